@@ -1,0 +1,190 @@
+"""Configuration: the TOML contract of DESIGN.md as msgspec Structs.
+
+Every table forbids unknown fields and every sensor kind is a tagged Struct, so a
+typo, a wrong type or an unknown kind/mode is one clear line naming the key,
+raised before anything starts.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Literal
+
+import msgspec
+
+
+class ConfigError(ValueError):
+    """A configuration problem, phrased for the user (one line, names the key)."""
+
+
+class _Table(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    pass
+
+
+class ZenohConfig(_Table):
+    mode: Literal["peer", "client", "router"] = "peer"
+    connect: list[str] = []
+    listen: list[str] = []
+    multicast_scouting: bool = True
+    config_file: str = ""
+    namespace: str = ""
+
+
+class OutputConfig(_Table):
+    pose_key: str = "odom_combined"
+    odometry_key: str = "odometry/filtered"
+    diagnostics_key: str = "fusiond/diagnostics"
+    health_key: str = "fusiond/health"
+    frame_id: str = "odom"
+    child_frame_id: str = "base_link"
+
+
+class FilterConfig(_Table):
+    """Core and estimator tuning shared by all sensors."""
+
+    history_s: float = 1.0  # late messages up to this age are applied at their own stamp
+    history_max: int = 4096  # hard bound on stored events, whatever their rate
+    gap_s: float = 0.5  # a prediction step longer than this inflates the covariance
+    gap_inflation: list[float] = [0.05, 0.05]  # position m/sqrt(s), attitude rad/sqrt(s) added per s of gap
+    covariance_cap: list[float] = [1.0e4, 10.0]  # max variance: position m^2, attitude rad^2
+    jump_s: float = 5.0  # a stamp this far from filter time is suspect (clock reset, bag restart)
+    jump_confirm: int = 3  # consecutive suspect messages that confirm a jump (reset if backwards)
+    process_noise: list[float] = [0.002, 0.002]  # model error: position m/sqrt(s), attitude rad/sqrt(s)
+    initial_sigma: list[float] = [0.0, 0.1]  # initial position m, attitude rad
+    gyro_bias_sigma: float = 0.01  # initial gyro-bias uncertainty, rad/s
+    gyro_bias_walk: float = 2.0e-5  # gyro-bias random walk, rad/s/sqrt(s)
+    standstill_s: float = 0.3  # odometry at zero this long before the gyro bias is learned
+    nis_window: int = 50  # updates per windowed NIS consistency test
+    nis_confidence: float = 0.95  # two-sided chi-square confidence of that test
+
+
+class _Sensor(_Table, tag_field="kind"):
+    name: str
+    key: str
+    encoding: Literal["ros2-cdr", "json", "msgpack"] = "ros2-cdr"
+    timeout_s: float = 0.2
+    mahalanobis_threshold: float = math.inf  # gate on sqrt(NIS); inf disables
+    adaptive: bool = False  # scale R from the innovation window
+    adaptive_window: int = 50
+
+
+class OdomSensor(_Sensor, tag="odom"):
+    twist_frame: Literal["body", "world"] = "body"
+    twist_noise: list[float] | None = None  # std devs vx vy vz wx wy wz, replace message covariance
+    twist_min_sigma: list[float] = [0.01, 0.01]  # floors: linear m/s, angular rad/s
+    twist_max_sigma: list[float] = [10.0, 10.0]  # above: "not measured" (input zero, default noise)
+    slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
+
+
+class ImuSensor(_Sensor, tag="imu"):
+    orientation: Literal["absolute", "relative", "roll_pitch", "off"] = "roll_pitch"
+    angular_velocity: bool = False
+    extrinsic_rpy: list[float] = [0.0, 0.0, 0.0]
+    orientation_noise: list[float] | None = None  # std devs roll pitch yaw, rad
+    gyro_noise: float | None = None  # std dev rad/s
+    orientation_min_sigma: float = 0.001  # floor, rad
+    orientation_max_sigma: float = 3.0  # above: "not measured"
+    gyro_min_sigma: float = 0.0005  # floor, rad/s
+
+
+SensorConfig = OdomSensor | ImuSensor
+
+
+class Config(_Table):
+    zenoh: ZenohConfig = msgspec.field(default_factory=ZenohConfig)
+    output: OutputConfig = msgspec.field(default_factory=OutputConfig)
+    filter: FilterConfig = msgspec.field(default_factory=FilterConfig)
+    sensors: list[SensorConfig] = []
+
+    def sensor(self, name: str) -> SensorConfig:
+        for s in self.sensors:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+
+_VECTOR_LENGTHS = {
+    "gap_inflation": 2, "covariance_cap": 2, "process_noise": 2, "initial_sigma": 2,
+    "twist_noise": 6, "twist_min_sigma": 2, "twist_max_sigma": 2,
+    "extrinsic_rpy": 3, "orientation_noise": 3,
+}
+
+
+def _check_struct(obj: msgspec.Struct, where: str) -> None:
+    for field in obj.__struct_fields__:
+        value = getattr(obj, field)
+        path = f"{where}.{field}"
+        if isinstance(value, list) and field in _VECTOR_LENGTHS and len(value) != _VECTOR_LENGTHS[field]:
+            raise ConfigError(f"{path}: expected {_VECTOR_LENGTHS[field]} numbers, got {len(value)}")
+        numbers = value if isinstance(value, list) and field in _VECTOR_LENGTHS else [value]
+        for v in numbers:
+            if isinstance(v, float) and math.isnan(v):
+                raise ConfigError(f"{path}: NaN is not a valid value")
+        if field.endswith(("_s", "_sigma", "_noise", "_window", "_max", "_confirm")) and value is not None:
+            if any(isinstance(v, (int, float)) and v < 0 for v in numbers):
+                raise ConfigError(f"{path}: must not be negative")
+
+
+def validate(cfg: Config) -> Config:
+    """Checks msgspec cannot express: vector lengths, signs, unique names and keys."""
+    _check_struct(cfg.filter, "filter")
+    if not 0.0 < cfg.filter.nis_confidence < 1.0:
+        raise ConfigError("filter.nis_confidence: must be between 0 and 1")
+    if cfg.filter.nis_window < 2:
+        raise ConfigError("filter.nis_window: must be at least 2")
+    names: set[str] = set()
+    keys: set[str] = set()
+    for i, s in enumerate(cfg.sensors):
+        where = f"sensors[{i}]"
+        _check_struct(s, where)
+        if not s.name:
+            raise ConfigError(f"{where}.name: must not be empty")
+        if s.name in names:
+            raise ConfigError(f"{where}.name: duplicate sensor name {s.name!r}")
+        if s.key in keys:
+            raise ConfigError(f"{where}.key: duplicate key {s.key!r}")
+        if not s.key or s.key.startswith("/"):
+            raise ConfigError(f"{where}.key: must be a Zenoh key without leading '/', got {s.key!r}")
+        if s.timeout_s <= 0:
+            raise ConfigError(f"{where}.timeout_s: must be positive")
+        names.add(s.name)
+        keys.add(s.key)
+    odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]
+    if len(odoms) != 1 and cfg.sensors:
+        raise ConfigError(f"sensors: exactly one odom sensor drives the prediction, found {len(odoms)}")
+    return cfg
+
+
+def _one_line(err: msgspec.ValidationError) -> str:
+    msg = str(err)
+    # msgspec says "... - at `$.sensors[0].kind`"; lead with the key, as users read it.
+    if " - at `$." in msg:
+        text, _, path = msg.partition(" - at `$.")
+        return f"{path.rstrip('`')}: {text}"
+    return msg
+
+
+def loads(text: str, source: str = "<config>") -> Config:
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{source}: invalid TOML: {err}") from None
+    try:
+        cfg = msgspec.convert(raw, type=Config)
+    except msgspec.ValidationError as err:
+        raise ConfigError(f"{source}: {_one_line(err)}") from None
+    try:
+        return validate(cfg)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}") from None
+
+
+def load(path: str | Path) -> Config:
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read config: {err.strerror}") from None
+    return loads(text, str(p))

@@ -1,0 +1,10 @@
+"""Pure maths: state blocks, error-state EKF, motion and measurement models. No I/O, no clocks."""
+
+from .ekf import ErrorStateEKF, UpdateResult
+from .motion import MotionInput, predict
+from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout
+
+__all__ = [
+    "ErrorStateEKF", "UpdateResult", "MotionInput", "predict",
+    "GyroBiasBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
+]
