@@ -15,6 +15,11 @@ from typing import Literal
 import msgspec
 
 
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+Vec6 = tuple[float, float, float, float, float, float]
+
+
 class ConfigError(ValueError):
     """A configuration problem, phrased for the user (one line, names the key)."""
 
@@ -47,12 +52,12 @@ class FilterConfig(_Table):
     history_s: float = 1.0  # late messages up to this age are applied at their own stamp
     history_max: int = 4096  # hard bound on stored events, whatever their rate
     gap_s: float = 0.5  # a prediction step longer than this inflates the covariance
-    gap_inflation: list[float] = [0.05, 0.05]  # position m/sqrt(s), attitude rad/sqrt(s) added per s of gap
-    covariance_cap: list[float] = [1.0e4, 10.0]  # max variance: position m^2, attitude rad^2
+    gap_inflation: Vec2 = (0.05, 0.05)  # position m/sqrt(s), attitude rad/sqrt(s) added per s of gap
+    covariance_cap: Vec2 = (1.0e4, 10.0)  # max variance: position m^2, attitude rad^2
     jump_s: float = 5.0  # a stamp this far from filter time is suspect (clock reset, bag restart)
     jump_confirm: int = 3  # consecutive suspect messages that confirm a jump (reset if backwards)
-    process_noise: list[float] = [0.002, 0.002]  # model error: position m/sqrt(s), attitude rad/sqrt(s)
-    initial_sigma: list[float] = [0.0, 0.1]  # initial position m, attitude rad
+    process_noise: Vec2 = (0.002, 0.002)  # model error: position m/sqrt(s), attitude rad/sqrt(s)
+    initial_sigma: Vec2 = (0.0, 0.1)  # initial position m, attitude rad
     gyro_bias_sigma: float = 0.01  # initial gyro-bias uncertainty, rad/s
     gyro_bias_walk: float = 2.0e-5  # gyro-bias random walk, rad/s/sqrt(s)
     standstill_s: float = 0.3  # odometry at zero this long before the gyro bias is learned
@@ -65,24 +70,25 @@ class _Sensor(_Table, tag_field="kind"):
     key: str
     encoding: Literal["ros2-cdr", "json", "msgpack"] = "ros2-cdr"
     timeout_s: float = 0.2
-    mahalanobis_threshold: float = math.inf  # gate on sqrt(NIS); inf disables
-    adaptive: bool = False  # scale R from the innovation window
-    adaptive_window: int = 50
 
 
 class OdomSensor(_Sensor, tag="odom"):
     twist_frame: Literal["body", "world"] = "body"
-    twist_noise: list[float] | None = None  # std devs vx vy vz wx wy wz, replace message covariance
-    twist_min_sigma: list[float] = [0.01, 0.01]  # floors: linear m/s, angular rad/s
-    twist_max_sigma: list[float] = [10.0, 10.0]  # above: "not measured" (input zero, default noise)
+    twist_noise: Vec6 | None = None  # std devs vx vy vz wx wy wz, replace message covariance
+    twist_min_sigma: Vec2 = (0.01, 0.01)  # floors: linear m/s, angular rad/s
+    twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
+    twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
     slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
 
 
 class ImuSensor(_Sensor, tag="imu"):
+    mahalanobis_threshold: float = math.inf  # gate on sqrt(NIS); inf disables
+    adaptive: bool = False  # scale R from the innovation window
+    adaptive_window: int = 50
     orientation: Literal["absolute", "relative", "roll_pitch", "off"] = "roll_pitch"
     angular_velocity: bool = False
-    extrinsic_rpy: list[float] = [0.0, 0.0, 0.0]
-    orientation_noise: list[float] | None = None  # std devs roll pitch yaw, rad
+    extrinsic_rpy: Vec3 = (0.0, 0.0, 0.0)
+    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
     gyro_noise: float | None = None  # std dev rad/s
     orientation_min_sigma: float = 0.001  # floor, rad
     orientation_max_sigma: float = 3.0  # above: "not measured"
@@ -105,20 +111,11 @@ class Config(_Table):
         raise KeyError(name)
 
 
-_VECTOR_LENGTHS = {
-    "gap_inflation": 2, "covariance_cap": 2, "process_noise": 2, "initial_sigma": 2,
-    "twist_noise": 6, "twist_min_sigma": 2, "twist_max_sigma": 2,
-    "extrinsic_rpy": 3, "orientation_noise": 3,
-}
-
-
 def _check_struct(obj: msgspec.Struct, where: str) -> None:
     for field in obj.__struct_fields__:
         value = getattr(obj, field)
         path = f"{where}.{field}"
-        if isinstance(value, list) and field in _VECTOR_LENGTHS and len(value) != _VECTOR_LENGTHS[field]:
-            raise ConfigError(f"{path}: expected {_VECTOR_LENGTHS[field]} numbers, got {len(value)}")
-        numbers = value if isinstance(value, list) and field in _VECTOR_LENGTHS else [value]
+        numbers = value if isinstance(value, tuple) else [value]
         for v in numbers:
             if isinstance(v, float) and math.isnan(v):
                 raise ConfigError(f"{path}: NaN is not a valid value")

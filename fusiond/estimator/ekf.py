@@ -47,8 +47,16 @@ class ErrorStateEKF:
         return self._store(self.P + Q)
 
     # -- correction --------------------------------------------------------
-    def update(self, y: np.ndarray, H: np.ndarray, R: np.ndarray, threshold: float = math.inf) -> UpdateResult:
-        """Kalman update with a Mahalanobis gate on sqrt(NIS)."""
+    def update(
+        self, y: np.ndarray, H: np.ndarray, R: np.ndarray, threshold: float = math.inf, mask: np.ndarray | None = None
+    ) -> UpdateResult:
+        """Kalman update with a Mahalanobis gate on sqrt(NIS).
+
+        ``mask`` (bool per error component) limits what the update may change: the
+        gain rows of the others are zeroed (a Schmidt "consider" update) and the
+        Joseph form keeps P right for that sub-optimal gain. A roll/pitch update
+        uses it so that correlations in P cannot leak it into heading or position.
+        """
         P = self.P
         PHt = P @ H.T
         S = H @ PHt
@@ -65,7 +73,10 @@ class ErrorStateEKF:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
         KT, _ = dpotrs(L, PHt.T, lower=1)  # K^T = S^-1 H P
         K = KT.T
-        dx = PHt @ Sinv_y
+        if mask is not None:
+            K = K * mask[:, None]
+            KT = K.T
+        dx = K @ y
         IKH = self._eye - K @ H
         P_new = IKH @ P @ IKH.T
         P_new += K @ R @ KT
@@ -96,6 +107,15 @@ class ErrorStateEKF:
             scale = np.ones_like(d)
             scale[over] = np.sqrt(caps[over] / d[over])
             self.P = self.P * np.outer(scale, scale)
+
+    def copy(self) -> "ErrorStateEKF":
+        c = ErrorStateEKF.__new__(ErrorStateEKF)
+        c.layout = self.layout
+        c.x = self.x.copy()
+        c.P = self.P.copy()
+        c._eye = self._eye
+        c.resets = self.resets
+        return c
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         return self.x.copy(), self.P.copy()

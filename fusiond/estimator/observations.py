@@ -33,7 +33,7 @@ def rpy_jacobian(q: rot.Quat) -> tuple[tuple[float, float, float], np.ndarray]:
     cp = max(math.cos(pitch), _MIN_COS_PITCH)
     cr, sr = math.cos(roll), math.sin(roll)
     # gravity in body g = R^T e_z moves by R^T [e_z]x dtheta
-    M = R.T[:, 0:2] @ np.array(((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0)))
+    M = R.T[:, 0:2] @ np.array(((0.0, -1.0, 0.0), (1.0, 0.0, 0.0)))
     H = np.empty((3, 3))
     H[0] = (cr * M[1] - sr * M[2]) / cp
     H[1] = -M[0] / cp

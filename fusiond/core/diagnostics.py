@@ -1,0 +1,89 @@
+"""Innovation diagnostics: the per-update record and the windowed NIS consistency test.
+
+A remote operator reads these to tell at a glance whether R is too small (NIS
+high), too large (NIS low) or a sensor is lying: the mean NIS over a window of N
+updates is compared with chi-square bounds on N*dof degrees of freedom.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import msgspec
+from scipy.special import gammaincinv
+
+
+class DiagnosticsRecord(msgspec.Struct, gc=False):
+    """One record per update (DESIGN.md schema; ``channel`` and later fields are extensions)."""
+
+    stamp: float
+    sensor: str
+    components: list[str]
+    innovation: list[float]
+    innovation_var: list[float]
+    nis: float
+    dof: int
+    rejected: bool
+    channel: str = ""
+    late: bool = False  # applied at its own stamp from the history
+    consistency: str = "warming_up"  # ok | nis_high | nis_low | warming_up
+
+
+def chi2_ppf(p: float, dof: float) -> float:
+    return 2.0 * float(gammaincinv(0.5 * dof, p))
+
+
+class NisWindow:
+    """Sliding window of NIS values for one sensor channel."""
+
+    def __init__(self, window: int, confidence: float) -> None:
+        self.window = window
+        self.confidence = confidence
+        self.values: deque[float] = deque(maxlen=window)
+        self.dof = 0
+        self._bounds: dict[int, tuple[float, float]] = {}
+        self.total = 0
+        self.rejected = 0
+
+    def bounds(self, dof: int) -> tuple[float, float]:
+        """Two-sided bounds on the window's mean NIS."""
+        b = self._bounds.get(dof)
+        if b is None:
+            n = self.window
+            a = (1.0 - self.confidence) / 2.0
+            b = (chi2_ppf(a, n * dof) / n, chi2_ppf(1.0 - a, n * dof) / n)
+            self._bounds[dof] = b
+        return b
+
+    def add(self, nis: float, dof: int, rejected: bool) -> str:
+        self.total += 1
+        if rejected:
+            self.rejected += 1
+        if dof != self.dof:
+            self.values.clear()
+            self.dof = dof
+        if nis == nis:  # NaN from a singular S is not evidence either way
+            self.values.append(nis)
+        return self.verdict()
+
+    @property
+    def mean(self) -> float | None:
+        return sum(self.values) / len(self.values) if self.values else None
+
+    def verdict(self) -> str:
+        if len(self.values) < self.window:
+            return "warming_up"
+        lo, hi = self.bounds(self.dof)
+        m = sum(self.values) / len(self.values)
+        return "nis_high" if m > hi else "nis_low" if m < lo else "ok"
+
+    def summary(self) -> dict:
+        lo_hi = self.bounds(self.dof) if self.dof else None
+        return {
+            "updates": self.total,
+            "rejected": self.rejected,
+            "dof": self.dof,
+            "nis_mean": self.mean,
+            "nis_bounds": list(lo_hi) if lo_hi else None,
+            "verdict": self.verdict(),
+        }

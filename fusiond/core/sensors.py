@@ -1,0 +1,193 @@
+"""Per-sensor policy: turn a raw sample into filter inputs, or reject it with a reason.
+
+Message covariances lie (all zeros, 1e6 for "not measured", a gyro covariance ten
+times the real noise), so every variance goes through a floor, a "not measured"
+cap and the user's override from the config. The IMU's mounting rotation
+(``extrinsic_rpy``) is applied here to orientation, rates and their covariances
+alike, so the estimator only ever sees base_link quantities.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config import ImuSensor, OdomSensor
+from ..estimator import rotation as rot
+from ..samples import ImuSample, OdomSample
+
+_QUAT_NORM_TOLERANCE = 0.1  # drivers round; anything further off is not a rotation
+
+
+class Rejected(Exception):
+    """A sample the core refuses; ``reason`` is a stable counter name."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+class OdomInput:
+    """Body (or world) twist with per-sample covariances, ready for the motion model."""
+
+    __slots__ = ("linear", "linear_cov", "angular", "angular_cov", "yaw_rate_measured", "stationary")
+
+    def __init__(self, linear, linear_cov, angular, angular_cov, yaw_rate_measured, stationary) -> None:
+        self.linear = linear
+        self.linear_cov = linear_cov
+        self.angular = angular
+        self.angular_cov = angular_cov
+        self.yaw_rate_measured = yaw_rate_measured
+        self.stationary = stationary
+
+
+class ImuInput:
+    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate."""
+
+    __slots__ = ("rpy", "rpy_cov", "rows", "gyro", "gyro_cov")
+
+    def __init__(self, rpy, rpy_cov, rows, gyro, gyro_cov) -> None:
+        self.rpy = rpy
+        self.rpy_cov = rpy_cov
+        self.rows = rows
+        self.gyro = gyro
+        self.gyro_cov = gyro_cov
+
+
+def _finite(values) -> bool:
+    return all(math.isfinite(v) for v in values)
+
+
+def _resolve_variances(diag: list[float], floor: float, unmeasured: float, default: float) -> tuple[list[float], list[bool]]:
+    """Floor tiny/zero variances; mark huge or non-finite ones as "not measured"."""
+    out, measured = [], []
+    for v in diag:
+        if not math.isfinite(v) or v >= unmeasured:
+            out.append(default)
+            measured.append(False)
+        else:
+            out.append(max(v, floor))
+            measured.append(True)
+    return out, measured
+
+
+class OdomPolicy:
+    STATIONARY_LINEAR = 1e-3  # m/s
+    STATIONARY_ANGULAR = 1e-3  # rad/s
+
+    def __init__(self, cfg: OdomSensor) -> None:
+        self.cfg = cfg
+        lin_min, ang_min = cfg.twist_min_sigma
+        lin_max, ang_max = cfg.twist_max_sigma
+        lin_def, ang_def = cfg.twist_unmeasured_sigma
+        self._floor = [lin_min**2] * 3 + [ang_min**2] * 3
+        self._unmeasured = [lin_max**2] * 3 + [ang_max**2] * 3
+        self._default = [lin_def**2] * 3 + [ang_def**2] * 3
+        self._override = None if cfg.twist_noise is None else [s * s for s in cfg.twist_noise]
+
+    def convert(self, s: OdomSample) -> OdomInput:
+        if not (_finite(s.linear) and _finite(s.angular)):
+            raise Rejected("non_finite", "twist")
+        if len(s.twist_covariance) != 36:
+            raise Rejected("bad_covariance", "twist covariance must have 36 entries")
+        cov = s.twist_covariance
+        diag = [cov[7 * i] for i in range(6)]
+        if self._override is not None:
+            var = list(self._override)
+            measured = [True] * 6
+        else:
+            if any(d < 0.0 for d in diag):
+                raise Rejected("negative_covariance", "twist")
+            var = []
+            measured = []
+            for i, d in enumerate(diag):
+                v, m = _resolve_variances([d], self._floor[i], self._unmeasured[i], self._default[i])
+                var += v
+                measured += m
+        twist = [*s.linear, *s.angular]
+        values = [t if m else 0.0 for t, m in zip(twist, measured)]
+        stationary = all(abs(v) <= self.STATIONARY_LINEAR for v in values[0:3]) and all(
+            abs(v) <= self.STATIONARY_ANGULAR for v in values[3:6]
+        )
+        return OdomInput(
+            np.array(values[0:3]),
+            np.diag(var[0:3]),
+            np.array(values[3:6]),
+            np.diag(var[3:6]),
+            measured[5],
+            stationary,
+        )
+
+
+class ImuPolicy:
+    def __init__(self, cfg: ImuSensor) -> None:
+        self.cfg = cfg
+        r, p, y = cfg.extrinsic_rpy
+        self.q_ext = rot.from_rpy(r, p, y)
+        self.q_ext_inv = rot.conj(self.q_ext)
+        self.R_ext = rot.matrix(self.q_ext)
+        self._identity = (r, p, y) == (0.0, 0.0, 0.0)
+        self.mode = cfg.orientation
+        self._rows = {"absolute": (0, 1, 2), "relative": (0, 1, 2), "roll_pitch": (0, 1), "off": ()}[self.mode]
+        self._ori_floor = cfg.orientation_min_sigma**2
+        self._ori_unmeasured = cfg.orientation_max_sigma**2
+        self._ori_override = None if cfg.orientation_noise is None else [s * s for s in cfg.orientation_noise]
+        self._gyro_floor = cfg.gyro_min_sigma**2
+        self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
+
+    def _rotate_cov(self, diag: list[float]) -> np.ndarray:
+        C = np.diag(diag)
+        if self._identity:
+            return C
+        return self.R_ext @ C @ self.R_ext.T
+
+    def convert(self, s: ImuSample) -> ImuInput:
+        rpy = rpy_cov = None
+        rows: tuple[int, ...] = ()
+        if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
+            if not (_finite(s.orientation) and _finite(s.orientation_covariance)):
+                raise Rejected("non_finite", "orientation")
+            x, y, z, w = s.orientation
+            n = math.sqrt(x * x + y * y + z * z + w * w)
+            if n < 1e-6:
+                raise Rejected("zero_quaternion")
+            if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
+                raise Rejected("non_unit_quaternion", f"norm {n:.3f}")
+            q_imu = (x / n, y / n, z / n, w / n)
+            q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
+            rpy = rot.to_rpy(q_base)
+            if self._ori_override is not None:
+                var, measured = list(self._ori_override), [True, True, True]
+            else:
+                oc = s.orientation_covariance
+                diag = [oc[0], oc[4], oc[8]]
+                if any(d < 0.0 for d in diag):
+                    raise Rejected("negative_covariance", "orientation")
+                var, measured = _resolve_variances(diag, self._ori_floor, self._ori_unmeasured, 1.0)
+            rows = tuple(i for i in self._rows if measured[i])
+            rpy_cov = self._rotate_cov(var)
+        elif len(s.orientation_covariance) != 9:
+            raise Rejected("bad_covariance", "orientation covariance must have 9 entries")
+
+        gyro = gyro_cov = None
+        if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
+            gc = s.angular_velocity_covariance
+            if gc[0] != -1.0:
+                if not (_finite(s.angular_velocity) and _finite(gc)):
+                    raise Rejected("non_finite", "angular_velocity")
+                if self._gyro_override is not None:
+                    var = [self._gyro_override] * 3
+                else:
+                    diag = [gc[0], gc[4], gc[8]]
+                    if any(d < 0.0 for d in diag):
+                        raise Rejected("negative_covariance", "angular_velocity")
+                    var = [max(d, self._gyro_floor) for d in diag]
+                w = np.array(s.angular_velocity)
+                gyro = w if self._identity else self.R_ext @ w
+                gyro_cov = self._rotate_cov(var)
+        elif self.cfg.angular_velocity:
+            raise Rejected("bad_covariance", "angular velocity covariance must have 9 entries")
+        if rpy is None and gyro is None:
+            raise Rejected("nothing_to_fuse", "no orientation and no angular velocity in the message")
+        return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov)

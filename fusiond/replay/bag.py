@@ -1,0 +1,167 @@
+"""Sensor samples and ROS 2 CDR payloads from ROS 1 and ROS 2 bags (rosbags' AnyReader).
+
+Replay and `fusiond play` read bags through here, so both see the same topics,
+the same order (bag receive time) and the same samples the live codecs make.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
+
+from rosbags.highlevel import AnyReader, AnyReaderError
+
+from fusiond.samples import Sample
+from fusiond.transport.codecs import IMU, ODOMETRY, TYPESTORE, imu_from_ros, odom_from_ros
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
+
+    from fusiond.config import SensorConfig
+
+_EXPECTED: dict[str, tuple[str, Callable[[Any, str], Sample]]] = {
+    "odom": (ODOMETRY, odom_from_ros),
+    "imu": (IMU, imu_from_ros),
+}
+
+
+class BagError(ValueError):
+    """A bag that cannot be replayed as configured, phrased for the user."""
+
+
+def sensor_kind(sensor: SensorConfig) -> str:
+    """The config's `kind` tag (msgspec keeps it on the class, not the instance)."""
+    return str(type(sensor).__struct_config__.tag)
+
+
+class BagSamples:
+    """The configured sensors' messages in a bag, in bag (receive-time) order.
+
+    Iterating yields samples; `raw_cdr()` yields the ROS 2 CDR payloads instead.
+    Messages that do not deserialize are skipped and counted in `decode_errors`.
+    Close it (or use it as a context manager) to release the bag files.
+    """
+
+    def __init__(self, reader: AnyReader, selected: dict[str, tuple[SensorConfig, list[Connection]]],
+                 missing: list[str]) -> None:
+        self._reader = reader
+        self._by_topic = {topic: sensor for topic, (sensor, _) in selected.items()}
+        self._connections = [c for _, conns in selected.values() for c in conns]
+        self.topics: dict[str, str] = {sensor.name: topic for topic, (sensor, _) in selected.items()}
+        self.missing = missing
+        self.total = sum(c.msgcount for c in self._connections)
+        self.decode_errors = 0
+
+    def __iter__(self) -> Iterator[Sample]:
+        reader = self._reader
+        convert = {topic: (s.name, *_EXPECTED[sensor_kind(s)]) for topic, s in self._by_topic.items()}
+        for connection, _, raw in reader.messages(connections=self._connections):
+            name, msgtype, from_ros = convert[connection.topic]
+            try:
+                msg = reader.deserialize(raw, msgtype)
+            except Exception:  # AnyReaderError on a bad message, or anything rosbags raises on garbage
+                self.decode_errors += 1
+                continue
+            yield from_ros(msg, name)
+
+    def raw_cdr(self) -> Iterator[tuple[int, SensorConfig, bytes]]:
+        """(bag time ns, sensor, ROS 2 CDR) as zenoh-bridge-ros2dds would publish the message.
+
+        ROS 2 bags already hold CDR. ROS 1 messages are converted at byte level
+        against the ROS 2 (Humble) types, which drops the ROS 1 header's `seq`.
+        """
+        is2 = self._reader.is2
+        for connection, bag_time, raw in self._reader.messages(connections=self._connections):
+            sensor = self._by_topic[connection.topic]
+            if is2:
+                yield bag_time, sensor, bytes(raw)
+                continue
+            try:
+                cdr = TYPESTORE.ros1_to_cdr(raw, _EXPECTED[sensor_kind(sensor)][0])
+            except Exception:
+                self.decode_errors += 1
+                continue
+            yield bag_time, sensor, bytes(cdr)
+
+    def close(self) -> None:
+        if self._reader.stack is not None:
+            self._reader.close()
+
+    def __enter__(self) -> BagSamples:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+def _open_reader(paths: Sequence[Path]) -> AnyReader:
+    if not paths:
+        raise BagError("no bag given")
+    for p in paths:
+        if not p.exists():
+            raise BagError(f"{p}: no such bag")
+    ros1 = [p.suffix == ".bag" for p in paths]
+    if any(ros1) and not all(ros1):
+        raise BagError("cannot mix ROS 1 .bag files and ROS 2 bags in one replay")
+    if len(paths) > 1 and not any(ros1):
+        raise BagError("give one ROS 2 bag (directory) at a time; several ROS 1 .bag files can be merged")
+    try:
+        reader = AnyReader(list(paths), default_typestore=TYPESTORE)
+        reader.open()
+    except (AnyReaderError, OSError) as err:
+        names = ", ".join(str(p) for p in paths)
+        raise BagError(f"{names}: cannot read bag: {err}") from None
+    return reader
+
+
+def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
+            ) -> tuple[dict[str, tuple[SensorConfig, list[Connection]]], list[str]]:
+    topics = reader.topics
+    selected: dict[str, tuple[SensorConfig, list[Connection]]] = {}
+    missing: list[str] = []
+    for sensor in sensors:
+        kind = sensor_kind(sensor)
+        if kind not in _EXPECTED:
+            raise BagError(f"sensor {sensor.name!r}: kind {kind!r} cannot be read from a bag")
+        topic = next((t for t in ("/" + sensor.key, sensor.key) if t in topics), None)
+        if topic is None:
+            missing.append(sensor.name)
+            continue
+        expected = _EXPECTED[kind][0]
+        found = {c.msgtype for c in topics[topic].connections}
+        if found != {expected}:
+            raise BagError(
+                f"topic {topic} (sensor {sensor.name!r}) has type {', '.join(sorted(found))}, "
+                f"expected {expected} for a {kind} sensor"
+            )
+        selected[topic] = (sensor, list(topics[topic].connections))
+    if not selected:
+        wanted = ", ".join("/" + s.key for s in sensors) or "(no sensors configured)"
+        have = ", ".join(f"{t} [{i.msgtype}]" for t, i in topics.items()) or "none"
+        raise BagError(f"none of the configured topics is in the bag: wanted {wanted}; the bag has {have}")
+    return selected, missing
+
+
+def open_bag_samples(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]) -> BagSamples:
+    """Open bags for the configured sensors; each sensor's topic is "/" + key (or the bare key).
+
+    Raises BagError for a missing or unreadable bag, a topic of the wrong type, or
+    when no configured topic is present; sensors without a topic are listed in `.missing`.
+    """
+    reader = _open_reader([Path(p) for p in paths])
+    try:
+        selected, missing = _select(reader, sensors)
+    except BaseException:
+        reader.close()
+        raise
+    return BagSamples(reader, selected, missing)
+
+
+def iter_raw_cdr(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]
+                 ) -> Iterator[tuple[int, SensorConfig, bytes]]:
+    """(bag time ns, sensor, ROS 2 CDR) in bag order; the bag is closed when the iteration ends."""
+    with open_bag_samples(paths, sensors) as bag:
+        yield from bag.raw_cdr()

@@ -1,0 +1,174 @@
+"""Estimator maths: analytic Jacobians against central differences, manifold hygiene."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+from fusiond.estimator import observations as obs
+from fusiond.estimator import rotation as rot
+from fusiond.estimator.motion import propagate_state
+from fusiond.estimator.numeric import measurement_jacobian, transition_jacobian
+
+angles = st.floats(-math.pi, math.pi)
+tilts = st.floats(-1.2, 1.2)
+
+
+def _layout(bias: bool = True) -> StateLayout:
+    blocks = [PoseBlock(0.1, 0.1)] + ([GyroBiasBlock(0.01, 1e-4)] if bias else [])
+    return StateLayout(blocks)
+
+
+def _state(layout: StateLayout, rpy: tuple[float, float, float], bias=(0.01, -0.02, 0.005)) -> np.ndarray:
+    x = layout.initial_state()
+    x[0:3] = (1.0, -2.0, 0.3)
+    x[3:7] = rot.from_rpy(*rpy)
+    if layout.has("gyro_bias"):
+        x[layout.nominal["gyro_bias"]] = bias
+    return x
+
+
+def _input(world: bool = False, gyro: bool = True) -> MotionInput:
+    u = MotionInput()
+    u.linear = np.array([0.8, 0.1, -0.05])
+    u.angular = np.array([0.2, -0.3, 0.9])
+    u.linear_cov = np.diag([1e-3, 2e-3, 3e-3])
+    u.angular_cov = np.diag([1e-4, 1e-4, 4e-4])
+    u.linear_period = u.angular_period = 0.02
+    u.from_gyro = gyro
+    u.world_frame = world
+    return u
+
+
+@settings(max_examples=40, deadline=None)
+@given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans())
+def test_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro):
+    layout = _layout()
+    x = _state(layout, (r, p, y))
+    u = _input(world, gyro)
+    _, F, _ = predict(layout, x, u, dt, np.zeros(6))
+    F_num = transition_jacobian(layout, lambda s: propagate_state(layout, s, u, dt), x)
+    np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(r=tilts, p=tilts, y=angles)
+def test_rpy_jacobian_matches_central_differences(r, p, y):
+    layout = _layout()
+    x = _state(layout, (r, p, y))
+
+    def h(s: np.ndarray) -> np.ndarray:
+        return np.array(rot.to_rpy(tuple(s[3:7].tolist())))
+
+    _, H3 = obs.rpy_jacobian(tuple(x[3:7].tolist()))
+    H_num = measurement_jacobian(layout, h, x)
+    np.testing.assert_allclose(H3, H_num[:, 3:6], atol=1e-6, rtol=1e-5)
+    np.testing.assert_allclose(H_num[:, [0, 1, 2, 6, 7, 8]], 0.0, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(r=tilts, p=tilts, y=angles)
+def test_roll_pitch_observation_has_no_yaw_column(r, p, y):
+    layout = _layout()
+    x = _state(layout, (r, p, y))
+    _, H, _ = obs.orientation(layout, x, (0.0, 0.0, 0.0), np.eye(3) * 1e-4, obs.ORIENTATION_ROWS["roll_pitch"])
+    assert H.shape == (2, layout.error_dim)
+    assert np.all(H[:, 5] == 0.0)  # global yaw error column
+    assert np.all(H[:, 0:3] == 0.0)  # position
+
+
+def test_zero_rate_jacobian_matches_central_differences():
+    layout = _layout()
+    x = _state(layout, (0.1, 0.2, 0.3))
+    gyro = np.array([0.01, 0.02, -0.03])
+    _, H, _ = obs.zero_rate(layout, x, gyro, np.eye(3))
+    H_num = measurement_jacobian(layout, lambda s: s[layout.nominal["gyro_bias"]], x, angular=False)
+    np.testing.assert_allclose(H, H_num, atol=1e-9)
+
+
+@given(v=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_exp_log_roundtrip_and_sign_ambiguity(v):
+    q = rot.exp(*v)
+    assert math.isclose(sum(c * c for c in q), 1.0, rel_tol=1e-12)
+    back = rot.log(q)
+    back_neg = rot.log(tuple(-c for c in q))
+    np.testing.assert_allclose(back, back_neg, atol=1e-12)
+    np.testing.assert_allclose(rot.matrix(rot.exp(*back)), rot.matrix(q), atol=1e-12)
+
+
+@given(r=tilts, p=tilts, y=angles)
+def test_rpy_roundtrip(r, p, y):
+    rr, pp, yy = rot.to_rpy(rot.from_rpy(r, p, y))
+    assert abs(rot.wrap(rr - r)) < 1e-9 and abs(pp - p) < 1e-9 and abs(rot.wrap(yy - y)) < 1e-9
+
+
+def test_right_jacobian_definition():
+    phi = np.array([0.3, -0.2, 0.5])
+    d = np.array([1e-6, -2e-6, 3e-6])
+    lhs = rot.exp(*(phi + d))
+    rhs = rot.mul(rot.exp(*phi), rot.exp(*(rot.right_jacobian(*phi) @ d)))
+    np.testing.assert_allclose(rot.log(rot.mul(lhs, rot.conj(rhs))), 0.0, atol=1e-11)
+
+
+def test_long_random_run_keeps_covariance_psd_and_quaternion_unit():
+    rng = np.random.default_rng(7)
+    layout = _layout()
+    ekf = ErrorStateEKF(layout)
+    for k in range(5000):
+        u = _input(gyro=bool(k % 2))
+        u.linear = rng.normal(0, 1, 3)
+        u.angular = rng.normal(0, 0.5, 3)
+        x, F, Q = predict(layout, ekf.x, u, float(rng.uniform(0.0, 0.05)), np.full(6, 1e-6))
+        ekf.propagate(x, F, Q)
+        if k % 3 == 0:
+            z = tuple(rng.uniform(-0.5, 0.5, 3)) if k % 2 else tuple(rng.uniform(-math.pi, math.pi, 3))
+            y, H, R = obs.orientation(layout, ekf.x, z, np.diag(rng.uniform(1e-6, 1e-1, 3)), (0, 1, 2))
+            ekf.update(y, H, R)
+        q = ekf.x[3:7]
+        assert abs(float(q @ q) - 1.0) < 1e-12
+        assert np.allclose(ekf.P, ekf.P.T, atol=0.0)
+        assert np.linalg.eigvalsh(ekf.P).min() > -1e-12
+        assert np.isfinite(ekf.P).all()
+
+
+def test_non_finite_covariance_is_reset_not_raised():
+    layout = _layout()
+    ekf = ErrorStateEKF(layout)
+    F = np.eye(layout.error_dim)
+    Q = np.zeros_like(F)
+    Q[0, 0] = math.nan
+    assert ekf.propagate(ekf.x.copy(), F, Q) is False
+    assert ekf.resets == 1
+    np.testing.assert_array_equal(ekf.P, layout.initial_covariance())
+
+
+def test_gate_rejects_outlier_and_leaves_state():
+    layout = _layout()
+    ekf = ErrorStateEKF(layout)
+    before = ekf.snapshot()
+    y, H, R = obs.orientation(layout, ekf.x, (0.0, 0.0, 2.0), np.eye(3) * 1e-4, (0, 1, 2))
+    res = ekf.update(y, H, R, threshold=5.0)
+    assert res.rejected and res.nis > 25.0
+    np.testing.assert_array_equal(ekf.x, before[0])
+    np.testing.assert_array_equal(ekf.P, before[1])
+
+
+def test_kalman_update_matches_textbook_inverse():
+    layout = _layout()
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(9, 9))
+    P = A @ A.T * 1e-2 + np.eye(9) * 1e-3
+    ekf = ErrorStateEKF(layout, P=P)
+    y, H, R = obs.orientation(layout, ekf.x, (0.05, -0.02, 0.1), np.diag([1e-3, 2e-3, 3e-3]), (0, 1, 2))
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    res = ekf.update(y, H, R)
+    assert res.nis == pytest.approx(float(y @ np.linalg.inv(S) @ y), rel=1e-10)
+    IKH = np.eye(9) - K @ H
+    np.testing.assert_allclose(ekf.P, IKH @ P @ IKH.T + K @ R @ K.T, atol=1e-14)
+    np.testing.assert_allclose(ekf.x[layout.nominal["gyro_bias"]], (K @ y)[6:9], atol=1e-14)
