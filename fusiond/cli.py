@@ -1,4 +1,4 @@
-"""Command line: `fusiond replay | bench | ...`. Each command imports what it needs when it runs."""
+"""Command line: `fusiond run | play | health | replay | bench-latency`. Each command imports what it needs when it runs."""
 
 from __future__ import annotations
 
@@ -47,9 +47,123 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+EXIT_UNHEALTHY = 1
+_STATUS_RANK = {"failed": 0, "degraded": 1, "ok": 2}
+
+
+def _zenoh_errors():
+    from .config import ConfigError
+    from .transport.session import SessionError
+
+    return ConfigError, SessionError
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    cfg = _load_config(args.config)
+    from .transport.daemon import run
+
+    ConfigError, SessionError = _zenoh_errors()
+    try:
+        return run(cfg, base_dir=Path(args.config).resolve().parent)
+    except ConfigError as err:
+        print(f"fusiond: config error: {args.config}: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except SessionError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return 1
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    cfg = _load_config(args.config)
+    import signal
+    import threading
+
+    from .replay.bag import BagError
+    from .transport.player import play
+    from .transport.session import client_config, open_session
+
+    ConfigError, SessionError = _zenoh_errors()
+    if args.rate < 0:
+        print("fusiond: --rate must be >= 0", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        conf = client_config(cfg.zenoh, base_dir=Path(args.config).resolve().parent, connect=args.connect,
+                             listen=args.listen)
+        session = open_session(conf)
+    except ConfigError as err:
+        print(f"fusiond: config error: {args.config}: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except SessionError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return 1
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        result = play([Path(b) for b in args.bags], cfg, session, rate=args.rate, duration=args.duration,
+                      wait_s=args.wait, stop=stop)
+    except BagError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    finally:
+        session.close()
+    per = " ".join(f"{k}={v}" for k, v in result.per_sensor.items())
+    print(f"played {result.messages} messages ({per}), {result.bag_seconds:.3f} s of bag in {result.seconds:.3f} s"
+          + (" (interrupted)" if result.interrupted else ""))
+    return 0
+
+
+def cmd_health(args: argparse.Namespace) -> int:
+    import json
+
+    from .config import Config
+    from .transport.session import client_config, open_session, query_health
+
+    cfg = _load_config(args.config) if args.config else Config()
+    ConfigError, SessionError = _zenoh_errors()
+    key = args.key or cfg.output.health_key
+    try:
+        base = Path(args.config).resolve().parent if args.config else None
+        session = open_session(client_config(cfg.zenoh, base_dir=base, connect=args.connect))
+    except ConfigError as err:
+        print(f"fusiond: config error: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except SessionError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return EXIT_UNHEALTHY
+    try:
+        answers = query_health(session, key, args.timeout)
+    finally:
+        session.close()
+    if not answers:
+        print(f"fusiond: no health answer on {key!r} within {args.timeout} s", file=sys.stderr)
+        return EXIT_UNHEALTHY
+    worst = None
+    for raw in answers:
+        print(raw.decode())
+        status = json.loads(raw).get("status")
+        rank = _STATUS_RANK.get(status, -1)
+        worst = rank if worst is None else min(worst, rank)
+    return 0 if worst is not None and worst >= _STATUS_RANK[args.min_status] else EXIT_UNHEALTHY
+
+
+def cmd_bench_latency(args: argparse.Namespace) -> int:
+    from .transport.bench_latency import format_table, run_bench
+
+    result = run_bench(seconds=args.seconds, imu_hz=args.imu_hz, odom_hz=args.odom_hz, express=not args.no_express)
+    if args.json:
+        import msgspec
+
+        print(msgspec.json.encode(result).decode())
+    else:
+        print(format_table(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fusiond", description="Wheel odometry + IMU EKF fusion over Eclipse Zenoh.")
-    p.add_argument("--log-level", default="warning", choices=["debug", "info", "warning", "error"])
+    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"],
+                   help="default: info for run and play, warning otherwise")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("replay", help="replay ROS 1/2 bags through the fusion core")
@@ -60,6 +174,41 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", help="write a PNG of the trajectory and NIS per sensor")
     r.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     r.set_defaults(func=cmd_replay)
+
+    d = sub.add_parser("run", help="the fusion daemon: subscribe to the sensors on Zenoh, publish the fused pose")
+    d.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    d.set_defaults(func=cmd_run, default_log_level="info")
+
+    pl = sub.add_parser("play", help="publish a bag's sensor topics onto Zenoh as zenoh-bridge-ros2dds would")
+    pl.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    pl.add_argument("--config", required=True, help="TOML config: sensors, keys and the [zenoh] section")
+    pl.add_argument("--rate", type=float, default=1.0, help="pace relative to the recording; 0 = as fast as possible")
+    pl.add_argument("--duration", type=float, help="play only the first S seconds of the bag")
+    pl.add_argument("--connect", action="append", metavar="ENDPOINT",
+                    help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "
+                         "endpoints on loopback")
+    pl.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
+    pl.add_argument("--wait", type=float, default=5.0,
+                    help="wait up to S seconds for a subscriber on every key before playing (default 5)")
+    pl.set_defaults(func=cmd_play, default_log_level="info")
+
+    h = sub.add_parser("health", help="query a running daemon's health; exit 0 when it is good enough")
+    h.add_argument("--config", help="TOML config of the daemon (health key, namespace, endpoints)")
+    h.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="Zenoh endpoint of the daemon (repeatable); default: from the config")
+    h.add_argument("--key", help="health key (default: output.health_key of the config)")
+    h.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for an answer (default 2)")
+    h.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
+                   help="worst status that still exits 0 (default degraded; failed = any answer)")
+    h.set_defaults(func=cmd_health)
+
+    b = sub.add_parser("bench-latency", help="sensor put -> fused pose latency over Zenoh on loopback")
+    b.add_argument("--seconds", type=float, default=10.0, help="measurement duration (default 10)")
+    b.add_argument("--imu-hz", type=float, default=1000.0)
+    b.add_argument("--odom-hz", type=float, default=100.0)
+    b.add_argument("--no-express", action="store_true", help="let Zenoh batch the daemon's outputs")
+    b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.set_defaults(func=cmd_bench_latency)
     return p
 
 
@@ -67,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from .logs import configure
 
-    configure(args.log_level)
+    configure(args.log_level or getattr(args, "default_log_level", "warning"))
     return args.func(args)
 
 

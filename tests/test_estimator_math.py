@@ -35,10 +35,10 @@ def _state(layout: StateLayout, rpy: tuple[float, float, float], bias=(0.01, -0.
 
 def _input(world: bool = False, gyro: bool = True) -> MotionInput:
     u = MotionInput()
-    u.linear = np.array([0.8, 0.1, -0.05])
-    u.angular = np.array([0.2, -0.3, 0.9])
-    u.linear_cov = np.diag([1e-3, 2e-3, 3e-3])
-    u.angular_cov = np.diag([1e-4, 1e-4, 4e-4])
+    u.linear = (0.8, 0.1, -0.05)
+    u.angular = (0.2, -0.3, 0.9)
+    u.linear_cov = (1e-3, 1e-4, 0.0, 1e-4, 2e-3, 0.0, 0.0, 0.0, 3e-3)
+    u.angular_cov = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 4e-4)
     u.linear_period = u.angular_period = 0.02
     u.from_gyro = gyro
     u.world_frame = world
@@ -51,7 +51,7 @@ def test_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyr
     layout = _layout()
     x = _state(layout, (r, p, y))
     u = _input(world, gyro)
-    _, F, _ = predict(layout, x, u, dt, np.zeros(6))
+    _, F, _ = predict(layout, x, u, dt, np.zeros(9))
     F_num = transition_jacobian(layout, lambda s: propagate_state(layout, s, u, dt), x)
     np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
 
@@ -67,7 +67,7 @@ def test_rpy_jacobian_matches_central_differences(r, p, y):
 
     _, H3 = obs.rpy_jacobian(tuple(x[3:7].tolist()))
     H_num = measurement_jacobian(layout, h, x)
-    np.testing.assert_allclose(H3, H_num[:, 3:6], atol=1e-6, rtol=1e-5)
+    np.testing.assert_allclose(np.array(H3), H_num[:, 3:6], atol=1e-6, rtol=1e-5)
     np.testing.assert_allclose(H_num[:, [0, 1, 2, 6, 7, 8]], 0.0, atol=1e-9)
 
 
@@ -76,7 +76,8 @@ def test_rpy_jacobian_matches_central_differences(r, p, y):
 def test_roll_pitch_observation_has_no_yaw_column(r, p, y):
     layout = _layout()
     x = _state(layout, (r, p, y))
-    _, H, _ = obs.orientation(layout, x, (0.0, 0.0, 0.0), np.eye(3) * 1e-4, obs.ORIENTATION_ROWS["roll_pitch"])
+    _, H, _ = obs.orientation(layout, x, (0.0, 0.0, 0.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4),
+                              obs.ORIENTATION_ROWS["roll_pitch"])
     assert H.shape == (2, layout.error_dim)
     assert np.all(H[:, 5] == 0.0)  # global yaw error column
     assert np.all(H[:, 0:3] == 0.0)  # position
@@ -85,8 +86,8 @@ def test_roll_pitch_observation_has_no_yaw_column(r, p, y):
 def test_zero_rate_jacobian_matches_central_differences():
     layout = _layout()
     x = _state(layout, (0.1, 0.2, 0.3))
-    gyro = np.array([0.01, 0.02, -0.03])
-    _, H, _ = obs.zero_rate(layout, x, gyro, np.eye(3))
+    gyro = (0.01, 0.02, -0.03)
+    _, H, _ = obs.zero_rate(layout, x, gyro, (1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0))
     H_num = measurement_jacobian(layout, lambda s: s[layout.nominal["gyro_bias"]], x, angular=False)
     np.testing.assert_allclose(H, H_num, atol=1e-9)
 
@@ -121,13 +122,14 @@ def test_long_random_run_keeps_covariance_psd_and_quaternion_unit():
     ekf = ErrorStateEKF(layout)
     for k in range(5000):
         u = _input(gyro=bool(k % 2))
-        u.linear = rng.normal(0, 1, 3)
-        u.angular = rng.normal(0, 0.5, 3)
-        x, F, Q = predict(layout, ekf.x, u, float(rng.uniform(0.0, 0.05)), np.full(6, 1e-6))
+        u.linear = tuple(rng.normal(0, 1, 3).tolist())
+        u.angular = tuple(rng.normal(0, 0.5, 3).tolist())
+        x, F, Q = predict(layout, ekf.x, u, float(rng.uniform(0.0, 0.05)), np.full(9, 1e-6))
         ekf.propagate(x, F, Q)
         if k % 3 == 0:
             z = tuple(rng.uniform(-0.5, 0.5, 3)) if k % 2 else tuple(rng.uniform(-math.pi, math.pi, 3))
-            y, H, R = obs.orientation(layout, ekf.x, z, np.diag(rng.uniform(1e-6, 1e-1, 3)), (0, 1, 2))
+            var = rng.uniform(1e-6, 1e-1, 3).tolist()
+            y, H, R = obs.orientation(layout, ekf.x, z, (var[0], 0, 0, 0, var[1], 0, 0, 0, var[2]), (0, 1, 2))
             ekf.update(y, H, R)
         q = ekf.x[3:7]
         assert abs(float(q @ q) - 1.0) < 1e-12
@@ -151,7 +153,7 @@ def test_gate_rejects_outlier_and_leaves_state():
     layout = _layout()
     ekf = ErrorStateEKF(layout)
     before = ekf.snapshot()
-    y, H, R = obs.orientation(layout, ekf.x, (0.0, 0.0, 2.0), np.eye(3) * 1e-4, (0, 1, 2))
+    y, H, R = obs.orientation(layout, ekf.x, (0.0, 0.0, 2.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0, 1, 2))
     res = ekf.update(y, H, R, threshold=5.0)
     assert res.rejected and res.nis > 25.0
     np.testing.assert_array_equal(ekf.x, before[0])
@@ -164,11 +166,30 @@ def test_kalman_update_matches_textbook_inverse():
     A = rng.normal(size=(9, 9))
     P = A @ A.T * 1e-2 + np.eye(9) * 1e-3
     ekf = ErrorStateEKF(layout, P=P)
-    y, H, R = obs.orientation(layout, ekf.x, (0.05, -0.02, 0.1), np.diag([1e-3, 2e-3, 3e-3]), (0, 1, 2))
+    y, H, R = obs.orientation(layout, ekf.x, (0.05, -0.02, 0.1), (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3), (0, 1, 2))
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
     res = ekf.update(y, H, R)
     assert res.nis == pytest.approx(float(y @ np.linalg.inv(S) @ y), rel=1e-10)
     IKH = np.eye(9) - K @ H
-    np.testing.assert_allclose(ekf.P, IKH @ P @ IKH.T + K @ R @ K.T, atol=1e-14)
+    np.testing.assert_allclose(ekf.P, IKH @ P @ IKH.T + K @ R @ K.T, atol=1e-12)
     np.testing.assert_allclose(ekf.x[layout.nominal["gyro_bias"]], (K @ y)[6:9], atol=1e-14)
+
+
+def test_masked_update_equals_joseph_form_with_zeroed_gain_rows():
+    layout = _layout()
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(9, 9))
+    P = A @ A.T * 1e-2 + np.eye(9) * 1e-3
+    ekf = ErrorStateEKF(layout, x=_state(layout, (0.2, -0.1, 0.5)), P=P)
+    x0 = ekf.x.copy()
+    y, H, R = obs.orientation(layout, ekf.x, (0.25, -0.12, 0.0), (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3), (0, 1))
+    mask = np.ones(9, dtype=bool)
+    mask[[0, 1, 2, 5, 8]] = False
+    ekf.update(y, H, R, mask=mask)
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R) * mask[:, None]
+    IKH = np.eye(9) - K @ H
+    np.testing.assert_allclose(ekf.P, IKH @ P @ IKH.T + K @ R @ K.T, atol=1e-12)
+    dx = layout.boxminus(ekf.x, x0)
+    np.testing.assert_allclose(dx, K @ y, atol=1e-12)
+    assert np.abs(dx[~mask]).max() < 1e-15

@@ -25,6 +25,7 @@ import structlog
 
 from ..config import Config, ImuSensor, OdomSensor
 from ..estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+from ..estimator import mat3
 from ..estimator import observations as obs
 from ..estimator import rotation as rot
 from ..samples import ImuSample, OdomSample, Sample
@@ -127,7 +128,9 @@ class FusionCore:
         self.tilt_mask[[0, 1, 2, 5]] = False
         if self.has_bias:
             self.tilt_mask[self.layout.error["gyro_bias"].start + 2] = False
-        self.pose_noise_var = np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
+        self.noise_density = self.layout.noise_density(
+            np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
+        )
         self.gap_var = np.zeros(self.layout.error_dim)
         self.gap_var[0:3] = fc.gap_inflation[0] ** 2
         self.gap_var[3:6] = fc.gap_inflation[1] ** 2
@@ -136,8 +139,8 @@ class FusionCore:
         self.caps[3:6] = fc.covariance_cap[1]
         odom = self.sensors[self.odom_index] if self.odom_index >= 0 else None
         unmeasured = odom.twist_unmeasured_sigma if isinstance(odom, OdomSensor) else [0.1, 0.1]
-        self.default_linear_cov = np.eye(3) * unmeasured[0] ** 2
-        self.default_angular_cov = np.eye(3) * unmeasured[1] ** 2
+        self.default_linear_cov = mat3.diag(*[unmeasured[0] ** 2] * 3)
+        self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
         self._u = MotionInput()
         self._u.world_frame = isinstance(odom, OdomSensor) and odom.twist_frame == "world"
         self.stats = [SensorStats() for _ in self.sensors]
@@ -236,17 +239,18 @@ class FusionCore:
         u = self._inputs(s)
         angular = u.angular
         if u.from_gyro and self.has_bias:
-            angular = angular - x[self.layout.nominal["gyro_bias"]]
+            b = x[self.layout.nominal["gyro_bias"]].tolist()
+            angular = (angular[0] - b[0], angular[1] - b[1], angular[2] - b[2])
         twist_cov = np.zeros((6, 6))
-        twist_cov[0:3, 0:3] = u.linear_cov
-        twist_cov[3:6, 3:6] = u.angular_cov
+        twist_cov[0:3, 0:3] = np.reshape(u.linear_cov, (3, 3))
+        twist_cov[3:6, 3:6] = np.reshape(u.angular_cov, (3, 3))
         return Estimate(
             stamp=s.t,
             position=(float(x[0]), float(x[1]), float(x[2])),
             orientation=(float(x[3]), float(x[4]), float(x[5]), float(x[6])),
             pose_covariance=P[0:6, 0:6].ravel().tolist(),
-            linear=tuple(u.linear.tolist()),
-            angular=tuple(angular.tolist()),
+            linear=tuple(u.linear),
+            angular=tuple(angular),
             twist_covariance=twist_cov.ravel().tolist(),
         )
 
@@ -305,9 +309,9 @@ class FusionCore:
         n = len(self.sensors)
         s.last = [None] * n
         s.period = [0.0] * n
-        s.linear = np.zeros(3)
+        s.linear = _ZERO3
         s.linear_cov = self.default_linear_cov
-        s.wheel_angular = np.zeros(3)
+        s.wheel_angular = _ZERO3
         s.wheel_angular_cov = self.default_angular_cov
         s.wheel_yaw_measured = False
         s.gyro = None
@@ -359,7 +363,7 @@ class FusionCore:
 
     def _predict(self, s: FilterState, dt: float) -> None:
         u = self._inputs(s)
-        x, F, Q = predict(self.layout, s.ekf.x, u, dt, self.pose_noise_var)
+        x, F, Q = predict(self.layout, s.ekf.x, u, dt, self.noise_density)
         if dt > self.cfg.filter.gap_s:
             Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
         if not s.ekf.propagate(x, F, Q):
@@ -404,12 +408,12 @@ class FusionCore:
         # The wheels' yaw rate is not fused once the gyro drives heading; it only
         # checks the gyro, so that skid and hand-turning show up as slip.
         bias_z = s.ekf.x[self.layout.nominal["gyro_bias"]][2] if self.has_bias else 0.0
-        gyro_z = float(s.gyro[2]) - float(bias_z)
-        var = float(inp.angular_cov[2, 2] + s.gyro_cov[2, 2])
+        gyro_z = s.gyro[2] - float(bias_z)
+        var = inp.angular_cov[8] + s.gyro_cov[8]
         if self.has_bias:
             e = self.layout.error["gyro_bias"].start + 2
             var += float(s.ekf.P[e, e])
-        r = float(inp.angular[2]) - gyro_z
+        r = inp.angular[2] - gyro_z
         slip = abs(r) > self.sensors[idx].slip_threshold
         return [
             DiagnosticsRecord(stamp, self.sensors[idx].name, ["yaw_rate"], [r], [var], r * r / var, 1, slip,
@@ -489,4 +493,4 @@ class FusionCore:
 
 
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
-_ZERO3 = np.zeros(3)
+_ZERO3 = (0.0, 0.0, 0.0)

@@ -11,9 +11,8 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ..config import ImuSensor, OdomSensor
+from ..estimator import mat3
 from ..estimator import rotation as rot
 from ..samples import ImuSample, OdomSample
 
@@ -29,7 +28,7 @@ class Rejected(Exception):
 
 
 class OdomInput:
-    """Body (or world) twist with per-sample covariances, ready for the motion model."""
+    """Body (or world) twist with per-sample covariances (row-major 9-tuples), ready for the motion model."""
 
     __slots__ = ("linear", "linear_cov", "angular", "angular_cov", "yaw_rate_measured", "stationary")
 
@@ -43,7 +42,7 @@ class OdomInput:
 
 
 class ImuInput:
-    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate."""
+    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate; 9-tuple covariances."""
 
     __slots__ = ("rpy", "rpy_cov", "rows", "gyro", "gyro_cov")
 
@@ -56,18 +55,19 @@ class ImuInput:
 
 
 def _finite(values) -> bool:
-    return all(math.isfinite(v) for v in values)
+    """All finite: one float sum (inf - inf and anything + nan are not finite)."""
+    return math.isfinite(math.fsum(values)) if len(values) else True
 
 
-def _resolve_variances(diag: list[float], floor: float, unmeasured: float, default: float) -> tuple[list[float], list[bool]]:
+def _resolve_variances(diag, floor: float, unmeasured: float, default: float) -> tuple[list[float], list[bool]]:
     """Floor tiny/zero variances; mark huge or non-finite ones as "not measured"."""
     out, measured = [], []
     for v in diag:
-        if not math.isfinite(v) or v >= unmeasured:
+        if v >= unmeasured or v != v or v == math.inf:
             out.append(default)
             measured.append(False)
         else:
-            out.append(max(v, floor))
+            out.append(v if v > floor else floor)
             measured.append(True)
     return out, measured
 
@@ -89,32 +89,39 @@ class OdomPolicy:
     def convert(self, s: OdomSample) -> OdomInput:
         if not (_finite(s.linear) and _finite(s.angular)):
             raise Rejected("non_finite", "twist")
-        if len(s.twist_covariance) != 36:
-            raise Rejected("bad_covariance", "twist covariance must have 36 entries")
         cov = s.twist_covariance
-        diag = [cov[7 * i] for i in range(6)]
+        if len(cov) != 36:
+            raise Rejected("bad_covariance", "twist covariance must have 36 entries")
+        twist = (*s.linear, *s.angular)
         if self._override is not None:
-            var = list(self._override)
-            measured = [True] * 6
+            var = self._override
+            values = twist
+            measured = (True,) * 6
         else:
-            if any(d < 0.0 for d in diag):
-                raise Rejected("negative_covariance", "twist")
-            var = []
-            measured = []
-            for i, d in enumerate(diag):
-                v, m = _resolve_variances([d], self._floor[i], self._unmeasured[i], self._default[i])
-                var += v
-                measured += m
-        twist = [*s.linear, *s.angular]
-        values = [t if m else 0.0 for t, m in zip(twist, measured)]
-        stationary = all(abs(v) <= self.STATIONARY_LINEAR for v in values[0:3]) and all(
-            abs(v) <= self.STATIONARY_ANGULAR for v in values[3:6]
+            var, values, measured = [], [], []
+            for i in range(6):
+                d = cov[7 * i]
+                if d < 0.0:
+                    raise Rejected("negative_covariance", "twist")
+                if d >= self._unmeasured[i] or d != d or d == math.inf:
+                    var.append(self._default[i])  # "not measured": not used, default noise
+                    values.append(0.0)
+                    measured.append(False)
+                else:
+                    var.append(d if d > self._floor[i] else self._floor[i])
+                    values.append(twist[i])
+                    measured.append(True)
+        lin, ang = self.STATIONARY_LINEAR, self.STATIONARY_ANGULAR
+        v0, v1, v2, w0, w1, w2 = values
+        stationary = (
+            -lin <= v0 <= lin and -lin <= v1 <= lin and -lin <= v2 <= lin
+            and -ang <= w0 <= ang and -ang <= w1 <= ang and -ang <= w2 <= ang
         )
         return OdomInput(
-            np.array(values[0:3]),
-            np.diag(var[0:3]),
-            np.array(values[3:6]),
-            np.diag(var[3:6]),
+            (v0, v1, v2),
+            mat3.diag(var[0], var[1], var[2]),
+            (w0, w1, w2),
+            mat3.diag(var[3], var[4], var[5]),
             measured[5],
             stationary,
         )
@@ -126,7 +133,7 @@ class ImuPolicy:
         r, p, y = cfg.extrinsic_rpy
         self.q_ext = rot.from_rpy(r, p, y)
         self.q_ext_inv = rot.conj(self.q_ext)
-        self.R_ext = rot.matrix(self.q_ext)
+        self.R_ext = rot.matrix9(self.q_ext)
         self._identity = (r, p, y) == (0.0, 0.0, 0.0)
         self.mode = cfg.orientation
         self._rows = {"absolute": (0, 1, 2), "relative": (0, 1, 2), "roll_pitch": (0, 1), "off": ()}[self.mode]
@@ -136,11 +143,11 @@ class ImuPolicy:
         self._gyro_floor = cfg.gyro_min_sigma**2
         self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
 
-    def _rotate_cov(self, diag: list[float]) -> np.ndarray:
-        C = np.diag(diag)
+    def _rotate_cov(self, diag: list[float]) -> mat3.Mat3:
+        C = mat3.diag(diag[0], diag[1], diag[2])
         if self._identity:
             return C
-        return self.R_ext @ C @ self.R_ext.T
+        return mat3.flat(mat3.sandwich(self.R_ext, C))
 
     def convert(self, s: ImuSample) -> ImuInput:
         rpy = rpy_cov = None
@@ -183,8 +190,8 @@ class ImuPolicy:
                     if any(d < 0.0 for d in diag):
                         raise Rejected("negative_covariance", "angular_velocity")
                     var = [max(d, self._gyro_floor) for d in diag]
-                w = np.array(s.angular_velocity)
-                gyro = w if self._identity else self.R_ext @ w
+                w = s.angular_velocity
+                gyro = w if self._identity else mat3.apply(self.R_ext, w)
                 gyro_cov = self._rotate_cov(var)
         elif self.cfg.angular_velocity:
             raise Rejected("bad_covariance", "angular velocity covariance must have 9 entries")

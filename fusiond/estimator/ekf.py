@@ -32,19 +32,22 @@ class ErrorStateEKF:
         self.layout = layout
         self.x = layout.initial_state() if x is None else np.array(x, dtype=float)
         self.P = layout.initial_covariance() if P is None else np.array(P, dtype=float)
-        self._eye = np.eye(layout.error_dim)
         self.resets = 0  # covariance resets after a non-finite value
+        self._mask: np.ndarray | None = None
+        self._weights = np.ones((layout.error_dim, layout.error_dim))
 
     # -- propagation -------------------------------------------------------
     def propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
         """Accept a propagated state; False if the covariance had to be reset."""
         self.x = x_new
-        P = F @ self.P @ F.T
+        P = np.dot(np.dot(F, self.P), F.T)
         P += Q
-        return self._store(P)
-
-    def add_noise(self, Q: np.ndarray) -> bool:
-        return self._store(self.P + Q)
+        if not math.isfinite(P.sum()):  # one reduction: any NaN/inf makes the sum non-finite
+            self.P = self.layout.initial_covariance()
+            self.resets += 1
+            return False
+        self.P = P  # F P F^T + Q is symmetric PSD up to rounding; update() re-symmetrises
+        return True
 
     # -- correction --------------------------------------------------------
     def update(
@@ -58,41 +61,48 @@ class ErrorStateEKF:
         uses it so that correlations in P cannot leak it into heading or position.
         """
         P = self.P
-        PHt = P @ H.T
-        S = H @ PHt
+        PHt = np.dot(P, H.T)
+        S = np.dot(H, PHt)
         S += R
         L, info = dpotrf(S, lower=1, clean=0, overwrite_a=0)
-        s_diag = np.diagonal(S).tolist()
+        s_diag = S.diagonal().tolist()
         if info != 0:
             return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
         Sinv_y, _ = dpotrs(L, y, lower=1)
-        nis = float(y @ Sinv_y)
+        nis = float(np.dot(y, Sinv_y))
         if not math.isfinite(nis):
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
-        if math.sqrt(max(nis, 0.0)) > threshold:
+        if nis > threshold * threshold:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
         KT, _ = dpotrs(L, PHt.T, lower=1)  # K^T = S^-1 H P
-        K = KT.T
-        if mask is not None:
-            K = K * mask[:, None]
-            KT = K.T
-        dx = K @ y
-        IKH = self._eye - K @ H
-        P_new = IKH @ P @ IKH.T
-        P_new += K @ R @ KT
+        dx = np.dot(PHt, Sinv_y)
+        C = np.dot(PHt, KT)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
+        if mask is None:
+            P_new = P - C
+        else:
+            # Gain rows zeroed by the mask (M K): Joseph's P - MKHP - PH^TK^TM + MKSK^TM
+            # collapses to P - C * W with W_ij = 1 - (1 - m_i)(1 - m_j).
+            dx *= mask
+            P_new = P - C * self._mask_weights(mask)
         self.layout.boxplus(self.x, dx)
         self._store(P_new)
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False)
 
+    def _mask_weights(self, mask: np.ndarray) -> np.ndarray:
+        if self._mask is not mask:
+            keep = 1.0 - mask.astype(float)
+            self._mask, self._weights = mask, 1.0 - np.outer(keep, keep)
+        return self._weights
+
     # -- covariance hygiene ------------------------------------------------
     def _store(self, P: np.ndarray) -> bool:
-        P = 0.5 * (P + P.T)
-        d = np.diagonal(P)
-        if not np.isfinite(P).all():
+        P += P.T
+        P *= 0.5
+        if not math.isfinite(P.sum()):
             self.P = self.layout.initial_covariance()
             self.resets += 1
             return False
-        if (d < 0.0).any():
+        if P.diagonal().min() < 0.0:
             # Rounding can push a tiny variance below zero: clip the spectrum.
             w, V = np.linalg.eigh(P)
             P = (V * np.maximum(w, 0.0)) @ V.T
@@ -113,8 +123,8 @@ class ErrorStateEKF:
         c.layout = self.layout
         c.x = self.x.copy()
         c.P = self.P.copy()
-        c._eye = self._eye
         c.resets = self.resets
+        c._mask, c._weights = self._mask, self._weights
         return c
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:

@@ -4,12 +4,20 @@ The wheel twist is a control input, not a measurement: position moves by
 R(q) v dt (body-frame twist) or v dt (world-frame twist), attitude by the
 body rate, which comes either from the wheels' yaw rate or from the gyro.
 Input blocks of the state (gyro bias, wheel scale) correct the input first
-and get their columns of F by the chain rule through ``G_linear``/``G_angular``.
+and get their columns of F by the chain rule through ``G_lin``/``G_ang``.
+
+With global attitude errors (R_true = Exp(dtheta) R):
+    p' = p + R v dt        ->  dp' = dp - [R v dt]x dtheta + R dt dv
+    R' = R Exp(w dt)       ->  dtheta' = dtheta + R' Jr(w dt) dt dw
+so F = [[I, -[R v dt]x], [0, I]] plus the input blocks' columns.
 
 Input noise: a message covariance is per sample. Held over a sample period T,
 white per-sample noise integrates to a random walk of variance sigma^2 * T * dt,
 so Q = G (Sigma * T / dt) G^T, independent of how finely the interval is split
 by other sensors' messages.
+
+This runs once per message: the 3x3 algebra is done on Python floats (several
+times cheaper than numpy calls on 3-vectors); numpy only sees the n x n blocks.
 """
 
 from __future__ import annotations
@@ -18,14 +26,19 @@ import math
 
 import numpy as np
 
+from . import mat3
 from . import rotation as rot
-from .state import StateLayout
+from .state import StateLayout, Vec3
 
-_I3 = np.eye(3)
+_POSITION = slice(0, 3)
+_ATTITUDE = slice(3, 6)
 
 
 class MotionInput:
-    """The inputs held between messages (zero-order hold), with their noise."""
+    """The inputs held between messages (zero-order hold), with their noise.
+
+    Vectors are 3-tuples and covariances row-major 9-tuples of floats.
+    """
 
     __slots__ = (
         "linear", "linear_cov", "linear_period",
@@ -34,83 +47,90 @@ class MotionInput:
     )
 
     def __init__(self) -> None:
-        self.linear = np.zeros(3)
-        self.linear_cov = np.zeros((3, 3))
+        self.linear: Vec3 = (0.0, 0.0, 0.0)
+        self.linear_cov: tuple[float, ...] = (0.0,) * 9
         self.linear_period = 0.0
-        self.angular = np.zeros(3)
-        self.angular_cov = np.zeros((3, 3))
+        self.angular: Vec3 = (0.0, 0.0, 0.0)
+        self.angular_cov: tuple[float, ...] = (0.0,) * 9
         self.angular_period = 0.0
         self.from_gyro = False
         self.world_frame = False
 
-    def copy(self) -> "MotionInput":
-        c = MotionInput.__new__(MotionInput)
-        c.linear = self.linear  # arrays are replaced, never mutated in place
-        c.linear_cov = self.linear_cov
-        c.linear_period = self.linear_period
-        c.angular = self.angular
-        c.angular_cov = self.angular_cov
-        c.angular_period = self.angular_period
-        c.from_gyro = self.from_gyro
-        c.world_frame = self.world_frame
-        return c
+
+def _right_jacobian(x: float, y: float, z: float) -> tuple:
+    """Jr(phi) = I - a [phi]x + b [phi]x^2, row-major 9-tuple."""
+    t2 = x * x + y * y + z * z
+    if t2 < 1e-10:
+        a, b = 0.5, 1.0 / 6.0
+    else:
+        t = math.sqrt(t2)
+        a = (1.0 - math.cos(t)) / t2
+        b = (t - math.sin(t)) / (t2 * t)
+    # [phi]x^2 = phi phi^T - t2 I
+    return (
+        1.0 + b * (x * x - t2), a * z + b * x * y, -a * y + b * x * z,
+        -a * z + b * x * y, 1.0 + b * (y * y - t2), a * x + b * y * z,
+        a * y + b * x * z, -a * x + b * y * z, 1.0 + b * (z * z - t2),
+    )
 
 
 def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float) -> np.ndarray:
     """f(x, u, dt): the exact function the filter runs (used by numeric Jacobian tests)."""
-    return predict(layout, x, u, dt, np.zeros(6))[0]
+    return predict(layout, x, u, dt, np.zeros(layout.error_dim))[0]
 
 
 def predict(
-    layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, pose_noise_var: np.ndarray
+    layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, noise_density: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Propagate the nominal state over dt; return (x_new, F, Q) in error space."""
+    """Propagate the nominal state over dt; return (x_new, F, Q) in error space.
+
+    ``noise_density``: variance per second added to each error component (model
+    error of the pose plus the blocks' random walks, see ``StateLayout.noise_density``).
+    """
     n = layout.error_dim
+    xl = x.tolist()
     v = u.linear
     w = u.angular
     corrections = []
-    for blk in layout.input_blocks:
+    for blk, n0, n1, cols in layout.input_blocks:
         if not blk.applies(u.from_gyro):
             continue
-        xb = x[layout.nominal[blk.name]]
+        xb = xl[n0:n1]
         if blk.corrects == "linear":
-            corrections.append(("linear", layout.error[blk.name], blk.input_jacobian(xb, v)))
+            corrections.append((_POSITION, cols, blk, xb, v))
             v = blk.correct(xb, v)
         else:
-            corrections.append(("angular", layout.error[blk.name], blk.input_jacobian(xb, w)))
+            corrections.append((_ATTITUDE, cols, blk, xb, w))
             w = blk.correct(xb, w)
 
-    q0 = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
-    R0 = rot.matrix(q0)
-    F = np.eye(n)
-    x_new = x.copy()
+    px, py, pz, qx, qy, qz, qw = xl[0:7]
+    vx, vy, vz = v
+    R0 = rot.matrix9((qx, qy, qz, qw))
+    F = layout.identity.copy()
     if u.world_frame:
-        G_lin = _I3 * dt
-        x_new[0:3] += v * dt
+        G_lin = (dt, 0.0, 0.0, 0.0, dt, 0.0, 0.0, 0.0, dt)
+        dpx, dpy, dpz = vx * dt, vy * dt, vz * dt
     else:
-        G_lin = R0 * dt
-        dp = R0 @ v * dt
-        x_new[0:3] += dp
-        F[0:3, 3:6] = -rot.skew(dp)
-    wx, wy, wz = float(w[0]) * dt, float(w[1]) * dt, float(w[2]) * dt
-    q1 = rot.normalize(rot.mul(q0, rot.exp(wx, wy, wz)))
-    x_new[3:7] = q1
-    G_ang = rot.matrix(q1) @ rot.right_jacobian(wx, wy, wz) * dt
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R0
+        G_lin = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
+        dpx = (r0 * vx + r1 * vy + r2 * vz) * dt
+        dpy = (r3 * vx + r4 * vy + r5 * vz) * dt
+        dpz = (r6 * vx + r7 * vy + r8 * vz) * dt
+        F[0:3, 3:6] = ((0.0, dpz, -dpy), (-dpz, 0.0, dpx), (dpy, -dpx, 0.0))  # -[dp]x
+    ax, ay, az = w[0] * dt, w[1] * dt, w[2] * dt
+    q1 = rot.normalize(rot.mul((qx, qy, qz, qw), rot.exp(ax, ay, az)))
+    xl[0:7] = (px + dpx, py + dpy, pz + dpz, *q1)
+    x_new = np.array(xl)
+    G_ang = mat3.mul(rot.matrix9(q1), _right_jacobian(ax, ay, az), dt)
 
-    for which, cols, J in corrections:
-        if which == "linear":
-            F[0:3, cols] = G_lin @ J
-        else:
-            F[3:6, cols] = G_ang @ J
+    for rows, cols, blk, xb, u_in in corrections:
+        F[rows, cols] = blk.chain(G_lin if rows is _POSITION else G_ang, xb, u_in)
 
-    Q = np.zeros((n, n))
+    Q = layout.zeros.copy()
     if dt > 0.0:
         if u.linear_period > 0.0:
-            Q[0:3, 0:3] = G_lin @ (u.linear_cov * (u.linear_period / dt)) @ G_lin.T
+            Q[0:3, 0:3] = mat3.sandwich(G_lin, u.linear_cov, u.linear_period / dt)
         if u.angular_period > 0.0:
-            Q[3:6, 3:6] = G_ang @ (u.angular_cov * (u.angular_period / dt)) @ G_ang.T
-        d = np.diagonal(Q).copy()
-        d[0:6] += pose_noise_var * dt
-        d += layout.random_walk_var * dt
-        np.fill_diagonal(Q, d)
+            Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, u.angular_period / dt)
+        Q.reshape(-1)[:: n + 1] += noise_density * dt
     return x_new, F, Q

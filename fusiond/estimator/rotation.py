@@ -83,6 +83,19 @@ def matrix(q: Quat) -> np.ndarray:
     )
 
 
+def matrix9(q: Quat) -> tuple[float, ...]:
+    """Rotation matrix of a unit quaternion as a row-major 9-tuple of floats."""
+    x, y, z, w = q
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    return (
+        1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
+        2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
+        2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy),
+    )
+
+
 def from_rpy(roll: float, pitch: float, yaw: float) -> Quat:
     cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
     cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)

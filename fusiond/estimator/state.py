@@ -21,7 +21,11 @@ from . import rotation as rot
 
 
 class StateBlock:
-    """A piece of the state: sizes, initial value and uncertainty, boxplus."""
+    """A piece of the state: sizes, initial value and uncertainty, boxplus.
+
+    Blocks work on Python lists of floats (the nominal state's ``tolist()``):
+    per-message numpy calls on 3-vectors cost more than the arithmetic.
+    """
 
     name: str = ""
     nominal_size: int = 0
@@ -37,9 +41,10 @@ class StateBlock:
         """Process noise density (std per sqrt(s)) of each error component."""
         return [0.0] * self.error_size
 
-    def boxplus(self, xb: np.ndarray, dxb: np.ndarray) -> None:
-        """Inject a tangent-space correction into the nominal block, in place."""
-        xb += dxb
+    def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
+        """Inject the correction dx[e0:e0+error_size] into x[n0:n0+nominal_size], in place."""
+        for i in range(self.nominal_size):
+            x[n0 + i] += dx[e0 + i]
 
 
 class PoseBlock(StateBlock):
@@ -59,19 +64,22 @@ class PoseBlock(StateBlock):
     def initial_sigma(self) -> list[float]:
         return [self.position_sigma] * 3 + [self.attitude_sigma] * 3
 
-    def boxplus(self, xb: np.ndarray, dxb: np.ndarray) -> None:
-        xb[0:3] += dxb[0:3]
-        q = rot.mul(rot.exp(float(dxb[3]), float(dxb[4]), float(dxb[5])), tuple(xb[3:7].tolist()))
-        xb[3:7] = rot.normalize(q)
+    def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
+        x[n0] += dx[e0]
+        x[n0 + 1] += dx[e0 + 1]
+        x[n0 + 2] += dx[e0 + 2]
+        q = rot.mul(rot.exp(dx[e0 + 3], dx[e0 + 4], dx[e0 + 5]), (x[n0 + 3], x[n0 + 4], x[n0 + 5], x[n0 + 6]))
+        x[n0 + 3 : n0 + 7] = rot.normalize(q)
 
 
 InputName = Literal["linear", "angular"]
+Vec3 = tuple[float, float, float]
 
 
 class InputBlock(StateBlock):
     """A block that corrects one motion input (u' = g(u, x_block)).
 
-    The motion model chains its own input Jacobian with ``input_jacobian`` to get
+    The motion model chains its own input Jacobian G with the block's to get
     this block's columns of F, so the block never touches the motion model.
     """
 
@@ -80,12 +88,20 @@ class InputBlock(StateBlock):
     def applies(self, from_gyro: bool) -> bool:
         return True
 
-    def correct(self, xb: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def correct(self, xb: list[float], u: Vec3) -> Vec3:
         raise NotImplementedError
 
-    def input_jacobian(self, xb: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def input_jacobian(self, xb: list[float], u: Vec3) -> np.ndarray:
         """d u' / d (block error), shape (3, error_size)."""
         raise NotImplementedError
+
+    def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
+        """This block's columns of F: G (d state / d input, row-major 3x3) times the input Jacobian.
+
+        Blocks may override it with a cheaper closed form; the result is anything
+        numpy can assign to a (3, error_size) slice.
+        """
+        return np.dot(np.array(G).reshape(3, 3), self.input_jacobian(xb, u))
 
 
 class GyroBiasBlock(InputBlock):
@@ -110,11 +126,15 @@ class GyroBiasBlock(InputBlock):
     def applies(self, from_gyro: bool) -> bool:
         return from_gyro
 
-    def correct(self, xb: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return u - xb
+    def correct(self, xb: list[float], u: Vec3) -> Vec3:
+        return (u[0] - xb[0], u[1] - xb[1], u[2] - xb[2])
 
-    def input_jacobian(self, xb: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def input_jacobian(self, xb: list[float], u: Vec3) -> np.ndarray:
         return self._MINUS_I
+
+    def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
+        g0, g1, g2, g3, g4, g5, g6, g7, g8 = G  # G (-I) = -G
+        return ((-g0, -g1, -g2), (-g3, -g4, -g5), (-g6, -g7, -g8))
 
 
 class StateLayout:
@@ -136,9 +156,23 @@ class StateLayout:
             e += b.error_size
         self.nominal_dim = n
         self.error_dim = e
-        self.input_blocks = [b for b in blocks if isinstance(b, InputBlock)]
+        self.input_blocks = [
+            (b, self.nominal[b.name].start, self.nominal[b.name].stop, self.error[b.name])
+            for b in blocks
+            if isinstance(b, InputBlock)
+        ]
+        self._offsets = [(b, self.nominal[b.name].start, self.error[b.name].start) for b in blocks]
         walk = np.concatenate([np.asarray(b.random_walk(), float) for b in blocks])
         self.random_walk_var = walk**2
+        # Preallocated shapes the filter copies instead of building each step.
+        self.identity = np.eye(e)
+        self.zeros = np.zeros((e, e))
+
+    def noise_density(self, pose_noise_var: np.ndarray) -> np.ndarray:
+        """Per-second variance of every error component: pose model error + random walks."""
+        d = self.random_walk_var.copy()
+        d[0:6] += pose_noise_var
+        return d
 
     def has(self, name: str) -> bool:
         return name in self.nominal
@@ -151,8 +185,12 @@ class StateLayout:
         return np.diag(sig**2)
 
     def boxplus(self, x: np.ndarray, dx: np.ndarray) -> None:
-        for b in self.blocks:
-            b.boxplus(x[self.nominal[b.name]], dx[self.error[b.name]])
+        """x [+]= dx, in place."""
+        xl = x.tolist()
+        dl = dx.tolist()
+        for b, n0, e0 in self._offsets:
+            b.boxplus(xl, dl, n0, e0)
+        x[:] = xl
 
     def boxminus(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """a [-] b in the error space (inverse of boxplus); used by numeric Jacobians."""

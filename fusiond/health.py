@@ -1,0 +1,237 @@
+"""Health of the running service: per-sensor liveness, counters, filter sanity.
+
+Pure logic with an injected clock, so it is testable without Zenoh. Liveness is
+wall clock (the core's time is message time, which stops when input stops): a
+sensor is alive while its newest *accepted* sample arrived less than
+`max(timeout_s, 3 x its observed wall-clock period)` ago, so a 5 Hz sensor with
+jitter does not flap and a sensor sending only garbage or stale stamps is not
+counted as alive.
+
+Threads: subscriber callbacks count arrivals and queue drops, the worker reports
+accepted samples and core counters, the queryable reads a report. One lock
+guards it all; every call is a few dict/list updates.
+
+Status: `failed` when no sensor is alive, the filter state is non-finite or the
+worker has stopped; `degraded` when any configured sensor is not alive; else `ok`.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import msgspec
+
+TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many observed periods)
+PERIOD_SMOOTHING = 0.1  # EMA weight of a new wall-clock arrival interval
+MAX_INTERVAL = 1.0  # a longer gap counts as this much in the period EMA (a pause must not stretch it for minutes)
+
+Status = Literal["ok", "degraded", "failed"]
+
+
+class SensorHealth(msgspec.Struct, kw_only=True):
+    """One sensor in the health answer (DESIGN.md fields first, extensions after)."""
+
+    alive: bool
+    age_s: float | None  # wall seconds since its newest accepted sample; null before the first
+    rate_hz: float  # observed wall-clock rate while alive, 0 otherwise
+    received: int  # payloads the subscriber got
+    dropped: int  # all drops: queue full, undecodable, refused by the core
+    rejected: int  # updates refused by the Mahalanobis gate
+    applied: int = 0
+    late: int = 0  # applied at their own stamp from the history
+    timeout_s: float = 0.0  # liveness timeout in force
+    dropped_by_reason: dict[str, int] = {}
+
+
+class FilterHealth(msgspec.Struct, kw_only=True):
+    initialised: bool = False
+    time: float | None = None  # filter (message) time of the newest estimate
+    finite: bool = True
+    covariance_resets: int = 0
+    time_resets: int = 0  # backwards time jumps that reset the filter
+
+
+class QueueHealth(msgspec.Struct, kw_only=True):
+    depth: int = 0
+    capacity: int = 0
+    dropped: int = 0  # samples dropped because the queue was full (all sensors)
+
+
+class HealthReport(msgspec.Struct, kw_only=True):
+    """The health queryable's JSON answer."""
+
+    status: Status
+    sensors: dict[str, SensorHealth]
+    problems: list[str]  # one phrase per reason the status is not ok, naming the sensor
+    filter: FilterHealth
+    queue: QueueHealth
+    consistency: dict[str, dict[str, Any]]  # windowed NIS verdict per sensor channel (core.consistency())
+    published: int = 0  # fused poses published
+    uptime_s: float = 0.0
+
+
+class CoreCounters(msgspec.Struct, kw_only=True):
+    """What the worker copies out of the fusion core (it alone touches the core)."""
+
+    applied: list[int]
+    late: list[int]
+    rejected: list[int]
+    dropped: list[dict[str, int]]
+    filter: FilterHealth
+    consistency: dict[str, dict[str, Any]]
+    published: int = 0
+
+
+def core_counters(core: Any, published: int = 0) -> CoreCounters:
+    """Snapshot of a FusionCore's counters and sanity; call it from the thread that feeds the core."""
+    finite = True
+    if core.initialised:
+        est = core.estimate()
+        finite = all(math.isfinite(v) for v in (*est.position, *est.orientation, *est.pose_covariance))
+    return CoreCounters(
+        applied=[s.applied for s in core.stats],
+        late=[s.late for s in core.stats],
+        rejected=[s.rejected for s in core.stats],
+        dropped=[dict(s.dropped) for s in core.stats],
+        filter=FilterHealth(initialised=core.initialised, time=core.time, finite=finite,
+                            covariance_resets=core.covariance_resets, time_resets=core.resets),
+        consistency=core.consistency(),
+        published=published,
+    )
+
+
+class _Tracker:
+    __slots__ = ("name", "timeout_s", "received", "dropped", "last", "period")
+
+    def __init__(self, name: str, timeout_s: float) -> None:
+        self.name = name
+        self.timeout_s = timeout_s
+        self.received = 0
+        self.dropped: dict[str, int] = {}
+        self.last: float | None = None  # wall arrival of the newest accepted sample
+        self.period = 0.0  # EMA of wall-clock intervals between accepted samples
+
+    def timeout(self) -> float:
+        return max(self.timeout_s, TIMEOUT_PERIODS * self.period)
+
+
+class Health:
+    """Thread-safe health state; `report()` is the queryable's answer."""
+
+    def __init__(self, sensors: Sequence[tuple[str, float]], *, clock: Callable[[], float] = time.monotonic,
+                 queue_capacity: int = 0, queue_depth: Callable[[], int] | None = None) -> None:
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._sensors = [_Tracker(name, timeout) for name, timeout in sensors]
+        self._core: CoreCounters | None = None
+        self._queue_capacity = queue_capacity
+        self._queue_depth = queue_depth or (lambda: 0)
+        self._worker_alive = True
+        self._started = clock()
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self._sensors]
+
+    # -- writers ---------------------------------------------------------------------
+    def on_received(self, idx: int) -> None:
+        with self._lock:
+            self._sensors[idx].received += 1
+
+    def on_dropped(self, idx: int, reason: str) -> int:
+        """Count a drop outside the core (queue full, undecodable); returns that reason's count."""
+        with self._lock:
+            d = self._sensors[idx].dropped
+            n = d.get(reason, 0) + 1
+            d[reason] = n
+            return n
+
+    def on_accepted(self, idx: int, arrival: float) -> None:
+        """A sample the filter used, received at wall time `arrival` (the subscriber's clock)."""
+        with self._lock:
+            s = self._sensors[idx]
+            if s.last is not None:
+                if arrival <= s.last:
+                    return
+                d = min(arrival - s.last, MAX_INTERVAL)
+                s.period = d if s.period <= 0.0 else s.period + PERIOD_SMOOTHING * (d - s.period)
+            s.last = arrival
+
+    def set_core(self, counters: CoreCounters) -> None:
+        with self._lock:
+            self._core = counters
+
+    def set_worker_alive(self, alive: bool) -> None:
+        with self._lock:
+            self._worker_alive = alive
+
+    # -- reader -------------------------------------------------------------------------
+    def report(self, now: float | None = None) -> HealthReport:
+        with self._lock:
+            now = self._clock() if now is None else now
+            core = self._core
+            sensors: dict[str, SensorHealth] = {}
+            problems: list[str] = []
+            queue_full = 0
+            for i, s in enumerate(self._sensors):
+                timeout = s.timeout()
+                age = None if s.last is None else max(now - s.last, 0.0)
+                alive = age is not None and age <= timeout
+                reasons = dict(s.dropped)
+                queue_full += reasons.get("queue_full", 0)
+                if core is not None:
+                    for k, v in core.dropped[i].items():
+                        reasons[k] = reasons.get(k, 0) + v
+                sensors[s.name] = SensorHealth(
+                    alive=alive,
+                    age_s=age,
+                    rate_hz=1.0 / s.period if alive and s.period > 0.0 else 0.0,
+                    received=s.received,
+                    dropped=sum(reasons.values()),
+                    rejected=core.rejected[i] if core else 0,
+                    applied=core.applied[i] if core else 0,
+                    late=core.late[i] if core else 0,
+                    timeout_s=timeout,
+                    dropped_by_reason=reasons,
+                )
+                if not alive:
+                    if age is None:
+                        problems.append(f"{s.name}: no sample yet" if not s.received
+                                        else f"{s.name}: no usable sample yet ({s.received} received)")
+                    else:
+                        problems.append(f"{s.name}: silent for {age:.2f} s (timeout {timeout:.2f} s)")
+            filt = core.filter if core is not None else FilterHealth()
+            any_alive = any(v.alive for v in sensors.values())
+            failed = not any_alive or not filt.finite or not self._worker_alive
+            if not filt.finite:
+                problems.append("filter: non-finite state")
+            if not self._worker_alive:
+                problems.append("worker: stopped")
+            if not any_alive:
+                problems.append("no sensor alive")
+            status: Status = "failed" if failed else "degraded" if any(not v.alive for v in sensors.values()) else "ok"
+            return HealthReport(
+                status=status,
+                sensors=sensors,
+                problems=problems,
+                filter=filt,
+                queue=QueueHealth(depth=self._queue_depth(), capacity=self._queue_capacity, dropped=queue_full),
+                consistency=core.consistency if core is not None else {},
+                published=core.published if core is not None else 0,
+                uptime_s=max(now - self._started, 0.0),
+            )
+
+
+_encoder = msgspec.json.Encoder()
+
+
+def encode_report(report: HealthReport) -> bytes:
+    return _encoder.encode(report)
+
+
+def decode_report(payload: bytes) -> HealthReport:
+    return msgspec.json.decode(payload, type=HealthReport)

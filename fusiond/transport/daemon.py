@@ -1,0 +1,302 @@
+"""The Zenoh side of `fusiond run`: subscribers -> one queue -> one worker -> publishers.
+
+Kept thin on purpose: the maths is the fusion core's, the wire formats are the
+codecs', liveness is health.py's. What lives here is threading and life cycle:
+
+- zenoh-python runs each subscriber's callback on its own thread, so callbacks
+  never touch the filter: they copy the payload and `put_nowait` (sensor index,
+  bytes, wall arrival time) into ONE bounded queue. A full queue drops the new
+  sample and counts it per sensor as `queue_full` (explicit, visible in health).
+- ONE worker drains the queue: decode (`DecodeError` counted per reason),
+  `core.ingest`, then publish. The core's history absorbs the arrival order.
+- Outputs are declared once: pose (PoseWithCovarianceStamped CDR) and odometry
+  (nav_msgs/Odometry CDR) on every odometry sample, one JSON diagnostics record
+  per update, a health queryable, and a liveliness token `<health_key>/alive` so
+  remote tools see the daemon come and go (with a namespace both are prefixed).
+- Stop: subscribers first (no new input), then the worker drains what is queued
+  (bounded time; each sample is published completely or not at all), then the
+  outputs are undeclared; the caller closes the session.
+"""
+
+from __future__ import annotations
+
+import queue
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import structlog
+import zenoh
+
+from ..config import Config
+from ..core.fusion import FusionCore
+from ..health import Health, HealthReport, core_counters, encode_report
+from .codecs import DecodeError, encode_odometry_cdr, encode_pose_cdr, make_decoder
+from .session import build_config, open_session
+
+log = structlog.get_logger("fusiond.daemon")
+
+QUEUE_SIZE = 1024  # ~1 s of 1 kHz IMU + 100 Hz odometry: as long as the core's default history
+HEALTH_LOG_S = 5.0  # period of the `health` log event
+HEALTH_POLL_S = 0.1  # how often status changes are looked for (`health_changed`)
+CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while busy
+DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
+LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
+
+_STOP = object()
+
+
+def sensor_kind(sensor: Any) -> str:
+    """The config's `kind` tag (msgspec keeps it on the class)."""
+    return str(type(sensor).__struct_config__.tag)
+
+
+def alive_key(health_key: str) -> str:
+    """The daemon's liveliness token: `<health_key>/alive` (strip `/alive` to get the health key)."""
+    return f"{health_key}/alive"
+
+
+class Daemon:
+    """Subscribers, queue, worker and outputs on an open session (which the caller owns)."""
+
+    def __init__(self, cfg: Config, session: zenoh.Session, *, queue_size: int = QUEUE_SIZE,
+                 health_log_s: float = HEALTH_LOG_S, express: bool = True,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.cfg = cfg
+        self.session = session
+        self.core = FusionCore(cfg)
+        self.queue: queue.Queue[Any] = queue.Queue(maxsize=queue_size)
+        self.health = Health([(s.name, s.timeout_s) for s in cfg.sensors], clock=clock,
+                             queue_capacity=queue_size, queue_depth=self.queue.qsize)
+        self._clock = clock
+        self._express = express
+        self._health_log_s = health_log_s
+        self._decoders = [make_decoder(sensor_kind(s), s.encoding, s.name) for s in cfg.sensors]
+        self._subscribers: list[Any] = []
+        self._outputs: list[Any] = []
+        self._worker: threading.Thread | None = None
+        self._monitor: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self._abort = False
+        self.published = 0
+        self.errors = 0
+        self.worker_cpu_s = 0.0  # CPU time of the worker thread, set when it ends
+
+    # -- life cycle ----------------------------------------------------------------------
+    def start(self) -> None:
+        out = self.cfg.output
+        s = self.session
+        cdr = zenoh.Encoding.APPLICATION_CDR
+        self._pose_pub = s.declare_publisher(out.pose_key, encoding=cdr, express=self._express)
+        self._odom_pub = s.declare_publisher(out.odometry_key, encoding=cdr, express=self._express)
+        self._diag_pub = s.declare_publisher(out.diagnostics_key, encoding=zenoh.Encoding.APPLICATION_JSON)
+        self._queryable = s.declare_queryable(out.health_key, self._on_query)
+        self._token = s.liveliness().declare_token(alive_key(out.health_key))
+        self._outputs = [self._pose_pub, self._odom_pub, self._diag_pub, self._queryable, self._token]
+        self._worker = threading.Thread(target=self._work, name="fusiond-worker", daemon=True)
+        self._worker.start()
+        for idx, sensor in enumerate(self.cfg.sensors):
+            self._subscribers.append(s.declare_subscriber(sensor.key, self._callback(idx)))
+            log.info("sensor_subscribed", sensor=sensor.name, key=sensor.key, kind=sensor_kind(sensor),
+                     encoding=sensor.encoding, timeout_s=sensor.timeout_s)
+        self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
+        self._monitor.start()
+
+    def stop(self, drain_s: float = DRAIN_S) -> None:
+        """Stop input, let the worker finish what is queued (bounded), undeclare outputs."""
+        if self._stopping.is_set():
+            return
+        self._stopping.set()
+        for sub in self._subscribers:
+            sub.undeclare()
+        self._subscribers.clear()
+        deadline = time.monotonic() + drain_s
+        worker = self._worker
+        if worker is not None and worker.is_alive():
+            try:
+                self.queue.put(_STOP, timeout=drain_s)
+            except queue.Full:
+                pass
+            worker.join(max(deadline - time.monotonic(), 0.05))
+            if worker.is_alive():  # still busy: stop between samples, never inside one
+                self._abort = True
+                worker.join(1.0)
+        left = self.queue.qsize()
+        if left:
+            log.warning("samples_discarded_at_stop", count=left)
+        if self._monitor is not None:
+            self._monitor.join(1.0)
+        for obj in reversed(self._outputs):
+            try:
+                obj.undeclare()
+            except zenoh.ZError:
+                pass
+        self._outputs.clear()
+
+    def report(self) -> HealthReport:
+        return self.health.report()
+
+    # -- subscriber side (Zenoh threads): never block ------------------------------------
+    def _callback(self, idx: int) -> Callable[[zenoh.Sample], None]:
+        put = self.queue.put_nowait
+        clock = self._clock
+        health = self.health
+        name = self.cfg.sensors[idx].name
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            arrival = clock()
+            health.on_received(idx)
+            try:
+                put((idx, sample.payload.to_bytes(), arrival))
+            except queue.Full:
+                n = health.on_dropped(idx, "queue_full")
+                if n == 1 or n % LOG_EVERY == 0:
+                    log.warning("sample_dropped", sensor=name, reason="queue_full", count=n)
+
+        return on_sample
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        query.reply(self.cfg.output.health_key, encode_report(self.health.report()),
+                    encoding=zenoh.Encoding.APPLICATION_JSON)
+
+    # -- worker ------------------------------------------------------------------------
+    def _work(self) -> None:
+        get = self.queue.get
+        handle = self._handle
+        monotonic = time.monotonic
+        next_refresh = 0.0
+        dirty = False
+        try:
+            while not self._abort:
+                try:
+                    item = get(timeout=CORE_REFRESH_S)
+                except queue.Empty:
+                    if dirty:
+                        self._refresh()
+                        dirty = False
+                    continue
+                if item is _STOP:
+                    break
+                try:
+                    handle(*item)
+                except Exception:  # a bug on one sample must not stop the service
+                    self.errors += 1
+                    if self.errors == 1 or self.errors % LOG_EVERY == 0:
+                        log.exception("worker_error", count=self.errors)
+                dirty = True
+                now = monotonic()
+                if now >= next_refresh:
+                    self._refresh()
+                    dirty = False
+                    next_refresh = now + CORE_REFRESH_S
+            if dirty:
+                self._refresh()
+        except BaseException:
+            log.exception("worker_crashed")
+            self.health.set_worker_alive(False)
+            raise
+        finally:
+            self.worker_cpu_s = time.thread_time()
+        if not self._stopping.is_set():
+            self.health.set_worker_alive(False)
+
+    def _refresh(self) -> None:
+        self.health.set_core(core_counters(self.core, self.published))
+
+    def _handle(self, idx: int, payload: bytes, arrival: float) -> None:
+        try:
+            sample = self._decoders[idx](payload)
+        except DecodeError as err:
+            n = self.health.on_dropped(idx, err.reason)
+            if n == 1 or n % LOG_EVERY == 0:
+                log.warning("sample_dropped", sensor=self.cfg.sensors[idx].name, reason=err.reason,
+                            detail=err.detail, count=n)
+            return
+        step = self.core.ingest(sample)
+        if not step.accepted:
+            return  # counted (and logged) by the core
+        self.health.on_accepted(idx, arrival)
+        if step.publish:
+            self._publish_estimate()
+        if step.records:
+            put, enc = self._diag_pub.put, _diag_encoder.encode
+            for r in step.records:
+                put(enc(r))
+
+    def _publish_estimate(self) -> None:
+        out = self.cfg.output
+        est = self.core.estimate()
+        pose = encode_pose_cdr(est.stamp, out.frame_id, est.position, est.orientation, est.pose_covariance)
+        odom = encode_odometry_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position, est.orientation,
+                                   est.pose_covariance, est.linear, est.angular, est.twist_covariance)
+        self._pose_pub.put(pose)
+        self._odom_pub.put(odom)
+        self.published += 1
+
+    # -- health monitor ----------------------------------------------------------------
+    def _watch(self) -> None:
+        last_status = None
+        last_problems: list[str] = []
+        next_log = time.monotonic() + self._health_log_s
+        while not self._stopping.wait(HEALTH_POLL_S):
+            rep = self.health.report()
+            names = [p.split(":")[0] for p in rep.problems]
+            if rep.status != last_status or names != [p.split(":")[0] for p in last_problems]:
+                log.log(_LEVEL[rep.status], "health_changed", status=rep.status, previous=last_status,
+                        problems=rep.problems)
+                last_status, last_problems = rep.status, rep.problems
+            now = time.monotonic()
+            if now >= next_log:
+                next_log = now + self._health_log_s
+                log.info("health", status=rep.status, problems=rep.problems, published=rep.published,
+                         queue_depth=rep.queue.depth, queue_dropped=rep.queue.dropped,
+                         filter_time=rep.filter.time, sensors={
+                             k: {"alive": v.alive, "rate_hz": round(v.rate_hz, 1), "received": v.received,
+                                 "dropped": v.dropped, "rejected": v.rejected} for k, v in rep.sensors.items()})
+
+
+_LEVEL = {"ok": 20, "degraded": 30, "failed": 40}
+_diag_encoder = msgspec.json.Encoder()
+
+
+def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | None = None) -> int:
+    """`fusiond run`: open the session, serve until SIGINT/SIGTERM (or `stop`), shut down cleanly.
+
+    Raises ConfigError (bad Zenoh value or file) and SessionError (cannot open) before anything starts.
+    """
+    conf = build_config(cfg.zenoh, base_dir=base_dir)
+    stop = stop or threading.Event()
+    received: list[str] = []
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        received.append(signal.Signals(signum).name)
+        stop.set()
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, on_signal)
+    session = open_session(conf)
+    try:
+        daemon = Daemon(cfg, session)
+        daemon.start()
+        z = cfg.zenoh
+        log.info("daemon_started", zid=str(session.zid()), mode=z.mode, listen=z.listen, connect=z.connect,
+                 namespace=z.namespace or None, sensors=[s.name for s in cfg.sensors],
+                 pose_key=cfg.output.pose_key, odometry_key=cfg.output.odometry_key,
+                 diagnostics_key=cfg.output.diagnostics_key, health_key=cfg.output.health_key,
+                 alive_key=alive_key(cfg.output.health_key))
+        while not stop.wait(0.5):
+            pass
+        log.info("daemon_stopping", signal=received[0] if received else None)
+        daemon.stop()
+        rep = daemon.report()
+    finally:
+        session.close()
+    log.info("daemon_stopped", published=daemon.published, errors=daemon.errors,
+             sensors={k: {"received": v.received, "applied": v.applied, "dropped": v.dropped,
+                          "rejected": v.rejected} for k, v in rep.sensors.items()})
+    return 0

@@ -1,0 +1,115 @@
+"""`fusiond play`: a bag's configured sensor topics onto Zenoh, as zenoh-bridge-ros2dds would.
+
+Each configured sensor's bag topic (`"/" + key`) is published on its Zenoh key as
+ROS 2 CDR with the encapsulation header (ROS 1 bags are converted at byte level),
+paced by bag (receive) time at `rate` (1.0 recorded pace, 0 as fast as possible).
+A sensor configured with `json` or `msgpack` gets that encoding instead, so the
+daemon of the same config can be fed without a robot.
+
+Publishers use reliable, blocking congestion control: a replay tool should not
+lose messages to its own speed (the daemon's queue still counts its own drops).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import structlog
+import zenoh
+
+from ..config import Config
+from ..replay.bag import open_bag_samples, sensor_kind
+from .codecs import encode_imu_sample, encode_odom_sample, make_decoder
+
+log = structlog.get_logger("fusiond.play")
+
+LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
+
+
+@dataclass
+class PlayResult:
+    messages: int = 0
+    per_sensor: dict[str, int] = field(default_factory=dict)
+    bag_seconds: float = 0.0  # bag time span played
+    seconds: float = 0.0  # wall time
+    interrupted: bool = False
+
+
+def wait_for_subscribers(publishers: Sequence[Any], timeout: float) -> bool:
+    """Wait until every publisher has a matching subscriber (the daemon is reachable)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if all(p.matching_status for p in publishers):
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.02)
+
+
+def _transcoder(sensor: Any) -> Callable[[bytes], bytes] | None:
+    if sensor.encoding == "ros2-cdr":
+        return None
+    decode = make_decoder(sensor_kind(sensor), "ros2-cdr", sensor.name)
+    encode = encode_odom_sample if sensor_kind(sensor) == "odom" else encode_imu_sample
+    return lambda raw: encode(decode(raw), sensor.encoding)  # type: ignore[arg-type]
+
+
+def play(paths: Sequence[Path | str], cfg: Config, session: zenoh.Session, *, rate: float = 1.0,
+         duration: float | None = None, wait_s: float = 5.0, stop: threading.Event | None = None,
+         clock: Callable[[], float] = time.monotonic) -> PlayResult:
+    """Publish the bag; returns counts. `duration` limits the bag seconds played (from its start)."""
+    if rate < 0:
+        raise ValueError("rate must be >= 0")
+    stop = stop or threading.Event()
+    result = PlayResult(per_sensor={s.name: 0 for s in cfg.sensors})
+    with open_bag_samples(paths, cfg.sensors) as bag:
+        if bag.missing:
+            log.warning("play_missing_topics", sensors=bag.missing)
+        pubs = {s.name: session.declare_publisher(s.key, encoding=_encoding(s.encoding),
+                                                  congestion_control=zenoh.CongestionControl.BLOCK)
+                for s in cfg.sensors if s.name not in bag.missing}
+        transcode = {s.name: _transcoder(s) for s in cfg.sensors}
+        try:
+            if wait_s > 0 and not wait_for_subscribers(list(pubs.values()), wait_s):
+                log.warning("play_no_subscribers", waited_s=wait_s,
+                            keys=[s.key for s in cfg.sensors if s.name in pubs])
+            log.info("play_started", bag=[str(p) for p in paths], rate=rate, messages=bag.total)
+            t0_bag: int | None = None
+            t0 = clock()
+            for bag_ns, sensor, raw in bag.raw_cdr():
+                if stop.is_set():
+                    result.interrupted = True
+                    break
+                if t0_bag is None:
+                    t0_bag = bag_ns
+                offset = (bag_ns - t0_bag) * 1e-9
+                if duration is not None and offset > duration:
+                    break
+                if rate > 0:
+                    delay = t0 + offset / rate - clock()
+                    if delay > 0 and stop.wait(delay):
+                        result.interrupted = True
+                        break
+                conv = transcode[sensor.name]
+                pubs[sensor.name].put(raw if conv is None else conv(raw))
+                result.messages += 1
+                result.per_sensor[sensor.name] += 1
+                result.bag_seconds = offset
+            result.seconds = clock() - t0
+            stop.wait(LINGER_S)
+        finally:
+            for p in pubs.values():
+                p.undeclare()
+    log.info("play_finished", messages=result.messages, per_sensor=result.per_sensor,
+             seconds=round(result.seconds, 3), interrupted=result.interrupted)
+    return result
+
+
+def _encoding(name: str) -> zenoh.Encoding:
+    return {"ros2-cdr": zenoh.Encoding.APPLICATION_CDR, "json": zenoh.Encoding.APPLICATION_JSON}.get(
+        name, zenoh.Encoding.ZENOH_BYTES)
