@@ -193,3 +193,19 @@ def test_masked_update_equals_joseph_form_with_zeroed_gain_rows():
     dx = layout.boxminus(ekf.x, x0)
     np.testing.assert_allclose(dx, K @ y, atol=1e-12)
     assert np.abs(dx[~mask]).max() < 1e-15
+
+
+@settings(max_examples=50, deadline=None)
+@given(m=st.integers(1, 5), seed=st.integers(0, 10_000))
+def test_cholesky_whitening_matches_numpy(m, seed):
+    from fusiond.estimator.cholesky import whiten
+
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(m, m))
+    S = A @ A.T + np.eye(m) * 1e-3
+    y = rng.normal(size=m)
+    Linv, z = whiten(S.tolist(), y.tolist())
+    L = np.linalg.cholesky(S)
+    np.testing.assert_allclose(np.array(Linv) @ L, np.eye(m), atol=1e-9)
+    assert float(np.dot(z, z)) == pytest.approx(float(y @ np.linalg.solve(S, y)), rel=1e-9)
+    assert whiten((-S).tolist(), y.tolist()) is None

@@ -8,9 +8,9 @@ updates is compared with chi-square bounds on N*dof degrees of freedom.
 from __future__ import annotations
 
 from collections import deque
+from statistics import NormalDist
 
 import msgspec
-from scipy.special import gammaincinv
 
 
 class DiagnosticsRecord(msgspec.Struct, gc=False):
@@ -30,7 +30,11 @@ class DiagnosticsRecord(msgspec.Struct, gc=False):
 
 
 def chi2_ppf(p: float, dof: float) -> float:
-    return 2.0 * float(gammaincinv(0.5 * dof, p))
+    """Chi-square quantile by Wilson-Hilferty: within 0.5% of the exact value for the
+    window sizes used here (dof >= 20), and no scipy.special import (0.3 s) at start-up."""
+    z = NormalDist().inv_cdf(p)
+    h = 2.0 / (9.0 * dof)
+    return dof * max(1.0 - h + z * h**0.5, 0.0) ** 3
 
 
 class NisWindow:

@@ -2,9 +2,10 @@
 
 It knows nothing of sensors or time: a model hands it the propagated nominal
 state with F and Q, or an innovation with H and R. The gain comes from a
-Cholesky factorisation of S (LAPACK potrf/potrs, ~1 us on small S) instead of an
-explicit inverse; the covariance update is Joseph form, then symmetrised, which
-keeps it positive semi-definite in floating point.
+Cholesky factorisation of S (see ``cholesky``) instead of an explicit inverse,
+and the covariance update K S K^T = W^T W is symmetric by construction; a masked
+(Schmidt) update uses the Joseph form's closed form. P is then symmetrised and
+checked: a non-finite P is reset (counted), a negative variance clipped.
 """
 
 from __future__ import annotations
@@ -13,8 +14,7 @@ import math
 
 import msgspec
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dpotrs
-
+from .cholesky import whiten
 from .state import StateLayout
 
 
@@ -64,19 +64,20 @@ class ErrorStateEKF:
         PHt = np.dot(P, H.T)
         S = np.dot(H, PHt)
         S += R
-        L, info = dpotrf(S, lower=1, clean=0, overwrite_a=0)
-        s_diag = S.diagonal().tolist()
-        if info != 0:
+        S_rows = S.tolist()
+        s_diag = [S_rows[i][i] for i in range(len(S_rows))]
+        white = whiten(S_rows, y.tolist())
+        if white is None:
             return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
-        Sinv_y, _ = dpotrs(L, y, lower=1)
-        nis = float(np.dot(y, Sinv_y))
+        Linv, z = white  # z = L^-1 y, the whitened innovation
+        nis = math.fsum(v * v for v in z)
         if not math.isfinite(nis):
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
         if nis > threshold * threshold:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
-        KT, _ = dpotrs(L, PHt.T, lower=1)  # K^T = S^-1 H P
-        dx = np.dot(PHt, Sinv_y)
-        C = np.dot(PHt, KT)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
+        W = np.dot(Linv, PHt.T)  # L^-1 H P
+        dx = np.dot(z, W)  # K y = P H^T S^-1 y = W^T z
+        C = np.dot(W.T, W)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
         if mask is None:
             P_new = P - C
         else:

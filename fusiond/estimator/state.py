@@ -126,6 +126,11 @@ class GyroBiasBlock(InputBlock):
     def applies(self, from_gyro: bool) -> bool:
         return from_gyro
 
+    def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
+        x[n0] += dx[e0]
+        x[n0 + 1] += dx[e0 + 1]
+        x[n0 + 2] += dx[e0 + 2]
+
     def correct(self, xb: list[float], u: Vec3) -> Vec3:
         return (u[0] - xb[0], u[1] - xb[1], u[2] - xb[2])
 
