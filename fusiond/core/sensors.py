@@ -17,6 +17,12 @@ from ..estimator import rotation as rot
 from ..samples import ImuSample, OdomSample
 
 _QUAT_NORM_TOLERANCE = 0.1  # drivers round; anything further off is not a rotation
+MAX_SPEED = 100.0  # m/s: beyond any wheeled robot, so a value this large is corrupt
+MAX_RATE = 100.0  # rad/s: beyond any gyro's range (they saturate near 35 rad/s)
+
+
+def _plausible(values, limit: float) -> bool:
+    return all(-limit <= v <= limit for v in values)
 
 
 class Rejected(Exception):
@@ -55,8 +61,7 @@ class ImuInput:
 
 
 def _finite(values) -> bool:
-    """All finite: one float sum (inf - inf and anything + nan are not finite)."""
-    return math.isfinite(math.fsum(values)) if len(values) else True
+    return all(map(math.isfinite, values))
 
 
 def _resolve_variances(diag, floor: float, unmeasured: float, default: float) -> tuple[list[float], list[bool]]:
@@ -89,6 +94,8 @@ class OdomPolicy:
     def convert(self, s: OdomSample) -> OdomInput:
         if not (_finite(s.linear) and _finite(s.angular)):
             raise Rejected("non_finite", "twist")
+        if not (_plausible(s.linear, MAX_SPEED) and _plausible(s.angular, MAX_RATE)):
+            raise Rejected("implausible_value", "twist beyond 100 m/s or 100 rad/s")
         cov = s.twist_covariance
         if len(cov) != 36:
             raise Rejected("bad_covariance", "twist covariance must have 36 entries")
@@ -183,6 +190,8 @@ class ImuPolicy:
             if gc[0] != -1.0:
                 if not (_finite(s.angular_velocity) and _finite(gc)):
                     raise Rejected("non_finite", "angular_velocity")
+                if not _plausible(s.angular_velocity, MAX_RATE):
+                    raise Rejected("implausible_value", "angular velocity beyond 100 rad/s")
                 if self._gyro_override is not None:
                     var = [self._gyro_override] * 3
                 else:
