@@ -28,6 +28,7 @@ class SimConfig:
     wheel_yaw_scale: float = 1.0  # skid-steer wheels misread the turn rate
     standstill: float = 0.0  # seconds at rest before moving
     imu_yaw_offset: float = 0.0  # the IMU's own yaw reference (magnetic north, ...)
+    imu_yaw_wander: float = 0.0  # amplitude (rad) of a slow magnetic disturbance of the IMU's yaw
     seed: int = 3
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
@@ -61,7 +62,9 @@ def simulate(cfg: SimConfig) -> list[OdomSample | ImuSample]:
             next_odom += 1.0 / cfg.odom_rate
             cfg.truth.append((t, x, y, yaw))
         if rel >= next_imu:
-            q = rot.from_rpy(rng.normal(0, os_), rng.normal(0, os_), yaw + cfg.imu_yaw_offset + rng.normal(0, os_))
+            disturbance = cfg.imu_yaw_wander * math.sin(0.4 * rel)
+            q = rot.from_rpy(rng.normal(0, os_), rng.normal(0, os_),
+                             yaw + cfg.imu_yaw_offset + disturbance + rng.normal(0, os_))
             b = cfg.gyro_bias
             gyro = (b[0] + rng.normal(0, gs), b[1] + rng.normal(0, gs), w + b[2] + rng.normal(0, gs))
             out.append(ImuSample("imu", t, q, (os_**2, 0, 0, 0, os_**2, 0, 0, 0, os_**2), gyro,

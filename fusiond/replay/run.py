@@ -15,7 +15,9 @@ from typing import IO
 import msgspec
 
 from ..config import Config
+from ..core.doctor import Doctor, Verdict, format_verdicts
 from ..core.fusion import FusionCore
+from ..estimator.rotation import to_rpy
 from ..samples import OdomSample
 from .bag import open_bag_samples
 
@@ -32,12 +34,21 @@ class Trace:
 @dataclass
 class ReplayResult:
     core: FusionCore
+    doctor: Doctor
     trace: Trace
     messages: int
     poses: int
     seconds: float  # wall time of the fusion loop (bag decoding included)
     missing: list[str]
     decode_errors: int
+
+    def verdicts(self) -> list[Verdict]:
+        core = self.core
+        stats = {s.name: {"received": st.received, "dropped": st.dropped} for s, st in zip(core.sensors, core.stats)}
+        at_cap = False
+        if core.initialised:
+            at_cap = bool((core.state.ekf.P.diagonal() >= core.caps * 0.999).any())
+        return self.doctor.verdicts(stats, at_cap=at_cap, covariance_resets=core.covariance_resets)
 
     @property
     def final(self) -> tuple[float, ...] | None:
@@ -84,6 +95,7 @@ def replay(
     progress: bool = True,
 ) -> ReplayResult:
     core = FusionCore(cfg)
+    doctor = Doctor(cfg)
     trace = Trace()
     lines: list[str] = []
     enc = msgspec.json.Encoder()
@@ -99,11 +111,16 @@ def replay(
                 if step.publish:
                     t, x = core.pose()
                     lines.append(tum_line(t, x))
+                    roll, pitch, _ = to_rpy((float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+                    doctor.add_attitude(roll, pitch)
                     if keep_trace:
                         trace.fused.append((t, float(x[0]), float(x[1]), float(x[2])))
-                if keep_trace and isinstance(sample, OdomSample):
-                    trace.raw_odom.append((sample.stamp, *sample.position))
+                if isinstance(sample, OdomSample) and step.accepted:
+                    doctor.add_twist(sample.linear, sample.angular)
+                    if keep_trace:
+                        trace.raw_odom.append((sample.stamp, *sample.position))
                 for r in step.records:
+                    doctor.add(r)
                     if diag_out is not None:
                         diag_out.write(enc.encode(r))
                         diag_out.write(b"\n")
@@ -121,7 +138,7 @@ def replay(
     if tum is not None:
         tum.parent.mkdir(parents=True, exist_ok=True)
         tum.write_text("".join(lines))
-    return ReplayResult(core, trace, messages, len(lines), seconds, missing, decode_errors)
+    return ReplayResult(core, doctor, trace, messages, len(lines), seconds, missing, decode_errors)
 
 
 def summary(result: ReplayResult) -> str:
@@ -133,8 +150,6 @@ def summary(result: ReplayResult) -> str:
         out.append("no sample was fused: check the sensor keys against the bag's topics")
     else:
         t, x, y, z, qx, qy, qz, qw = final
-        from ..estimator.rotation import to_rpy
-
         r, p, yaw = to_rpy((qx, qy, qz, qw))
         out.append(f"final pose  t={t:.3f}  x={x:.4f} y={y:.4f} z={z:.4f}  roll={r:.4f} pitch={p:.4f} yaw={yaw:.4f}")
     rate = result.messages / result.seconds if result.seconds > 0 else float("nan")
@@ -161,4 +176,5 @@ def summary(result: ReplayResult) -> str:
         out.append(f"time jumps  {core.resets} filter reset(s) on a backwards time jump")
     if core.covariance_resets:
         out.append(f"covariance  {core.covariance_resets} reset(s) after a non-finite value")
+    out.append(format_verdicts(result.verdicts()))
     return "\n".join(out)
