@@ -103,3 +103,31 @@ def calibrate(samples: list[ImuSample], cfg: ImuSensor | None = None) -> Calibra
         static = max(abs(v) for v in gyro_bias) < STATIC_RATE
     return Calibration(len(samples), duration, rate, orientation_sigma, drift, gyro_sigma, gyro_bias, stated_ori,
                        stated_gyro, static)
+
+
+def record_imu(session, sensor: ImuSensor, duration: float) -> list[ImuSample]:
+    """Collect a sensor's samples from Zenoh for ``duration`` seconds (undecodable ones skipped)."""
+    import threading
+    import time
+
+    from .transport.codecs import DecodeError, make_decoder
+
+    decode = make_decoder("imu", sensor.encoding, sensor.name)
+    samples: list[ImuSample] = []
+    lock = threading.Lock()
+
+    def on_sample(sample) -> None:
+        try:
+            s = decode(sample.payload.to_bytes())
+        except DecodeError:
+            return
+        with lock:
+            samples.append(s)
+
+    sub = session.declare_subscriber(sensor.key, on_sample)
+    try:
+        time.sleep(duration)
+    finally:
+        sub.undeclare()
+    with lock:
+        return list(samples)

@@ -1,4 +1,8 @@
-"""Command line: `fusiond run | play | health | replay | bench-latency`. Each command imports what it needs when it runs."""
+"""Command line: `fusiond run | play | replay | monitor | health | calibrate-imu | bench | bench-latency`.
+
+Each command imports what it needs when it runs, so `replay` does not pay for Zenoh
+nor `run` for matplotlib.
+"""
 
 from __future__ import annotations
 
@@ -30,16 +34,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
             cfg,
             tum=Path(args.tum) if args.tum else None,
             diagnostics=Path(args.diagnostics) if args.diagnostics else None,
-            keep_trace=bool(args.plot),
+            keep_trace=bool(args.plot or args.report),
             progress=not args.quiet,
         )
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE
+    title = ", ".join(Path(b).name for b in args.bags)
     if args.plot:
         from .replay.plot import plot_replay
 
-        plot_replay(result, Path(args.plot), title=", ".join(Path(b).name for b in args.bags))
+        plot_replay(result, Path(args.plot), title=title)
+    if args.report:
+        from .replay.report import write_report
+
+        index = write_report(result, Path(args.report), title)
+        if not args.quiet:
+            print(f"report      {index}")
     if not args.quiet:
         print(summary(result))
     if result.final is None:
@@ -147,6 +158,102 @@ def cmd_health(args: argparse.Namespace) -> int:
     return 0 if worst is not None and worst >= _STATUS_RANK[args.min_status] else EXIT_UNHEALTHY
 
 
+def _tool_session(args: argparse.Namespace):
+    """A Zenoh session for a tool (monitor, calibrate-imu): the config's [zenoh] table if given, --connect wins."""
+    from .config import Config
+    from .transport.session import client_config, open_session
+
+    cfg = _load_config(args.config) if getattr(args, "config", None) else Config()
+    ConfigError, SessionError = _zenoh_errors()
+    base = Path(args.config).resolve().parent if getattr(args, "config", None) else None
+    zc = cfg.zenoh
+    if getattr(args, "no_multicast", False):
+        import msgspec
+
+        zc = msgspec.structs.replace(zc, multicast_scouting=False)
+    try:
+        return cfg, open_session(client_config(zc, base_dir=base, connect=args.connect))
+    except ConfigError as err:
+        print(f"fusiond: config error: {err}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE) from None
+    except SessionError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        raise SystemExit(1) from None
+
+
+def cmd_monitor(args: argparse.Namespace) -> int:
+    from . import monitor
+
+    cfg, session = _tool_session(args)
+    try:
+        return monitor.run(session, timeout=args.timeout, duration=args.duration, as_json=args.json,
+                           interval=args.interval, health_key=cfg.output.health_key,
+                           diagnostics_key=cfg.output.diagnostics_key, window=cfg.filter.nis_window)
+    finally:
+        session.close()
+
+
+def cmd_calibrate_imu(args: argparse.Namespace) -> int:
+    from .calibrate import calibrate, record_imu
+    from .config import ImuSensor
+
+    if args.bag and not args.config:
+        print("fusiond: calibrate-imu --bag needs --config (which topic is the IMU)", file=sys.stderr)
+        return EXIT_USAGE
+    cfg = _load_config(args.config) if args.config else None
+    imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)] if cfg else []
+    if args.sensor:
+        imus = [s for s in imus if s.name == args.sensor]
+    if cfg is not None and not imus:
+        print(f"fusiond: no imu sensor {args.sensor or ''} in {args.config}".replace("  ", " "), file=sys.stderr)
+        return EXIT_USAGE
+    imu = imus[0] if imus else ImuSensor(name="imu", key=args.key or "imu/data")
+    if args.bag:
+        from .replay.bag import BagError, open_bag_samples
+
+        try:
+            with open_bag_samples([Path(args.bag)], [imu]) as bag:
+                samples = list(bag)
+        except BagError as err:
+            print(f"fusiond: {err}", file=sys.stderr)
+            return EXIT_USAGE
+        if samples:
+            t0 = min(s.stamp for s in samples) + args.start
+            samples = [s for s in samples if t0 <= s.stamp <= t0 + args.duration]
+    else:
+        _, session = _tool_session(args)
+        try:
+            samples = record_imu(session, imu, args.duration)
+        finally:
+            session.close()
+    try:
+        cal = calibrate(samples, imu)
+    except ValueError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return 1
+    print(cal.snippet(imu.name))
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    import msgspec
+
+    from . import bench
+
+    cfg = _load_config(args.config)
+    result = bench.run(Path(args.bag), Path(args.config), cfg, quick=args.quick)
+    if args.latency:
+        from .transport.bench_latency import run_bench
+
+        lat = run_bench(seconds=args.seconds, imu_hz=1000.0, odom_hz=100.0, express=True)
+        result["latency"] = {k: v for k, v in msgspec.to_builtins(lat).items() if isinstance(v, (int, float))}
+    if args.json:
+        print(msgspec.json.encode(result).decode())
+    else:
+        print(bench.format_table(result))
+    return 0
+
+
 def cmd_bench_latency(args: argparse.Namespace) -> int:
     from .transport.bench_latency import format_table, run_bench
 
@@ -172,8 +279,39 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--tum", help="write the trajectory as TUM lines (stamp x y z qx qy qz qw)")
     r.add_argument("--diagnostics", help="write one JSON diagnostics record per update (JSON lines)")
     r.add_argument("--plot", help="write a PNG of the trajectory and NIS per sensor")
+    r.add_argument("--report", metavar="DIR", help="write an HTML report (plots, doctor's verdicts) into DIR")
     r.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     r.set_defaults(func=cmd_replay)
+
+    m = sub.add_parser("monitor", help="live per-sensor innovation/NIS view of running daemons")
+    m.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")
+    m.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional)")
+    m.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
+    m.add_argument("--timeout", type=float, default=5.0, help="seconds to find a daemon before giving up (default 5)")
+    m.add_argument("--duration", type=float, help="stop after S seconds (default: until Ctrl-C)")
+    m.add_argument("--interval", type=float, default=1.0, help="refresh period in seconds")
+    m.add_argument("--json", action="store_true", help="stream JSON lines instead of the terminal view")
+    m.set_defaults(func=cmd_monitor)
+
+    c = sub.add_parser("calibrate-imu", help="measure a static IMU's noise and print it as config")
+    c.add_argument("--duration", type=float, default=60.0, help="seconds to record (default 60)")
+    c.add_argument("--bag", help="read the IMU from this bag instead of Zenoh")
+    c.add_argument("--start", type=float, default=0.0, help="with --bag: skip the first S seconds")
+    c.add_argument("--config", help="TOML config naming the IMU sensor (key, encoding, extrinsic_rpy)")
+    c.add_argument("--sensor", help="which imu sensor of the config (default: the first)")
+    c.add_argument("--key", help="Zenoh key of the IMU without a config (default imu/data, ROS 2 CDR)")
+    c.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
+    c.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
+    c.set_defaults(func=cmd_calibrate_imu)
+
+    bb = sub.add_parser("bench", help="estimator, core and replay benchmarks on a bag")
+    bb.add_argument("--bag", default="../shared/data/jackal_test2.bag")
+    bb.add_argument("--config", default="examples/jackal.toml")
+    bb.add_argument("--quick", action="store_true", help="fewer repeats")
+    bb.add_argument("--latency", action="store_true", help="also the Zenoh end-to-end latency benchmark")
+    bb.add_argument("--seconds", type=float, default=10.0, help="latency benchmark duration")
+    bb.add_argument("--json", action="store_true", help="machine-readable output")
+    bb.set_defaults(func=cmd_bench)
 
     d = sub.add_parser("run", help="the fusion daemon: subscribe to the sensors on Zenoh, publish the fused pose")
     d.add_argument("--config", required=True, help="TOML config (see config.toml)")

@@ -89,8 +89,12 @@ LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
 
 
 class Doctor:
-    def __init__(self, cfg: Config) -> None:
-        self.cfg = cfg
+    """``cfg`` may be None (a remote monitor that only sees the diagnostics stream): the
+    sensors are then known by name only, and an orientation channel's mode is read
+    from its components (a yaw row means absolute or relative)."""
+
+    def __init__(self, cfg: Config | None) -> None:
+        self.cfg = cfg if cfg is not None else Config()
         self.channels: dict[tuple[str, str], ChannelStats] = {}
         self.twist = TwistStats()
         self.tilt = TiltStats()
@@ -128,7 +132,10 @@ class Doctor:
             if ch.n < MIN_UPDATES:
                 out.append(Verdict(name, channel, "ok", f"only {ch.n} updates: too few to judge"))
                 continue
-            if channel == "orientation" and isinstance(s, ImuSensor):
+            if channel == "orientation":
+                if not isinstance(s, ImuSensor):
+                    mode = "absolute" if "yaw" in ch.components else "roll_pitch"
+                    s = ImuSensor(name=name, key=name, orientation=mode)
                 out.extend(self._orientation(name, where, s, ch))
             elif channel == "yaw_rate":
                 out.extend(self._yaw_rate(name, where, ch))

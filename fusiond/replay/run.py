@@ -29,6 +29,8 @@ class Trace:
     fused: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y z
     raw_odom: list[tuple[float, float, float, float]] = field(default_factory=list)
     nis: dict[str, list[tuple[float, float, int, bool]]] = field(default_factory=dict)  # t nis dof rejected
+    innovations: dict[str, tuple[list[str], list[tuple[float, list[float], list[float]]]]] = field(
+        default_factory=dict)  # channel -> (components, [(t, innovation, innovation_var)])
 
 
 @dataclass
@@ -125,7 +127,11 @@ def replay(
                         diag_out.write(enc.encode(r))
                         diag_out.write(b"\n")
                     if keep_trace:
-                        trace.nis.setdefault(f"{r.sensor}/{r.channel}", []).append((r.stamp, r.nis, r.dof, r.rejected))
+                        name = f"{r.sensor}/{r.channel}"
+                        trace.nis.setdefault(name, []).append((r.stamp, r.nis, r.dof, r.rejected))
+                        comps, rows = trace.innovations.setdefault(name, (list(r.components), []))
+                        if r.components == comps:
+                            rows.append((r.stamp, r.innovation, r.innovation_var))
                 if messages % 256 == 0:
                     bar.update(messages)
             bar.update(messages)

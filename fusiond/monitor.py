@@ -1,0 +1,282 @@
+"""`fusiond monitor`: a live per-sensor view of running daemons, from any machine.
+
+Daemons are found by their liveliness tokens (`**/fusiond/health/alive`, any
+namespace); their diagnostics stream (`**/fusiond/diagnostics`) is aggregated here
+per sensor channel into a rate, an age, a windowed NIS against its chi-square
+bounds, the innovation RMS per component and the gated count; the doctor turns
+it into a verdict line in plain words. `--json` prints the same as JSON lines.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import msgspec
+
+from .core.diagnostics import DiagnosticsRecord, chi2_ppf
+from .core.doctor import Doctor, Verdict
+
+ALIVE_SUFFIX = "/alive"
+DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"
+RATE_WINDOW_S = 5.0
+
+
+@dataclass
+class ChannelView:
+    sensor: str
+    channel: str
+    components: list[str]
+    window: int
+    confidence: float
+    arrivals: deque = field(default_factory=lambda: deque(maxlen=4096))  # wall times
+    nis: deque = field(default_factory=deque)
+    innovations: deque = field(default_factory=deque)
+    dof: int = 0
+    total: int = 0
+    rejected: int = 0
+    last_stamp: float | None = None
+
+    def __post_init__(self) -> None:
+        self.nis = deque(maxlen=self.window)
+        self.innovations = deque(maxlen=self.window)
+
+    def add(self, r: DiagnosticsRecord, now: float) -> None:
+        self.arrivals.append(now)
+        self.total += 1
+        self.rejected += r.rejected
+        self.last_stamp = r.stamp
+        if r.dof != self.dof or r.components != self.components:
+            self.nis.clear()
+            self.innovations.clear()
+            self.dof, self.components = r.dof, list(r.components)
+        if math.isfinite(r.nis):
+            self.nis.append(r.nis)
+        self.innovations.append(r.innovation)
+
+    def row(self, now: float) -> dict:
+        recent = [t for t in self.arrivals if now - t <= RATE_WINDOW_S]
+        rate = (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 and recent[-1] > recent[0] else 0.0
+        nis_mean = sum(self.nis) / len(self.nis) if self.nis else None
+        n = len(self.nis)
+        bounds = None
+        if n >= 2 and self.dof:
+            a = (1.0 - self.confidence) / 2.0
+            bounds = (chi2_ppf(a, n * self.dof) / n, chi2_ppf(1.0 - a, n * self.dof) / n)
+        rms = [math.sqrt(sum(v[i] ** 2 for v in self.innovations) / len(self.innovations))
+               for i in range(len(self.components))] if self.innovations else []
+        if bounds is None or n < self.window:
+            verdict = "warming_up"
+        else:
+            verdict = "nis_high" if nis_mean > bounds[1] else "nis_low" if nis_mean < bounds[0] else "ok"
+        return {
+            "sensor": self.sensor, "channel": self.channel, "rate_hz": rate,
+            "age_s": now - self.arrivals[-1] if self.arrivals else None,
+            "nis_mean": nis_mean, "nis_bounds": list(bounds) if bounds else None, "dof": self.dof,
+            "rms": dict(zip(self.components, rms)), "updates": self.total, "gated": self.rejected,
+            "verdict": verdict,
+        }
+
+
+class DaemonView:
+    """One daemon (one namespace prefix): its channels and a doctor fed from the stream."""
+
+    def __init__(self, prefix: str, window: int = 50, confidence: float = 0.95) -> None:
+        self.prefix = prefix
+        self.window = window
+        self.confidence = confidence
+        self.channels: dict[tuple[str, str], ChannelView] = {}
+        self.doctor = Doctor(None)
+        self.health: dict | None = None
+        self.lock = threading.Lock()
+
+    def add(self, r: DiagnosticsRecord, now: float) -> None:
+        with self.lock:
+            key = (r.sensor, r.channel)
+            ch = self.channels.get(key)
+            if ch is None:
+                ch = self.channels[key] = ChannelView(r.sensor, r.channel, list(r.components), self.window,
+                                                      self.confidence)
+            ch.add(r, now)
+            self.doctor.add(r)
+
+    def snapshot(self, now: float) -> dict:
+        with self.lock:
+            rows = [ch.row(now) for _, ch in sorted(self.channels.items())]
+            verdicts = self.doctor.verdicts()
+        return {"daemon": self.prefix or "(no namespace)", "health": self.health, "channels": rows,
+                "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
+
+
+def prefix_of(key: str, suffix: str) -> str:
+    """The namespace part of a key: `robot1/fusiond/diagnostics` -> `robot1`."""
+    key = str(key)
+    return key[: -len(suffix)].rstrip("/") if key.endswith(suffix) else key
+
+
+class Monitor:
+    """Zenoh side: liveliness discovery, diagnostics subscription, periodic health queries."""
+
+    def __init__(self, session, health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX,
+                 window: int = 50) -> None:
+        self.session = session
+        self.health_key = health_key
+        self.diagnostics_key = diagnostics_key
+        self.window = window
+        self.daemons: dict[str, DaemonView] = {}
+        self._decoder = msgspec.json.Decoder(DiagnosticsRecord)
+        self.undecodable = 0
+        self._lock = threading.Lock()
+        self._subs = []
+
+    def _daemon(self, prefix: str) -> DaemonView:
+        with self._lock:
+            d = self.daemons.get(prefix)
+            if d is None:
+                d = self.daemons[prefix] = DaemonView(prefix, self.window)
+            return d
+
+    def start(self) -> None:
+        # `**` also matches no chunk at all: one subscriber sees every namespace and none
+        self._subs.append(self.session.declare_subscriber(f"**/{self.diagnostics_key}", self._on_diagnostics))
+
+    def _on_diagnostics(self, sample) -> None:
+        try:
+            rec = self._decoder.decode(sample.payload.to_bytes())
+        except msgspec.DecodeError:
+            self.undecodable += 1
+            return
+        self._daemon(prefix_of(sample.key_expr, self.diagnostics_key)).add(rec, time.monotonic())
+
+    def discover(self, timeout: float) -> list[str]:
+        """Prefixes of the daemons whose liveliness token is up."""
+        found = set()
+        alive = f"{self.health_key}{ALIVE_SUFFIX}"
+        for reply in self.session.liveliness().get(f"**/{alive}", timeout=timeout):
+            if reply.ok is not None:
+                found.add(prefix_of(reply.ok.key_expr, alive))
+        for p in found:
+            self._daemon(p)
+        return sorted(found)
+
+    def refresh_health(self, timeout: float = 1.0) -> None:
+        for prefix, d in list(self.daemons.items()):
+            key = f"{prefix}/{self.health_key}" if prefix else self.health_key
+            for reply in self.session.get(key, timeout=timeout):
+                if reply.ok is not None:
+                    try:
+                        d.health = msgspec.json.decode(reply.ok.payload.to_bytes())
+                    except msgspec.DecodeError:
+                        self.undecodable += 1
+
+    def snapshot(self) -> list[dict]:
+        now = time.monotonic()
+        return [d.snapshot(now) for _, d in sorted(self.daemons.items())]
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.undeclare()
+
+
+# -- rendering --------------------------------------------------------------
+def _fmt(v: float | None, spec: str = ".2f") -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
+
+
+def render(snapshots: list[dict]):
+    """A rich renderable of the snapshots (imported lazily: --json needs no rich)."""
+    from rich.console import Group
+    from rich.table import Table
+    from rich.text import Text
+
+    parts = []
+    for snap in snapshots:
+        health = snap.get("health") or {}
+        status = health.get("status", "?")
+        colour = {"ok": "green", "degraded": "yellow", "failed": "red"}.get(status, "white")
+        parts.append(Text(f"daemon {snap['daemon']}  status ", style="bold") + Text(status, style=f"bold {colour}"))
+        sensors = health.get("sensors", {})
+        if sensors:
+            t = Table(show_header=True, header_style="bold", box=None)
+            for col in ("sensor", "alive", "age s", "rate Hz", "received", "dropped", "rejected"):
+                t.add_column(col)
+            for name, s in sensors.items():
+                t.add_row(name, "yes" if s.get("alive") else "NO", _fmt(s.get("age_s")), _fmt(s.get("rate_hz"), ".1f"),
+                          str(s.get("received")), str(s.get("dropped")), str(s.get("rejected")))
+            parts.append(t)
+        t = Table(show_header=True, header_style="bold", box=None)
+        for col in ("sensor/channel", "rate Hz", "age s", "NIS mean", "bounds", "innovation rms", "gated", "window"):
+            t.add_column(col)
+        for r in snap["channels"]:
+            b = r["nis_bounds"]
+            bounds = f"[{b[0]:.2f}, {b[1]:.2f}]" if b else "-"
+            rms = " ".join(f"{k} {v:.4f}" for k, v in r["rms"].items())
+            style = {"nis_high": "red", "nis_low": "yellow", "ok": "green"}.get(r["verdict"], "")
+            t.add_row(f"{r['sensor']}/{r['channel']}", _fmt(r["rate_hz"], ".1f"), _fmt(r["age_s"]),
+                      _fmt(r["nis_mean"], ".3f"), bounds, rms, f"{r['gated']}/{r['updates']}",
+                      Text(r["verdict"], style=style))
+        parts.append(t)
+        for v in snap["verdicts"]:
+            style = {"ok": "green", "warn": "yellow", "problem": "bold red"}[v["level"]]
+            key = f"  [{v['key']}]" if v["key"] else ""
+            parts.append(Text(f"  {v['level'].upper():7} {v['sensor']}/{v['channel']}: {v['message']}{key}",
+                              style=style))
+        parts.append(Text(""))
+    return Group(*parts)
+
+
+def run(session, *, timeout: float, duration: float | None, as_json: bool, interval: float = 1.0,
+        health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX, window: int = 50,
+        stop: threading.Event | None = None, out=sys.stdout) -> int:
+    """Discover daemons (up to ``timeout``), then show them until ``duration`` or Ctrl-C.
+
+    Exit 1, with a message naming what was looked for, when no daemon answers.
+    """
+    mon = Monitor(session, health_key, diagnostics_key, window)
+    mon.start()
+    stop = stop or threading.Event()
+    deadline = time.monotonic() + timeout
+    found: list[str] = []
+    while not found and time.monotonic() < deadline and not stop.is_set():
+        found = mon.discover(timeout=min(1.0, max(deadline - time.monotonic(), 0.1)))
+    if not found:
+        mon.close()
+        print(f"fusiond monitor: no fusiond daemon reachable within {timeout:g} s "
+              f"(no liveliness token on {health_key}{ALIVE_SUFFIX} in any namespace); "
+              "check --connect and that `fusiond run` is up", file=sys.stderr)
+        return 1
+    end = None if duration is None else time.monotonic() + duration
+    enc = msgspec.json.Encoder()
+    live = None
+    if not as_json:
+        from rich.console import Console
+        from rich.live import Live
+
+        live = Live(render([]), console=Console(file=out), refresh_per_second=4, transient=False)
+        live.start()
+    try:
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            mon.discover(timeout=0.5)
+            mon.refresh_health(timeout=min(interval, 1.0))
+            snaps = mon.snapshot()
+            if as_json:
+                for s in snaps:
+                    out.write(enc.encode({"time": time.time(), **s}).decode() + "\n")
+                out.flush()
+            else:
+                live.update(render(snaps))
+            stop.wait(interval)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if live is not None:
+            live.stop()
+        mon.close()
+    return 0
+
+
+__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "render", "run"]
