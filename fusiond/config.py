@@ -61,6 +61,10 @@ class FilterConfig(_Table):
     gyro_bias_sigma: float = 0.01  # initial gyro-bias uncertainty, rad/s
     gyro_bias_walk: float = 2.0e-5  # gyro-bias random walk, rad/s/sqrt(s)
     standstill_s: float = 0.3  # odometry at zero this long before the gyro bias is learned
+    wheel_scale_sigma: float = 0.1  # initial wheel speed scale uncertainty (scale_estimation)
+    wheel_scale_walk: float = 1.0e-4  # its random walk, 1/sqrt(s)
+    gyro_scale_sigma: float = 0.05  # initial gyro (yaw axis) scale uncertainty (gyro_scale_estimation)
+    gyro_scale_walk: float = 1.0e-5  # its random walk, 1/sqrt(s)
     nis_window: int = 50  # updates per windowed NIS consistency test
     nis_confidence: float = 0.95  # two-sided chi-square confidence of that test
 
@@ -79,6 +83,7 @@ class OdomSensor(_Sensor, tag="odom"):
     twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
     twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
     slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
+    scale_estimation: bool = False  # estimate a wheel speed scale (v' = s v); needs a gps or pose sensor
 
 
 class ImuSensor(_Sensor, tag="imu"):
@@ -93,9 +98,48 @@ class ImuSensor(_Sensor, tag="imu"):
     orientation_min_sigma: float = 0.001  # floor, rad
     orientation_max_sigma: float = 3.0  # above: "not measured"
     gyro_min_sigma: float = 0.0005  # floor, rad/s
+    gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
 
 
-SensorConfig = OdomSensor | ImuSensor
+POSE_MSGTYPES = (
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/PoseStamped",
+    "nav_msgs/msg/Odometry",
+)
+
+
+class GpsSensor(_Sensor, tag="gps"):
+    """sensor_msgs/msg/NavSatFix; with one configured, the world frame is ENU at the datum."""
+
+    timeout_s: float = 2.0
+    mahalanobis_threshold: float = math.inf
+    datum: Vec3 | None = None  # [lat deg, lon deg, alt m]; default: the first valid fix
+    position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
+    position_min_sigma: float = 0.01  # floor, m
+    unknown_position_sigma: Vec3 = (2.5, 2.5, 5.0)  # used when the covariance type is UNKNOWN (0)
+    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # antenna position in base_link, m
+    heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
+
+
+class PoseSensor(_Sensor, tag="pose"):
+    """An absolute (or, with differential, relative) pose: visual odometry, motion capture, ..."""
+
+    timeout_s: float = 1.0
+    mahalanobis_threshold: float = math.inf
+    msgtype: Literal[
+        "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry"
+    ] = "geometry_msgs/msg/PoseWithCovarianceStamped"
+    differential: bool = False  # fuse deltas between consecutive poses (drifting origin) instead
+    position_noise: Vec3 | None = None  # std devs x y z, m; replaces the message covariance
+    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
+    position_min_sigma: float = 0.001  # floor, m
+    orientation_min_sigma: float = 0.001  # floor, rad
+    max_sigma: Vec2 = (100.0, 3.0)  # larger means "not measured": m, rad
+    unknown_sigma: Vec2 = (0.1, 0.05)  # for a message without covariance (PoseStamped): m, rad
+    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
+
+
+SensorConfig = OdomSensor | ImuSensor | GpsSensor | PoseSensor
 
 
 class Config(_Table):
@@ -151,6 +195,19 @@ def validate(cfg: Config) -> Config:
     odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]
     if len(odoms) != 1 and cfg.sensors:
         raise ConfigError(f"sensors: exactly one odom sensor drives the prediction, found {len(odoms)}")
+    frames = [i for i, s in enumerate(cfg.sensors)
+              if isinstance(s, GpsSensor) or (isinstance(s, PoseSensor) and not s.differential)]
+    if len(frames) > 1:
+        raise ConfigError(f"sensors[{frames[1]}]: only one absolute sensor (gps, or pose without differential) "
+                          "may define the world frame")
+    for i, s in enumerate(cfg.sensors):
+        if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
+            raise ConfigError(f"sensors[{i}].gyro_scale_estimation: needs angular_velocity = true")
+        if isinstance(s, GpsSensor):
+            if s.datum is not None and not (-90.0 <= s.datum[0] <= 90.0 and -180.0 <= s.datum[1] <= 180.0):
+                raise ConfigError(f"sensors[{i}].datum: latitude must be in [-90, 90] and longitude in [-180, 180]")
+            if s.heading_init_m <= 0.0:
+                raise ConfigError(f"sensors[{i}].heading_init_m: must be positive")
     return cfg
 
 

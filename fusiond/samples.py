@@ -34,4 +34,27 @@ class ImuSample(msgspec.Struct, gc=False):
     linear_acceleration_covariance: tuple[float, ...] = (0.0,) * 9
 
 
-Sample = OdomSample | ImuSample
+class GpsSample(msgspec.Struct, gc=False):
+    """sensor_msgs/NavSatFix: WGS84 position; the core converts it to ENU at the datum."""
+
+    sensor: str
+    stamp: float
+    latitude: float  # degrees
+    longitude: float  # degrees
+    altitude: float  # m above the ellipsoid
+    status: int = 0  # NavSatStatus.status: -1 no fix, 0 fix, 1 SBAS, 2 GBAS (RTK)
+    position_covariance: tuple[float, ...] = (0.0,) * 9  # ENU, row-major, m^2
+    covariance_type: int = 0  # 0 unknown, 1 approximated, 2 diagonal known, 3 known
+
+
+class PoseSample(msgspec.Struct, gc=False):
+    """A pose of base_link's sensor origin (PoseStamped, PoseWithCovarianceStamped, Odometry.pose)."""
+
+    sensor: str
+    stamp: float
+    position: tuple[float, float, float]
+    orientation: tuple[float, float, float, float]  # x y z w
+    covariance: tuple[float, ...] = ()  # 36 (x y z roll pitch yaw, row-major), or () when the message has none
+
+
+Sample = OdomSample | ImuSample | GpsSample | PoseSample

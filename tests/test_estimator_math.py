@@ -209,3 +209,42 @@ def test_cholesky_whitening_matches_numpy(m, seed):
     np.testing.assert_allclose(np.array(Linv) @ L, np.eye(m), atol=1e-9)
     assert float(np.dot(z, z)) == pytest.approx(float(y @ np.linalg.solve(S, y)), rel=1e-9)
     assert whiten((-S).tolist(), y.tolist()) is None
+
+
+# -- scale states (issue 7) -------------------------------------------------------------------------------------
+
+def _scale_layout(bias: bool = True) -> StateLayout:
+    from fusiond.estimator import GyroScaleBlock, WheelScaleBlock
+
+    blocks = [PoseBlock(0.1, 0.1)] + ([GyroBiasBlock(0.01, 1e-4)] if bias else [])
+    return StateLayout(blocks + [GyroScaleBlock(0.05, 1e-5), WheelScaleBlock(0.1, 1e-4)])
+
+
+@settings(max_examples=40, deadline=None)
+@given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans(),
+       k=st.floats(0.7, 1.3), s=st.floats(0.7, 1.3), bias=st.booleans())
+def test_scale_blocks_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, k, s, bias):
+    """Bias then scale correct the same gyro input: the bias columns must be chained through the scale."""
+    layout = _scale_layout(bias)
+    x = _state(layout, (r, p, y))
+    x[layout.nominal["gyro_scale"]] = k
+    x[layout.nominal["wheel_scale"]] = s
+    u = _input(world, gyro)
+    _, F, _ = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+    F_num = transition_jacobian(layout, lambda st_: propagate_state(layout, st_, u, dt), x)
+    np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
+
+
+def test_scales_correct_the_inputs_and_their_noise():
+    layout = _scale_layout()
+    x = _state(layout, (0.0, 0.0, 0.0), bias=(0.0, 0.0, 0.1))
+    x[layout.nominal["gyro_scale"]] = 0.5
+    x[layout.nominal["wheel_scale"]] = 2.0
+    u = _input(world=True, gyro=True)
+    x1, _, Q = predict(layout, x, u, 1.0, np.zeros(layout.error_dim))
+    np.testing.assert_allclose(x1[0:3], x[0:3] + 2.0 * np.array(u.linear), atol=1e-12)
+    yaw_rate = 0.5 * (u.angular[2] - 0.1)
+    q1 = rot.mul(tuple(x[3:7].tolist()), rot.exp(u.angular[0], u.angular[1], yaw_rate))
+    np.testing.assert_allclose(rot.log(rot.mul(tuple(x1[3:7].tolist()), rot.conj(q1))), 0.0, atol=1e-12)
+    # the wheel noise scales with the speed: world frame, dt = 1 -> Q = s^2 Sigma T
+    np.testing.assert_allclose(Q[0:3, 0:3], 4.0 * u.linear_period * np.reshape(u.linear_cov, (3, 3)), atol=1e-15)

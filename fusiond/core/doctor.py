@@ -141,6 +141,8 @@ class Doctor:
                 out.extend(self._yaw_rate(name, where, ch))
             elif channel == "gyro_bias":
                 out.extend(self._gyro_bias(name, where, ch))
+            elif channel in ("position", "pose", "pose_delta"):
+                out.extend(self._absolute(name, where, channel, ch))
         out.extend(self._lean(sensors))
         odom = next(((i, s) for i, s in enumerate(self.cfg.sensors) if isinstance(s, OdomSensor)), None)
         if odom is not None:
@@ -227,6 +229,27 @@ class Doctor:
                             f"standstill gyro NIS high ({per_dof:.1f} per dof): gyro noise understated",
                             f"{where}.gyro_noise")]
         return [Verdict(name, "gyro_bias", "ok", f"standstill bias updates consistent ({per_dof:.2f} per dof)")]
+
+    def _absolute(self, name: str, where: str, channel: str, ch: ChannelStats) -> list[Verdict]:
+        """GPS and pose channels: NIS against the stated noise (position_noise / orientation_noise)."""
+        per_dof = ch.nis_per_dof
+        frac = ch.rejected / ch.n
+        key = f"{where}.position_noise"
+        detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
+        if frac > 0.1:
+            return [Verdict(name, channel, "warn",
+                            f"{100 * frac:.0f}% of updates gated ({detail}): the sensor jumps (multipath, "
+                            "relocalisation) or its noise is understated", f"{where}.mahalanobis_threshold")]
+        if per_dof > NIS_HIGH:
+            return [Verdict(name, channel, "problem",
+                            f"NIS high ({per_dof:.1f} per dof; {detail}): the stated noise is too small, a "
+                            "mounting offset (extrinsic_xyz) is missing, or an odometry scale error is "
+                            "unmodelled (scale_estimation)", key)]
+        if per_dof < NIS_LOW:
+            return [Verdict(name, channel, "warn",
+                            f"NIS low ({per_dof:.2f} per dof; {detail}): the stated noise is larger than the "
+                            "innovations show", key)]
+        return [Verdict(name, channel, "ok", f"consistent ({per_dof:.2f} per dof)")]
 
     def _lean(self, sensors: dict) -> list[Verdict]:
         t = self.tilt

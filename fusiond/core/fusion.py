@@ -23,14 +23,19 @@ import msgspec
 import numpy as np
 import structlog
 
-from ..config import Config, ImuSensor, OdomSensor
-from ..estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from ..estimator import (
+    ErrorStateEKF, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock, predict,
+)
 from ..estimator import mat3
 from ..estimator import observations as obs
 from ..estimator import rotation as rot
-from ..samples import ImuSample, OdomSample, Sample
+from ..estimator.geodesy import EnuFrame
+from ..samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
-from .sensors import ImuInput, ImuPolicy, OdomInput, OdomPolicy, Rejected
+from .sensors import (
+    GpsInput, GpsPolicy, ImuInput, ImuPolicy, OdomInput, OdomPolicy, PoseInput, PosePolicy, Rejected,
+)
 
 log = structlog.get_logger("fusiond.core")
 
@@ -38,6 +43,10 @@ ZERO_RATE_GATE = 5.0  # sqrt(NIS) gate of the standstill bias update: a hand-tur
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
 _GYRO_COMPONENTS = ["gyro_x", "gyro_y", "gyro_z"]
+HEADING_MIN_TRAVEL = 0.3  # odometry chord / GPS chord below this: pushed, slipping or a GPS jump, start over
+HEADING_SIGMA_FLOOR = 0.02  # rad added to the chord-angle uncertainty of the initial GPS heading
+_POLICIES = {OdomSensor: (OdomPolicy, OdomSample), ImuSensor: (ImuPolicy, ImuSample),
+             GpsSensor: (GpsPolicy, GpsSample), PoseSensor: (PosePolicy, PoseSample)}
 
 
 class Estimate(msgspec.Struct, gc=False):
@@ -86,6 +95,7 @@ class FilterState:
         "linear", "linear_cov", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
         "still_since", "attitude_ready", "yaw_offset", "adaptive",
+        "frame_ready", "enu", "heading_ready", "gps_anchor", "travel", "pose_anchor",
     )
 
     def copy(self) -> "FilterState":
@@ -103,6 +113,10 @@ class FilterState:
         c.attitude_ready = self.attitude_ready
         c.yaw_offset = dict(self.yaw_offset)
         c.adaptive = {k: list(v) for k, v in self.adaptive.items()}
+        # world frame: flags and immutable values (tuples, EnuFrame) only, so sharing is safe
+        c.frame_ready, c.enu, c.heading_ready = self.frame_ready, self.enu, self.heading_ready
+        c.gps_anchor, c.travel = self.gps_anchor, self.travel
+        c.pose_anchor = self.pose_anchor  # copy-on-write: replaced, never mutated
         return c
 
 
@@ -112,22 +126,47 @@ class FusionCore:
         fc = cfg.filter
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
-        self.policies: list[OdomPolicy | ImuPolicy] = [
-            OdomPolicy(s) if isinstance(s, OdomSensor) else ImuPolicy(s) for s in self.sensors
-        ]
+        self.policies = [_POLICIES[type(s)][0](s) for s in self.sensors]
+        self._sample_types = [_POLICIES[type(s)][1] for s in self.sensors]
         self.odom_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, OdomSensor)), -1)
         gyro_imus = [i for i, s in enumerate(self.sensors) if isinstance(s, ImuSensor) and s.angular_velocity]
         blocks = [PoseBlock(fc.initial_sigma[0], fc.initial_sigma[1])]
         if gyro_imus:
             blocks.append(GyroBiasBlock(fc.gyro_bias_sigma, fc.gyro_bias_walk))
+        if any(isinstance(s, ImuSensor) and s.gyro_scale_estimation for s in self.sensors):
+            blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
+        if any(isinstance(s, OdomSensor) and s.scale_estimation for s in self.sensors):
+            blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
         self.layout = StateLayout(blocks)
         self.has_bias = self.layout.has("gyro_bias")
+        self.has_gyro_scale = self.layout.has("gyro_scale")
         # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
-        # position, heading or the z bias (which drives heading).
+        # position, heading, the z bias or a scale (which drive heading and position).
         self.tilt_mask = np.ones(self.layout.error_dim, dtype=bool)
         self.tilt_mask[[0, 1, 2, 5]] = False
         if self.has_bias:
             self.tilt_mask[self.layout.error["gyro_bias"].start + 2] = False
+        for name in ("gyro_scale", "wheel_scale"):
+            if self.layout.has(name):
+                self.tilt_mask[self.layout.error[name]] = False
+        # While the GPS heading is unknown a fix may only move position: a wrong heading
+        # must not be "explained" by attitude, biases or scales.
+        self.position_mask = np.zeros(self.layout.error_dim, dtype=bool)
+        self.position_mask[0:3] = True
+        # The sensor that defines the world frame (GPS: ENU at the datum; an absolute pose
+        # sensor: its own frame); nothing is published before its first message.
+        self.frame_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)
+                                 or (isinstance(s, PoseSensor) and not s.differential)), -1)
+        self.gps_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)), -1)
+        # A pose delta fused against the filter's previous pose acts on the absolute pose as
+        # if that previous pose were exact, which collapses P of position and heading. Alone
+        # that is robot_pose_ekf's behaviour; beside an absolute sensor it would lock the GPS
+        # out, so there the delta may correct tilt, biases and scales only (Schmidt update).
+        # The exact treatment, cloning the previous pose into the state, is not done yet.
+        self.delta_mask = None
+        if self.frame_index >= 0:
+            self.delta_mask = np.ones(self.layout.error_dim, dtype=bool)
+            self.delta_mask[[0, 1, 2, 5]] = False
         self.noise_density = self.layout.noise_density(
             np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
         )
@@ -163,11 +202,8 @@ class FusionCore:
             return self._drop(idx, "invalid_stamp", stamp)
         policy = self.policies[idx]
         try:
-            if isinstance(policy, OdomPolicy):
-                if not isinstance(sample, OdomSample):
-                    raise Rejected("wrong_type", "expected odometry")
-            elif not isinstance(sample, ImuSample):
-                raise Rejected("wrong_type", "expected imu")
+            if type(sample) is not self._sample_types[idx]:
+                raise Rejected("wrong_type", f"expected {self._sample_types[idx].__name__}")
             inp = policy.convert(sample)  # type: ignore[arg-type]
         except Rejected as r:
             return self._drop(idx, r.reason, stamp)
@@ -220,11 +256,42 @@ class FusionCore:
             r.consistency = w.add(r.nis, r.dof, r.rejected)
             if r.rejected and r.channel != "yaw_rate":
                 st.rejected += 1
-        return Step(sample.sensor, True, late=late, publish=idx == self.odom_index, records=records)
+        publish = idx == self.odom_index and (self.frame_index < 0 or self.state.frame_ready)
+        return Step(sample.sensor, True, late=late, publish=publish, records=records)
 
     @property
     def initialised(self) -> bool:
         return self.state is not None and self.state.t is not None
+
+    @property
+    def ready(self) -> bool:
+        """Is the world frame defined? False until an absolute sensor's first message (health: not_ready_reason)."""
+        return self.initialised and (self.frame_index < 0 or self.state.frame_ready)
+
+    @property
+    def not_ready_reason(self) -> str:
+        if self.ready:
+            return ""
+        if not self.initialised:
+            return "no sample fused yet"
+        s = self.sensors[self.frame_index]
+        what = "GPS fix" if isinstance(s, GpsSensor) else "pose"
+        return f"waiting for the first {what} from {s.name!r} to define the world frame"
+
+    @property
+    def heading_known(self) -> bool:
+        """False while a GPS-referenced heading is not yet measured (no travel since the first fix)."""
+        if self.gps_index < 0:
+            return True
+        return self.state is not None and self.state.heading_ready
+
+    @property
+    def scales(self) -> dict[str, float]:
+        """Estimated scale factors (wheel_scale, gyro_scale) that are in the state."""
+        if not self.initialised:
+            return {}
+        return {n: float(self.state.ekf.x[self.layout.nominal[n]][0])
+                for n in ("wheel_scale", "gyro_scale") if self.layout.has(n)}
 
     @property
     def time(self) -> float | None:
@@ -237,10 +304,15 @@ class FusionCore:
             raise RuntimeError("no sample has been fused yet")
         x, P = s.ekf.x, s.ekf.P
         u = self._inputs(s)
-        angular = u.angular
-        if u.from_gyro and self.has_bias:
-            b = x[self.layout.nominal["gyro_bias"]].tolist()
-            angular = (angular[0] - b[0], angular[1] - b[1], angular[2] - b[2])
+        linear, angular = u.linear, u.angular
+        if self.layout.input_blocks:
+            xl = x.tolist()
+            for blk, n0, n1, _ in self.layout.input_blocks:
+                if blk.applies(u.from_gyro):
+                    if blk.corrects == "linear":
+                        linear = blk.correct(xl[n0:n1], linear)
+                    else:
+                        angular = blk.correct(xl[n0:n1], angular)
         twist_cov = np.zeros((6, 6))
         twist_cov[0:3, 0:3] = np.reshape(u.linear_cov, (3, 3))
         twist_cov[3:6, 3:6] = np.reshape(u.angular_cov, (3, 3))
@@ -249,7 +321,7 @@ class FusionCore:
             position=(float(x[0]), float(x[1]), float(x[2])),
             orientation=(float(x[3]), float(x[4]), float(x[5]), float(x[6])),
             pose_covariance=P[0:6, 0:6].ravel().tolist(),
-            linear=tuple(u.linear),
+            linear=tuple(linear),
             angular=tuple(angular),
             twist_covariance=twist_cov.ravel().tolist(),
         )
@@ -321,6 +393,13 @@ class FusionCore:
         s.attitude_ready = False
         s.yaw_offset = {}
         s.adaptive = {}
+        s.frame_ready = False
+        gps = self.sensors[self.gps_index] if self.gps_index >= 0 else None
+        s.enu = EnuFrame(*gps.datum) if isinstance(gps, GpsSensor) and gps.datum is not None else None
+        s.heading_ready = False
+        s.gps_anchor = None  # (first fix in ENU, filter antenna lever R t then) for the heading
+        s.travel = _ZERO3  # dead-reckoned base motion since that fix
+        s.pose_anchor = {}  # differential pose: name -> (measured position, q, predicted motion since (dp, dq))
         self.state = s
         self._reset_history()
 
@@ -364,6 +443,12 @@ class FusionCore:
     def _predict(self, s: FilterState, dt: float) -> None:
         u = self._inputs(s)
         x, F, Q = predict(self.layout, s.ekf.x, u, dt, self.noise_density)
+        if s.gps_anchor is not None:  # GPS heading pending: accumulate the dead-reckoned motion
+            x0 = s.ekf.x
+            t = s.travel
+            s.travel = (t[0] + float(x[0] - x0[0]), t[1] + float(x[1] - x0[1]), t[2] + float(x[2] - x0[2]))
+        if s.pose_anchor:
+            s.pose_anchor = _accumulate_motion(s.pose_anchor, s.ekf.x, x)
         if dt > self.cfg.filter.gap_s:
             Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
         if not s.ekf.propagate(x, F, Q):
@@ -390,7 +475,11 @@ class FusionCore:
         self._note_period(s, idx, stamp)
         if isinstance(inp, OdomInput):
             return self._apply_odom(s, idx, inp, stamp, emit, late)
-        return self._apply_imu(s, idx, inp, stamp, emit, late)
+        if isinstance(inp, ImuInput):
+            return self._apply_imu(s, idx, inp, stamp, emit, late)
+        if isinstance(inp, GpsInput):
+            return self._apply_gps(s, idx, inp, stamp, emit, late)
+        return self._apply_pose(s, idx, inp, stamp, emit, late)
 
     def _apply_odom(self, s: FilterState, idx: int, inp: OdomInput, stamp: float, emit: bool, late: bool):
         s.linear, s.linear_cov = inp.linear, inp.linear_cov
@@ -409,6 +498,8 @@ class FusionCore:
         # checks the gyro, so that skid and hand-turning show up as slip.
         bias_z = s.ekf.x[self.layout.nominal["gyro_bias"]][2] if self.has_bias else 0.0
         gyro_z = s.gyro[2] - float(bias_z)
+        if self.has_gyro_scale:
+            gyro_z *= float(s.ekf.x[self.layout.nominal["gyro_scale"]][0])
         var = inp.angular_cov[8] + s.gyro_cov[8]
         if self.has_bias:
             e = self.layout.error["gyro_bias"].start + 2
@@ -469,6 +560,150 @@ class FusionCore:
                                                  channel="orientation", late=late))
         return records
 
+    # -- absolute and relative position sensors ---------------------------------------------------------------
+    def _apply_gps(self, s: FilterState, idx: int, inp: GpsInput, stamp: float, emit: bool, late: bool):
+        cfg: GpsSensor = self.sensors[idx]  # type: ignore[assignment]
+        if s.enu is None:
+            s.enu = EnuFrame(*inp.lla)  # no datum configured: the first valid fix (in stamp order)
+        z = s.enu.enu(*inp.lla)
+        ekf = s.ekf
+        if not s.frame_ready:
+            self._set_position(s, z, inp.cov, cfg.extrinsic_xyz)
+            s.frame_ready = True
+            s.pose_anchor = {}
+            s.gps_anchor = (z, _lever(ekf.x, cfg.extrinsic_xyz))
+            s.travel = _ZERO3
+            return []
+        if not s.heading_ready:
+            self._gps_heading(s, cfg, z, inp.cov)
+        y, H, R = obs.position(self.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz)
+        if s.heading_ready:
+            res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
+            channel = "position"
+        else:
+            # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
+            # track along a wrong heading must not lock the filter out of the GPS).
+            res = ekf.update(y, H, R, math.inf, self.position_mask)
+            channel = "position_unaligned"
+        if not emit:
+            return []
+        return [DiagnosticsRecord(stamp, cfg.name, list(_ENU_NAMES), y.tolist(), res.innovation_var, res.nis, 3,
+                                  res.rejected, channel=channel, late=late)]
+
+    def _gps_heading(self, s: FilterState, cfg: GpsSensor, z: tuple[float, float, float], cov) -> None:
+        """Initial heading from the first metres of travel: the angle between the GPS chord and
+        the dead-reckoned chord of the antenna since the first fix. A wrong initial yaw rotates
+        the whole dead-reckoned track about its start, so the chord angles differ by exactly
+        the yaw error, whatever the path's shape."""
+        z0, l0 = s.gps_anchor
+        gx, gy = z[0] - z0[0], z[1] - z0[1]
+        d = math.hypot(gx, gy)
+        sigma = math.sqrt(max(cov[0], cov[4]))
+        if d < max(cfg.heading_init_m, 4.0 * sigma):
+            return
+        l1 = _lever(s.ekf.x, cfg.extrinsic_xyz)
+        fx, fy = s.travel[0] + l1[0] - l0[0], s.travel[1] + l1[1] - l0[1]
+        if math.hypot(fx, fy) < HEADING_MIN_TRAVEL * d:
+            s.gps_anchor, s.travel = (z, l1), _ZERO3  # GPS wander or a pushed robot: start over
+            return
+        dyaw = rot.wrap(math.atan2(gy, gx) - math.atan2(fy, fx))
+        ekf = s.ekf
+        q = (float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6]))
+        ekf.x[3:7] = rot.normalize(rot.mul(rot.exp(0.0, 0.0, dyaw), q))
+        sig = math.sqrt(2.0) * sigma / d + HEADING_SIGMA_FLOOR
+        P = ekf.P.copy()
+        P[5, :] = 0.0
+        P[:, 5] = 0.0
+        P[5, 5] = sig * sig
+        ekf.P = P
+        s.heading_ready = True
+        s.gps_anchor, s.travel = None, _ZERO3
+        s.pose_anchor = {}  # the frame turned under them: deltas restart from the next message
+        log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=dyaw, sigma=sig, chord_m=d)
+
+    def _set_position(self, s: FilterState, z, cov9, lever, rows: tuple[int, ...] = (0, 1, 2)) -> None:
+        """Put the base where the sensor says (p = z - R t), with the sensor's position covariance."""
+        ekf = s.ekf
+        a = _lever(ekf.x, lever)
+        P = ekf.P.copy()
+        for i in rows:
+            ekf.x[i] = z[i] - a[i]
+            P[i, :] = 0.0
+            P[:, i] = 0.0
+        for i in rows:
+            for j in rows:
+                P[i, j] = cov9[3 * i + j]
+        ekf.P = P
+
+    def _apply_pose(self, s: FilterState, idx: int, inp: PoseInput, stamp: float, emit: bool, late: bool):
+        cfg: PoseSensor = self.sensors[idx]  # type: ignore[assignment]
+        if cfg.differential:
+            return self._apply_pose_delta(s, idx, cfg, inp, stamp, emit, late)
+        ekf = s.ekf
+        if not s.frame_ready:
+            self._initialise_from_pose(s, cfg, inp)
+            return []
+        y, H, R = obs.pose(self.layout, ekf.x, inp.position, inp.rpy, inp.cov, inp.rows, cfg.extrinsic_xyz)
+        res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
+        if not emit:
+            return []
+        return [DiagnosticsRecord(stamp, cfg.name, [obs.POSE_NAMES[i] for i in inp.rows], y.tolist(),
+                                  res.innovation_var, res.nis, len(inp.rows), res.rejected, channel="pose", late=late)]
+
+    def _initialise_from_pose(self, s: FilterState, cfg: PoseSensor, inp: PoseInput) -> None:
+        """The first absolute pose defines the world frame: position and heading (and roll/pitch
+        when no IMU has set them) are taken from it, with its variances."""
+        ekf = s.ekf
+        r, p, y = rot.to_rpy((float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6])))
+        mr, mp, my = inp.rpy
+        rows = inp.rows
+        if not s.attitude_ready:
+            r = mr if 3 in rows else r
+            p = mp if 4 in rows else p
+        y = my if 5 in rows else y
+        ekf.x[3:7] = rot.from_rpy(r, p, y)
+        var = [inp.cov[7 * i] for i in range(6)]
+        pos_rows = tuple(i for i in rows if i < 3)
+        self._set_position(s, inp.position, (var[0], 0.0, 0.0, 0.0, var[1], 0.0, 0.0, 0.0, var[2]),
+                           cfg.extrinsic_xyz, pos_rows)
+        if 5 in rows:
+            P = ekf.P.copy()
+            P[5, :] = 0.0
+            P[:, 5] = 0.0
+            P[5, 5] = var[5]
+            ekf.P = P
+        s.frame_ready = True
+        s.pose_anchor = {}  # differential sensors restart in the new frame
+
+    def _apply_pose_delta(self, s: FilterState, idx: int, cfg: PoseSensor, inp: PoseInput, stamp: float,
+                          emit: bool, late: bool):
+        """Fuse the sensor's motion since its previous message against the filter's motion since
+        then (accumulated by the predictions, kept with the anchor in the snapshot): the
+        sensor's drifting origin never enters. The stated noise (message covariance or override) is
+        that of one delta, as robot_pose_ekf reads visual odometry's covariance: VO's error
+        lives in its increments."""
+        ekf = s.ekf
+        anchor = s.pose_anchor.get(cfg.name)
+        s.pose_anchor = {**s.pose_anchor, cfg.name: (inp.position, inp.q, _NO_MOTION)}
+        if anchor is None:
+            return []
+        pos0, q0, (dp, dqf) = anchor
+        # The filter's pose at the previous message, moved along with every correction made
+        # since (x_now o D^-1): the delta then checks only the predicted motion D, and does
+        # not undo what other sensors (GPS, heading initialisation) corrected meanwhile.
+        qn = (float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6]))
+        qa = rot.mul(qn, rot.conj(dqf))
+        a = mat3.apply(rot.matrix9(qa), dp)
+        x_prev = (float(ekf.x[0]) - a[0], float(ekf.x[1]) - a[1], float(ekf.x[2]) - a[2], *qa)
+        dpos, dq = obs.relative_pose(pos0, q0, inp.position, inp.q)
+        y, H, R = obs.delta_pose(self.layout, ekf.x, x_prev, dpos, dq, inp.cov, inp.rows, cfg.extrinsic_xyz)
+        res = ekf.update(y, H, R, cfg.mahalanobis_threshold, self.delta_mask)
+        if not emit:
+            return []
+        return [DiagnosticsRecord(stamp, cfg.name, [obs.DELTA_NAMES[i] for i in inp.rows], y.tolist(),
+                                  res.innovation_var, res.nis, len(inp.rows), res.rejected, channel="pose_delta",
+                                  late=late)]
+
     def _initialise_attitude(self, s: FilterState, rpy: tuple[float, float, float], with_yaw: bool) -> None:
         """Take roll/pitch (and yaw when absolute) from the first orientation sample."""
         yaw = rpy[2] if with_yaw else rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2]
@@ -494,3 +729,29 @@ class FusionCore:
 
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
 _ZERO3 = (0.0, 0.0, 0.0)
+_ENU_NAMES = ("east", "north", "up")
+
+
+_NO_MOTION = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+
+
+def _accumulate_motion(anchors: dict, x0: np.ndarray, x1: np.ndarray) -> dict:
+    """Compose one prediction step's relative motion (x0^-1 x1) onto each differential anchor (a new dict).
+
+    The motion is expressed in the body frame at the anchor, so corrections of the
+    world pose (updates, heading initialisation) between messages do not enter it.
+    """
+    q0 = (float(x0[3]), float(x0[4]), float(x0[5]), float(x0[6]))
+    step_p, step_q = obs.relative_pose((float(x0[0]), float(x0[1]), float(x0[2])), q0,
+                                       (float(x1[0]), float(x1[1]), float(x1[2])),
+                                       (float(x1[3]), float(x1[4]), float(x1[5]), float(x1[6])))
+    out = {}
+    for name, (mp, mq, (dp, dq)) in anchors.items():
+        a = mat3.apply(rot.matrix9(dq), step_p)
+        out[name] = (mp, mq, ((dp[0] + a[0], dp[1] + a[1], dp[2] + a[2]), rot.normalize(rot.mul(dq, step_q))))
+    return out
+
+
+def _lever(x: np.ndarray, t: tuple[float, float, float]) -> tuple[float, float, float]:
+    """R(q) t: the sensor's offset from base_link, in the world."""
+    return mat3.apply(rot.matrix9((float(x[3]), float(x[4]), float(x[5]), float(x[6]))), t)

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import math
 
-from ..config import ImuSensor, OdomSensor
+from ..config import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..estimator import mat3
 from ..estimator import rotation as rot
-from ..samples import ImuSample, OdomSample
+from ..samples import GpsSample, ImuSample, OdomSample, PoseSample
 
 _QUAT_NORM_TOLERANCE = 0.1  # drivers round; anything further off is not a rotation
 MAX_SPEED = 100.0  # m/s: beyond any wheeled robot, so a value this large is corrupt
@@ -207,3 +207,116 @@ class ImuPolicy:
         if rpy is None and gyro is None:
             raise Rejected("nothing_to_fuse", "no orientation and no angular velocity in the message")
         return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov)
+
+
+class GpsInput:
+    """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2)."""
+
+    __slots__ = ("lla", "cov")
+
+    def __init__(self, lla: tuple[float, float, float], cov: tuple[float, ...]) -> None:
+        self.lla = lla
+        self.cov = cov
+
+
+class GpsPolicy:
+    """NavSatFix: skip fixes without a fix (status < 0), take the noise from the message
+    covariance (floored), the config's ``position_noise``, or a conservative default
+    when the receiver says its covariance is unknown."""
+
+    def __init__(self, cfg: GpsSensor) -> None:
+        self.cfg = cfg
+        self._floor = cfg.position_min_sigma**2
+        self._override = None if cfg.position_noise is None else mat3.diag(*[v * v for v in cfg.position_noise])
+        self._unknown = mat3.diag(*[v * v for v in cfg.unknown_position_sigma])
+
+    def convert(self, s: GpsSample) -> GpsInput:
+        if s.status < 0:
+            raise Rejected("no_fix", f"status {s.status}")
+        lla = (s.latitude, s.longitude, s.altitude)
+        if not _finite(lla):
+            raise Rejected("non_finite", "latitude/longitude/altitude")
+        if not (-90.0 <= s.latitude <= 90.0 and -180.0 <= s.longitude <= 180.0 and -1e5 < s.altitude < 1e6):
+            raise Rejected("implausible_value", "latitude/longitude/altitude out of range")
+        if self._override is not None:
+            return GpsInput(lla, self._override)
+        if s.covariance_type == 0:
+            return GpsInput(lla, self._unknown)
+        c = s.position_covariance
+        if len(c) != 9 or not _finite(c):
+            raise Rejected("bad_covariance", "position covariance must be 9 finite numbers")
+        if c[0] < 0.0 or c[4] < 0.0 or c[8] < 0.0:
+            raise Rejected("negative_covariance", "position")
+        if s.covariance_type == 2:  # COVARIANCE_TYPE_DIAGONAL_KNOWN: off-diagonals are not meaningful
+            c = mat3.diag(c[0], c[4], c[8])
+        f = self._floor
+        cov = (max(c[0], f), c[1], c[2], c[3], max(c[4], f), c[5], c[6], c[7], max(c[8], f))
+        return GpsInput(lla, cov)
+
+
+class PoseInput:
+    """Sensor pose (position, unit quaternion, its rpy) with a 6x6 covariance (x y z roll pitch yaw,
+    row-major 36-tuple, diagonal) and the usable rows."""
+
+    __slots__ = ("position", "q", "rpy", "cov", "rows")
+
+    def __init__(self, position, q, rpy, cov, rows) -> None:
+        self.position = position
+        self.q = q
+        self.rpy = rpy
+        self.cov = cov
+        self.rows = rows
+
+
+class PosePolicy:
+    """Covariances of pose sensors are as unreliable as any: the diagonal is used, floored,
+    replaced by the config's noise when given, and a component above ``max_sigma`` is not
+    measured (a 2D visual odometry sends 1e6 for z, roll and pitch)."""
+
+    def __init__(self, cfg: PoseSensor) -> None:
+        self.cfg = cfg
+        pmin, omin = cfg.position_min_sigma**2, cfg.orientation_min_sigma**2
+        self._floor = [pmin] * 3 + [omin] * 3
+        self._max = [cfg.max_sigma[0] ** 2] * 3 + [cfg.max_sigma[1] ** 2] * 3
+        self._unknown = [cfg.unknown_sigma[0] ** 2] * 3 + [cfg.unknown_sigma[1] ** 2] * 3
+        self._pos_override = None if cfg.position_noise is None else [v * v for v in cfg.position_noise]
+        self._ori_override = None if cfg.orientation_noise is None else [v * v for v in cfg.orientation_noise]
+
+    def convert(self, s: PoseSample) -> PoseInput:
+        if not (_finite(s.position) and _finite(s.orientation)):
+            raise Rejected("non_finite", "pose")
+        if not _plausible(s.position, 1e6):
+            raise Rejected("implausible_value", "position beyond 1000 km")
+        x, y, z, w = s.orientation
+        n = math.sqrt(x * x + y * y + z * z + w * w)
+        if n < 1e-6:
+            raise Rejected("zero_quaternion")
+        if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
+            raise Rejected("non_unit_quaternion", f"norm {n:.3f}")
+        q = (x / n, y / n, z / n, w / n)
+        c = s.covariance
+        if len(c) == 36:
+            diag = [c[7 * i] for i in range(6)]
+            if any(d < 0.0 for d in diag):
+                raise Rejected("negative_covariance", "pose")
+        elif len(c) == 0:
+            diag = list(self._unknown)
+        else:
+            raise Rejected("bad_covariance", "pose covariance must have 36 entries")
+        if self._pos_override is not None:
+            diag[0:3] = self._pos_override
+        if self._ori_override is not None:
+            diag[3:6] = self._ori_override
+        rows = []
+        var = [0.0] * 6
+        for i, d in enumerate(diag):
+            if d != d or d >= self._max[i]:
+                continue
+            var[i] = d if d > self._floor[i] else self._floor[i]
+            rows.append(i)
+        if not rows:
+            raise Rejected("nothing_to_fuse", "every pose component is marked not measured")
+        cov = [0.0] * 36
+        for i in range(6):
+            cov[7 * i] = var[i] if var[i] > 0.0 else 1.0
+        return PoseInput(s.position, q, rot.to_rpy(q), tuple(cov), tuple(rows))

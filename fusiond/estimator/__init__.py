@@ -2,9 +2,10 @@
 
 from .ekf import ErrorStateEKF, UpdateResult
 from .motion import MotionInput, predict
+from .scale import GyroScaleBlock, WheelScaleBlock
 from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout
 
 __all__ = [
     "ErrorStateEKF", "UpdateResult", "MotionInput", "predict",
-    "GyroBiasBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
+    "GyroBiasBlock", "GyroScaleBlock", "WheelScaleBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
 ]

@@ -123,9 +123,20 @@ def predict(
     x_new = np.array(xl)
     G_ang = mat3.mul(rot.matrix9(q1), _right_jacobian(ax, ay, az), dt)
 
-    for rows, cols, blk, xb, u_in in corrections:
-        F[rows, cols] = blk.chain(G_lin if rows is _POSITION else G_ang, xb, u_in)
+    # Blocks correct an input in turn (u1 = g1(u0), u2 = g2(u1), ...): walking them
+    # backwards, each block's columns are G d u_last / d u_its_output times its own
+    # input Jacobian, and G is carried through the block's d u_out / d u_in.
+    for rows, cols, blk, xb, u_in in reversed(corrections):
+        if rows is _POSITION:
+            F[rows, cols] = blk.chain(G_lin, xb, u_in)
+            if blk.scales_input:
+                G_lin = mat3.mul(G_lin, blk.input_derivative(xb, u_in))
+        else:
+            F[rows, cols] = blk.chain(G_ang, xb, u_in)
+            if blk.scales_input:
+                G_ang = mat3.mul(G_ang, blk.input_derivative(xb, u_in))
 
+    # G_lin/G_ang now map the measured inputs, whose noise the covariances describe.
     Q = layout.zeros.copy()
     if dt > 0.0:
         if u.linear_period > 0.0:

@@ -73,3 +73,94 @@ def zero_rate(
 
 
 _I3 = np.eye(3)
+
+
+# -- absolute and relative position/pose (GPS, pose sensors) ------------------------------------------------------
+
+POSITION_NAMES = ("x", "y", "z")
+POSE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
+DELTA_NAMES = ("dx", "dy", "dz", "drx", "dry", "drz")
+
+
+def _lever(q: rot.Quat, t: tuple[float, float, float]) -> tuple[float, float, float]:
+    R = rot.matrix9(q)
+    return (R[0] * t[0] + R[1] * t[1] + R[2] * t[2], R[3] * t[0] + R[4] * t[1] + R[5] * t[2],
+            R[6] * t[0] + R[7] * t[1] + R[8] * t[2])
+
+
+def position(
+    layout: StateLayout, x: np.ndarray, z: tuple[float, float, float], cov: tuple[float, ...],
+    lever: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A sensor at ``lever`` (base_link) observed in the world: h = p + R t.
+
+    With global attitude errors R_true t = R t + dtheta x (R t), so dh/dtheta = -[R t]x:
+    a lever arm makes the position observe heading while the robot turns.
+    """
+    q = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
+    a0, a1, a2 = _lever(q, lever)
+    y = np.array((z[0] - float(x[0]) - a0, z[1] - float(x[1]) - a1, z[2] - float(x[2]) - a2))
+    H = np.zeros((3, layout.error_dim))
+    H[0, 0] = H[1, 1] = H[2, 2] = 1.0
+    H[0:3, 3:6] = ((0.0, a2, -a1), (-a2, 0.0, a0), (a1, -a0, 0.0))
+    return y, H, np.array(cov, dtype=float).reshape(3, 3)
+
+
+def pose(
+    layout: StateLayout, x: np.ndarray, z_pos: tuple[float, float, float], z_rpy: tuple[float, float, float],
+    cov: tuple[float, ...], rows: tuple[int, ...], lever: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position (lever arm) and roll/pitch/yaw of a rigidly mounted sensor; ``rows`` of the 6; cov 6x6 row-major."""
+    yp, Hp, _ = position(layout, x, z_pos, (0.0,) * 9, lever)
+    h_rpy, Hrpy = rpy_jacobian((float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+    y6 = (*yp.tolist(), *(rot.wrap(z_rpy[i] - h_rpy[i]) for i in range(3)))
+    H6 = np.zeros((6, layout.error_dim))
+    H6[0:3] = Hp
+    H6[3:6, 3:6] = Hrpy
+    C = np.array(cov, dtype=float).reshape(6, 6)
+    if len(rows) == 6:
+        return np.array(y6), H6, C
+    idx = list(rows)
+    return np.array([y6[i] for i in rows]), H6[idx], C[np.ix_(idx, idx)]
+
+
+def relative_pose(pos0: tuple[float, float, float], q0: rot.Quat, pos1: tuple[float, float, float], q1: rot.Quat
+                  ) -> tuple[tuple[float, float, float], rot.Quat]:
+    """Pose 1 in the frame of pose 0: (R0^T (p1 - p0), q0^-1 q1)."""
+    R = rot.matrix9(q0)
+    d = (pos1[0] - pos0[0], pos1[1] - pos0[1], pos1[2] - pos0[2])
+    return ((R[0] * d[0] + R[3] * d[1] + R[6] * d[2], R[1] * d[0] + R[4] * d[1] + R[7] * d[2],
+             R[2] * d[0] + R[5] * d[1] + R[8] * d[2]), rot.mul(rot.conj(q0), q1))
+
+
+def delta_pose(
+    layout: StateLayout, x: np.ndarray, x_prev: np.ndarray, z_dpos: tuple[float, float, float], z_dq: rot.Quat,
+    cov: tuple[float, ...], rows: tuple[int, ...], lever: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The sensor's motion since the previous message, in the previous sensor pose's frame.
+
+    ``x_prev`` is the filter's state at the previous message (held fixed: the
+    delta is a measurement of the current state given it, as robot_pose_ekf fuses
+    visual odometry). Translation r = R0^T (s1 - s0) with s = p + R t; rotation
+    residual Log(dq_meas dq_pred^-1) in the previous frame, where dq_pred depends on
+    dtheta through Exp(R0^T dtheta): both rows of H carry R0^T.
+    """
+    q0 = (float(x_prev[3]), float(x_prev[4]), float(x_prev[5]), float(x_prev[6]))
+    q1 = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
+    l0, l1 = _lever(q0, lever), _lever(q1, lever)
+    s0 = (float(x_prev[0]) + l0[0], float(x_prev[1]) + l0[1], float(x_prev[2]) + l0[2])
+    s1 = (float(x[0]) + l1[0], float(x[1]) + l1[1], float(x[2]) + l1[2])
+    r, dq = relative_pose(s0, q0, s1, q1)
+    e = rot.log(rot.mul(z_dq, rot.conj(dq)))
+    y6 = (z_dpos[0] - r[0], z_dpos[1] - r[1], z_dpos[2] - r[2], *e)
+    R0T = rot.matrix(q0).T
+    a0, a1, a2 = l1
+    H6 = np.zeros((6, layout.error_dim))
+    H6[0:3, 0:3] = R0T
+    H6[0:3, 3:6] = R0T @ np.array(((0.0, a2, -a1), (-a2, 0.0, a0), (a1, -a0, 0.0)))
+    H6[3:6, 3:6] = R0T
+    C = np.array(cov, dtype=float).reshape(6, 6)
+    if len(rows) == 6:
+        return np.array(y6), H6, C
+    idx = list(rows)
+    return np.array([y6[i] for i in rows]), H6[idx], C[np.ix_(idx, idx)]

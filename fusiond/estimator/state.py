@@ -84,6 +84,7 @@ class InputBlock(StateBlock):
     """
 
     corrects: InputName = "angular"
+    scales_input = False  # True when d u'/d u is not the identity (see input_derivative)
 
     def applies(self, from_gyro: bool) -> bool:
         return True
@@ -94,6 +95,14 @@ class InputBlock(StateBlock):
     def input_jacobian(self, xb: list[float], u: Vec3) -> np.ndarray:
         """d u' / d (block error), shape (3, error_size)."""
         raise NotImplementedError
+
+    def input_derivative(self, xb: list[float], u: Vec3) -> tuple[float, ...] | None:
+        """d u' / d u as a row-major 9-tuple; None for the identity (an additive correction).
+
+        When several blocks correct the same input in turn, the motion model chains the
+        earlier blocks' columns through the later blocks' input derivatives.
+        """
+        return None
 
     def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
         """This block's columns of F: G (d state / d input, row-major 3x3) times the input Jacobian.

@@ -14,17 +14,20 @@ from typing import TYPE_CHECKING, Any
 from rosbags.highlevel import AnyReader, AnyReaderError
 
 from fusiond.samples import Sample
-from fusiond.transport.codecs import IMU, ODOMETRY, TYPESTORE, imu_from_ros, odom_from_ros
+from fusiond.transport.codecs import TYPESTORE, ros_converter, ros_msgtype
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
 
     from fusiond.config import SensorConfig
 
-_EXPECTED: dict[str, tuple[str, Callable[[Any, str], Sample]]] = {
-    "odom": (ODOMETRY, odom_from_ros),
-    "imu": (IMU, imu_from_ros),
-}
+KINDS = ("odom", "imu", "gps", "pose")
+
+
+def expected(sensor: SensorConfig) -> tuple[str, Callable[[Any, str], Sample]]:
+    """(ROS message type, message -> sample) of a sensor; a pose sensor's `msgtype` selects its type."""
+    kind = sensor_kind(sensor)
+    return ros_msgtype(kind, getattr(sensor, "msgtype", None)), ros_converter(kind)
 
 
 class BagError(ValueError):
@@ -56,7 +59,7 @@ class BagSamples:
 
     def __iter__(self) -> Iterator[Sample]:
         reader = self._reader
-        convert = {topic: (s.name, *_EXPECTED[sensor_kind(s)]) for topic, s in self._by_topic.items()}
+        convert = {topic: (s.name, *expected(s)) for topic, s in self._by_topic.items()}
         for connection, _, raw in reader.messages(connections=self._connections):
             name, msgtype, from_ros = convert[connection.topic]
             try:
@@ -79,7 +82,7 @@ class BagSamples:
                 yield bag_time, sensor, bytes(raw)
                 continue
             try:
-                cdr = TYPESTORE.ros1_to_cdr(raw, _EXPECTED[sensor_kind(sensor)][0])
+                cdr = TYPESTORE.ros1_to_cdr(raw, expected(sensor)[0])
             except Exception:
                 self.decode_errors += 1
                 continue
@@ -124,18 +127,19 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
     missing: list[str] = []
     for sensor in sensors:
         kind = sensor_kind(sensor)
-        if kind not in _EXPECTED:
+        if kind not in KINDS:
             raise BagError(f"sensor {sensor.name!r}: kind {kind!r} cannot be read from a bag")
         topic = next((t for t in ("/" + sensor.key, sensor.key) if t in topics), None)
         if topic is None:
             missing.append(sensor.name)
             continue
-        expected = _EXPECTED[kind][0]
+        want = expected(sensor)[0]
         found = {c.msgtype for c in topics[topic].connections}
-        if found != {expected}:
+        if found != {want}:
+            hint = " (set its msgtype)" if kind == "pose" else ""
             raise BagError(
                 f"topic {topic} (sensor {sensor.name!r}) has type {', '.join(sorted(found))}, "
-                f"expected {expected} for a {kind} sensor"
+                f"expected {want} for a {kind} sensor{hint}"
             )
         selected[topic] = (sensor, list(topics[topic].connections))
     if not selected:

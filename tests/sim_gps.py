@@ -1,0 +1,145 @@
+"""A wheeled robot with GPS and pose sensors, with known truth (issue 7 tests).
+
+Planar robot in an ENU world starting at an unknown position and heading. The
+wheels misread distance (``wheel_scale``: true speed = wheel_scale * reported),
+the gyro has a bias and a yaw-axis scale error (true rate = gyro_scale *
+(reading - bias)), so the filter's scale states should converge to exactly these
+values. GPS fixes carry white noise, a lever arm and dropouts; a pose sensor
+(motion capture, or visual odometry with a drifting origin for `differential`)
+sees the sensor's pose through a lever arm. A hand-turn phase rotates the
+robot while its wheels read zero.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fusiond.estimator import rotation as rot
+from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
+from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample
+
+T0 = 1000.0
+
+
+@dataclass
+class World:
+    duration: float = 60.0
+    odom_rate: float = 20.0
+    imu_rate: float = 50.0
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x y yaw in the world (ENU or pose frame)
+    standstill: float = 2.0  # seconds at rest first
+    speed: float = 1.0
+    wheel_scale: float = 1.0
+    wheel_sigma: float = 0.02
+    gyro_scale: float = 1.0
+    gyro_bias: float = 0.0  # z, rad/s
+    gyro_sigma: float = 0.002
+    hand_turn: tuple[float, float, float] | None = None  # (t0, t1, rate): wheels at rest, robot turned
+    # GPS
+    gps_rate: float = 0.0  # 0: no GPS
+    gps_sigma: float = 0.3
+    gps_lever: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gps_dropout: tuple[float, float] | None = None  # no fixes in [t0, t1) (relative seconds)
+    gps_bad_every: int = 0  # every n-th fix has status -1 and garbage coordinates
+    datum: tuple[float, float, float] = (48.137, 11.575, 520.0)
+    # pose sensor
+    pose_rate: float = 0.0  # 0: no pose sensor
+    pose_sigma: tuple[float, float] = (0.01, 0.005)  # position m, orientation rad
+    pose_lever: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pose_origin_drift: float = 0.0  # the pose sensor's origin creeps along x, m/s
+    pose_origin_jump: tuple[float, float, float, float] | None = None  # (t, dx, dy, dyaw): a relocalisation
+    pose_increment_noise: bool = False  # visual odometry: pose_sigma is per message increment, and accumulates
+    seed: int = 5
+    truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw (every odom stamp)
+    fixes: list[tuple[float, float, float]] = field(default_factory=list)  # t east north of every valid fix
+
+
+def commanded(rel: float, w: World) -> tuple[float, float, bool]:
+    """(v, yaw rate, wheels see it)."""
+    if w.hand_turn is not None and w.hand_turn[0] <= rel < w.hand_turn[1]:
+        return 0.0, w.hand_turn[2], False
+    if rel < w.standstill:
+        return 0.0, 0.0, True
+    return w.speed, 0.25 * math.sin(0.3 * (rel - w.standstill)) + 0.05, True
+
+
+def simulate(w: World) -> list:
+    rng = np.random.default_rng(w.seed)
+    enu = EnuFrame(*w.datum)
+    dt = 1e-3
+    x, y, yaw = w.start
+    nxt = {"odom": 0.0, "imu": 0.0, "gps": 0.0, "pose": 0.0}
+    out: list = []
+    n_fix = 0
+    vo_err = [0.0, 0.0, 0.0, 0.0]  # accumulated visual-odometry error: x y z yaw
+    rel = 0.0
+    while rel < w.duration:
+        t = T0 + rel
+        v, wz, wheels = commanded(rel, w)
+        if rel >= nxt["odom"]:
+            nxt["odom"] += 1.0 / w.odom_rate
+            moving = wheels and (v != 0.0 or wz != 0.0)
+            cov = tuple(w.wheel_sigma**2 if i % 7 == 0 else 0.0 for i in range(36))
+            vm = (v / w.wheel_scale + rng.normal(0, w.wheel_sigma)) if moving else 0.0
+            wm = (wz + rng.normal(0, w.wheel_sigma)) if moving else 0.0
+            out.append(OdomSample("wheel", t, (vm, 0.0, 0.0), (0.0, 0.0, wm), cov))
+            w.truth.append((t, x, y, yaw))
+        if rel >= nxt["imu"]:
+            nxt["imu"] += 1.0 / w.imu_rate
+            gs = w.gyro_sigma
+            gz = wz / w.gyro_scale + w.gyro_bias + rng.normal(0, gs)
+            out.append(ImuSample("imu", t, rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), 0.0),
+                                 (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, 1e6), (rng.normal(0, gs), rng.normal(0, gs), gz),
+                                 (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
+        if w.gps_rate > 0 and rel >= nxt["gps"]:
+            nxt["gps"] += 1.0 / w.gps_rate
+            n_fix += 1
+            lx, ly, _ = w.gps_lever
+            c, s = math.cos(yaw), math.sin(yaw)
+            e = x + c * lx - s * ly + rng.normal(0, w.gps_sigma)
+            n = y + s * lx + c * ly + rng.normal(0, w.gps_sigma)
+            u = w.gps_lever[2] + rng.normal(0, w.gps_sigma)
+            dropped = w.gps_dropout is not None and w.gps_dropout[0] <= rel < w.gps_dropout[1]
+            var = w.gps_sigma**2
+            if w.gps_bad_every and n_fix % w.gps_bad_every == 0:
+                out.append(GpsSample("gps", t, math.nan, 0.0, 0.0, -1, (var, 0, 0, 0, var, 0, 0, 0, var), 2))
+            elif not dropped:
+                lat, lon, alt = enu_to_geodetic(enu, e, n, u)
+                out.append(GpsSample("gps", t, lat, lon, alt, 0, (var, 0, 0, 0, var, 0, 0, 0, var), 2))
+                w.fixes.append((t, e, n))
+        if w.pose_rate > 0 and rel >= nxt["pose"]:
+            nxt["pose"] += 1.0 / w.pose_rate
+            ps, os_ = w.pose_sigma
+            lx, ly, lz = w.pose_lever
+            c, s = math.cos(yaw), math.sin(yaw)
+            sx, sy = x + c * lx - s * ly, y + s * lx + c * ly  # sensor origin in the world
+            # the sensor's own frame: its origin drifts away from the world's
+            ox, oy, oyaw = w.pose_origin_drift * rel, 0.0, 0.0
+            if w.pose_origin_jump is not None and rel >= w.pose_origin_jump[0]:
+                ox, oy, oyaw = ox + w.pose_origin_jump[1], w.pose_origin_jump[2], w.pose_origin_jump[3]
+            co, so = math.cos(-oyaw), math.sin(-oyaw)
+            px, py = co * (sx - ox) - so * (sy - oy), so * (sx - ox) + co * (sy - oy)
+            if w.pose_increment_noise:
+                for k in range(3):
+                    vo_err[k] += rng.normal(0, ps)
+                vo_err[3] += rng.normal(0, os_)
+                err = vo_err
+            else:
+                err = [rng.normal(0, ps), rng.normal(0, ps), rng.normal(0, ps), rng.normal(0, os_)]
+            q = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), yaw - oyaw + err[3])
+            cov = tuple((ps**2 if i < 3 else os_**2) if j == i else 0.0 for i in range(6) for j in range(6))
+            out.append(PoseSample("pose", t, (px + err[0], py + err[1], lz + err[2]), q, cov))
+        x += v * math.cos(yaw) * dt
+        y += v * math.sin(yaw) * dt
+        yaw += wz * dt
+        rel += dt
+    return out
+
+
+def truth_at(w: World, t: float) -> tuple[float, float, float]:
+    """Truth (x, y, yaw) at the odometry stamp nearest t."""
+    i = min(range(len(w.truth)), key=lambda k: abs(w.truth[k][0] - t))
+    return w.truth[i][1:]
