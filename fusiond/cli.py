@@ -257,7 +257,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_bench_latency(args: argparse.Namespace) -> int:
     from .transport.bench_latency import format_table, run_bench
 
-    result = run_bench(seconds=args.seconds, imu_hz=args.imu_hz, odom_hz=args.odom_hz, express=not args.no_express)
+    result = run_bench(seconds=args.seconds, imu_hz=args.imu_hz, odom_hz=args.odom_hz, express=args.express)
     if args.json:
         import msgspec
 
@@ -327,7 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "endpoints on loopback")
     pl.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
     pl.add_argument("--wait", type=float, default=5.0,
-                    help="wait up to S seconds for a subscriber on every key before playing (default 5)")
+                    help="wait up to S seconds for the config's daemon to answer on its health key before "
+                         "playing, then play anyway (default 5; 0: do not wait)")
     pl.set_defaults(func=cmd_play, default_log_level="info")
 
     h = sub.add_parser("health", help="query a running daemon's health; exit 0 when it is good enough")
@@ -344,7 +345,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seconds", type=float, default=10.0, help="measurement duration (default 10)")
     b.add_argument("--imu-hz", type=float, default=1000.0)
     b.add_argument("--odom-hz", type=float, default=100.0)
-    b.add_argument("--no-express", action="store_true", help="let Zenoh batch the daemon's outputs")
+    b.add_argument("--express", action="store_true", help="send the daemon's outputs unbatched (Zenoh express)")
     b.add_argument("--json", action="store_true", help="machine-readable output")
     b.set_defaults(func=cmd_bench_latency)
     return p

@@ -24,7 +24,8 @@ import zenoh
 
 from ..config import Config
 from ..replay.bag import open_bag_samples, sensor_kind
-from .codecs import encode_imu_sample, encode_odom_sample, make_decoder
+from .codecs import encode_sample, make_decoder
+from .session import query_health
 
 log = structlog.get_logger("fusiond.play")
 
@@ -40,23 +41,31 @@ class PlayResult:
     interrupted: bool = False
 
 
-def wait_for_subscribers(publishers: Sequence[Any], timeout: float) -> bool:
-    """Wait until every publisher has a matching subscriber (the daemon is reachable)."""
+def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> bool:
+    """Wait until the daemon answers on its health key.
+
+    The daemon declares its queryable after its subscribers, and declarations
+    reach us in order on the link, so an answer proves our first message will be
+    routed. A publisher's `matching_status` is no such proof: right after a
+    session opens it can read true while the first messages still go nowhere.
+    """
     deadline = time.monotonic() + timeout
     while True:
-        if all(p.matching_status for p in publishers):
-            return True
-        if time.monotonic() >= deadline:
+        left = deadline - time.monotonic()
+        if left <= 0:
             return False
-        time.sleep(0.02)
+        if query_health(session, health_key, min(0.5, left)):
+            return True
+        time.sleep(min(0.05, max(deadline - time.monotonic(), 0.0)))
 
 
 def _transcoder(sensor: Any) -> Callable[[bytes], bytes] | None:
+    """None for CDR sensors (bytes pass through); else CDR -> sample -> the sensor's encoding."""
     if sensor.encoding == "ros2-cdr":
         return None
-    decode = make_decoder(sensor_kind(sensor), "ros2-cdr", sensor.name)
-    encode = encode_odom_sample if sensor_kind(sensor) == "odom" else encode_imu_sample
-    return lambda raw: encode(decode(raw), sensor.encoding)  # type: ignore[arg-type]
+    msgtype = getattr(sensor, "msgtype", None)
+    decode = make_decoder(sensor_kind(sensor), "ros2-cdr", sensor.name, msgtype=msgtype)
+    return lambda raw: encode_sample(decode(raw), sensor.encoding, msgtype)
 
 
 def play(paths: Sequence[Path | str], cfg: Config, session: zenoh.Session, *, rate: float = 1.0,
@@ -75,8 +84,8 @@ def play(paths: Sequence[Path | str], cfg: Config, session: zenoh.Session, *, ra
                 for s in cfg.sensors if s.name not in bag.missing}
         transcode = {s.name: _transcoder(s) for s in cfg.sensors}
         try:
-            if wait_s > 0 and not wait_for_subscribers(list(pubs.values()), wait_s):
-                log.warning("play_no_subscribers", waited_s=wait_s,
+            if wait_s > 0 and not wait_for_daemon(session, cfg.output.health_key, wait_s):
+                log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
                             keys=[s.key for s in cfg.sensors if s.name in pubs])
             log.info("play_started", bag=[str(p) for p in paths], rate=rate, messages=bag.total)
             t0_bag: int | None = None

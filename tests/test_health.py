@@ -1,0 +1,153 @@
+"""Health logic with an injected wall clock: no Zenoh, no threads, no sleeping."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from fusiond.config import loads
+from fusiond.core.fusion import FusionCore
+from fusiond.health import (
+    FilterHealth,
+    Health,
+    core_counters,
+    decode_report,
+    encode_report,
+)
+from fusiond.samples import ImuSample, OdomSample
+
+
+class Clock:
+    def __init__(self, t: float = 100.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def feed(h: Health, clock: Clock, until: float, periods: dict[int, float]) -> None:
+    """Both sensors arriving at their periods until wall time `until`."""
+    nxt = {i: clock.t for i in periods}
+    while True:
+        i = min(nxt, key=nxt.get)
+        if nxt[i] > until:
+            break
+        clock.t = nxt[i]
+        h.on_received(i)
+        h.on_accepted(i, clock.t)
+        nxt[i] += periods[i]
+    clock.t = until
+
+
+def test_ok_then_degraded_naming_the_sensor_then_failed():
+    clock = Clock()
+    h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock, queue_capacity=8)
+    rep = h.report()
+    assert rep.status == "failed"
+    assert rep.sensors["wheel"].age_s is None and rep.problems[:2] == ["wheel: no sample yet", "imu: no sample yet"]
+
+    feed(h, clock, 102.0, {0: 0.02, 1: 0.01})
+    rep = h.report()
+    assert rep.status == "ok" and rep.problems == []
+    assert rep.sensors["imu"].alive and rep.sensors["imu"].rate_hz == pytest.approx(100.0)
+    assert rep.sensors["wheel"].rate_hz == pytest.approx(50.0)
+    assert rep.sensors["wheel"].received == 101
+
+    # the IMU stops; the wheel goes on
+    feed(h, clock, 102.15, {0: 0.02})
+    assert h.report().status == "ok"  # 0.15 s < timeout 0.2 s
+    feed(h, clock, 102.25, {0: 0.02})
+    rep = h.report()
+    assert rep.status == "degraded"
+    assert not rep.sensors["imu"].alive and rep.sensors["wheel"].alive
+    assert rep.sensors["imu"].rate_hz == 0.0 and rep.sensors["imu"].age_s == pytest.approx(0.25, abs=0.02)
+    assert len(rep.problems) == 1 and rep.problems[0].startswith("imu: silent for 0.2")
+
+    clock.t += 1.0  # everything silent
+    rep = h.report()
+    assert rep.status == "failed"
+    assert "no sensor alive" in rep.problems and any(p.startswith("wheel:") for p in rep.problems)
+
+    feed(h, clock, clock.t + 0.5, {0: 0.02, 1: 0.01})  # back
+    assert h.report().status == "ok"
+
+
+def test_timeout_follows_a_slow_sensor_so_it_does_not_flap():
+    """5 Hz odometry with 0.4 s gaps: timeout max(0.2, 3 x period) ~ 0.6-1.2 s, never flagged."""
+    clock = Clock()
+    h = Health([("wheel", 0.2)], clock=clock)
+    t = clock.t
+    statuses = set()
+    for k in range(60):
+        t += 0.4 if k % 3 == 0 else 0.15
+        while clock.t < t:  # the operator polls every 50 ms in between
+            clock.t = min(clock.t + 0.05, t)
+            statuses.add(h.report().status)
+        h.on_received(0)
+        h.on_accepted(0, t)
+    statuses.discard("failed")  # before the first sample
+    assert statuses == {"ok"}
+    assert h.report().sensors["wheel"].timeout_s > 0.4
+
+
+def test_drops_are_counted_per_reason_and_garbage_does_not_keep_a_sensor_alive():
+    clock = Clock()
+    h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock, queue_capacity=4, queue_depth=lambda: 3)
+    for _ in range(5):
+        h.on_received(1)
+        h.on_dropped(1, "cdr_invalid")
+    assert h.on_dropped(1, "queue_full") == 1
+    h.on_received(0)
+    h.on_accepted(0, clock.t)
+    rep = h.report()
+    imu = rep.sensors["imu"]
+    assert not imu.alive and imu.received == 5 and imu.dropped == 6
+    assert imu.dropped_by_reason == {"cdr_invalid": 5, "queue_full": 1}
+    assert rep.problems[0] == "imu: no usable sample yet (5 received)"
+    assert rep.queue.depth == 3 and rep.queue.capacity == 4 and rep.queue.dropped == 1
+    assert rep.status == "degraded"
+
+
+def test_core_counters_merge_and_non_finite_filter_fails():
+    cfg = loads('[[sensors]]\nname="wheel"\nkind="odom"\nkey="odom"\n'
+                '[[sensors]]\nname="imu"\nkind="imu"\nkey="imu"\nangular_velocity=true\n')
+    core = FusionCore(cfg)
+    cov36 = tuple(0.01 if i % 7 == 0 else 0.0 for i in range(36))
+    cov9 = (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4)
+    for k in range(20):
+        t = 10.0 + 0.02 * k
+        core.ingest(OdomSample("wheel", t, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), cov36))
+        core.ingest(ImuSample("imu", t + 0.01, (0.0, 0.0, 0.0, 1.0), cov9, (0.0, 0.0, 0.0), cov9))
+    core.ingest(OdomSample("wheel", 0.0, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), cov36))  # invalid stamp
+    clock = Clock()
+    h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)
+    h.on_accepted(0, clock.t)
+    h.on_accepted(1, clock.t)
+    h.set_core(core_counters(core, published=20))
+    rep = h.report()
+    assert rep.status == "ok" and rep.published == 20
+    assert rep.sensors["wheel"].applied == 20 and rep.sensors["wheel"].dropped_by_reason == {"invalid_stamp": 1}
+    assert rep.filter.initialised and rep.filter.finite and rep.filter.time == pytest.approx(10.39)
+    assert set(rep.consistency) == {"imu/orientation", "wheel/yaw_rate"}
+    assert decode_report(encode_report(rep)) == rep
+
+    counters = core_counters(core)
+    counters.filter = FilterHealth(initialised=True, time=math.nan, finite=False)
+    h.set_core(counters)
+    rep = h.report()
+    assert rep.status == "failed" and "filter: non-finite state" in rep.problems
+    h.set_core(core_counters(core))
+    h.set_worker_alive(False)
+    assert h.report().status == "failed" and "worker: stopped" in h.report().problems
+
+
+def test_out_of_order_arrival_times_are_ignored():
+    clock = Clock()
+    h = Health([("imu", 0.2)], clock=clock)
+    h.on_accepted(0, 100.0)
+    h.on_accepted(0, 100.01)
+    h.on_accepted(0, 99.0)  # an older arrival (another link) must not move the clock back
+    clock.t = 100.1
+    rep = h.report()
+    assert rep.sensors["imu"].age_s == pytest.approx(0.09) and rep.sensors["imu"].rate_hz == pytest.approx(100.0)
