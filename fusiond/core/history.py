@@ -1,0 +1,61 @@
+"""The bounded, stamp-ordered history of applied samples and the state after each.
+
+A sample older than the newest is inserted at its own stamp: the state just
+before it is restored and the later samples re-applied, as robot_localization's
+lagged-data smoothing does. The history keeps ``history_s`` seconds (and at most
+``history_max`` samples); the state before its oldest sample is the ``base``, and a
+sample older than that is too old to place.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Callable
+from typing import Any
+
+from .state import FilterState
+
+Key = tuple[float, int]  # (stamp, sensor index): ties broken by sensor, never by arrival
+
+
+class History:
+    def __init__(self, base: FilterState | None) -> None:
+        self.keys: list[Key] = []
+        self.events: list[tuple[int, Any, float]] = []
+        self.after: list[FilterState] = []
+        self.base = base.copy() if base is not None else None
+
+    def slot(self, key: Key) -> tuple[int, bool]:
+        """(insert position, is a duplicate of an applied sample)."""
+        pos = bisect.bisect_right(self.keys, key)
+        return pos, pos > 0 and self.keys[pos - 1] == key
+
+    def is_late(self, pos: int) -> bool:
+        return pos < len(self.keys)
+
+    def too_old(self, stamp: float) -> bool:
+        return self.base is not None and self.base.t is not None and stamp < self.base.t
+
+    def state_before(self, pos: int) -> FilterState:
+        return (self.after[pos - 1] if pos > 0 else self.base).copy()
+
+    def insert(self, pos: int, key: Key, event: tuple[int, Any, float], state: FilterState) -> None:
+        self.keys.insert(pos, key)
+        self.events.insert(pos, event)
+        self.after.insert(pos, state.copy())
+
+    def reapply_after(self, pos: int, state: FilterState, apply: Callable[[FilterState, int, Any, float], None]) -> None:
+        """Re-apply every event after ``pos`` on ``state`` (in place), refreshing their snapshots."""
+        for j in range(pos + 1, len(self.events)):
+            idx, inp, stamp = self.events[j]
+            apply(state, idx, inp, stamp)
+            self.after[j] = state.copy()
+
+    def trim(self, history_s: float, history_max: int) -> None:
+        horizon = self.keys[-1][0] - history_s
+        n = 0
+        while len(self.keys) - n > history_max or (n < len(self.keys) and self.keys[n][0] < horizon):
+            n += 1
+        if n:
+            self.base = self.after[n - 1]
+            del self.keys[:n], self.events[:n], self.after[:n]

@@ -1,0 +1,33 @@
+"""World-frame helpers shared by the absolute sensors (GPS, pose)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...estimator import mat3
+from ...estimator import rotation as rot
+
+if TYPE_CHECKING:
+    from ..state import FilterState
+
+
+def set_position(s: FilterState, z, cov9, offset, rows: tuple[int, ...] = (0, 1, 2)) -> None:
+    """Put the base where the sensor says (p = z - R t), with the sensor's position covariance."""
+    ekf = s.ekf
+    a = lever(ekf.x, offset)
+    P = ekf.P.copy()
+    for i in rows:
+        ekf.x[i] = z[i] - a[i]
+        P[i, :] = 0.0
+        P[:, i] = 0.0
+    for i in rows:
+        for j in rows:
+            P[i, j] = cov9[3 * i + j]
+    ekf.P = P
+
+
+def lever(x: np.ndarray, t: tuple[float, float, float]) -> tuple[float, float, float]:
+    """R(q) t: the sensor's offset from base_link, in the world."""
+    return mat3.apply(rot.matrix9((float(x[3]), float(x[4]), float(x[5]), float(x[6]))), t)

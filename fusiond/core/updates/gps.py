@@ -1,0 +1,89 @@
+"""GPS: position fixes in ENU at the datum; heading from the first metres of travel."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from ...estimator import observations as obs
+from ...estimator import rotation as rot
+from ..diagnostics import DiagnosticsRecord
+import structlog
+
+from ...config import GpsSensor
+from ...estimator.geodesy import EnuFrame
+from ..sensors import GpsInput
+from .frame import lever, set_position
+
+if TYPE_CHECKING:
+    from ..fusion import FusionCore
+    from ..state import FilterState
+
+log = structlog.get_logger("fusiond.core")
+
+HEADING_MIN_TRAVEL = 0.3  # odometry chord / GPS chord below this: pushed, slipping or a GPS jump, start over
+HEADING_SIGMA_FLOOR = 0.02  # rad added to the chord-angle uncertainty of the initial GPS heading
+ENU_NAMES = ("east", "north", "up")
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp: float, emit: bool, late: bool):
+    cfg: GpsSensor = core.sensors[idx]  # type: ignore[assignment]
+    if s.enu is None:
+        s.enu = EnuFrame(*inp.lla)  # no datum configured: the first valid fix (in stamp order)
+    z = s.enu.enu(*inp.lla)
+    ekf = s.ekf
+    if not s.frame_ready:
+        set_position(s, z, inp.cov, cfg.extrinsic_xyz)
+        s.frame_ready = True
+        s.pose_anchor = {}
+        s.gps_anchor = (z, lever(ekf.x, cfg.extrinsic_xyz))
+        s.travel = _ZERO3
+        return []
+    if not s.heading_ready:
+        gps_heading(core, s, cfg, z, inp.cov)
+    y, H, R = obs.position(core.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz)
+    if s.heading_ready:
+        res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
+        channel = "position"
+    else:
+        # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
+        # track along a wrong heading must not lock the filter out of the GPS).
+        res = ekf.update(y, H, R, math.inf, core.position_mask)
+        channel = "position_unaligned"
+    if not emit:
+        return []
+    return [DiagnosticsRecord(stamp, cfg.name, list(ENU_NAMES), y.tolist(), res.innovation_var, res.nis, 3,
+                              res.rejected, channel=channel, late=late)]
+
+
+def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[float, float, float], cov) -> None:
+    """Initial heading from the first metres of travel: the angle between the GPS chord and
+    the dead-reckoned chord of the antenna since the first fix. A wrong initial yaw rotates
+    the whole dead-reckoned track about its start, so the chord angles differ by exactly
+    the yaw error, whatever the path's shape."""
+    z0, l0 = s.gps_anchor
+    gx, gy = z[0] - z0[0], z[1] - z0[1]
+    d = math.hypot(gx, gy)
+    sigma = math.sqrt(max(cov[0], cov[4]))
+    if d < max(cfg.heading_init_m, 4.0 * sigma):
+        return
+    l1 = lever(s.ekf.x, cfg.extrinsic_xyz)
+    fx, fy = s.travel[0] + l1[0] - l0[0], s.travel[1] + l1[1] - l0[1]
+    if math.hypot(fx, fy) < HEADING_MIN_TRAVEL * d:
+        s.gps_anchor, s.travel = (z, l1), _ZERO3  # GPS wander or a pushed robot: start over
+        return
+    dyaw = rot.wrap(math.atan2(gy, gx) - math.atan2(fy, fx))
+    ekf = s.ekf
+    q = (float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6]))
+    ekf.x[3:7] = rot.normalize(rot.mul(rot.exp(0.0, 0.0, dyaw), q))
+    sig = math.sqrt(2.0) * sigma / d + HEADING_SIGMA_FLOOR
+    P = ekf.P.copy()
+    P[5, :] = 0.0
+    P[:, 5] = 0.0
+    P[5, 5] = sig * sig
+    ekf.P = P
+    s.heading_ready = True
+    s.gps_anchor, s.travel = None, _ZERO3
+    s.pose_anchor = {}  # the frame turned under them: deltas restart from the next message
+    log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=dyaw, sigma=sig, chord_m=d)
