@@ -402,11 +402,15 @@ class FusionCore:
             s.travel = (t[0] + float(x[0] - x0[0]), t[1] + float(x[1] - x0[1]), t[2] + float(x[2] - x0[2]))
         if s.pose_anchor:
             s.pose_anchor = accumulate_motion(s.pose_anchor, s.ekf.x, x)
-        if dt > self.cfg.filter.gap_s:
+        gap = dt > self.cfg.filter.gap_s
+        if gap:
             Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
         if not s.ekf.propagate(x, F, Q):
             self._covariance_reset(s)
-        s.ekf.cap_covariance(self.caps)
+        # Without a gap P grows slowly: capping once per second of message time is enough, and
+        # depends on the stamps only (so re-applied samples cap exactly where they did before).
+        if gap or math.floor(s.t) != math.floor(s.t + dt):
+            s.ekf.cap_covariance(self.caps)
 
     def _covariance_reset(self, s: FilterState) -> None:
         self.covariance_resets += 1
