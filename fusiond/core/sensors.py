@@ -10,6 +10,7 @@ alike, so the estimator only ever sees base_link quantities.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from ..config import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..estimator import mat3
@@ -33,31 +34,27 @@ class Rejected(Exception):
         self.reason = reason
 
 
+@dataclass(slots=True)
 class OdomInput:
     """Body (or world) twist with per-sample covariances (row-major 9-tuples), ready for the motion model."""
 
-    __slots__ = ("linear", "linear_cov", "angular", "angular_cov", "yaw_rate_measured", "stationary")
-
-    def __init__(self, linear, linear_cov, angular, angular_cov, yaw_rate_measured, stationary) -> None:
-        self.linear = linear
-        self.linear_cov = linear_cov
-        self.angular = angular
-        self.angular_cov = angular_cov
-        self.yaw_rate_measured = yaw_rate_measured
-        self.stationary = stationary
+    linear: tuple[float, float, float]
+    linear_cov: tuple[float, ...]
+    angular: tuple[float, float, float]
+    angular_cov: tuple[float, ...]
+    yaw_rate_measured: bool
+    stationary: bool
 
 
+@dataclass(slots=True)
 class ImuInput:
     """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate; 9-tuple covariances."""
 
-    __slots__ = ("rpy", "rpy_cov", "rows", "gyro", "gyro_cov")
-
-    def __init__(self, rpy, rpy_cov, rows, gyro, gyro_cov) -> None:
-        self.rpy = rpy
-        self.rpy_cov = rpy_cov
-        self.rows = rows
-        self.gyro = gyro
-        self.gyro_cov = gyro_cov
+    rpy: tuple[float, float, float] | None
+    rpy_cov: tuple[float, ...] | None
+    rows: tuple[int, ...]
+    gyro: tuple[float, float, float] | None
+    gyro_cov: tuple[float, ...] | None
 
 
 def _finite(values) -> bool:
@@ -209,14 +206,12 @@ class ImuPolicy:
         return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov)
 
 
+@dataclass(slots=True)
 class GpsInput:
     """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2)."""
 
-    __slots__ = ("lla", "cov")
-
-    def __init__(self, lla: tuple[float, float, float], cov: tuple[float, ...]) -> None:
-        self.lla = lla
-        self.cov = cov
+    lla: tuple[float, float, float]
+    cov: tuple[float, ...]
 
 
 class GpsPolicy:
@@ -254,18 +249,16 @@ class GpsPolicy:
         return GpsInput(lla, cov)
 
 
+@dataclass(slots=True)
 class PoseInput:
     """Sensor pose (position, unit quaternion, its rpy) with a 6x6 covariance (x y z roll pitch yaw,
     row-major 36-tuple, diagonal) and the usable rows."""
 
-    __slots__ = ("position", "q", "rpy", "cov", "rows")
-
-    def __init__(self, position, q, rpy, cov, rows) -> None:
-        self.position = position
-        self.q = q
-        self.rpy = rpy
-        self.cov = cov
-        self.rows = rows
+    position: tuple[float, float, float]
+    q: tuple[float, float, float, float]
+    rpy: tuple[float, float, float]
+    cov: tuple[float, ...]
+    rows: tuple[int, ...]
 
 
 class PosePolicy:
