@@ -45,6 +45,7 @@ class SensorHealth(msgspec.Struct, kw_only=True):
     late: int = 0  # applied at their own stamp from the history
     timeout_s: float = 0.0  # liveness timeout in force
     dropped_by_reason: dict[str, int] = {}
+    zero_covariance_floored: int = 0  # accepted samples with a zero variance that the floor replaced (not a drop)
 
 
 class FilterHealth(msgspec.Struct, kw_only=True):
@@ -105,7 +106,7 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
 
 
 class _Tracker:
-    __slots__ = ("name", "timeout_s", "received", "dropped", "last", "period")
+    __slots__ = ("name", "timeout_s", "received", "dropped", "last", "period", "floored")
 
     def __init__(self, name: str, timeout_s: float) -> None:
         self.name = name
@@ -114,6 +115,7 @@ class _Tracker:
         self.dropped: dict[str, int] = {}
         self.last: float | None = None  # wall arrival of the newest accepted sample
         self.period = 0.0  # EMA of wall-clock intervals between accepted samples
+        self.floored = 0  # accepted samples whose covariance was floored (all-zero covariances of real drivers)
 
     def timeout(self) -> float:
         return max(self.timeout_s, TIMEOUT_PERIODS * self.period)
@@ -149,6 +151,11 @@ class Health:
             n = d.get(reason, 0) + 1
             d[reason] = n
             return n
+
+    def on_floored(self, idx: int) -> None:
+        """An accepted sample had a zero variance that the sensor's floor replaced (robot_pose_ekf's zero covariance)."""
+        with self._lock:
+            self._sensors[idx].floored += 1
 
     def on_accepted(self, idx: int, arrival: float) -> None:
         """A sample the filter used, received at wall time `arrival` (the subscriber's clock)."""
@@ -197,6 +204,7 @@ class Health:
                     late=core.late[i] if core else 0,
                     timeout_s=timeout,
                     dropped_by_reason=reasons,
+                    zero_covariance_floored=s.floored,
                 )
                 if not alive:
                     if age is None:

@@ -15,3 +15,56 @@ def jackal_bag() -> Path:
     if not JACKAL_BAG.is_file():
         pytest.skip(f"dev bag not found at {JACKAL_BAG}")
     return JACKAL_BAG
+
+
+# --- reliability observations (tests/test_reliability.py, tests/test_security.py) -----------
+#
+# The reliability tests record what they fed the daemon and what they observed into one
+# JSON file in pytest's session temp dir. With FUSIOND_WRITE_RELIABILITY=1 the session end
+# renders docs/RELIABILITY.md from it (scripts/reliability_table.py), so that table is
+# produced by the test suite, never written by hand.
+
+import json as _json
+import os as _os
+import platform as _platform
+import time as _time
+
+RELIABILITY_ENV = "FUSIOND_WRITE_RELIABILITY"
+_reliability_path: list[Path] = []
+
+
+class ReliabilityLog:
+    """Rows of the reliability table; every record rewrites the JSON file (nothing lost if a test dies)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.rows: list[dict] = []
+
+    def record(self, *, group: str, sensor: str, input: str, expected: str, observed: str, passed: bool,
+               crashed: bool = False, non_finite: bool = False, test: str = "") -> None:
+        self.rows.append({"group": group, "sensor": sensor, "input": input, "expected": expected,
+                          "observed": observed, "passed": bool(passed), "crashed": bool(crashed),
+                          "non_finite": bool(non_finite), "test": test})
+        self.path.write_text(_json.dumps({"created": _time.strftime("%Y-%m-%d %H:%M:%S"),
+                                          "machine": f"{_platform.machine()}, {_os.cpu_count()} CPUs",
+                                          "rows": self.rows}, indent=1))
+
+
+@pytest.fixture(scope="session")
+def reliability_log(tmp_path_factory) -> ReliabilityLog:
+    path = tmp_path_factory.getbasetemp() / "reliability.json"
+    _reliability_path.append(path)
+    return ReliabilityLog(path)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    if _os.environ.get(RELIABILITY_ENV) != "1" or not _reliability_path or not _reliability_path[0].is_file():
+        return
+    import importlib.util
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("reliability_table", root / "scripts" / "reliability_table.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = module.render_file(_reliability_path[0], root / "docs" / "RELIABILITY.md")
+    print(f"\nreliability table written to {out}")

@@ -326,3 +326,16 @@ def test_adaptive_noise_scales_r_towards_the_truth():
         core.ingest(imu(t + 0.001, rpy=tuple(rng.normal(0, 0.02, 3)), ovar=0.002**2))
     scale = core.state.adaptive["imu/orientation"][0]
     assert 20.0 < scale < 400.0  # true/stated variance ratio is 100; adaptive lands in the vicinity
+
+
+def test_confirmed_forward_jump_keeps_the_pose_and_a_lagging_sensor():
+    core = FusionCore(make_config(gyro=False))
+    feed(core, [odom(10.0 + 0.1 * k, v=1.0) for k in range(10)])
+    x_before = core.pose()[1][0]
+    for k in range(3):  # three in a row confirm the jump (8 s > jump_s)
+        step = core.ingest(odom(18.9 + 0.1 * k, v=1.0))
+    assert step.accepted and core.resets == 0
+    assert core.pose()[1][0] >= x_before  # not a reset: the pose carried over the gap
+    step = core.ingest(imu(19.05))  # a sensor lagging the jump is still applied at its own stamp
+    assert step.accepted and step.late
+

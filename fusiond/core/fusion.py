@@ -190,6 +190,8 @@ class FusionCore:
                 self.resets += 1
                 self._start()
             else:
+                # Not a reset: the pose carries across the gap (inflated); the history before
+                # the jump stays, so a sensor lagging the jump is still applied at its stamp.
                 log.warning("time_jump_forward", sensor=sample.sensor, stamp=stamp, filter_time=t)
         else:
             self._suspect = 0

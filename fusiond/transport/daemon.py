@@ -78,6 +78,32 @@ def alive_key(health_key: str) -> str:
     return f"{health_key}/alive"
 
 
+def zero_covariance_check(sensor: Any) -> Callable[[Any], bool] | None:
+    """For health's `zero_covariance_floored`: does an accepted sample carry a zero variance that
+    the sensor's floor replaces? Real drivers send all-zero covariances (robot_pose_ekf's "zero
+    covariance" case); they are accepted with floors, and counted so an operator sees it. None when
+    the config overrides the message covariances (they are not read) or the kind has no such check."""
+    kind = sensor_kind(sensor)
+    if kind == "odom":
+        if sensor.twist_noise is not None:
+            return None
+        return lambda s: any(s.twist_covariance[7 * i] == 0.0 for i in range(6))
+    if kind == "imu":
+        use_orientation = sensor.orientation != "off" and sensor.orientation_noise is None
+        use_gyro = sensor.angular_velocity and sensor.gyro_noise is None
+        if not (use_orientation or use_gyro):
+            return None
+
+        def check(s: Any) -> bool:
+            oc, gc = s.orientation_covariance, s.angular_velocity_covariance
+            if use_orientation and oc[0] != -1.0 and (oc[0] == 0.0 or oc[4] == 0.0 or oc[8] == 0.0):
+                return True
+            return use_gyro and gc[0] != -1.0 and (gc[0] == 0.0 or gc[4] == 0.0 or gc[8] == 0.0)
+
+        return check
+    return None
+
+
 class Daemon:
     """Subscribers, queue, worker and outputs on an open session (which the caller owns)."""
 
@@ -98,6 +124,7 @@ class Daemon:
         self._health_log_s = health_log_s
         self._decoders = [make_decoder(sensor_kind(s), s.encoding, s.name, msgtype=getattr(s, "msgtype", None))
                           for s in cfg.sensors]
+        self._zero_cov = [zero_covariance_check(s) for s in cfg.sensors]
         self._subscribers: list[Any] = []
         self._outputs: list[Any] = []
         self._worker: threading.Thread | None = None
@@ -246,6 +273,9 @@ class Daemon:
         if not step.accepted:
             return  # counted (and logged) by the core
         self.health.on_accepted(idx, arrival)
+        zero_cov = self._zero_cov[idx]
+        if zero_cov is not None and zero_cov(sample):
+            self.health.on_floored(idx)
         if step.publish:
             self._publish_estimate()
         if step.records:
