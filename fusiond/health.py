@@ -54,6 +54,10 @@ class FilterHealth(msgspec.Struct, kw_only=True):
     finite: bool = True
     covariance_resets: int = 0
     time_resets: int = 0  # backwards time jumps that reset the filter
+    ready: bool = True  # world frame defined (False until a GPS/absolute pose sensor's first message)
+    not_ready_reason: str = ""
+    heading_known: bool = True  # False while a GPS-referenced heading waits for the first metres of travel
+    scales: dict[str, float] = {}  # estimated wheel_scale / gyro_scale, when in the state
 
 
 class QueueHealth(msgspec.Struct, kw_only=True):
@@ -99,7 +103,9 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
         rejected=[s.rejected for s in core.stats],
         dropped=[dict(s.dropped) for s in core.stats],
         filter=FilterHealth(initialised=core.initialised, time=core.time, finite=finite,
-                            covariance_resets=core.covariance_resets, time_resets=core.resets),
+                            covariance_resets=core.covariance_resets, time_resets=core.resets,
+                            ready=core.ready or not core.initialised, not_ready_reason=core.not_ready_reason,
+                            heading_known=core.heading_known, scales=core.scales),
         consistency=core.consistency(),
         published=published,
     )
@@ -221,7 +227,13 @@ class Health:
                 problems.append("worker: stopped")
             if not any_alive:
                 problems.append("no sensor alive")
-            status: Status = "failed" if failed else "degraded" if any(not v.alive for v in sensors.values()) else "ok"
+            waiting = filt.initialised and not filt.ready
+            if waiting:
+                problems.append(f"filter: {filt.not_ready_reason} (nothing is published until then)")
+            if filt.initialised and not filt.heading_known:
+                problems.append("filter: heading not yet known (GPS heading waits for the first metres of travel)")
+            degraded = waiting or any(not v.alive for v in sensors.values())
+            status: Status = "failed" if failed else "degraded" if degraded else "ok"
             return HealthReport(
                 status=status,
                 sensors=sensors,

@@ -151,3 +151,33 @@ def test_out_of_order_arrival_times_are_ignored():
     clock.t = 100.1
     rep = h.report()
     assert rep.sensors["imu"].age_s == pytest.approx(0.09) and rep.sensors["imu"].rate_hz == pytest.approx(100.0)
+
+
+def test_health_says_when_the_world_frame_is_not_defined_yet():
+    """A GPS-referenced core publishes nothing before its first fix: health names the reason."""
+    from fusiond.config import loads
+    from fusiond.core.fusion import FusionCore
+    from fusiond.health import core_counters
+    from fusiond.samples import ImuSample
+
+    cfg = loads("""
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+angular_velocity = true
+[[sensors]]
+name = "gps"
+kind = "gps"
+key = "gps/fix"
+""")
+    core = FusionCore(cfg)
+    core.ingest(ImuSample("imu", 10.0, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0.0, 0.0, 0.0),
+                          (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)))
+    f = core_counters(core).filter
+    assert f.initialised and not f.ready and "first GPS fix" in f.not_ready_reason
+    assert not f.heading_known
