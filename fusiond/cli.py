@@ -246,7 +246,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from .transport.bench_latency import run_bench
 
         lat = run_bench(seconds=args.seconds, imu_hz=1000.0, odom_hz=100.0, express=True)
-        result["latency"] = {k: v for k, v in msgspec.to_builtins(lat).items() if isinstance(v, (int, float))}
+        flat: dict[str, float] = {}
+        for k, v in msgspec.to_builtins(lat).items():
+            if isinstance(v, dict):  # latency statistics: pose, raw_hop, ... -> pose_p50_us, ...
+                flat.update({f"{k}_{sk}": sv for sk, sv in v.items() if isinstance(sv, (int, float))})
+            elif isinstance(v, (int, float)):
+                flat[k] = v
+        result["latency"] = flat
     if args.json:
         print(msgspec.json.encode(result).decode())
     else:
