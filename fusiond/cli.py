@@ -85,28 +85,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_play(args: argparse.Namespace) -> int:
-    cfg = _load_config(args.config)
     import signal
     import threading
 
     from .replay.bag import BagError
     from .transport.player import play
-    from .transport.session import client_config, open_session
 
-    ConfigError, SessionError = _zenoh_errors()
     if args.rate < 0:
         print("fusiond: --rate must be >= 0", file=sys.stderr)
         return EXIT_USAGE
-    try:
-        conf = client_config(cfg.zenoh, base_dir=Path(args.config).resolve().parent, connect=args.connect,
-                             listen=args.listen)
-        session = open_session(conf)
-    except ConfigError as err:
-        print(f"fusiond: config error: {args.config}: {err}", file=sys.stderr)
-        return EXIT_USAGE
-    except SessionError as err:
-        print(f"fusiond: {err}", file=sys.stderr)
-        return 1
+    cfg, session = _tool_session(args, listen=args.listen)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -127,21 +115,10 @@ def cmd_play(args: argparse.Namespace) -> int:
 def cmd_health(args: argparse.Namespace) -> int:
     import json
 
-    from .config import Config
-    from .transport.session import client_config, open_session, query_health
+    from .transport.session import query_health
 
-    cfg = _load_config(args.config) if args.config else Config()
-    ConfigError, SessionError = _zenoh_errors()
+    cfg, session = _tool_session(args, unreachable_exit=EXIT_UNHEALTHY)
     key = args.key or cfg.output.health_key
-    try:
-        base = Path(args.config).resolve().parent if args.config else None
-        session = open_session(client_config(cfg.zenoh, base_dir=base, connect=args.connect))
-    except ConfigError as err:
-        print(f"fusiond: config error: {err}", file=sys.stderr)
-        return EXIT_USAGE
-    except SessionError as err:
-        print(f"fusiond: {err}", file=sys.stderr)
-        return EXIT_UNHEALTHY
     try:
         answers = query_health(session, key, args.timeout)
     finally:
@@ -158,27 +135,31 @@ def cmd_health(args: argparse.Namespace) -> int:
     return 0 if worst is not None and worst >= _STATUS_RANK[args.min_status] else EXIT_UNHEALTHY
 
 
-def _tool_session(args: argparse.Namespace):
-    """A Zenoh session for a tool (monitor, calibrate-imu): the config's [zenoh] table if given, --connect wins."""
+def _tool_session(args: argparse.Namespace, listen: list[str] | None = None, unreachable_exit: int = 1):
+    """A Zenoh session for a client tool (play, health, monitor, calibrate-imu) of the daemon that the
+    config describes: its [zenoh] table if a config is given, --connect wins. Errors exit: a bad config
+    with 2, a session that cannot open with ``unreachable_exit``."""
     from .config import Config
     from .transport.session import client_config, open_session
 
-    cfg = _load_config(args.config) if getattr(args, "config", None) else Config()
+    config = getattr(args, "config", None)
+    cfg = _load_config(config) if config else Config()
     ConfigError, SessionError = _zenoh_errors()
-    base = Path(args.config).resolve().parent if getattr(args, "config", None) else None
+    base = Path(config).resolve().parent if config else None
     zc = cfg.zenoh
     if getattr(args, "no_multicast", False):
         import msgspec
 
         zc = msgspec.structs.replace(zc, multicast_scouting=False)
     try:
-        return cfg, open_session(client_config(zc, base_dir=base, connect=args.connect))
+        return cfg, open_session(client_config(zc, base_dir=base, connect=args.connect, listen=listen))
     except ConfigError as err:
-        print(f"fusiond: config error: {err}", file=sys.stderr)
+        prefix = f"{config}: " if config else ""
+        print(f"fusiond: config error: {prefix}{err}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
     except SessionError as err:
         print(f"fusiond: {err}", file=sys.stderr)
-        raise SystemExit(1) from None
+        raise SystemExit(unreachable_exit) from None
 
 
 def cmd_monitor(args: argparse.Namespace) -> int:

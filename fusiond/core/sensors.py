@@ -57,6 +57,17 @@ class ImuInput:
     gyro_cov: tuple[float, ...] | None
 
 
+def _unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """q normalised; a zero or clearly non-unit quaternion (beyond driver rounding) is refused."""
+    x, y, z, w = q
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n < 1e-6:
+        raise Rejected("zero_quaternion")
+    if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
+        raise Rejected("non_unit_quaternion", f"norm {n:.3f}")
+    return (x / n, y / n, z / n, w / n)
+
+
 def _finite(values) -> bool:
     return all(map(math.isfinite, values))
 
@@ -159,13 +170,7 @@ class ImuPolicy:
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             if not (_finite(s.orientation) and _finite(s.orientation_covariance)):
                 raise Rejected("non_finite", "orientation")
-            x, y, z, w = s.orientation
-            n = math.sqrt(x * x + y * y + z * z + w * w)
-            if n < 1e-6:
-                raise Rejected("zero_quaternion")
-            if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
-                raise Rejected("non_unit_quaternion", f"norm {n:.3f}")
-            q_imu = (x / n, y / n, z / n, w / n)
+            q_imu = _unit_quaternion(s.orientation)
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
             rpy = rot.to_rpy(q_base)
             if self._ori_override is not None:
@@ -280,13 +285,7 @@ class PosePolicy:
             raise Rejected("non_finite", "pose")
         if not _plausible(s.position, 1e6):
             raise Rejected("implausible_value", "position beyond 1000 km")
-        x, y, z, w = s.orientation
-        n = math.sqrt(x * x + y * y + z * z + w * w)
-        if n < 1e-6:
-            raise Rejected("zero_quaternion")
-        if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
-            raise Rejected("non_unit_quaternion", f"norm {n:.3f}")
-        q = (x / n, y / n, z / n, w / n)
+        q = _unit_quaternion(s.orientation)
         c = s.covariance
         if len(c) == 36:
             diag = [c[7 * i] for i in range(6)]
