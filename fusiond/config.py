@@ -119,6 +119,8 @@ class GpsSensor(_Sensor, tag="gps"):
     unknown_position_sigma: Vec3 = (2.5, 2.5, 5.0)  # used when the covariance type is UNKNOWN (0)
     extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # antenna position in base_link, m
     heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
+    error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s
+    error_sigma: Vec3 | None = None  # its steady-state std devs east north up, m (needed with error_tau_s)
 
 
 class PoseSensor(_Sensor, tag="pose"):
@@ -208,6 +210,8 @@ def validate(cfg: Config) -> Config:
                 raise ConfigError(f"sensors[{i}].datum: latitude must be in [-90, 90] and longitude in [-180, 180]")
             if s.heading_init_m <= 0.0:
                 raise ConfigError(f"sensors[{i}].heading_init_m: must be positive")
+            if s.error_tau_s > 0.0 and s.error_sigma is None:
+                raise ConfigError(f"sensors[{i}].error_sigma: needed when error_tau_s > 0")
     return cfg
 
 

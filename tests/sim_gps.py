@@ -4,7 +4,8 @@ Planar robot in an ENU world starting at an unknown position and heading. The
 wheels misread distance (``wheel_scale``: true speed = wheel_scale * reported),
 the gyro has a bias and a yaw-axis scale error (true rate = gyro_scale *
 (reading - bias)), so the filter's scale states should converge to exactly these
-values. GPS fixes carry white noise, a lever arm and dropouts; a pose sensor
+values. GPS fixes carry white noise, optionally a slowly wandering Gauss-Markov
+error and frozen stretches, a lever arm and dropouts; a pose sensor
 (motion capture, or visual odometry with a drifting origin for `differential`)
 sees the sensor's pose through a lever arm. A hand-turn phase rotates the
 robot while its wheels read zero.
@@ -45,6 +46,9 @@ class World:
     gps_dropout: tuple[float, float] | None = None  # no fixes in [t0, t1) (relative seconds)
     gps_bad_every: int = 0  # every n-th fix has status -1 and garbage coordinates
     datum: tuple[float, float, float] = (48.137, 11.575, 520.0)
+    gps_error_tau: float = 0.0  # > 0: a first-order Gauss-Markov error (per axis) on top of the white noise
+    gps_error_sigma: float = 0.0  # its steady-state std dev, m
+    gps_freeze: tuple[tuple[float, float], ...] = ()  # the receiver repeats its last fix in [t0, t1)
     # pose sensor
     pose_rate: float = 0.0  # 0: no pose sensor
     pose_sigma: tuple[float, float] = (0.01, 0.005)  # position m, orientation rad
@@ -74,6 +78,10 @@ def simulate(w: World) -> list:
     nxt = {"odom": 0.0, "imu": 0.0, "gps": 0.0, "pose": 0.0}
     out: list = []
     n_fix = 0
+    gm_rng = np.random.default_rng(w.seed + 1000)  # own stream: worlds without it draw as before
+    gm = gm_rng.normal(0, w.gps_error_sigma, 3) if w.gps_error_tau > 0 else np.zeros(3)
+    gm_t = 0.0
+    last_fix = None
     vo_err = [0.0, 0.0, 0.0, 0.0]  # accumulated visual-odometry error: x y z yaw
     rel = 0.0
     while rel < w.duration:
@@ -102,6 +110,14 @@ def simulate(w: World) -> list:
             e = x + c * lx - s * ly + rng.normal(0, w.gps_sigma)
             n = y + s * lx + c * ly + rng.normal(0, w.gps_sigma)
             u = w.gps_lever[2] + rng.normal(0, w.gps_sigma)
+            if w.gps_error_tau > 0:  # exact discretisation of db = -b/tau dt + noise
+                a = math.exp(-(rel - gm_t) / w.gps_error_tau)
+                gm = a * gm + math.sqrt(1.0 - a * a) * gm_rng.normal(0, w.gps_error_sigma, 3)
+                gm_t = rel
+                e, n, u = e + gm[0], n + gm[1], u + gm[2]
+            if any(f0 <= rel < f1 for f0, f1 in w.gps_freeze) and last_fix is not None:
+                e, n, u = last_fix  # a stuck receiver: same position, new stamp
+            last_fix = (e, n, u)
             dropped = w.gps_dropout is not None and w.gps_dropout[0] <= rel < w.gps_dropout[1]
             var = w.gps_sigma**2
             if w.gps_bad_every and n_fix % w.gps_bad_every == 0:

@@ -248,3 +248,62 @@ def test_scales_correct_the_inputs_and_their_noise():
     np.testing.assert_allclose(rot.log(rot.mul(tuple(x1[3:7].tolist()), rot.conj(q1))), 0.0, atol=1e-12)
     # the wheel noise scales with the speed: world frame, dt = 1 -> Q = s^2 Sigma T
     np.testing.assert_allclose(Q[0:3, 0:3], 4.0 * u.linear_period * np.reshape(u.linear_cov, (3, 3)), atol=1e-15)
+
+
+# -- Gauss-Markov GPS error state --------------------------------------------------------------------------------
+
+def _gm_layout():
+    from fusiond.estimator import GpsErrorBlock, WheelScaleBlock
+
+    return StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), WheelScaleBlock(0.1, 1e-4),
+                        GpsErrorBlock(30.0, (1.0, 1.5, 2.0))])
+
+
+@settings(max_examples=40, deadline=None)
+@given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 5.0), world=st.booleans(), gyro=st.booleans(),
+       b=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_gauss_markov_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, b):
+    layout = _gm_layout()
+    x = _state(layout, (r, p, y))
+    x[layout.nominal["gps_error"]] = b
+    u = _input(world, gyro)
+    x1, F, _ = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+    F_num = transition_jacobian(layout, lambda s: propagate_state(layout, s, u, dt), x)
+    np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
+    np.testing.assert_allclose(x1[layout.nominal["gps_error"]], np.array(b) * math.exp(-dt / 30.0), rtol=1e-12)
+
+
+def test_gauss_markov_noise_keeps_the_stationary_variance_whatever_the_step():
+    layout = _gm_layout()
+    es = layout.error["gps_error"]
+    sig2 = np.array([1.0, 1.5, 2.0]) ** 2
+    u = _input()
+    for dt in (0.01, 0.5, 7.0):
+        x = _state(layout, (0.0, 0.0, 0.0))
+        _, F, Q = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+        a = math.exp(-dt / 30.0)
+        np.testing.assert_allclose(np.diag(Q)[es], sig2 * (1.0 - math.exp(-2.0 * dt / 30.0)), rtol=1e-12)
+        np.testing.assert_allclose(np.diag(F)[es], a, rtol=1e-15)
+        # P_bb = sigma^2 (the stationary distribution) is a fixed point of F P F^T + Q
+        P_bb = a * a * sig2 + np.diag(Q)[es]
+        np.testing.assert_allclose(P_bb, sig2, rtol=1e-12)
+    assert layout.dynamic_blocks and not _layout().dynamic_blocks
+
+
+def test_position_with_gps_error_jacobian_matches_central_differences():
+    from fusiond.estimator.numeric import measurement_jacobian
+
+    layout = _gm_layout()
+    x = _state(layout, (0.2, -0.3, 1.1))
+    x[layout.nominal["gps_error"]] = (0.4, -0.7, 1.2)
+    lever = (0.3, 0.1, 0.5)
+
+    def h(s):
+        return -obs.position(layout, s, (0.0, 0.0, 0.0), (1.0,) * 9, lever, "gps_error")[0]
+
+    y, H, _ = obs.position(layout, x, (0.0, 0.0, 0.0), (1.0,) * 9, lever, "gps_error")
+    np.testing.assert_allclose(H, measurement_jacobian(layout, h, x, angular=False), atol=1e-7)
+    y0, H0, _ = obs.position(layout, x, (0.0, 0.0, 0.0), (1.0,) * 9, lever)
+    np.testing.assert_allclose(y, y0 - np.array([0.4, -0.7, 1.2]), atol=1e-15)
+    np.testing.assert_array_equal(H[:, layout.error["gps_error"]], np.eye(3))
+    np.testing.assert_array_equal(H0[:, layout.error["gps_error"]], 0.0)

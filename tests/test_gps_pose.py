@@ -596,3 +596,62 @@ def test_doctor_flags_an_understated_gps_noise():
             doctor.add(r)
     verdicts = [v for v in doctor.verdicts() if v.sensor == "gps" and v.channel == "position"]
     assert verdicts and verdicts[0].level == "problem" and verdicts[0].key == "sensors[2].position_noise"
+
+
+# -- Gauss-Markov GPS error state -------------------------------------------------------------------------------
+
+GM = "error_tau_s = 30.0\nerror_sigma = [1.0, 1.0, 1.0]"
+
+
+@pytest.mark.parametrize("gps, needle", [
+    ("error_tau_s = -1.0\nerror_sigma = [1.0, 1.0, 1.0]", "sensors[2].error_tau_s"),
+    ("error_tau_s = 30.0\nerror_sigma = [1.0, -1.0, 1.0]", "sensors[2].error_sigma"),
+    ("error_tau_s = 30.0", "sensors[2].error_sigma"),
+    ("error_tau_s = 30.0\nerror_sigma = [1.0, 1.0]", "sensors[2].error_sigma"),
+])
+def test_gps_error_keys_are_validated(gps, needle):
+    with pytest.raises(ConfigError) as err:
+        config(gps=gps)
+    assert needle in str(err.value) and "\n" not in str(err.value)
+
+
+def test_gps_error_state_is_off_by_default_and_a_block_when_configured():
+    assert not FusionCore(_gps_config()).layout.has("gps_error")
+    assert not FusionCore(_gps_config("error_tau_s = 0.0\nerror_sigma = [1.0, 1.0, 1.0]")).layout.has("gps_error")
+    core = FusionCore(_gps_config(GM))
+    assert [b.name for b in core.layout.blocks][-1] == "gps_error" and core.layout.error_dim == 14
+    # neither roll/pitch nor an unaligned fix may write the GPS error
+    es = core.layout.error["gps_error"]
+    assert not core.tilt_mask[es].any() and not core.position_mask[es].any()
+
+
+def test_gauss_markov_gps_error_state_tracks_truth_better_through_wander_and_frozen_fixes():
+    """GPS error = Gauss-Markov (tau 30 s, 1 m) + 0.3 m white, two frozen stretches, 1 fix in 10 fused.
+
+    The receiver reports only its white noise (as real ones do). Without the state the filter
+    follows each fix's slow error; with it the odometry-tied track averages the error over tau.
+    Measured on this world (seed 8, 6000 poses): RMS vs truth 1.49 m without, 0.90 m with (0.60x).
+    """
+    w = _gps_world(duration=360.0, gps_sigma=0.3, gps_error_tau=30.0, gps_error_sigma=1.0,
+                   gps_freeze=((50.0, 54.0), (150.0, 153.0), (250.0, 256.0)), seed=8)
+    samples = simulate(w)
+    truth = {round(t, 6): (x, y) for t, x, y, _ in w.truth}
+
+    def rms(extra: str) -> float:
+        core = FusionCore(_gps_config(extra))
+        n, err = 0, []
+        for s in samples:
+            if isinstance(s, GpsSample):
+                n += 1
+                if n % 10:
+                    continue
+            if core.ingest(s).publish and s.stamp > 1000.0 + 60.0:  # heading and scales have had a minute
+                t, x = core.pose()
+                tx, ty = truth[round(t, 6)]
+                err.append(math.hypot(x[0] - tx, x[1] - ty))
+        assert len(err) > 5000
+        return math.sqrt(sum(v * v for v in err) / len(err))
+
+    without, with_state = rms(""), rms(GM)
+    assert with_state < 0.75 * without, (with_state, without)
+    assert with_state < 1.0  # below the error's own 1.41 m horizontal RMS

@@ -28,7 +28,8 @@ import structlog
 
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..estimator import (
-    ErrorStateEKF, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock, predict,
+    ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
+    predict,
 )
 from ..estimator import mat3
 from ..estimator.geodesy import EnuFrame
@@ -104,6 +105,9 @@ class FusionCore:
             blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
         if any(isinstance(s, OdomSensor) and s.scale_estimation for s in self.sensors):
             blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
+        for sc in self.sensors:  # at most one GPS (it defines the world frame)
+            if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
+                blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
         self.layout = StateLayout(blocks)
         self.has_bias = self.layout.has("gyro_bias")
         self.has_gyro_scale = self.layout.has("gyro_scale")
@@ -113,7 +117,7 @@ class FusionCore:
         self.tilt_mask[[0, 1, 2, 5]] = False
         if self.has_bias:
             self.tilt_mask[self.layout.error["gyro_bias"].start + 2] = False
-        for name in ("gyro_scale", "wheel_scale"):
+        for name in ("gyro_scale", "wheel_scale", "gps_error"):
             if self.layout.has(name):
                 self.tilt_mask[self.layout.error[name]] = False
         # While the GPS heading is unknown a fix may only move position: a wrong heading
@@ -134,6 +138,8 @@ class FusionCore:
         if self.frame_index >= 0:
             self.delta_mask = np.ones(self.layout.error_dim, dtype=bool)
             self.delta_mask[[0, 1, 2, 5]] = False
+            if self.layout.has("gps_error"):  # a pose delta says nothing about the GPS error
+                self.delta_mask[self.layout.error["gps_error"]] = False
         self.noise_density = self.layout.noise_density(
             np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
         )

@@ -1,11 +1,12 @@
 """Pure maths: state blocks, error-state EKF, motion and measurement models. No I/O, no clocks."""
 
 from .ekf import ErrorStateEKF, UpdateResult
+from .gps_error import GpsErrorBlock
 from .motion import MotionInput, predict
 from .scale import GyroScaleBlock, WheelScaleBlock
 from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout
 
 __all__ = [
     "ErrorStateEKF", "UpdateResult", "MotionInput", "predict",
-    "GyroBiasBlock", "GyroScaleBlock", "WheelScaleBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
+    "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "WheelScaleBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
 ]

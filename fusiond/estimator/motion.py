@@ -9,7 +9,10 @@ and get their columns of F by the chain rule through ``G_lin``/``G_ang``.
 With global attitude errors (R_true = Exp(dtheta) R):
     p' = p + R v dt        ->  dp' = dp - [R v dt]x dtheta + R dt dv
     R' = R Exp(w dt)       ->  dtheta' = dtheta + R' Jr(w dt) dt dw
-so F = [[I, -[R v dt]x], [0, I]] plus the input blocks' columns.
+so F = [[I, -[R v dt]x], [0, I]] plus the input blocks' columns. Blocks with their own
+dynamics (``StateBlock.dynamic``, e.g. a Gauss-Markov GPS error) decay component-wise,
+x' = a x, and add their discrete process noise to Q's diagonal; a layout without them
+pays one empty-list test.
 
 Input noise: a message covariance is per sample. Held over a sample period T,
 white per-sample noise integrates to a random walk of variance sigma^2 * T * dt,
@@ -120,6 +123,12 @@ def predict(
     ax, ay, az = w[0] * dt, w[1] * dt, w[2] * dt
     q1 = rot.normalize(rot.mul((qx, qy, qz, qw), rot.exp(ax, ay, az)))
     xl[0:7] = (px + dpx, py + dpy, pz + dpz, *q1)
+    dynamic = layout.dynamic_blocks
+    if dynamic:  # blocks with their own dynamics (Gauss-Markov errors): x' = a x, F diagonal a
+        for blk, n0, e0 in dynamic:
+            for i, a in enumerate(blk.transition(dt)):
+                xl[n0 + i] *= a
+                F[e0 + i, e0 + i] = a
     x_new = np.array(xl)
     G_ang = mat3.mul(rot.matrix9(q1), _right_jacobian(ax, ay, az), dt)
 
@@ -144,4 +153,8 @@ def predict(
         if u.angular_period > 0.0:
             Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, u.angular_period / dt)
         Q.reshape(-1)[:: n + 1] += noise_density * dt
+        if dynamic:
+            for blk, n0, e0 in dynamic:
+                for i, q in enumerate(blk.process_noise(dt)):
+                    Q[e0 + i, e0 + i] += q
     return x_new, F, Q

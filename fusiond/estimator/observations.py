@@ -90,19 +90,28 @@ def _lever(q: rot.Quat, t: tuple[float, float, float]) -> tuple[float, float, fl
 
 def position(
     layout: StateLayout, x: np.ndarray, z: tuple[float, float, float], cov: tuple[float, ...],
-    lever: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    lever: tuple[float, float, float] = (0.0, 0.0, 0.0), error: str | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A sensor at ``lever`` (base_link) observed in the world: h = p + R t.
+    """A sensor at ``lever`` (base_link) observed in the world: h = p + R t (+ b).
 
     With global attitude errors R_true t = R t + dtheta x (R t), so dh/dtheta = -[R t]x:
-    a lever arm makes the position observe heading while the robot turns.
+    a lever arm makes the position observe heading while the robot turns. ``error`` names
+    an additive 3-block of the state the sensor's reading carries (the GPS Gauss-Markov
+    error): h gains + b and H an identity on its columns.
     """
     q = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
     a0, a1, a2 = _lever(q, lever)
+    if error is not None:
+        b0 = layout.nominal[error].start
+        a0, a1, a2 = a0 + float(x[b0]), a1 + float(x[b0 + 1]), a2 + float(x[b0 + 2])
     y = np.array((z[0] - float(x[0]) - a0, z[1] - float(x[1]) - a1, z[2] - float(x[2]) - a2))
+    if error is not None:
+        a0, a1, a2 = _lever(q, lever)
     H = np.zeros((3, layout.error_dim))
     H[0, 0] = H[1, 1] = H[2, 2] = 1.0
     H[0:3, 3:6] = ((0.0, a2, -a1), (-a2, 0.0, a0), (a1, -a0, 0.0))
+    if error is not None:
+        H[0:3, layout.error[error]] = _I3
     return y, H, np.array(cov, dtype=float).reshape(3, 3)
 
 

@@ -41,6 +41,19 @@ class StateBlock:
         """Process noise density (std per sqrt(s)) of each error component."""
         return [0.0] * self.error_size
 
+    # Blocks with their own dynamics (e.g. a Gauss-Markov error) set ``dynamic = True`` and
+    # override ``transition`` and ``process_noise``; the motion model applies them generically.
+    # Such a block must be additive (nominal_size == error_size) and decay component-wise.
+    dynamic = False
+
+    def transition(self, dt: float) -> list[float]:
+        """Per-component decay a over dt: x' = a x (so the error also maps as a dx); F's diagonal."""
+        return [1.0] * self.error_size
+
+    def process_noise(self, dt: float) -> list[float]:
+        """Discrete variance added to each error component over dt (beyond ``random_walk``)."""
+        return [0.0] * self.error_size
+
     def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
         """Inject the correction dx[e0:e0+error_size] into x[n0:n0+nominal_size], in place."""
         for i in range(self.nominal_size):
@@ -176,6 +189,11 @@ class StateLayout:
             if isinstance(b, InputBlock)
         ]
         self._offsets = [(b, self.nominal[b.name].start, self.error[b.name].start) for b in blocks]
+        for b in blocks:
+            if b.dynamic and b.nominal_size != b.error_size:
+                raise ValueError(f"state block {b.name!r} has dynamics but is not additive")
+        # Blocks with their own dynamics; empty for odometry/IMU-only layouts (predict skips them).
+        self.dynamic_blocks = [(b, n0, e0) for b, n0, e0 in self._offsets if b.dynamic]
         walk = np.concatenate([np.asarray(b.random_walk(), float) for b in blocks])
         self.random_walk_var = walk**2
         # Preallocated shapes the filter copies instead of building each step.

@@ -33,8 +33,11 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
         s.enu = EnuFrame(*inp.lla)  # no datum configured: the first valid fix (in stamp order)
     z = s.enu.enu(*inp.lla)
     ekf = s.ekf
+    error = "gps_error" if core.layout.has("gps_error") else None
     if not s.frame_ready:
         set_position(s, z, inp.cov, cfg.extrinsic_xyz)
+        if error is not None:
+            _split_first_fix(s, core.layout, error)
         s.frame_ready = True
         s.pose_anchor = {}
         s.gps_anchor = (z, lever(ekf.x, cfg.extrinsic_xyz))
@@ -42,13 +45,15 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
         return []
     if not s.heading_ready:
         gps_heading(core, s, cfg, z, inp.cov)
-    y, H, R = obs.position(core.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz)
+    y, H, R = obs.position(core.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz, error)
     if s.heading_ready:
         res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
         channel = "position"
     else:
         # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
-        # track along a wrong heading must not lock the filter out of the GPS).
+        # track along a wrong heading must not lock the filter out of the GPS). A Gauss-Markov
+        # GPS error is a "consider" state here: its variance widens S (H has its columns) but
+        # the offset a wrong heading builds up must not be absorbed into it as GPS error.
         res = ekf.update(y, H, R, math.inf, core.position_mask)
         channel = "position_unaligned"
     if not emit:
@@ -66,6 +71,8 @@ def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[flo
     gx, gy = z[0] - z0[0], z[1] - z0[1]
     d = math.hypot(gx, gy)
     sigma = math.sqrt(max(cov[0], cov[4]))
+    if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:  # the slow error moves the chord too
+        sigma = math.hypot(sigma, max(cfg.error_sigma[0], cfg.error_sigma[1]))
     if d < max(cfg.heading_init_m, 4.0 * sigma):
         return
     l1 = lever(s.ekf.x, cfg.extrinsic_xyz)
@@ -87,3 +94,14 @@ def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[flo
     s.gps_anchor, s.travel = None, _ZERO3
     s.pose_anchor = {}  # the frame turned under them: deltas restart from the next message
     log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=dyaw, sigma=sig, chord_m=d)
+
+
+def _split_first_fix(s: FilterState, layout, error: str) -> None:
+    """The first fix put the base at z - R t, but z also carries the GPS error b: the base
+    position is off by -(b + noise), so P_pp gains P_bb and P_pb = -P_bb (b keeps its prior)."""
+    P = s.ekf.P.copy()
+    eb = layout.error[error]
+    P[0:3, :] -= P[eb, :]  # dp <- dp - db: rows and columns of the linear map [I -I]
+    P[:, 0:3] -= P[:, eb]
+    # set_position zeroed the position rows (P_pb was 0): now P_pp + P_bb and P_pb = -P_bb
+    s.ekf.P = P
