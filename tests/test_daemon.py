@@ -29,7 +29,7 @@ from fusiond.config import ZenohConfig, load
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.bag import open_bag_samples
 from fusiond.replay.run import replay
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.samples import OdomSample
 from fusiond.transport.codecs import (
     decode_odometry_cdr,
     decode_pose_cdr,

@@ -12,7 +12,6 @@ docs/RELIABILITY.md from those records.
 from __future__ import annotations
 
 import math
-import os
 import random
 import signal
 import struct

@@ -131,6 +131,3 @@ class ErrorStateEKF:
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         return self.x.copy(), self.P.copy()
 
-    def restore(self, snap: tuple[np.ndarray, np.ndarray]) -> None:
-        self.x = snap[0].copy()
-        self.P = snap[1].copy()

@@ -44,10 +44,6 @@ def mul(A: Mat3, B: Mat3, k: float = 1.0) -> Mat3:
     )
 
 
-def transpose(A: Mat3) -> Mat3:
-    return (A[0], A[3], A[6], A[1], A[4], A[7], A[2], A[5], A[8])
-
-
 def apply(A: Mat3, v: tuple[float, float, float]) -> tuple[float, float, float]:
     x, y, z = v
     return (A[0] * x + A[1] * y + A[2] * z, A[3] * x + A[4] * y + A[5] * z, A[6] * x + A[7] * y + A[8] * z)

@@ -115,20 +115,3 @@ def to_rpy(q: Quat) -> tuple[float, float, float]:
     pitch = math.asin(max(-1.0, min(1.0, sp)))
     yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
     return roll, pitch, yaw
-
-
-def skew(v: np.ndarray | tuple[float, float, float]) -> np.ndarray:
-    x, y, z = v
-    return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
-
-
-def right_jacobian(vx: float, vy: float, vz: float) -> np.ndarray:
-    """Jr(phi): Exp(phi + d) ~= Exp(phi) Exp(Jr(phi) d) for small d."""
-    theta2 = vx * vx + vy * vy + vz * vz
-    K = skew((vx, vy, vz))
-    if theta2 < 1e-10:
-        return np.eye(3) - 0.5 * K + (K @ K) / 6.0
-    theta = math.sqrt(theta2)
-    a = (1.0 - math.cos(theta)) / theta2
-    b = (theta - math.sin(theta)) / (theta2 * theta)
-    return np.eye(3) - a * K + b * (K @ K)
