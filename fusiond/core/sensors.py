@@ -22,8 +22,9 @@ MAX_SPEED = 100.0  # m/s: beyond any wheeled robot, so a value this large is cor
 MAX_RATE = 100.0  # rad/s: beyond any gyro's range (they saturate near 35 rad/s)
 
 
-def _plausible(values, limit: float) -> bool:
-    return all(-limit <= v <= limit for v in values)
+def _plausible(values: tuple[float, float, float], limit: float) -> bool:
+    a, b, c = values
+    return -limit <= a <= limit and -limit <= b <= limit and -limit <= c <= limit
 
 
 class Rejected(Exception):

@@ -108,6 +108,12 @@ def from_rpy(roll: float, pitch: float, yaw: float) -> Quat:
     )
 
 
+def yaw(q: Quat) -> float:
+    """The yaw of to_rpy(q), without the roll and pitch."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
 def to_rpy(q: Quat) -> tuple[float, float, float]:
     x, y, z, w = q
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))

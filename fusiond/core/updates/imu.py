@@ -53,14 +53,15 @@ def apply_imu(core: "FusionCore", s: FilterState, idx: int, inp: ImuInput, stamp
         scale = adaptive_scale(core, s, cfg, "orientation")
         tilt_only = 2 not in inp.rows
         if tilt_only:
-            heading = rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2]
+            heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
         res = s.ekf.update(y, H, R * scale if scale != 1.0 else R, cfg.mahalanobis_threshold,
                            core.tilt_mask if tilt_only else None)
         if tilt_only and not res.rejected:
-            # A world-x/y correction of a tilted body still turns its Euler yaw a
-            # little (second order); put the heading back exactly.
-            r, p, _ = rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))
-            s.ekf.x[3:7] = rot.from_rpy(r, p, heading)
+            # A world-x/y correction of a tilted body still turns its Euler yaw a little
+            # (second order); a rotation about world z puts the heading back exactly and
+            # leaves roll and pitch as the update set them.
+            q = tuple(s.ekf.x[3:7].tolist())
+            s.ekf.x[3:7] = rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q)
         if cfg.adaptive:
             adapt(core, s, cfg, "orientation", res.nis, len(inp.rows))
         if emit:
