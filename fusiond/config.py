@@ -44,6 +44,7 @@ class OutputConfig(_Table):
     health_key: str = "fusiond/health"
     frame_id: str = "odom"
     child_frame_id: str = "base_link"
+    navsat_key: str = ""  # with a gps sensor: the fused position as NavSatFix here (empty: off)
 
 
 class FilterConfig(_Table):
@@ -202,6 +203,8 @@ def validate(cfg: Config) -> Config:
     if len(frames) > 1:
         raise ConfigError(f"sensors[{frames[1]}]: only one absolute sensor (gps, or pose without differential) "
                           "may define the world frame")
+    if cfg.output.navsat_key and not any(isinstance(s, GpsSensor) for s in cfg.sensors):
+        raise ConfigError("output.navsat_key: needs a gps sensor (the NavSatFix is the fused position in WGS84)")
     for i, s in enumerate(cfg.sensors):
         if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
             raise ConfigError(f"sensors[{i}].gyro_scale_estimation: needs angular_velocity = true")

@@ -171,3 +171,37 @@ angular_velocity = true
             assert s.received == result.per_sensor[name] and s.dropped == 0 and s.applied == s.received
     finally:
         daemon.stop()
+
+
+def test_fused_position_is_published_as_navsatfix(sessions):
+    """With a GPS and `output.navsat_key`, the daemon publishes the fused base position in WGS84."""
+    from fusiond.samples import GpsSample, ImuSample
+    from fusiond.transport.codecs import NAVSATFIX, TYPESTORE, encode_gps_sample, encode_imu_sample
+
+    cfg = loads(CONFIG.replace('health_key = "t/health"', 'health_key = "t/health"\nnavsat_key = "t/fix_filtered"')
+                + '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n')
+    dsession, client = sessions
+    fixes: list[bytes] = []
+    sub = client.declare_subscriber("t/fix_filtered", lambda s: fixes.append(s.payload.to_bytes()))
+    daemon = Daemon(cfg, dsession, monitor=False)
+    daemon.start()
+    try:
+        pubs = {k: client.declare_publisher(f"t/{k}", congestion_control=zenoh.CongestionControl.BLOCK)
+                for k in ("odom", "imu", "gps")}
+        wait_until(lambda: report(client), 10, "the daemon")
+        cov = (1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0)
+        for k in range(20):
+            t = 10.0 + 0.02 * k
+            pubs["imu"].put(encode_imu_sample(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), (1e-4,) * 9, (0.0,) * 3,
+                                                        (1e-6,) * 9), "ros2-cdr"))
+            if k == 5:
+                pubs["gps"].put(encode_gps_sample(GpsSample("gps", t, 48.0001, 11.0002, 501.0, 0, cov, 2), "ros2-cdr"))
+            pubs["odom"].put(odom(k))
+        wait_until(lambda: len(fixes) > 5, 10, "NavSatFix outputs")
+        msg = TYPESTORE.deserialize_cdr(fixes[-1], NAVSATFIX)
+        assert msg.latitude == pytest.approx(48.0001, abs=2e-5) and msg.longitude == pytest.approx(11.0002, abs=2e-5)
+        assert msg.position_covariance_type == 3 and msg.position_covariance[0] > 0
+        assert msg.header.frame_id == "base_link"
+    finally:
+        daemon.stop()
+        sub.undeclare()

@@ -655,3 +655,12 @@ def test_gauss_markov_gps_error_state_tracks_truth_better_through_wander_and_fro
     without, with_state = rms(""), rms(GM)
     assert with_state < 0.75 * without, (with_state, without)
     assert with_state < 1.0  # below the error's own 1.41 m horizontal RMS
+
+
+def test_navsat_output_needs_a_gps_sensor():
+    import pytest as _pytest
+
+    from fusiond.config import ConfigError, loads
+
+    with _pytest.raises(ConfigError, match="output.navsat_key"):
+        loads('[output]\nnavsat_key = "fix"\n[[sensors]]\nname = "w"\nkind = "odom"\nkey = "odom"\n')

@@ -32,7 +32,7 @@ from ..estimator import (
     predict,
 )
 from ..estimator import mat3
-from ..estimator.geodesy import EnuFrame
+from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
@@ -296,6 +296,16 @@ class FusionCore:
             angular=tuple(angular),
             twist_covariance=twist_cov.ravel().tolist(),
         )
+
+    def geodetic(self) -> tuple[float, float, float, list[float]] | None:
+        """The fused base position in WGS84 (lat, lon, alt) with its ENU covariance (row-major 3x3),
+        once a GPS has defined the ENU frame; None otherwise."""
+        s = self.state
+        if s is None or s.t is None or s.enu is None or not s.frame_ready:
+            return None
+        x = s.ekf.x
+        lat, lon, alt = enu_to_geodetic(s.enu, float(x[0]), float(x[1]), float(x[2]))
+        return lat, lon, alt, s.ekf.P[0:3, 0:3].ravel().tolist()
 
     def pose(self) -> tuple[float, np.ndarray]:
         """(filter time, nominal [x y z qx qy qz qw]) without building a full Estimate."""

@@ -553,6 +553,20 @@ def encode_imu_sample(sample: ImuSample, encoding: str) -> bytes:
     )
 
 
+def encode_navsat_cdr(stamp: float, frame_id: str, lat: float, lon: float, alt: float,
+                      cov9: Sequence[float]) -> bytes:
+    """The fused position as sensor_msgs/msg/NavSatFix (what navsat_transform publishes as
+    gps/filtered): status FIX, covariance known (ENU, m^2)."""
+    msg = _NavSatFix(
+        header=_Header(stamp=_ros_time(stamp), frame_id=frame_id),
+        status=_NavSatStatus(status=0, service=1),
+        latitude=float(lat), longitude=float(lon), altitude=float(alt),
+        position_covariance=_cov(cov9, 9),
+        position_covariance_type=3,
+    )
+    return _serialize(msg, NAVSATFIX)
+
+
 def encode_gps_sample(sample: GpsSample, encoding: str) -> bytes:
     """What a GPS driver puts on the key (CDR: sensor_msgs/msg/NavSatFix, frame gps)."""
     if encoding == "ros2-cdr":

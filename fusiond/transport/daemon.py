@@ -45,7 +45,7 @@ import zenoh
 from ..config import Config
 from ..core.fusion import FusionCore
 from ..health import Health, HealthReport, core_counters, encode_report
-from .codecs import DecodeError, encode_odometry_cdr, encode_pose_cdr, make_decoder
+from .codecs import DecodeError, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder
 from .session import build_config, open_session
 
 log = structlog.get_logger("fusiond.daemon")
@@ -127,6 +127,7 @@ class Daemon:
         self._zero_cov = [zero_covariance_check(s) for s in cfg.sensors]
         self._subscribers: list[Any] = []
         self._outputs: list[Any] = []
+        self._navsat_pub: Any = None
         self._worker: threading.Thread | None = None
         self._monitor: threading.Thread | None = None
         self._stopping = threading.Event()
@@ -143,6 +144,8 @@ class Daemon:
         self._pose_pub = s.declare_publisher(out.pose_key, encoding=cdr, express=self._express)
         self._odom_pub = s.declare_publisher(out.odometry_key, encoding=cdr, express=self._express)
         self._diag_pub = s.declare_publisher(out.diagnostics_key, encoding=zenoh.Encoding.APPLICATION_JSON)
+        self._navsat_pub = (s.declare_publisher(out.navsat_key, encoding=cdr, express=self._express)
+                            if out.navsat_key else None)
         self._worker = threading.Thread(target=self._work, name="fusiond-worker", daemon=True)
         self._worker.start()
         for idx, sensor in enumerate(self.cfg.sensors):
@@ -156,6 +159,8 @@ class Daemon:
         self._queryable = s.declare_queryable(out.health_key, self._on_query)
         self._token = s.liveliness().declare_token(alive_key(out.health_key))
         self._outputs = [self._pose_pub, self._odom_pub, self._diag_pub, self._queryable, self._token]
+        if self._navsat_pub is not None:
+            self._outputs.append(self._navsat_pub)
         if self._monitor_on:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
@@ -291,6 +296,10 @@ class Daemon:
                                    est.pose_covariance, est.linear, est.angular, est.twist_covariance)
         self._pose_pub.put(pose)
         self._odom_pub.put(odom)
+        if self._navsat_pub is not None:
+            fix = self.core.geodetic()
+            if fix is not None:
+                self._navsat_pub.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
         self.published += 1
 
     # -- health monitor ----------------------------------------------------------------
