@@ -664,3 +664,40 @@ def test_navsat_output_needs_a_gps_sensor():
 
     with _pytest.raises(ConfigError, match="output.navsat_key"):
         loads('[output]\nnavsat_key = "fix"\n[[sensors]]\nname = "w"\nkind = "odom"\nkey = "odom"\n')
+
+
+def test_gps_with_an_absolute_imu_yaw_takes_heading_from_the_imu():
+    """REP-103 absolute yaw is already ENU: no chord-based heading initialisation to fight it."""
+    from fusiond.config import loads
+    from fusiond.core.fusion import FusionCore
+    from fusiond.estimator import rotation as rot
+    from fusiond.samples import ImuSample
+
+    cfg = loads("""
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+orientation = "absolute"
+[[sensors]]
+name = "gps"
+kind = "gps"
+key = "fix"
+datum = [48.0, 11.0, 500.0]
+""")
+    core = FusionCore(cfg)
+    cov36 = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
+    q = rot.from_rpy(0.0, 0.0, 1.0)
+    for k in range(50):
+        t = 10.0 + 0.02 * k
+        core.ingest(OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), cov36))
+        core.ingest(ImuSample("imu", t + 0.001, q, (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0.0,) * 3, (1e-6,) * 9))
+        if k % 10 == 0:
+            steps = core.ingest(GpsSample("gps", t + 0.002, 48.0, 11.0, 500.0, 0, (1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0), 2))
+    assert core.heading_known
+    assert steps.records and steps.records[0].channel == "position"
+    assert rot.to_rpy(tuple(core.pose()[1][3:7].tolist()))[2] == pytest.approx(1.0, abs=0.01)

@@ -40,8 +40,11 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
             _split_first_fix(s, core.layout, error)
         s.frame_ready = True
         s.pose_anchor = {}
-        s.gps_anchor = (z, lever(ekf.x, cfg.extrinsic_xyz))
-        s.travel = _ZERO3
+        if core.absolute_yaw:
+            s.heading_ready = True  # the IMU's absolute yaw is the heading in ENU
+        else:
+            s.gps_anchor = (z, lever(ekf.x, cfg.extrinsic_xyz))
+            s.travel = _ZERO3
         return []
     if not s.heading_ready:
         gps_heading(core, s, cfg, z, inp.cov)
