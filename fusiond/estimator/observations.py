@@ -115,6 +115,15 @@ def position(
     return y, H, np.array(cov, dtype=float).reshape(3, 3)
 
 
+def _select_rows(y6, H6: np.ndarray, cov: tuple[float, ...], rows: tuple[int, ...]):
+    """The measured ``rows`` of a 6-row pose observation (x y z, then the three rotations)."""
+    C = np.array(cov, dtype=float).reshape(6, 6)
+    if len(rows) == 6:
+        return np.array(y6), H6, C
+    idx = list(rows)
+    return np.array([y6[i] for i in rows]), H6[idx], C[np.ix_(idx, idx)]
+
+
 def pose(
     layout: StateLayout, x: np.ndarray, z_pos: tuple[float, float, float], z_rpy: tuple[float, float, float],
     cov: tuple[float, ...], rows: tuple[int, ...], lever: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -126,11 +135,7 @@ def pose(
     H6 = np.zeros((6, layout.error_dim))
     H6[0:3] = Hp
     H6[3:6, 3:6] = Hrpy
-    C = np.array(cov, dtype=float).reshape(6, 6)
-    if len(rows) == 6:
-        return np.array(y6), H6, C
-    idx = list(rows)
-    return np.array([y6[i] for i in rows]), H6[idx], C[np.ix_(idx, idx)]
+    return _select_rows(y6, H6, cov, rows)
 
 
 def relative_pose(pos0: tuple[float, float, float], q0: rot.Quat, pos1: tuple[float, float, float], q1: rot.Quat
@@ -168,8 +173,4 @@ def delta_pose(
     H6[0:3, 0:3] = R0T
     H6[0:3, 3:6] = R0T @ np.array(((0.0, a2, -a1), (-a2, 0.0, a0), (a1, -a0, 0.0)))
     H6[3:6, 3:6] = R0T
-    C = np.array(cov, dtype=float).reshape(6, 6)
-    if len(rows) == 6:
-        return np.array(y6), H6, C
-    idx = list(rows)
-    return np.array([y6[i] for i in rows]), H6[idx], C[np.ix_(idx, idx)]
+    return _select_rows(y6, H6, cov, rows)
