@@ -56,7 +56,8 @@ class FilterConfig(_Table):
     gap_inflation: Vec2 = (0.05, 0.05)  # position m/sqrt(s), attitude rad/sqrt(s) added per s of gap
     covariance_cap: Vec2 = (1.0e4, 10.0)  # max variance: position m^2, attitude rad^2
     jump_s: float = 5.0  # a stamp this far from filter time is suspect (clock reset, bag restart)
-    jump_confirm: int = 3  # consecutive suspect messages that confirm a jump (reset if backwards)
+    jump_confirm: int = 3  # suspect messages that, with jump_persist_s, confirm a jump (reset if backwards)
+    jump_persist_s: float = 1.0  # and the suspect stamps must span this long: a short clock glitch is dropped
     process_noise: Vec2 = (0.002, 0.002)  # model error: position m/sqrt(s), attitude rad/sqrt(s)
     initial_sigma: Vec2 = (0.0, 0.1)  # initial position m, attitude rad
     gyro_bias_sigma: float = 0.01  # initial gyro-bias uncertainty, rad/s

@@ -43,6 +43,7 @@ class SensorHealth(msgspec.Struct, kw_only=True):
     rejected: int  # updates refused by the Mahalanobis gate
     applied: int = 0
     late: int = 0  # applied at their own stamp from the history
+    held: int = 0  # held while a far-off time jump is unconfirmed (later applied or dropped)
     timeout_s: float = 0.0  # liveness timeout in force
     dropped_by_reason: dict[str, int] = {}
     zero_covariance_floored: int = 0  # accepted samples with a zero variance that the floor replaced (not a drop)
@@ -84,6 +85,7 @@ class CoreCounters(msgspec.Struct, kw_only=True):
 
     applied: list[int]
     late: list[int]
+    held: list[int]
     rejected: list[int]
     dropped: list[dict[str, int]]
     filter: FilterHealth
@@ -100,6 +102,7 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
     return CoreCounters(
         applied=[s.applied for s in core.stats],
         late=[s.late for s in core.stats],
+        held=core.held(),
         rejected=[s.rejected for s in core.stats],
         dropped=[dict(s.dropped) for s in core.stats],
         filter=FilterHealth(initialised=core.initialised, time=core.time, finite=finite,
@@ -208,6 +211,7 @@ class Health:
                     rejected=core.rejected[i] if core else 0,
                     applied=core.applied[i] if core else 0,
                     late=core.late[i] if core else 0,
+                    held=core.held[i] if core else 0,
                     timeout_s=timeout,
                     dropped_by_reason=reasons,
                     zero_covariance_floored=s.floored,

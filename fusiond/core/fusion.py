@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -71,6 +72,16 @@ class Step:
     late: bool = False
     publish: bool = False  # an odometry sample: the daemon publishes the newest estimate now
     records: list[DiagnosticsRecord] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class _PendingJump:
+    """Samples stamped far from filter time, held until their timeline persists (or is left)."""
+
+    first: float
+    lo: float = math.inf
+    hi: float = -math.inf
+    samples: list[tuple[float, int, Any]] = field(default_factory=list)
 
 
 @dataclass(slots=True)
@@ -162,7 +173,7 @@ class FusionCore:
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
         self._reset_history()
-        self._suspect = 0  # consecutive samples far from filter time
+        self._jump: _PendingJump | None = None  # samples held while a far-off timeline is unconfirmed
         self.resets = 0
         self.covariance_resets = 0
 
@@ -187,24 +198,16 @@ class FusionCore:
         if self.state is None:
             self._start()
         assert self.state is not None
-        jump = self.cfg.filter.jump_s
         t = self.state.t
-        if t is not None and (stamp < t - jump or stamp > t + jump):
-            self._suspect += 1
-            if self._suspect < self.cfg.filter.jump_confirm:
-                return self._drop(idx, "stale_stamp" if stamp < t else "future_stamp", stamp)
-            self._suspect = 0
-            if stamp < t:
-                log.warning("time_jump_reset", sensor=sample.sensor, stamp=stamp, filter_time=t)
-                self.resets += 1
-                self._start()
-            else:
-                # Not a reset: the pose carries across the gap (inflated); the history before
-                # the jump stays, so a sensor lagging the jump is still applied at its stamp.
-                log.warning("time_jump_forward", sensor=sample.sensor, stamp=stamp, filter_time=t)
-        else:
-            self._suspect = 0
+        if t is not None and (stamp < t - self.cfg.filter.jump_s or stamp > t + self.cfg.filter.jump_s):
+            return self._hold_jump(idx, inp, stamp)
+        if self._jump is not None and stamp > t:
+            self._abandon_jump()  # the stream moved on along the old timeline: the far stamps were a glitch
+        return self._place(idx, inp, stamp)
 
+    def _place(self, idx: int, inp, stamp: float) -> Step:
+        """Apply a sample at its own stamp (re-applying later ones when it is late) and count it."""
+        st = self.stats[idx]
         key = (stamp, idx)
         h = self.history
         pos, duplicate = h.slot(key)
@@ -231,7 +234,59 @@ class FusionCore:
             if r.rejected and r.channel != "yaw_rate":
                 st.rejected += 1
         publish = idx == self.odom_index and (self.frame_index < 0 or self.state.frame_ready)
-        return Step(sample.sensor, True, late=late, publish=publish, records=records)
+        return Step(self.sensors[idx].name, True, late=late, publish=publish, records=records)
+
+    # -- time jumps ------------------------------------------------------------------------------------
+    def _hold_jump(self, idx: int, inp, stamp: float) -> Step:
+        """A stamp far from filter time: a clock glitch, or a new timeline (bag restarted, clock
+        reset, a long logging gap). Hold it, with the others of its cluster, until the cluster
+        has persisted for ``jump_confirm`` samples AND ``jump_persist_s`` seconds of its own
+        stamps; only then is it a new timeline. A burst of far stamps that the stream leaves
+        again (the old timeline advances) is dropped whole: nothing stamped in it is applied or
+        published, and the filter carries on from its history instead of resetting."""
+        fc = self.cfg.filter
+        j = self._jump
+        if j is not None and abs(stamp - j.first) > fc.jump_s:
+            self._abandon_jump()  # a different far timeline: the held one did not persist
+            j = None
+        if j is None:
+            j = self._jump = _PendingJump(first=stamp)
+        if len(j.samples) >= fc.history_max:
+            return self._drop(idx, "future_stamp" if stamp > (self.state.t or 0.0) else "stale_stamp", stamp)
+        j.samples.append((stamp, idx, inp))
+        j.lo, j.hi = min(j.lo, stamp), max(j.hi, stamp)
+        if len(j.samples) < fc.jump_confirm or j.hi - j.lo < fc.jump_persist_s:
+            return Step(self.sensors[idx].name, False, "held_time_jump")
+        return self._confirm_jump()
+
+    def _confirm_jump(self) -> Step:
+        j = self._jump
+        assert j is not None and self.state is not None
+        self._jump = None
+        t = self.state.t
+        if j.first < t:
+            log.warning("time_jump_reset", stamp=j.first, filter_time=t, held=len(j.samples))
+            self.resets += 1
+            self._start()
+        else:
+            # Not a reset: the pose carries across the gap (inputs end at their sensors'
+            # timeouts, covariance inflated); the history before the jump stays, so a sensor
+            # lagging the jump is still applied at its stamp.
+            log.warning("time_jump_forward", stamp=j.first, filter_time=t, held=len(j.samples))
+        steps = [self._place(i, inp, stamp) for stamp, i, inp in sorted(j.samples, key=lambda e: (e[0], e[1]))]
+        last = steps[-1]
+        return Step(last.sensor, last.accepted, last.reason, late=any(s.late for s in steps),
+                    publish=any(s.publish for s in steps), records=[r for s in steps for r in s.records])
+
+    def _abandon_jump(self) -> None:
+        j = self._jump
+        self._jump = None
+        if j is None:
+            return
+        t = self.state.t if self.state is not None else None
+        for stamp, idx, _ in j.samples:
+            self._drop(idx, "future_stamp" if t is None or stamp > t else "stale_stamp", stamp)
+        log.warning("time_glitch_dropped", samples=len(j.samples), first_stamp=j.first, filter_time=t)
 
     @property
     def initialised(self) -> bool:
@@ -322,6 +377,14 @@ class FusionCore:
             return None
         return self.state.ekf.x[self.layout.nominal["gyro_bias"]].copy()
 
+    def held(self) -> list[int]:
+        """Per sensor: samples held while a far-off time jump is unconfirmed (later applied or dropped)."""
+        n = [0] * len(self.sensors)
+        if self._jump is not None:
+            for _, idx, _ in self._jump.samples:
+                n[idx] += 1
+        return n
+
     def consistency(self) -> dict[str, dict]:
         return {f"{self.sensors[i].name}/{ch}": w.summary() for (i, ch), w in sorted(self.windows.items())}
 
@@ -393,16 +456,18 @@ class FusionCore:
     def _reapply(self, s: FilterState, idx: int, inp, stamp: float) -> None:
         self._apply(s, idx, inp, stamp, emit=False, late=False)
 
-    def _inputs(self, s: FilterState) -> MotionInput:
-        """Motion inputs held at time s.t; a silent sensor's input is not held forever."""
+    def _inputs(self, s: FilterState, t: float | None = None) -> MotionInput:
+        """Motion inputs held at time t (default s.t); a silent sensor's input is not held forever."""
         u = self._u
+        if t is None:
+            t = s.t
         odom = self.odom_index
-        odom_fresh = odom >= 0 and s.last[odom] is not None and s.t - s.last[odom] <= self.timeout(odom, s)
+        odom_fresh = odom >= 0 and s.last[odom] is not None and t - s.last[odom] <= self.timeout(odom, s)
         if odom_fresh:
             u.linear, u.linear_cov, u.linear_period = s.linear, s.linear_cov, s.period[odom]
         else:
             u.linear, u.linear_cov, u.linear_period = _ZERO3, self.default_linear_cov, 0.0
-        gyro_fresh = s.gyro is not None and s.t - s.gyro_last[1] <= self.timeout(s.gyro_last[0], s)
+        gyro_fresh = s.gyro is not None and t - s.gyro_last[1] <= self.timeout(s.gyro_last[0], s)
         if gyro_fresh:
             u.angular, u.angular_cov, u.angular_period = s.gyro, s.gyro_cov, s.period[s.gyro_last[0]]
             u.from_gyro = True
@@ -415,23 +480,53 @@ class FusionCore:
         return u
 
     def _predict(self, s: FilterState, dt: float) -> None:
-        u = self._inputs(s)
-        x, F, Q = predict(self.layout, s.ekf.x, u, dt, self.noise_density)
-        if s.gps_anchor is not None:  # GPS heading pending: accumulate the dead-reckoned motion
-            x0 = s.ekf.x
-            t = s.travel
-            s.travel = (t[0] + float(x[0] - x0[0]), t[1] + float(x[1] - x0[1]), t[2] + float(x[2] - x0[2]))
-        if s.pose_anchor:
-            s.pose_anchor = accumulate_motion(s.pose_anchor, s.ekf.x, x)
+        """Predict over dt from s.t, in segments: no input outlives its sensor.
+
+        Each input (odometry twist, gyro rate) is held only until its sensor's timeout after
+        its last message; a step that crosses that moment is split there and the rest runs
+        without it (zero twist, no rotation), so a logging gap of any length moves the pose
+        by at most speed x timeout and cannot integrate the last gyro rate into a tumble. The
+        covariance grows for the rest of the gap by the gap inflation (added once per step).
+        """
+        t0 = s.t
+        t_end = t0 + dt
         gap = dt > self.cfg.filter.gap_s
-        if gap:
-            Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
-        if not s.ekf.propagate(x, F, Q):
-            self._covariance_reset(s)
+        while True:
+            t1 = min(t_end, self._next_expiry(s, t0))
+            seg = t1 - t0
+            u = self._inputs(s, 0.5 * (t0 + t1))  # fresh throughout the segment iff fresh at its middle
+            x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density)
+            if s.gps_anchor is not None:  # GPS heading pending: accumulate the dead-reckoned motion
+                x0 = s.ekf.x
+                tr = s.travel
+                s.travel = (tr[0] + float(x[0] - x0[0]), tr[1] + float(x[1] - x0[1]), tr[2] + float(x[2] - x0[2]))
+            if s.pose_anchor:
+                s.pose_anchor = accumulate_motion(s.pose_anchor, s.ekf.x, x)
+            if gap and t1 >= t_end:
+                Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
+            if not s.ekf.propagate(x, F, Q):
+                self._covariance_reset(s)
+            if t1 >= t_end:
+                break
+            t0 = t1
         # Without a gap P grows slowly: capping once per second of message time is enough, and
         # depends on the stamps only (so re-applied samples cap exactly where they did before).
-        if gap or math.floor(s.t) != math.floor(s.t + dt):
+        if gap or math.floor(s.t) != math.floor(t_end):
             s.ekf.cap_covariance(self.caps)
+
+    def _next_expiry(self, s: FilterState, t: float) -> float:
+        """The first moment after t at which a held input's sensor times out (inf if none)."""
+        nxt = math.inf
+        odom = self.odom_index
+        if odom >= 0 and s.last[odom] is not None:
+            e = s.last[odom] + self.timeout(odom, s)
+            if t < e < nxt:
+                nxt = e
+        if s.gyro_last is not None:
+            e = s.gyro_last[1] + self.timeout(s.gyro_last[0], s)
+            if t < e < nxt:
+                nxt = e
+        return nxt
 
     def _covariance_reset(self, s: FilterState) -> None:
         self.covariance_resets += 1
