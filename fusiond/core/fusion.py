@@ -169,6 +169,19 @@ class FusionCore:
         self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
         self._u = MotionInput()
         self._u.world_frame = isinstance(odom, OdomSensor) and odom.twist_frame == "world"
+        # Two-D mode: z, roll, pitch (and the x/y gyro bias they alone would reveal) held at 0.
+        self.two_d = fc.two_d_mode
+        nominal_zero, error_zero = [2], [2, 3, 4]
+        if self.has_bias:
+            nb, eb = self.layout.nominal["gyro_bias"].start, self.layout.error["gyro_bias"].start
+            nominal_zero += [nb, nb + 1]
+            error_zero += [eb, eb + 1]
+        self._planar_nominal = tuple(nominal_zero)
+        self._planar_error = np.array(error_zero)
+        if self.two_d:
+            for p in self.policies:
+                if isinstance(p, (ImuPolicy, PosePolicy)):
+                    p.planar()
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
@@ -477,6 +490,9 @@ class FusionCore:
         else:
             u.angular, u.angular_cov, u.angular_period = _ZERO3, self.default_angular_cov, 0.0
             u.from_gyro = False
+        if self.two_d:  # vertical twist and roll/pitch rates ignored
+            u.linear = (u.linear[0], u.linear[1], 0.0)
+            u.angular = (0.0, 0.0, u.angular[2])
         return u
 
     def _predict(self, s: FilterState, dt: float) -> None:
@@ -513,6 +529,8 @@ class FusionCore:
         # depends on the stamps only (so re-applied samples cap exactly where they did before).
         if gap or math.floor(s.t) != math.floor(t_end):
             s.ekf.cap_covariance(self.caps)
+        if self.two_d:
+            s.ekf.hold_planar(self._planar_nominal, self._planar_error)
 
     def _next_expiry(self, s: FilterState, t: float) -> float:
         """The first moment after t at which a held input's sensor times out (inf if none)."""
@@ -546,7 +564,10 @@ class FusionCore:
             self._predict(s, stamp - s.t)
             s.t = stamp
         self._note_period(s, idx, stamp)
-        return self._handlers[idx](self, s, idx, inp, stamp, emit, late)
+        records = self._handlers[idx](self, s, idx, inp, stamp, emit, late)
+        if self.two_d:
+            s.ekf.hold_planar(self._planar_nominal, self._planar_error)
+        return records
 
     # -- absolute and relative position sensors ---------------------------------------------------------------
 _ZERO3 = (0.0, 0.0, 0.0)

@@ -159,6 +159,10 @@ class ImuPolicy:
         self._gyro_floor = cfg.gyro_min_sigma**2
         self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
 
+    def planar(self) -> None:
+        """Two-D mode: roll and pitch are held at 0, so only a yaw row can be fused."""
+        self._rows = tuple(r for r in self._rows if r == 2)
+
     def _rotate_cov(self, diag: list[float]) -> mat3.Mat3:
         C = mat3.diag(diag[0], diag[1], diag[2])
         if self._identity:
@@ -280,6 +284,11 @@ class PosePolicy:
         self._unknown = [cfg.unknown_sigma[0] ** 2] * 3 + [cfg.unknown_sigma[1] ** 2] * 3
         self._pos_override = None if cfg.position_noise is None else [v * v for v in cfg.position_noise]
         self._ori_override = None if cfg.orientation_noise is None else [v * v for v in cfg.orientation_noise]
+        self._held: tuple[int, ...] = ()
+
+    def planar(self) -> None:
+        """Two-D mode: z, roll and pitch are held at 0 and never fused."""
+        self._held = (2, 3, 4)
 
     def convert(self, s: PoseSample) -> PoseInput:
         if not (_finite(s.position) and _finite(s.orientation)):
@@ -303,7 +312,7 @@ class PosePolicy:
         rows = []
         var = [0.0] * 6
         for i, d in enumerate(diag):
-            if d != d or d >= self._max[i]:
+            if d != d or d >= self._max[i] or i in self._held:
                 continue
             var[i] = d if d > self._floor[i] else self._floor[i]
             rows.append(i)

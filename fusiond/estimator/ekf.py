@@ -110,6 +110,26 @@ class ErrorStateEKF:
         self.P = P
         return True
 
+    def hold_planar(self, nominal_zero: tuple[int, ...], error_zero: np.ndarray) -> None:
+        """Two-D mode (robot_localization's ``two_d_mode``): z, roll and pitch exactly 0.
+
+        The attitude becomes the pure rotation about world z with the same heading, the
+        listed nominal components (z, and what the layout adds, e.g. the x/y gyro bias) are
+        set to 0, and the listed error components lose all variance and correlation: a
+        state held at a value is known exactly, and nothing can be inferred through it.
+        """
+        x = self.x
+        qx, qy, qz, qw = float(x[3]), float(x[4]), float(x[5]), float(x[6])
+        if qx != 0.0 or qy != 0.0:
+            half = 0.5 * math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+            qx, qy, qz, qw = 0.0, 0.0, math.sin(half), math.cos(half)
+            x[3], x[4], x[5], x[6] = qx, qy, qz, qw
+        for i in nominal_zero:
+            x[i] = 0.0
+        P = self.P
+        P[error_zero, :] = 0.0
+        P[:, error_zero] = 0.0
+
     def cap_covariance(self, caps: np.ndarray) -> None:
         """Scale rows/columns whose variance exceeds its cap (keeps correlations, stays PSD)."""
         d = np.diagonal(self.P)

@@ -49,6 +49,8 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
     if not s.heading_ready:
         gps_heading(core, s, cfg, z, inp.cov)
     y, H, R = obs.position(core.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz, error)
+    if core.two_d:  # altitude is not fused: z is held at 0
+        y, H, R = y[:2], H[:2], R[:2, :2]
     if s.heading_ready:
         res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
         channel = "position"
@@ -61,7 +63,8 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
         channel = "position_unaligned"
     if not emit:
         return []
-    return [DiagnosticsRecord(stamp, cfg.name, list(ENU_NAMES), y.tolist(), res.innovation_var, res.nis, 3,
+    return [DiagnosticsRecord(stamp, cfg.name, list(ENU_NAMES[:len(y)]), y.tolist(), res.innovation_var, res.nis,
+                              len(y),
                               res.rejected, channel=channel, late=late)]
 
 
