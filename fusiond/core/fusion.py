@@ -450,6 +450,8 @@ class FusionCore:
         s.gyro_cov = None
         s.gyro_last = None
         s.still_since = None
+        s.bias_window = None
+        s.bias_rejects = ((), (), ())
         s.attitude_ready = False
         s.yaw_offset = {}
         s.adaptive = {}

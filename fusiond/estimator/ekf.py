@@ -110,6 +110,18 @@ class ErrorStateEKF:
         self.P = P
         return True
 
+    def reset_variance(self, i: int, var: float) -> None:
+        """Forget what is known about error component i: its correlations go, its variance is var.
+
+        For a state whose estimate turned out to be wrong (its updates are rejected, yet they
+        agree with each other): re-opening it lets the evidence in again.
+        """
+        P = self.P.copy()
+        P[i, :] = 0.0
+        P[:, i] = 0.0
+        P[i, i] = var
+        self.P = P
+
     def hold_planar(self, nominal_zero: tuple[int, ...], error_zero: np.ndarray) -> None:
         """Two-D mode (robot_localization's ``two_d_mode``): z, roll and pitch exactly 0.
 

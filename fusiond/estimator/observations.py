@@ -75,6 +75,17 @@ def zero_rate(
 _I3 = np.eye(3)
 
 
+def bias_axis(
+    layout: StateLayout, x: np.ndarray, axis: int, mean_rate: float, var: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One gyro axis at rest, averaged over a window: its mean reading is that axis's bias."""
+    n0 = layout.nominal["gyro_bias"].start
+    y = np.array((mean_rate - float(x[n0 + axis]),))
+    H = np.zeros((1, layout.error_dim))
+    H[0, layout.error["gyro_bias"].start + axis] = 1.0
+    return y, H, np.array(((var,),))
+
+
 # -- absolute and relative position/pose (GPS, pose sensors) ------------------------------------------------------
 
 POSITION_NAMES = ("x", "y", "z")

@@ -10,13 +10,21 @@ from ...estimator import rotation as rot
 from ..diagnostics import DiagnosticsRecord
 from ...config import ImuSensor
 from ..sensors import ImuInput
+import structlog
+
+log = structlog.get_logger("fusiond.core")
 
 if TYPE_CHECKING:
     from ..fusion import FusionCore
     from ..state import FilterState
 
-ZERO_RATE_GATE = 5.0  # sqrt(NIS) gate of the standstill bias update: a hand-turned robot is not at rest
-GYRO_COMPONENTS = ["gyro_x", "gyro_y", "gyro_z"]
+ZERO_RATE_GATE = 5.0  # sqrt(NIS) gate of a standstill bias update: a hand-turned robot is not at rest
+GYRO_COMPONENTS = ("gyro_x", "gyro_y", "gyro_z")
+QUIET_SIGMAS = 3.0  # at rest the gyro reads noise + bias: beyond 3 sigma of each (prior bias) it is turning
+MIN_WINDOW_SAMPLES = 5  # gyro samples averaged into one standstill update, at least
+BIAS_MEAN_FLOOR = 1e-4  # rad/s: the mean of a window is no better than this (quantisation, vibration)
+REOPEN_AFTER = 4  # consecutive rejected windows of one axis that agree: the bias estimate is what is wrong
+AGREE_SIGMAS = 4.0  # ... "agree": their spread within this many sigma of one window's mean
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
 
 
@@ -25,20 +33,8 @@ def apply_imu(core: "FusionCore", s: FilterState, idx: int, inp: ImuInput, stamp
     records: list[DiagnosticsRecord] = []
     if inp.gyro is not None:
         s.gyro, s.gyro_cov, s.gyro_last = inp.gyro, inp.gyro_cov, (idx, stamp)
-        odom = core.odom_index
-        resting = (
-            core.has_bias
-            and s.still_since is not None
-            and stamp - s.still_since >= core.cfg.filter.standstill_s
-            and s.last[odom] is not None
-            and stamp - s.last[odom] <= core.timeout(odom, s)
-        )
-        if resting:
-            y, H, R = obs.zero_rate(core.layout, s.ekf.x, inp.gyro, inp.gyro_cov)
-            res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
-            if emit:
-                records.append(DiagnosticsRecord(stamp, cfg.name, GYRO_COMPONENTS, y.tolist(), res.innovation_var,
-                                                 res.nis, 3, res.rejected, channel="gyro_bias", late=late))
+        if core.has_bias:
+            records.extend(learn_bias_at_rest(core, s, cfg, inp, stamp, emit, late))
     if inp.rpy is not None and inp.rows:
         rpy = inp.rpy
         if not s.attitude_ready:
@@ -68,6 +64,70 @@ def apply_imu(core: "FusionCore", s: FilterState, idx: int, inp: ImuInput, stamp
             records.append(DiagnosticsRecord(stamp, cfg.name, [obs.RPY_NAMES[i] for i in inp.rows], y.tolist(),
                                              res.innovation_var, res.nis, len(inp.rows), res.rejected,
                                              channel="orientation", late=late))
+    return records
+
+
+def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: ImuInput, stamp: float,
+                       emit: bool, late: bool) -> list[DiagnosticsRecord]:
+    """At a confirmed standstill the gyro reads its bias: learn it, per axis, robustly.
+
+    Some drives report exactly zero speed while the vehicle still coasts or turns, so
+    the odometry alone does not confirm a standstill: the gyro must be quiet too (each
+    axis within QUIET_SIGMAS of its noise plus the prior bias range, judged on the raw
+    reading so that a wrong bias estimate cannot veto it). Samples are averaged over a
+    window of ``standstill_s`` and each window makes one scalar update per axis, gated on
+    its own: a wrong x/y bias (learned through roll/pitch) no longer blocks the z bias that
+    drives heading. When an axis's windows keep being rejected while agreeing with each
+    other, the estimate (locked in by an earlier false standstill) is what is wrong: its
+    variance is re-opened to the prior and the evidence let in, so one bad update cannot
+    lock out every later one.
+    """
+    fc = core.cfg.filter
+    odom = core.odom_index
+    resting = (
+        s.still_since is not None
+        and stamp - s.still_since >= fc.standstill_s
+        and s.last[odom] is not None
+        and stamp - s.last[odom] <= core.timeout(odom, s)
+    )
+    g, gc = inp.gyro, inp.gyro_cov
+    if not resting or any(abs(g[i]) > QUIET_SIGMAS * (math.sqrt(gc[4 * i]) + fc.gyro_bias_sigma) for i in range(3)):
+        s.bias_window = None  # moving, or turning with the wheels at rest: not a standstill
+        return []
+    w = s.bias_window
+    if w is None:
+        w = (stamp, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    w = (w[0], w[1] + 1, w[2] + g[0], w[3] + g[1], w[4] + g[2], w[5] + gc[0], w[6] + gc[4], w[7] + gc[8])
+    if w[1] < MIN_WINDOW_SAMPLES or stamp - w[0] < fc.standstill_s:
+        s.bias_window = w
+        return []
+    s.bias_window = None
+    n = w[1]
+    records = []
+    rejects = list(s.bias_rejects)
+    e0 = core.layout.error["gyro_bias"].start
+    for axis in (2,) if core.two_d else (0, 1, 2):
+        mean = w[2 + axis] / n
+        var = max(w[5 + axis] / (n * n), BIAS_MEAN_FLOOR**2)
+        y, H, R = obs.bias_axis(core.layout, s.ekf.x, axis, mean, var)
+        res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
+        if res.rejected:
+            recent = (rejects[axis] + (mean,))[-REOPEN_AFTER:]
+            if len(recent) == REOPEN_AFTER and max(recent) - min(recent) <= AGREE_SIGMAS * math.sqrt(var):
+                log.warning("gyro_bias_reopened", sensor=cfg.name, axis=GYRO_COMPONENTS[axis], stamp=stamp,
+                            estimate=float(s.ekf.x[core.layout.nominal["gyro_bias"].start + axis]), at_rest=mean)
+                s.ekf.reset_variance(e0 + axis, fc.gyro_bias_sigma**2)
+                y, H, R = obs.bias_axis(core.layout, s.ekf.x, axis, mean, var)
+                res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
+                recent = ()
+            rejects[axis] = recent
+        else:
+            rejects[axis] = ()
+        if emit:
+            records.append(DiagnosticsRecord(stamp, cfg.name, [GYRO_COMPONENTS[axis]], y.tolist(),
+                                             res.innovation_var, res.nis, 1, res.rejected, channel="gyro_bias",
+                                             late=late))
+    s.bias_rejects = tuple(rejects)
     return records
 
 
