@@ -102,6 +102,8 @@ class ImuSensor(_Sensor, tag="imu"):
     orientation_max_sigma: float = 3.0  # above: "not measured"
     gyro_min_sigma: float = 0.0005  # floor, rad/s
     gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
+    tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer
+    gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics
 
 
 POSE_MSGTYPES = (

@@ -18,6 +18,7 @@ from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
 
 T0 = 1000.0
+GRAVITY = 9.80665
 
 
 @dataclass
@@ -38,6 +39,8 @@ class RestWorld:
     orientation_sigma: float = 0.002
     roll_drift: float = 0.0  # rad/s: the IMU's reported roll wanders away from the truth
     wheel_sigma: float = 0.01
+    accel_sigma: float | None = None  # the IMU reports its specific force with this noise (m/s^2)
+    orientation_absent: bool = False  # orientation_covariance[0] = -1: the IMU gives no orientation
     seed: int = 11
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
@@ -69,8 +72,13 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 q = rot.from_rpy(w.roll_drift * t + rng.normal(0, os_), rng.normal(0, os_), yaw + rng.normal(0, os_))
                 b = w.gyro_bias
                 gyro = (b[0] + rng.normal(0, gs), b[1] + rng.normal(0, gs), seg.yaw_rate + b[2] + rng.normal(0, gs))
-                out.append(ImuSample("imu", T0 + t, q, (os_**2, 0, 0, 0, os_**2, 0, 0, 0, os_**2), gyro,
-                                     (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
+                ocov = (-1.0,) + (0.0,) * 8 if w.orientation_absent else (os_**2, 0, 0, 0, os_**2, 0, 0, 0, os_**2)
+                acc, acov = (0.0, 0.0, 0.0), (-1.0,) + (0.0,) * 8
+                if w.accel_sigma is not None:  # flat ground: gravity up, centripetal v w to the left
+                    sa = w.accel_sigma
+                    acc = (rng.normal(0, sa), seg.speed * seg.yaw_rate + rng.normal(0, sa), GRAVITY + rng.normal(0, sa))
+                    acov = (sa**2, 0, 0, 0, sa**2, 0, 0, 0, sa**2)
+                out.append(ImuSample("imu", T0 + t, q, ocov, gyro, (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2), acc, acov))
                 next_imu += 1.0 / w.imu_rate
             x += seg.speed * math.cos(yaw) * dt
             y += seg.speed * math.sin(yaw) * dt

@@ -182,6 +182,12 @@ class FusionCore:
             for p in self.policies:
                 if isinstance(p, (ImuPolicy, PosePolicy)):
                     p.planar()
+        # Without any tilt reference (no IMU roll/pitch, no accelerometer, no absolute pose) the
+        # gyro's x/y rates would integrate their biases into tens of degrees of tilt: the robot is
+        # taken as planar instead (roll/pitch rates not integrated), and the summary says so.
+        self.tilt_reference = self.two_d or any(
+            (isinstance(p, ImuPolicy) and p.gives_tilt) or (isinstance(p, PosePolicy) and not p.cfg.differential)
+            for p in self.policies)
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
@@ -495,7 +501,13 @@ class FusionCore:
         if self.two_d:  # vertical twist and roll/pitch rates ignored
             u.linear = (u.linear[0], u.linear[1], 0.0)
             u.angular = (0.0, 0.0, u.angular[2])
+        elif not self.tilt_reference:  # planar: nothing could correct a tilt the rates build up
+            u.angular = (0.0, 0.0, u.angular[2])
         return u
+
+    def inputs_at(self, s: FilterState) -> MotionInput:
+        """The motion inputs held at the state's time (the twist and rate a sensor model may need)."""
+        return self._inputs(s)
 
     def _predict(self, s: FilterState, dt: float) -> None:
         """Predict over dt from s.t, in segments: no input outlives its sensor.

@@ -56,6 +56,7 @@ class ImuInput:
     rows: tuple[int, ...]
     gyro: tuple[float, float, float] | None
     gyro_cov: tuple[float, ...] | None
+    accel: tuple[float, float, float] | None = None  # base-frame specific force, when gravity gives the tilt
 
 
 def _unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
@@ -158,10 +159,17 @@ class ImuPolicy:
         self._ori_override = None if cfg.orientation_noise is None else [s * s for s in cfg.orientation_noise]
         self._gyro_floor = cfg.gyro_min_sigma**2
         self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
+        self._gravity_tilt = cfg.tilt_from_gravity
+
+    @property
+    def gives_tilt(self) -> bool:
+        """Can this IMU's messages constrain roll/pitch (orientation rows or gravity)?"""
+        return 0 in self._rows or 1 in self._rows or self._gravity_tilt
 
     def planar(self) -> None:
         """Two-D mode: roll and pitch are held at 0, so only a yaw row can be fused."""
         self._rows = tuple(r for r in self._rows if r == 2)
+        self._gravity_tilt = False
 
     def _rotate_cov(self, diag: list[float]) -> mat3.Mat3:
         C = mat3.diag(diag[0], diag[1], diag[2])
@@ -211,9 +219,16 @@ class ImuPolicy:
                 gyro_cov = self._rotate_cov(var)
         elif self.cfg.angular_velocity:
             raise Rejected("bad_covariance", "angular velocity covariance must have 9 entries")
-        if rpy is None and gyro is None:
-            raise Rejected("nothing_to_fuse", "no orientation and no angular velocity in the message")
-        return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov)
+        accel = None
+        if self._gravity_tilt and not (0 in rows or 1 in rows):
+            a = s.linear_acceleration
+            ac = s.linear_acceleration_covariance
+            # [0] == -1: no accelerometer (sensor_msgs/Imu); an all-zero vector: not filled in
+            if len(ac) == 9 and ac[0] != -1.0 and _finite(a) and a != (0.0, 0.0, 0.0):
+                accel = a if self._identity else mat3.apply(self.R_ext, a)
+        if rpy is None and gyro is None and accel is None:
+            raise Rejected("nothing_to_fuse", "no orientation, angular velocity or acceleration in the message")
+        return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov, accel)
 
 
 @dataclass(slots=True)

@@ -49,6 +49,12 @@ def apply(A: Mat3, v: tuple[float, float, float]) -> tuple[float, float, float]:
     return (A[0] * x + A[1] * y + A[2] * z, A[3] * x + A[4] * y + A[5] * z, A[6] * x + A[7] * y + A[8] * z)
 
 
+def apply_transposed(A: Mat3, v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """A^T v (for a rotation: back into the body frame)."""
+    return (A[0] * v[0] + A[3] * v[1] + A[6] * v[2], A[1] * v[0] + A[4] * v[1] + A[7] * v[2],
+            A[2] * v[0] + A[5] * v[1] + A[8] * v[2])
+
+
 def flat(nested: tuple) -> Mat3:
     """Nested 3x3 (as ``sandwich`` returns) to a row-major 9-tuple."""
     return (*nested[0], *nested[1], *nested[2])

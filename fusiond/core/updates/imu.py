@@ -6,6 +6,7 @@ import math
 from typing import TYPE_CHECKING
 
 from ...estimator import observations as obs
+from ...estimator import mat3
 from ...estimator import rotation as rot
 from ..diagnostics import DiagnosticsRecord
 from ...config import ImuSensor
@@ -18,6 +19,8 @@ if TYPE_CHECKING:
     from ..fusion import FusionCore
     from ..state import FilterState
 
+GRAVITY = 9.80665  # m/s^2, standard gravity
+GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
 ZERO_RATE_GATE = 5.0  # sqrt(NIS) gate of a standstill bias update: a hand-turned robot is not at rest
 GYRO_COMPONENTS = ("gyro_x", "gyro_y", "gyro_z")
 QUIET_SIGMAS = 3.0  # at rest the gyro reads noise + bias: beyond 3 sigma of each (prior bias) it is turning
@@ -53,18 +56,61 @@ def apply_imu(core: "FusionCore", s: FilterState, idx: int, inp: ImuInput, stamp
         res = s.ekf.update(y, H, R * scale if scale != 1.0 else R, cfg.mahalanobis_threshold,
                            core.tilt_mask if tilt_only else None)
         if tilt_only and not res.rejected:
-            # A world-x/y correction of a tilted body still turns its Euler yaw a little
-            # (second order); a rotation about world z puts the heading back exactly and
-            # leaves roll and pitch as the update set them.
-            q = tuple(s.ekf.x[3:7].tolist())
-            s.ekf.x[3:7] = rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q)
+            restore_heading(s, heading)
         if cfg.adaptive:
             adapt(core, s, cfg, "orientation", res.nis, len(inp.rows))
         if emit:
             records.append(DiagnosticsRecord(stamp, cfg.name, [obs.RPY_NAMES[i] for i in inp.rows], y.tolist(),
                                              res.innovation_var, res.nis, len(inp.rows), res.rejected,
                                              channel="orientation", late=late))
+    if inp.accel is not None:
+        records.extend(tilt_from_gravity(core, s, cfg, inp.accel, stamp, emit, late))
     return records
+
+
+def restore_heading(s: FilterState, heading: float) -> None:
+    """After a roll/pitch-only update: a world-x/y correction of a tilted body still turns
+    its Euler yaw a little (second order); a rotation about world z puts the heading back
+    exactly and leaves roll and pitch as the update set them."""
+    q = tuple(s.ekf.x[3:7].tolist())
+    s.ekf.x[3:7] = rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q)
+
+
+def tilt_from_gravity(core: "FusionCore", s: FilterState, cfg: ImuSensor, accel: tuple[float, float, float],
+                      stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+    """Roll and pitch from the accelerometer, when the IMU gives no orientation.
+
+    At low dynamics the accelerometer reads the specific force R^T (0, 0, g) plus the
+    centripetal term w x v: that term is removed with the gyro rate and the odometry
+    twist held now, and a sample whose remaining magnitude is not g (braking,
+    bumps) is skipped. Without this an ``orientation = "off"`` IMU left the tilt to
+    integrate the gyro's x/y bias: tens of degrees and metres of z on a flat floor.
+    """
+    u = core.inputs_at(s)
+    wx, wy, wz = u.angular
+    vx, vy, vz = u.linear
+    if u.world_frame:  # the twist is in the world: into the body
+        vx, vy, vz = mat3.apply_transposed(rot.matrix9(tuple(s.ekf.x[3:7].tolist())), (vx, vy, vz))
+    ax = accel[0] - (wy * vz - wz * vy)
+    ay = accel[1] - (wz * vx - wx * vz)
+    az = accel[2] - (wx * vy - wy * vx)
+    if abs(math.sqrt(ax * ax + ay * ay + az * az) - GRAVITY) > GRAVITY_DYNAMIC_GATE:
+        return []
+    roll = math.atan2(ay, az)
+    pitch = math.atan2(-ax, math.hypot(ay, az))
+    if not s.attitude_ready:
+        initialise_attitude(core, s, (roll, pitch, 0.0), False)
+    var = cfg.gravity_tilt_noise**2
+    y, H, R = obs.orientation(core.layout, s.ekf.x, (roll, pitch, 0.0), (var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var),
+                              (0, 1))
+    heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
+    res = s.ekf.update(y, H, R, cfg.mahalanobis_threshold, core.tilt_mask)
+    if not res.rejected:
+        restore_heading(s, heading)
+    if not emit:
+        return []
+    return [DiagnosticsRecord(stamp, cfg.name, ["roll", "pitch"], y.tolist(), res.innovation_var, res.nis, 2,
+                              res.rejected, channel="gravity", late=late)]
 
 
 def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: ImuInput, stamp: float,
@@ -106,7 +152,8 @@ def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: 
     records = []
     rejects = list(s.bias_rejects)
     e0 = core.layout.error["gyro_bias"].start
-    for axis in (2,) if core.two_d else (0, 1, 2):
+    # x/y biases matter only where a tilt reference can see what they do (and two_d holds them at 0)
+    for axis in (0, 1, 2) if core.tilt_reference and not core.two_d else (2,):
         mean = w[2 + axis] / n
         var = max(w[5 + axis] / (n * n), BIAS_MEAN_FLOOR**2)
         y, H, R = obs.bias_axis(core.layout, s.ekf.x, axis, mean, var)
