@@ -205,6 +205,7 @@ class FusionCore:
         else:
             self._suspect = 0
 
+        resets = self.state.ekf.resets  # the newest timeline's covariance resets before this sample
         key = (stamp, idx)
         h = self.history
         pos, duplicate = h.slot(key)
@@ -220,6 +221,8 @@ class FusionCore:
         if late:
             h.reapply_after(pos, self.state, self._reapply)
         h.trim(self.cfg.filter.history_s, self.cfg.filter.history_max)
+        if self.state.ekf.resets > resets:
+            self._covariance_reset(self.state.ekf.resets - resets)
         st.applied += 1
         if late:
             st.late += 1
@@ -426,16 +429,18 @@ class FusionCore:
         gap = dt > self.cfg.filter.gap_s
         if gap:
             Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
-        if not s.ekf.propagate(x, F, Q):
-            self._covariance_reset(s)
+        s.ekf.propagate(x, F, Q)  # a reset is counted in ingest, once: re-applications repeat it
         # Without a gap P grows slowly: capping once per second of message time is enough, and
         # depends on the stamps only (so re-applied samples cap exactly where they did before).
         if gap or math.floor(s.t) != math.floor(s.t + dt):
             s.ekf.cap_covariance(self.caps)
 
-    def _covariance_reset(self, s: FilterState) -> None:
-        self.covariance_resets += 1
-        log.error("covariance_reset", stamp=s.t, reason="non-finite covariance")
+    def _covariance_reset(self, n: int) -> None:
+        """Count resets (propagate's and update's) by the EKF's own counter, which snapshots carry:
+        the resets a sample added to the newest timeline, so a prediction re-applied after a late
+        sample does not count its reset again."""
+        self.covariance_resets += n
+        log.error("covariance_reset", stamp=self.state.t, count=n, reason="non-finite covariance")
 
     def _note_period(self, s: FilterState, idx: int, stamp: float) -> None:
         last = s.last[idx]

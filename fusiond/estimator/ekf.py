@@ -23,6 +23,7 @@ class UpdateResult(msgspec.Struct, gc=False):
     innovation_var: list[float]
     rejected: bool
     singular: bool = False  # S was not positive definite: update skipped
+    covariance_reset: bool = False  # P went non-finite and was reset (counted in ``ErrorStateEKF.resets``)
 
 
 class ErrorStateEKF:
@@ -32,7 +33,9 @@ class ErrorStateEKF:
         self.layout = layout
         self.x = layout.initial_state() if x is None else np.array(x, dtype=float)
         self.P = layout.initial_covariance() if P is None else np.array(P, dtype=float)
-        self.resets = 0  # covariance resets after a non-finite value
+        # Covariance resets after a non-finite value, in propagate and update alike. It travels
+        # with copies, so a history snapshot knows how many resets its timeline has had.
+        self.resets = 0
         self._mask: np.ndarray | None = None
         self._weights = np.ones((layout.error_dim, layout.error_dim))
 
@@ -86,8 +89,8 @@ class ErrorStateEKF:
             dx *= mask
             P_new = P - C * self._mask_weights(mask)
         self.layout.boxplus(self.x, dx)
-        self._store(P_new)
-        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False)
+        reset = not self._store(P_new)
+        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 
     def _mask_weights(self, mask: np.ndarray) -> np.ndarray:
         if self._mask is not mask:
