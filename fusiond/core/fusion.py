@@ -27,6 +27,8 @@ import numpy as np
 import structlog
 
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from .. import reasons
+from ..errors import CoreError
 from ..estimator import (
     ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
     predict,
@@ -170,16 +172,16 @@ class FusionCore:
     def ingest(self, sample: Sample) -> Step:
         idx = self.index.get(sample.sensor)
         if idx is None:
-            return Step(sample.sensor, False, "unknown_sensor")
+            return Step(sample.sensor, False, reasons.UNKNOWN_SENSOR)
         st = self.stats[idx]
         st.received += 1
         stamp = sample.stamp
         if not (math.isfinite(stamp) and stamp > 0.0):
-            return self._drop(idx, "invalid_stamp", stamp)
+            return self._drop(idx, reasons.INVALID_STAMP, stamp)
         policy = self.policies[idx]
         try:
             if type(sample) is not self._sample_types[idx]:
-                raise Rejected("wrong_type", f"expected {self._sample_types[idx].__name__}")
+                raise Rejected(reasons.WRONG_TYPE, f"expected {self._sample_types[idx].__name__}")
             inp = policy.convert(sample)  # type: ignore[arg-type]
         except Rejected as r:
             return self._drop(idx, r.reason, stamp)
@@ -192,7 +194,7 @@ class FusionCore:
         if t is not None and (stamp < t - jump or stamp > t + jump):
             self._suspect += 1
             if self._suspect < self.cfg.filter.jump_confirm:
-                return self._drop(idx, "stale_stamp" if stamp < t else "future_stamp", stamp)
+                return self._drop(idx, reasons.STALE_STAMP if stamp < t else reasons.FUTURE_STAMP, stamp)
             self._suspect = 0
             if stamp < t:
                 log.warning("time_jump_reset", sensor=sample.sensor, stamp=stamp, filter_time=t)
@@ -210,11 +212,11 @@ class FusionCore:
         h = self.history
         pos, duplicate = h.slot(key)
         if duplicate:
-            return self._drop(idx, "duplicate_stamp", stamp)
+            return self._drop(idx, reasons.DUPLICATE_STAMP, stamp)
         late = h.is_late(pos)
         if late:
             if h.too_old(stamp):
-                return self._drop(idx, "too_old", stamp)
+                return self._drop(idx, reasons.TOO_OLD, stamp)
             self.state = h.state_before(pos)
         records = self._apply(self.state, idx, inp, stamp, emit=True, late=late)
         h.insert(pos, key, (idx, inp, stamp), self.state)
@@ -278,7 +280,7 @@ class FusionCore:
         """The newest estimate (at filter time)."""
         s = self.state
         if s is None or s.t is None:
-            raise RuntimeError("no sample has been fused yet")
+            raise CoreError("no sample has been fused yet")
         x, P = s.ekf.x, s.ekf.P
         u = self._inputs(s)
         linear, angular = u.linear, u.angular
@@ -316,7 +318,7 @@ class FusionCore:
     def pose(self) -> tuple[float, np.ndarray]:
         """(filter time, nominal [x y z qx qy qz qw]) without building a full Estimate."""
         if not self.initialised:
-            raise RuntimeError("no sample has been fused yet")
+            raise CoreError("no sample has been fused yet")
         return self.state.t, self.state.ekf.x[0:7]
 
     @property
