@@ -19,11 +19,21 @@ import subprocess
 import sys
 import time
 import timeit
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from .config import Config
+
+# In-process timings are CPU time of this thread, not wall time: on a shared machine other
+# processes' load stretches wall time but not the work this thread does (both sides of a
+# ratio are timed alike). Whole-process runs report wall time and the child's CPU time.
+CLOCK = time.thread_time
+
+
+def _best_us(fn: Callable[[], object], number: int, repeat: int) -> float:
+    return min(timeit.Timer(fn, timer=CLOCK).repeat(repeat=repeat, number=number)) / number * 1e6
 
 
 def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
@@ -56,9 +66,88 @@ def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
         update_only()
 
     def best(fn) -> float:
-        return min(timeit.repeat(fn, number=number, repeat=repeat)) / number * 1e6
+        return _best_us(fn, number, repeat)
 
     return {"predict_us": best(predict_only), "update_us": best(update_only), "predict_update_us": best(step)}
+
+
+def tight_step(dt: float = 0.01) -> Callable[[], None]:
+    """A tight numpy step of the estimator's model, as a careful user would write it for this one
+    layout (p, q, gyro bias: 9 error states) and these inputs: body twist and gyro minus bias
+    drive the pose (3x3 algebra on floats), F's two changing blocks written into a preallocated F,
+    isotropic input noise added on Q's diagonal, P = F P F^T + Q, then the masked roll/pitch update
+    with H on the two attitude columns and a closed-form 2x2 Cholesky. The yardstick of
+    `bench_estimator`: the same maths, none of the generality (layouts, input blocks, gating,
+    diagnostics, covariance checks)."""
+    import math
+
+    from .estimator import rotation as rot
+
+    wx, wy, wz = 0.01, -0.02, 0.2
+    period = 0.02
+    sig_v, sig_w = 1e-3, 2.5e-5  # isotropic input variances (per message, held for `period`)
+    noise = np.full(9, 4e-6)
+    noise[6:9] = 2e-5**2
+    q_diag = np.arange(9) * 10  # flat indices of the diagonal
+    q_noise = noise * dt
+    q_noise[0:3] += sig_v * dt * period  # G Sigma G^T T/dt with G = R dt: sigma^2 dt T
+    q_noise[3:6] += sig_w * dt * period
+    st: dict = {"p": (0.0, 0.0, 0.0), "q": (0.0, 0.0, 0.0, 1.0), "b": (0.0, 0.0, 0.0),
+                "P": np.diag([0.0] * 3 + [0.01] * 3 + [1e-4] * 3)}
+    F = np.eye(9)
+    Q = np.zeros((9, 9))
+    Hs = np.zeros((2, 2))
+    keep = np.ones(9)
+    keep[[0, 1, 2, 5, 8]] = 0.0  # roll/pitch may move roll, pitch and the x/y bias only
+    weights = 1.0 - np.outer(1.0 - keep, 1.0 - keep)
+    z_rp = (0.001, -0.002)
+
+    def step() -> None:
+        qx, qy, qz, qw = st["q"]
+        bx, by, bz = st["b"]
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = rot.matrix9((qx, qy, qz, qw))
+        dpx, dpy, dpz = 0.5 * r0 * dt, 0.5 * r3 * dt, 0.5 * r6 * dt  # R (0.5, 0, 0) dt
+        p = st["p"]
+        st["p"] = (p[0] + dpx, p[1] + dpy, p[2] + dpz)
+        q1 = rot.normalize(rot.mul((qx, qy, qz, qw), rot.exp((wx - bx) * dt, (wy - by) * dt, (wz - bz) * dt)))
+        R1 = rot.matrix9(q1)
+        F[0:3, 3:6] = ((0.0, dpz, -dpy), (-dpz, 0.0, dpx), (dpy, -dpx, 0.0))
+        F[3:6, 6:9] = ((-R1[0] * dt, -R1[1] * dt, -R1[2] * dt), (-R1[3] * dt, -R1[4] * dt, -R1[5] * dt),
+                       (-R1[6] * dt, -R1[7] * dt, -R1[8] * dt))  # Jr ~ I for a 2 mrad step
+        Q.flat[q_diag] = q_noise
+        P = np.dot(np.dot(F, st["P"]), F.T)
+        P += Q
+        x, y, z, w = q1
+        roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+        yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        c, s = math.cos(yaw), math.sin(yaw)
+        Hs[0, 0], Hs[0, 1], Hs[1, 0], Hs[1, 1] = c, s, -s, c  # global x/y tilt seen through the heading
+        PHt = np.dot(P[:, 3:5], Hs.T)
+        (s00, s01), (s10, s11) = np.dot(Hs, PHt[3:5]).tolist()
+        a00 = math.sqrt(s00 + 1e-6)
+        l10 = s10 / a00
+        l11 = math.sqrt(s11 + 1e-6 - l10 * l10)
+        i00, i11 = 1.0 / a00, 1.0 / l11
+        i10 = -l10 * i00 * i11
+        e0, e1 = z_rp[0] - roll, z_rp[1] - pitch
+        W = np.dot(((i00, 0.0), (i10, i11)), PHt.T)
+        dx = np.dot((i00 * e0, i10 * e0 + i11 * e1), W)
+        C = np.dot(W.T, W)
+        C *= weights
+        P -= C
+        st["P"] = P
+        d = dx.tolist()  # masked: position, yaw and z bias rows of the gain are zero
+        st["q"] = rot.normalize(rot.mul(rot.exp(d[3], d[4], 0.0), q1))
+        st["b"] = (bx + d[6], by + d[7], bz)
+
+    return step
+
+
+def bench_yardstick(repeat: int = 7, number: int = 3000) -> dict[str, float]:
+    """us per step of `tight_step` (min over repeats, as `bench_estimator`)."""
+    step = tight_step()
+    return {"tight_numpy_step_us": _best_us(step, number, repeat)}
 
 
 def bench_sensors(repeat: int = 5, number: int = 2000, seconds: float = 20.0) -> dict[str, float]:
@@ -96,7 +185,7 @@ def bench_sensors(repeat: int = 5, number: int = 2000, seconds: float = 20.0) ->
         ekf.update(y, H, R)
 
     def best(fn) -> float:
-        return min(timeit.repeat(fn, number=number, repeat=repeat)) / number * 1e6
+        return _best_us(fn, number, repeat)
 
     out = {"gps_update_us": best(gps_update), "pose_update_us": best(pose_update),
            "pose_delta_update_us": best(delta_update)}
@@ -138,7 +227,7 @@ gyro_scale_estimation = true
         "pose_differential": base + '[[sensors]]\nname = "pose"\nkind = "pose"\nkey = "pose"\ndifferential = true\n',
         "odom_imu_only": base,
     }
-    clock = time.perf_counter
+    clock = CLOCK
     for label, text in configs.items():
         cfg = loads(text)
         names = {s.name for s in cfg.sensors}
@@ -189,9 +278,9 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
         return n
 
     def timed(fn) -> tuple[float, object]:
-        t0 = time.perf_counter()
+        t0 = CLOCK()
         out = fn()
-        return time.perf_counter() - t0, out
+        return CLOCK() - t0, out
 
     rosbags_s, n = min(timed(rosbags_decode) for _ in range(repeat))
     with open_bag_samples([bag], cfg.sensors) as b:
@@ -214,34 +303,119 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
     }
 
 
-def bench_process(bag: Path, config: Path, topics: tuple[str, str], repeat: int = 3) -> dict[str, float]:
+def _run_child(cmd: list[str]) -> tuple[float, float]:
+    """(wall s, CPU s of the child: user + system) of one command run to completion."""
+    import os
+
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode() if proc.stderr else ""
+    if proc.stderr:
+        proc.stderr.close()
+    if proc.returncode != 0:
+        raise RuntimeError(f"{cmd[:4]} failed ({proc.returncode}): {err[-500:]}")
+    return wall, usage.ru_utime + usage.ru_stime
+
+
+def bench_process(bag: Path, config: Path, topics: tuple[str, str], repeat: int = 3,
+                  label: str = "") -> dict[str, float]:
+    """Whole `fusiond replay` process beside the bare numpy script on the same bag, alternated so
+    that both see the same load; medians of wall time and of the child's CPU time."""
     root = Path(__file__).resolve().parents[1]
     bare = root / "scripts" / "bare_ekf_replay.py"
+    fusiond_cmd = [sys.executable, "-m", "fusiond", "replay", str(bag), "--config", str(config), "--quiet"]
+    bare_cmd = [sys.executable, str(bare), str(bag), *topics]
+    runs: dict[str, list[tuple[float, float]]] = {"fusiond": [], "bare": []}
+    for _ in range(repeat):
+        runs["fusiond"].append(_run_child(fusiond_cmd))
+        if bare.is_file():
+            runs["bare"].append(_run_child(bare_cmd))
+    sfx = f"_{label}" if label else ""
+    out = {f"fusiond_replay{sfx}_s": statistics.median(w for w, _ in runs["fusiond"]),
+           f"fusiond_replay{sfx}_cpu_s": statistics.median(c for _, c in runs["fusiond"])}
+    if runs["bare"]:
+        out[f"bare_numpy_script{sfx}_s"] = statistics.median(w for w, _ in runs["bare"])
+        out[f"bare_numpy_script{sfx}_cpu_s"] = statistics.median(c for _, c in runs["bare"])
+    return out
 
-    def wall(cmd: list[str]) -> float:
-        times = []
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            subprocess.run(cmd, check=True, capture_output=True)
-            times.append(time.perf_counter() - t0)
-        return statistics.median(times)
 
-    out = {"fusiond_replay_s": wall([sys.executable, "-m", "fusiond", "replay", str(bag), "--config", str(config),
-                                     "--quiet"])}
-    if bare.is_file():
-        out["bare_numpy_script_s"] = wall([sys.executable, str(bare), str(bag), *topics])
+def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: int = 15_000) -> Path:
+    """A ROS 2 bag of a robot driving a circle: odometry 50 Hz, IMU 100 Hz (5 ms behind), ``messages``
+    in all, through the codecs' own CDR encoders (what a live publisher puts on the wire)."""
+    import math
+
+    from rosbags.rosbag2 import Writer
+
+    from .estimator import rotation as rot
+    from .samples import ImuSample, OdomSample
+    from .transport.codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, encode_odom_sample
+
+    cov36 = tuple(1e-3 if i % 7 == 0 else 0.0 for i in range(36))
+    ocov = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
+    gcov = (2.5e-5, 0.0, 0.0, 0.0, 2.5e-5, 0.0, 0.0, 0.0, 2.5e-5)
+    with Writer(path, version=9) as writer:
+        odom = writer.add_connection(odom_topic, ODOMETRY, typestore=TYPESTORE)
+        imu = writer.add_connection(imu_topic, IMU, typestore=TYPESTORE)
+        n = k = 0
+        while n < messages:
+            t = 1000.0 + 0.01 * k
+            if k % 2 == 0:
+                writer.write(odom, int(t * 1e9), encode_odom_sample(
+                    OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.2), cov36), "ros2-cdr"))
+                n += 1
+            if n < messages:
+                ti = t + 0.005
+                q = rot.from_rpy(0.01 * math.sin(ti), -0.01 * math.cos(ti), 0.2 * (ti - 1000.0))
+                writer.write(imu, int(ti * 1e9), encode_imu_sample(
+                    ImuSample("imu", ti, q, ocov, (0.0, 0.0, 0.2), gcov), "ros2-cdr"))
+                n += 1
+            k += 1
+    return path
+
+
+def targets(result: dict[str, dict[str, float]]) -> dict[str, float]:
+    """Issue 13's ratios, each against its yardstick from the same run (targets in the names)."""
+    out: dict[str, float] = {}
+    est, yard = result.get("estimator", {}), result.get("yardstick", {})
+    if est and yard:
+        out["estimator_step_vs_tight_numpy (<=1.5)"] = est["predict_update_us"] / yard["tight_numpy_step_us"]
+    rep = result.get("replay", {})
+    if rep:
+        out["replay_in_process_vs_rosbags_decode (>=0.5)"] = rep["replay_vs_rosbags"]
+    proc = result.get("process", {})
+    for sfx in ("", "_synthetic"):
+        f, b = proc.get(f"fusiond_replay{sfx}_s"), proc.get(f"bare_numpy_script{sfx}_s")
+        if f and b:
+            name = "jackal" if not sfx else "synthetic_15k"
+            out[f"replay_process_vs_bare_{name}_wall (<=1.0)"] = f / b
+            out[f"replay_process_vs_bare_{name}_cpu (<=1.0)"] = (proc[f"fusiond_replay{sfx}_cpu_s"]
+                                                                 / proc[f"bare_numpy_script{sfx}_cpu_s"])
     return out
 
 
 def run(bag: Path, config: Path, cfg: Config, quick: bool = False) -> dict[str, dict[str, float]]:
-    result = {"estimator": bench_estimator(repeat=3 if quick else 7, number=1000 if quick else 3000)}
+    import tempfile
+
+    reps, number = (3, 1000) if quick else (7, 3000)
+    result = {"estimator": bench_estimator(repeat=reps, number=number),
+              "yardstick": bench_yardstick(repeat=reps, number=number)}
     result["sensors"] = bench_sensors(repeat=3 if quick else 5, number=500 if quick else 2000,
                                       seconds=5.0 if quick else 20.0)
+    odom = next(s for s in cfg.sensors if type(s).__name__ == "OdomSensor")
+    imu = next((s for s in cfg.sensors if type(s).__name__ == "ImuSensor"), odom)
+    topics = ("/" + odom.key, "/" + imu.key)
+    result["process"] = {}
     if bag.is_file():
         result["replay"] = bench_replay(bag, cfg, repeat=1 if quick else 3)
-        odom = next(s for s in cfg.sensors if type(s).__name__ == "OdomSensor")
-        imu = next((s for s in cfg.sensors if type(s).__name__ == "ImuSensor"), odom)
-        result["process"] = bench_process(bag, config, ("/" + odom.key, "/" + imu.key), repeat=1 if quick else 3)
+        result["process"].update(bench_process(bag, config, topics, repeat=1 if quick else 3))
+    with tempfile.TemporaryDirectory(prefix="fusiond-bench-") as tmp:
+        synthetic = write_synthetic_bag(Path(tmp) / "synthetic", *topics)
+        result["process"].update(bench_process(synthetic, config, topics, repeat=1 if quick else 3,
+                                               label="synthetic"))
+    result["targets"] = targets(result)
     return result
 
 
@@ -249,5 +423,5 @@ def format_table(result: dict[str, dict[str, float]]) -> str:
     lines = []
     for section, values in result.items():
         for k, v in values.items():
-            lines.append(f"{section:<10} {k:<40} {v:>12,.2f}")
+            lines.append(f"{section:<10} {k:<52} {v:>12,.2f}")
     return "\n".join(lines)

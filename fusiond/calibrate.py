@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import ImuSensor
+from .errors import CalibrationError
 from .estimator import rotation as rot
 from .samples import ImuSample
 
@@ -71,7 +72,7 @@ def _detrended_std(t: np.ndarray, values: np.ndarray) -> tuple[float, float]:
 
 def calibrate(samples: list[ImuSample], cfg: ImuSensor | None = None) -> Calibration:
     if len(samples) < 10:
-        raise ValueError(f"need at least 10 IMU samples to calibrate, got {len(samples)}")
+        raise CalibrationError(f"need at least 10 IMU samples to calibrate, got {len(samples)}")
     samples = sorted(samples, key=lambda s: s.stamp)
     t = np.array([s.stamp for s in samples])
     duration = float(t[-1] - t[0])

@@ -14,14 +14,12 @@ from typing import Literal
 
 import msgspec
 
+from .errors import ConfigError  # defined with the other layers' errors; importable from here
+
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
-
-
-class ConfigError(ValueError):
-    """A configuration problem, phrased for the user (one line, names the key)."""
 
 
 class _Table(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):

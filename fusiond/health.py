@@ -25,6 +25,8 @@ from typing import Any, Literal
 
 import msgspec
 
+from .reasons import QUEUE_FULL
+
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many observed periods)
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new wall-clock arrival interval
 MAX_INTERVAL = 1.0  # a longer gap counts as this much in the period EMA (a pause must not stretch it for minutes)
@@ -198,7 +200,7 @@ class Health:
                 age = None if s.last is None else max(now - s.last, 0.0)
                 alive = age is not None and age <= timeout
                 reasons = dict(s.dropped)
-                queue_full += reasons.get("queue_full", 0)
+                queue_full += reasons.get(QUEUE_FULL, 0)
                 if core is not None:
                     for k, v in core.dropped[i].items():
                         reasons[k] = reasons.get(k, 0) + v

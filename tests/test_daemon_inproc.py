@@ -129,11 +129,19 @@ def test_liveliness_token_and_a_clean_stop(sessions):
         t0 = time.monotonic()
         daemon.stop()
         assert time.monotonic() - t0 < 3.0
-    # after stop: no input is taken, no output published, the token is gone
+    # after stop: no input is taken, no output published, the token is gone. A witness subscribed
+    # to the odometry key on the daemon's session receives the ten puts: once it has them, a still
+    # subscribed daemon would have had them too (same session, same route), so waiting on the
+    # witness replaces a guessed sleep before the negative check.
+    witness: list[bytes] = []
+    wsub = dsession.declare_subscriber("t/odom", lambda s: witness.append(s.payload.to_bytes()))
+    wait_until(lambda: (pub.put(odom(99)), bool(witness))[1], 5, "the witness's route")
+    seen = len(witness)
     for k in range(50, 60):
         pub.put(odom(k))
-    time.sleep(0.3)
+    wait_until(lambda: len(witness) >= seen + 10, 5, "the ten puts at the witness")
     assert len(poses) == 50
+    wsub.undeclare()
     wait_until(lambda: any("DELETE" in kind for kind, _ in events), 5, "the token's deletion")
     assert not [r for r in client.liveliness().get("**/alive", timeout=0.5) if r.ok is not None]
     assert report(client) is None

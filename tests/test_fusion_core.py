@@ -260,17 +260,28 @@ def test_extrinsic_rotation_applies_to_orientation_and_rates():
     R_ext = rot.matrix(q_ext)
     w_imu = tuple((R_ext.T @ w_base).tolist())
     q_imu = rot.mul(q_base, q_ext)
+    # The same readings into a core that is not told of the mounting: what the test would see if
+    # the extrinsic were ignored. It must be far from the truth, or the checks below prove nothing.
+    unmounted = FusionCore(make_config(orientation="absolute", gyro=True))
     for k in range(50):
         t = 1.0 + 0.02 * k
         q_true = rot.mul(rot.from_rpy(0.0, 0.0, 0.2 * 0.02 * k), q_base)
-        core.ingest(odom(t))
-        core.ingest(ImuSample("imu", t + 0.001, rot.mul(q_true, q_ext), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), w_imu,
-                              (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)))
+        for c in (core, unmounted):
+            c.ingest(odom(t))
+            c.ingest(ImuSample("imu", t + 0.001, rot.mul(q_true, q_ext), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4),
+                               w_imu, (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)))
     r, p, yw = rot.to_rpy(tuple(core.pose()[1][3:7].tolist()))
     assert (r, p) == pytest.approx((0.05, -0.02), abs=1e-3)
     assert yw == pytest.approx(0.4 + 0.2 * 0.02 * 49, abs=5e-3)
-    assert q_imu  # the mounting is not the identity
     assert core.estimate().angular[2] == pytest.approx(0.2, abs=1e-3)
+    # The mounting is far from the identity: the IMU's own attitude is about pi from the base's
+    # (upside down), its z rate has the opposite sign, and ignoring the extrinsic shows it.
+    dot = abs(sum(a * b for a, b in zip(q_imu, q_base)))
+    assert 2.0 * math.acos(min(dot, 1.0)) > 3.0
+    assert w_imu[2] == pytest.approx(-0.2, abs=1e-9)
+    r_u, _, _ = rot.to_rpy(tuple(unmounted.pose()[1][3:7].tolist()))
+    assert abs(rot.wrap(r_u - 0.05)) > 3.0
+    assert unmounted.estimate().angular[2] == pytest.approx(-0.2, abs=1e-3)
 
 
 def test_outlier_is_gated_and_counted():

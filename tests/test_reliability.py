@@ -562,18 +562,19 @@ def test_dropout_and_silence_degrade_then_recover(tmp_path, reliability_log):
             gen.imu_on.set()
             gen.start()
             wait_status(session, proc, "ok", 10, "ok with both sensors")
-            time.sleep(1.0)  # a steady state of the roll/pitch variance
-            n_steady = len(poses)
+            # a steady state of the roll/pitch variance: 1 s of 50 Hz odometry = 50 more poses
+            n_ok = len(poses)
+            n_steady = wait_until(lambda: len(poses) >= n_ok + 50 and len(poses), 10, "1 s of poses")
             gen.imu_on.clear()  # -- IMU drops out
             h = wait_status(session, proc, "degraded", 5, "degraded once the IMU is silent")
             assert not h["sensors"]["imu"]["alive"] and h["sensors"]["wheel"]["alive"]
             imu_problems = [p for p in h["problems"] if p.startswith("imu:")]
-            time.sleep(1.0)
-            n_dropout = len(poses)
+            n_degraded = len(poses)  # 1 s more of the dropout: 50 poses
+            n_dropout = wait_until(lambda: len(poses) >= n_degraded + 50 and len(poses), 10, "1 s of dropout")
             gen.imu_on.set()  # -- and returns
             wait_status(session, proc, "ok", 5, "ok once the IMU is back")
-            time.sleep(1.5)
-            n_back = len(poses)
+            n_imu_back = len(poses)  # 1.5 s to recover: 75 poses
+            n_back = wait_until(lambda: len(poses) >= n_imu_back + 75 and len(poses), 10, "1.5 s with the IMU")
             gen.wheel_on.clear()  # -- both silent
             gen.imu_on.clear()
             hf = wait_status(session, proc, "failed", 5, "failed with both sensors silent")
@@ -752,10 +753,14 @@ def test_sigterm_mid_stream_exits_0_and_publishes_the_last_pose(tmp_path, reliab
             wait_until(lambda: len(poses) > 100, 10, "poses flowing")
             proc.send_signal(signal.SIGTERM)  # while messages keep coming
             code = proc.wait(15)
-            time.sleep(0.3)
         finally:
             gen.close()
-        time.sleep(0.5)  # poses still in flight on the loopback link
+        # The daemon's last log event says how many poses it published; some are still in flight on
+        # the loopback link when it exits: wait for that many here (the asserts below say if not).
+        target = log_events(log)[-1].get("published", 0)
+        deadline = time.monotonic() + 5.0
+        while len(poses) < target and time.monotonic() < deadline:
+            time.sleep(0.02)
     stopped = log_events(log)[-1]
     assert stopped["event"] == "daemon_stopped", stopped
     published = stopped["published"]

@@ -7,6 +7,7 @@ updates is compared with chi-square bounds on N*dof degrees of freedom.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from statistics import NormalDist
 
@@ -38,7 +39,13 @@ def chi2_ppf(p: float, dof: float) -> float:
 
 
 class NisWindow:
-    """Sliding window of NIS values for one sensor channel."""
+    """Sliding window of NIS values for one sensor channel.
+
+    The window's mean is read on every update (the verdict), so it keeps a running sum of
+    the finite values (plus a count of infinite ones, which would poison a running sum:
+    inf - inf is NaN) instead of summing the window each time. Rounding drift is bounded by
+    re-summing exactly (math.fsum) once per window length of additions.
+    """
 
     def __init__(self, window: int, confidence: float) -> None:
         self.window = window
@@ -48,6 +55,9 @@ class NisWindow:
         self._bounds: dict[int, tuple[float, float]] = {}
         self.total = 0
         self.rejected = 0
+        self._sum = 0.0  # of the finite values in the window
+        self._infinite = 0  # +inf values in the window
+        self._since_exact = 0  # additions since the sum was last recomputed exactly
 
     def bounds(self, dof: int) -> tuple[float, float]:
         """Two-sided bounds on the window's mean NIS."""
@@ -63,22 +73,42 @@ class NisWindow:
         self.total += 1
         if rejected:
             self.rejected += 1
+        values = self.values
         if dof != self.dof:
-            self.values.clear()
+            values.clear()
             self.dof = dof
+            self._sum, self._infinite, self._since_exact = 0.0, 0, 0
         if nis == nis:  # NaN from a singular S is not evidence either way
-            self.values.append(nis)
+            if len(values) == self.window:
+                old = values[0]
+                if old == math.inf:
+                    self._infinite -= 1
+                else:
+                    self._sum -= old
+            values.append(nis)
+            if nis == math.inf:
+                self._infinite += 1
+            else:
+                self._sum += nis
+            self._since_exact += 1
+            if self._since_exact >= self.window:
+                self._sum = math.fsum(v for v in values if v != math.inf)
+                self._since_exact = 0
         return self.verdict()
 
     @property
     def mean(self) -> float | None:
-        return sum(self.values) / len(self.values) if self.values else None
+        n = len(self.values)
+        if not n:
+            return None
+        return math.inf if self._infinite else self._sum / n
 
     def verdict(self) -> str:
-        if len(self.values) < self.window:
+        n = len(self.values)
+        if n < self.window:
             return "warming_up"
         lo, hi = self.bounds(self.dof)
-        m = sum(self.values) / len(self.values)
+        m = math.inf if self._infinite else self._sum / n
         return "nis_high" if m > hi else "nis_low" if m < lo else "ok"
 
     def summary(self) -> dict:

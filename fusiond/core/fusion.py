@@ -28,6 +28,8 @@ import numpy as np
 import structlog
 
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from .. import reasons
+from ..errors import CoreError
 from ..estimator import (
     ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
     predict,
@@ -200,16 +202,16 @@ class FusionCore:
     def ingest(self, sample: Sample) -> Step:
         idx = self.index.get(sample.sensor)
         if idx is None:
-            return Step(sample.sensor, False, "unknown_sensor")
+            return Step(sample.sensor, False, reasons.UNKNOWN_SENSOR)
         st = self.stats[idx]
         st.received += 1
         stamp = sample.stamp
         if not (math.isfinite(stamp) and stamp > 0.0):
-            return self._drop(idx, "invalid_stamp", stamp)
+            return self._drop(idx, reasons.INVALID_STAMP, stamp)
         policy = self.policies[idx]
         try:
             if type(sample) is not self._sample_types[idx]:
-                raise Rejected("wrong_type", f"expected {self._sample_types[idx].__name__}")
+                raise Rejected(reasons.WRONG_TYPE, f"expected {self._sample_types[idx].__name__}")
             inp = policy.convert(sample)  # type: ignore[arg-type]
         except Rejected as r:
             return self._drop(idx, r.reason, stamp)
@@ -227,21 +229,24 @@ class FusionCore:
     def _place(self, idx: int, inp, stamp: float) -> Step:
         """Apply a sample at its own stamp (re-applying later ones when it is late) and count it."""
         st = self.stats[idx]
+        resets = self.state.ekf.resets  # the newest timeline's covariance resets before this sample
         key = (stamp, idx)
         h = self.history
         pos, duplicate = h.slot(key)
         if duplicate:
-            return self._drop(idx, "duplicate_stamp", stamp)
+            return self._drop(idx, reasons.DUPLICATE_STAMP, stamp)
         late = h.is_late(pos)
         if late:
             if h.too_old(stamp):
-                return self._drop(idx, "too_old", stamp)
+                return self._drop(idx, reasons.TOO_OLD, stamp)
             self.state = h.state_before(pos)
         records = self._apply(self.state, idx, inp, stamp, emit=True, late=late)
         h.insert(pos, key, (idx, inp, stamp), self.state)
         if late:
             h.reapply_after(pos, self.state, self._reapply)
         h.trim(self.cfg.filter.history_s, self.cfg.filter.history_max)
+        if self.state.ekf.resets > resets:
+            self._covariance_reset(self.state.ekf.resets - resets)
         st.applied += 1
         if late:
             st.late += 1
@@ -271,11 +276,11 @@ class FusionCore:
         if j is None:
             j = self._jump = _PendingJump(first=stamp)
         if len(j.samples) >= fc.history_max:
-            return self._drop(idx, "future_stamp" if stamp > (self.state.t or 0.0) else "stale_stamp", stamp)
+            return self._drop(idx, reasons.FUTURE_STAMP if stamp > (self.state.t or 0.0) else reasons.STALE_STAMP, stamp)
         j.samples.append((stamp, idx, inp))
         j.lo, j.hi = min(j.lo, stamp), max(j.hi, stamp)
         if len(j.samples) < fc.jump_confirm or j.hi - j.lo < fc.jump_persist_s:
-            return Step(self.sensors[idx].name, False, "held_time_jump")
+            return Step(self.sensors[idx].name, False, reasons.HELD_TIME_JUMP)
         return self._confirm_jump()
 
     def _confirm_jump(self) -> Step:
@@ -304,7 +309,7 @@ class FusionCore:
             return
         t = self.state.t if self.state is not None else None
         for stamp, idx, _ in j.samples:
-            self._drop(idx, "future_stamp" if t is None or stamp > t else "stale_stamp", stamp)
+            self._drop(idx, reasons.FUTURE_STAMP if t is None or stamp > t else reasons.STALE_STAMP, stamp)
         log.warning("time_glitch_dropped", samples=len(j.samples), first_stamp=j.first, filter_time=t)
 
     @property
@@ -349,7 +354,7 @@ class FusionCore:
         """The newest estimate (at filter time)."""
         s = self.state
         if s is None or s.t is None:
-            raise RuntimeError("no sample has been fused yet")
+            raise CoreError("no sample has been fused yet")
         x, P = s.ekf.x, s.ekf.P
         u = self._inputs(s)
         linear, angular = u.linear, u.angular
@@ -387,7 +392,7 @@ class FusionCore:
     def pose(self) -> tuple[float, np.ndarray]:
         """(filter time, nominal [x y z qx qy qz qw]) without building a full Estimate."""
         if not self.initialised:
-            raise RuntimeError("no sample has been fused yet")
+            raise CoreError("no sample has been fused yet")
         return self.state.t, self.state.ekf.x[0:7]
 
     @property
@@ -534,8 +539,7 @@ class FusionCore:
                 s.pose_anchor = accumulate_motion(s.pose_anchor, s.ekf.x, x)
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
-            if not s.ekf.propagate(x, F, Q):
-                self._covariance_reset(s)
+            s.ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it
             if t1 >= t_end:
                 break
             t0 = t1
@@ -560,9 +564,12 @@ class FusionCore:
                 nxt = e
         return nxt
 
-    def _covariance_reset(self, s: FilterState) -> None:
-        self.covariance_resets += 1
-        log.error("covariance_reset", stamp=s.t, reason="non-finite covariance")
+    def _covariance_reset(self, n: int) -> None:
+        """Count resets (propagate's and update's) by the EKF's own counter, which snapshots carry:
+        the resets a sample added to the newest timeline, so a prediction re-applied after a late
+        sample does not count its reset again."""
+        self.covariance_resets += n
+        log.error("covariance_reset", stamp=self.state.t, count=n, reason="non-finite covariance")
 
     def _note_period(self, s: FilterState, idx: int, stamp: float) -> None:
         last = s.last[idx]

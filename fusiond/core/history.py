@@ -5,6 +5,12 @@ before it is restored and the later samples re-applied, as robot_localization's
 lagged-data smoothing does. The history keeps ``history_s`` seconds (and at most
 ``history_max`` samples); the state before its oldest sample is the ``base``, and a
 sample older than that is too old to place.
+
+Snapshots are recycled: the ones ``trim`` drops go to a free list, and the next
+insert overwrites one of them in place (``FilterState.copy(into=...)``, x and P by
+np.copyto) instead of allocating a state, an EKF and two arrays per message and
+freeing as many. Once the history has filled, a steady stream allocates no
+snapshots at all; the free list never holds more than one trim's worth.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ class History:
         self.events: list[tuple[int, Any, float]] = []
         self.after: list[FilterState] = []
         self.base = base.copy() if base is not None else None
+        self._free: list[FilterState] = []  # snapshots no longer referenced, to be overwritten
 
     def slot(self, key: Key) -> tuple[int, bool]:
         """(insert position, is a duplicate of an applied sample)."""
@@ -37,25 +44,32 @@ class History:
         return self.base is not None and self.base.t is not None and stamp < self.base.t
 
     def state_before(self, pos: int) -> FilterState:
+        """A copy the caller owns (it becomes the live state)."""
         return (self.after[pos - 1] if pos > 0 else self.base).copy()
 
     def insert(self, pos: int, key: Key, event: tuple[int, Any, float], state: FilterState) -> None:
         self.keys.insert(pos, key)
         self.events.insert(pos, event)
-        self.after.insert(pos, state.copy())
+        free = self._free
+        self.after.insert(pos, state.copy(into=free.pop() if free else None))
 
     def reapply_after(self, pos: int, state: FilterState, apply: Callable[[FilterState, int, Any, float], None]) -> None:
-        """Re-apply every event after ``pos`` on ``state`` (in place), refreshing their snapshots."""
+        """Re-apply every event after ``pos`` on ``state`` (in place), refreshing their snapshots in place."""
+        after = self.after
         for j in range(pos + 1, len(self.events)):
             idx, inp, stamp = self.events[j]
             apply(state, idx, inp, stamp)
-            self.after[j] = state.copy()
+            state.copy(into=after[j])
 
     def trim(self, history_s: float, history_max: int) -> None:
-        horizon = self.keys[-1][0] - history_s
+        keys = self.keys
+        horizon = keys[-1][0] - history_s
         n = 0
-        while len(self.keys) - n > history_max or (n < len(self.keys) and self.keys[n][0] < horizon):
+        while len(keys) - n > history_max or (n < len(keys) and keys[n][0] < horizon):
             n += 1
         if n:
+            if self.base is not None:
+                self._free.append(self.base)
             self.base = self.after[n - 1]
-            del self.keys[:n], self.events[:n], self.after[:n]
+            self._free.extend(self.after[: n - 1])
+            del keys[:n], self.events[:n], self.after[:n]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .. import reasons
 from ..config import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..estimator import mat3
 from ..estimator import rotation as rot
@@ -64,9 +65,9 @@ def _unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float
     x, y, z, w = q
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if n < 1e-6:
-        raise Rejected("zero_quaternion")
+        raise Rejected(reasons.ZERO_QUATERNION)
     if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
-        raise Rejected("non_unit_quaternion", f"norm {n:.3f}")
+        raise Rejected(reasons.NON_UNIT_QUATERNION, f"norm {n:.3f}")
     return (x / n, y / n, z / n, w / n)
 
 
@@ -103,12 +104,12 @@ class OdomPolicy:
 
     def convert(self, s: OdomSample) -> OdomInput:
         if not (_finite(s.linear) and _finite(s.angular)):
-            raise Rejected("non_finite", "twist")
+            raise Rejected(reasons.NON_FINITE, "twist")
         if not (_plausible(s.linear, MAX_SPEED) and _plausible(s.angular, MAX_RATE)):
-            raise Rejected("implausible_value", "twist beyond 100 m/s or 100 rad/s")
+            raise Rejected(reasons.IMPLAUSIBLE_VALUE, "twist beyond 100 m/s or 100 rad/s")
         cov = s.twist_covariance
         if len(cov) != 36:
-            raise Rejected("bad_covariance", "twist covariance must have 36 entries")
+            raise Rejected(reasons.BAD_COVARIANCE, "twist covariance must have 36 entries")
         twist = (*s.linear, *s.angular)
         if self._override is not None:
             var = self._override
@@ -119,7 +120,7 @@ class OdomPolicy:
             for i in range(6):
                 d = cov[7 * i]
                 if d < 0.0:
-                    raise Rejected("negative_covariance", "twist")
+                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "twist")
                 if d >= self._unmeasured[i] or d != d or d == math.inf:
                     var.append(self._default[i])  # "not measured": not used, default noise
                     values.append(0.0)
@@ -182,7 +183,7 @@ class ImuPolicy:
         rows: tuple[int, ...] = ()
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             if not (_finite(s.orientation) and _finite(s.orientation_covariance)):
-                raise Rejected("non_finite", "orientation")
+                raise Rejected(reasons.NON_FINITE, "orientation")
             q_imu = _unit_quaternion(s.orientation)
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
             rpy = rot.to_rpy(q_base)
@@ -192,33 +193,33 @@ class ImuPolicy:
                 oc = s.orientation_covariance
                 diag = [oc[0], oc[4], oc[8]]
                 if any(d < 0.0 for d in diag):
-                    raise Rejected("negative_covariance", "orientation")
+                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "orientation")
                 var, measured = _resolve_variances(diag, self._ori_floor, self._ori_unmeasured, 1.0)
             rows = tuple(i for i in self._rows if measured[i])
             rpy_cov = self._rotate_cov(var)
         elif len(s.orientation_covariance) != 9:
-            raise Rejected("bad_covariance", "orientation covariance must have 9 entries")
+            raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
         gyro = gyro_cov = None
         if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
             gc = s.angular_velocity_covariance
             if gc[0] != -1.0:
                 if not (_finite(s.angular_velocity) and _finite(gc)):
-                    raise Rejected("non_finite", "angular_velocity")
+                    raise Rejected(reasons.NON_FINITE, "angular_velocity")
                 if not _plausible(s.angular_velocity, MAX_RATE):
-                    raise Rejected("implausible_value", "angular velocity beyond 100 rad/s")
+                    raise Rejected(reasons.IMPLAUSIBLE_VALUE, "angular velocity beyond 100 rad/s")
                 if self._gyro_override is not None:
                     var = [self._gyro_override] * 3
                 else:
                     diag = [gc[0], gc[4], gc[8]]
                     if any(d < 0.0 for d in diag):
-                        raise Rejected("negative_covariance", "angular_velocity")
+                        raise Rejected(reasons.NEGATIVE_COVARIANCE, "angular_velocity")
                     var = [max(d, self._gyro_floor) for d in diag]
                 w = s.angular_velocity
                 gyro = w if self._identity else mat3.apply(self.R_ext, w)
                 gyro_cov = self._rotate_cov(var)
         elif self.cfg.angular_velocity:
-            raise Rejected("bad_covariance", "angular velocity covariance must have 9 entries")
+            raise Rejected(reasons.BAD_COVARIANCE, "angular velocity covariance must have 9 entries")
         accel = None
         if self._gravity_tilt and not (0 in rows or 1 in rows):
             a = s.linear_acceleration
@@ -227,7 +228,7 @@ class ImuPolicy:
             if len(ac) == 9 and ac[0] != -1.0 and _finite(a) and a != (0.0, 0.0, 0.0):
                 accel = a if self._identity else mat3.apply(self.R_ext, a)
         if rpy is None and gyro is None and accel is None:
-            raise Rejected("nothing_to_fuse", "no orientation, angular velocity or acceleration in the message")
+            raise Rejected(reasons.NOTHING_TO_FUSE, "no orientation, angular velocity or acceleration in the message")
         return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov, accel)
 
 
@@ -252,21 +253,21 @@ class GpsPolicy:
 
     def convert(self, s: GpsSample) -> GpsInput:
         if s.status < 0:
-            raise Rejected("no_fix", f"status {s.status}")
+            raise Rejected(reasons.NO_FIX, f"status {s.status}")
         lla = (s.latitude, s.longitude, s.altitude)
         if not _finite(lla):
-            raise Rejected("non_finite", "latitude/longitude/altitude")
+            raise Rejected(reasons.NON_FINITE, "latitude/longitude/altitude")
         if not (-90.0 <= s.latitude <= 90.0 and -180.0 <= s.longitude <= 180.0 and -1e5 < s.altitude < 1e6):
-            raise Rejected("implausible_value", "latitude/longitude/altitude out of range")
+            raise Rejected(reasons.IMPLAUSIBLE_VALUE, "latitude/longitude/altitude out of range")
         if self._override is not None:
             return GpsInput(lla, self._override)
         if s.covariance_type == 0:
             return GpsInput(lla, self._unknown)
         c = s.position_covariance
         if len(c) != 9 or not _finite(c):
-            raise Rejected("bad_covariance", "position covariance must be 9 finite numbers")
+            raise Rejected(reasons.BAD_COVARIANCE, "position covariance must be 9 finite numbers")
         if c[0] < 0.0 or c[4] < 0.0 or c[8] < 0.0:
-            raise Rejected("negative_covariance", "position")
+            raise Rejected(reasons.NEGATIVE_COVARIANCE, "position")
         if s.covariance_type == 2:  # COVARIANCE_TYPE_DIAGONAL_KNOWN: off-diagonals are not meaningful
             c = mat3.diag(c[0], c[4], c[8])
         f = self._floor
@@ -307,19 +308,19 @@ class PosePolicy:
 
     def convert(self, s: PoseSample) -> PoseInput:
         if not (_finite(s.position) and _finite(s.orientation)):
-            raise Rejected("non_finite", "pose")
+            raise Rejected(reasons.NON_FINITE, "pose")
         if not _plausible(s.position, 1e6):
-            raise Rejected("implausible_value", "position beyond 1000 km")
+            raise Rejected(reasons.IMPLAUSIBLE_VALUE, "position beyond 1000 km")
         q = _unit_quaternion(s.orientation)
         c = s.covariance
         if len(c) == 36:
             diag = [c[7 * i] for i in range(6)]
             if any(d < 0.0 for d in diag):
-                raise Rejected("negative_covariance", "pose")
+                raise Rejected(reasons.NEGATIVE_COVARIANCE, "pose")
         elif len(c) == 0:
             diag = list(self._unknown)
         else:
-            raise Rejected("bad_covariance", "pose covariance must have 36 entries")
+            raise Rejected(reasons.BAD_COVARIANCE, "pose covariance must have 36 entries")
         if self._pos_override is not None:
             diag[0:3] = self._pos_override
         if self._ori_override is not None:
@@ -332,7 +333,7 @@ class PosePolicy:
             var[i] = d if d > self._floor[i] else self._floor[i]
             rows.append(i)
         if not rows:
-            raise Rejected("nothing_to_fuse", "every pose component is marked not measured")
+            raise Rejected(reasons.NOTHING_TO_FUSE, "every pose component is marked not measured")
         cov = [0.0] * 36
         for i in range(6):
             cov[7 * i] = var[i] if var[i] > 0.0 else 1.0

@@ -20,10 +20,16 @@ class FilterState:
         "frame_ready", "enu", "heading_ready", "gps_anchor", "travel", "pose_anchor",
     )
 
-    def copy(self) -> "FilterState":
-        c = FilterState.__new__(FilterState)
+    def copy(self, into: "FilterState | None" = None) -> "FilterState":
+        """A snapshot; ``into`` (a snapshot the history no longer needs) is overwritten instead of
+        allocating a new one, its x and P by np.copyto."""
+        if into is None:
+            c = FilterState.__new__(FilterState)
+            c.ekf = self.ekf.copy()
+        else:
+            c = into
+            c.ekf = self.ekf.copy(into=into.ekf)
         c.t = self.t
-        c.ekf = self.ekf.copy()
         c.last = list(self.last)
         c.period = list(self.period)
         # numpy inputs are replaced on update, never mutated, so sharing them is safe

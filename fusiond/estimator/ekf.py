@@ -4,8 +4,17 @@ It knows nothing of sensors or time: a model hands it the propagated nominal
 state with F and Q, or an innovation with H and R. The gain comes from a
 Cholesky factorisation of S (see ``cholesky``) instead of an explicit inverse,
 and the covariance update K S K^T = W^T W is symmetric by construction; a masked
-(Schmidt) update uses the Joseph form's closed form. P is then symmetrised and
-checked: a non-finite P is reset (counted), a negative variance clipped.
+(Schmidt) update uses the Joseph form's closed form.
+
+Cost. For the 9-15 dimensional states here every numpy call costs more in
+dispatch than in arithmetic, so the per-step work is a fixed, short list of calls:
+P - K S K^T is written into a spare n x n buffer that is then swapped with P (P
+itself is never shared: copies and history snapshots copy it), with K S K^T in a
+per-dimension workspace. Checks on every step are the ones that guard the next
+step: a non-finite P is reset (counted in ``resets``), a negative variance clipped.
+Symmetrising is hygiene against rounding, not correctness (the gain uses P H^T
+only): ``cap_covariance``, called once per second of message time by the core, does
+it with the caps.
 """
 
 from __future__ import annotations
@@ -23,30 +32,50 @@ class UpdateResult(msgspec.Struct, gc=False):
     innovation_var: list[float]
     rejected: bool
     singular: bool = False  # S was not positive definite: update skipped
+    covariance_reset: bool = False  # P went non-finite and was reset (counted in ``ErrorStateEKF.resets``)
 
 
 class ErrorStateEKF:
-    """Nominal state ``x`` (on the manifold) and error covariance ``P``."""
+    """Nominal state ``x`` (on the manifold) and error covariance ``P``.
+
+    ``P`` is replaced by a new array on every step that changes it (read it, do not keep
+    a reference across steps: its buffer is reused two steps later).
+    """
 
     def __init__(self, layout: StateLayout, x: np.ndarray | None = None, P: np.ndarray | None = None) -> None:
         self.layout = layout
         self.x = layout.initial_state() if x is None else np.array(x, dtype=float)
         self.P = layout.initial_covariance() if P is None else np.array(P, dtype=float)
-        self.resets = 0  # covariance resets after a non-finite value
+        # Covariance resets after a non-finite value, in propagate and update alike. It travels
+        # with copies, so a history snapshot knows how many resets its timeline has had.
+        self.resets = 0
         self._mask: np.ndarray | None = None
         self._weights = np.ones((layout.error_dim, layout.error_dim))
+        self._spare: np.ndarray | None = None  # the next P's buffer (never self.P); allocated on first use
+        self._ws: _Workspace | None = None  # scratch shared with copies (single-threaded use per core)
+
+    def _buffers(self) -> tuple[np.ndarray, "_Workspace"]:
+        spare, ws = self._spare, self._ws
+        n = self.P.shape[0]
+        if spare is None or spare.shape[0] != n:
+            spare = self._spare = np.empty((n, n))
+        if ws is None or ws.n != n:
+            ws = self._ws = _Workspace(n)
+        return spare, ws
 
     # -- propagation -------------------------------------------------------
     def propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
         """Accept a propagated state; False if the covariance had to be reset."""
         self.x = x_new
-        P = np.dot(np.dot(F, self.P), F.T)
-        P += Q
-        if not math.isfinite(P.sum()):  # one reduction: any NaN/inf makes the sum non-finite
+        # Two fresh products: measured faster than np.dot(..., out=) into the workspace at these
+        # sizes (the out= path's checks cost more than a 9x9 allocation).
+        P_new = np.dot(np.dot(F, self.P), F.T)
+        P_new += Q
+        if not math.isfinite(P_new.sum()):  # one reduction: any NaN/inf makes the sum non-finite
             self.P = self.layout.initial_covariance()
             self.resets += 1
             return False
-        self.P = P  # F P F^T + Q is symmetric PSD up to rounding; update() re-symmetrises
+        self.P = P_new
         return True
 
     # -- correction --------------------------------------------------------
@@ -77,17 +106,17 @@ class ErrorStateEKF:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
         W = np.dot(Linv, PHt.T)  # L^-1 H P
         dx = np.dot(z, W)  # K y = P H^T S^-1 y = W^T z
-        C = np.dot(W.T, W)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
-        if mask is None:
-            P_new = P - C
-        else:
+        P_new, ws = self._buffers()
+        C = np.dot(W.T, W, out=ws.nn)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
+        if mask is not None:
             # Gain rows zeroed by the mask (M K): Joseph's P - MKHP - PH^TK^TM + MKSK^TM
             # collapses to P - C * W with W_ij = 1 - (1 - m_i)(1 - m_j).
             dx *= mask
-            P_new = P - C * self._mask_weights(mask)
+            C *= self._mask_weights(mask)
+        np.subtract(P, C, out=P_new)
         self.layout.boxplus(self.x, dx)
-        self._store(P_new)
-        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False)
+        reset = not self._store(P_new)
+        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 
     def _mask_weights(self, mask: np.ndarray) -> np.ndarray:
         if self._mask is not mask:
@@ -96,18 +125,25 @@ class ErrorStateEKF:
         return self._weights
 
     # -- covariance hygiene ------------------------------------------------
-    def _store(self, P: np.ndarray) -> bool:
-        P += P.T
-        P *= 0.5
-        if not math.isfinite(P.sum()):
+    def _store(self, P_new: np.ndarray) -> bool:
+        """Accept P - K S K^T (written in the spare buffer); False if it had to be reset.
+
+        The diagonal is enough to see a non-finite result: P was finite, and an overflow or
+        NaN in C = W^T W at (i, j) comes from W's column i or j, whose C_ii or C_jj (a sum of
+        squares) is then non-finite too, also where the mask weight is 0 (inf * 0 = NaN).
+        """
+        d = P_new.diagonal()
+        if not math.isfinite(d.sum()):
             self.P = self.layout.initial_covariance()
             self.resets += 1
             return False
-        if P.diagonal().min() < 0.0:
+        if d.min() < 0.0:
             # Rounding can push a tiny variance below zero: clip the spectrum.
-            w, V = np.linalg.eigh(P)
-            P = (V * np.maximum(w, 0.0)) @ V.T
-        self.P = P
+            P_new += P_new.T
+            P_new *= 0.5
+            w, V = np.linalg.eigh(P_new)
+            np.copyto(P_new, (V * np.maximum(w, 0.0)) @ V.T)
+        self._spare, self.P = self.P, P_new
         return True
 
     def reset_variance(self, i: int, var: float) -> None:
@@ -143,23 +179,45 @@ class ErrorStateEKF:
         P[:, error_zero] = 0.0
 
     def cap_covariance(self, caps: np.ndarray) -> None:
-        """Scale rows/columns whose variance exceeds its cap (keeps correlations, stays PSD)."""
-        d = np.diagonal(self.P)
+        """Hygiene at a slow cadence (the core calls it once per second of message time and after
+        a gap): symmetrise P against rounding, then scale rows/columns whose variance exceeds its
+        cap (keeps correlations, stays PSD)."""
+        P = self.P
+        P += P.T
+        P *= 0.5
+        d = np.diagonal(P)
         over = d > caps
         if over.any():
             scale = np.ones_like(d)
             scale[over] = np.sqrt(caps[over] / d[over])
-            self.P = self.P * np.outer(scale, scale)
+            P *= np.outer(scale, scale)
 
-    def copy(self) -> "ErrorStateEKF":
-        c = ErrorStateEKF.__new__(ErrorStateEKF)
+    def copy(self, into: "ErrorStateEKF | None" = None) -> "ErrorStateEKF":
+        """A copy with its own x and P; ``into`` reuses an existing object's arrays (np.copyto)."""
+        c = into
+        if c is None or c.P.shape != self.P.shape or c.x.shape != self.x.shape:
+            c = ErrorStateEKF.__new__(ErrorStateEKF)
+            c.x = self.x.copy()
+            c.P = self.P.copy()
+            c._spare = None
+        else:
+            np.copyto(c.x, self.x)
+            np.copyto(c.P, self.P)
         c.layout = self.layout
-        c.x = self.x.copy()
-        c.P = self.P.copy()
         c.resets = self.resets
         c._mask, c._weights = self._mask, self._weights
+        c._ws = self._ws
         return c
 
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         return self.x.copy(), self.P.copy()
 
+
+class _Workspace:
+    """Per-dimension scratch for the products of one step (never holds state between calls)."""
+
+    __slots__ = ("n", "nn")
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.nn = np.empty((n, n))

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 
+from ..errors import EstimatorError
+
 from .state import StateBlock
 
 
@@ -29,7 +31,7 @@ class GpsErrorBlock(StateBlock):
 
     def __init__(self, tau: float, sigma: tuple[float, float, float]) -> None:
         if not tau > 0.0:
-            raise ValueError("gps error time constant must be positive")
+            raise EstimatorError("gps error time constant must be positive")
         self.tau = float(tau)
         self.sigma = tuple(float(s) for s in sigma)
         self._var = tuple(s * s for s in self.sigma)

@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from ..errors import EstimatorError
+
 Quat = tuple[float, float, float, float]
 IDENTITY: Quat = (0.0, 0.0, 0.0, 1.0)
 TWO_PI = 2.0 * math.pi
@@ -27,7 +29,7 @@ def normalize(q: Quat) -> Quat:
     x, y, z, w = q
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if not n > 0.0 or not math.isfinite(n):
-        raise ValueError("quaternion has zero or non-finite norm")
+        raise EstimatorError("quaternion has zero or non-finite norm")
     return (x / n, y / n, z / n, w / n)
 
 

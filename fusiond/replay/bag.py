@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 from rosbags.highlevel import AnyReader, AnyReaderError
 
 from fusiond.samples import Sample
+from fusiond.errors import BagError  # importable from here, as before
 from fusiond.transport.codecs import TYPESTORE, ros_converter, ros_msgtype
 
 if TYPE_CHECKING:
@@ -28,10 +29,6 @@ def expected(sensor: SensorConfig) -> tuple[str, Callable[[Any, str], Sample]]:
     """(ROS message type, message -> sample) of a sensor; a pose sensor's `msgtype` selects its type."""
     kind = sensor_kind(sensor)
     return ros_msgtype(kind, getattr(sensor, "msgtype", None)), ros_converter(kind)
-
-
-class BagError(ValueError):
-    """A bag that cannot be replayed as configured, phrased for the user."""
 
 
 def sensor_kind(sensor: SensorConfig) -> str:

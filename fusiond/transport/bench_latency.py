@@ -31,6 +31,7 @@ import numpy as np
 import zenoh
 
 from ..config import loads
+from ..errors import TransportError
 from ..samples import ImuSample, OdomSample
 from .codecs import encode_imu_sample, encode_odom_sample
 from .daemon import Daemon, direct
@@ -212,7 +213,7 @@ def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 10
         echo_put = g_session.declare_publisher("bench/echo", express=True, congestion_control=block).put
         objs += list(pubs.values())
         if not _wait(lambda: query_health(g_session, cfg.output.health_key, 0.5), 10.0):
-            raise RuntimeError("the daemon did not answer its health query within 10 s")
+            raise TransportError("the daemon did not answer its health query within 10 s")
         time.sleep(0.2)
         hop_idle, echo_idle = _ping(echo_put, hop, echo, idle_s)
 

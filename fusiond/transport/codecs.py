@@ -41,7 +41,8 @@ Encoding = Literal["ros2-cdr", "json", "msgpack"]
 Payload = bytes | bytearray | memoryview
 
 
-class DecodeError(ValueError):
+from fusiond.errors import CodecError  # noqa: E402
+class DecodeError(CodecError):
     """A payload that cannot become a sample; `reason` is one of `REASONS`."""
 
     def __init__(self, reason: str, detail: str) -> None:

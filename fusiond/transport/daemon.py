@@ -43,6 +43,7 @@ import structlog
 import zenoh
 
 from ..config import Config
+from .. import reasons
 from ..core.fusion import FusionCore
 from ..health import Health, HealthReport, core_counters, encode_report
 from .codecs import DecodeError, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder
@@ -211,9 +212,9 @@ class Daemon:
             if size() < capacity:
                 put((idx, sample.payload.to_bytes(), arrival))
                 return
-            n = health.on_dropped(idx, "queue_full")
+            n = health.on_dropped(idx, reasons.QUEUE_FULL)
             if n == 1 or n % LOG_EVERY == 0:
-                log.warning("sample_dropped", sensor=name, reason="queue_full", count=n)
+                log.warning("sample_dropped", sensor=name, reason=reasons.QUEUE_FULL, count=n)
 
         return on_sample
 

@@ -23,6 +23,7 @@ import structlog
 import zenoh
 
 from ..config import Config
+from ..errors import PlaybackError
 from ..replay.bag import open_bag_samples, sensor_kind
 from .codecs import encode_sample, make_decoder
 from .session import query_health
@@ -73,7 +74,7 @@ def play(paths: Sequence[Path | str], cfg: Config, session: zenoh.Session, *, ra
          clock: Callable[[], float] = time.monotonic) -> PlayResult:
     """Publish the bag; returns counts. `duration` limits the bag seconds played (from its start)."""
     if rate < 0:
-        raise ValueError("rate must be >= 0")
+        raise PlaybackError("rate must be >= 0")
     stop = stop or threading.Event()
     result = PlayResult(per_sensor={s.name: 0 for s in cfg.sensors})
     with open_bag_samples(paths, cfg.sensors) as bag:

@@ -28,6 +28,7 @@ import msgspec
 import zenoh
 
 from ..config import ConfigError, ZenohConfig
+from ..errors import SessionError  # importable from here, as before
 
 _DEFAULTS = ZenohConfig()
 _WILDCARD_HOSTS = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]", "::": "[::1]"}
@@ -93,10 +94,6 @@ def build_config(
     if zc.namespace:
         _insert(conf, "namespace", zc.namespace, "zenoh.namespace")
     return conf
-
-
-class SessionError(RuntimeError):
-    """Zenoh accepted the configuration but could not open (port in use, unreachable router, ...)."""
 
 
 def open_session(conf: zenoh.Config) -> zenoh.Session:

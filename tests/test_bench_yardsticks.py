@@ -1,0 +1,78 @@
+"""`fusiond bench`'s yardsticks are what they claim: the tight step is the estimator's model, the
+synthetic bag replays cleanly. (No timing is asserted; `fusiond bench` reports the numbers.)"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fusiond import bench
+from fusiond.config import load
+from fusiond.core.fusion import FusionCore
+from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+from fusiond.estimator import observations as obs
+from fusiond.replay.bag import open_bag_samples
+
+ROOT = bench.Path(bench.__file__).resolve().parents[1]
+
+
+def test_tight_step_runs_the_estimators_model():
+    """300 steps of the yardstick and of fusiond's estimator (bench_estimator's step) from the same
+    start with the same inputs. The yardstick's two shortcuts bound the difference: Jr(w dt) ~ I
+    (|w dt| = 2 mrad: the bias columns of F are off by |w dt| / 2 = 1e-3 relative) and the small-tilt
+    H (tilt ~1 mrad: 1e-6 relative). The bias columns only couple the small bias variance (1e-4 *
+    dt^2 per step) into attitude, so P's pose diagonal agrees to well within 1e-3 relative, the
+    pose to within 1e-6 m / 1e-6 rad over 1.5 m of travel."""
+    step = bench.tight_step()
+    layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5)])
+    ekf = ErrorStateEKF(layout)
+    u = MotionInput()
+    u.linear, u.angular = (0.5, 0.0, 0.0), (0.01, -0.02, 0.2)
+    u.linear_cov = (1e-3, 0, 0, 0, 1e-3, 0, 0, 0, 1e-3)
+    u.angular_cov = (2.5e-5, 0, 0, 0, 2.5e-5, 0, 0, 0, 2.5e-5)
+    u.linear_period = u.angular_period = 0.02
+    u.from_gyro = True
+    noise = layout.noise_density(np.full(6, 4e-6))
+    mask = np.ones(9, dtype=bool)
+    mask[[0, 1, 2, 5, 8]] = False
+    for _ in range(300):
+        step()
+        x, F, Q = predict(layout, ekf.x, u, 0.01, noise)
+        ekf.propagate(x, F, Q)
+        y, H, R = obs.orientation(layout, ekf.x, (0.001, -0.002, 0.0), (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6), (0, 1))
+        ekf.update(y, H, R, mask=mask)
+    st = dict(zip(step.__code__.co_freevars, (c.cell_contents for c in step.__closure__)))["st"]
+    assert math.dist(st["p"], ekf.x[0:3]) < 1e-6
+    assert abs(abs(float(np.dot(st["q"], ekf.x[3:7]))) - 1.0) < 1e-12  # cos(angle/2): angle < 3e-6 rad
+    np.testing.assert_allclose(np.diag(st["P"])[:6], np.diag(ekf.P)[:6], rtol=1e-3)
+    assert math.dist(st["p"], (0.0, 0.0, 0.0)) > 1.0  # it did travel
+
+
+def test_synthetic_bag_replays_every_message(tmp_path):
+    cfg = load(ROOT / "examples" / "jackal.toml")
+    odom = "/" + cfg.sensors[0].key
+    imu = "/" + cfg.sensors[1].key
+    path = bench.write_synthetic_bag(tmp_path / "synthetic", odom, imu, messages=301)
+    core = FusionCore(cfg)
+    with open_bag_samples([path], cfg.sensors) as samples:
+        n = sum(1 for s in samples if core.ingest(s).accepted)
+    assert n == 301
+    assert [st.applied for st in core.stats] == [101, 200]  # 50 Hz odometry, 100 Hz IMU: 1 + 2 per 20 ms
+    # 2 s of a 1 m/s circle of radius 5 m (0.2 rad/s): the chord from the start, 2 r sin(0.2 rad)
+    assert math.dist(core.pose()[1][0:3].tolist(), (0.0, 0.0, 0.0)) == pytest.approx(
+        2 * 5.0 * math.sin(0.2 * 2.0 / 2), abs=0.05)
+
+
+def test_targets_are_ratios_of_the_same_run():
+    result = {"estimator": {"predict_update_us": 30.0}, "yardstick": {"tight_numpy_step_us": 20.0},
+              "replay": {"replay_vs_rosbags": 0.4},
+              "process": {"fusiond_replay_s": 2.0, "fusiond_replay_cpu_s": 1.5, "bare_numpy_script_s": 1.6,
+                          "bare_numpy_script_cpu_s": 1.0}}
+    t = bench.targets(result)
+    assert t["estimator_step_vs_tight_numpy (<=1.5)"] == pytest.approx(1.5)
+    assert t["replay_in_process_vs_rosbags_decode (>=0.5)"] == pytest.approx(0.4)
+    assert t["replay_process_vs_bare_jackal_wall (<=1.0)"] == pytest.approx(1.25)
+    assert t["replay_process_vs_bare_jackal_cpu (<=1.0)"] == pytest.approx(1.5)
+    assert not any("synthetic" in k for k in t)
