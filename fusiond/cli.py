@@ -88,7 +88,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from .replay.bag import BagError
+    from .replay.bag import BagError, open_bag_samples
     from .transport.player import play
 
     if args.rate < 0:
@@ -99,8 +99,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     try:
-        result = play([Path(b) for b in args.bags], cfg, session, rate=args.rate, duration=args.duration,
-                      wait_s=args.wait, stop=stop)
+        with open_bag_samples([Path(b) for b in args.bags], cfg.sensors) as bag:
+            result = play(bag, cfg, session, rate=args.rate, duration=args.duration, wait_s=args.wait, stop=stop,
+                          names=args.bags)
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE

@@ -30,7 +30,7 @@ from fusiond.core.fusion import FusionCore
 from fusiond.replay.bag import open_bag_samples
 from fusiond.replay.run import replay
 from fusiond.samples import OdomSample
-from fusiond.transport.codecs import (
+from fusiond.codecs import (
     decode_odometry_cdr,
     decode_pose_cdr,
     encode_imu_sample,

@@ -13,13 +13,8 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fusiond.codecs import encode_odometry_cdr, encode_pose_cdr
 from fusiond.config import ConfigError, ZenohConfig
-from fusiond.transport.codecs import (
-    encode_odometry_cdr,
-    encode_odometry_cdr_rosbags,
-    encode_pose_cdr,
-    encode_pose_cdr_rosbags,
-)
 from fusiond.transport.session import (
     build_config,
     client_config,
@@ -28,6 +23,8 @@ from fusiond.transport.session import (
     open_session,
     zenoh_error_text,
 )
+
+from .cdr_reference import encode_odometry_cdr_rosbags, encode_pose_cdr_rosbags
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 frames = st.text(alphabet=st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=20)

@@ -30,9 +30,9 @@ import msgspec
 import numpy as np
 import zenoh
 
+from ..codecs import encode_imu_sample, encode_odom_sample
 from ..config import loads
 from ..samples import ImuSample, OdomSample
-from .codecs import encode_imu_sample, encode_odom_sample
 from .daemon import Daemon, direct
 from .session import build_config, open_session, query_health
 

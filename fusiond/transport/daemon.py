@@ -42,10 +42,10 @@ import msgspec
 import structlog
 import zenoh
 
+from ..codecs import DecodeError, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder
 from ..config import Config
 from ..core.fusion import FusionCore
 from ..health import Health, HealthReport, core_counters, encode_report
-from .codecs import DecodeError, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder
 from .session import build_config, open_session
 
 log = structlog.get_logger("fusiond.daemon")
