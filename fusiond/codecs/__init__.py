@@ -42,6 +42,22 @@ from .payloads import (
     ros_msgtype,
     stamp_to_ros,
 )
+from .ros_messages import (
+    DIAGNOSTIC_ARRAY,
+    ERROR,
+    OK,
+    TF_MESSAGE,
+    WARN,
+    DiagnosticStatus,
+    SetPose,
+    SetPoseMessage,
+    check_set_pose,
+    dds_type_name,
+    decode_set_pose,
+    encode_diagnostic_array_cdr,
+    encode_tf_cdr,
+    type_hash,
+)
 
 __all__ = [
     "IMU", "MAX_PAYLOAD", "NAVSATFIX", "ODOMETRY", "POSE_COV_STAMPED", "POSE_STAMPED", "POSE_TYPES", "REASONS",
@@ -50,4 +66,6 @@ __all__ = [
     "encode_navsat_cdr", "encode_odom_sample", "encode_odometry_cdr", "encode_pose_cdr", "encode_pose_sample",
     "encode_sample", "gps_from_ros", "imu_from_ros", "make_decoder", "odom_from_ros", "pose_from_ros",
     "ros_converter", "ros_msgtype", "stamp_to_ros",
+    "DIAGNOSTIC_ARRAY", "ERROR", "OK", "TF_MESSAGE", "WARN", "DiagnosticStatus", "SetPose", "SetPoseMessage",
+    "check_set_pose", "dds_type_name", "decode_set_pose", "encode_diagnostic_array_cdr", "encode_tf_cdr", "type_hash",
 ]
