@@ -356,3 +356,34 @@ def test_rmw_zenoh_mode_refuses_a_zenoh_namespace_and_non_cdr_sensors():
         loads('[ros]\ninterop = "rmw_zenoh"\n[[sensors]]\nname = "w"\nkind = "odom"\nkey = "odom"\nencoding = "json"\n')
     with pytest.raises(ConfigError, match="ros.node_name"):
         loads('[ros]\nnode_name = "my-node"\n')
+
+
+def test_attachment_is_zenohs_serialisation_of_int64_int64_and_a_16_byte_sequence():
+    """zenoh-cpp serialises std::array<uint8_t, 16> as a sequence: LEB128 length, then the bytes
+    (serialization.hxx), after the two little-endian int64 (attachment_helpers.cpp)."""
+    from fusiond.transport.rmw_zenoh import attachment, gid_of
+
+    gid = gid_of("@ros2_lv/0/abc/0/1/MP/%/%/fusiond/%tf/tf2_msgs::msg::dds_::TFMessage_/RIHS01_x/::,100:,:,:,,")
+    raw = attachment(1, 1_700_000_000_123_456_789, gid)
+    assert raw == struct.pack("<qqB", 1, 1_700_000_000_123_456_789, 16) + gid and len(raw) == 33
+    assert attachment(2**40, -5, gid)[:16] == struct.pack("<qq", 2**40, -5)
+
+
+def test_qos_chunk_and_names_as_rmw_zenoh_writes_them():
+    from fusiond.transport.rmw_zenoh import mangle, qos_keyexpr, topic_key, topic_name
+
+    assert qos_keyexpr(42) == "::,:,:,:,,"  # everything rmw_zenoh's default (qos.cpp): all elided
+    assert qos_keyexpr(10) == "::,10:,:,:,,"
+    assert mangle("/robot1/odom") == "%robot1%odom" and mangle("/") == "%"
+    assert topic_name("robot1/odom") == "/robot1/odom"
+    assert topic_key(0, "/robot1/odom/", ODOMETRY) == f"0/robot1/odom/{dds(ODOMETRY)}/{type_hash(ODOMETRY)}"
+
+
+def test_type_hashes_do_not_depend_on_the_rosbags_store():
+    """type_hash uses rosbags' Jazzy store; the messages fusiond uses hash the same in Humble's and Kilted's."""
+    from rosbags.typesys import Stores, get_typestore
+
+    types = [*TYPES.values(), *INPUTS.values(), "sensor_msgs/msg/NavSatFix", "geometry_msgs/msg/PoseStamped"]
+    for store in (Stores.ROS2_HUMBLE, Stores.ROS2_KILTED):
+        ts = get_typestore(store)
+        assert [ts.hash_rihs01(t) for t in types] == [type_hash(t) for t in types], store

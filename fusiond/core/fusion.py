@@ -388,7 +388,12 @@ class FusionCore:
         s.ekf.P[0:6, 0:6] = cov
         s.attitude_ready = True
         self._suspect = 0
-        self._reset_history()  # its base is this state: nothing older can be placed
+        self._reset_history()  # its base is this state: nothing older can be placed ...
+        # ... once the history holds an entry at the set stamp (with an empty history an older
+        # sample would not count as late). The marker (sensor index -1) is never re-applied:
+        # a sample is only re-applied after one inserted before it, and nothing older than the
+        # set stamp is accepted.
+        self.history.insert(0, (stamp, -1), (-1, None, stamp), s)
         log.info("pose_set", stamp=stamp, position=p.tolist(), orientation=(q / norm).tolist())
 
     # -- internals ------------------------------------------------------------
