@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from fusiond.codecs import ODOMETRY, POSE_COV_STAMPED, TYPESTORE, stamp_to_ros
+from fusiond.codecs import ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, TYPESTORE, stamp_to_ros
 
 _T = TYPESTORE.types
 
@@ -77,3 +77,16 @@ def encode_odometry_cdr_rosbags(
         ),
     )
     return _serialize(msg, ODOMETRY)
+
+
+def encode_tf_cdr_rosbags(stamp: float, frame_id: str, child_frame_id: str, position: Sequence[float],
+                          quat_xyzw: Sequence[float]) -> bytes:
+    """Reference implementation of `encode_tf_cdr` through rosbags (tests)."""
+    q = quat_xyzw
+    transform = _T["geometry_msgs/msg/TransformStamped"](
+        header=_header(stamp, frame_id), child_frame_id=child_frame_id,
+        transform=_T["geometry_msgs/msg/Transform"](
+            translation=_vec3(position),
+            rotation=_T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))),
+    )
+    return _serialize(_T[TF_MESSAGE](transforms=[transform]), TF_MESSAGE)
