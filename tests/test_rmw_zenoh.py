@@ -197,13 +197,15 @@ def test_sdk_publishers_feed_the_daemon_and_sdk_subscribers_get_its_outputs(worl
                                                                         None if s.attachment is None
                                                                         else s.attachment.to_bytes(),
                                                                         time.time_ns())))
-    odometry, poses, tfs = Received(), Received(), Received()
+    odometry, poses, tfs, diagnostics = Received(), Received(), Received(), Received()
     subs = [
         sdk.ROS2Subscriber("/odometry/filtered", ODOMETRY, odometry, node_name="checker", domain_id=DOMAIN,
                            router_port=port),
         sdk.ROS2Subscriber("/odom_combined", POSE_COV_STAMPED, poses, node_name="checker", domain_id=DOMAIN,
                            router_port=port),
         sdk.ROS2Subscriber("/tf", TF_MESSAGE, tfs, node_name="checker", domain_id=DOMAIN, router_port=port),
+        sdk.ROS2Subscriber("/diagnostics", DIAGNOSTIC_ARRAY, diagnostics, node_name="checker", domain_id=DOMAIN,
+                           router_port=port),
     ]
     wheel = sdk.ROS2Publisher("/odom", ODOMETRY, node_name="wheel_driver", domain_id=DOMAIN, router_port=port)
     # The SDK computed the hashes itself from the .msg definitions: they must be rosbags'.
@@ -274,6 +276,21 @@ def test_sdk_publishers_feed_the_daemon_and_sdk_subscribers_get_its_outputs(worl
         v = xxhash.xxh3_128_intdigest(token.encode())
         assert gid == (v & (2**64 - 1)).to_bytes(8, "little") + (v >> 64).to_bytes(8, "little")
     assert max(s[3] for s in samples) <= t_end
+
+    # /diagnostics (every 0.2 s here) through the SDK: odometry at 50 Hz of wall time until an array
+    # shows the wheel alive; the IMU never sent, so the filter is degraded (WARN) and the IMU WARN
+    def wheel_ok() -> list:
+        return [d for d in diagnostics.snapshot() if any(st.name == "fusiond: wheel" and st.level == 0
+                                                         for st in d.status)]
+
+    k, deadline = n, time.monotonic() + 10
+    while not wheel_ok():
+        assert time.monotonic() < deadline, "a DiagnosticArray with the wheel OK"
+        sdk_odometry(wheel, 200.0 + 0.02 * k)
+        k += 1
+        time.sleep(0.02)
+    levels = {st.name: int(st.level) for st in wheel_ok()[-1].status}
+    assert levels == {"fusiond: filter": 1, "fusiond: wheel": 0, "fusiond: imu": 1}
     raw_sub.undeclare()
     for s in subs:
         s.close()

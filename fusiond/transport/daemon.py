@@ -63,7 +63,7 @@ from ..codecs import (
 from ..config import Config
 from ..core.fusion import FusionCore
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
-from .rmw_zenoh import TF_DEPTH, RmwNode, topic_name
+from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
 
 log = structlog.get_logger("fusiond.daemon")
@@ -176,8 +176,7 @@ class Daemon:
     def start(self) -> None:
         out = self.cfg.output
         s = self.session
-        rmw = self.cfg.ros.interop == "rmw_zenoh"
-        if rmw:
+        if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
         self._pose_pub = self._ros_publisher(out.pose_key, POSE_COV_STAMPED)
         self._odom_pub = self._ros_publisher(out.odometry_key, ODOMETRY)
@@ -198,26 +197,25 @@ class Daemon:
                 self._subscribers.append(s.declare_subscriber(sensor.key, handler))
             log.info("sensor_subscribed", sensor=sensor.name, key=sensor.key, kind=sensor_kind(sensor),
                      encoding=sensor.encoding, timeout_s=sensor.timeout_s, interop=self.cfg.ros.interop)
-        self._set_pose_queryable = s.declare_queryable(out.set_pose_key, self._on_set_pose_query)
-        self._set_pose_sub = (self.node.subscriber(SET_POSE_TOPIC, POSE_COV_STAMPED, self._on_set_pose_topic)
-                              if self.node is not None else None)
+        # set_pose requests are input too: undeclared with the subscribers when stopping
+        self._subscribers.append(s.declare_queryable(out.set_pose_key, self._on_set_pose_query))
+        if self.node is not None:
+            self._subscribers.append(self.node.subscriber(SET_POSE_TOPIC, POSE_COV_STAMPED, self._on_set_pose_topic))
         # Last, so that an answer to a health query (or the token) proves the subscribers exist:
         # a peer's declarations reach a client in order on the link, before the reply. Tools
         # (`play`, tests) wait for that answer; a publisher's matching status is no such proof.
         self._queryable = s.declare_queryable(out.health_key, self._on_query)
         self._token = s.liveliness().declare_token(alive_key(out.health_key))
         self._outputs = [o for o in (self.node, self._pose_pub, self._odom_pub, self._diag_pub, self._navsat_pub,
-                                     self._tf_pub, self._ros_diag_pub, self._set_pose_queryable,
-                                     self._set_pose_sub, self._queryable, self._token) if o is not None]
+                                     self._tf_pub, self._ros_diag_pub, self._queryable, self._token)
+                         if o is not None]
         if self._monitor_on or self._ros_diag_pub is not None:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
 
-    def _ros_publisher(self, key: str, msgtype: str, depth: int | None = None) -> Any:
+    def _ros_publisher(self, key: str, msgtype: str, depth: int = QUEUE_DEPTH) -> Any:
         """A publisher of a ROS topic: the bridge's plain key, or rmw_zenoh's key with attachments and token."""
         if self.node is not None:
-            if depth is None:
-                return self.node.publisher(topic_name(key), msgtype, express=self._express)
             return self.node.publisher(topic_name(key), msgtype, depth=depth, express=self._express)
         return self.session.declare_publisher(key, encoding=zenoh.Encoding.APPLICATION_CDR, express=self._express)
 
