@@ -351,7 +351,7 @@ def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: i
 
     from .estimator import rotation as rot
     from .samples import ImuSample, OdomSample
-    from .transport.codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, encode_odom_sample
+    from .codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, encode_odom_sample
 
     cov36 = tuple(1e-3 if i % 7 == 0 else 0.0 for i in range(36))
     ocov = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)

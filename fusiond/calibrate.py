@@ -111,7 +111,7 @@ def record_imu(session, sensor: ImuSensor, duration: float) -> list[ImuSample]:
     import threading
     import time
 
-    from .transport.codecs import DecodeError, make_decoder
+    from .codecs import DecodeError, make_decoder
 
     decode = make_decoder("imu", sensor.encoding, sensor.name)
     samples: list[ImuSample] = []

@@ -1,4 +1,4 @@
-"""Command line: `fusiond run | play | replay | monitor | health | calibrate-imu | bench | bench-latency`.
+"""Command line: `fusiond run | play | replay | monitor | health | set-pose | calibrate-imu | bench | bench-latency`.
 
 Each command imports what it needs when it runs, so `replay` does not pay for Zenoh
 nor `run` for matplotlib.
@@ -59,7 +59,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 EXIT_UNHEALTHY = 1
-_STATUS_RANK = {"failed": 0, "degraded": 1, "ok": 2}
+_STATUS_RANK = {"failed": 0, "starting": 1, "degraded": 1, "ok": 2}
 
 
 def _zenoh_errors():
@@ -88,7 +88,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from .replay.bag import BagError
+    from .replay.bag import BagError, open_bag_samples
     from .transport.player import play
 
     if args.rate < 0:
@@ -99,8 +99,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     try:
-        result = play([Path(b) for b in args.bags], cfg, session, rate=args.rate, duration=args.duration,
-                      wait_s=args.wait, stop=stop)
+        with open_bag_samples([Path(b) for b in args.bags], cfg.sensors) as bag:
+            result = play(bag, cfg, session, rate=args.rate, duration=args.duration, wait_s=args.wait, stop=stop,
+                          names=args.bags)
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -133,6 +134,36 @@ def cmd_health(args: argparse.Namespace) -> int:
         rank = _STATUS_RANK.get(status, -1)
         worst = rank if worst is None else min(worst, rank)
     return 0 if worst is not None and worst >= _STATUS_RANK[args.min_status] else EXIT_UNHEALTHY
+
+
+def cmd_set_pose(args: argparse.Namespace) -> int:
+    """robot_localization's set_pose: re-initialise a running daemon's filter at a pose."""
+    import msgspec
+
+    from .codecs import SetPoseMessage
+    from .estimator.rotation import from_rpy
+    from .transport.session import request_set_pose
+
+    pos_var, att_var = args.sigma[0] ** 2, args.sigma[1] ** 2
+    cov = [0.0] * 36
+    for i in range(6):
+        cov[7 * i] = pos_var if i < 3 else att_var
+    message = SetPoseMessage(stamp=args.stamp, position=(args.x, args.y, args.z),
+                             orientation=from_rpy(args.roll, args.pitch, args.yaw), covariance=tuple(cov))
+    cfg, session = _tool_session(args, unreachable_exit=EXIT_UNHEALTHY)
+    key = args.key or cfg.output.set_pose_key
+    try:
+        answers, errors = request_set_pose(session, key, msgspec.json.encode(message), args.timeout)
+    finally:
+        session.close()
+    for raw in answers:
+        print(raw.decode())
+    for text in errors:
+        print(f"fusiond: {text}", file=sys.stderr)
+    if not answers and not errors:
+        print(f"fusiond: no daemon answered on {key!r} within {args.timeout} s (not running, or not allowed)",
+              file=sys.stderr)
+    return 0 if answers and not errors else EXIT_UNHEALTHY
 
 
 def _tool_session(args: argparse.Namespace, listen: list[str] | None = None, unreachable_exit: int = 1):
@@ -327,6 +358,25 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
                    help="worst status that still exits 0 (default degraded; failed = any answer)")
     h.set_defaults(func=cmd_health)
+
+    sp = sub.add_parser("set-pose", help="re-initialise a running daemon's filter at a pose (robot_localization's "
+                                         "set_pose); prints the new health")
+    sp.add_argument("x", type=float, help="position x in the output frame, m")
+    sp.add_argument("y", type=float, help="position y, m")
+    sp.add_argument("yaw", type=float, nargs="?", default=0.0, help="heading, rad (default 0)")
+    sp.add_argument("--z", type=float, default=0.0, help="position z, m (default 0)")
+    sp.add_argument("--roll", type=float, default=0.0, help="rad (default 0)")
+    sp.add_argument("--pitch", type=float, default=0.0, help="rad (default 0)")
+    sp.add_argument("--stamp", type=float, default=0.0,
+                    help="time the pose holds at, s (message time); default 0: the filter's current time")
+    sp.add_argument("--sigma", type=float, nargs=2, default=(0.0, 0.0), metavar=("POSITION_M", "ATTITUDE_RAD"),
+                    help="standard deviations of the pose (default 0 0: exactly this pose)")
+    sp.add_argument("--config", help="TOML config of the daemon (set_pose key, namespace, endpoints)")
+    sp.add_argument("--connect", action="append", metavar="ENDPOINT",
+                    help="Zenoh endpoint of the daemon (repeatable); default: from the config")
+    sp.add_argument("--key", help="set_pose key (default: output.set_pose_key of the config)")
+    sp.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the answer (default 2)")
+    sp.set_defaults(func=cmd_set_pose)
 
     b = sub.add_parser("bench-latency", help="sensor put -> fused pose latency over Zenoh on loopback")
     b.add_argument("--seconds", type=float, default=10.0, help="measurement duration (default 10)")

@@ -8,6 +8,7 @@ raised before anything starts.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Literal
@@ -43,6 +44,19 @@ class OutputConfig(_Table):
     frame_id: str = "odom"
     child_frame_id: str = "base_link"
     navsat_key: str = ""  # with a gps sensor: the fused position as NavSatFix here (empty: off)
+    publish_tf: bool = True  # tf2_msgs/msg/TFMessage frame_id -> child_frame_id on tf_key (robot_localization's name)
+    tf_key: str = "tf"  # the bridge's mapping of /tf
+    ros_diagnostics_key: str = "diagnostics"  # health as diagnostic_msgs/msg/DiagnosticArray (empty: off)
+    ros_diagnostics_period_s: float = 1.0  # how often it is published (diagnostic_updater's default rate)
+    set_pose_key: str = "fusiond/set_pose"  # queryable: re-initialise the filter (robot_localization's set_pose)
+
+
+class RosConfig(_Table):
+    """How fusiond meets ROS 2: through zenoh-bridge-ros2dds's plain keys, or as an rmw_zenoh node."""
+
+    interop: Literal["bridge", "rmw_zenoh"] = "bridge"
+    domain_id: int = 0  # ROS_DOMAIN_ID (rmw_zenoh mode): the first chunk of every key
+    node_name: str = "fusiond"  # the node rmw_zenoh tools list (ros2 node list)
 
 
 class FilterConfig(_Table):
@@ -150,6 +164,7 @@ SensorConfig = OdomSensor | ImuSensor | GpsSensor | PoseSensor
 class Config(_Table):
     zenoh: ZenohConfig = msgspec.field(default_factory=ZenohConfig)
     output: OutputConfig = msgspec.field(default_factory=OutputConfig)
+    ros: RosConfig = msgspec.field(default_factory=RosConfig)
     filter: FilterConfig = msgspec.field(default_factory=FilterConfig)
     sensors: list[SensorConfig] = []
 
@@ -207,6 +222,7 @@ def validate(cfg: Config) -> Config:
                           "may define the world frame")
     if cfg.output.navsat_key and not any(isinstance(s, GpsSensor) for s in cfg.sensors):
         raise ConfigError("output.navsat_key: needs a gps sensor (the NavSatFix is the fused position in WGS84)")
+    _check_ros(cfg)
     for i, s in enumerate(cfg.sensors):
         if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
             raise ConfigError(f"sensors[{i}].gyro_scale_estimation: needs angular_velocity = true")
@@ -218,6 +234,28 @@ def validate(cfg: Config) -> Config:
             if s.error_tau_s > 0.0 and s.error_sigma is None:
                 raise ConfigError(f"sensors[{i}].error_sigma: needed when error_tau_s > 0")
     return cfg
+
+
+def _check_ros(cfg: Config) -> None:
+    """[ros] and the output keys it turns into ROS topics."""
+    out, ros = cfg.output, cfg.ros
+    if out.ros_diagnostics_period_s <= 0.0:
+        raise ConfigError("output.ros_diagnostics_period_s: must be positive")
+    for name in ("tf_key", "set_pose_key"):
+        if not getattr(out, name):
+            raise ConfigError(f"output.{name}: must not be empty")
+    if not 0 <= ros.domain_id < 2**31:
+        raise ConfigError(f"ros.domain_id: must be in [0, 2^31), got {ros.domain_id}")
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", ros.node_name):
+        raise ConfigError(f"ros.node_name: not a valid ROS node name: {ros.node_name!r}")
+    if ros.interop != "rmw_zenoh":
+        return
+    if cfg.zenoh.namespace:
+        raise ConfigError("zenoh.namespace: not used with ros.interop = \"rmw_zenoh\" (rmw_zenoh keys start with "
+                          "the domain id); put a ROS namespace into the keys instead, e.g. \"robot1/odom\"")
+    for i, s in enumerate(cfg.sensors):
+        if s.encoding != "ros2-cdr":
+            raise ConfigError(f"sensors[{i}].encoding: rmw_zenoh carries ROS 2 CDR only, got {s.encoding!r}")
 
 
 def _one_line(err: msgspec.ValidationError) -> str:

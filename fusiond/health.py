@@ -11,8 +11,13 @@ Threads: subscriber callbacks count arrivals and queue drops, the worker reports
 accepted samples and core counters, the queryable reads a report. One lock
 guards it all; every call is a few dict/list updates.
 
-Status: `failed` when no sensor is alive, the filter state is non-finite or the
-worker has stopped; `degraded` when any configured sensor is not alive; else `ok`.
+Status: `starting` while the daemon waits for its first samples (nothing
+accepted, nothing dropped yet: not an error); `failed` when no sensor is alive,
+the filter state is non-finite or the worker has stopped; `degraded` when any
+configured sensor is not alive; else `ok`.
+
+`ros_statuses` turns a report into diagnostic_msgs DiagnosticStatus entries (one
+per sensor, one for the filter) for ROS's rqt_robot_monitor / diagnostic_aggregator.
 """
 
 from __future__ import annotations
@@ -26,12 +31,13 @@ from typing import Any, Literal
 import msgspec
 
 from .reasons import QUEUE_FULL
+from .codecs.ros_messages import ERROR, OK, WARN, DiagnosticStatus
 
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many observed periods)
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new wall-clock arrival interval
 MAX_INTERVAL = 1.0  # a longer gap counts as this much in the period EMA (a pause must not stretch it for minutes)
 
-Status = Literal["ok", "degraded", "failed"]
+Status = Literal["ok", "degraded", "starting", "failed"]
 
 
 class SensorHealth(msgspec.Struct, kw_only=True):
@@ -226,12 +232,18 @@ class Health:
                         problems.append(f"{s.name}: silent for {age:.2f} s (timeout {timeout:.2f} s)")
             filt = core.filter if core is not None else FilterHealth()
             any_alive = any(v.alive for v in sensors.values())
-            failed = not any_alive or not filt.finite or not self._worker_alive
+            # Waiting for the first samples is not a failure: nothing was accepted and nothing
+            # dropped yet (a sample in the queue is not a drop; garbage is, and fails).
+            starting = (self._worker_alive and filt.finite and all(s.last is None for s in self._sensors)
+                        and not any(v.dropped for v in sensors.values()))
+            failed = not starting and (not any_alive or not filt.finite or not self._worker_alive)
             if not filt.finite:
                 problems.append("filter: non-finite state")
             if not self._worker_alive:
                 problems.append("worker: stopped")
-            if not any_alive:
+            if starting:
+                problems.append("starting: waiting for the first samples")
+            elif not any_alive:
                 problems.append("no sensor alive")
             waiting = filt.initialised and not filt.ready
             if waiting:
@@ -239,7 +251,7 @@ class Health:
             if filt.initialised and not filt.heading_known:
                 problems.append("filter: heading not yet known (GPS heading waits for the first metres of travel)")
             degraded = waiting or any(not v.alive for v in sensors.values())
-            status: Status = "failed" if failed else "degraded" if degraded else "ok"
+            status: Status = "failed" if failed else "starting" if starting else "degraded" if degraded else "ok"
             return HealthReport(
                 status=status,
                 sensors=sensors,
@@ -261,3 +273,57 @@ def encode_report(report: HealthReport) -> bytes:
 
 def decode_report(payload: bytes) -> HealthReport:
     return msgspec.json.decode(payload, type=HealthReport)
+
+
+# --------------------------------------------------------------------------- ROS diagnostics
+
+_LEVEL_OF_STATUS = {"ok": OK, "degraded": WARN, "starting": WARN, "failed": ERROR}
+_BAD_VERDICTS = {"nis_high": "NIS high (R too small, or the sensor lies)",
+                 "nis_low": "NIS low (R too large)"}
+
+
+def _num(v: float | None, digits: int = 3) -> str:
+    return "" if v is None else f"{v:.{digits}f}"
+
+
+def ros_statuses(report: HealthReport, node_name: str, hardware_ids: dict[str, str]) -> list[DiagnosticStatus]:
+    """The health report as DiagnosticStatus entries: `<node>: filter` first, then `<node>: <sensor>`.
+
+    Levels: the filter is OK / WARN (degraded, starting) / ERROR (failed). A sensor is
+    OK while alive, WARN while alive with a windowed NIS verdict out of its bounds (the
+    live doctor's signal) or before its first sample, ERROR when it has gone silent.
+    Key-values carry rates, ages and counters as strings (DiagnosticStatus has no numbers).
+    """
+    f, q = report.filter, report.queue
+    out = [DiagnosticStatus(
+        level=_LEVEL_OF_STATUS[report.status], name=f"{node_name}: filter",
+        message=report.status if not report.problems else f"{report.status}: " + "; ".join(report.problems),
+        hardware_id=node_name,
+        values=[("status", report.status), ("initialised", str(f.initialised).lower()),
+                ("filter_time", _num(f.time, 9)), ("published", str(report.published)),
+                ("uptime_s", _num(report.uptime_s, 1)), ("covariance_resets", str(f.covariance_resets)),
+                ("time_resets", str(f.time_resets)), ("world_frame_ready", str(f.ready).lower()),
+                ("queue_depth", str(q.depth)), ("queue_capacity", str(q.capacity)),
+                ("queue_dropped", str(q.dropped))],
+    )]
+    for name, s in report.sensors.items():
+        channels = {k.split("/", 1)[1]: v for k, v in report.consistency.items() if k.split("/", 1)[0] == name}
+        bad = [f"{ch}: {_BAD_VERDICTS[v['verdict']]}" for ch, v in channels.items()
+               if v.get("verdict") in _BAD_VERDICTS]
+        if s.alive:
+            level, message = (WARN, "; ".join(bad)) if bad else (OK, "alive")
+        elif s.age_s is None:
+            level = WARN
+            message = "no sample yet" if not s.received else f"no usable sample yet ({s.received} received)"
+        else:
+            level, message = ERROR, f"silent for {s.age_s:.2f} s (timeout {s.timeout_s:.2f} s)"
+        values = [("alive", str(s.alive).lower()), ("rate_hz", _num(s.rate_hz, 2)), ("age_s", _num(s.age_s)),
+                  ("timeout_s", _num(s.timeout_s)), ("received", str(s.received)), ("applied", str(s.applied)),
+                  ("late", str(s.late)), ("dropped", str(s.dropped)), ("rejected", str(s.rejected)),
+                  ("zero_covariance_floored", str(s.zero_covariance_floored))]
+        values += [(f"dropped_{reason}", str(n)) for reason, n in sorted(s.dropped_by_reason.items())]
+        values += [(f"nis_{ch}", f"{_num(v.get('nis_mean'))} ({v.get('verdict')})")
+                   for ch, v in sorted(channels.items())]
+        out.append(DiagnosticStatus(level=level, name=f"{node_name}: {name}", message=message,
+                                    hardware_id=hardware_ids.get(name, name), values=values))
+    return out

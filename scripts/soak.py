@@ -46,7 +46,7 @@ import zenoh  # noqa: E402
 
 from fusiond.config import ZenohConfig  # noqa: E402
 from fusiond.samples import ImuSample, OdomSample  # noqa: E402
-from fusiond.transport.codecs import encode_imu_sample, encode_odom_sample  # noqa: E402
+from fusiond.codecs import encode_imu_sample, encode_odom_sample  # noqa: E402
 from fusiond.transport.session import build_config, open_session, query_health  # noqa: E402
 
 _STAMP = struct.Struct("<iI")

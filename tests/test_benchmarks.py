@@ -12,7 +12,7 @@ import pytest
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
 from fusiond.estimator import observations as obs
-from fusiond.transport.codecs import encode_imu_sample, encode_odom_sample, make_decoder
+from fusiond.codecs import encode_imu_sample, encode_odom_sample, make_decoder
 
 from .sim import SimConfig, simulate
 from .test_fusion_core import make_config

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fusiond.samples import ImuSample, OdomSample
-from fusiond.transport.codecs import (
+from fusiond.codecs import (
     IMU,
     MAX_PAYLOAD,
     ODOMETRY,

@@ -13,7 +13,7 @@ import zenoh
 from fusiond.config import ZenohConfig, loads
 from fusiond.health import decode_report
 from fusiond.samples import OdomSample
-from fusiond.transport.codecs import decode_pose_cdr, encode_odom_sample
+from fusiond.codecs import decode_pose_cdr, encode_odom_sample
 from fusiond.transport.daemon import Daemon, alive_key
 from fusiond.transport.session import build_config, open_session, query_health
 
@@ -152,6 +152,7 @@ def test_liveliness_token_and_a_clean_stop(sessions):
 @pytest.mark.e2e
 def test_play_transcodes_for_json_and_msgpack_sensors(sessions, jackal_bag):
     """`play` feeds a daemon whose sensors are configured as json/msgpack: the same samples arrive."""
+    from fusiond.replay.bag import open_bag_samples
     from fusiond.transport.player import play
 
     dsession, client = sessions
@@ -173,7 +174,8 @@ angular_velocity = true
     daemon = Daemon(cfg, dsession, monitor=False)
     daemon.start()
     try:
-        result = play([jackal_bag], cfg, client, rate=0.0, duration=2.0, wait_s=5.0)
+        with open_bag_samples([jackal_bag], cfg.sensors) as bag:
+            result = play(bag, cfg, client, rate=0.0, duration=2.0, wait_s=5.0)
         assert result.messages > 150 and not result.interrupted
         rep = wait_until(lambda: (r := report(client)) and r.published == result.per_sensor["wheel"] and r, 10,
                          "all poses")
@@ -187,7 +189,7 @@ angular_velocity = true
 def test_fused_position_is_published_as_navsatfix(sessions):
     """With a GPS and `output.navsat_key`, the daemon publishes the fused base position in WGS84."""
     from fusiond.samples import GpsSample, ImuSample
-    from fusiond.transport.codecs import NAVSATFIX, TYPESTORE, encode_gps_sample, encode_imu_sample
+    from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_gps_sample, encode_imu_sample
 
     cfg = loads(CONFIG.replace('health_key = "t/health"', 'health_key = "t/health"\nnavsat_key = "t/fix_filtered"')
                 + '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n')

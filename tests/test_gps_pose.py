@@ -21,7 +21,7 @@ from fusiond.estimator.numeric import measurement_jacobian
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
 from fusiond.replay.run import replay
 from fusiond.samples import GpsSample, OdomSample, PoseSample
-from fusiond.transport.codecs import (
+from fusiond.codecs import (
     NAVSATFIX, ODOMETRY, POSE_STAMPED, POSE_TYPES, TYPESTORE, DecodeError, encode_gps_sample, encode_odom_sample,
     encode_pose_sample, encode_sample, make_decoder,
 )

@@ -40,19 +40,22 @@ def feed(h: Health, clock: Clock, until: float, periods: dict[int, float]) -> No
     clock.t = until
 
 
-def test_ok_then_degraded_naming_the_sensor_then_failed():
+def test_starting_then_ok_then_degraded_naming_the_sensor_then_failed():
     clock = Clock()
     h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock, queue_capacity=8)
     rep = h.report()
-    assert rep.status == "failed"
+    assert rep.status == "starting"  # waiting for the first samples is not a failure
     assert rep.sensors["wheel"].age_s is None and rep.problems[:2] == ["wheel: no sample yet", "imu: no sample yet"]
+    assert "no sensor alive" not in rep.problems and "starting: waiting for the first samples" in rep.problems
+    h.on_received(0)  # received, still in the queue: still starting
+    assert h.report().status == "starting"
 
     feed(h, clock, 102.0, {0: 0.02, 1: 0.01})
     rep = h.report()
     assert rep.status == "ok" and rep.problems == []
     assert rep.sensors["imu"].alive and rep.sensors["imu"].rate_hz == pytest.approx(100.0)
     assert rep.sensors["wheel"].rate_hz == pytest.approx(50.0)
-    assert rep.sensors["wheel"].received == 101
+    assert rep.sensors["wheel"].received == 102  # 101 fed + the one received while starting
 
     # the IMU stops; the wheel goes on
     feed(h, clock, 102.15, {0: 0.02})
@@ -86,7 +89,7 @@ def test_timeout_follows_a_slow_sensor_so_it_does_not_flap():
             statuses.add(h.report().status)
         h.on_received(0)
         h.on_accepted(0, t)
-    statuses.discard("failed")  # before the first sample
+    statuses.discard("starting")  # before the first sample
     assert statuses == {"ok"}
     assert h.report().sensors["wheel"].timeout_s > 0.4
 

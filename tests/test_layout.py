@@ -26,7 +26,7 @@ def test_each_package_declares_a_public_surface_that_resolves(name):
 def test_every_error_is_a_fusiond_error_and_old_names_are_the_same_classes():
     from fusiond.config import ConfigError
     from fusiond.replay.bag import BagError
-    from fusiond.transport.codecs import DecodeError
+    from fusiond.codecs import DecodeError
     from fusiond.transport.session import SessionError
 
     for name in errors.__all__:
@@ -60,7 +60,7 @@ def test_reason_codes_are_unique_and_each_has_a_meaning():
 
 
 def test_the_codecs_reasons_are_listed():
-    from fusiond.transport import codecs
+    from fusiond import codecs
 
     assert set(codecs.REASONS) <= set(reasons.ALL)
 

@@ -30,7 +30,7 @@ import zenoh
 from fusiond.config import ZenohConfig, load
 from fusiond.replay.bag import open_bag_samples
 from fusiond.samples import ImuSample, OdomSample
-from fusiond.transport.codecs import (
+from fusiond.codecs import (
     MAX_PAYLOAD,
     DecodeError,
     decode_pose_cdr,

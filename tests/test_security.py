@@ -22,7 +22,7 @@ import zenoh
 from fusiond.config import ZenohConfig, load
 from fusiond.transport.session import build_config, open_session, query_health
 
-from .test_daemon import ROOT, daemon_process, free_port, wait_until
+from .test_daemon import ROOT, daemon_process, free_port, fusiond_cmd, wait_until
 from .test_reliability import IMU_KEY, WHEEL_KEY, Poses, imu_payload, odom_payload
 
 OPENSSL = shutil.which("openssl")
@@ -54,13 +54,14 @@ def _leaf(d: Path, name: str, ca: str, san: str, eku: str) -> None:
 
 @pytest.fixture(scope="module")
 def pki(tmp_path_factory) -> Path:
-    """ca (trusted): fusiond (server, 127.0.0.1/localhost) and operator (client); rogue CA: intruder."""
+    """ca (trusted): fusiond (server, 127.0.0.1/localhost), operator and viewer (clients); rogue CA: intruder."""
     if OPENSSL is None:
         pytest.skip("openssl CLI not found")
     d = tmp_path_factory.mktemp("pki")
     _ca(d, "ca")
     _leaf(d, "fusiond", "ca", "IP:127.0.0.1,DNS:localhost", "serverAuth,clientAuth")
     _leaf(d, "operator", "ca", "DNS:operator", "clientAuth")
+    _leaf(d, "viewer", "ca", "DNS:viewer", "clientAuth")  # trusted, but not the operator
     _ca(d, "rogue")
     _leaf(d, "intruder", "rogue", "DNS:intruder", "clientAuth")
     return d
@@ -279,3 +280,126 @@ def test_access_control_lets_fusiond_publish_only_its_own_keys(tmp_path, reliabi
     assert set(daemon_keys) == allowed, daemon_keys
     assert "cmd_vel:from-daemon" not in at_peer and "odom_combined:from-daemon" in at_peer
     assert "from-peer" not in at_daemon
+
+
+# --------------------------------------------------------------------------- set_pose for the operator only
+
+
+def set_pose_acl_json5(pki: Path, sensor_keys: list[str]) -> str:
+    """Mutual TLS, and an ACL in which only the certificate with CN "operator" may call set_pose."""
+    tls = json.loads(json.dumps({"root_ca_certificate": str(pki / "ca.pem"),
+                                 "listen_private_key": str(pki / "fusiond.key"),
+                                 "listen_certificate": str(pki / "fusiond.pem"), "enable_mtls": True}))
+    outputs = ["odom_combined", "odometry/filtered", "tf", "diagnostics", "fusiond/diagnostics"]
+    health = ["fusiond/health", "fusiond/health/**"]
+    return json.dumps({
+        "transport": {"link": {"tls": tls}},
+        "access_control": {
+            "enabled": True,
+            "default_permission": "deny",
+            "rules": [
+                {"id": "publish-outputs", "permission": "allow", "flows": ["egress"], "messages": ["put"],
+                 "key_exprs": outputs},
+                {"id": "outputs-subscribers", "permission": "allow", "flows": ["ingress"],
+                 "messages": ["declare_subscriber"], "key_exprs": outputs},
+                {"id": "subscribe-sensors", "permission": "allow", "flows": ["egress"],
+                 "messages": ["declare_subscriber"], "key_exprs": sensor_keys},
+                {"id": "receive-sensors", "permission": "allow", "flows": ["ingress"], "messages": ["put"],
+                 "key_exprs": sensor_keys},
+                {"id": "health", "permission": "allow", "flows": ["ingress", "egress"],
+                 "messages": ["declare_queryable", "query", "reply", "liveliness_token", "liveliness_query",
+                              "declare_liveliness_subscriber"], "key_exprs": health},
+                {"id": "set-pose", "permission": "allow", "flows": ["ingress", "egress"],
+                 "messages": ["declare_queryable", "query", "reply"], "key_exprs": ["fusiond/set_pose"]},
+            ],
+            "subjects": [{"id": "every-peer"}, {"id": "operator", "cert_common_names": ["operator"]}],
+            "policies": [
+                {"rules": ["publish-outputs", "outputs-subscribers", "subscribe-sensors", "receive-sensors", "health"],
+                 "subjects": ["every-peer"]},
+                {"rules": ["set-pose"], "subjects": ["operator"]},
+            ],
+        },
+    }, indent=2)
+
+
+def tls_tool_config(tmp_path: Path, pki: Path, port: int, cert: str) -> Path:
+    """A client tool's TOML (fusiond set-pose / health) dialling the daemon with a client certificate."""
+    (tmp_path / f"{cert}.json5").write_text(json.dumps({"transport": {"link": {"tls": {
+        "root_ca_certificate": str(pki / "ca.pem"), "connect_private_key": str(pki / f"{cert}.key"),
+        "connect_certificate": str(pki / f"{cert}.pem"), "enable_mtls": True}}}}))
+    path = tmp_path / f"{cert}.toml"
+    path.write_text(f'[zenoh]\nmode = "peer"\nconnect = ["tls/127.0.0.1:{port}"]\nmulticast_scouting = false\n'
+                    f'config_file = "{cert}.json5"\n')
+    return path
+
+
+@needs_openssl
+@pytest.mark.e2e
+def test_only_the_operator_identity_may_set_the_pose(pki, tmp_path, reliability_log):
+    """The ACL of docs/SECURITY.md: a session whose certificate is not the operator's cannot reset the
+    filter (its query never reaches the daemon); the operator's `fusiond set-pose` does."""
+    port = free_port()
+    config = daemon_config(tmp_path, f"tls/127.0.0.1:{port}", set_pose_acl_json5(pki, [WHEEL_KEY, IMU_KEY]),
+                           "setpose")
+    log = tmp_path / "daemon.log"
+    with daemon_process(config, log) as proc:
+        viewer = tls_client(pki, port, "viewer")
+        try:
+            wait_until(lambda: proc.poll() is None and answers(viewer, 0.5), 30, "a health answer for the viewer")
+            poses = Poses(viewer)
+            pub = viewer.declare_publisher(WHEEL_KEY)
+            for k in range(20):
+                pub.put(odom_payload(1000.0 + 0.02 * k))
+            wait_until(lambda: len(poses) >= 20, 10, "20 poses")
+            last = 1000.0 + 0.02 * 19
+            before = wait_until(lambda: (h := json.loads(answers(viewer)[0]))["filter"]["time"] == last and h, 10,
+                                "health at the last stamp")
+
+            # the viewer (trusted certificate, other identity) asks, directly and through the CLI
+            from fusiond.transport.session import request_set_pose
+
+            request = json.dumps({"stamp": 0, "position": [9.0, 9.0, 0.0], "orientation": [0, 0, 0, 1]}).encode()
+            viewer_ok, viewer_err = request_set_pose(viewer, "fusiond/set_pose", request, 2.0)
+            cli_viewer = subprocess.run(fusiond_cmd("set-pose", "9", "9", "--config",
+                                                    str(tls_tool_config(tmp_path, pki, port, "viewer"))),
+                                        cwd=ROOT, capture_output=True, text=True, timeout=60)
+            after_denied = json.loads(answers(viewer)[0])
+            pub.put(odom_payload(1000.0 + 0.02 * 20))
+            wait_until(lambda: len(poses) >= 21, 10, "the next pose")
+            x_after_denied = poses.items[-1][2][0]
+
+            # the operator's certificate is allowed
+            cli_operator = subprocess.run(fusiond_cmd("set-pose", "9", "9", "0.5", "--config",
+                                                      str(tls_tool_config(tmp_path, pki, port, "operator"))),
+                                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+            wait_until(lambda: any(x[0] == 9.0 and x[1] == 9.0 for _, _, x, _ in poses.items), 10,
+                       "the pose at (9, 9)")
+        finally:
+            viewer.close()
+        alive = proc.poll() is None
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(15) == 0
+    # A circle at 0.5 m/s from the origin: after 0.4 s, x = sin(0.2 * 0.4) / 0.2 * 0.5 = 0.1999 m, nowhere near 9.
+    denied = (not viewer_ok and not viewer_err and cli_viewer.returncode == 1
+              and after_denied["filter"]["time"] == before["filter"]["time"] and x_after_denied < 1.0)
+    reliability_log.record(
+        group="security", sensor="set_pose", input="ACL: set_pose allowed to cert CN 'operator' only; a trusted "
+                                                   "'viewer' certificate sends set_pose (query and CLI)",
+        expected="no answer, filter unchanged",
+        observed=f"answers {len(viewer_ok)}, errors {len(viewer_err)}, CLI exit {cli_viewer.returncode}, "
+                 f"x after {x_after_denied:.4f}",
+        passed=denied, crashed=not alive, test="test_only_the_operator_identity_may_set_the_pose")
+    reliability_log.record(
+        group="security", sensor="set_pose", input="the operator's certificate: fusiond set-pose 9 9 0.5",
+        expected="applied, health answered", observed=f"CLI exit {cli_operator.returncode}",
+        passed=cli_operator.returncode == 0, crashed=not alive,
+        test="test_only_the_operator_identity_may_set_the_pose")
+    assert alive
+    assert viewer_ok == [] and viewer_err == []
+    assert cli_viewer.returncode == 1 and "no daemon answered" in cli_viewer.stderr, cli_viewer.stderr
+    assert after_denied["filter"]["time"] == before["filter"]["time"] and x_after_denied < 1.0
+    assert cli_operator.returncode == 0, cli_operator.stderr
+    # its answer is the new health: the filter re-initialised at its current time (stamp 0), the
+    # last odometry's 1000.40; the sensors have been quiet since, so the status itself is whatever it is
+    answer = json.loads(cli_operator.stdout.splitlines()[0])
+    assert answer["filter"]["time"] == pytest.approx(1000.0 + 0.02 * 20, abs=1e-9) and "wheel" in answer["sensors"]

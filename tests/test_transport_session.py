@@ -13,13 +13,8 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fusiond.codecs import encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr
 from fusiond.config import ConfigError, ZenohConfig
-from fusiond.transport.codecs import (
-    encode_odometry_cdr,
-    encode_odometry_cdr_rosbags,
-    encode_pose_cdr,
-    encode_pose_cdr_rosbags,
-)
 from fusiond.transport.session import (
     build_config,
     client_config,
@@ -28,6 +23,8 @@ from fusiond.transport.session import (
     open_session,
     zenoh_error_text,
 )
+
+from .cdr_reference import encode_odometry_cdr_rosbags, encode_pose_cdr_rosbags, encode_tf_cdr_rosbags
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 frames = st.text(alphabet=st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=20)
@@ -39,6 +36,7 @@ frames = st.text(alphabet=st.characters(blacklist_categories=("Cs",), blacklist_
 def test_struct_encoders_are_byte_identical_to_rosbags(stamp, frame, child, values):
     p, q, cov, lin, ang, tcov = values[0:3], values[3:7], values[7:43], values[43:46], values[46:49], values[49:85]
     assert encode_pose_cdr(stamp, frame, p, q, cov) == encode_pose_cdr_rosbags(stamp, frame, p, q, cov)
+    assert encode_tf_cdr(stamp, frame, child, p, q) == encode_tf_cdr_rosbags(stamp, frame, child, p, q)
     assert (encode_odometry_cdr(stamp, frame, child, np.array(p), tuple(q), np.array(cov), lin, ang, tcov)
             == encode_odometry_cdr_rosbags(stamp, frame, child, p, q, cov, lin, ang, tcov))
 

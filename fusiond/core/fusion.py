@@ -427,6 +427,62 @@ class FusionCore:
             return base
         return max(base, TIMEOUT_PERIODS * s.period[idx])
 
+    def set_pose(self, stamp: float, position: tuple[float, float, float],
+                 orientation: tuple[float, float, float, float], covariance: list[float]) -> None:
+        """Re-initialise the filter at this pose and stamp (robot_localization's set_pose).
+
+        The pose (position, quaternion x y z w, normalised here) becomes the state at
+        ``stamp`` with ``covariance`` (36 numbers, ROS row-major over x y z roll pitch yaw)
+        as its uncertainty and no correlation to anything else; the history is cleared, so
+        a sample older than ``stamp`` is dropped as too old, and held inputs are forgotten
+        (the robot is taken to be at rest until the next odometry, as robot_localization
+        zeroes the twist). What describes the sensors rather than the pose survives:
+        gyro bias and scale estimates with their covariance, observed rates, and a
+        GPS-defined world frame. A relative IMU re-measures its yaw offset, a differential
+        pose sensor restarts its deltas, so neither pulls the estimate back to the old pose.
+        Raises ValueError, naming the problem, and changes nothing if a value is unusable.
+        """
+        p = np.asarray(position, dtype=float).reshape(-1)
+        q = np.asarray(orientation, dtype=float).reshape(-1)
+        cov = np.asarray(covariance, dtype=float).reshape(-1)
+        if not (math.isfinite(stamp) and stamp > 0.0):
+            raise ValueError(f"stamp must be finite and positive, got {stamp}")
+        if p.size != 3 or not np.isfinite(p).all():
+            raise ValueError(f"position must be 3 finite numbers, got {p.tolist()}")
+        norm = float(np.linalg.norm(q)) if q.size == 4 and np.isfinite(q).all() else 0.0
+        if norm < 1e-6:
+            raise ValueError(f"orientation must be a finite quaternion of non-zero norm, got {q.tolist()}")
+        if cov.size != 36 or not np.isfinite(cov).all():
+            raise ValueError("covariance must be 36 finite numbers")
+        cov = cov.reshape(6, 6)
+        cov = 0.5 * (cov + cov.T)
+        if (np.diagonal(cov) < 0.0).any():
+            raise ValueError(f"covariance has a negative variance: {np.diagonal(cov).tolist()}")
+        old = self.state if self.initialised else None
+        self._start()
+        s = self.state
+        assert s is not None
+        if old is not None:
+            s.ekf.x[7:] = old.ekf.x[7:]
+            s.ekf.P[6:, 6:] = old.ekf.P[6:, 6:]
+            s.period = list(old.period)
+            s.frame_ready, s.enu, s.heading_ready = old.frame_ready, old.enu, old.heading_ready
+        s.t = stamp
+        s.ekf.x[0:3] = p
+        s.ekf.x[3:7] = q / norm
+        s.ekf.P[0:6, :] = 0.0
+        s.ekf.P[:, 0:6] = 0.0
+        s.ekf.P[0:6, 0:6] = cov
+        s.attitude_ready = True
+        self._suspect = 0
+        self._reset_history()  # its base is this state: nothing older can be placed ...
+        # ... once the history holds an entry at the set stamp (with an empty history an older
+        # sample would not count as late). The marker (sensor index -1) is never re-applied:
+        # a sample is only re-applied after one inserted before it, and nothing older than the
+        # set stamp is accepted.
+        self.history.insert(0, (stamp, -1), (-1, None, stamp), s)
+        log.info("pose_set", stamp=stamp, position=p.tolist(), orientation=(q / norm).tolist())
+
     # -- internals ------------------------------------------------------------
     def _drop(self, idx: int, reason: str, stamp: float) -> Step:
         st = self.stats[idx]

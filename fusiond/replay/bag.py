@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
+from fusiond.codecs import TYPESTORE, ros_converter, ros_msgtype
 from fusiond.samples import Sample
 from fusiond.errors import BagError  # importable from here, as before
-from fusiond.transport.codecs import TYPESTORE, ros_converter, ros_msgtype
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection

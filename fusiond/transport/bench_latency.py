@@ -30,10 +30,10 @@ import msgspec
 import numpy as np
 import zenoh
 
+from ..codecs import encode_imu_sample, encode_odom_sample
 from ..config import loads
 from ..errors import TransportError
 from ..samples import ImuSample, OdomSample
-from .codecs import encode_imu_sample, encode_odom_sample
 from .daemon import Daemon, direct
 from .session import build_config, open_session, query_health
 

@@ -23,6 +23,19 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   They are batched, not `express`: on a loaded 2-core machine express messages
   lost a few poses to Zenoh's drop-on-congestion where batching lost none, at
   the same latency.
+- ROS outputs: a TF (`tf2_msgs/msg/TFMessage`, frame_id -> child_frame_id) with
+  each published pose whose stamp is newer than the last TF's (tf2 rejects a
+  repeated stamp, and a late odometry sample can be answered at a stamp already
+  published); health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
+  the health thread (it reads health, never the core).
+- set_pose: a queryable (and in rmw_zenoh mode the topic /set_pose) whose
+  request is decoded on the Zenoh thread, then queued like a sample: the worker
+  alone re-initialises the core, publishes the new pose and replies with the new
+  health (a Zenoh query can be answered from any thread). A bad request is
+  answered with an error naming the problem and changes nothing.
+- Interop (`[ros] interop`): "bridge" uses zenoh-bridge-ros2dds's plain keys;
+  "rmw_zenoh" uses rmw_zenoh's keys, attachments and liveliness tokens for every
+  ROS topic in and out (`rmw_zenoh.py`); the JSON health/diagnostics keys stay plain.
 - Stop: subscribers first (no new input), then the worker drains what is queued
   (bounded time; each sample is published completely or not at all), then the
   outputs are undeclared; the caller closes the session.
@@ -42,11 +55,16 @@ import msgspec
 import structlog
 import zenoh
 
+from ..codecs import (
+    DIAGNOSTIC_ARRAY, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, DecodeError, SetPose, decode_set_pose,
+    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr, make_decoder,
+    ros_msgtype,
+)
 from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
-from ..health import Health, HealthReport, core_counters, encode_report
-from .codecs import DecodeError, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder
+from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
+from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
 
 log = structlog.get_logger("fusiond.daemon")
@@ -59,6 +77,18 @@ DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
 
 _STOP = object()
+SET_POSE_TOPIC = "/set_pose"  # robot_localization's topic (rmw_zenoh mode)
+
+
+class _SetPoseItem:
+    """A decoded set_pose request in the worker's queue; `query` is None for the /set_pose topic."""
+
+    __slots__ = ("request", "query", "source")
+
+    def __init__(self, request: SetPose, query: zenoh.Query | None, source: str) -> None:
+        self.request = request
+        self.query = query
+        self.source = source
 
 
 def sensor_kind(sensor: Any) -> str:
@@ -129,6 +159,12 @@ class Daemon:
         self._subscribers: list[Any] = []
         self._outputs: list[Any] = []
         self._navsat_pub: Any = None
+        self._tf_pub: Any = None
+        self._ros_diag_pub: Any = None
+        self._tf_stamp = -float("inf")  # stamp of the last TF published: TF stamps strictly increase
+        self.node: RmwNode | None = None
+        self.tf_published = 0
+        self.set_poses = 0  # set_pose requests applied
         self._worker: threading.Thread | None = None
         self._monitor: threading.Thread | None = None
         self._stopping = threading.Event()
@@ -141,30 +177,48 @@ class Daemon:
     def start(self) -> None:
         out = self.cfg.output
         s = self.session
-        cdr = zenoh.Encoding.APPLICATION_CDR
-        self._pose_pub = s.declare_publisher(out.pose_key, encoding=cdr, express=self._express)
-        self._odom_pub = s.declare_publisher(out.odometry_key, encoding=cdr, express=self._express)
+        if self.cfg.ros.interop == "rmw_zenoh":
+            self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
+        self._pose_pub = self._ros_publisher(out.pose_key, POSE_COV_STAMPED)
+        self._odom_pub = self._ros_publisher(out.odometry_key, ODOMETRY)
         self._diag_pub = s.declare_publisher(out.diagnostics_key, encoding=zenoh.Encoding.APPLICATION_JSON)
-        self._navsat_pub = (s.declare_publisher(out.navsat_key, encoding=cdr, express=self._express)
-                            if out.navsat_key else None)
+        self._navsat_pub = self._ros_publisher(out.navsat_key, NAVSATFIX) if out.navsat_key else None
+        self._tf_pub = self._ros_publisher(out.tf_key, TF_MESSAGE, depth=TF_DEPTH) if out.publish_tf else None
+        self._ros_diag_pub = (self._ros_publisher(out.ros_diagnostics_key, DIAGNOSTIC_ARRAY)
+                              if out.ros_diagnostics_key else None)
         self._worker = threading.Thread(target=self._work, name="fusiond-worker", daemon=True)
         self._worker.start()
         for idx, sensor in enumerate(self.cfg.sensors):
             cb = self._callback(idx)
-            self._subscribers.append(s.declare_subscriber(sensor.key, direct(cb) if self._direct else cb))
+            handler = direct(cb) if self._direct else cb
+            if self.node is not None:
+                msgtype = ros_msgtype(sensor_kind(sensor), getattr(sensor, "msgtype", None))
+                self._subscribers.append(self.node.subscriber(topic_name(sensor.key), msgtype, handler))
+            else:
+                self._subscribers.append(s.declare_subscriber(sensor.key, handler))
             log.info("sensor_subscribed", sensor=sensor.name, key=sensor.key, kind=sensor_kind(sensor),
-                     encoding=sensor.encoding, timeout_s=sensor.timeout_s)
+                     encoding=sensor.encoding, timeout_s=sensor.timeout_s, interop=self.cfg.ros.interop)
+        # set_pose requests are input too: undeclared with the subscribers when stopping
+        self._subscribers.append(s.declare_queryable(out.set_pose_key, self._on_set_pose_query))
+        if self.node is not None:
+            self._subscribers.append(self.node.subscriber(SET_POSE_TOPIC, POSE_COV_STAMPED, self._on_set_pose_topic))
         # Last, so that an answer to a health query (or the token) proves the subscribers exist:
         # a peer's declarations reach a client in order on the link, before the reply. Tools
         # (`play`, tests) wait for that answer; a publisher's matching status is no such proof.
         self._queryable = s.declare_queryable(out.health_key, self._on_query)
         self._token = s.liveliness().declare_token(alive_key(out.health_key))
-        self._outputs = [self._pose_pub, self._odom_pub, self._diag_pub, self._queryable, self._token]
-        if self._navsat_pub is not None:
-            self._outputs.append(self._navsat_pub)
-        if self._monitor_on:
+        self._outputs = [o for o in (self.node, self._pose_pub, self._odom_pub, self._diag_pub, self._navsat_pub,
+                                     self._tf_pub, self._ros_diag_pub, self._queryable, self._token)
+                         if o is not None]
+        if self._monitor_on or self._ros_diag_pub is not None:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
+
+    def _ros_publisher(self, key: str, msgtype: str, depth: int = QUEUE_DEPTH) -> Any:
+        """A publisher of a ROS topic: the bridge's plain key, or rmw_zenoh's key with attachments and token."""
+        if self.node is not None:
+            return self.node.publisher(topic_name(key), msgtype, depth=depth, express=self._express)
+        return self.session.declare_publisher(key, encoding=zenoh.Encoding.APPLICATION_CDR, express=self._express)
 
     def stop(self, drain_s: float = DRAIN_S) -> None:
         """Stop input, let the worker finish what is queued (bounded), undeclare outputs."""
@@ -187,7 +241,7 @@ class Daemon:
             log.warning("samples_discarded_at_stop", count=left)
         if self._monitor is not None:
             self._monitor.join(1.0)
-        for obj in reversed(self._outputs):
+        for obj in reversed(self._outputs):  # the node's token last: rmw_zenoh undeclares entities first
             try:
                 obj.undeclare()
             except zenoh.ZError:
@@ -222,6 +276,28 @@ class Daemon:
         query.reply(self.cfg.output.health_key, encode_report(self.health.report()),
                     encoding=zenoh.Encoding.APPLICATION_JSON)
 
+    def _on_set_pose_query(self, query: zenoh.Query) -> None:
+        """Decode here (no core access); the worker applies it and replies."""
+        payload = query.payload
+        try:
+            if payload is None:
+                raise DecodeError("empty_payload", "no payload: send a PoseWithCovarianceStamped (CDR) or JSON "
+                                                   "{\"stamp\", \"position\", \"orientation\", \"covariance\"}")
+            request = decode_set_pose(payload.to_bytes())
+        except DecodeError as err:
+            log.warning("set_pose_refused", source="query", reason=err.reason, detail=err.detail)
+            query.reply_err(f"set_pose refused: {err}")
+            return
+        self.queue.put(_SetPoseItem(request, query, "query"))
+
+    def _on_set_pose_topic(self, sample: zenoh.Sample) -> None:
+        try:
+            request = decode_set_pose(sample.payload.to_bytes())
+        except DecodeError as err:
+            log.warning("set_pose_refused", source="topic", reason=err.reason, detail=err.detail)
+            return
+        self.queue.put(_SetPoseItem(request, None, "topic"))
+
     # -- worker ------------------------------------------------------------------------
     def _work(self) -> None:
         get = self.queue.get
@@ -241,7 +317,10 @@ class Daemon:
                 if item is _STOP:
                     break
                 try:
-                    handle(*item)
+                    if type(item) is _SetPoseItem:
+                        self._set_pose(item)
+                    else:
+                        handle(*item)
                 except Exception:  # a bug on one sample must not stop the service
                     self.errors += 1
                     if self.errors == 1 or self.errors % LOG_EVERY == 0:
@@ -301,21 +380,61 @@ class Daemon:
             fix = self.core.geodetic()
             if fix is not None:
                 self._navsat_pub.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
+        if self._tf_pub is not None and est.stamp > self._tf_stamp:
+            self._tf_pub.put(encode_tf_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position,
+                                           est.orientation))
+            self._tf_stamp = est.stamp
+            self.tf_published += 1
         self.published += 1
+
+    def _set_pose(self, item: _SetPoseItem) -> None:
+        """Worker only: re-initialise the core at the requested pose, publish it, answer with the new health."""
+        req = item.request
+        stamp = req.stamp if req.stamp > 0.0 else self.core.time
+        try:
+            if stamp is None:
+                raise ValueError("stamp 0 means the filter's current time, but nothing has been fused yet: "
+                                 "give the stamp the pose holds at")
+            self.core.set_pose(stamp, req.position, req.orientation, list(req.covariance))
+        except ValueError as err:
+            log.warning("set_pose_refused", source=item.source, reason="invalid", detail=str(err))
+            if item.query is not None:
+                item.query.reply_err(f"set_pose refused: {err}")
+                item.query.drop()
+            return
+        self.set_poses += 1
+        log.info("set_pose", source=item.source, stamp=stamp, position=req.position, orientation=req.orientation)
+        if self.core.ready:
+            self._publish_estimate()
+        self._refresh()
+        if item.query is not None:
+            item.query.reply(self.cfg.output.set_pose_key, encode_report(self.health.report()),
+                             encoding=zenoh.Encoding.APPLICATION_JSON)
+            item.query.drop()
 
     # -- health monitor ----------------------------------------------------------------
     def _watch(self) -> None:
+        """Health thread: status-change and periodic health logs; /diagnostics once a period."""
         last_status = None
         last_problems: list[str] = []
         next_log = time.monotonic() + self._health_log_s
+        period = self.cfg.output.ros_diagnostics_period_s
+        next_diag = time.monotonic()
+        hardware_ids = {s.name: s.key for s in self.cfg.sensors}
         while not self._stopping.wait(HEALTH_POLL_S):
             rep = self.health.report()
+            now = time.monotonic()
+            if self._ros_diag_pub is not None and now >= next_diag:
+                next_diag = now + period
+                statuses = ros_statuses(rep, self.cfg.ros.node_name, hardware_ids)
+                self._ros_diag_pub.put(encode_diagnostic_array_cdr(time.time(), statuses))
+            if not self._monitor_on:
+                continue
             names = [p.split(":")[0] for p in rep.problems]
             if rep.status != last_status or names != [p.split(":")[0] for p in last_problems]:
                 log.log(_LEVEL[rep.status], "health_changed", status=rep.status, previous=last_status,
                         problems=rep.problems)
                 last_status, last_problems = rep.status, rep.problems
-            now = time.monotonic()
             if now >= next_log:
                 next_log = now + self._health_log_s
                 log.info("health", status=rep.status, problems=rep.problems, published=rep.published,
@@ -325,7 +444,7 @@ class Daemon:
                                  "dropped": v.dropped, "rejected": v.rejected} for k, v in rep.sensors.items()})
 
 
-_LEVEL = {"ok": 20, "degraded": 30, "failed": 40}
+_LEVEL = {"ok": 20, "starting": 20, "degraded": 30, "failed": 40}
 _diag_encoder = msgspec.json.Encoder()
 
 
@@ -354,7 +473,10 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
                  namespace=z.namespace or None, sensors=[s.name for s in cfg.sensors],
                  pose_key=cfg.output.pose_key, odometry_key=cfg.output.odometry_key,
                  diagnostics_key=cfg.output.diagnostics_key, health_key=cfg.output.health_key,
-                 alive_key=alive_key(cfg.output.health_key))
+                 alive_key=alive_key(cfg.output.health_key), set_pose_key=cfg.output.set_pose_key,
+                 tf_key=cfg.output.tf_key if cfg.output.publish_tf else None,
+                 ros_diagnostics_key=cfg.output.ros_diagnostics_key or None, interop=cfg.ros.interop,
+                 node=daemon.node.token_key if daemon.node is not None else None)
         while not stop.wait(0.5):
             pass
         log.info("daemon_stopping", signal=received[0] if received else None)

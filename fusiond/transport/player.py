@@ -8,29 +8,43 @@ daemon of the same config can be fed without a robot.
 
 Publishers use reliable, blocking congestion control: a replay tool should not
 lose messages to its own speed (the daemon's queue still counts its own drops).
+
+The bag is opened by the caller (`fusiond.replay.bag.open_bag_samples`) and
+handed in as a `RawSource`: transport/ does not import replay/ (nor the reverse);
+both share only `fusiond.codecs`.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import structlog
 import zenoh
 
+from ..codecs import encode_sample, make_decoder
 from ..config import Config
 from ..errors import PlaybackError
-from ..replay.bag import open_bag_samples, sensor_kind
-from .codecs import encode_sample, make_decoder
+from .daemon import sensor_kind
 from .session import query_health
 
 log = structlog.get_logger("fusiond.play")
 
 LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
+
+
+class RawSource(Protocol):
+    """An open bag as `play` needs it (what `fusiond.replay.bag.BagSamples` provides)."""
+
+    missing: list[str]  # configured sensors whose topic is not in the bag
+    total: int  # messages of the configured topics
+
+    def raw_cdr(self) -> Iterator[tuple[int, Any, bytes]]:
+        """(bag time ns, sensor config, ROS 2 CDR payload) in bag order."""
+        ...
 
 
 @dataclass
@@ -69,52 +83,52 @@ def _transcoder(sensor: Any) -> Callable[[bytes], bytes] | None:
     return lambda raw: encode_sample(decode(raw), sensor.encoding, msgtype)
 
 
-def play(paths: Sequence[Path | str], cfg: Config, session: zenoh.Session, *, rate: float = 1.0,
+def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1.0,
          duration: float | None = None, wait_s: float = 5.0, stop: threading.Event | None = None,
-         clock: Callable[[], float] = time.monotonic) -> PlayResult:
-    """Publish the bag; returns counts. `duration` limits the bag seconds played (from its start)."""
+         clock: Callable[[], float] = time.monotonic, names: Sequence[str] = ()) -> PlayResult:
+    """Publish an open bag (the caller closes it); returns counts. `duration` limits the bag
+    seconds played (from its start); `names` (the bag files) only label the log."""
     if rate < 0:
         raise PlaybackError("rate must be >= 0")
     stop = stop or threading.Event()
     result = PlayResult(per_sensor={s.name: 0 for s in cfg.sensors})
-    with open_bag_samples(paths, cfg.sensors) as bag:
-        if bag.missing:
-            log.warning("play_missing_topics", sensors=bag.missing)
-        pubs = {s.name: session.declare_publisher(s.key, encoding=_encoding(s.encoding),
-                                                  congestion_control=zenoh.CongestionControl.BLOCK)
-                for s in cfg.sensors if s.name not in bag.missing}
-        transcode = {s.name: _transcoder(s) for s in cfg.sensors}
-        try:
-            if wait_s > 0 and not wait_for_daemon(session, cfg.output.health_key, wait_s):
-                log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
-                            keys=[s.key for s in cfg.sensors if s.name in pubs])
-            log.info("play_started", bag=[str(p) for p in paths], rate=rate, messages=bag.total)
-            t0_bag: int | None = None
-            t0 = clock()
-            for bag_ns, sensor, raw in bag.raw_cdr():
-                if stop.is_set():
+    if bag.missing:
+        log.warning("play_missing_topics", sensors=bag.missing)
+    pubs = {s.name: session.declare_publisher(s.key, encoding=_encoding(s.encoding),
+                                              congestion_control=zenoh.CongestionControl.BLOCK)
+            for s in cfg.sensors if s.name not in bag.missing}
+    transcode = {s.name: _transcoder(s) for s in cfg.sensors}
+    try:
+        if wait_s > 0 and not wait_for_daemon(session, cfg.output.health_key, wait_s):
+            log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
+                        keys=[s.key for s in cfg.sensors if s.name in pubs])
+        log.info("play_started", bag=list(names), rate=rate, messages=bag.total)
+        t0_bag: int | None = None
+        t0 = clock()
+        for bag_ns, sensor, raw in bag.raw_cdr():
+            if stop.is_set():
+                result.interrupted = True
+                break
+            if t0_bag is None:
+                t0_bag = bag_ns
+            offset = (bag_ns - t0_bag) * 1e-9
+            if duration is not None and offset > duration:
+                break
+            if rate > 0:
+                delay = t0 + offset / rate - clock()
+                if delay > 0 and stop.wait(delay):
                     result.interrupted = True
                     break
-                if t0_bag is None:
-                    t0_bag = bag_ns
-                offset = (bag_ns - t0_bag) * 1e-9
-                if duration is not None and offset > duration:
-                    break
-                if rate > 0:
-                    delay = t0 + offset / rate - clock()
-                    if delay > 0 and stop.wait(delay):
-                        result.interrupted = True
-                        break
-                conv = transcode[sensor.name]
-                pubs[sensor.name].put(raw if conv is None else conv(raw))
-                result.messages += 1
-                result.per_sensor[sensor.name] += 1
-                result.bag_seconds = offset
-            result.seconds = clock() - t0
-            stop.wait(LINGER_S)
-        finally:
-            for p in pubs.values():
-                p.undeclare()
+            conv = transcode[sensor.name]
+            pubs[sensor.name].put(raw if conv is None else conv(raw))
+            result.messages += 1
+            result.per_sensor[sensor.name] += 1
+            result.bag_seconds = offset
+        result.seconds = clock() - t0
+        stop.wait(LINGER_S)
+    finally:
+        for p in pubs.values():
+            p.undeclare()
     log.info("play_finished", messages=result.messages, per_sensor=result.per_sensor,
              seconds=round(result.seconds, 3), interrupted=result.interrupted)
     return result

@@ -144,3 +144,20 @@ def query_health(session: zenoh.Session, key: str, timeout: float) -> list[bytes
         if reply.ok is not None:
             answers.append(reply.ok.payload.to_bytes())
     return answers
+
+
+def request_set_pose(session: zenoh.Session, key: str, payload: bytes, timeout: float
+                     ) -> tuple[list[bytes], list[str]]:
+    """Send a set_pose request (JSON or PoseWithCovarianceStamped CDR) to every daemon on `key`.
+
+    Returns (the health answers of the daemons that applied it, the error texts of those that
+    refused it); both empty when no daemon answered within `timeout` (or an ACL dropped the query).
+    """
+    ok: list[bytes] = []
+    errors: list[str] = []
+    for reply in session.get(key, payload=payload, timeout=timeout):
+        if reply.ok is not None:
+            ok.append(reply.ok.payload.to_bytes())
+        elif reply.err is not None:
+            errors.append(reply.err.payload.to_bytes().decode(errors="replace"))
+    return ok, errors

@@ -18,6 +18,7 @@ import msgspec
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
+from fusiond.errors import CodecError
 from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
 
 MAX_PAYLOAD: Final = 64 * 1024
@@ -41,7 +42,6 @@ Encoding = Literal["ros2-cdr", "json", "msgpack"]
 Payload = bytes | bytearray | memoryview
 
 
-from fusiond.errors import CodecError  # noqa: E402
 class DecodeError(CodecError):
     """A payload that cannot become a sample; `reason` is one of `REASONS`."""
 
@@ -64,10 +64,7 @@ _Quaternion = _T["geometry_msgs/msg/Quaternion"]
 _Vector3 = _T["geometry_msgs/msg/Vector3"]
 _Pose = _T["geometry_msgs/msg/Pose"]
 _PoseWithCovariance = _T["geometry_msgs/msg/PoseWithCovariance"]
-_Twist = _T["geometry_msgs/msg/Twist"]
-_TwistWithCovariance = _T["geometry_msgs/msg/TwistWithCovariance"]
 _PoseWithCovarianceStamped = _T[POSE_COV_STAMPED]
-_Odometry = _T[ODOMETRY]
 _Imu = _T[IMU]
 _PoseStamped = _T[POSE_STAMPED]
 _NavSatFix = _T[NAVSATFIX]
@@ -690,41 +687,3 @@ def encode_odometry_cdr(
     buf += _ODOMETRY_BLOCK.pack(x, y, z, qx, qy, qz, qw, *_floats(pose_cov36, 36), vx, vy, vz, wx, wy, wz,
                                 *_floats(twist_cov36, 36))
     return bytes(buf)
-
-
-def encode_pose_cdr_rosbags(
-    stamp: float,
-    frame_id: str,
-    position: Sequence[float],
-    quat_xyzw: Sequence[float],
-    cov36: Sequence[float] | np.ndarray,
-) -> bytes:
-    """Reference implementation of `encode_pose_cdr` through rosbags (tests)."""
-    msg = _PoseWithCovarianceStamped(
-        header=_Header(stamp=_ros_time(stamp), frame_id=frame_id),
-        pose=_PoseWithCovariance(pose=_pose(position, quat_xyzw), covariance=_cov(cov36, 36)),
-    )
-    return _serialize(msg, POSE_COV_STAMPED)
-
-
-def encode_odometry_cdr_rosbags(
-    stamp: float,
-    frame_id: str,
-    child_frame_id: str,
-    position: Sequence[float],
-    quat_xyzw: Sequence[float],
-    pose_cov36: Sequence[float] | np.ndarray,
-    linear: Sequence[float],
-    angular: Sequence[float],
-    twist_cov36: Sequence[float] | np.ndarray,
-) -> bytes:
-    """Reference implementation of `encode_odometry_cdr` through rosbags (tests)."""
-    msg = _Odometry(
-        header=_Header(stamp=_ros_time(stamp), frame_id=frame_id),
-        child_frame_id=child_frame_id,
-        pose=_PoseWithCovariance(pose=_pose(position, quat_xyzw), covariance=_cov(pose_cov36, 36)),
-        twist=_TwistWithCovariance(
-            twist=_Twist(linear=_vec3(linear), angular=_vec3(angular)), covariance=_cov(twist_cov36, 36),
-        ),
-    )
-    return _serialize(msg, ODOMETRY)

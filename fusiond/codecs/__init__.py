@@ -1,0 +1,71 @@
+"""Wire formats: bytes on a Zenoh key or in a bag <-> fusiond samples, and the CDR of the outputs.
+
+Its own package below both `transport/` (the live daemon, `fusiond play`) and
+`replay/` (bags), so that neither has to import the other to share one
+definition of the formats. No Zenoh import here: pure functions over bytes.
+"""
+
+from .payloads import (
+    IMU,
+    MAX_PAYLOAD,
+    NAVSATFIX,
+    ODOMETRY,
+    POSE_COV_STAMPED,
+    POSE_STAMPED,
+    POSE_TYPES,
+    REASONS,
+    TYPESTORE,
+    DecodeError,
+    Decoder,
+    Encoding,
+    GpsMessage,
+    ImuMessage,
+    OdomMessage,
+    Payload,
+    PoseMessage,
+    decode_odometry_cdr,
+    decode_pose_cdr,
+    encode_gps_sample,
+    encode_imu_sample,
+    encode_navsat_cdr,
+    encode_odom_sample,
+    encode_odometry_cdr,
+    encode_pose_cdr,
+    encode_pose_sample,
+    encode_sample,
+    gps_from_ros,
+    imu_from_ros,
+    make_decoder,
+    odom_from_ros,
+    pose_from_ros,
+    ros_converter,
+    ros_msgtype,
+    stamp_to_ros,
+)
+from .ros_messages import (
+    DIAGNOSTIC_ARRAY,
+    ERROR,
+    OK,
+    TF_MESSAGE,
+    WARN,
+    DiagnosticStatus,
+    SetPose,
+    SetPoseMessage,
+    check_set_pose,
+    dds_type_name,
+    decode_set_pose,
+    encode_diagnostic_array_cdr,
+    encode_tf_cdr,
+    type_hash,
+)
+
+__all__ = [
+    "IMU", "MAX_PAYLOAD", "NAVSATFIX", "ODOMETRY", "POSE_COV_STAMPED", "POSE_STAMPED", "POSE_TYPES", "REASONS",
+    "TYPESTORE", "DecodeError", "Decoder", "Encoding", "GpsMessage", "ImuMessage", "OdomMessage", "Payload",
+    "PoseMessage", "decode_odometry_cdr", "decode_pose_cdr", "encode_gps_sample", "encode_imu_sample",
+    "encode_navsat_cdr", "encode_odom_sample", "encode_odometry_cdr", "encode_pose_cdr", "encode_pose_sample",
+    "encode_sample", "gps_from_ros", "imu_from_ros", "make_decoder", "odom_from_ros", "pose_from_ros",
+    "ros_converter", "ros_msgtype", "stamp_to_ros",
+    "DIAGNOSTIC_ARRAY", "ERROR", "OK", "TF_MESSAGE", "WARN", "DiagnosticStatus", "SetPose", "SetPoseMessage",
+    "check_set_pose", "dds_type_name", "decode_set_pose", "encode_diagnostic_array_cdr", "encode_tf_cdr", "type_hash",
+]

@@ -1,0 +1,209 @@
+"""The ROS-facing messages beyond pose and odometry: TF, diagnostics, set_pose; ROS type names.
+
+- `tf2_msgs/msg/TFMessage` with one `geometry_msgs/msg/TransformStamped`: what
+  robot_localization's `publish_tf` broadcasts on /tf.
+- `diagnostic_msgs/msg/DiagnosticArray`: what rqt_robot_monitor and
+  diagnostic_aggregator read on /diagnostics.
+- `geometry_msgs/msg/PoseWithCovarianceStamped` in (CDR) or its JSON twin: a
+  set_pose request, as robot_localization's set_pose topic/service takes it.
+- RIHS01 type hashes and DDS type names, which rmw_zenoh puts into its keys.
+
+All of it through rosbags (serialisation, type hashes): nothing hand-written that
+rosbags does. No Zenoh import.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Sequence
+from functools import cache
+from typing import Annotated, Any, Final
+
+import msgspec
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+
+from .payloads import POSE_COV_STAMPED, TYPESTORE, DecodeError, Payload, _check_size, _deserialize, stamp_to_ros
+
+TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
+DIAGNOSTIC_ARRAY: Final = "diagnostic_msgs/msg/DiagnosticArray"
+
+_T = TYPESTORE.types
+_Time = _T["builtin_interfaces/msg/Time"]
+_Header = _T["std_msgs/msg/Header"]
+_KeyValue = _T["diagnostic_msgs/msg/KeyValue"]
+_DiagnosticStatus = _T["diagnostic_msgs/msg/DiagnosticStatus"]
+_DiagnosticArray = _T[DIAGNOSTIC_ARRAY]
+
+
+def _header(stamp: float, frame_id: str) -> Any:
+    sec, nanosec = stamp_to_ros(stamp)
+    return _Header(stamp=_Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+
+def _serialize(msg: Any, msgtype: str) -> bytes:
+    return bytes(TYPESTORE.serialize_cdr(msg, msgtype, little_endian=True))
+
+
+# --------------------------------------------------------------------------- TF
+
+
+_TF_HEAD: Final = b"\x00\x01\x00\x00" + struct.pack("<I", 1)  # encapsulation, then a sequence of 1 transform
+_STAMP_PACK = struct.Struct("<iI").pack
+_U32_PACK = struct.Struct("<I").pack
+_TRANSFORM_BLOCK = struct.Struct("<7d")  # translation (3) + rotation (4)
+
+
+def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Sequence[float],
+                  quat_xyzw: Sequence[float]) -> bytes:
+    """One transform frame_id -> child_frame_id at `stamp` (the pose itself), as a TFMessage.
+
+    Packed with struct, byte for byte what rosbags serialises (a test compares both on many
+    inputs; `tests/cdr_reference.py` holds the rosbags version): it is sent with every pose.
+    """
+    buf = bytearray(_TF_HEAD)
+    buf += _STAMP_PACK(*stamp_to_ros(stamp))
+    for text in (frame_id, child_frame_id):
+        pad = (len(buf) - 4) & 3
+        if pad:
+            buf += bytes(4 - pad)
+        raw = text.encode()
+        buf += _U32_PACK(len(raw) + 1)
+        buf += raw
+        buf += b"\x00"
+    pad = (len(buf) - 4) & 7
+    if pad:
+        buf += bytes(8 - pad)
+    x, y, z = position
+    qx, qy, qz, qw = quat_xyzw
+    buf += _TRANSFORM_BLOCK.pack(x, y, z, qx, qy, qz, qw)
+    return bytes(buf)
+
+
+# --------------------------------------------------------------------------- diagnostics
+
+OK: Final = 0
+WARN: Final = 1
+ERROR: Final = 2
+"""diagnostic_msgs/msg/DiagnosticStatus levels (STALE = 3 is the aggregator's, never ours)."""
+
+
+class DiagnosticStatus(msgspec.Struct, frozen=True):
+    """One DiagnosticStatus: `values` as (key, value) string pairs, in order."""
+
+    level: int
+    name: str
+    message: str
+    hardware_id: str
+    values: list[tuple[str, str]]
+
+
+def encode_diagnostic_array_cdr(stamp: float, statuses: Sequence[DiagnosticStatus]) -> bytes:
+    """A diagnostic_msgs/msg/DiagnosticArray (header frame_id empty, as diagnostic_updater sends it)."""
+    msg = _DiagnosticArray(
+        header=_header(stamp, ""),
+        status=[_DiagnosticStatus(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
+                                  values=[_KeyValue(key=k, value=v) for k, v in s.values]) for s in statuses],
+    )
+    return _serialize(msg, DIAGNOSTIC_ARRAY)
+
+
+# --------------------------------------------------------------------------- set_pose
+
+_Vec3 = tuple[float, float, float]
+_Quat = tuple[float, float, float, float]
+_Cov36 = Annotated[tuple[float, ...], msgspec.Meta(min_length=36, max_length=36)]
+
+
+class SetPoseMessage(msgspec.Struct, kw_only=True, forbid_unknown_fields=True):
+    """A set_pose request in JSON (the CDR form is geometry_msgs/msg/PoseWithCovarianceStamped).
+
+    - `stamp`: seconds, the time the pose holds at; 0 means "the filter's current time".
+    - `position` [x, y, z] m and `orientation` [x, y, z, w] in the output frame_id.
+    - `covariance`: 36 numbers, row-major over x y z roll pitch yaw (default all zero:
+      exactly this pose, as an unfilled ROS message says).
+
+    Example: `{"stamp": 0, "position": [1, 2, 0], "orientation": [0, 0, 0, 1]}`.
+    """
+
+    stamp: float = 0.0
+    position: _Vec3
+    orientation: _Quat
+    covariance: _Cov36 = (0.0,) * 36
+
+
+class SetPose(msgspec.Struct, frozen=True):
+    """A checked set_pose request: every number finite, quaternion of usable norm."""
+
+    stamp: float  # 0.0: the filter's current time
+    position: _Vec3
+    orientation: _Quat
+    covariance: tuple[float, ...]
+
+
+_set_pose_json = msgspec.json.Decoder(SetPoseMessage)
+
+
+def decode_set_pose(payload: Payload) -> SetPose:
+    """JSON (a payload starting with `{`) or PoseWithCovarianceStamped CDR -> SetPose.
+
+    Raises DecodeError whose detail names the problem (field and value); the daemon
+    sends it back as the query's error reply.
+    """
+    _check_size(payload)
+    raw = bytes(payload)
+    if raw.lstrip()[:1] == b"{":
+        try:
+            m = _set_pose_json.decode(raw)
+        except msgspec.ValidationError as exc:
+            raise DecodeError("schema_invalid", str(exc)) from None
+        except msgspec.DecodeError as exc:
+            raise DecodeError("json_invalid", str(exc)) from None
+        req = SetPose(m.stamp, m.position, m.orientation, tuple(m.covariance))
+    else:
+        msg = _deserialize(raw, POSE_COV_STAMPED)
+        st, pose = msg.header.stamp, msg.pose.pose
+        p, q = pose.position, pose.orientation
+        req = SetPose(st.sec + st.nanosec * 1e-9, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w),
+                      tuple(msg.pose.covariance.tolist()))
+    check_set_pose(req)
+    return req
+
+
+def check_set_pose(req: SetPose) -> None:
+    """Raise DecodeError("schema_invalid", ...) naming the first unusable value."""
+    if not (math.isfinite(req.stamp) and req.stamp >= 0.0):
+        raise DecodeError("schema_invalid", f"stamp must be finite and >= 0 (0: now), got {req.stamp}")
+    for name, values in (("position", req.position), ("orientation", req.orientation),
+                         ("covariance", req.covariance)):
+        for i, v in enumerate(values):
+            if not math.isfinite(v):
+                raise DecodeError("schema_invalid", f"{name}[{i}] is not finite: {v}")
+    norm = math.sqrt(sum(v * v for v in req.orientation))
+    if abs(norm - 1.0) > 0.1:
+        raise DecodeError("schema_invalid", f"orientation must be a unit quaternion (x y z w), its norm is {norm:.6g}")
+    cov = np.asarray(req.covariance).reshape(6, 6)
+    if (np.diagonal(cov) < 0.0).any():
+        raise DecodeError("schema_invalid", f"covariance diagonal must not be negative: {np.diagonal(cov).tolist()}")
+
+
+# --------------------------------------------------------------------------- ROS 2 type names and hashes
+
+@cache
+def _hash_store() -> Any:
+    """Type hashes are a Jazzy-and-later notion (REP 2011); the types fusiond uses hash the same in
+    every store that has hashes (a test compares Humble's and Jazzy's). Built on first use."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+@cache
+def type_hash(msgtype: str) -> str:
+    """RIHS01 hash of a ROS 2 message type, as rosidl computes it (`RIHS01_<64 hex>`), from rosbags."""
+    return str(_hash_store().hash_rihs01(msgtype))
+
+
+def dds_type_name(msgtype: str) -> str:
+    """The DDS name of a ROS 2 type, as rmw_zenoh puts it into keys: `pkg/msg/Name` -> `pkg::msg::dds_::Name_`."""
+    pkg, sub, name = msgtype.split("/")
+    return f"{pkg}::{sub}::dds_::{name}_"
