@@ -84,6 +84,8 @@ class OdomSensor(_Sensor, tag="odom"):
     twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
     twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
     slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
+    # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
+    twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
     scale_estimation: bool = False  # estimate a wheel speed scale (v' = s v); needs a gps or pose sensor
 
 
