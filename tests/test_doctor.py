@@ -286,3 +286,23 @@ def test_few_updates_are_judged_with_chi_square_bounds_for_their_count():
     v = one(d.verdicts(), "gps", "position")
     assert v.level == "problem" and "NIS high" in v.message and "too few" not in v.message
     assert v.key == "sensors.gps.position_noise"
+
+
+# -- plots -------------------------------------------------------------------------------------------------
+def test_plot_breaks_lines_at_gaps_and_draws_gps_runs_in_enu(tmp_path):
+    import numpy as np
+
+    from fusiond.replay.plot import break_gaps, plot_replay
+
+    t = np.array([0.0, 0.1, 0.2, 150.2, 150.3, 150.4])
+    tb, xb = break_gaps(t, np.arange(6.0))
+    assert np.isnan(tb[3]) and np.isnan(xb[3]) and len(tb) == 7  # one break, at the 150 s silence
+    assert len(break_gaps(t[:3], np.arange(3.0))[0]) == 3  # no gap: unchanged
+    w = sim_gps.World(duration=60.0, gps_rate=1.0)
+    samples = [s for s in sim_gps.simulate(w) if not 1020.0 <= s.stamp < 1035.0]
+    result = run_samples(samples, gps_config('orientation = "roll_pitch"\nangular_velocity = true'),
+                         keep_trace=True)
+    out = tmp_path / "gps.png"
+    plot_replay(result, out, title="gps")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(result.doctor.series().gps_t) > 40  # the fixes the plot draws beside the ENU track
