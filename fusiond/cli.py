@@ -224,29 +224,45 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
         print(f"fusiond: no imu sensor {args.sensor or ''} in {args.config}".replace("  ", " "), file=sys.stderr)
         return EXIT_USAGE
     imu = imus[0] if imus else ImuSensor(name="imu", key=args.key or "imu/data")
+    from .config import OdomSensor
+
+    odom_cfg = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None) if cfg else None
+    odom: list = []
     if args.bag:
         from .replay.bag import BagError, open_bag_samples
 
         try:
-            with open_bag_samples([Path(args.bag)], [imu]) as bag:
-                samples = list(bag)
+            with open_bag_samples([Path(args.bag)], [imu] + ([odom_cfg] if odom_cfg else [])) as bag:
+                read = list(bag)
         except BagError as err:
             print(f"fusiond: {err}", file=sys.stderr)
             return EXIT_USAGE
+        samples = [s for s in read if s.sensor == imu.name]
         if samples:
             t0 = min(s.stamp for s in samples) + args.start
             samples = [s for s in samples if t0 <= s.stamp <= t0 + args.duration]
+            odom = [s for s in read if odom_cfg and s.sensor == odom_cfg.name and t0 <= s.stamp <= t0 + args.duration]
     else:
         _, session = _tool_session(args)
         try:
-            samples = record_imu(session, imu, args.duration)
+            if odom_cfg is not None:
+                samples, odom = record_imu(session, imu, args.duration, odom_cfg)
+            else:
+                samples = record_imu(session, imu, args.duration)
         finally:
             session.close()
     try:
-        cal = calibrate(samples, imu)
+        cal = calibrate(samples, imu, odom or None)
     except ValueError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return 1
+    if cal.refuse:
+        print(f"fusiond: calibrate-imu: the IMU was not static ({'; '.join(cal.motion)}); its spread would be "
+              "motion, not noise. Record it standing still", file=sys.stderr)
+        return 1
+    if cal.motion:
+        print(f"fusiond: WARNING: the recording may not be static ({'; '.join(cal.motion)}): the numbers "
+              "below may overstate the noise", file=sys.stderr)
     print(cal.snippet(imu.name))
     return 0
 
