@@ -181,8 +181,8 @@ def check_endpoint(endpoint: str, where: str) -> None:
     """A Zenoh locator `<protocol>/<address>`: refused here, naming the key, rather than by the session."""
     proto, sep, address = endpoint.partition("/")
     if not sep or not address:
-        raise ConfigError(f"{where}: {endpoint!r} is not a Zenoh endpoint (<protocol>/<address>, "
-                          "e.g. tcp/10.0.0.2:7447)")
+        raise ConfigError(f"{where}: Endpoints must be of the form <protocol>/<address> (e.g. tcp/10.0.0.2:7447), "
+                          f"got {endpoint!r}")
     if proto not in ZENOH_PROTOCOLS:
         raise ConfigError(f"{where}: unknown protocol {proto!r} in {endpoint!r}; valid: {', '.join(ZENOH_PROTOCOLS)}")
 
@@ -190,8 +190,8 @@ def check_endpoint(endpoint: str, where: str) -> None:
 def validate(cfg: Config) -> Config:
     """Checks msgspec cannot express: vector lengths, signs, unique names and keys."""
     for table in ("connect", "listen"):
-        for i, ep in enumerate(getattr(cfg.zenoh, table)):
-            check_endpoint(ep, f"zenoh.{table}[{i}]")
+        for ep in getattr(cfg.zenoh, table):
+            check_endpoint(ep, f"zenoh.{table}")
     _check_struct(cfg.filter, "filter")
     if not 0.0 < cfg.filter.nis_confidence < 1.0:
         raise ConfigError("filter.nis_confidence: must be between 0 and 1")

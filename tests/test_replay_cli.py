@@ -176,7 +176,7 @@ def test_unwritable_outputs_are_refused_before_replaying(jackal_bag, tmp_path, o
      "valid values: 'absolute', 'relative', 'roll_pitch', 'off'"),
     ('[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\nslip_treshold=0.2\n', "did you mean `slip_threshold`?"),
     ('[filtr]\ngap_s=1.0\n', "did you mean `filter`?"),
-    ('[zenoh]\nconnect=["tcpx/10.0.0.2:7447"]\n', "zenoh.connect[0]: unknown protocol 'tcpx'"),
+    ('[zenoh]\nconnect=["tcpx/10.0.0.2:7447"]\n', "zenoh.connect: unknown protocol 'tcpx'"),
 ])
 def test_config_errors_say_what_would_be_valid(tmp_path, toml, needle):
     cfg = tmp_path / "bad.toml"
