@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 from ..diagnostics import DiagnosticsRecord, chi2_ppf
 
@@ -25,6 +26,7 @@ NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): 
 NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
 
 
+@lru_cache(maxsize=4096)
 def nis_bounds(n: int, dof: int, confidence: float) -> tuple[float, float]:
     """Two-sided bounds on the mean NIS of n updates (chi-square on n*dof, divided by n),
     widened to the practical band [NIS_LOW, NIS_HIGH] per dof."""

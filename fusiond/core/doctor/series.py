@@ -29,6 +29,9 @@ REORDER_S = 1.0  # samples are integrated in stamp order once they are this much
 MAX_STEP_S = 1.0  # an integration step longer than this is a gap: not integrated across
 
 
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
 class Series(msgspec.Struct):
     """Binned series (one row per BIN_S of each stream) and gaps; NaN where a value is absent."""
 
@@ -86,8 +89,11 @@ class SeriesCollector:
         gps = [s for s in cfg.sensors if isinstance(s, GpsSensor)]
         self._gps_names = {s.name for s in gps}
         # the filter's ENU frame: the configured datum, else the first valid fix (as the core does)
-        self._ext = {n: rot.conj(rot.from_rpy(*s.extrinsic_rpy)) for n, s in self._imu_cfg.items()}
-        self._R = {n: rot.matrix(rot.from_rpy(*s.extrinsic_rpy)) for n, s in self._imu_cfg.items()}
+        # IMU -> base: None for an IMU mounted as base_link (the common case: nothing to rotate)
+        self._ext = {n: None if s.extrinsic_rpy == (0.0, 0.0, 0.0) else rot.conj(rot.from_rpy(*s.extrinsic_rpy))
+                     for n, s in self._imu_cfg.items()}
+        self._Rz = {n: tuple(float(v) for v in rot.matrix(rot.from_rpy(*s.extrinsic_rpy))[2])
+                    for n, s in self._imu_cfg.items()}
         self._gap_s = cfg.filter.gap_s
         # integration state
         self._odom_last: tuple[float, float] | None = None  # (stamp, wz)
@@ -206,7 +212,7 @@ class SeriesCollector:
         b.sums[1] += wz
         if wz == 0.0 and len(cov) == 36 and cov[35] <= 0.0:
             b.extra += 1
-        if any(v != 0.0 for v in s.linear) or any(v != 0.0 for v in s.angular):
+        if self._rest and (s.linear != _ZERO3 or s.angular != _ZERO3):
             self._rest = False
 
     def _imu(self, s: ImuSample) -> None:
@@ -217,7 +223,8 @@ class SeriesCollector:
             n = math.sqrt(sum(v * v for v in s.orientation))
             if n > 0.5:
                 q = tuple(v / n for v in s.orientation)
-                qb = rot.mul(q, self._ext[name])
+                ext = self._ext[name]
+                qb = q if ext is None else rot.mul(q, ext)
                 yaw_measured = cfg.orientation_noise is not None or oc[8] < cfg.orientation_max_sigma ** 2
                 if yaw_measured:
                     y = rot.yaw(qb)
@@ -231,9 +238,9 @@ class SeriesCollector:
                     b.sums[0] += self._yaw_unwrapped
         gc = s.angular_velocity_covariance
         if len(gc) == 9 and gc[0] != -1.0 and all(map(math.isfinite, s.angular_velocity)):
-            R = self._R[name]
+            r0, r1, r2 = self._Rz[name]
             w = s.angular_velocity
-            wz = float(R[2, 0] * w[0] + R[2, 1] * w[1] + R[2, 2] * w[2])
+            wz = r0 * w[0] + r1 * w[1] + r2 * w[2]
             last = self._gyro_last
             if last is not None and 0.0 < s.stamp - last[0] <= MAX_STEP_S:
                 self._gyro_heading += last[1] * (s.stamp - last[0])
