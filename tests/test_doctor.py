@@ -306,3 +306,20 @@ def test_plot_breaks_lines_at_gaps_and_draws_gps_runs_in_enu(tmp_path):
     plot_replay(result, out, title="gps")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert len(result.doctor.series().gps_t) > 40  # the fixes the plot draws beside the ENU track
+
+
+def test_magnetometer_yaw_without_any_gyro_is_judged_against_the_gps_track():
+    """robot_localization's Husky setup: absolute yaw, no gyro in the messages at all, GPS. The wander
+    (0.2 rad amplitude: rms 0.14 rad) stands far above the track's own noise (0.3 m over >= 10 m chords:
+    0.04 rad), so the IMU yaw is blamed and the GPS is not told to state more noise."""
+    from fusiond.samples import ImuSample
+
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.3, imu_yaw_wander=0.2)
+    samples = [ImuSample(s.sensor, s.stamp, s.orientation, s.orientation_covariance, (0.0, 0.0, 0.0),
+                         (-1.0,) + (0.0,) * 8) if isinstance(s, ImuSample) else s for s in sim_gps.simulate(w)]
+    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = false'), samples)
+    v = one(verdicts, "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation" and "GPS track" in v.message
+    assert v.evidence["imu_vs_gps_track_wander_rad"] == pytest.approx(0.2 / math.sqrt(2), rel=0.35)
+    assert one(verdicts, "gps", "position").key == "sensors.imu.orientation"
+    never_trusts_more(verdicts, "imu")

@@ -160,8 +160,10 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
     if disturbed:
         w = wander if math.isfinite(wander) else track_wander
         against = "the integrated gyro" if math.isfinite(wander) else "the GPS track"
-        msg = (f"the IMU's absolute yaw wanders against {against} by {w:.3f} rad rms once a gyro bias and scale "
-               "are removed: a magnetometer-disturbed yaw (motors, steel)")
+        removed = ("once a gyro bias and scale are removed" if math.isfinite(wander)
+                   else "beyond the track's own noise")
+        msg = (f"the IMU's absolute yaw wanders against {against} by {w:.3f} rad rms {removed}: a "
+               "magnetometer-disturbed yaw (motors, steel)")
         if notes:
             msg += "; " + "; ".join(notes)
         if math.isfinite(offset):
