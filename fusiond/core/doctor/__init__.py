@@ -163,7 +163,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
                 # the IMU yaw is contradicted by the other sources: no advice to trust it more, and its
                 # NIS (the filter follows it) is evidence of nothing
                 vs = [v for v in vs if v.key.endswith("extrinsic_rpy")]
-                found[(name, channel)][0].message += f" (its own NIS: {figures(ch, t0)})"
+                heading.message += f" (its own NIS: {figures(ch, t0)})"
             elif culprit is not None and ch.verdict() == "nis_high":
                 vs = [_explained(v, culprit, ch, t0) if v.level != "ok" and not v.key.endswith("extrinsic_rpy") else v
                       for v in vs]

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, OdomSensor
+from ...config import OdomSensor
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, sensor_key
