@@ -24,7 +24,24 @@ from .test_fusion_core import make_config
 
 
 def verdicts_of(cfg, samples) -> list[Verdict]:
-    return run_samples(samples, cfg).verdicts()
+    result = run_samples(samples, cfg)
+    verdicts = result.verdicts()
+    agree(result.doctor, verdicts)
+    return verdicts
+
+
+def agree(doctor, verdicts: list[Verdict]) -> None:
+    """One verdict per channel, and it never contradicts the channel's whole-run NIS verdict (what the
+    summary prints): no 'ok' beside a NIS high or low, no 'NIS high' beside an ok."""
+    keys = [(v.sensor, v.channel) for v in verdicts]
+    assert len(keys) == len(set(keys)), keys
+    by_key = dict(zip(keys, verdicts))
+    for key, ch in doctor.channels.items():
+        v = by_key[key]
+        if ch.verdict() in ("nis_high", "nis_low"):
+            assert v.level != "ok", (key, ch.verdict(), v)
+        else:
+            assert "NIS high" not in v.message and "NIS low" not in v.message, (key, v)
 
 
 def one(verdicts: list[Verdict], sensor: str, channel: str) -> Verdict:

@@ -165,6 +165,11 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        f"standstill gyro NIS high ({ch.nis_per_dof:.1f} per dof over {ch.n} updates): the gyro noise "
                        "is understated" + (f"; it measures {measured:.5f} rad/s at rest" if noise_hint else ""),
                        sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+    if v == "nis_low":
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"standstill gyro NIS low ({ch.nis_per_dof:.2f} per dof over {ch.n} updates): the gyro noise "
+                       "is overstated" + (f"; it measures {measured:.5f} rad/s at rest" if noise_hint else ""),
+                       sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
     return Verdict(imu.name, "gyro_bias", "ok",
                    f"standstill bias updates consistent ({ch.nis_per_dof:.2f} per dof over {ch.n} updates)",
                    evidence=evidence)

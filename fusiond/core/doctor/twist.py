@@ -70,6 +70,14 @@ def slip_verdict(odom: OdomSensor, ch: ChannelStats) -> Verdict:
         return Verdict(odom.name, "yaw_rate", "warn",
                        f"wheel yaw rate offset of {mean:+.3f} rad/s against the gyro: a driver offset or "
                        "uncorrected gyro bias", key, evidence={"mean_rad_s": mean})
+    verdict = ch.verdict()
+    if verdict != "ok":
+        more = "smaller" if verdict == "nis_high" else "larger"
+        return Verdict(odom.name, "yaw_rate", "warn",
+                       f"wheel yaw rate against the gyro: NIS {verdict.removeprefix('nis_')} ({ch.nis_per_dof:.2f} per "
+                       f"dof over {ch.n}, rms {rms:.3f} rad/s) without slip: the stated wheel yaw-rate noise is {more} "
+                       "than the residuals show", sensor_key(odom.name, "twist_noise"),
+                       evidence={"nis_per_dof": ch.nis_per_dof, "rms_rad_s": rms})
     return Verdict(odom.name, "yaw_rate", "ok", f"wheels agree with the gyro (rms {rms:.3f} rad/s over {ch.n})")
 
 
