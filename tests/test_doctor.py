@@ -271,6 +271,9 @@ def test_lean_prints_the_full_two_axis_mount(configured_yaw):
     assert v.key == "sensors.imu.extrinsic_rpy"
     # orientation noise 0.002 rad averaged over 3000 samples: the mean tilt is known to ~1e-4 rad
     assert vector(v.suggestion) == pytest.approx(list(mount), abs=0.01)
+    # pasting it removes the lean: no attitude verdict any more
+    fixed = make_config(extra_imu=v.suggestion)
+    assert not [x for x in verdicts_of(fixed, samples) if x.channel == "attitude"]
 
 
 def test_understated_orientation_noise_is_flagged_with_a_measured_suggestion():

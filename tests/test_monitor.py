@@ -110,6 +110,9 @@ def test_monitor_sees_a_running_daemon(jackal_bag, tmp_path):
     assert ori["rate_hz"] > 50 and ori["updates"] > 100 and ori["nis_mean"] is not None
     assert set(ori["rms"]) == {"roll", "pitch"}
     assert any(v["channel"] == "yaw_rate" for v in last["verdicts"])  # the doctor speaks live too
+    # the same key spelling as the replay: the TOML path
+    assert all(v["key"] == "" or v["key"].startswith(("sensors.", "filter.")) for v in last["verdicts"])
+    assert any(v["key"] == "sensors.wheel.slip_threshold" for v in last["verdicts"]), last["verdicts"]
     assert still_running and any("daemon (no namespace) status" in line for line in streamed), streamed
     assert any("imu/orientation" in line and "->" in line for line in streamed), streamed
     assert not any("\x1b[" in line for line in streamed)  # plain text: no terminal escapes
