@@ -4,6 +4,12 @@ Message covariances lie; the honest numbers come from the IMU itself standing
 still. Orientation noise is the spread of roll/pitch/yaw after removing a linear
 drift (a slowly settling filter is not noise), gyro noise the per-sample spread of
 each axis, gyro bias its mean. The result prints as a ready-to-paste snippet.
+
+Numbers from a robot that moved are not noise: a robot driving straight for a
+minute looks quiet to a mean-rate test. So the recording is checked against what a
+static IMU can show (its gyro and accelerometer spread against static floors) and,
+when the config has an odometry sensor, against the wheels: clear motion refuses
+(the CLI exits 1), borderline spread warns loudly.
 """
 
 from __future__ import annotations
@@ -13,12 +19,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ImuSensor
+from .config import ImuSensor, OdomSensor
 from .errors import CalibrationError
 from .estimator import rotation as rot
-from .samples import ImuSample
+from .samples import ImuSample, OdomSample
 
 STATIC_RATE = 0.05  # rad/s: a mean rate above this is motion, not bias
+# Static floors. A MEMS gyro at rest spreads by 0.001-0.01 rad/s and an accelerometer by 0.01-0.04 m/s^2
+# (noise densities of 0.005-0.05 deg/s/sqrt(Hz) and 150-400 ug/sqrt(Hz) over a 100 Hz bandwidth). Above
+# the warn floors the recording is suspect; above the refuse floors it is motion (a robot driving on a
+# floor shakes its accelerometer by 0.3-1 m/s^2).
+GYRO_WARN_SIGMA, GYRO_REFUSE_SIGMA = 0.02, 0.1  # rad/s
+ACCEL_WARN_SIGMA, ACCEL_REFUSE_SIGMA = 0.15, 0.3  # m/s^2
+ODOM_STATIC_SPEED = 0.01  # m/s: wheels faster than this (on average, or 5x in any sample) moved
+ODOM_STATIC_RATE = 0.02  # rad/s
 
 
 @dataclass
@@ -33,12 +47,16 @@ class Calibration:
     stated_orientation_sigma: tuple[float, float, float] | None
     stated_gyro_sigma: tuple[float, float, float] | None
     static: bool
+    accel_sigma: tuple[float, float, float] | None = None
+    motion: tuple[str, ...] = ()  # why the recording looks like motion (empty: static)
+    refuse: bool = False  # clear motion: the numbers must not be used
 
     def snippet(self, sensor: str = "imu") -> str:
         lines = [f"# measured by fusiond calibrate-imu: {self.samples} samples over {self.duration_s:.1f} s "
                  f"({self.rate_hz:.1f} Hz)"]
         if not self.static:
-            lines.append("# WARNING: the IMU was not static (mean rate above 0.05 rad/s): numbers overstate the noise")
+            why = "; ".join(self.motion) or "mean rate above 0.05 rad/s"
+            lines.append(f"# WARNING: the IMU was not static ({why}): numbers overstate the noise")
         lines.append(f"[[sensors]]  # {sensor}: add these keys to its table")
         if self.orientation_sigma:
             r, p, y = (max(v, 1e-4) for v in self.orientation_sigma)
@@ -70,7 +88,9 @@ def _detrended_std(t: np.ndarray, values: np.ndarray) -> tuple[float, float]:
     return float(np.std(resid, ddof=2)), float(coef[0])
 
 
-def calibrate(samples: list[ImuSample], cfg: ImuSensor | None = None) -> Calibration:
+def calibrate(samples: list[ImuSample], cfg: ImuSensor | None = None,
+              odom: list[OdomSample] | None = None) -> Calibration:
+    """``odom``: the odometry over the same span, when an odometry sensor is configured."""
     if len(samples) < 10:
         raise CalibrationError(f"need at least 10 IMU samples to calibrate, got {len(samples)}")
     samples = sorted(samples, key=lambda s: s.stamp)
@@ -89,7 +109,6 @@ def calibrate(samples: list[ImuSample], cfg: ImuSensor | None = None) -> Calibra
                        for s in ori])
         stated_ori = tuple(float(v) for v in np.sqrt(np.clip(oc.mean(axis=0), 0.0, None)))
     gyro_sigma = gyro_bias = stated_gyro = None
-    static = True
     gy = [s for s in samples if s.angular_velocity_covariance and s.angular_velocity_covariance[0] != -1.0]
     if len(gy) >= 10:
         w = np.array([s.angular_velocity for s in gy])
@@ -101,34 +120,72 @@ def calibrate(samples: list[ImuSample], cfg: ImuSensor | None = None) -> Calibra
         gc = np.array([[s.angular_velocity_covariance[0], s.angular_velocity_covariance[4],
                         s.angular_velocity_covariance[8]] for s in gy])
         stated_gyro = tuple(float(v) for v in np.sqrt(np.clip(gc.mean(axis=0), 0.0, None)))
-        static = max(abs(v) for v in gyro_bias) < STATIC_RATE
+    motion: list[str] = []
+    refuse = False
+    if gyro_bias is not None:
+        mean_rate = max(abs(v) for v in gyro_bias)
+        if mean_rate >= STATIC_RATE:
+            motion.append(f"mean gyro rate {mean_rate:.3f} rad/s, above {STATIC_RATE}")
+            refuse = True
+        spread = max(gyro_sigma)
+        if spread > GYRO_WARN_SIGMA:
+            motion.append(f"gyro spread {spread:.4f} rad/s, above a static IMU's {GYRO_WARN_SIGMA}")
+            refuse = refuse or spread > GYRO_REFUSE_SIGMA
+    acc = [s for s in samples if len(s.linear_acceleration_covariance) == 9
+           and s.linear_acceleration_covariance[0] != -1.0 and any(s.linear_acceleration)]
+    accel_sigma = None
+    if len(acc) >= 10:
+        a = np.array([s.linear_acceleration for s in acc])
+        accel_sigma = tuple(float(v) for v in a.std(axis=0, ddof=1))
+        spread = max(accel_sigma)
+        if spread > ACCEL_WARN_SIGMA:
+            motion.append(f"accelerometer spread {spread:.3f} m/s^2, above a static IMU's {ACCEL_WARN_SIGMA}")
+            refuse = refuse or spread > ACCEL_REFUSE_SIGMA
+    if odom:
+        v = np.array([s.linear for s in odom])
+        w = np.array([s.angular for s in odom])
+        speed = np.linalg.norm(v, axis=1)
+        turn = np.abs(w[:, 2])
+        if speed.mean() > ODOM_STATIC_SPEED or speed.max() > 5 * ODOM_STATIC_SPEED or \
+                turn.mean() > ODOM_STATIC_RATE or turn.max() > 5 * ODOM_STATIC_RATE:
+            motion.append(f"the odometry moved (mean speed {speed.mean():.3f} m/s, max {speed.max():.3f}; "
+                          f"mean turn {turn.mean():.3f} rad/s)")
+            refuse = True
     return Calibration(len(samples), duration, rate, orientation_sigma, drift, gyro_sigma, gyro_bias, stated_ori,
-                       stated_gyro, static)
+                       stated_gyro, not motion, accel_sigma, tuple(motion), refuse)
 
 
-def record_imu(session, sensor: ImuSensor, duration: float) -> list[ImuSample]:
-    """Collect a sensor's samples from Zenoh for ``duration`` seconds (undecodable ones skipped)."""
+def record_imu(session, sensor: ImuSensor, duration: float, odom: OdomSensor | None = None):
+    """Collect a sensor's samples from Zenoh for ``duration`` seconds (undecodable ones skipped).
+    With ``odom``, its samples too: returns (imu samples, odometry samples) then."""
     import threading
     import time
 
     from .codecs import DecodeError, make_decoder
 
-    decode = make_decoder("imu", sensor.encoding, sensor.name)
-    samples: list[ImuSample] = []
     lock = threading.Lock()
 
-    def on_sample(sample) -> None:
-        try:
-            s = decode(sample.payload.to_bytes())
-        except DecodeError:
-            return
-        with lock:
-            samples.append(s)
+    def collector(kind: str, cfg):
+        decode = make_decoder(kind, cfg.encoding, cfg.name)
+        out: list = []
 
-    sub = session.declare_subscriber(sensor.key, on_sample)
+        def on_sample(sample) -> None:
+            try:
+                s = decode(sample.payload.to_bytes())
+            except DecodeError:
+                return
+            with lock:
+                out.append(s)
+
+        return out, session.declare_subscriber(cfg.key, on_sample)
+
+    samples, sub = collector("imu", sensor)
+    odom_samples, odom_sub = collector("odom", odom) if odom is not None else ([], None)
     try:
         time.sleep(duration)
     finally:
         sub.undeclare()
+        if odom_sub is not None:
+            odom_sub.undeclare()
     with lock:
-        return list(samples)
+        return (list(samples), list(odom_samples)) if odom is not None else list(samples)

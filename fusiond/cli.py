@@ -23,8 +23,33 @@ def _load_config(path: str):
         raise SystemExit(EXIT_USAGE) from None
 
 
+def _output_error(path: str, option: str, directory: bool = False) -> str | None:
+    """Why an output path cannot be written (checked before a long replay, not after it), or None."""
+    import os
+
+    p = Path(path)
+    if directory and p.exists() and not p.is_dir():
+        return f"{option} {path}: names an existing file; --report writes a directory (index.html and images)"
+    if not directory and p.is_dir():
+        return f"{option} {path}: is a directory"
+    if p.exists():
+        return None if os.access(p, os.W_OK) else f"{option} {path}: not writable"
+    parent = p.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{option} {path}: {parent} is a file, not a directory"
+    return None if os.access(parent, os.W_OK) else f"{option} {path}: cannot create it ({parent} is not writable)"
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     cfg = _load_config(args.config)
+    for option, value, directory in (("--tum", args.tum, False), ("--diagnostics", args.diagnostics, False),
+                                     ("--plot", args.plot, False), ("--report", args.report, True)):
+        problem = _output_error(value, option, directory) if value else None
+        if problem:
+            print(f"fusiond: {problem}", file=sys.stderr)
+            return EXIT_USAGE
     from .replay.bag import BagError
     from .replay.run import replay, summary
 
@@ -36,6 +61,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             diagnostics=Path(args.diagnostics) if args.diagnostics else None,
             keep_trace=bool(args.plot or args.report),
             progress=not args.quiet,
+            warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
         )
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)
@@ -176,6 +202,15 @@ def _tool_session(args: argparse.Namespace, listen: list[str] | None = None, unr
     config = getattr(args, "config", None)
     cfg = _load_config(config) if config else Config()
     ConfigError, SessionError = _zenoh_errors()
+    from .config import check_endpoint
+
+    for option, endpoints in (("--connect", getattr(args, "connect", None)), ("--listen", listen)):
+        for ep in endpoints or []:
+            try:
+                check_endpoint(ep, option)
+            except ConfigError as err:
+                print(f"fusiond: {err}", file=sys.stderr)
+                raise SystemExit(EXIT_USAGE) from None
     base = Path(config).resolve().parent if config else None
     zc = cfg.zenoh
     if getattr(args, "no_multicast", False):
@@ -220,29 +255,45 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
         print(f"fusiond: no imu sensor {args.sensor or ''} in {args.config}".replace("  ", " "), file=sys.stderr)
         return EXIT_USAGE
     imu = imus[0] if imus else ImuSensor(name="imu", key=args.key or "imu/data")
+    from .config import OdomSensor
+
+    odom_cfg = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None) if cfg else None
+    odom: list = []
     if args.bag:
         from .replay.bag import BagError, open_bag_samples
 
         try:
-            with open_bag_samples([Path(args.bag)], [imu]) as bag:
-                samples = list(bag)
+            with open_bag_samples([Path(args.bag)], [imu] + ([odom_cfg] if odom_cfg else [])) as bag:
+                read = list(bag)
         except BagError as err:
             print(f"fusiond: {err}", file=sys.stderr)
             return EXIT_USAGE
+        samples = [s for s in read if s.sensor == imu.name]
         if samples:
             t0 = min(s.stamp for s in samples) + args.start
             samples = [s for s in samples if t0 <= s.stamp <= t0 + args.duration]
+            odom = [s for s in read if odom_cfg and s.sensor == odom_cfg.name and t0 <= s.stamp <= t0 + args.duration]
     else:
         _, session = _tool_session(args)
         try:
-            samples = record_imu(session, imu, args.duration)
+            if odom_cfg is not None:
+                samples, odom = record_imu(session, imu, args.duration, odom_cfg)
+            else:
+                samples = record_imu(session, imu, args.duration)
         finally:
             session.close()
     try:
-        cal = calibrate(samples, imu)
+        cal = calibrate(samples, imu, odom or None)
     except ValueError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return 1
+    if cal.refuse:
+        print(f"fusiond: calibrate-imu: the IMU was not static ({'; '.join(cal.motion)}); its spread would be "
+              "motion, not noise. Record it standing still", file=sys.stderr)
+        return 1
+    if cal.motion:
+        print(f"fusiond: WARNING: the recording may not be static ({'; '.join(cal.motion)}): the numbers "
+              "below may overstate the noise", file=sys.stderr)
     print(cal.snippet(imu.name))
     return 0
 
@@ -285,11 +336,21 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
     return 0
 
 
+LOG_LEVELS = ["debug", "info", "warning", "error"]
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fusiond", description="Wheel odometry + IMU EKF fusion over Eclipse Zenoh.")
-    p.add_argument("--log-level", choices=["debug", "info", "warning", "error"],
-                   help="default: info for run and play, warning otherwise")
+    p.add_argument("--log-level", choices=LOG_LEVELS, help="default: info for run and play, warning otherwise")
+    # --log-level also after the subcommand, and in each subcommand's help (SUPPRESS: an absent one does
+    # not overwrite the value given before the subcommand)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--log-level", choices=LOG_LEVELS, default=argparse.SUPPRESS,
+                        help="log level of the structlog lines on stderr (default: info for run and play, "
+                             "warning otherwise)")
     sub = p.add_subparsers(dest="command", required=True)
+    _add_parser = sub.add_parser
+    sub.add_parser = lambda *a, **k: _add_parser(*a, parents=[common], **k)  # type: ignore[method-assign]
 
     r = sub.add_parser("replay", help="replay ROS 1/2 bags through the fusion core")
     r.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
@@ -323,8 +384,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate_imu)
 
     bb = sub.add_parser("bench", help="estimator, core and replay benchmarks on a bag")
-    bb.add_argument("--bag", default="../shared/data/jackal_test2.bag")
-    bb.add_argument("--config", default="examples/jackal.toml")
+    bb.add_argument("--bag", default="../shared/data/jackal_test2.bag",
+                    help="bag to replay for the core and replay benchmarks (default: the shared Jackal bag)")
+    bb.add_argument("--config", default="examples/jackal.toml",
+                    help="TOML config the bag is replayed with (default examples/jackal.toml)")
     bb.add_argument("--quick", action="store_true", help="fewer repeats")
     bb.add_argument("--latency", action="store_true", help="also the Zenoh end-to-end latency benchmark")
     bb.add_argument("--seconds", type=float, default=10.0, help="latency benchmark duration")
@@ -380,8 +443,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench-latency", help="sensor put -> fused pose latency over Zenoh on loopback")
     b.add_argument("--seconds", type=float, default=10.0, help="measurement duration (default 10)")
-    b.add_argument("--imu-hz", type=float, default=1000.0)
-    b.add_argument("--odom-hz", type=float, default=100.0)
+    b.add_argument("--imu-hz", type=float, default=1000.0, help="IMU messages per second sent (default 1000)")
+    b.add_argument("--odom-hz", type=float, default=100.0,
+                   help="odometry messages per second sent; each yields a fused pose (default 100)")
     b.add_argument("--express", action="store_true", help="send the daemon's outputs unbatched (Zenoh express)")
     b.add_argument("--json", action="store_true", help="machine-readable output")
     b.set_defaults(func=cmd_bench_latency)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+import typing
 from pathlib import Path
 from typing import Literal
 
@@ -98,6 +99,8 @@ class OdomSensor(_Sensor, tag="odom"):
     twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
     twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
     slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
+    # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
+    twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
     scale_estimation: bool = False  # estimate a wheel speed scale (v' = s v); needs a gps or pose sensor
 
 
@@ -188,8 +191,24 @@ def _check_struct(obj: msgspec.Struct, where: str) -> None:
                 raise ConfigError(f"{path}: must not be negative")
 
 
+ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "serial", "vsock")
+
+
+def check_endpoint(endpoint: str, where: str) -> None:
+    """A Zenoh locator `<protocol>/<address>`: refused here, naming the key, rather than by the session."""
+    proto, sep, address = endpoint.partition("/")
+    if not sep or not address:
+        raise ConfigError(f"{where}: Endpoints must be of the form <protocol>/<address> (e.g. tcp/10.0.0.2:7447), "
+                          f"got {endpoint!r}")
+    if proto not in ZENOH_PROTOCOLS:
+        raise ConfigError(f"{where}: unknown protocol {proto!r} in {endpoint!r}; valid: {', '.join(ZENOH_PROTOCOLS)}")
+
+
 def validate(cfg: Config) -> Config:
     """Checks msgspec cannot express: vector lengths, signs, unique names and keys."""
+    for table in ("connect", "listen"):
+        for ep in getattr(cfg.zenoh, table):
+            check_endpoint(ep, f"zenoh.{table}")
     _check_struct(cfg.filter, "filter")
     if not 0.0 < cfg.filter.nis_confidence < 1.0:
         raise ConfigError("filter.nis_confidence: must be between 0 and 1")
@@ -257,14 +276,72 @@ def _check_ros(cfg: Config) -> None:
         if s.encoding != "ros2-cdr":
             raise ConfigError(f"sensors[{i}].encoding: rmw_zenoh carries ROS 2 CDR only, got {s.encoding!r}")
 
+def _resolve(raw: object, path: str) -> type | None:
+    """The config Struct at a msgspec error path (`sensors[1]`, `filter`), reading a sensor's `kind`."""
+    import re
 
-def _one_line(err: msgspec.ValidationError) -> str:
+    cls: type = Config
+    node = raw
+    for part in [p for p in re.split(r"\.|(?=\[)", path) if p]:
+        if part.startswith("["):
+            if not isinstance(node, list):
+                return None
+            i = int(part[1:-1])
+            node = node[i] if i < len(node) else None
+            kind = node.get("kind") if isinstance(node, dict) else None
+            cls = next((c for c in typing.get_args(SensorConfig) if c.__struct_config__.tag == kind), None)
+            if cls is None:
+                return None
+            continue
+        hint = typing.get_type_hints(cls).get(part)
+        node = node.get(part) if isinstance(node, dict) else None
+        if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
+            cls = hint
+        elif part == "sensors":
+            continue
+        else:
+            return None
+    return cls
+
+
+def _hint(msg: str, path: str, raw: object) -> str:
+    """What msgspec does not say: the valid values of an enum, the key a typo meant."""
+    import difflib
+    import re
+
+    unknown = re.match(r"Object contains unknown field `([^`]+)`", msg)
+    if unknown:
+        cls = _resolve(raw, path)
+        if cls is not None:
+            close = difflib.get_close_matches(unknown.group(1), cls.__struct_fields__, n=1, cutoff=0.6)
+            if close:
+                return f"; did you mean `{close[0]}`?"
+        return ""
+    if msg.startswith(("Invalid enum value", "Invalid value")):
+        table, _, field = path.rpartition(".")
+        cls = _resolve(raw, table) if table else Config
+        if field == "kind":
+            valid = [c.__struct_config__.tag for c in typing.get_args(SensorConfig)]
+        elif cls is not None:
+            hint = typing.get_type_hints(cls).get(field)
+            valid = [a for t in ([hint] + list(typing.get_args(hint))) if typing.get_origin(t) is Literal
+                     for a in typing.get_args(t)]
+        else:
+            valid = []
+        if valid:
+            return "; valid values: " + ", ".join(f"{v!r}" if isinstance(v, str) else str(v) for v in valid)
+    return ""
+
+
+def _one_line(err: msgspec.ValidationError, raw: object = None) -> str:
     msg = str(err)
     # msgspec says "... - at `$.sensors[0].kind`"; lead with the key, as users read it.
-    if " - at `$." in msg:
-        text, _, path = msg.partition(" - at `$.")
-        return f"{path.rstrip('`')}: {text}"
-    return msg
+    if " - at `$" in msg:
+        text, _, path = msg.partition(" - at `$")
+        path = path.lstrip(".").rstrip("`")
+        hint = _hint(text, path, raw)
+        return f"{path}: {text}{hint}" if path else f"{text}{hint}"
+    return msg + _hint(msg, "", raw)
 
 
 def loads(text: str, source: str = "<config>") -> Config:
@@ -275,7 +352,7 @@ def loads(text: str, source: str = "<config>") -> Config:
     try:
         cfg = msgspec.convert(raw, type=Config)
     except msgspec.ValidationError as err:
-        raise ConfigError(f"{source}: {_one_line(err)}") from None
+        raise ConfigError(f"{source}: {_one_line(err, raw)}") from None
     try:
         return validate(cfg)
     except ConfigError as err:

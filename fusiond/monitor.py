@@ -4,7 +4,12 @@ Daemons are found by their liveliness tokens (`**/fusiond/health/alive`, any
 namespace); their diagnostics stream (`**/fusiond/diagnostics`) is aggregated here
 per sensor channel into a rate, an age, a windowed NIS against its chi-square
 bounds, the innovation RMS per component and the gated count; the doctor turns
-it into a verdict line in plain words. `--json` prints the same as JSON lines.
+it into a verdict line in plain words. `--json` prints the same as JSON lines; with
+its output not a terminal (a pipe, a log file) it streams plain text lines as it goes.
+
+A channel's verdict is judged over everything seen since the monitor started (the
+doctor's whole-run rule, chi-square bounds for that count) and says when the latest
+window differs, exactly as the replay summary does.
 """
 
 from __future__ import annotations
@@ -18,8 +23,8 @@ from dataclasses import dataclass, field
 
 import msgspec
 
-from .core.diagnostics import DiagnosticsRecord, chi2_ppf
-from .core.doctor import Doctor, Verdict
+from .core.diagnostics import DiagnosticsRecord
+from .core.doctor import Doctor, Verdict, judge_nis, nis_bounds
 
 ALIVE_SUFFIX = "/alive"
 DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"
@@ -63,16 +68,10 @@ class ChannelView:
         rate = (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 and recent[-1] > recent[0] else 0.0
         nis_mean = sum(self.nis) / len(self.nis) if self.nis else None
         n = len(self.nis)
-        bounds = None
-        if n >= 2 and self.dof:
-            a = (1.0 - self.confidence) / 2.0
-            bounds = (chi2_ppf(a, n * self.dof) / n, chi2_ppf(1.0 - a, n * self.dof) / n)
+        bounds = nis_bounds(n, self.dof, self.confidence) if n and self.dof else None
         rms = [math.sqrt(sum(v[i] ** 2 for v in self.innovations) / len(self.innovations))
                for i in range(len(self.components))] if self.innovations else []
-        if bounds is None or n < self.window:
-            verdict = "warming_up"
-        else:
-            verdict = "nis_high" if nis_mean > bounds[1] else "nis_low" if nis_mean < bounds[0] else "ok"
+        verdict = judge_nis(nis_mean, n, self.dof, self.confidence)
         return {
             "sensor": self.sensor, "channel": self.channel, "rate_hz": rate,
             "age_s": now - self.arrivals[-1] if self.arrivals else None,
@@ -90,7 +89,7 @@ class DaemonView:
         self.window = window
         self.confidence = confidence
         self.channels: dict[tuple[str, str], ChannelView] = {}
-        self.doctor = Doctor(None)
+        self.doctor = Doctor(None, window, confidence)
         self.health: dict | None = None
         self.lock = threading.Lock()
 
@@ -106,7 +105,15 @@ class DaemonView:
 
     def snapshot(self, now: float) -> dict:
         with self.lock:
-            rows = [ch.row(now) for _, ch in sorted(self.channels.items())]
+            rows = []
+            for key, ch in sorted(self.channels.items()):
+                row = ch.row(now)
+                whole = self.doctor.channels.get(key)
+                if whole is not None:  # one verdict per channel: the whole run's, and what the window says now
+                    row["window_verdict"] = row["verdict"]
+                    row["verdict"] = whole.verdict()
+                    row["now_note"] = whole.now_note(None)
+                rows.append(row)
             verdicts = self.doctor.verdicts()
         return {"daemon": self.prefix or "(no namespace)", "health": self.health, "channels": rows,
                 "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
@@ -229,6 +236,29 @@ def render(snapshots: list[dict]):
     return Group(*parts)
 
 
+def plain_lines(snapshots: list[dict], wall: float) -> list[str]:
+    """The same content as the terminal view, as plain lines (for a pipe or a log file)."""
+    stamp = time.strftime("%H:%M:%S", time.localtime(wall))
+    out = []
+    for snap in snapshots:
+        health = snap.get("health") or {}
+        out.append(f"{stamp} daemon {snap['daemon']} status {health.get('status', '?')}")
+        for name, s in health.get("sensors", {}).items():
+            out.append(f"{stamp}   sensor {name} alive={'yes' if s.get('alive') else 'NO'} age={_fmt(s.get('age_s'))}s "
+                       f"rate={_fmt(s.get('rate_hz'), '.1f')}Hz received={s.get('received')} "
+                       f"dropped={s.get('dropped')} rejected={s.get('rejected')}")
+        for r in snap["channels"]:
+            rms = " ".join(f"{k}={v:.4f}" for k, v in r["rms"].items())
+            now = f" ({r['now_note']})" if r.get("now_note") else ""
+            out.append(f"{stamp}   {r['sensor']}/{r['channel']} rate={_fmt(r['rate_hz'], '.1f')}Hz "
+                       f"nis_window={_fmt(r['nis_mean'], '.3f')} rms[{rms}] gated={r['gated']}/{r['updates']} "
+                       f"-> {r['verdict']}{now}")
+        for v in snap["verdicts"]:
+            key = f"  [{v['key']}]" if v["key"] else ""
+            out.append(f"{stamp}   {v['level'].upper():7} {v['sensor']}/{v['channel']}: {v['message']}{key}")
+    return out
+
+
 def run(session, *, timeout: float, duration: float | None, as_json: bool, interval: float = 1.0,
         health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX, window: int = 50,
         stop: threading.Event | None = None, out=sys.stdout) -> int:
@@ -252,7 +282,8 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     end = None if duration is None else time.monotonic() + duration
     enc = msgspec.json.Encoder()
     live = None
-    if not as_json:
+    plain = not as_json and not (hasattr(out, "isatty") and out.isatty())
+    if not as_json and not plain:
         from rich.console import Console
         from rich.live import Live
 
@@ -266,6 +297,9 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
             if as_json:
                 for s in snaps:
                     out.write(enc.encode({"time": time.time(), **s}).decode() + "\n")
+                out.flush()
+            elif plain:
+                out.write("\n".join(plain_lines(snaps, time.time())) + "\n")
                 out.flush()
             else:
                 live.update(render(snaps))

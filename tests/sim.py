@@ -30,13 +30,29 @@ class SimConfig:
     imu_yaw_offset: float = 0.0  # the IMU's own yaw reference (magnetic north, ...)
     imu_yaw_wander: float = 0.0  # amplitude (rad) of a slow magnetic disturbance of the IMU's yaw
     seed: int = 3
+    # traits for the doctor's tests (issue 12); the defaults leave every other simulation unchanged
+    speed: float = 1.0  # m/s while driving
+    stops: tuple[tuple[float, float], ...] = ()  # (t0, t1) relative: genuine standstills
+    false_stops: tuple[tuple[float, float, float], ...] = ()  # (t0, t1, yaw rate): wheels read 0, robot turns
+    wheel_yaw_lost: bool = False  # the driver lost the yaw rate: it reports 0 with variance 0
+    imu_mount_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the IMU's true mounting in base_link
+    imu_axis_sigma: tuple[float, float, float] | None = None  # orientation noise about the IMU's own axes
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
 
 def commanded(t: float, cfg: SimConfig) -> tuple[float, float]:
-    if t < cfg.standstill:
-        return 0.0, 0.0
-    return 1.0, 0.3 * math.sin(0.5 * (t - cfg.standstill))
+    v, w, _ = commanded_seen(t, cfg)
+    return v, w
+
+
+def commanded_seen(t: float, cfg: SimConfig) -> tuple[float, float, bool]:
+    """(v, yaw rate, the wheels see the motion)."""
+    if t < cfg.standstill or any(a <= t < b for a, b in cfg.stops):
+        return 0.0, 0.0, True
+    for a, b, rate in cfg.false_stops:
+        if a <= t < b:
+            return 0.0, rate, False
+    return cfg.speed, 0.3 * math.sin(0.5 * (t - cfg.standstill)), True
 
 
 def simulate(cfg: SimConfig) -> list[OdomSample | ImuSample]:
@@ -51,22 +67,33 @@ def simulate(cfg: SimConfig) -> list[OdomSample | ImuSample]:
     ws, gs, os_ = cfg.wheel_sigma, cfg.gyro_sigma, cfg.orientation_sigma
     while t < t_end:
         rel = t - 1000.0
-        v, w = commanded(rel, cfg)
+        v, w, seen = commanded_seen(rel, cfg)
         if rel >= next_odom:
             cov = [0.0] * 36
             for i in range(6):
                 cov[7 * i] = ws**2
-            moving = v != 0.0 or w != 0.0  # encoders read exactly zero when the wheels stand
-            out.append(OdomSample("wheel", t, (v + moving * rng.normal(0, ws), 0.0, 0.0),
-                                  (0.0, 0.0, cfg.wheel_yaw_scale * w + moving * rng.normal(0, ws)), tuple(cov)))
+            moving = seen and (v != 0.0 or w != 0.0)  # encoders read exactly zero when the wheels stand
+            wz = (cfg.wheel_yaw_scale * w if seen else 0.0) + moving * rng.normal(0, ws)
+            if cfg.wheel_yaw_lost:
+                wz, cov[35] = 0.0, 0.0
+            out.append(OdomSample("wheel", t, ((v if seen else 0.0) + moving * rng.normal(0, ws), 0.0, 0.0),
+                                  (0.0, 0.0, wz), tuple(cov)))
             next_odom += 1.0 / cfg.odom_rate
             cfg.truth.append((t, x, y, yaw))
         if rel >= next_imu:
             disturbance = cfg.imu_yaw_wander * math.sin(0.4 * rel)
-            q = rot.from_rpy(rng.normal(0, os_), rng.normal(0, os_),
-                             yaw + cfg.imu_yaw_offset + disturbance + rng.normal(0, os_))
             b = cfg.gyro_bias
-            gyro = (b[0] + rng.normal(0, gs), b[1] + rng.normal(0, gs), w + b[2] + rng.normal(0, gs))
+            if cfg.imu_axis_sigma is None and cfg.imu_mount_rpy == (0.0, 0.0, 0.0):
+                q = rot.from_rpy(rng.normal(0, os_), rng.normal(0, os_),
+                                 yaw + cfg.imu_yaw_offset + disturbance + rng.normal(0, os_))
+                gyro = (b[0] + rng.normal(0, gs), b[1] + rng.normal(0, gs), w + b[2] + rng.normal(0, gs))
+            else:  # q_imu = q_base * q_mount * exp(noise about the IMU's axes); rates in the IMU's axes
+                sig = cfg.imu_axis_sigma or (os_, os_, os_)
+                q_mount = rot.from_rpy(*cfg.imu_mount_rpy)
+                noise = rot.exp(*(rng.normal(0, sk) for sk in sig))
+                q = rot.mul(rot.mul(rot.from_rpy(0.0, 0.0, yaw + cfg.imu_yaw_offset + disturbance), q_mount), noise)
+                w_imu = rot.matrix(q_mount).T @ np.array([0.0, 0.0, w])
+                gyro = tuple(float(w_imu[k] + b[k] + rng.normal(0, gs)) for k in range(3))
             out.append(ImuSample("imu", t, q, (os_**2, 0, 0, 0, os_**2, 0, 0, 0, os_**2), gyro,
                                  (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
             next_imu += 1.0 / cfg.imu_rate

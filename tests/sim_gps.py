@@ -56,6 +56,10 @@ class World:
     pose_origin_drift: float = 0.0  # the pose sensor's origin creeps along x, m/s
     pose_origin_jump: tuple[float, float, float, float] | None = None  # (t, dx, dy, dyaw): a relocalisation
     pose_increment_noise: bool = False  # visual odometry: pose_sigma is per message increment, and accumulates
+    # an IMU that also reports an absolute (magnetometer) yaw: offset + slow disturbance (issue 12)
+    imu_yaw: bool = False
+    imu_yaw_offset: float = 0.0  # rad: declination, mounting
+    imu_yaw_wander: float = 0.0  # rad amplitude of a slow disturbance (period ~16 s)
     seed: int = 5
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw (every odom stamp)
     fixes: list[tuple[float, float, float]] = field(default_factory=list)  # t east north of every valid fix
@@ -99,9 +103,13 @@ def simulate(w: World) -> list:
             nxt["imu"] += 1.0 / w.imu_rate
             gs = w.gyro_sigma
             gz = wz / w.gyro_scale + w.gyro_bias + rng.normal(0, gs)
-            out.append(ImuSample("imu", t, rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), 0.0),
-                                 (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, 1e6), (rng.normal(0, gs), rng.normal(0, gs), gz),
-                                 (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
+            if w.imu_yaw:
+                mag = yaw + w.imu_yaw_offset + w.imu_yaw_wander * math.sin(0.4 * rel) + rng.normal(0, 0.002)
+                q, yaw_var = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), mag), 4e-6
+            else:
+                q, yaw_var = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), 0.0), 1e6
+            out.append(ImuSample("imu", t, q, (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, yaw_var),
+                                 (rng.normal(0, gs), rng.normal(0, gs), gz), (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
         if w.gps_rate > 0 and rel >= nxt["gps"]:
             nxt["gps"] += 1.0 / w.gps_rate
             n_fix += 1

@@ -1,65 +1,345 @@
-"""The tuning doctor on simulated robots with a known fault."""
+"""The doctor on simulated robots with a known fault: each verdict names the right sensor and key.
+
+Every simulation runs through `fusiond.replay.run.run_samples`, the loop `fusiond replay`
+runs on a bag (core, doctor series, estimates), so the verdicts are the ones a user
+would read. Thresholds come from the simulation's physics (derivations inline).
+"""
 
 from __future__ import annotations
 
-from fusiond.core.doctor import Doctor
-from fusiond.core.fusion import FusionCore
-from fusiond.estimator.rotation import to_rpy
+import math
+import re
+
+import pytest
+
+from fusiond.config import loads
+from fusiond.core.doctor import Verdict
+from fusiond.core.sensors import OdomPolicy
+from fusiond.replay.run import run_samples
 from fusiond.samples import OdomSample
 
+from . import sim_gps
 from .sim import SimConfig, simulate
 from .test_fusion_core import make_config
 
 
-def run_doctor(cfg, samples):
-    core, doctor = FusionCore(cfg), Doctor(cfg)
-    for s in samples:
-        step = core.ingest(s)
-        if isinstance(s, OdomSample):
-            doctor.add_twist(s.linear, s.angular)
-        for r in step.records:
-            doctor.add(r)
-        if step.publish:
-            x = core.pose()[1].tolist()
-            doctor.add_attitude(*to_rpy(tuple(x[3:7]))[0:2])
-    stats = {s.name: {"received": st.received, "dropped": st.dropped} for s, st in zip(core.sensors, core.stats)}
-    return doctor.verdicts(stats)
+def verdicts_of(cfg, samples) -> list[Verdict]:
+    result = run_samples(samples, cfg)
+    verdicts = result.verdicts()
+    agree(result.doctor, verdicts)
+    return verdicts
 
 
-def test_disturbed_absolute_yaw_is_flagged_and_roll_pitch_gyro_suggested():
-    samples = simulate(SimConfig(duration=30.0, imu_yaw_wander=0.3, standstill=2.0))
-    verdicts = run_doctor(make_config(orientation="absolute", gyro=True), samples)
-    ori = [v for v in verdicts if v.channel == "orientation" and v.level == "problem"]
-    assert ori and ori[0].key == "sensors[1].orientation"
-    assert "roll_pitch" in ori[0].message and "angular_velocity = true" in ori[0].message
+def agree(doctor, verdicts: list[Verdict]) -> None:
+    """One verdict per channel, and it never contradicts the channel's whole-run NIS verdict (what the
+    summary prints): no 'ok' beside a NIS high or low, no 'NIS high' beside an ok."""
+    keys = [(v.sensor, v.channel) for v in verdicts]
+    assert len(keys) == len(set(keys)), keys
+    by_key = dict(zip(keys, verdicts))
+    for key, ch in doctor.channels.items():
+        v = by_key[key]
+        if ch.verdict() in ("nis_high", "nis_low"):
+            assert v.level != "ok", (key, ch.verdict(), v)
+        else:
+            assert "NIS high" not in v.message and "NIS low" not in v.message, (key, v)
 
-    recommended = run_doctor(make_config(orientation="roll_pitch", gyro=True), samples)
-    assert all(v.level == "ok" for v in recommended if v.channel == "orientation"), recommended
+
+def one(verdicts: list[Verdict], sensor: str, channel: str) -> Verdict:
+    found = [v for v in verdicts if v.sensor == sensor and v.channel == channel]
+    assert len(found) == 1, f"expected one verdict for {sensor}/{channel}: {verdicts}"
+    return found[0]
+
+
+def vector(suggestion: str) -> list[float]:
+    return [float(v) for v in re.search(r"\[([^\]]*)\]", suggestion).group(1).split(",")]
+
+
+def gps_config(imu: str, odom: str = "", gps: str = ""):
+    return loads(f"""
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+{odom}
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+{imu}
+[[sensors]]
+name = "gps"
+kind = "gps"
+key = "gps"
+{gps}
+""")
+
+
+def never_trusts_more(verdicts: list[Verdict], sensor: str) -> None:
+    """No verdict advises trusting a contradicted sensor more (a smaller noise, or 'under-uses')."""
+    for v in verdicts:
+        assert "under-uses" not in v.message, v
+        assert not (v.key == f"sensors.{sensor}.orientation_noise"), v
+
+
+# -- clean runs ------------------------------------------------------------------------------------
+def test_clean_simulation_every_verdict_is_ok():
+    verdicts = verdicts_of(make_config(orientation="roll_pitch", gyro=True),
+                           simulate(SimConfig(duration=30.0, standstill=2.0)))
+    assert verdicts and all(v.level == "ok" for v in verdicts), verdicts
+    assert {(v.sensor, v.channel) for v in verdicts} >= {("imu", "orientation"), ("imu", "gyro_bias"),
+                                                        ("wheel", "yaw_rate")}
+
+
+def test_clean_gps_simulation_every_verdict_is_ok():
+    w = sim_gps.World(duration=120.0, gps_rate=1.0)
+    verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
+    assert all(v.level == "ok" for v in verdicts), verdicts
+    # the cross-source speed check ran and found the wheels right (scale 1 within its standard error)
+    speed = one(verdicts, "wheel", "speed")
+    assert abs(speed.evidence["wheel_scale_vs_gps"] - 1.0) < 3 * speed.evidence["wheel_scale_se"] + 0.01
+
+
+# -- magnetometer yaw --------------------------------------------------------------------------------
+def test_magnetometer_offset_and_disturbance_without_gps_blames_the_imu_yaw():
+    samples = simulate(SimConfig(duration=60.0, standstill=2.0, imu_yaw_offset=0.4, imu_yaw_wander=0.3))
+    verdicts = verdicts_of(make_config(orientation="absolute", gyro=True), samples)
+    v = one(verdicts, "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation" and "roll_pitch" in v.suggestion
+    # a 0.3 rad sine disturbance has an rms of 0.3 / sqrt(2) = 0.21 rad; a linear fit over a 60 s window
+    # removes little of a 16 s period, so the measured wander is within 25 % of that
+    assert v.evidence["imu_vs_gyro_wander_rad"] == pytest.approx(0.3 / math.sqrt(2), rel=0.25)
+    never_trusts_more(verdicts, "imu")
+    # the standstill updates rejected against the bias the disturbed yaw pulled are blamed on the yaw too
+    bias = one(verdicts, "imu", "gyro_bias")
+    assert bias.level == "ok" or bias.key == "sensors.imu.orientation", bias
+
+
+def test_magnetometer_offset_and_disturbance_with_gps_blames_the_imu_not_the_gps():
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.4, imu_yaw_wander=0.3)
+    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = true'), sim_gps.simulate(w))
+    v = one(verdicts, "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation" and "roll_pitch" in v.suggestion
+    gps = one(verdicts, "gps", "position")
+    assert gps.key != "sensors.gps.position_noise" and "imu/orientation" in gps.message, gps
+    never_trusts_more(verdicts, "imu")
+
+
+def test_magnetometer_offset_alone_with_gps_gets_a_yaw_offset():
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.4)
+    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = true'), sim_gps.simulate(w))
+    v = one(verdicts, "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.yaw_offset"
+    # corrected = raw + yaw_offset: the offset to state is -0.4; its standard error (GPS sigma 0.3 m over
+    # 10 m chords: 0.04 rad per chord, ~20 chords) is about 0.01 rad, so 0.05 is > 3 standard errors
+    (value,) = [float(x) for x in re.findall(r"-?\d+\.\d+", v.suggestion)]
+    assert value == pytest.approx(-0.4, abs=0.05)
+    assert one(verdicts, "gps", "position").key == "sensors.imu.yaw_offset"
+
+
+# -- wheels ------------------------------------------------------------------------------------------
+def test_lost_yaw_rate_is_not_measured_rather_than_slip():
+    samples = simulate(SimConfig(duration=30.0, standstill=2.0, wheel_yaw_lost=True))
+    v = one(verdicts_of(make_config(), samples), "wheel", "yaw_rate")
+    assert v.level == "problem" and v.key == "sensors.wheel.twist_measured" and "slip" not in v.message.split("(")[0]
+    assert v.suggestion == "twist_measured = [true, true, true, true, true, false]"
+    # declared: not used as an input, not slip-checked, and the doctor is content
+    declared = make_config(extra_odom="twist_measured = [true, true, true, true, true, false]")
+    result = run_samples(samples, declared)
+    assert "wheel/yaw_rate" not in result.core.consistency()
+    assert all(v.level == "ok" for v in result.verdicts()), result.verdicts()
+
+
+def test_twist_measured_takes_the_not_measured_path_even_with_zero_covariance():
+    cfg = make_config(extra_odom="twist_measured = [true, true, true, true, true, false]").sensors[0]
+    inp = OdomPolicy(cfg).convert(OdomSample("wheel", 1.0, (1.0, 0.0, 0.0), (0.0, 0.0, 0.7), (0.0,) * 36))
+    assert inp.angular[2] == 0.0 and not inp.yaw_rate_measured and inp.linear[0] == 1.0
+    # the same with twist_noise set: the override applies to the measured components only
+    cfg = make_config(extra_odom="twist_measured = [true, true, true, true, true, false]\n"
+                                 "twist_noise = [0.05, 0.05, 0.05, 0.02, 0.02, 0.05]").sensors[0]
+    inp = OdomPolicy(cfg).convert(OdomSample("wheel", 1.0, (1.0, 0.0, 0.0), (0.0, 0.0, 0.7), (0.0,) * 36))
+    assert inp.angular[2] == 0.0 and not inp.yaw_rate_measured and inp.linear_cov[0] == pytest.approx(0.05**2)
+
+
+def test_wheel_scale_error_against_gps_names_scale_estimation():
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, wheel_scale=0.95)
+    verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
+    v = one(verdicts, "wheel", "speed")
+    assert v.level == "problem" and v.key == "sensors.wheel.scale_estimation"
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(0.95, abs=3 * v.evidence["wheel_scale_se"] + 0.005)
+
+
+def test_skid_steer_wheels_are_reported_as_slip():
+    samples = simulate(SimConfig(duration=30.0, wheel_yaw_scale=2.3))
+    v = one(verdicts_of(make_config(extra_odom="slip_threshold = 0.1"), samples), "wheel", "yaw_rate")
+    assert v.level == "warn" and v.key == "sensors.wheel.slip_threshold"
+
+
+def test_wheels_driving_heading_against_gyro_and_imu_yaw_are_the_culprit():
+    """Without the gyro fused, skid-steer wheels (2.3x) drive heading and the IMU's absolute yaw fights
+    them: the IMU's NIS is high, but the doctor blames the wheels and says to fuse the gyro."""
+    samples = simulate(SimConfig(duration=30.0, standstill=2.0, wheel_yaw_scale=2.3))
+    verdicts = verdicts_of(make_config(orientation="absolute", gyro=False), samples)
+    v = one(verdicts, "wheel", "heading")
+    assert v.level == "problem" and v.key == "sensors.imu.angular_velocity"
+    assert v.evidence["wheel_vs_gyro_yaw_scale"] == pytest.approx(2.3, rel=0.05)
+    ori = one(verdicts, "imu", "orientation")
+    assert ori.key != "sensors.imu.orientation_noise"
+    never_trusts_more(verdicts, "imu")
+
+
+def test_world_twist_setting_on_a_body_twist_is_a_problem():
+    verdicts = verdicts_of(make_config(extra_odom='twist_frame = "world"'), simulate(SimConfig(duration=20.0)))
+    v = one(verdicts, "wheel", "twist")
+    assert v.level == "problem" and v.key == "sensors.wheel.twist_frame"
+
+
+# -- gyro bias and covariance ----------------------------------------------------------------------------
+def test_false_standstill_points_at_the_accepted_update():
+    """Wheels read zero for 3 s while the robot turns at 0.04 rad/s, then three genuine standstills."""
+    samples = simulate(SimConfig(duration=40.0, gyro_bias=(0.0, 0.0, 0.002), false_stops=((3.0, 6.0, 0.04),),
+                                 stops=((12.0, 15.0), (20.0, 23.0), (28.0, 31.0))))
+    result = run_samples(samples, make_config())
+    ch = result.doctor.channels[("imu", "gyro_bias")]
+    t0 = samples[0].stamp
+    false_accepted = sum(1 for t, r in zip(ch.stamps, ch.rejected_flags) if t - t0 < 7.0 and not r)
+    later = [r for t, r in zip(ch.stamps, ch.rejected_flags) if t - t0 > 11.0]
+    v = one(result.verdicts(), "imu", "gyro_bias")
+    if false_accepted and sum(later) > len(later) / 2:
+        # the core learned from the false one: the verdict must point at it, not at the genuine ones
+        assert v.level == "problem" and v.key == "filter.standstill_s"
+        assert v.evidence["suspect_t_s"] == pytest.approx(3.0, abs=0.5)
+        # the gyro read the turn rate plus its bias there
+        assert v.evidence["suspect_gyro_rad_s"] == pytest.approx(0.042, abs=0.003)
+    else:
+        # a core that refuses the false standstill: the genuine ones are not blamed
+        assert v.level == "ok" or "genuine" not in v.message, v
+
+
+def test_car_that_never_stops_reaches_the_cap_through_an_unlearned_bias():
+    """20 m/s for 120 s, no standstill, heading from the gyro only: the bias prior (0.01 rad/s) grows the
+    heading sigma by 0.01 t and the lateral position sigma by about v 0.01 t^2 / 2 = 1440 m at 120 s, far
+    beyond the 100 m of the default cap (1e4 m^2); there are no gaps and the process noise alone gives
+    sqrt(0.002^2 x 120) = 0.02 m."""
+    samples = simulate(SimConfig(duration=120.0, speed=20.0, gyro_bias=(0.0, 0.0, 0.004), odom_rate=20, imu_rate=50))
+    verdicts = verdicts_of(make_config(), samples)
+    v = one(verdicts, "filter", "covariance")
+    assert v.key == "filter.gyro_bias_sigma" and "unobservable" in v.message
+    assert one(verdicts, "imu", "gyro_bias").key == "filter.gyro_bias_sigma"
+
+
+def test_covariance_cap_after_a_dropout_names_the_gap_inflation():
+    """A 30 s silence of every sensor inflates the position variance by gap_inflation^2 x 30 =
+    0.05^2 x 30 = 0.075 m^2, above a cap of 0.05 m^2; driving without the gap stays far below it
+    (odometry noise 0.01 m/s per message over 30 s: ~1e-4 m^2)."""
+    samples = [s for s in simulate(SimConfig(duration=60.0, standstill=2.0)) if not 1020.0 <= s.stamp < 1050.0]
+    v = one(verdicts_of(make_config(extra_filter="covariance_cap = [0.05, 10.0]"), samples), "filter", "covariance")
+    assert v.key == "filter.gap_inflation" and v.evidence["gap_longest_s"] == pytest.approx(30.0, abs=0.1)
+
+
+def test_covariance_cap_from_process_noise_names_it():
+    """process_noise 5 m/sqrt(s) grows the position variance by 25 m^2/s: a 10 m^2 cap in half a second,
+    with no gap and a standstill (the bias is learned)."""
+    samples = simulate(SimConfig(duration=20.0, standstill=2.0))
+    v = one(verdicts_of(make_config(extra_filter="covariance_cap = [10.0, 10.0]\nprocess_noise = [5.0, 0.002]"),
+                        samples), "filter", "covariance")
+    assert v.key == "filter.process_noise"
+
+
+# -- IMU mounting and noise frames -----------------------------------------------------------------------
+def test_rotated_imu_yaw_noise_is_reported_on_the_imu_yaw_axis():
+    """An IMU rolled by 90 degrees whose own yaw is noisy (0.03 rad) while 0.003 is stated: the noise shows
+    on base pitch, but orientation_noise applies in the IMU's axes, so it must be suggested as yaw."""
+    samples = simulate(SimConfig(duration=30.0, standstill=2.0, imu_mount_rpy=(math.pi / 2, 0.0, 0.0),
+                                 imu_axis_sigma=(0.003, 0.003, 0.03)))
+    cfg = make_config(extra_imu=f"extrinsic_rpy = [{math.pi / 2}, 0.0, 0.0]\n"
+                                "orientation_noise = [0.003, 0.003, 0.003]")
+    v = one(verdicts_of(cfg, samples), "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation_noise"
+    roll, _, yaw = vector(v.suggestion)
+    # innovations also carry the filter's own attitude uncertainty: within 20 % of the simulated sigmas
+    assert yaw == pytest.approx(0.03, rel=0.2) and roll == pytest.approx(0.003, rel=0.2)
+
+
+@pytest.mark.parametrize("configured_yaw", [0.0, 0.6])
+def test_lean_prints_the_full_two_axis_mount(configured_yaw):
+    """The IMU is mounted rolled 0.08 and pitched -0.12 rad (and yawed as configured); the config has the
+    yaw only. On level ground the estimate leans by the missing tilt; the verdict gives the whole mount."""
+    mount = (0.08, -0.12, configured_yaw)
+    samples = simulate(SimConfig(duration=30.0, standstill=2.0, imu_mount_rpy=mount))
+    cfg = make_config(extra_imu=f"extrinsic_rpy = [0.0, 0.0, {configured_yaw}]")
+    v = one(verdicts_of(cfg, samples), "imu", "attitude")
+    assert v.key == "sensors.imu.extrinsic_rpy"
+    # orientation noise 0.002 rad averaged over 3000 samples: the mean tilt is known to ~1e-4 rad
+    assert vector(v.suggestion) == pytest.approx(list(mount), abs=0.01)
+    # pasting it removes the lean: no attitude verdict any more
+    fixed = make_config(extra_imu=v.suggestion)
+    assert not [x for x in verdicts_of(fixed, samples) if x.channel == "attitude"]
 
 
 def test_understated_orientation_noise_is_flagged_with_a_measured_suggestion():
     samples = simulate(SimConfig(duration=20.0, orientation_sigma=0.02))
-    verdicts = run_doctor(make_config(orientation="roll_pitch", gyro=True,
-                                      extra_imu="orientation_noise = [0.002, 0.002, 0.002]"), samples)
-    v = next(v for v in verdicts if v.channel == "orientation")
-    assert v.level == "problem" and v.key == "sensors[1].orientation_noise"
+    v = one(verdicts_of(make_config(extra_imu="orientation_noise = [0.002, 0.002, 0.002]"), samples),
+            "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation_noise"
+    roll, pitch, _ = vector(v.suggestion)
+    assert roll == pytest.approx(0.02, rel=0.2) and pitch == pytest.approx(0.02, rel=0.2)
 
 
 def test_mounting_offset_is_reported_against_extrinsic_rpy():
     samples = simulate(SimConfig(duration=20.0))
     # the config claims a 3 degree roll mount the IMU does not have
-    verdicts = run_doctor(make_config(orientation="roll_pitch", gyro=True, extra_imu="extrinsic_rpy = [0.05, 0.0, 0.0]"),
-                          samples)
-    assert any(v.key == "sensors[1].extrinsic_rpy" for v in verdicts), verdicts
+    verdicts = verdicts_of(make_config(extra_imu="extrinsic_rpy = [0.05, 0.0, 0.0]"), samples)
+    assert any(v.key == "sensors.imu.extrinsic_rpy" for v in verdicts), verdicts
 
 
-def test_skid_steer_wheels_are_reported_as_slip():
-    samples = simulate(SimConfig(duration=30.0, wheel_yaw_scale=2.3))
-    verdicts = run_doctor(make_config(orientation="roll_pitch", gyro=True, extra_odom="slip_threshold = 0.1"), samples)
-    assert any(v.channel == "yaw_rate" and v.level == "warn" for v in verdicts)
+# -- one verdict per channel -------------------------------------------------------------------------------
+def test_few_updates_are_judged_with_chi_square_bounds_for_their_count():
+    """11 updates with a mean NIS of 51.6 for 3 dof (the issue's 0.2 Hz GPS): far above the chi-square
+    bound for 33 dof (about 4.6 per update), so NIS high, not 'too few'."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.core.doctor import Doctor
+
+    d = Doctor(None)
+    for k in range(11):
+        d.add(DiagnosticsRecord(100.0 + 5 * k, "gps", ["x", "y", "z"], [7.0, 7.0, 1.0], [1.9, 1.9, 1.9],
+                                51.6, 3, False, channel="position"))
+    v = one(d.verdicts(), "gps", "position")
+    assert v.level == "problem" and "NIS high" in v.message and "too few" not in v.message
+    assert v.key == "sensors.gps.position_noise"
 
 
-def test_world_twist_setting_on_a_body_twist_is_a_problem():
-    samples = simulate(SimConfig(duration=20.0))
-    verdicts = run_doctor(make_config(extra_odom='twist_frame = "world"'), samples)
-    assert any(v.key == "sensors[0].twist_frame" and v.level == "problem" for v in verdicts)
+# -- plots -------------------------------------------------------------------------------------------------
+def test_plot_breaks_lines_at_gaps_and_draws_gps_runs_in_enu(tmp_path):
+    import numpy as np
+
+    from fusiond.replay.plot import break_gaps, plot_replay
+
+    t = np.array([0.0, 0.1, 0.2, 150.2, 150.3, 150.4])
+    tb, xb = break_gaps(t, np.arange(6.0))
+    assert np.isnan(tb[3]) and np.isnan(xb[3]) and len(tb) == 7  # one break, at the 150 s silence
+    assert len(break_gaps(t[:3], np.arange(3.0))[0]) == 3  # no gap: unchanged
+    w = sim_gps.World(duration=60.0, gps_rate=1.0)
+    samples = [s for s in sim_gps.simulate(w) if not 1020.0 <= s.stamp < 1035.0]
+    result = run_samples(samples, gps_config('orientation = "roll_pitch"\nangular_velocity = true'),
+                         keep_trace=True)
+    out = tmp_path / "gps.png"
+    plot_replay(result, out, title="gps")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(result.doctor.series().gps_t) > 40  # the fixes the plot draws beside the ENU track
+
+
+def test_magnetometer_yaw_without_any_gyro_is_judged_against_the_gps_track():
+    """robot_localization's Husky setup: absolute yaw, no gyro in the messages at all, GPS. The wander
+    (0.2 rad amplitude: rms 0.14 rad) stands far above the track's own noise (0.3 m over >= 10 m chords:
+    0.04 rad), so the IMU yaw is blamed and the GPS is not told to state more noise."""
+    from fusiond.samples import ImuSample
+
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.3, imu_yaw_wander=0.2)
+    samples = [ImuSample(s.sensor, s.stamp, s.orientation, s.orientation_covariance, (0.0, 0.0, 0.0),
+                         (-1.0,) + (0.0,) * 8) if isinstance(s, ImuSample) else s for s in sim_gps.simulate(w)]
+    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = false'), samples)
+    v = one(verdicts, "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation" and "GPS track" in v.message
+    assert v.evidence["imu_vs_gps_track_wander_rad"] == pytest.approx(0.2 / math.sqrt(2), rel=0.35)
+    assert one(verdicts, "gps", "position").key == "sensors.imu.orientation"
+    never_trusts_more(verdicts, "imu")

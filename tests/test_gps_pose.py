@@ -595,7 +595,7 @@ def test_doctor_flags_an_understated_gps_noise():
         for r in core.ingest(s).records:
             doctor.add(r)
     verdicts = [v for v in doctor.verdicts() if v.sensor == "gps" and v.channel == "position"]
-    assert verdicts and verdicts[0].level == "problem" and verdicts[0].key == "sensors[2].position_noise"
+    assert verdicts and verdicts[0].level == "problem" and verdicts[0].key == "sensors.gps.position_noise"
 
 
 # -- Gauss-Markov GPS error state -------------------------------------------------------------------------------

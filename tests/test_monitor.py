@@ -74,10 +74,27 @@ def test_monitor_sees_a_running_daemon(jackal_bag, tmp_path):
         feeder = threading.Thread(target=stream, daemon=True)
         feeder.start()
         try:
+            # off a TTY without --json: plain lines, streamed while the monitor runs (not one frame at exit)
+            plain = subprocess.Popen(
+                fusiond_cmd("monitor", "--connect", f"tcp/127.0.0.1:{port}", "--no-multicast",
+                            "--duration", "30", "--interval", "0.5", "--timeout", "10"),
+                cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
             mon = subprocess.run(
                 fusiond_cmd("monitor", "--connect", f"tcp/127.0.0.1:{port}", "--no-multicast", "--json",
                             "--duration", "4", "--interval", "0.5", "--timeout", "10"),
                 cwd=ROOT, capture_output=True, text=True, timeout=60)
+            try:
+                streamed = []
+                deadline = time.monotonic() + 25
+                while time.monotonic() < deadline and not any("imu/orientation" in line for line in streamed):
+                    line = plain.stdout.readline()
+                    if not line:
+                        break
+                    streamed.append(line)
+                still_running = plain.poll() is None
+            finally:
+                plain.terminate()
+                plain.communicate(timeout=20)
         finally:
             stop.set()
             feeder.join(10)
@@ -93,6 +110,12 @@ def test_monitor_sees_a_running_daemon(jackal_bag, tmp_path):
     assert ori["rate_hz"] > 50 and ori["updates"] > 100 and ori["nis_mean"] is not None
     assert set(ori["rms"]) == {"roll", "pitch"}
     assert any(v["channel"] == "yaw_rate" for v in last["verdicts"])  # the doctor speaks live too
+    # the same key spelling as the replay: the TOML path
+    assert all(v["key"] == "" or v["key"].startswith(("sensors.", "filter.")) for v in last["verdicts"])
+    assert any(v["key"] == "sensors.wheel.slip_threshold" for v in last["verdicts"]), last["verdicts"]
+    assert still_running and any("daemon (no namespace) status" in line for line in streamed), streamed
+    assert any("imu/orientation" in line and "->" in line for line in streamed), streamed
+    assert not any("\x1b[" in line for line in streamed)  # plain text: no terminal escapes
 
 
 def test_monitor_without_a_daemon_says_so_and_fails(tmp_path):

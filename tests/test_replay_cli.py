@@ -123,3 +123,106 @@ def test_config_toml_at_the_root_documents_a_valid_config():
 def test_missing_bag_is_a_clear_error(tmp_path):
     proc = fusiond("replay", str(tmp_path / "nope.bag"), "--config", "examples/jackal.toml")
     assert proc.returncode == 2 and "nope.bag" in proc.stderr
+
+
+# -- issue 12: errors instead of silent empty runs ---------------------------------------------------------
+def _config_with_keys(tmp_path, odom_key: str, imu_key: str) -> Path:
+    text = (ROOT / "examples/jackal.toml").read_text()
+    text = text.replace('key = "jackal_velocity_controller/odom"', f'key = "{odom_key}"')
+    text = text.replace('key = "imu/data"', f'key = "{imu_key}"')
+    path = tmp_path / "cfg.toml"
+    path.write_text(text)
+    return path
+
+
+def test_odometry_topic_absent_from_the_bag_is_an_error_listing_the_bag_topics(jackal_bag, tmp_path):
+    cfg = _config_with_keys(tmp_path, "wheel/odom", "imu/data")
+    tum = tmp_path / "out.tum"
+    proc = fusiond("replay", str(jackal_bag), "--config", str(cfg), "--tum", str(tum))
+    assert proc.returncode == 2
+    err = proc.stderr.strip()
+    assert len(err.splitlines()) == 1
+    assert "/wheel/odom" in err and "/imu/data" in err and "/jackal_velocity_controller/odom" in err
+    assert not tum.exists()  # nothing was replayed
+
+
+def test_other_absent_topics_are_a_warning_before_the_replay(jackal_bag, tmp_path):
+    cfg = _config_with_keys(tmp_path, "jackal_velocity_controller/odom", "imu/nope")
+    proc = fusiond("replay", str(jackal_bag), "--config", str(cfg), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" in proc.stderr and "/imu/nope" in proc.stderr and "/imu/data" in proc.stderr
+
+
+def _file(d: Path, name: str) -> Path:
+    (d / name).write_text("x")
+    return d / name
+
+
+@pytest.mark.parametrize("option, make, needle", [
+    ("--report", lambda d: _file(d, "taken.html"), "names an existing file"),
+    ("--tum", lambda d: _file(d, "f") / "out.tum", "is a file, not a directory"),
+    ("--tum", lambda d: d, "is a directory"),
+])
+def test_unwritable_outputs_are_refused_before_replaying(jackal_bag, tmp_path, option, make, needle):
+    target = make(tmp_path)
+    proc = fusiond("replay", str(jackal_bag), "--config", "examples/jackal.toml", option, str(target))
+    assert proc.returncode == 2
+    assert needle in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("toml, needle", [
+    ('[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\norientation="rollpitch"\n',
+     "valid values: 'absolute', 'relative', 'roll_pitch', 'off'"),
+    ('[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\nslip_treshold=0.2\n', "did you mean `slip_threshold`?"),
+    ('[filtr]\ngap_s=1.0\n', "did you mean `filter`?"),
+    ('[zenoh]\nconnect=["tcpx/10.0.0.2:7447"]\n', "zenoh.connect: unknown protocol 'tcpx'"),
+])
+def test_config_errors_say_what_would_be_valid(tmp_path, toml, needle):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(toml)
+    for command in (("replay", "nothing.bag"), ("run",)):
+        proc = fusiond(*command, "--config", str(cfg))
+        assert proc.returncode == 2, proc.stderr
+        assert needle in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_bad_connect_endpoint_on_the_command_line_is_a_usage_error():
+    proc = fusiond("health", "--connect", "tcpx/127.0.0.1:7447", "--timeout", "1")
+    assert proc.returncode == 2 and "--connect: unknown protocol 'tcpx'" in proc.stderr
+
+
+def test_log_level_is_accepted_after_the_subcommand_and_in_its_help():
+    for command in ("replay", "run", "monitor", "calibrate-imu", "bench", "bench-latency", "play", "health"):
+        proc = fusiond(command, "--help")
+        assert "--log-level" in proc.stdout, command
+    proc = fusiond("bench", "--help")
+    assert "bag to replay" in proc.stdout and "TOML config the bag" in proc.stdout
+    proc = fusiond("bench-latency", "--help")
+    assert "IMU messages per second" in proc.stdout and "odometry messages per second" in proc.stdout
+    proc = fusiond("replay", "nothing.bag", "--config", "examples/jackal.toml", "--log-level", "debug")
+    assert proc.returncode == 2 and "nothing.bag" in proc.stderr  # parsed: it got as far as the bag
+
+
+@pytest.mark.e2e
+def test_summary_and_doctor_agree_on_every_channel(jackal_bag):
+    """One verdict per channel: the summary's whole-run NIS verdict and the doctor's line never disagree."""
+    from fusiond.replay.run import summary
+
+    for example in ("examples/jackal.toml", "examples/jackal_rl.toml"):
+        res = replay([jackal_bag], load(ROOT / example), progress=False)
+        text = summary(res)
+        verdicts = {(v.sensor, v.channel): v for v in res.verdicts()}
+        channels = res.doctor.channel_summaries()
+        assert channels
+        for name, c in channels.items():
+            line = next(line for line in text.splitlines() if line.startswith(f"NIS {name} "))
+            assert f"-> {c['verdict']} " in line, line
+            v = verdicts[tuple(name.split("/"))]
+            if c["verdict"] in ("nis_high", "nis_low"):
+                assert v.level != "ok", (name, c, v)  # never 'consistent' beside a NIS high or low
+            else:
+                assert "NIS high" not in v.message and "NIS low" not in v.message, (name, v)
+        # the doctor's figures are the whole run's: the same mean NIS per dof as the summary
+        ori = channels["imu/orientation"]
+        assert f"{ori['nis_mean'] / ori['dof']:.2f} per dof" in verdicts[("imu", "orientation")].message

@@ -34,8 +34,10 @@ def test_report_has_the_plots_and_the_doctor(report):
         data = (report / img).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
     assert 'id="verdicts"' in page
-    # the robot_localization-alike config fuses a yaw the skid-steer wheels contradict: the doctor says so
-    assert "sensors[1].orientation" in page and "roll_pitch" in page
+    # the robot_localization-alike config predicts heading from skid-steer wheels that the gyro and the
+    # IMU's own yaw contradict: the doctor blames the wheels (not the IMU) and says to fuse the gyro
+    assert "wheel/heading" in page and "sensors.imu.angular_velocity" in page and "angular_velocity = true" in page
+    assert "whole run" in page
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="headless Chromium not installed (Debian package chromium)")

@@ -254,7 +254,8 @@ class FusionCore:
             st.newest_stamp = stamp
         for r in records:
             w = self._window(idx, r.channel)
-            r.consistency = w.add(r.nis, r.dof, r.rejected)
+            if not r.learning:
+                r.consistency = w.add(r.nis, r.dof, r.rejected)
             if r.rejected and r.channel != "yaw_rate":
                 st.rejected += 1
         publish = idx == self.odom_index and (self.frame_index < 0 or self.state.frame_ready)

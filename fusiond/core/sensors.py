@@ -101,6 +101,10 @@ class OdomPolicy:
         self._unmeasured = [lin_max**2] * 3 + [ang_max**2] * 3
         self._default = [lin_def**2] * 3 + [ang_def**2] * 3
         self._override = None if cfg.twist_noise is None else [s * s for s in cfg.twist_noise]
+        # twist_measured: a component the driver does not measure takes the "not measured" path
+        # whatever its covariance says (a lost yaw rate reads 0 with covariance 0)
+        self._declared = tuple(cfg.twist_measured)
+        self._all_measured = all(self._declared)
 
     def convert(self, s: OdomSample) -> OdomInput:
         if not (_finite(s.linear) and _finite(s.angular)):
@@ -111,17 +115,22 @@ class OdomPolicy:
         if len(cov) != 36:
             raise Rejected(reasons.BAD_COVARIANCE, "twist covariance must have 36 entries")
         twist = (*s.linear, *s.angular)
-        if self._override is not None:
+        if self._override is not None and self._all_measured:
             var = self._override
             values = twist
             measured = (True,) * 6
         else:
             var, values, measured = [], [], []
             for i in range(6):
+                if self._override is not None:  # the user's noise, for the components declared measured
+                    measured.append(self._declared[i])
+                    var.append(self._override[i] if self._declared[i] else self._default[i])
+                    values.append(twist[i] if self._declared[i] else 0.0)
+                    continue
                 d = cov[7 * i]
                 if d < 0.0:
                     raise Rejected(reasons.NEGATIVE_COVARIANCE, "twist")
-                if d >= self._unmeasured[i] or d != d or d == math.inf:
+                if not self._declared[i] or d >= self._unmeasured[i] or d != d or d == math.inf:
                     var.append(self._default[i])  # "not measured": not used, default noise
                     values.append(0.0)
                     measured.append(False)

@@ -51,6 +51,7 @@ class BagSamples:
         self._connections = [c for _, conns in selected.values() for c in conns]
         self.topics: dict[str, str] = {sensor.name: topic for topic, (sensor, _) in selected.items()}
         self.missing = missing
+        self.bag_topics: dict[str, str] = {t: i.msgtype or "" for t, i in reader.topics.items()}  # all, for errors
         self.total = sum(c.msgcount for c in self._connections)
         self.decode_errors = 0
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .plot import plot_replay
+from .plot import break_gaps, plot_replay, run_start
 from .run import ReplayResult, summary
 
 
@@ -28,12 +28,12 @@ def plot_innovations(result: ReplayResult, path: Path) -> bool:
         return False
     fig, axes = plt.subplots(rows, 1, figsize=(11, 1.9 * rows + 0.6), sharex=True, squeeze=False)
     k = 0
+    t0 = run_start(result)
     for name, (comps, data) in chans:
         if not data:
             continue
-        t = np.array([d[0] for d in data])
-        y = np.array([d[1] for d in data], dtype=float)
-        sd = np.sqrt(np.array([d[2] for d in data], dtype=float))
+        t, y, sd = break_gaps(np.array([d[0] for d in data]) - t0, np.array([d[1] for d in data], dtype=float),
+                              np.sqrt(np.array([d[2] for d in data], dtype=float)))
         for i, comp in enumerate(comps):
             ax = axes[k, 0]
             ax.fill_between(t, -2 * sd[:, i], 2 * sd[:, i], color="tab:green", alpha=0.2, label="±2σ predicted (S)")
@@ -43,7 +43,7 @@ def plot_innovations(result: ReplayResult, path: Path) -> bool:
             if k == 0:
                 ax.legend(loc="upper right", fontsize=7, ncol=2)
             k += 1
-    axes[-1, 0].set_xlabel("stamp [s]")
+    axes[-1, 0].set_xlabel(f"time since the start [s] (stamp {t0:.3f})")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -57,15 +57,16 @@ def write_report(result: ReplayResult, directory: Path, title: str) -> Path:
     verdicts = result.verdicts()
     rows = "\n".join(
         f'<tr class="{v.level}"><td>{html.escape(v.level)}</td><td>{html.escape(v.sensor)}/{html.escape(v.channel)}'
-        f"</td><td>{html.escape(v.message)}</td><td><code>{html.escape(v.key)}</code></td></tr>"
+        f"</td><td>{html.escape(v.message)}</td><td><code>{html.escape(v.key)}</code>"
+        + (f"<br><code>{html.escape(v.suggestion)}</code>" if v.suggestion else "") + "</td></tr>"
         for v in verdicts
     )
     cons = "\n".join(
         f"<tr><td>{html.escape(name)}</td><td>{c['updates']}</td><td>{c['rejected']}</td>"
         f"<td>{'-' if c['nis_mean'] is None else format(c['nis_mean'], '.3f')}</td>"
         f"<td>{'-' if not c['nis_bounds'] else '[{:.2f}, {:.2f}]'.format(*c['nis_bounds'])}</td>"
-        f"<td>{html.escape(c['verdict'])}</td></tr>"
-        for name, c in result.core.consistency().items()
+        f"<td>{html.escape(c['verdict'])}</td><td>{html.escape(c['now_note'])}</td></tr>"
+        for name, c in result.doctor.channel_summaries().items()
     )
     innov = '<h2>Innovations</h2>\n<img src="innovations.png" alt="innovation traces">' if has_innov else ""
     page = f"""<!doctype html>
@@ -86,8 +87,9 @@ pre {{ background: #f6f6f6; padding: 1em; overflow-x: auto; }}
 <h2>Trajectory and NIS</h2>
 <img src="overview.png" alt="trajectory and NIS per sensor channel">
 {innov}
-<h2>NIS consistency (last window)</h2>
-<table><tr><th>channel</th><th>updates</th><th>rejected</th><th>mean NIS</th><th>bounds</th><th>verdict</th></tr>
+<h2>NIS consistency (whole run; chi-square bounds for its update count)</h2>
+<table><tr><th>channel</th><th>updates</th><th>rejected</th><th>mean NIS</th><th>bounds</th><th>verdict</th>
+<th>latest window</th></tr>
 {cons}
 </table>
 <h2>Summary</h2>

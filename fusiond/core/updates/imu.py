@@ -27,7 +27,8 @@ QUIET_SIGMAS = 3.0  # at rest the gyro reads noise + bias: beyond 3 sigma of eac
 MIN_WINDOW_SAMPLES = 5  # gyro samples averaged into one standstill update, at least
 BIAS_MEAN_FLOOR = 1e-4  # rad/s: the mean of a window is no better than this (quantisation, vibration)
 REOPEN_AFTER = 4  # consecutive rejected windows of one axis that agree: the bias estimate is what is wrong
-AGREE_SIGMAS = 4.0  # ... "agree": their spread within this many sigma of one window's mean
+AGREE_SIGMAS = 4.0
+LEARNING_PRIOR_RATIO = 10.0  # prior variance this many times the window's: the update learns, it does not test  # ... "agree": their spread within this many sigma of one window's mean
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
 
 
@@ -149,13 +150,17 @@ def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: 
         return []
     s.bias_window = None
     n = w[1]
-    records = []
     rejects = list(s.bias_rejects)
     e0 = core.layout.error["gyro_bias"].start
-    # x/y biases matter only where a tilt reference can see what they do (and two_d holds them at 0)
-    for axis in (0, 1, 2) if core.tilt_reference and not core.two_d else (2,):
+    axes = (0, 1, 2) if core.tilt_reference and not core.two_d else (2,)
+    ys, svars, nis, rejected, learning = [], [], 0.0, False, False
+    for axis in axes:
         mean = w[2 + axis] / n
         var = max(w[5 + axis] / (n * n), BIAS_MEAN_FLOOR**2)
+        # An update whose prior is far wider than the window's noise mostly learns the bias: its
+        # NIS tests the prior (gyro_bias_sigma), not the gyro's noise, so it is marked as learning
+        # and left out of the consistency tests.
+        learning |= float(s.ekf.P[e0 + axis, e0 + axis]) > LEARNING_PRIOR_RATIO * var
         y, H, R = obs.bias_axis(core.layout, s.ekf.x, axis, mean, var)
         res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
         if res.rejected:
@@ -166,16 +171,20 @@ def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: 
                 s.ekf.reset_variance(e0 + axis, fc.gyro_bias_sigma**2)
                 y, H, R = obs.bias_axis(core.layout, s.ekf.x, axis, mean, var)
                 res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
+                learning = True
                 recent = ()
             rejects[axis] = recent
         else:
             rejects[axis] = ()
-        if emit:
-            records.append(DiagnosticsRecord(stamp, cfg.name, [GYRO_COMPONENTS[axis]], y.tolist(),
-                                             res.innovation_var, res.nis, 1, res.rejected, channel="gyro_bias",
-                                             late=late))
+        ys.append(float(y[0]))
+        svars.append(res.innovation_var[0])
+        nis += res.nis
+        rejected |= res.rejected
     s.bias_rejects = tuple(rejects)
-    return records
+    if not emit:
+        return []
+    return [DiagnosticsRecord(stamp, cfg.name, [GYRO_COMPONENTS[a] for a in axes], ys, svars, nis, len(axes),
+                              rejected, channel="gyro_bias", late=late, learning=learning)]
 
 
 def initialise_attitude(core: "FusionCore", s: FilterState, rpy: tuple[float, float, float], with_yaw: bool) -> None:

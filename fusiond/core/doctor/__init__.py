@@ -1,0 +1,248 @@
+"""The tuning doctor: what the sources say about each other, turned into one verdict per channel.
+
+It encodes the table a practitioner tunes an EKF with, but NIS alone points the
+wrong way when one source is wrong and the filter follows it (a disturbed
+magnetometer yaw makes the GPS look bad). So besides the innovation statistics the
+doctor compares the sources on the quantities they share (heading, speed, the gyro
+at rest; see ``heading``, ``speed``, ``gyro``, ``twist``) and names the one that
+disagrees with the others, with what it measured and the config key to change. It
+never advises trusting a sensor more while another source contradicts it.
+
+Pure: no I/O. It is fed diagnostics records, samples and estimates (the replay has
+them all; the live monitor only the diagnostics stream) and returns
+:class:`Verdict` structs that the replay summary, the report and the monitor print.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+from ...config import Config, ImuSensor, OdomSensor
+from .attitude import TiltStats, lean_verdict
+from .channels import absolute_verdict, figures, orientation_verdicts
+from .covariance import cap_verdict
+from .gyro import bias_check
+from .heading import heading_check, wheel_heading_check
+from .nis import ChannelStats, judge_nis, nis_bounds
+from .series import Series, SeriesCollector
+from .speed import speed_check
+from .twist import TwistStats, slip_verdict, twist_frame_verdict, unmeasured_yaw_rate
+from .verdict import LEVELS, Verdict, filter_key, format_verdicts, sensor_key
+
+__all__ = ["Doctor", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
+           "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
+
+MIN_UPDATES = 50  # twist-frame and lean checks need this many samples (not NIS: that uses what there is)
+ABSOLUTE_CHANNELS = ("position", "position_unaligned", "pose", "pose_delta")
+
+
+class Doctor:
+    """Accumulates what a run showed. ``cfg`` may be None (a remote monitor that only sees the
+    diagnostics stream): sensors are then known by name only, an orientation channel's mode is
+    read from its components, and the cross-source checks have no series to work on."""
+
+    def __init__(self, cfg: Config | None, window: int | None = None, confidence: float | None = None) -> None:
+        self.known = cfg is not None
+        self.cfg = cfg if cfg is not None else Config()
+        self.window = window or self.cfg.filter.nis_window
+        self.confidence = confidence or self.cfg.filter.nis_confidence
+        self.channels: dict[tuple[str, str], ChannelStats] = {}
+        self.twist = TwistStats()
+        self.tilt = TiltStats()
+        self.collector = SeriesCollector(self.cfg) if self.known else None
+        self.t0: float | None = None
+
+    # -- feeding ---------------------------------------------------------------
+    def add(self, record) -> None:
+        key = (record.sensor, record.channel)
+        ch = self.channels.get(key)
+        if ch is None:
+            ch = self.channels[key] = ChannelStats(list(record.components), self.window, self.confidence,
+                                                   keep=record.channel == "gyro_bias")
+        ch.add(record)
+        if self.t0 is None or record.stamp < self.t0:
+            self.t0 = record.stamp
+
+    def add_twist(self, linear: tuple[float, float, float], angular: tuple[float, float, float]) -> None:
+        t = self.twist
+        t.n += 1
+        t.abs_vx += abs(linear[0])
+        t.abs_vy += abs(linear[1])
+        t.abs_wz += abs(angular[2])
+
+    def add_attitude(self, roll: float, pitch: float) -> None:
+        self.tilt.add(roll, pitch)
+
+    def add_sample(self, sample) -> None:
+        """A raw sample, as the sensor sent it (for the cross-source series)."""
+        if self.collector is not None:
+            self.collector.add_sample(sample)
+            if self.t0 is None or sample.stamp < self.t0:
+                self.t0 = sample.stamp
+
+    def add_estimate(self, t: float, q, pos_var: float, att_var: float, bias_z: float) -> None:
+        if self.collector is not None:
+            self.collector.add_estimate(t, q, pos_var, att_var, bias_z)
+
+    def wants_estimate(self, t: float) -> bool:
+        return self.collector is not None and self.collector.wants_estimate(t)
+
+    # -- results ------------------------------------------------------------------
+    def series(self) -> Series:
+        return self.collector.finish() if self.collector is not None else Series()
+
+    def channel_summaries(self) -> dict[str, dict]:
+        """Whole-run NIS figures per channel (the summary's and the report's table)."""
+        return {f"{s}/{c}": ch.summary(self.t0) for (s, c), ch in sorted(self.channels.items())}
+
+    def verdicts(self, stats: dict[str, dict] | None = None, at_cap: bool = False, covariance_resets: int = 0,
+                 scales: dict[str, float] | None = None) -> list[Verdict]:
+        """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
+        return diagnose(self.cfg if self.known else None, self.series(), self.channels, self.twist, self.tilt,
+                        stats, at_cap, covariance_resets, scales, self.t0)
+
+
+def _explained(v: Verdict, culprit: Verdict, ch: ChannelStats, t0: float | None) -> Verdict:
+    """A channel whose NIS is high because another source is wrong: point there, advise nothing here."""
+    head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)})"
+    if ch.rejected:
+        head += f", {ch.rejected} gated"
+    return Verdict(v.sensor, v.channel, "warn",
+                   f"{head}: explained by {culprit.sensor}/{culprit.channel} (see it), not by this sensor's noise; "
+                   "fix that first", culprit.key, evidence=v.evidence)
+
+
+def _merge(candidates: list[Verdict]) -> Verdict:
+    """One verdict per channel: the most severe finding leads, the others are appended."""
+    ranked = sorted(candidates, key=lambda v: -LEVELS.index(v.level))
+    top = ranked[0]
+    extra = [v.message for v in ranked[1:] if v.level != "ok" and v.message != top.message]
+    if extra:
+        top = Verdict(top.sensor, top.channel, top.level, top.message + "; also: " + "; ".join(extra), top.key,
+                      top.suggestion, top.evidence)
+    return top
+
+
+def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str], ChannelStats],
+             twist: TwistStats, tilt: TiltStats, stats: dict[str, dict] | None = None, at_cap: bool = False,
+             covariance_resets: int = 0, scales: dict[str, float] | None = None,
+             t0: float | None = None) -> list[Verdict]:
+    """Every check, merged into one verdict per (sensor, channel)."""
+    known = cfg is not None
+    cfg = cfg if cfg is not None else Config()
+    sensors = {s.name: s for s in cfg.sensors}
+    order = {s.name: i for i, s in enumerate(cfg.sensors)}
+    found: dict[tuple[str, str], list[Verdict]] = defaultdict(list)
+    odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
+    gyro_fused = any(isinstance(s, ImuSensor) and s.angular_velocity for s in cfg.sensors)
+
+    # cross-source checks first: they decide who is to blame
+    heading = heading_check(series, cfg) if known else None
+    speed = speed_check(series, cfg, scales) if known else None
+    unmeasured = unmeasured_yaw_rate(series, odom) if known and odom is not None else None
+    wheel_heading = wheel_heading_check(series, cfg) if known and unmeasured is None else None
+    culprit = next((v for v in (heading, wheel_heading, speed) if v is not None and v.level != "ok"), None)
+    if wheel_heading is not None:
+        found[(wheel_heading.sensor, wheel_heading.channel)].append(wheel_heading)
+    if heading is not None:
+        found[(heading.sensor, heading.channel)].append(heading)
+    if speed is not None:
+        found[(speed.sensor, speed.channel)].append(speed)
+    if unmeasured is not None:
+        found[(unmeasured.sensor, unmeasured.channel)].append(unmeasured)
+
+    for (name, channel), ch in sorted(channels.items()):
+        if ch.n == 0:
+            continue
+        s = sensors.get(name)
+        if channel == "orientation":
+            imu = s if isinstance(s, ImuSensor) else ImuSensor(
+                name=name, key=name, orientation="absolute" if "yaw" in ch.components else "roll_pitch")
+            vs = orientation_verdicts(imu, ch, t0)
+            if heading is not None and heading.sensor == name and heading.level != "ok":
+                # the IMU yaw is contradicted by the other sources: no advice to trust it more, and its
+                # NIS (the filter follows it) is evidence of nothing
+                vs = [v for v in vs if v.key.endswith("extrinsic_rpy")]
+                heading.message += f" (its own NIS: {figures(ch, t0)})"
+            elif culprit is not None and ch.verdict() == "nis_high":
+                vs = [_explained(v, culprit, ch, t0) if v.level != "ok" and not v.key.endswith("extrinsic_rpy") else v
+                      for v in vs]
+            found[(name, channel)].extend(vs)
+        elif channel == "yaw_rate":
+            if unmeasured is None:
+                o = s if isinstance(s, OdomSensor) else OdomSensor(name=name, key=name)
+                found[(name, channel)].append(slip_verdict(o, ch))
+        elif channel == "gyro_bias":
+            v = bias_check(series, cfg, ch, gyro_fused) if known else None
+            if v is None:
+                imu = s if isinstance(s, ImuSensor) else ImuSensor(name=name, key=name, angular_velocity=True)
+                v = bias_check(Series(), Config(sensors=[imu]), ch, True) or Verdict(
+                    name, channel, "ok", f"consistent ({figures(ch, t0)})")
+            if v.evidence.get("bias_moved") and culprit is not None:
+                v = Verdict(v.sensor, v.channel, v.level, v.message + f": explained by {culprit.sensor}/"
+                            f"{culprit.channel} (see it)", culprit.key, evidence=v.evidence)
+            found[(name, channel)].append(v)
+        elif channel in ABSOLUTE_CHANNELS:
+            v = absolute_verdict(name, channel, ch, t0)
+            if culprit is not None and v.level != "ok" and ch.verdict() != "nis_low":
+                v = _explained(v, culprit, ch, t0)
+            found[(name, channel)].append(v)
+        else:
+            verdict = ch.verdict()
+            level = "ok" if verdict == "ok" else "warn"
+            found[(name, channel)].append(Verdict(name, channel, level, f"{verdict} ({figures(ch, t0)})"))
+
+    if known:
+        gb = channels.get(next(((n, c) for n, c in channels if c == "gyro_bias"), ("", "")))
+        if gb is None:
+            v = bias_check(series, cfg, None, gyro_fused)
+            if v is not None:
+                found[(v.sensor, v.channel)].append(v)
+        imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
+        v = lean_verdict(tilt, imu, MIN_UPDATES)
+        if v is not None:
+            found[(v.sensor, v.channel)].append(v)
+        if odom is not None:
+            v = twist_frame_verdict(odom, twist, MIN_UPDATES)
+            if v is not None:
+                found[(v.sensor, v.channel)].append(v)
+        standstill_updates = sum(ch.n for (n, c), ch in channels.items() if c == "gyro_bias")
+        v = cap_verdict(series, cfg, at_cap, gyro_fused, standstill_updates)
+        if v is not None:
+            found[("filter", "covariance")].append(v)
+    if stats:
+        for v in _drops(stats):
+            found[(v.sensor, v.channel)].append(v)
+    if covariance_resets:
+        found[("filter", "covariance")].append(
+            Verdict("filter", "covariance", "problem",
+                    f"covariance went non-finite {covariance_resets} time(s) and was reset: Q too large, a time jump, "
+                    "or a bad Jacobian; check the stamps and filter.process_noise", filter_key("process_noise")))
+    # a wrong gyro bias (a false standstill it learned from) shows as a wheel-vs-gyro offset too
+    bias_problem = next((v for (n, c), vs in found.items() if c == "gyro_bias" for v in vs if v.level == "problem"),
+                        None)
+    if bias_problem is not None:
+        for (n, c), vs in found.items():
+            if c == "yaw_rate":
+                found[(n, c)] = [Verdict(v.sensor, c, "warn", v.message + f": explained by {bias_problem.sensor}/"
+                                         "gyro_bias (see it)", bias_problem.key, evidence=v.evidence)
+                                 if "mean_rad_s" in v.evidence else v for v in vs]
+    keys = sorted(found, key=lambda k: (order.get(k[0], len(order)), k[0], k[1]))
+    return [_merge(found[k]) for k in keys]
+
+
+def _drops(stats: dict[str, dict]) -> list[Verdict]:
+    out = []
+    for name, st in stats.items():
+        received = max(st.get("received", 0), 1)
+        dropped = st.get("dropped", {})
+        old = dropped.get("too_old", 0)
+        if old / received > 0.01:
+            out.append(Verdict(name, "time", "warn",
+                               f"{old} samples ({100 * old / received:.1f}%) arrived older than the history: "
+                               "their sensor's stamps lag more than filter.history_s", filter_key("history_s")))
+        bad = {k: v for k, v in dropped.items() if k != "too_old"}
+        if bad:
+            reasons = ", ".join(f"{k}={v}" for k, v in sorted(bad.items()))
+            out.append(Verdict(name, "input", "warn", f"dropped samples: {reasons}"))
+    return out

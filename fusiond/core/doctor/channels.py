@@ -1,0 +1,91 @@
+"""NIS verdicts of the measurement channels (IMU orientation, GPS / pose), in plain words.
+
+Each is judged over the whole run by :func:`..nis.judge_nis` (the same rule the
+summary prints) and says when the latest window differs. These are the verdicts of
+last resort: a cross-source check on the same sensor, when there is one, comes first
+(see ``diagnose``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from ...config import ImuSensor
+from .attitude import noise_suggestion
+from .nis import ChannelStats
+from .verdict import Verdict, sensor_key
+
+OFFSET_RAD = 0.01  # a mean roll/pitch innovation this large is a mounting error, not noise
+GATED_FRACTION = 0.1
+
+
+def figures(ch: ChannelStats, t0: float | None) -> str:
+    now = ch.now_note(t0)
+    return f"{ch.nis_per_dof:.2f} per dof over {ch.n} updates" + (f"; {now}" if now else "")
+
+
+def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> list[Verdict]:
+    out = []
+    comps = ch.components
+    verdict = ch.verdict()
+    key = sensor_key(imu.name, "orientation_noise")
+    detail = ", ".join(f"{c} rms {ch.component(i)[1]:.4f} vs {ch.component(i)[2]:.4f} predicted"
+                       for i, c in enumerate(comps))
+    if verdict == "nis_high":
+        comp_nis = []
+        for i in range(len(comps)):
+            _, rms, pred = ch.component(i)
+            comp_nis.append((rms / pred) ** 2 if pred > 0 else math.nan)
+        yaw_dominates = "yaw" in comps and comp_nis[comps.index("yaw")] > 3.0 * max(
+            [v for c, v in zip(comps, comp_nis) if c != "yaw"] or [0.0])
+        if yaw_dominates and imu.orientation in ("absolute", "relative"):
+            out.append(Verdict(imu.name, "orientation", "problem",
+                               f"NIS high ({figures(ch, t0)}; {detail}). The IMU yaw disagrees with the predicted "
+                               "heading: a magnetometer-disturbed IMU yaw, or (without the gyro) wheels whose yaw "
+                               "rate is wrong. Take heading from the gyro", sensor_key(imu.name, "orientation"),
+                               'orientation = "roll_pitch" and angular_velocity = true'))
+        else:
+            line, note = noise_suggestion(ch, imu)
+            out.append(Verdict(imu.name, "orientation", "problem",
+                               f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small or the IMU "
+                               f"lies; the measured innovations, {note}, suggest the value below", key, line))
+    elif verdict == "nis_low":
+        line, note = noise_suggestion(ch, imu)
+        out.append(Verdict(imu.name, "orientation", "warn",
+                           f"NIS low ({figures(ch, t0)}; {detail}): the stated orientation noise is larger than the "
+                           f"innovations show (or the process noise is); measured {note}", key, line))
+    else:
+        out.append(Verdict(imu.name, "orientation", "ok", f"consistent ({figures(ch, t0)})"))
+    for i, c in enumerate(comps):
+        mean, rms, _ = ch.component(i)
+        if c in ("roll", "pitch") and abs(mean) > OFFSET_RAD and abs(mean) > 0.5 * rms:
+            out.append(Verdict(imu.name, "orientation", "warn",
+                               f"constant {c} offset of {mean:+.3f} rad in the innovations: a mounting rotation "
+                               "not in the config", sensor_key(imu.name, "extrinsic_rpy")))
+    for v in out:
+        v.evidence = {**v.evidence, "nis_per_dof": ch.nis_per_dof}
+    return out
+
+
+def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None) -> Verdict:
+    """GPS and pose channels: NIS against the stated noise."""
+    frac = ch.rejected / ch.n if ch.n else 0.0
+    key = sensor_key(name, "position_noise")
+    detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
+    verdict = ch.verdict()
+    ev = {"nis_per_dof": ch.nis_per_dof, "gated_fraction": frac}
+    if frac > GATED_FRACTION:
+        return Verdict(name, channel, "warn",
+                       f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): the sensor jumps "
+                       "(multipath, relocalisation) or its noise is understated",
+                       sensor_key(name, "mahalanobis_threshold"), evidence=ev)
+    if verdict == "nis_high":
+        return Verdict(name, channel, "problem",
+                       f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "
+                       "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation)",
+                       key, evidence=ev)
+    if verdict == "nis_low":
+        return Verdict(name, channel, "warn",
+                       f"NIS low ({figures(ch, t0)}; {detail}): the stated noise is larger than the innovations show",
+                       key, evidence=ev)
+    return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)

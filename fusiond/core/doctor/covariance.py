@@ -1,0 +1,55 @@
+"""Why the covariance reached its cap: dropouts, an unobservable state, or process noise.
+
+Each cause has its own fix, so the verdict tells them apart from the series:
+long silences of the odometry (the gap inflation did it), a gyro bias that was
+never learned (no standstill and no heading reference: the bias uncertainty
+integrates into heading and, at speed, into position), or else the process noise.
+"""
+
+from __future__ import annotations
+
+from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from .series import Series
+from .verdict import Verdict, filter_key
+
+DROPOUT_LONGEST_S = 10.0
+DROPOUT_FRACTION = 0.1
+
+
+def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, standstill_updates: int) -> Verdict | None:
+    fc = cfg.filter
+    pos_cap, att_cap = fc.covariance_cap
+    reached = at_cap or any(v >= 0.999 * pos_cap for v in series.est_pos_var) or any(
+        v >= 0.999 * att_cap for v in series.est_att_var)
+    if not reached:
+        return None
+    t = series.odom_t
+    duration = t[-1] - t[0] if len(t) > 1 else 0.0
+    gaps = series.odom_gaps
+    longest = max((g[1] for g in gaps), default=0.0)
+    total = sum(g[1] for g in gaps)
+    first_cap = next((series.est_t[i] for i, v in enumerate(series.est_pos_var) if v >= 0.999 * pos_cap), None)
+    when = f" (from {first_cap - t[0]:.0f} s)" if first_cap is not None and t else ""
+    if gaps and (longest >= DROPOUT_LONGEST_S or (duration > 0 and total >= DROPOUT_FRACTION * duration)):
+        return Verdict("filter", "covariance", "warn",
+                       f"position/attitude uncertainty reached filter.covariance_cap{when} after dropouts: "
+                       f"{len(gaps)} odometry silences longer than gap_s, {total:.1f} s in all, the longest "
+                       f"{longest:.1f} s; each inflates the covariance by gap_inflation per sqrt(s)",
+                       filter_key("gap_inflation"), evidence={"gaps": float(len(gaps)), "gap_total_s": total,
+                                                             "gap_longest_s": longest})
+    heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
+        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
+    if gyro_fused and standstill_updates == 0 and not heading_ref:
+        return Verdict("filter", "covariance", "warn",
+                       f"position uncertainty reached filter.covariance_cap{when} because the gyro bias is "
+                       f"unobservable: no standstill in {duration:.0f} s and no heading reference, so its initial "
+                       f"uncertainty ({fc.gyro_bias_sigma:g} rad/s) integrates into heading ({fc.gyro_bias_sigma:g} "
+                       f"x {duration:.0f} s = {fc.gyro_bias_sigma * duration:.2f} rad) and, with speed, into "
+                       "position. Not a dropout nor the process noise: state the bias spread measured at rest "
+                       "(`fusiond calibrate-imu`), stop now and then, or add a heading reference",
+                       filter_key("gyro_bias_sigma"),
+                       evidence={"duration_s": duration, "standstill_updates": 0.0})
+    return Verdict("filter", "covariance", "warn",
+                   f"position/attitude uncertainty reached filter.covariance_cap{when} without long dropouts "
+                   f"(longest silence {longest:.1f} s) or an unobservable bias: the process noise grows it faster "
+                   "than the sensors constrain it", filter_key("process_noise"))

@@ -1,0 +1,178 @@
+"""The gyro at standstill against the filter's bias estimate.
+
+While the wheels read exactly zero, the gyro should read its bias. Each standstill
+episode gives the gyro's mean there; genuine standstills agree with each other to
+the gyro noise over the episode (sigma / sqrt(n)). An episode that reads clearly
+differently from the others is a false standstill (the vehicle coasting or turning
+with its wheels at zero). If the filter ACCEPTED that one and rejected the genuine
+ones after it, the accepted one is the cause: it set the bias, and the genuine ones
+then look like outliers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from .nis import ChannelStats
+from .series import Series
+from .verdict import Verdict, filter_key, sensor_key
+
+MIN_REJECTED_FRACTION = 0.1
+DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
+
+
+@dataclass
+class Episode:
+    t0: float
+    t1: float
+    gyro_mean: float = math.nan
+    gyro_sigma: float = math.nan  # within-episode std of the gyro samples
+    samples: int = 0
+    accepted: int = 0
+    rejected: int = 0
+
+    @property
+    def spread(self) -> float:
+        """Standard error of the episode's mean."""
+        return self.gyro_sigma / math.sqrt(self.samples) if self.samples > 1 else math.inf
+
+
+def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
+    """Runs of odometry exactly at rest lasting at least standstill_s, with the gyro over them."""
+    t = series.odom_t
+    out: list[Episode] = []
+    start = None
+    for i, rest in enumerate(series.odom_rest):
+        if rest and start is None:
+            start = t[i]
+        if (not rest or i == len(t) - 1) and start is not None:
+            end = t[i] if rest else t[i - 1]
+            if end - start >= standstill_s:
+                out.append(Episode(start, end))
+            start = None
+    if not out or not series.gyro_t:
+        return out
+    tg, z, var, n = (np.array(series.gyro_t), np.array(series.gyro_z), np.array(series.gyro_var),
+                     np.array(series.gyro_n))
+    for e in out:
+        m = (tg >= e.t0 + standstill_s) & (tg <= e.t1)
+        if m.sum() == 0:
+            continue
+        w = n[m]
+        e.samples = int(w.sum())
+        e.gyro_mean = float(np.sum(z[m] * w) / w.sum())
+        within = np.sum(var[m] * np.maximum(w - 1, 0))
+        between = np.sum(w * (z[m] - e.gyro_mean) ** 2)
+        e.gyro_sigma = float(math.sqrt((within + between) / max(e.samples - 1, 1)))
+    return out
+
+
+def _count_updates(episodes: list[Episode], ch: ChannelStats | None) -> None:
+    if ch is None:
+        return
+    bounds = np.array([e.t1 for e in episodes])
+    for stamp, rej in zip(ch.stamps, ch.rejected_flags):
+        i = int(np.searchsorted(bounds, stamp - 0.5))
+        if i < len(episodes) and episodes[i].t0 - 0.5 <= stamp <= episodes[i].t1 + 0.5:
+            if rej:
+                episodes[i].rejected += 1
+            else:
+                episodes[i].accepted += 1
+
+
+def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool) -> Verdict | None:
+    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
+    if imu is None or not gyro_fused:
+        return None
+    fc = cfg.filter
+    episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
+    heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
+        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
+    duration = (series.odom_t[-1] - series.odom_t[0]) if len(series.odom_t) > 1 else 0.0
+    if not episodes and (ch is None or ch.n == 0):
+        if heading_ref or duration <= 0.0:
+            return None
+        drift = fc.gyro_bias_sigma * duration
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"the gyro bias was never learned: no standstill of {fc.standstill_s:g} s in {duration:.0f} s "
+                       f"and no heading reference, so heading uncertainty grows by gyro_bias_sigma x t "
+                       f"({fc.gyro_bias_sigma:g} rad/s -> {drift:.2f} rad over the run). Stop the robot now and then, "
+                       "or state the bias spread measured by `fusiond calibrate-imu`",
+                       filter_key("gyro_bias_sigma"), evidence={"duration_s": duration, "standstills": 0.0})
+    _count_updates(episodes, ch)
+    evidence: dict[str, float] = {"standstills": float(len(episodes))}
+    if len(episodes) >= 2:
+        ref = float(np.median([e.gyro_mean for e in episodes]))
+        evidence["gyro_at_rest_rad_s"] = ref
+
+        def odd(e: Episode) -> bool:
+            return abs(e.gyro_mean - ref) > max(5.0 * e.spread, DISAGREE_RAD_S)
+
+        suspects = [e for e in episodes if odd(e) and e.accepted > 0]
+        later_rejected = [e for e in episodes if not odd(e) and e.rejected > e.accepted]
+        if suspects and later_rejected and later_rejected[-1].t0 > suspects[0].t0:
+            s = suspects[0]
+            t_start = series.odom_t[0]
+            evidence.update({"suspect_t_s": s.t0 - t_start, "suspect_gyro_rad_s": s.gyro_mean})
+            return Verdict(imu.name, "gyro_bias", "problem",
+                           f"the standstill at {s.t0 - t_start:.1f} s was ACCEPTED although the gyro read "
+                           f"{s.gyro_mean:+.4f} rad/s there, while the other {len(episodes) - len(suspects)} "
+                           f"standstills read {ref:+.4f} rad/s: the wheels read zero while the vehicle still turned "
+                           f"or coasted, and that update set the bias; the {len(later_rejected)} genuine standstills "
+                           "after it were then rejected against the wrong bias. Confirm standstills for longer",
+                           filter_key("standstill_s"), f"standstill_s = {max(2.0 * fc.standstill_s, 1.0):g}",
+                           evidence)
+    if episodes and series.est_bias_z:
+        evidence["bias_estimate_rad_s"] = float(np.interp(episodes[-1].t1, series.est_t, series.est_bias_z))
+    if ch is None or ch.n == 0:
+        return None
+    frac = ch.rejected / ch.n
+    sig = [e.gyro_sigma for e in episodes if math.isfinite(e.gyro_sigma)]
+    measured = float(np.median(sig)) if sig else math.nan
+    if math.isfinite(measured):
+        evidence["gyro_sigma_at_rest_rad_s"] = measured
+    noise_hint = f"gyro_noise = {measured:.5f}" if math.isfinite(measured) else ""
+    stated = series.gyro_stated_sigma
+    if math.isfinite(stated):
+        evidence["gyro_sigma_stated_rad_s"] = stated
+    if frac > MIN_REJECTED_FRACTION:
+        moving = [e for e in episodes if e.rejected and math.isfinite(measured) and e.gyro_sigma > 3.0 * measured]
+        if moving:
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"{100 * frac:.0f}% of standstill bias updates rejected: the robot turned while its wheels "
+                           "read zero (pushed or carried); those updates are rightly refused",
+                           filter_key("standstill_s"), evidence=evidence)
+        if math.isfinite(measured) and math.isfinite(stated) and measured > 1.5 * stated:
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"{100 * frac:.0f}% of standstill bias updates rejected: the gyro noise is understated "
+                           f"(it measures {measured:.5f} rad/s at rest, {stated:.5f} is stated)",
+                           sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+        est = evidence.get("bias_estimate_rad_s", math.nan)
+        ref = evidence.get("gyro_at_rest_rad_s", episodes[-1].gyro_mean if episodes else math.nan)
+        evidence["bias_moved"] = 1.0
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"{100 * frac:.0f}% of standstill bias updates rejected although the gyro is quiet at rest "
+                       f"({measured:.5f} rad/s, as stated) and reads {ref:+.5f} rad/s there: the filter's bias "
+                       f"estimate ({est:+.5f}) was moved by another source, and the standstills now contradict it",
+                       evidence=evidence)
+    v = ch.verdict()
+    if v == "nis_high":
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"standstill gyro NIS high ({ch.nis_per_dof:.1f} per dof over {ch.n} updates): the gyro noise "
+                       "is understated" + (f"; it measures {measured:.5f} rad/s at rest" if noise_hint else ""),
+                       sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+    # Each standstill window makes one update per axis; the first ones are judged against the wide
+    # bias prior, so a low NIS alone says the prior was wide, not that the noise is overstated:
+    # only the measured spread at rest can say that.
+    if v == "nis_low" and math.isfinite(measured) and math.isfinite(stated) and measured < stated / 1.5:
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"standstill gyro NIS low ({ch.nis_per_dof:.2f} per dof over {ch.n} updates): the gyro noise "
+                       "is overstated" + (f"; it measures {measured:.5f} rad/s at rest" if noise_hint else ""),
+                       sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+    return Verdict(imu.name, "gyro_bias", "ok",
+                   f"standstill bias updates consistent ({ch.nis_per_dof:.2f} per dof over {ch.n} updates)",
+                   evidence=evidence)

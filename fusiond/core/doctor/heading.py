@@ -1,0 +1,247 @@
+"""Heading cross-check: the IMU's absolute yaw against the gyro, the wheels and the GPS track.
+
+A magnetometer yaw carries a constant offset (declination, mounting) and a slow
+disturbance near motors and steel. Neither shows in the IMU's own NIS when the
+filter follows the IMU; both show against other sources:
+
+* against the integrated gyro, over windows of a minute: a gyro bias is a linear
+  drift and a gyro scale error is proportional to the turn, so after fitting
+  ``a + b t + c gyro_heading`` what is left is the IMU yaw wandering (the wheels,
+  fitted the same way, say whether the gyro itself is the odd one out);
+* against the GPS track direction (chords of the fixes while moving): the mean is
+  the IMU's yaw offset, the rest its wander (beyond the track's own noise).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...config import Config, GpsSensor, ImuSensor
+from .series import Series
+from .verdict import Verdict, sensor_key
+
+WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
+WANDER_RAD = 0.05  # rms yaw wander (after bias and scale are removed) that is a disturbance, not noise
+OFFSET_RAD = 0.05  # a mean IMU-vs-track offset this large is worth a yaw_offset
+MIN_SPAN_S = 10.0
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def detrended_rms(t: np.ndarray, d: np.ndarray, shape: np.ndarray | None) -> tuple[float, float]:
+    """rms of d after fitting a + b t (+ c shape) over windows of WINDOW_S; and the mean slope b."""
+    if len(t) < 10:
+        return math.nan, math.nan
+    resid, slopes = [], []
+    start = t[0]
+    while start < t[-1]:
+        m = (t >= start) & (t < start + WINDOW_S)
+        if m.sum() >= 10 and t[m][-1] - t[m][0] >= MIN_SPAN_S:
+            cols = [np.ones(m.sum()), t[m] - t[m][0]]
+            if shape is not None:
+                s = shape[m] - shape[m][0]
+                if np.ptp(s) > 0.05:  # the turn is large enough to tell a scale from an offset
+                    cols.append(s)
+            A = np.vstack(cols).T
+            coef, *_ = np.linalg.lstsq(A, d[m], rcond=None)
+            resid.append(d[m] - A @ coef)
+            slopes.append(coef[1])
+        start += WINDOW_S / 2.0 if t[-1] - start > WINDOW_S else WINDOW_S
+    if not resid:
+        return math.nan, math.nan
+    r = np.concatenate(resid)
+    return float(np.sqrt(np.mean(r * r))), float(np.median(slopes))
+
+
+def track_segments(series: Series, min_length: float, max_s: float = 30.0) -> list[tuple[float, float, float, float]]:
+    """(t0, t1, track direction rad, chord length m) between fixes at least min_length apart."""
+    t, e, n = np.array(series.gps_t), np.array(series.gps_e), np.array(series.gps_n)
+    order = np.argsort(t)
+    t, e, n = t[order], e[order], n[order]
+    out = []
+    i = 0
+    while i < len(t) - 1:
+        d = np.hypot(e[i + 1:] - e[i], n[i + 1:] - n[i])
+        far = np.nonzero(d >= min_length)[0]
+        if not len(far):
+            break
+        j = i + 1 + int(far[0])
+        if t[j] - t[i] <= max_s:
+            out.append((float(t[i]), float(t[j]), math.atan2(n[j] - n[i], e[j] - e[i]), float(d[far[0]])))
+        i = j
+    return out
+
+
+def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
+    if gps is not None and gps.position_noise is not None:
+        return float(max(gps.position_noise[0], gps.position_noise[1]))
+    s = [v for v in series.gps_sigma if math.isfinite(v)]
+    if s:
+        return float(np.median(s))
+    return float(gps.unknown_position_sigma[0]) if gps is not None else 2.5
+
+
+def heading_check(series: Series, cfg: Config) -> Verdict | None:
+    """The verdict on an IMU whose absolute yaw is fused, from the other heading sources."""
+    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative")),
+               None)
+    if imu is None or len(series.imu_t) < 10:
+        return None
+    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
+    ok = np.isfinite(yi)
+    ti, yi = ti[ok], yi[ok]
+    if len(ti) < 10:
+        return None
+    evidence: dict[str, float] = {}
+    notes: list[str] = []
+    wander = math.nan
+    culprit_gyro = False
+    if len(series.gyro_t) >= 10:
+        tg, hg = np.array(series.gyro_t), np.array(series.gyro_heading)
+        m = (ti >= tg[0]) & (ti <= tg[-1])
+        if m.sum() >= 10:
+            gyro_at = np.interp(ti[m], tg, hg)
+            wander, drift = detrended_rms(ti[m], yi[m] - gyro_at, gyro_at)
+            evidence["imu_vs_gyro_wander_rad"] = wander
+            if math.isfinite(drift):
+                evidence["imu_vs_gyro_drift_rad_s"] = drift
+            if len(series.odom_t) >= 10 and np.ptp(series.odom_heading) > 0.0:
+                to, ho = np.array(series.odom_t), np.array(series.odom_heading)
+                mo = (to >= tg[0]) & (to <= tg[-1])
+                if mo.sum() >= 10:
+                    g = np.interp(to[mo], tg, hg)
+                    wheel_vs_gyro, _ = detrended_rms(to[mo], ho[mo] - g, g)
+                    wi = np.interp(to[mo], ti, yi)
+                    wheel_vs_imu, _ = detrended_rms(to[mo], ho[mo] - wi, wi)
+                    evidence["wheel_vs_gyro_wander_rad"] = wheel_vs_gyro
+                    if math.isfinite(wheel_vs_gyro) and wheel_vs_gyro < WANDER_RAD:
+                        notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
+                    elif math.isfinite(wheel_vs_imu) and wheel_vs_imu < WANDER_RAD <= wander:
+                        culprit_gyro = True
+    offset = math.nan
+    track_wander = math.nan
+    if gps is not None and len(series.gps_t) >= 5:
+        sigma = gps_sigma(series, gps)
+        length = max(5.0, 10.0 * sigma)
+        segs = track_segments(series, length)
+        if len(segs) >= 5:
+            mids = np.array([(a + b) / 2.0 for a, b, _, _ in segs])
+            m = (mids >= ti[0]) & (mids <= ti[-1])
+            if m.sum() >= 5:
+                tracks = np.array([s[2] for s in segs])[m]
+                chords = np.array([s[3] for s in segs])[m]
+                d = _wrap(np.interp(mids[m], ti, yi) - tracks)
+                offset = float(math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
+                r = _wrap(d - offset)
+                track_var = np.mean(2.0 * sigma**2 / chords**2)
+                n = len(r)
+                se = math.sqrt(max(np.mean(r * r), track_var) / n)
+                evidence["imu_vs_gps_track_offset_rad"] = offset
+                evidence["imu_vs_gps_track_offset_se_rad"] = se
+                excess = float(np.mean(r * r) - track_var)
+                if excess > 0 and np.mean(r * r) / track_var > 1.0 + 3.0 * math.sqrt(2.0 / n):
+                    track_wander = math.sqrt(excess)
+                    evidence["imu_vs_gps_track_wander_rad"] = track_wander
+                if abs(offset) < max(OFFSET_RAD, 3.0 * se) or imu.orientation == "relative":
+                    offset = math.nan  # not significant (or removed by the relative mode anyway)
+    disturbed = (math.isfinite(wander) and wander > WANDER_RAD and not culprit_gyro) or (
+        not math.isfinite(wander) and math.isfinite(track_wander) and track_wander > WANDER_RAD)
+    key_sensor = imu.name
+    if culprit_gyro:
+        return Verdict(imu.name, "orientation", "warn",
+                       f"the integrated gyro wanders against both the IMU yaw and the wheels by {wander:.3f} rad rms "
+                       "(beyond a bias or scale): the gyro, not the IMU yaw, is the odd one out",
+                       sensor_key(key_sensor, "gyro_noise"), evidence=evidence)
+    if disturbed:
+        w = wander if math.isfinite(wander) else track_wander
+        against = "the integrated gyro" if math.isfinite(wander) else "the GPS track"
+        removed = ("once a gyro bias and scale are removed" if math.isfinite(wander)
+                   else "beyond the track's own noise")
+        msg = (f"the IMU's absolute yaw wanders against {against} by {w:.3f} rad rms {removed}: a "
+               "magnetometer-disturbed yaw (motors, steel)")
+        if notes:
+            msg += "; " + "; ".join(notes)
+        if math.isfinite(offset):
+            msg += f"; it also sits {offset:+.3f} rad off the GPS track"
+        has_gyro = len(series.gyro_t) >= 10
+        suggestion = 'orientation = "roll_pitch"'
+        if has_gyro and not imu.angular_velocity:
+            suggestion += " and angular_velocity = true"
+        msg += (". Take heading from the gyro" if has_gyro else ". Take heading from the other sources") + \
+            " and only roll/pitch from the IMU; do not state a smaller orientation_noise while the yaw is disturbed"
+        return Verdict(imu.name, "orientation", "problem", msg, sensor_key(key_sensor, "orientation"),
+                       suggestion, evidence)
+    if math.isfinite(offset):
+        return Verdict(imu.name, "orientation", "problem",
+                       f"the IMU's absolute yaw sits {offset:+.3f} rad ({math.degrees(offset):+.1f} deg) off the GPS "
+                       f"track direction (standard error {evidence['imu_vs_gps_track_offset_se_rad']:.3f} rad): a "
+                       "declination or mounting offset. Correct it (corrected = raw + yaw_offset), or use "
+                       'orientation = "roll_pitch" with the gyro', sensor_key(key_sensor, "yaw_offset"),
+                       f"yaw_offset = {-offset:.4f}", evidence)
+    if evidence:
+        return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources "
+                       + ", ".join(f"{k} {v:.3f}" for k, v in evidence.items()), evidence=evidence)
+    return None
+
+
+WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
+MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
+WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
+
+
+def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray) -> float:
+    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns."""
+    m = (t >= t_ref[0]) & (t <= t_ref[-1])
+    if m.sum() < 10:
+        return math.nan
+    ref = np.interp(t[m], t_ref, h_ref)
+    if np.ptp(ref) < MIN_TURN_RAD:
+        return math.nan
+    A = np.vstack([np.ones(m.sum()), ref, t[m] - t[m][0]]).T
+    coef, *_ = np.linalg.lstsq(A, h[m], rcond=None)
+    return float(coef[1])
+
+
+def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
+    """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
+    from ...config import OdomSensor
+
+    odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
+    imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)]
+    if odom is None or any(s.angular_velocity for s in imus) or not odom.twist_measured[5]:
+        return None
+    if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
+        return None
+    to, wz = np.array(series.odom_t), np.array(series.odom_wz)
+    tg, hg, gz = np.array(series.gyro_t), np.array(series.gyro_heading), np.array(series.gyro_z)
+    m = (to >= tg[0]) & (to <= tg[-1])
+    g = np.interp(to[m], tg, gz)
+    if m.sum() < 10 or np.ptp(hg) < MIN_TURN_RAD or np.std(g) < 0.02:
+        return None
+    # rates, not headings: a wheel yaw offset and a scale separate only where the turn rate varies
+    (offset, k), *_ = np.linalg.lstsq(np.vstack([np.ones_like(g), g]).T, wz[m], rcond=None)
+    offset, k = float(offset), float(k)
+    evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
+    ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
+    ok = np.isfinite(yi)
+    k_imu = _yaw_scale(ti[ok], yi[ok], tg, hg) if ok.sum() >= 10 else math.nan
+    if math.isfinite(k_imu):
+        evidence["imu_vs_gyro_yaw_scale"] = k_imu
+    if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
+        return Verdict(odom.name, "heading", "ok",
+                       f"wheel yaw rate agrees with the gyro (scale {k:.2f}, offset {offset:+.3f} rad/s)",
+                       evidence=evidence)
+    imu = imus[0] if imus else None
+    agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
+             if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
+    msg = (f"the wheels' yaw rate reads {k:.2f} x the gyro's rate {offset:+.3f} rad/s{agree}: skid-steer slip or a driver scale. The gyro "
+           "is not fused, so this wheel yaw rate drives the predicted heading and every heading update fights it")
+    if imu is None:
+        return Verdict(odom.name, "heading", "warn", msg, evidence=evidence)
+    return Verdict(odom.name, "heading", "problem", msg + "; fuse the gyro so it drives heading",
+                   sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)

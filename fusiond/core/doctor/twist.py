@@ -1,0 +1,99 @@
+"""Odometry twist: a yaw rate that is not measured, slip against the gyro, the twist frame.
+
+A driver that lost its yaw rate publishes 0 with covariance 0: to the filter a
+perfect measurement of "not turning". Against the gyro it looks like slip in every
+turn. The difference is in the numbers: slip reads a wrong rate, a lost component
+reads exactly zero (with zero variance) while the gyro turns. That is "not
+measured", declared with ``twist_measured``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...config import OdomSensor
+from .nis import ChannelStats
+from .series import Series
+from .verdict import Verdict, sensor_key
+
+TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noise and bias)
+UNMEASURED_FRACTION = 0.5  # in turns, this share of exact zeros is a component the driver does not measure
+SLIP_FRACTION = 0.2
+
+
+@dataclass
+class TwistStats:
+    n: int = 0
+    abs_vx: float = 0.0
+    abs_vy: float = 0.0
+    abs_wz: float = 0.0
+
+
+def unmeasured_yaw_rate(series: Series, odom: OdomSensor) -> Verdict | None:
+    if len(series.gyro_t) < 10 or len(series.odom_t) < 10 or not odom.twist_measured[5]:
+        return None
+    tg, z = np.array(series.gyro_t), np.array(series.gyro_z)
+    to = np.array(series.odom_t)
+    bias = float(np.interp(to, series.est_t, series.est_bias_z).mean()) if series.est_bias_z else 0.0
+    gyro_at = np.interp(to, tg, z) - bias
+    turning = np.abs(gyro_at) > TURNING_RAD_S
+    n = np.array(series.odom_n)[turning].sum()
+    if n < 20:
+        return None
+    zeros = np.array(series.odom_zero_wz)[turning].sum()
+    frac = zeros / n
+    if frac < UNMEASURED_FRACTION:
+        return None
+    measured = ["true"] * 6
+    measured[5] = "false"
+    return Verdict(odom.name, "yaw_rate", "problem",
+                   f"the wheel yaw rate reads exactly 0 with variance 0 in {100 * frac:.0f}% of the {int(n)} samples "
+                   f"where the gyro turns faster than {TURNING_RAD_S} rad/s: the driver does not measure it (not "
+                   "slip). Declare it not measured, so it is neither used nor checked",
+                   sensor_key(odom.name, "twist_measured"), f"twist_measured = [{', '.join(measured)}]",
+                   {"zero_fraction_in_turns": float(frac), "turning_samples": float(n)})
+
+
+def slip_verdict(odom: OdomSensor, ch: ChannelStats) -> Verdict:
+    frac = ch.rejected / ch.n
+    mean, rms, _ = ch.component(0)
+    key = sensor_key(odom.name, "slip_threshold")
+    if frac > SLIP_FRACTION:
+        return Verdict(odom.name, "yaw_rate", "warn",
+                       f"wheel yaw rate disagrees with the gyro in {100 * frac:.0f}% of {ch.n} samples "
+                       f"(mean {mean:+.3f}, rms {rms:.3f} rad/s): skid-steer slip or a driver scale/offset. "
+                       "The gyro drives heading, so this is only reported; without the gyro the heading "
+                       "would follow the wheels", key, evidence={"slip_fraction": frac, "rms_rad_s": rms})
+    if abs(mean) > 0.02:
+        return Verdict(odom.name, "yaw_rate", "warn",
+                       f"wheel yaw rate offset of {mean:+.3f} rad/s against the gyro: a driver offset or "
+                       "uncorrected gyro bias", key, evidence={"mean_rad_s": mean})
+    verdict = ch.verdict()
+    if verdict != "ok":
+        more = "smaller" if verdict == "nis_high" else "larger"
+        return Verdict(odom.name, "yaw_rate", "warn",
+                       f"wheel yaw rate against the gyro: NIS {verdict.removeprefix('nis_')} ({ch.nis_per_dof:.2f} per "
+                       f"dof over {ch.n}, rms {rms:.3f} rad/s) without slip: the stated wheel yaw-rate noise is {more} "
+                       "than the residuals show", sensor_key(odom.name, "twist_noise"),
+                       evidence={"nis_per_dof": ch.nis_per_dof, "rms_rad_s": rms})
+    return Verdict(odom.name, "yaw_rate", "ok", f"wheels agree with the gyro (rms {rms:.3f} rad/s over {ch.n})")
+
+
+def twist_frame_verdict(odom: OdomSensor, t: TwistStats, min_updates: int = 50) -> Verdict | None:
+    if t.n < min_updates or t.abs_vx + t.abs_vy < 1e-6:
+        return None
+    lateral = t.abs_vy / max(t.abs_vx + t.abs_vy, 1e-12)
+    key = sensor_key(odom.name, "twist_frame")
+    if odom.twist_frame == "world" and lateral < 0.05 and t.abs_wz / t.n > 0.05:
+        return Verdict(odom.name, "twist", "problem",
+                       "twist configured in the world frame, but its lateral velocity stays near zero while "
+                       "the robot turns: it is a body-frame twist, and the trajectory heading will run away",
+                       key, 'twist_frame = "body"')
+    if odom.twist_frame == "body" and lateral > 0.35:
+        return Verdict(odom.name, "twist", "warn",
+                       f"lateral velocity is {100 * lateral:.0f}% of the motion: a wheeled robot's body twist "
+                       "has little; if the driver reports the twist in the odom frame, say so", key,
+                       'twist_frame = "world"')
+    return None

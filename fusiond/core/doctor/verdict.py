@@ -1,0 +1,57 @@
+"""The verdict: what the doctor says about one sensor channel, and how keys are spelled.
+
+Key paths use one spelling everywhere (replay summary, report, monitor): the TOML
+path a user edits, ``sensors.<sensor name>.<key>`` for a sensor table (found by its
+``name``) and ``filter.<key>`` for the filter table.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+LEVELS = ("ok", "warn", "problem")
+
+
+class Verdict(msgspec.Struct):
+    """One channel's verdict. ``suggestion`` is a ready-to-paste TOML line when there is one,
+    in the frame of ``key`` (e.g. orientation noise in the IMU's own axes)."""
+
+    sensor: str
+    channel: str
+    level: str  # ok | warn | problem
+    message: str
+    key: str = ""  # the config key to change, when there is one
+    suggestion: str = ""  # e.g. 'orientation_noise = [0.005, 0.005, 0.05]'
+    evidence: dict[str, float] = {}  # measured figures behind the verdict (offsets, drifts, scales)
+
+
+def sensor_key(sensor: str, key: str) -> str:
+    """The TOML path of a sensor's key: ``sensors.wheel.slip_threshold``."""
+    return f"sensors.{sensor}.{key}"
+
+
+def filter_key(key: str) -> str:
+    return f"filter.{key}"
+
+
+def where_to_set(key: str) -> str:
+    """``sensors.imu.yaw_offset`` -> 'in the [[sensors]] table with name = "imu"'."""
+    parts = key.split(".")
+    if parts[0] == "sensors" and len(parts) >= 3:
+        return f'in the [[sensors]] table with name = "{".".join(parts[1:-1])}"'
+    return f"in the [{parts[0]}] table"
+
+
+def worst(levels: list[str]) -> str:
+    return max(levels, key=LEVELS.index) if levels else "ok"
+
+
+def format_verdicts(verdicts: list[Verdict]) -> str:
+    marks = {"ok": "ok     ", "warn": "WARN   ", "problem": "PROBLEM"}
+    lines = []
+    for v in verdicts:
+        key = f"  [{v.key}]" if v.key else ""
+        lines.append(f"doctor {marks[v.level]} {v.sensor}/{v.channel}: {v.message}{key}")
+        if v.suggestion:
+            lines.append(f"       -> {where_to_set(v.key)}: {v.suggestion}")
+    return "\n".join(lines)
