@@ -700,7 +700,9 @@ def test_router_restart_daemon_reconnects_without_restart(tmp_path, reliability_
 
             router.kill()  # -- the router dies (no goodbye) ...
             router.wait(5)
-            time.sleep(1.0)
+            # The loss is seen: our client of that router has dropped it (the daemon, a client of the
+            # same router over the same kind of link, sees the same closed socket).
+            wait_until(lambda: not list(s1.info.routers_zid()), 10, "the clients to lose the router")
             assert proc.poll() is None, "the daemon died with its router"
             router2 = start_router(script, endpoint)  # ... and comes back on the same port
             s2 = router_client(endpoint)

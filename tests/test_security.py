@@ -142,7 +142,10 @@ def test_mutual_tls_only_a_client_with_a_valid_certificate_gets_anything(pki, tm
             before = json.loads(answers(good)[0])["sensors"]["wheel"]["received"]
             for s in intruders.values():
                 s.put(WHEEL_KEY, odom_payload(2000.0))
-            time.sleep(0.5)
+            # Not sleep-and-hope: a session whose info lists no peer and no router has no link to
+            # anyone, so nothing it puts can reach the daemon; the daemon's counter confirms it.
+            for name, s in intruders.items():
+                assert not list(s.info.peers_zid()) and not list(s.info.routers_zid()), name
             after = json.loads(answers(good)[0])["sensors"]["wheel"]["received"]
         finally:
             for s in sessions:
@@ -243,16 +246,25 @@ def test_access_control_lets_fusiond_publish_only_its_own_keys(tmp_path, reliabi
             for key in ("odom_combined", "cmd_vel"):  # (a `**` subscription is not an allowed declaration)
                 peer.declare_subscriber(key, lambda s: at_peer.append(f"{s.key_expr}:{s.payload.to_bytes().decode()}"))
             as_daemon.declare_subscriber("cmd_vel", lambda s: at_daemon.append(s.payload.to_bytes().decode()))
-            time.sleep(0.5)  # declarations propagate (nothing to wait for: the point is that nothing comes)
+            witness: list[bytes] = []  # an allowed key, received by the daemon-config session
+            as_daemon.declare_subscriber(WHEEL_KEY, lambda s: witness.append(s.payload.to_bytes()))
 
-            def probe() -> bool:
+            def probe() -> bool:  # polled until the allowed key arrives: declarations have propagated
                 as_daemon.put("cmd_vel", b"from-daemon")
                 as_daemon.put("odom_combined", b"from-daemon")
                 peer.put("cmd_vel", b"from-peer")
                 return "odom_combined:from-daemon" in at_peer
 
             wait_until(probe, 10, "the allowed key at the peer", step=0.1)
-            time.sleep(0.3)
+            # cmd_vel from the daemon-config session was put before odom_combined on the same link,
+            # so it would have arrived first. For the other direction, the peer puts cmd_vel and then
+            # an allowed key on the same link: once that arrives, a permitted cmd_vel would have too.
+            def witnessed() -> bool:
+                peer.put("cmd_vel", b"from-peer")
+                peer.put(WHEEL_KEY, b"witness")
+                return bool(witness)
+
+            wait_until(witnessed, 10, "the peer's allowed put at the daemon-config session", step=0.1)
         finally:
             for s in sessions:
                 s.close()
