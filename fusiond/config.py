@@ -84,7 +84,10 @@ class OdomSensor(_Sensor, tag="odom"):
     twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
     twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
     slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
-    scale_estimation: bool = False  # estimate a wheel speed scale (v' = s v); needs a gps or pose sensor
+    # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
+    # makes it observable; false: an explicit opt-out
+    scale_estimation: bool | None = None
+    twist_correlation_s: float = 0.5  # the twist covariance is a velocity error lasting this long, s
 
 
 class ImuSensor(_Sensor, tag="imu"):
