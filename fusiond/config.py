@@ -125,6 +125,11 @@ class GpsSensor(_Sensor, tag="gps"):
     heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
     error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s
     error_sigma: Vec3 | None = None  # its steady-state std devs east north up, m (needed with error_tau_s)
+    # Without error_tau_s: the vertical alone as such a state (consumer receivers' altitude wanders
+    # metres over minutes while they state ~1-2 m); vertical_error_sigma = 0 turns it off
+    vertical_error_tau_s: float = 300.0
+    vertical_error_sigma: float = 5.0  # m
+    max_sigma: float = 1.0e3  # an axis stated less precise than this (m) is "not measured": not fused
 
 
 class PoseSensor(_Sensor, tag="pose"):
@@ -218,6 +223,8 @@ def validate(cfg: Config) -> Config:
                 raise ConfigError(f"sensors[{i}].heading_init_m: must be positive")
             if s.error_tau_s > 0.0 and s.error_sigma is None:
                 raise ConfigError(f"sensors[{i}].error_sigma: needed when error_tau_s > 0")
+            if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s <= 0.0:
+                raise ConfigError(f"sensors[{i}].vertical_error_tau_s: must be positive when vertical_error_sigma > 0")
     return cfg
 
 

@@ -112,6 +112,8 @@ class FusionCore:
         for sc in self.sensors:  # at most one GPS (it defines the world frame)
             if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
                 blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
+            elif isinstance(sc, GpsSensor) and sc.vertical_error_sigma > 0.0:  # the altitude's wander alone
+                blocks.append(GpsErrorBlock(sc.vertical_error_tau_s, (0.0, 0.0, sc.vertical_error_sigma)))
         self.layout = StateLayout(blocks)
         self.has_bias = self.layout.has("gyro_bias")
         self.has_gyro_scale = self.layout.has("gyro_scale")
