@@ -6,11 +6,17 @@ the published heading variance says it is unknown (HEADING_UNKNOWN_SIGMA, rad). 
 since the first is paired with the dead-reckoned antenna position at its stamp; a
 least-squares rigid fit (``estimator.rigid_fit``) of that track to the fixes gives the
 heading correction and its uncertainty. Once that uncertainty is below
-HEADING_PROVISIONAL_SIGMA the fit is applied: position and heading rotate together (the
-track dead-reckoned along the wrong heading is moved onto the fixes) and their covariance
-is re-set to the fit's. The fit keeps being refined with every fix and re-applied until its
-uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixes become
+HEADING_PROVISIONAL_SIGMA the fit is applied: the state turns about the antenna (which the
+fix has just put where the GPS says), so the position dead-reckoned along the wrong heading
+since the previous fix turns with the heading, P turns with both, and the heading's
+variance is re-set to the fit's. The fit keeps being refined with every fix (the stored
+track turned with the state, so each new fit measures what is left) and re-applied until
+its uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixes become
 ordinary, gated updates (channel ``position``).
+
+Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
+1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
+so the fixes pull z only as far as that wander and the odometry allow.
 
 Axes. A fix axis whose stated variance exceeds ``max_sigma``^2 is not measured and not
 fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitude).
@@ -71,8 +77,15 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
     rows = measured_axes(cfg, inp.cov)
     if not s.frame_ready:
         set_position(s, z, inp.cov, cfg.extrinsic_xyz, rows)
+        split = (0, 1, 2)
+        if cfg.datum is None and 2 in rows:
+            # The datum's altitude is this fix's: the frame's zero height is where the antenna is
+            # now, exactly, whatever this fix's own error. (With a configured datum the first
+            # altitude is as uncertain as the fix, slow error included.)
+            ekf.reset_covariance([2], np.zeros((1, 1)))
+            split = (0, 1)
         if error is not None:
-            _split_first_fix(s, core.layout, error)
+            _split_first_fix(s, core.layout, error, split)
         s.frame_ready = True
         s.pose_anchor = {}
         if core.absolute_yaw and not core.layout.has("yaw_offset"):
