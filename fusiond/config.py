@@ -101,7 +101,10 @@ class OdomSensor(_Sensor, tag="odom"):
     slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
     # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
     twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
-    scale_estimation: bool = False  # estimate a wheel speed scale (v' = s v); needs a gps or pose sensor
+    # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
+    # makes it observable; false: an explicit opt-out
+    scale_estimation: bool | None = None
+    twist_correlation_s: float = 0.5  # the twist covariance is a velocity error lasting this long, s
 
 
 class ImuSensor(_Sensor, tag="imu"):
@@ -141,6 +144,11 @@ class GpsSensor(_Sensor, tag="gps"):
     heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
     error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s
     error_sigma: Vec3 | None = None  # its steady-state std devs east north up, m (needed with error_tau_s)
+    # Without error_tau_s: the vertical alone as such a state (consumer receivers' altitude wanders
+    # metres over minutes while they state ~1-2 m); vertical_error_sigma = 0 turns it off
+    vertical_error_tau_s: float = 300.0
+    vertical_error_sigma: float = 5.0  # m
+    max_sigma: float = 1.0e3  # an axis stated less precise than this (m) is "not measured": not fused
 
 
 class PoseSensor(_Sensor, tag="pose"):
@@ -252,6 +260,8 @@ def validate(cfg: Config) -> Config:
                 raise ConfigError(f"sensors[{i}].heading_init_m: must be positive")
             if s.error_tau_s > 0.0 and s.error_sigma is None:
                 raise ConfigError(f"sensors[{i}].error_sigma: needed when error_tau_s > 0")
+            if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s <= 0.0:
+                raise ConfigError(f"sensors[{i}].vertical_error_tau_s: must be positive when vertical_error_sigma > 0")
     return cfg
 
 

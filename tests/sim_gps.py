@@ -49,6 +49,8 @@ class World:
     gps_error_tau: float = 0.0  # > 0: a first-order Gauss-Markov error (per axis) on top of the white noise
     gps_error_sigma: float = 0.0  # its steady-state std dev, m
     gps_freeze: tuple[tuple[float, float], ...] = ()  # the receiver repeats its last fix in [t0, t1)
+    gps_alt_error_tau: float = 0.0  # > 0: the altitude alone wanders (Gauss-Markov) beyond the stated sigma
+    gps_alt_error_sigma: float = 0.0  # its steady-state std dev, m
     # pose sensor
     pose_rate: float = 0.0  # 0: no pose sensor
     pose_sigma: tuple[float, float] = (0.01, 0.005)  # position m, orientation rad
@@ -85,6 +87,8 @@ def simulate(w: World) -> list:
     gm_rng = np.random.default_rng(w.seed + 1000)  # own stream: worlds without it draw as before
     gm = gm_rng.normal(0, w.gps_error_sigma, 3) if w.gps_error_tau > 0 else np.zeros(3)
     gm_t = 0.0
+    alt_rng = np.random.default_rng(w.seed + 2000)  # own stream: worlds without it draw as before
+    alt_err = alt_rng.normal(0, w.gps_alt_error_sigma) if w.gps_alt_error_tau > 0 else 0.0
     last_fix = None
     vo_err = [0.0, 0.0, 0.0, 0.0]  # accumulated visual-odometry error: x y z yaw
     rel = 0.0
@@ -123,6 +127,10 @@ def simulate(w: World) -> list:
                 gm = a * gm + math.sqrt(1.0 - a * a) * gm_rng.normal(0, w.gps_error_sigma, 3)
                 gm_t = rel
                 e, n, u = e + gm[0], n + gm[1], u + gm[2]
+            if w.gps_alt_error_tau > 0:
+                a = math.exp(-(1.0 / w.gps_rate) / w.gps_alt_error_tau)
+                alt_err = a * alt_err + math.sqrt(1.0 - a * a) * alt_rng.normal(0, w.gps_alt_error_sigma)
+                u += alt_err
             if any(f0 <= rel < f1 for f0, f1 in w.gps_freeze) and last_fix is not None:
                 e, n, u = last_fix  # a stuck receiver: same position, new stamp
             last_fix = (e, n, u)

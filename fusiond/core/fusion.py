@@ -116,11 +116,17 @@ class FusionCore:
             blocks.append(GyroBiasBlock(fc.gyro_bias_sigma, fc.gyro_bias_walk))
         if any(isinstance(s, ImuSensor) and s.gyro_scale_estimation for s in self.sensors):
             blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
-        if any(isinstance(s, OdomSensor) and s.scale_estimation for s in self.sensors):
+        # A wheel scale is observable once an absolute position is fused: on by default there.
+        absolute = any(isinstance(s, GpsSensor) or (isinstance(s, PoseSensor) and not s.differential)
+                       for s in self.sensors)
+        if any(isinstance(s, OdomSensor) and (s.scale_estimation or (s.scale_estimation is None and absolute))
+               for s in self.sensors):
             blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
         for sc in self.sensors:  # at most one GPS (it defines the world frame)
             if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
                 blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
+            elif isinstance(sc, GpsSensor) and sc.vertical_error_sigma > 0.0:  # the altitude's wander alone
+                blocks.append(GpsErrorBlock(sc.vertical_error_tau_s, (0.0, 0.0, sc.vertical_error_sigma)))
         self.layout = StateLayout(blocks)
         self.has_bias = self.layout.has("gyro_bias")
         self.has_gyro_scale = self.layout.has("gyro_scale")
@@ -171,6 +177,7 @@ class FusionCore:
         self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
         self._u = MotionInput()
         self._u.world_frame = isinstance(odom, OdomSensor) and odom.twist_frame == "world"
+        self._u.twist_correlation = odom.twist_correlation_s if isinstance(odom, OdomSensor) else 0.0
         # Two-D mode: z, roll, pitch (and the x/y gyro bias they alone would reveal) held at 0.
         self.two_d = fc.two_d_mode
         nominal_zero, error_zero = [2], [2, 3, 4]

@@ -23,6 +23,7 @@ import math
 
 import msgspec
 import numpy as np
+from . import rotation as rot
 from .cholesky import whiten
 from .state import StateLayout
 
@@ -191,6 +192,67 @@ class ErrorStateEKF:
             scale = np.ones_like(d)
             scale[over] = np.sqrt(caps[over] / d[over])
             P *= np.outer(scale, scale)
+
+    # -- state surgery (world frame definition, heading initialisation, sensor offsets) ---------------------
+    # The core never writes x or P itself: a re-set of part of the state goes through these,
+    # which keep P symmetric and positive semi-definite.
+
+    def reset_covariance(self, idx: list[int], block: np.ndarray) -> None:
+        """Forget what P says about the error components ``idx``: their rows and columns are
+        zeroed (no correlation left with anything else) and ``block`` becomes their covariance."""
+        P = self.P.copy()
+        P[idx, :] = 0.0
+        P[:, idx] = 0.0
+        P[np.ix_(idx, idx)] = block
+        self.P = P
+
+    def decorrelate(self, group: list[int]) -> None:
+        """Zero the covariances between the components ``group`` and all others: what P said about
+        how they move together no longer holds. P becomes block diagonal in (group, rest), each
+        block a principal submatrix of a PSD matrix: still PSD."""
+        rest = [i for i in range(self.layout.error_dim) if i not in set(group)]
+        P = self.P.copy()
+        P[np.ix_(group, rest)] = 0.0
+        P[np.ix_(rest, group)] = 0.0
+        self.P = P
+
+    def set_position(self, p, rows: tuple[int, ...] = (0, 1, 2)) -> None:
+        """Set the nominal position components ``rows`` (covariance: ``reset_covariance``)."""
+        for i in rows:
+            self.x[i] = p[i]
+
+    def set_attitude(self, q) -> None:
+        """Set the nominal attitude quaternion (x y z w); the covariance is unchanged."""
+        self.x[3:7] = q
+
+    def shift(self, name: str, delta: list[float]) -> None:
+        """Add ``delta`` to an additive block's nominal value (the covariance is unchanged)."""
+        s = self.layout.nominal[name]
+        self.x[s] = self.x[s] + np.asarray(delta, dtype=float)
+
+    def map_errors(self, J: np.ndarray) -> None:
+        """The error state is re-defined as J dx (a change of variables): P' = J P J^T."""
+        self.P = J @ self.P @ J.T
+
+    def rotate_yaw(self, angle: float, center: tuple[float, float] = (0.0, 0.0)) -> None:
+        """Turn the pose about the world z axis through ``center`` by ``angle``.
+
+        p' = c + Rz (p - c), q' = Rz q. The errors turn with it: dp' = Rz dp and, the
+        attitude error being global (R_true = Exp(dtheta) R), Rz Exp(dtheta) R =
+        Exp(Rz dtheta) Rz R gives dtheta' = Rz dtheta. So P' = J P J^T with
+        J = diag(Rz, Rz, I): orthogonal, P stays what it was, seen in the turned frame.
+        """
+        c, s = math.cos(angle), math.sin(angle)
+        Rz = np.array(((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)))
+        x = self.x
+        dx, dy = float(x[0]) - center[0], float(x[1]) - center[1]
+        x[0], x[1] = center[0] + c * dx - s * dy, center[1] + s * dx + c * dy
+        q = rot.mul(rot.exp(0.0, 0.0, angle), (float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+        x[3:7] = rot.normalize(q)
+        J = np.eye(self.layout.error_dim)
+        J[0:3, 0:3] = Rz
+        J[3:6, 3:6] = Rz
+        self.P = J @ self.P @ J.T
 
     def copy(self, into: "ErrorStateEKF | None" = None) -> "ErrorStateEKF":
         """A copy with its own x and P; ``into`` reuses an existing object's arrays (np.copyto)."""

@@ -14,10 +14,18 @@ dynamics (``StateBlock.dynamic``, e.g. a Gauss-Markov GPS error) decay component
 x' = a x, and add their discrete process noise to Q's diagonal; a layout without them
 pays one empty-list test.
 
-Input noise: a message covariance is per sample. Held over a sample period T,
-white per-sample noise integrates to a random walk of variance sigma^2 * T * dt,
-so Q = G (Sigma * T / dt) G^T, independent of how finely the interval is split
-by other sensors' messages.
+Input noise, per second of travel rather than per message. A gyro's sample noise is
+white: held over its sample period T it integrates to a random walk of variance
+sigma^2 * T * dt (Q = G (Sigma * T / dt) G^T). Odometry's is not: wheel slip, tyre
+deformation and the ground make consecutive twist errors alike for a while, so a
+faster odometry does not average its stated sigma away. Taking the odometry
+covariance as a velocity error with correlation time tau (first-order Gauss-Markov)
+gives, for travel much longer than tau, the random walk of spectral density
+2 sigma^2 tau: Q = G (Sigma * max(T, 2 tau) / dt) G^T. The same motion then grows
+the same position uncertainty at 10 Hz as at 83 Hz (per message it would shrink as
+1/rate, and a GPS could no longer correct along the track). ``twist_correlation``
+holds tau (the odometry sensor's ``twist_correlation_s``); 0 gives back the
+per-message model. The filter's own ``process_noise`` is a density already.
 
 This runs once per message: the 3x3 algebra is done on Python floats (several
 times cheaper than numpy calls on 3-vectors); numpy only sees the n x n blocks.
@@ -46,7 +54,7 @@ class MotionInput:
     __slots__ = (
         "linear", "linear_cov", "linear_period",
         "angular", "angular_cov", "angular_period",
-        "from_gyro", "world_frame",
+        "from_gyro", "world_frame", "twist_correlation",
     )
 
     def __init__(self) -> None:
@@ -58,6 +66,7 @@ class MotionInput:
         self.angular_period = 0.0
         self.from_gyro = False
         self.world_frame = False
+        self.twist_correlation = 0.0  # odometry twist error correlation time tau, s (see module doc)
 
 
 def _right_jacobian(x: float, y: float, z: float) -> tuple:
@@ -148,10 +157,12 @@ def predict(
     # G_lin/G_ang now map the measured inputs, whose noise the covariances describe.
     Q = layout.zeros.copy()
     if dt > 0.0:
+        memory = 2.0 * u.twist_correlation  # odometry: a velocity error that lasts ~tau
         if u.linear_period > 0.0:
-            Q[0:3, 0:3] = mat3.sandwich(G_lin, u.linear_cov, u.linear_period / dt)
+            Q[0:3, 0:3] = mat3.sandwich(G_lin, u.linear_cov, max(u.linear_period, memory) / dt)
         if u.angular_period > 0.0:
-            Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, u.angular_period / dt)
+            period = u.angular_period if u.from_gyro else max(u.angular_period, memory)
+            Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, period / dt)
         Q.reshape(-1)[:: n + 1] += noise_density * dt
         if dynamic:
             for blk, n0, e0 in dynamic:

@@ -17,15 +17,8 @@ def set_position(s: FilterState, z, cov9, offset, rows: tuple[int, ...] = (0, 1,
     """Put the base where the sensor says (p = z - R t), with the sensor's position covariance."""
     ekf = s.ekf
     a = lever(ekf.x, offset)
-    P = ekf.P.copy()
-    for i in rows:
-        ekf.x[i] = z[i] - a[i]
-        P[i, :] = 0.0
-        P[:, i] = 0.0
-    for i in rows:
-        for j in rows:
-            P[i, j] = cov9[3 * i + j]
-    ekf.P = P
+    ekf.set_position([z[i] - a[i] for i in range(3)], rows)
+    ekf.reset_covariance(list(rows), np.array([[cov9[3 * i + j] for j in rows] for i in rows]))
 
 
 def lever(x: np.ndarray, t: tuple[float, float, float]) -> tuple[float, float, float]:

@@ -1,9 +1,34 @@
-"""GPS: position fixes in ENU at the datum; heading from the first metres of travel."""
+"""GPS: position fixes in ENU at the datum; heading from a rigid fit of the first metres of travel.
+
+Heading. A GPS measures where the antenna is, not where it points. Until travel has
+shown the heading, the fix may move position only (channel ``position_unaligned``) and
+the published heading variance says it is unknown (HEADING_UNKNOWN_SIGMA, rad). Every fix
+since the first is paired with the dead-reckoned antenna position at its stamp; a
+least-squares rigid fit (``estimator.rigid_fit``) of that track to the fixes gives the
+heading correction and its uncertainty. Once that uncertainty is below
+HEADING_PROVISIONAL_SIGMA the fit is applied: the state turns about the antenna (which the
+fix has just put where the GPS says), so the position dead-reckoned along the wrong heading
+since the previous fix turns with the heading, P turns with both, and the heading's
+variance is re-set to the fit's. The fit keeps being refined with every fix (the stored
+track turned with the state, so each new fit measures what is left) and re-applied until
+its uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixes become
+ordinary, gated updates (channel ``position``).
+
+Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
+1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
+so the fixes pull z only as far as that wander and the odometry allow.
+
+Axes. A fix axis whose stated variance exceeds ``max_sigma``^2 is not measured and not
+fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitude).
+"""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from ...estimator import observations as obs
 from ...estimator import rotation as rot
@@ -12,6 +37,7 @@ import structlog
 
 from ...config import GpsSensor
 from ...estimator.geodesy import EnuFrame
+from ...estimator.rigid_fit import RigidFit, fit_rigid
 from ..sensors import GpsInput
 from .frame import lever, set_position
 
@@ -21,10 +47,24 @@ if TYPE_CHECKING:
 
 log = structlog.get_logger("fusiond.core")
 
-HEADING_MIN_TRAVEL = 0.3  # odometry chord / GPS chord below this: pushed, slipping or a GPS jump, start over
-HEADING_SIGMA_FLOOR = 0.02  # rad added to the chord-angle uncertainty of the initial GPS heading
+HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipping or GPS wander, start over
+HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad
+HEADING_PROVISIONAL_SIGMA = 0.3  # rad: apply the rigid fit provisionally (fixes still move position only)
+HEADING_READY_SIGMA = 0.05  # rad: the heading is known (an EKF linearises 0.1 rad well), fixes become full updates
+HEADING_MAX_FIXES = 400  # fixes kept for the fit; beyond, every other one is dropped (the extent stays)
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class HeadingTrack:
+    """Fixes paired with the dead-reckoned antenna position at their stamps (immutable: shared by
+    history snapshots). ``base`` + the state's ``travel`` is the dead-reckoned base position."""
+
+    points: tuple[tuple[float, float, float, float, float], ...]  # (gx, gy, dx, dy, weight)
+    base: tuple[float, float, float]
+    first: tuple[float, float]  # the first fix, for the extent
+    applied: bool = False  # a provisional fit has been applied
 
 
 def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp: float, emit: bool, late: bool):
@@ -34,23 +74,35 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
     z = s.enu.enu(*inp.lla)
     ekf = s.ekf
     error = "gps_error" if core.layout.has("gps_error") else None
+    rows = measured_axes(cfg, inp.cov)
+    if core.two_d:  # altitude is not fused: z is held at 0
+        rows = tuple(r for r in rows if r != 2)
     if not s.frame_ready:
-        set_position(s, z, inp.cov, cfg.extrinsic_xyz)
+        set_position(s, z, inp.cov, cfg.extrinsic_xyz, rows)
+        split = (0, 1, 2)
+        if cfg.datum is None and 2 in rows:
+            # The datum's altitude is this fix's: the frame's zero height is where the antenna is
+            # now, exactly, whatever this fix's own error. (With a configured datum the first
+            # altitude is as uncertain as the fix, slow error included.)
+            ekf.reset_covariance([2], np.zeros((1, 1)))
+            split = (0, 1)
         if error is not None:
-            _split_first_fix(s, core.layout, error)
+            _split_first_fix(s, core.layout, error, split)
         s.frame_ready = True
         s.pose_anchor = {}
-        if core.absolute_yaw:
-            s.heading_ready = True  # the IMU's absolute yaw is the heading in ENU
+        if core.absolute_yaw and not core.layout.has("yaw_offset"):
+            s.heading_ready = True  # an IMU's absolute yaw trusted as the heading in ENU
         else:
-            s.gps_anchor = (z, lever(ekf.x, cfg.extrinsic_xyz))
+            ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            s.gps_anchor = HeadingTrack((), (float(ekf.x[0]), float(ekf.x[1]), float(ekf.x[2])), (z[0], z[1]))
             s.travel = _ZERO3
+            gps_heading(core, s, cfg, z, inp.cov)
         return []
-    if not s.heading_ready:
-        gps_heading(core, s, cfg, z, inp.cov)
     y, H, R = obs.position(core.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz, error)
-    if core.two_d:  # altitude is not fused: z is held at 0
-        y, H, R = y[:2], H[:2], R[:2, :2]
+    if len(rows) < 3:
+        if not rows:
+            return []
+        y, H, R = y[list(rows)], H[list(rows)], R[np.ix_(rows, rows)]
     if s.heading_ready:
         res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
         channel = "position"
@@ -61,53 +113,100 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
         # the offset a wrong heading builds up must not be absorbed into it as GPS error.
         res = ekf.update(y, H, R, math.inf, core.position_mask)
         channel = "position_unaligned"
+        gps_heading(core, s, cfg, z, inp.cov)  # after the fix has put the antenna where it is
     if not emit:
         return []
-    return [DiagnosticsRecord(stamp, cfg.name, list(ENU_NAMES[:len(y)]), y.tolist(), res.innovation_var, res.nis,
-                              len(y),
-                              res.rejected, channel=channel, late=late)]
+    return [DiagnosticsRecord(stamp, cfg.name, [ENU_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis,
+                              len(rows), res.rejected, channel=channel, late=late)]
+
+
+def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
+    """The ENU axes the fix measures: a variance above ``max_sigma``^2 means "not measured"."""
+    limit = cfg.max_sigma * cfg.max_sigma
+    return tuple(i for i in range(3) if cov[4 * i] <= limit)
 
 
 def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[float, float, float], cov) -> None:
-    """Initial heading from the first metres of travel: the angle between the GPS chord and
-    the dead-reckoned chord of the antenna since the first fix. A wrong initial yaw rotates
-    the whole dead-reckoned track about its start, so the chord angles differ by exactly
-    the yaw error, whatever the path's shape."""
-    z0, l0 = s.gps_anchor
-    gx, gy = z[0] - z0[0], z[1] - z0[1]
-    d = math.hypot(gx, gy)
-    sigma = math.sqrt(max(cov[0], cov[4]))
-    if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:  # the slow error moves the chord too
-        sigma = math.hypot(sigma, max(cfg.error_sigma[0], cfg.error_sigma[1]))
-    if d < max(cfg.heading_init_m, 4.0 * sigma):
-        return
-    l1 = lever(s.ekf.x, cfg.extrinsic_xyz)
-    fx, fy = s.travel[0] + l1[0] - l0[0], s.travel[1] + l1[1] - l0[1]
-    if math.hypot(fx, fy) < HEADING_MIN_TRAVEL * d:
-        s.gps_anchor, s.travel = (z, l1), _ZERO3  # GPS wander or a pushed robot: start over
-        return
-    dyaw = rot.wrap(math.atan2(gy, gx) - math.atan2(fy, fx))
+    """Add this fix to the track and fit; apply the fit once it is good enough (module doc)."""
+    track: HeadingTrack = s.gps_anchor
     ekf = s.ekf
-    q = (float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6]))
-    ekf.x[3:7] = rot.normalize(rot.mul(rot.exp(0.0, 0.0, dyaw), q))
-    sig = math.sqrt(2.0) * sigma / d + HEADING_SIGMA_FLOOR
-    P = ekf.P.copy()
-    P[5, :] = 0.0
-    P[:, 5] = 0.0
-    P[5, 5] = sig * sig
-    ekf.P = P
-    s.heading_ready = True
-    s.gps_anchor, s.travel = None, _ZERO3
+    a = lever(ekf.x, cfg.extrinsic_xyz)
+    t = s.travel
+    dx, dy = track.base[0] + t[0] + a[0], track.base[1] + t[1] + a[1]  # dead-reckoned antenna
+    var = max(cov[0], cov[4])
+    wander = 0.0  # variance of the receiver's slowly wandering error (the Gauss-Markov state's prior)
+    if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
+        wander = max(cfg.error_sigma[0], cfg.error_sigma[1]) ** 2
+        var += wander
+    points = track.points + ((z[0], z[1], dx, dy, 1.0 / var),)
+    if len(points) > HEADING_MAX_FIXES:
+        points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
+    track = HeadingTrack(points, track.base, track.first, track.applied)
+    s.gps_anchor = track
+    extent = math.hypot(z[0] - track.first[0], z[1] - track.first[1])
+    if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
+        return
+    d0 = points[0]
+    if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * extent:
+        # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
+        s.gps_anchor = HeadingTrack(((z[0], z[1], dx, dy, 1.0 / var),), track.base, (z[0], z[1]), track.applied)
+        return
+    fit = fit_rigid(list(points))
+    if fit is None:
+        return
+    if wander > 0.0:
+        # A slowly wandering error moves neighbouring fixes together: it bends the track as a
+        # whole, which the residuals cannot show. Its ends may differ by ~sqrt(2) sigma_b.
+        fit = replace(fit, var_theta=fit.var_theta + 2.0 * wander / (extent * extent))
+    if fit.var_theta > HEADING_PROVISIONAL_SIGMA**2:
+        return
+    _apply_fit(core, s, cfg, fit, track)
+
+
+def _apply_fit(core: "FusionCore", s: FilterState, cfg: GpsSensor, fit: RigidFit, track: HeadingTrack) -> None:
+    """Turn the state by the fit's angle about the antenna, which this fix has just put where the
+    GPS says: the position dead-reckoned along the wrong heading since the previous fix turns with
+    the heading, and P turns with both (``ErrorStateEKF.rotate_yaw``). The heading's row of P is
+    then re-set to the fit's variance: its old correlations described the wrong heading."""
+    ekf = s.ekf
+    a = lever(ekf.x, cfg.extrinsic_xyz)
+    ekf.rotate_yaw(fit.theta, (float(ekf.x[0]) + a[0], float(ekf.x[1]) + a[1]))
+    if core.layout.has("yaw_offset"):  # an absolute IMU yaw reads the same: its offset turns the other way
+        ekf.shift("yaw_offset", [-fit.theta])
+    # While the heading was unknown, the position's correlations with the gyro bias and the scales
+    # were built through a heading error of ~1.8 rad: kept, they would feed the next fixes'
+    # innovations into those states. They are dropped with the heading's row and column; the
+    # position's own covariance and its relation to the GPS error state are what the fixes made them.
+    group = [0, 1, 2]
+    if core.layout.has("gps_error"):
+        group += list(range(core.layout.error["gps_error"].start, core.layout.error["gps_error"].stop))
+    ekf.decorrelate(group)
+    ekf.reset_covariance([5], np.array([[fit.var_theta]]))
+    # the stored track is now seen in the turned frame: the next fit measures what is left
+    points = tuple((gx, gy, *fit.apply(px, py), w) for gx, gy, px, py, w in track.points)
+    t = s.travel
+    bx, by = fit.apply(track.base[0] + t[0], track.base[1] + t[1])
+    s.travel = _ZERO3
     s.pose_anchor = {}  # the frame turned under them: deltas restart from the next message
-    log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=dyaw, sigma=sig, chord_m=d)
+    sigma = math.sqrt(fit.var_theta)
+    if sigma <= HEADING_READY_SIGMA:
+        s.heading_ready = True
+        s.gps_anchor = None
+        log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
+                 fixes=len(points))
+    else:
+        s.gps_anchor = HeadingTrack(points, (bx, by, track.base[2] + t[2]), track.first, True)
+        if not track.applied:
+            log.info("gps_heading_provisional", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
+                     fixes=len(points))
 
 
-def _split_first_fix(s: FilterState, layout, error: str) -> None:
+def _split_first_fix(s: FilterState, layout, error: str, rows: tuple[int, ...] = (0, 1, 2)) -> None:
     """The first fix put the base at z - R t, but z also carries the GPS error b: the base
-    position is off by -(b + noise), so P_pp gains P_bb and P_pb = -P_bb (b keeps its prior)."""
-    P = s.ekf.P.copy()
-    eb = layout.error[error]
-    P[0:3, :] -= P[eb, :]  # dp <- dp - db: rows and columns of the linear map [I -I]
-    P[:, 0:3] -= P[:, eb]
-    # set_position zeroed the position rows (P_pb was 0): now P_pp + P_bb and P_pb = -P_bb
-    s.ekf.P = P
+    position is off by -(b + noise), so P_pp gains P_bb and P_pb = -P_bb (b keeps its prior).
+    That is the change of variables dp <- dp - db: J = I with -I in the position rows' b columns."""
+    J = np.eye(layout.error_dim)
+    eb = layout.error[error].start
+    for i in rows:
+        J[i, eb + i] = -1.0
+    s.ekf.map_errors(J)

@@ -48,17 +48,13 @@ def initialise_from_pose(core: "FusionCore", s: FilterState, cfg: PoseSensor, in
         r = mr if 3 in rows else r
         p = mp if 4 in rows else p
     y = my if 5 in rows else y
-    ekf.x[3:7] = rot.from_rpy(r, p, y)
+    ekf.set_attitude(rot.from_rpy(r, p, y))
     var = [inp.cov[7 * i] for i in range(6)]
     pos_rows = tuple(i for i in rows if i < 3)
     set_position(s, inp.position, (var[0], 0.0, 0.0, 0.0, var[1], 0.0, 0.0, 0.0, var[2]),
                        cfg.extrinsic_xyz, pos_rows)
     if 5 in rows:
-        P = ekf.P.copy()
-        P[5, :] = 0.0
-        P[:, 5] = 0.0
-        P[5, 5] = var[5]
-        ekf.P = P
+        ekf.reset_covariance([5], np.array([[var[5]]]))
     s.frame_ready = True
     s.pose_anchor = {}  # differential sensors restart in the new frame
 
