@@ -65,13 +65,14 @@ def track_segments(series: Series, min_length: float, max_s: float = 30.0) -> li
     out = []
     i = 0
     while i < len(t) - 1:
-        d = np.hypot(e[i + 1:] - e[i], n[i + 1:] - n[i])
+        end = int(np.searchsorted(t, t[i] + max_s, side="right"))  # only fixes within max_s: O(n) overall
+        d = np.hypot(e[i + 1:end] - e[i], n[i + 1:end] - n[i])
         far = np.nonzero(d >= min_length)[0]
         if not len(far):
-            break
+            i += 1  # standing, or too slow from here: try the next fix
+            continue
         j = i + 1 + int(far[0])
-        if t[j] - t[i] <= max_s:
-            out.append((float(t[i]), float(t[j]), math.atan2(n[j] - n[i], e[j] - e[i]), float(d[far[0]])))
+        out.append((float(t[i]), float(t[j]), math.atan2(n[j] - n[i], e[j] - e[i]), float(d[far[0]])))
         i = j
     return out
 
