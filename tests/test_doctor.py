@@ -343,3 +343,24 @@ def test_magnetometer_yaw_without_any_gyro_is_judged_against_the_gps_track():
     assert v.evidence["imu_vs_gps_track_wander_rad"] == pytest.approx(0.2 / math.sqrt(2), rel=0.35)
     assert one(verdicts, "gps", "position").key == "sensors.imu.orientation"
     never_trusts_more(verdicts, "imu")
+
+
+def test_records_of_another_shape_still_count_in_the_channel_verdict():
+    """A channel whose records change shape (a message without its yaw row; per-axis bias updates) is
+    judged on all of them, each NIS over its own dof; per-component figures keep the first shape."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.core.doctor import ChannelStats
+
+    def run(scale: float) -> ChannelStats:
+        ch = ChannelStats(["roll", "pitch", "yaw"])
+        for k in range(200):
+            comps = ["roll", "pitch", "yaw"] if k % 2 else ["roll", "pitch"]
+            d = len(comps)
+            ch.add(DiagnosticsRecord(float(k), "imu", comps, [0.01] * d, [1e-4] * d, scale * d, d, False,
+                                     channel="orientation"))
+        return ch
+
+    ok, high = run(1.0), run(10.0)
+    assert ok.n == 200 and ok.n_comp == 100 and ok.dof_sum == 500
+    assert ok.verdict() == "ok" and ok.nis_per_dof == pytest.approx(1.0)
+    assert high.verdict() == "nis_high" and high.nis_per_dof == pytest.approx(10.0)

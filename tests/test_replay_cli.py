@@ -226,3 +226,36 @@ def test_summary_and_doctor_agree_on_every_channel(jackal_bag):
         # the doctor's figures are the whole run's: the same mean NIS per dof as the summary
         ori = channels["imu/orientation"]
         assert f"{ori['nis_mean'] / ori['dof']:.2f} per dof" in verdicts[("imu", "orientation")].message
+
+
+def test_wrong_odometry_topic_in_a_simulated_bag_is_an_error_not_an_empty_run(tmp_path):
+    """The issue's case on simulated data: the IMU topic is in the bag, the configured odometry topic
+    is not. Before: exit 0, an empty trajectory, a final pose of 0, 0, 0. Now: exit 2 naming it."""
+    from rosbags.rosbag2 import Writer
+
+    from fusiond.samples import ImuSample, OdomSample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample
+
+    from .sim import SimConfig, simulate
+
+    bag = tmp_path / "sim_bag"
+    with Writer(bag, version=9) as writer:
+        conns = {}
+        for s in simulate(SimConfig(duration=3.0)):
+            topic, msgtype = ("/odom", ODOMETRY) if isinstance(s, OdomSample) else ("/imu/data", IMU)
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msgtype, typestore=TYPESTORE)
+            writer.write(conns[topic], int(s.stamp * 1e9), encode_sample(s, "ros2-cdr"))
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text('[[sensors]]\nname = "wheel"\nkind = "odom"\nkey = "wheel_odom"\n'
+                   '[[sensors]]\nname = "imu"\nkind = "imu"\nkey = "imu/data"\nangular_velocity = true\n')
+    tum = tmp_path / "out.tum"
+    proc = fusiond("replay", str(bag), "--config", str(cfg), "--tum", str(tum))
+    assert proc.returncode == 2, proc.stdout
+    assert "/wheel_odom" in proc.stderr and "'wheel'" in proc.stderr
+    assert "/odom [nav_msgs/msg/Odometry]" in proc.stderr and "/imu/data [sensor_msgs/msg/Imu]" in proc.stderr
+    assert not tum.exists() and "final pose" not in proc.stdout
+    # with the right key the same bag replays
+    cfg.write_text(cfg.read_text().replace("wheel_odom", "odom"))
+    proc = fusiond("replay", str(bag), "--config", str(cfg), "--tum", str(tum), "--quiet")
+    assert proc.returncode == 0 and len(tum.read_text().splitlines()) == 150  # 3 s of 50 Hz odometry

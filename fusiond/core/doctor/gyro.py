@@ -173,6 +173,17 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        f"standstill gyro NIS low ({ch.nis_per_dof:.2f} per dof over {ch.n} updates): the gyro noise "
                        "is overstated" + (f"; it measures {measured:.5f} rad/s at rest" if noise_hint else ""),
                        sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+    against = ""
+    if episodes and "bias_estimate_rad_s" in evidence:
+        last = episodes[-1]
+        against = (f"; bias estimate {evidence['bias_estimate_rad_s']:+.5f} rad/s, the gyro at rest reads "
+                   f"{last.gyro_mean:+.5f}")
+        if abs(evidence["bias_estimate_rad_s"] - last.gyro_mean) > max(DISAGREE_RAD_S, 5.0 * last.spread):
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"the bias estimate ({evidence['bias_estimate_rad_s']:+.5f} rad/s) is off what the gyro "
+                           f"reads at rest ({last.gyro_mean:+.5f}) although the standstill updates were accepted: "
+                           "they are weighted too little (gyro noise overstated)",
+                           sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
     return Verdict(imu.name, "gyro_bias", "ok",
-                   f"standstill bias updates consistent ({ch.nis_per_dof:.2f} per dof over {ch.n} updates)",
+                   f"standstill bias updates consistent ({ch.nis_per_dof:.2f} per dof over {ch.n} updates{against})",
                    evidence=evidence)

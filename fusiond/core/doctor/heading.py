@@ -65,13 +65,14 @@ def track_segments(series: Series, min_length: float, max_s: float = 30.0) -> li
     out = []
     i = 0
     while i < len(t) - 1:
-        d = np.hypot(e[i + 1:] - e[i], n[i + 1:] - n[i])
+        end = int(np.searchsorted(t, t[i] + max_s, side="right"))  # only fixes within max_s: O(n) overall
+        d = np.hypot(e[i + 1:end] - e[i], n[i + 1:end] - n[i])
         far = np.nonzero(d >= min_length)[0]
         if not len(far):
-            break
+            i += 1  # standing, or too slow from here: try the next fix
+            continue
         j = i + 1 + int(far[0])
-        if t[j] - t[i] <= max_s:
-            out.append((float(t[i]), float(t[j]), math.atan2(n[j] - n[i], e[j] - e[i]), float(d[far[0]])))
+        out.append((float(t[i]), float(t[j]), math.atan2(n[j] - n[i], e[j] - e[i]), float(d[far[0]])))
         i = j
     return out
 
@@ -182,7 +183,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                        f"track direction (standard error {evidence['imu_vs_gps_track_offset_se_rad']:.3f} rad): a "
                        "declination or mounting offset. Correct it (corrected = raw + yaw_offset), or use "
                        'orientation = "roll_pitch" with the gyro', sensor_key(key_sensor, "yaw_offset"),
-                       f"yaw_offset = {-offset:.4f}", evidence)
+                       f"yaw_offset = {getattr(imu, 'yaw_offset', 0.0) - offset:.4f}", evidence)
     if evidence:
         return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources "
                        + ", ".join(f"{k} {v:.3f}" for k, v in evidence.items()), evidence=evidence)
@@ -239,7 +240,8 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     imu = imus[0] if imus else None
     agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
              if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
-    msg = (f"the wheels' yaw rate reads {k:.2f} x the gyro's rate {offset:+.3f} rad/s{agree}: skid-steer slip or a driver scale. The gyro "
+    msg = (f"the wheels' yaw rate reads {k:.2f} x the gyro's rate {offset:+.3f} rad/s{agree}: skid-steer slip "
+           "or a driver scale. The gyro "
            "is not fused, so this wheel yaw rate drives the predicted heading and every heading update fights it")
     if imu is None:
         return Verdict(odom.name, "heading", "warn", msg, evidence=evidence)

@@ -27,7 +27,7 @@ NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
 
 
 @lru_cache(maxsize=4096)
-def nis_bounds(n: int, dof: int, confidence: float) -> tuple[float, float]:
+def nis_bounds(n: int, dof: float, confidence: float) -> tuple[float, float]:
     """Two-sided bounds on the mean NIS of n updates (chi-square on n*dof, divided by n),
     widened to the practical band [NIS_LOW, NIS_HIGH] per dof."""
     a = (1.0 - confidence) / 2.0
@@ -36,7 +36,7 @@ def nis_bounds(n: int, dof: int, confidence: float) -> tuple[float, float]:
     return min(lo, NIS_LOW * dof), max(hi, NIS_HIGH * dof)
 
 
-def judge_nis(mean: float | None, n: int, dof: int, confidence: float) -> str:
+def judge_nis(mean: float | None, n: int, dof: float, confidence: float) -> str:
     """ok | nis_high | nis_low | no_updates."""
     if mean is None or n <= 0 or dof <= 0 or not math.isfinite(mean):
         return "no_updates"
@@ -55,7 +55,9 @@ class ChannelStats:
     n_nis: int = 0
     rejected: int = 0
     nis_sum: float = 0.0
-    dof: int = 0
+    dof_sum: int = 0
+    dof: int = 0  # of the latest record
+    n_comp: int = 0  # records of the channel's first shape (per-component figures)
     sums: list[float] = field(default_factory=list)
     outer: list[list[float]] = field(default_factory=list)  # sum of y y^T (second moment, for frame changes)
     variances: list[float] = field(default_factory=list)  # sum of predicted variances (diag S)
@@ -63,6 +65,7 @@ class ChannelStats:
     last_stamp: float | None = None
     recent: deque = field(default_factory=deque)
     recent_sum: float = 0.0
+    recent_dof: int = 0
     now_verdict: str = "no_updates"
     now_since: float | None = None  # stamp at which the window's verdict became now_verdict
     keep: bool = False  # keep every update's stamp, rejected flag and innovation (standstill episodes)
@@ -74,12 +77,8 @@ class ChannelStats:
         self.recent = deque(maxlen=self.window)
 
     def add(self, r: DiagnosticsRecord) -> None:
-        if r.components != self.components:
-            return  # e.g. a yaw row missing from one message: keep the channel's shape
-        k = len(self.components)
-        if not self.sums:
-            self.sums, self.variances = [0.0] * k, [0.0] * k
-            self.outer = [[0.0] * k for _ in range(k)]
+        """Every record counts (and is judged: NIS over its own dof); the per-component figures keep the
+        channel's first shape (a message without its yaw row, a per-axis update, do not mix columns)."""
         self.n += 1
         self.rejected += r.rejected
         if self.first_stamp is None:
@@ -91,17 +90,29 @@ class ChannelStats:
             self.innovations.append(list(r.innovation))
         if getattr(r, "learning", False):
             return  # the prior's test, not the sensor's: counted, kept as an episode, not judged
-        if math.isfinite(r.nis):
+        if math.isfinite(r.nis) and r.dof > 0:
             self.n_nis += 1
             self.nis_sum += r.nis
+            self.dof_sum += r.dof
             self.dof = r.dof
             if len(self.recent) == self.recent.maxlen:
-                self.recent_sum -= self.recent[0]
-            self.recent.append(r.nis)
+                old_nis, old_dof = self.recent[0]
+                self.recent_sum -= old_nis
+                self.recent_dof -= old_dof
+            self.recent.append((r.nis, r.dof))
             self.recent_sum += r.nis
-            verdict = judge_nis(self.recent_sum / len(self.recent), len(self.recent), self.dof, self.confidence)
+            self.recent_dof += r.dof
+            m = len(self.recent)
+            verdict = judge_nis(self.recent_sum / m, m, self.recent_dof / m, self.confidence)
             if verdict != self.now_verdict:
                 self.now_verdict, self.now_since = verdict, r.stamp
+        if r.components != self.components:
+            return
+        k = len(self.components)
+        if not self.sums:
+            self.sums, self.variances = [0.0] * k, [0.0] * k
+            self.outer = [[0.0] * k for _ in range(k)]
+        self.n_comp += 1
         y, v = r.innovation, r.innovation_var
         for i in range(k):
             self.sums[i] += y[i]
@@ -111,28 +122,31 @@ class ChannelStats:
                 row[j] += y[i] * y[j]
 
     @property
+    def mean_dof(self) -> float:
+        return self.dof_sum / self.n_nis if self.n_nis else 0.0
+
+    @property
     def nis_mean(self) -> float | None:
         return self.nis_sum / self.n_nis if self.n_nis else None
 
     @property
     def nis_per_dof(self) -> float:
-        m = self.nis_mean
-        return m / self.dof if m is not None and self.dof else math.nan
+        return self.nis_sum / self.dof_sum if self.dof_sum else math.nan
 
     def verdict(self) -> str:
         """The whole-run NIS verdict."""
-        return judge_nis(self.nis_mean, self.n_nis, self.dof, self.confidence)
+        return judge_nis(self.nis_mean, self.n_nis, self.mean_dof, self.confidence)
 
     def bounds(self) -> tuple[float, float] | None:
-        return nis_bounds(self.n_nis, self.dof, self.confidence) if self.n_nis and self.dof else None
+        return nis_bounds(self.n_nis, self.mean_dof, self.confidence) if self.n_nis else None
 
     def component(self, i: int) -> tuple[float, float, float]:
         """(mean, rms, rms predicted by S) of component i over the run."""
-        n = max(self.n, 1)
+        n = max(self.n_comp, 1)
         return self.sums[i] / n, math.sqrt(self.outer[i][i] / n), math.sqrt(self.variances[i] / n)
 
     def second_moment(self) -> list[list[float]]:
-        n = max(self.n, 1)
+        n = max(self.n_comp, 1)
         return [[v / n for v in row] for row in self.outer]
 
     def now_note(self, t0: float | None) -> str:

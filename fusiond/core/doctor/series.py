@@ -227,7 +227,10 @@ class SeriesCollector:
                 qb = q if ext is None else rot.mul(q, ext)
                 yaw_measured = cfg.orientation_noise is not None or oc[8] < cfg.orientation_max_sigma ** 2
                 if yaw_measured:
-                    y = rot.yaw(qb)
+                    # as the filter takes it: corrected = raw + yaw_offset + magnetic_declination (navsat_transform's
+                    # keys; read with getattr so that a config without them reads as 0)
+                    correction = getattr(cfg, "yaw_offset", 0.0) + getattr(cfg, "magnetic_declination", 0.0)
+                    y = rot.wrap(rot.yaw(qb) + correction)
                     if self._yaw_prev is None:
                         self._yaw_unwrapped = y
                     else:
