@@ -78,3 +78,13 @@ def test_centripetal_acceleration_is_not_read_as_roll():
     core = _core()
     tilt, _ = _worst_tilt_and_z(core, world)
     assert tilt < 0.5 * math.atan2(0.3, 9.80665)
+
+
+def test_the_summary_says_when_the_robot_is_taken_as_planar():
+    from fusiond.replay.run import run_samples, summary
+
+    world = RestWorld([Segment(1.0), Segment(3.0, speed=1.0)], orientation_absent=True)
+    cfg = _core("tilt_from_gravity = false").cfg
+    assert "taken as planar" in summary(run_samples(simulate(world), cfg))
+    world = RestWorld([Segment(1.0), Segment(3.0, speed=1.0)], accel_sigma=0.05, orientation_absent=True)
+    assert "taken as planar" not in summary(run_samples(simulate(world), _core().cfg))

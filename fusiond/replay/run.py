@@ -238,6 +238,12 @@ def summary(result: ReplayResult) -> str:
         now = f"; {c['now_note']}" if c["now_note"] else ""
         out.append(f"NIS {name:<22} whole run mean={mean} dof={c['dof']}{bounds} -> {c['verdict']} "
                    f"({c['updates']} updates, {c['rejected']} rejected{now})")
+    if not core.tilt_reference:
+        out.append("tilt        no tilt reference (no IMU roll/pitch, no accelerometer, no absolute pose): "
+                   "taken as planar, roll/pitch rates not integrated")
+    held_dropped = sum(st.dropped.get("future_stamp", 0) + st.dropped.get("stale_stamp", 0) for st in core.stats)
+    if held_dropped:
+        out.append(f"time jumps  {held_dropped} sample(s) far from filter time dropped as a clock glitch")
     if core.resets:
         out.append(f"time jumps  {core.resets} filter reset(s) on a backwards time jump")
     if core.covariance_resets:
