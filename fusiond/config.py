@@ -103,6 +103,13 @@ class ImuSensor(_Sensor, tag="imu"):
     orientation_max_sigma: float = 3.0  # above: "not measured"
     gyro_min_sigma: float = 0.0005  # floor, rad/s
     gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
+    # absolute yaw, as navsat_transform: yaw in ENU = reading + yaw_offset + magnetic_declination (rad)
+    yaw_offset: float = 0.0  # e.g. pi/2 for an IMU that reads 0 facing north
+    magnetic_declination: float = 0.0  # for a magnetometer's yaw (magnetic north), rad
+    # beside a gps or absolute pose: what is left of the offset is estimated, with this prior (rad)
+    # and random walk (rad/sqrt(s)); yaw_offset_sigma = 0 takes the corrected yaw as the heading
+    yaw_offset_sigma: float = 0.5
+    yaw_offset_walk: float = 0.05
 
 
 POSE_MSGTYPES = (

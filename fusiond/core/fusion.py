@@ -29,7 +29,7 @@ import structlog
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..estimator import (
     ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
-    predict,
+    YawOffsetBlock, predict,
 )
 from ..estimator import mat3
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
@@ -109,6 +109,11 @@ class FusionCore:
         if any(isinstance(s, OdomSensor) and (s.scale_estimation or (s.scale_estimation is None and absolute))
                for s in self.sensors):
             blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
+        # An absolute IMU yaw beside an absolute position or pose: heading + an estimated offset.
+        yaw_imu = next((s for s in self.sensors if isinstance(s, ImuSensor) and s.orientation == "absolute"
+                        and s.yaw_offset_sigma > 0.0), None)
+        if yaw_imu is not None and absolute:
+            blocks.append(YawOffsetBlock(yaw_imu.yaw_offset_sigma, yaw_imu.yaw_offset_walk))
         for sc in self.sensors:  # at most one GPS (it defines the world frame)
             if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
                 blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
@@ -123,7 +128,7 @@ class FusionCore:
         self.tilt_mask[[0, 1, 2, 5]] = False
         if self.has_bias:
             self.tilt_mask[self.layout.error["gyro_bias"].start + 2] = False
-        for name in ("gyro_scale", "wheel_scale", "gps_error"):
+        for name in ("gyro_scale", "wheel_scale", "gps_error", "yaw_offset"):
             if self.layout.has(name):
                 self.tilt_mask[self.layout.error[name]] = False
         # While the GPS heading is unknown a fix may only move position: a wrong heading
@@ -147,8 +152,9 @@ class FusionCore:
         if self.frame_index >= 0:
             self.delta_mask = np.ones(self.layout.error_dim, dtype=bool)
             self.delta_mask[[0, 1, 2, 5]] = False
-            if self.layout.has("gps_error"):  # a pose delta says nothing about the GPS error
-                self.delta_mask[self.layout.error["gps_error"]] = False
+            for name in ("gps_error", "yaw_offset"):  # a pose delta says nothing about these
+                if self.layout.has(name):
+                    self.delta_mask[self.layout.error[name]] = False
         self.noise_density = self.layout.noise_density(
             np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
         )
