@@ -87,7 +87,7 @@ class OdomSensor(_Sensor, tag="odom"):
     # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
     # makes it observable; false: an explicit opt-out
     scale_estimation: bool | None = None
-    twist_correlation_s: float = 0.5  # the twist covariance is a velocity error lasting this long, s
+    twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
 
 
 class ImuSensor(_Sensor, tag="imu"):
