@@ -104,7 +104,7 @@ class OdomSensor(_Sensor, tag="odom"):
     # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
     # makes it observable; false: an explicit opt-out
     scale_estimation: bool | None = None
-    twist_correlation_s: float = 0.5  # the twist covariance is a velocity error lasting this long, s
+    twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
 
 
 class ImuSensor(_Sensor, tag="imu"):
@@ -122,6 +122,13 @@ class ImuSensor(_Sensor, tag="imu"):
     gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
     tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer
     gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics
+    # absolute yaw, as navsat_transform: yaw in ENU = reading + yaw_offset + magnetic_declination (rad)
+    yaw_offset: float = 0.0  # e.g. pi/2 for an IMU that reads 0 facing north
+    magnetic_declination: float = 0.0  # for a magnetometer's yaw (magnetic north), rad
+    # beside a gps or absolute pose: what is left of the offset is estimated, with this prior (rad)
+    # and random walk (rad/sqrt(s)); yaw_offset_sigma = 0 takes the corrected yaw as the heading
+    yaw_offset_sigma: float = 0.5
+    yaw_offset_walk: float = 0.05
 
 
 POSE_MSGTYPES = (

@@ -51,6 +51,11 @@ class World:
     gps_freeze: tuple[tuple[float, float], ...] = ()  # the receiver repeats its last fix in [t0, t1)
     gps_alt_error_tau: float = 0.0  # > 0: the altitude alone wanders (Gauss-Markov) beyond the stated sigma
     gps_alt_error_sigma: float = 0.0  # its steady-state std dev, m
+    # an absolute IMU yaw (a magnetometer): off by default (yaw "not measured", as before)
+    imu_yaw_offset: float | None = None  # not None: the IMU reports yaw = truth + this + disturbance + noise
+    imu_yaw_disturbance: tuple[float, float] = (0.0, 60.0)  # (amplitude rad, period s) of a slow sinusoid
+    imu_yaw_sigma: float = 0.02  # its noise and stated std dev, rad
+    imu_yaw_steps: tuple[tuple[float, float, float], ...] = ()  # (t0, t1, rad): a disturbance switched on
     # pose sensor
     pose_rate: float = 0.0  # 0: no pose sensor
     pose_sigma: tuple[float, float] = (0.01, 0.005)  # position m, orientation rad
@@ -59,9 +64,6 @@ class World:
     pose_origin_jump: tuple[float, float, float, float] | None = None  # (t, dx, dy, dyaw): a relocalisation
     pose_increment_noise: bool = False  # visual odometry: pose_sigma is per message increment, and accumulates
     # an IMU that also reports an absolute (magnetometer) yaw: offset + slow disturbance (issue 12)
-    imu_yaw: bool = False
-    imu_yaw_offset: float = 0.0  # rad: declination, mounting
-    imu_yaw_wander: float = 0.0  # rad amplitude of a slow disturbance (period ~16 s)
     seed: int = 5
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw (every odom stamp)
     fixes: list[tuple[float, float, float]] = field(default_factory=list)  # t east north of every valid fix
@@ -87,6 +89,7 @@ def simulate(w: World) -> list:
     gm_rng = np.random.default_rng(w.seed + 1000)  # own stream: worlds without it draw as before
     gm = gm_rng.normal(0, w.gps_error_sigma, 3) if w.gps_error_tau > 0 else np.zeros(3)
     gm_t = 0.0
+    yaw_rng = np.random.default_rng(w.seed + 3000)
     alt_rng = np.random.default_rng(w.seed + 2000)  # own stream: worlds without it draw as before
     alt_err = alt_rng.normal(0, w.gps_alt_error_sigma) if w.gps_alt_error_tau > 0 else 0.0
     last_fix = None
@@ -107,13 +110,16 @@ def simulate(w: World) -> list:
             nxt["imu"] += 1.0 / w.imu_rate
             gs = w.gyro_sigma
             gz = wz / w.gyro_scale + w.gyro_bias + rng.normal(0, gs)
-            if w.imu_yaw:
-                mag = yaw + w.imu_yaw_offset + w.imu_yaw_wander * math.sin(0.4 * rel) + rng.normal(0, 0.002)
-                q, yaw_var = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), mag), 4e-6
-            else:
-                q, yaw_var = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), 0.0), 1e6
-            out.append(ImuSample("imu", t, q, (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, yaw_var),
-                                 (rng.normal(0, gs), rng.normal(0, gs), gz), (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
+            imu_yaw, yaw_var = 0.0, 1e6
+            if w.imu_yaw_offset is not None:  # own stream: worlds without it draw as before
+                amp, period = w.imu_yaw_disturbance
+                imu_yaw = (yaw + w.imu_yaw_offset + amp * math.sin(2 * math.pi * rel / period)
+                           + yaw_rng.normal(0, w.imu_yaw_sigma)
+                           + sum(d for t0, t1, d in w.imu_yaw_steps if t0 <= rel < t1))
+                yaw_var = w.imu_yaw_sigma**2
+            out.append(ImuSample("imu", t, rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), imu_yaw),
+                                 (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, yaw_var), (rng.normal(0, gs), rng.normal(0, gs), gz),
+                                 (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
         if w.gps_rate > 0 and rel >= nxt["gps"]:
             nxt["gps"] += 1.0 / w.gps_rate
             n_fix += 1

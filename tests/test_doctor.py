@@ -115,17 +115,20 @@ def test_magnetometer_offset_and_disturbance_without_gps_blames_the_imu_yaw():
 
 
 def test_magnetometer_offset_and_disturbance_with_gps_blames_the_imu_not_the_gps():
-    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.4, imu_yaw_wander=0.3)
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.4, imu_yaw_sigma=0.002,
+                         imu_yaw_disturbance=(0.3, 2 * math.pi / 0.4))
     verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = true'), sim_gps.simulate(w))
     v = one(verdicts, "imu", "orientation")
     assert v.level == "problem" and v.key == "sensors.imu.orientation" and "roll_pitch" in v.suggestion
+    # with the yaw-offset state the filter keeps the GPS consistent (its NIS is fine); if it were not,
+    # the GPS verdict would have to blame the IMU, never ask for more GPS noise
     gps = one(verdicts, "gps", "position")
-    assert gps.key != "sensors.gps.position_noise" and "imu/orientation" in gps.message, gps
+    assert gps.level == "ok" or (gps.key != "sensors.gps.position_noise" and "imu/orientation" in gps.message), gps
     never_trusts_more(verdicts, "imu")
 
 
 def test_magnetometer_offset_alone_with_gps_gets_a_yaw_offset():
-    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.4)
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.4, imu_yaw_sigma=0.002)
     verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = true'), sim_gps.simulate(w))
     v = one(verdicts, "imu", "orientation")
     assert v.level == "problem" and v.key == "sensors.imu.yaw_offset"
@@ -133,7 +136,8 @@ def test_magnetometer_offset_alone_with_gps_gets_a_yaw_offset():
     # 10 m chords: 0.04 rad per chord, ~20 chords) is about 0.01 rad, so 0.05 is > 3 standard errors
     (value,) = [float(x) for x in re.findall(r"-?\d+\.\d+", v.suggestion)]
     assert value == pytest.approx(-0.4, abs=0.05)
-    assert one(verdicts, "gps", "position").key == "sensors.imu.yaw_offset"
+    gps = one(verdicts, "gps", "position")  # consistent thanks to the estimated offset, or blaming it
+    assert gps.level == "ok" or gps.key == "sensors.imu.yaw_offset", gps
 
 
 # -- wheels ------------------------------------------------------------------------------------------
@@ -334,14 +338,16 @@ def test_magnetometer_yaw_without_any_gyro_is_judged_against_the_gps_track():
     0.04 rad), so the IMU yaw is blamed and the GPS is not told to state more noise."""
     from fusiond.samples import ImuSample
 
-    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw=True, imu_yaw_offset=0.3, imu_yaw_wander=0.2)
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.3, imu_yaw_sigma=0.002,
+                         imu_yaw_disturbance=(0.2, 2 * math.pi / 0.4))
     samples = [ImuSample(s.sensor, s.stamp, s.orientation, s.orientation_covariance, (0.0, 0.0, 0.0),
                          (-1.0,) + (0.0,) * 8) if isinstance(s, ImuSample) else s for s in sim_gps.simulate(w)]
     verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = false'), samples)
     v = one(verdicts, "imu", "orientation")
     assert v.level == "problem" and v.key == "sensors.imu.orientation" and "GPS track" in v.message
     assert v.evidence["imu_vs_gps_track_wander_rad"] == pytest.approx(0.2 / math.sqrt(2), rel=0.35)
-    assert one(verdicts, "gps", "position").key == "sensors.imu.orientation"
+    gps = one(verdicts, "gps", "position")  # consistent thanks to the estimated offset, or blaming the IMU
+    assert gps.level == "ok" or gps.key == "sensors.imu.orientation", gps
     never_trusts_more(verdicts, "imu")
 
 

@@ -675,8 +675,8 @@ def test_navsat_output_needs_a_gps_sensor():
         loads('[output]\nnavsat_key = "fix"\n[[sensors]]\nname = "w"\nkind = "odom"\nkey = "odom"\n')
 
 
-def test_gps_with_an_absolute_imu_yaw_takes_heading_from_the_imu():
-    """REP-103 absolute yaw is already ENU: no chord-based heading initialisation to fight it."""
+def test_gps_with_a_trusted_absolute_imu_yaw_takes_heading_from_the_imu():
+    """REP-103 absolute yaw trusted as ENU (yaw_offset_sigma = 0): no heading initialisation to fight it."""
     from fusiond.config import loads
     from fusiond.core.fusion import FusionCore
     from fusiond.estimator import rotation as rot
@@ -692,6 +692,7 @@ name = "imu"
 kind = "imu"
 key = "imu"
 orientation = "absolute"
+yaw_offset_sigma = 0.0
 [[sensors]]
 name = "gps"
 kind = "gps"

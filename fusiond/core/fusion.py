@@ -32,7 +32,7 @@ from .. import reasons
 from ..errors import CoreError
 from ..estimator import (
     ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
-    predict,
+    YawOffsetBlock, predict,
 )
 from ..estimator import mat3
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
@@ -122,6 +122,11 @@ class FusionCore:
         if any(isinstance(s, OdomSensor) and (s.scale_estimation or (s.scale_estimation is None and absolute))
                for s in self.sensors):
             blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
+        # An absolute IMU yaw beside an absolute position or pose: heading + an estimated offset.
+        yaw_imu = next((s for s in self.sensors if isinstance(s, ImuSensor) and s.orientation == "absolute"
+                        and s.yaw_offset_sigma > 0.0), None)
+        if yaw_imu is not None and absolute:
+            blocks.append(YawOffsetBlock(yaw_imu.yaw_offset_sigma, yaw_imu.yaw_offset_walk))
         for sc in self.sensors:  # at most one GPS (it defines the world frame)
             if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
                 blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
@@ -136,7 +141,7 @@ class FusionCore:
         self.tilt_mask[[0, 1, 2, 5]] = False
         if self.has_bias:
             self.tilt_mask[self.layout.error["gyro_bias"].start + 2] = False
-        for name in ("gyro_scale", "wheel_scale", "gps_error"):
+        for name in ("gyro_scale", "wheel_scale", "gps_error", "yaw_offset"):
             if self.layout.has(name):
                 self.tilt_mask[self.layout.error[name]] = False
         # While the GPS heading is unknown a fix may only move position: a wrong heading
@@ -160,8 +165,9 @@ class FusionCore:
         if self.frame_index >= 0:
             self.delta_mask = np.ones(self.layout.error_dim, dtype=bool)
             self.delta_mask[[0, 1, 2, 5]] = False
-            if self.layout.has("gps_error"):  # a pose delta says nothing about the GPS error
-                self.delta_mask[self.layout.error["gps_error"]] = False
+            for name in ("gps_error", "yaw_offset"):  # a pose delta says nothing about these
+                if self.layout.has(name):
+                    self.delta_mask[self.layout.error[name]] = False
         self.noise_density = self.layout.noise_density(
             np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
         )
@@ -471,18 +477,15 @@ class FusionCore:
         s = self.state
         assert s is not None
         if old is not None:
-            s.ekf.x[7:] = old.ekf.x[7:]
-            s.ekf.P[6:, 6:] = old.ekf.P[6:, 6:]
+            s.ekf.keep_beyond_pose(old.ekf)  # biases, scales, offsets: what the filter has learnt
             s.period = list(old.period)
             s.frame_ready, s.enu, s.heading_ready = old.frame_ready, old.enu, old.heading_ready
         s.t = stamp
-        s.ekf.x[0:3] = p
-        s.ekf.x[3:7] = q / norm
-        s.ekf.P[0:6, :] = 0.0
-        s.ekf.P[:, 0:6] = 0.0
-        s.ekf.P[0:6, 0:6] = cov
+        s.ekf.set_position(p.tolist())
+        s.ekf.set_attitude(q / norm)
+        s.ekf.reset_covariance(list(range(6)), cov)
         s.attitude_ready = True
-        self._suspect = 0
+        self._abandon_jump()  # samples held for a time jump belong to the timeline before the reset
         self._reset_history()  # its base is this state: nothing older can be placed ...
         # ... once the history holds an entry at the set stamp (with an empty history an older
         # sample would not count as late). The marker (sensor index -1) is never re-applied:

@@ -4,9 +4,10 @@ from .ekf import ErrorStateEKF, UpdateResult
 from .gps_error import GpsErrorBlock
 from .motion import MotionInput, predict
 from .scale import GyroScaleBlock, WheelScaleBlock
-from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout
+from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout, YawOffsetBlock
 
 __all__ = [
     "ErrorStateEKF", "UpdateResult", "MotionInput", "predict",
     "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "WheelScaleBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
+    "YawOffsetBlock",
 ]

@@ -216,6 +216,16 @@ class ErrorStateEKF:
         P[np.ix_(rest, group)] = 0.0
         self.P = P
 
+    def keep_beyond_pose(self, other: "ErrorStateEKF") -> None:
+        """Take every block after the pose (biases, scales, offsets) from ``other``, with their
+        covariance among themselves; their correlation with the (re-set) pose is dropped."""
+        self.x[7:] = other.x[7:]
+        P = self.P.copy()
+        P[6:, :] = 0.0
+        P[:, 6:] = 0.0
+        P[6:, 6:] = other.P[6:, 6:]
+        self.P = P
+
     def set_position(self, p, rows: tuple[int, ...] = (0, 1, 2)) -> None:
         """Set the nominal position components ``rows`` (covariance: ``reset_covariance``)."""
         for i in rows:

@@ -26,6 +26,10 @@ the same position uncertainty at 10 Hz as at 83 Hz (per message it would shrink 
 1/rate, and a GPS could no longer correct along the track). ``twist_correlation``
 holds tau (the odometry sensor's ``twist_correlation_s``); 0 gives back the
 per-message model. The filter's own ``process_noise`` is a density already.
+Rates stay white per sample: a gyro's noise is, and the wheels' yaw rate drives
+heading only without a gyro, where skid-steer wheels misreading the turn must keep
+showing as inconsistent innovations of the absolute yaw (the doctor's cue), not be
+hidden behind a widened prediction.
 
 This runs once per message: the 3x3 algebra is done on Python floats (several
 times cheaper than numpy calls on 3-vectors); numpy only sees the n x n blocks.
@@ -161,8 +165,7 @@ def predict(
         if u.linear_period > 0.0:
             Q[0:3, 0:3] = mat3.sandwich(G_lin, u.linear_cov, max(u.linear_period, memory) / dt)
         if u.angular_period > 0.0:
-            period = u.angular_period if u.from_gyro else max(u.angular_period, memory)
-            Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, period / dt)
+            Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, u.angular_period / dt)
         Q.reshape(-1)[:: n + 1] += noise_density * dt
         if dynamic:
             for blk, n0, e0 in dynamic:

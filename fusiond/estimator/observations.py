@@ -61,6 +61,20 @@ def orientation(
     return y, H, R
 
 
+def orientation_with_offset(
+    layout: StateLayout, x: np.ndarray, z_rpy: tuple[float, float, float], cov: tuple[float, ...],
+    rows: tuple[int, ...], offset: str = "yaw_offset",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``orientation`` of a sensor whose yaw reads heading + o (o: the ``offset`` block):
+    h_yaw = yaw(q) + o, so the yaw row gains a 1 in o's column."""
+    y, H, R = orientation(layout, x, z_rpy, cov, rows)
+    if 2 in rows:
+        k = rows.index(2)
+        y[k] = rot.wrap(float(y[k]) - float(x[layout.nominal[offset]][0]))
+        H[k, layout.error[offset].start] = 1.0
+    return y, H, R
+
+
 def zero_rate(
     layout: StateLayout, x: np.ndarray, gyro: tuple[float, float, float], cov: tuple[float, ...]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -164,6 +164,31 @@ class GyroBiasBlock(InputBlock):
         return ((-g0, -g1, -g2), (-g3, -g4, -g5), (-g6, -g7, -g8))
 
 
+class YawOffsetBlock(StateBlock):
+    """The offset o of an absolute-yaw sensor's heading reference: it reads yaw + o.
+
+    A magnetometer's yaw carries declination, mounting offsets and disturbances near motors
+    and steel that last seconds to minutes; a constant plus a slow random walk. It is
+    observable only beside an absolute position or pose (GPS track, pose sensor), which pin
+    the heading itself; the gyro then carries the heading between, and the yaw reading mostly
+    moves o (when the walk is large against the gyro's) instead of the heading.
+    """
+
+    name = "yaw_offset"
+    nominal_size = 1
+    error_size = 1
+
+    def __init__(self, sigma: float, walk: float) -> None:
+        self.sigma = sigma
+        self.walk = walk
+
+    def initial_sigma(self) -> list[float]:
+        return [self.sigma]
+
+    def random_walk(self) -> list[float]:
+        return [self.walk]
+
+
 class StateLayout:
     """Offsets of each block in the nominal vector and in the error vector."""
 

@@ -63,8 +63,9 @@ class HeadingTrack:
 
     points: tuple[tuple[float, float, float, float, float], ...]  # (gx, gy, dx, dy, weight)
     base: tuple[float, float, float]
-    first: tuple[float, float]  # the first fix, for the extent
+    first: tuple[float, float]  # the first fix
     applied: bool = False  # a provisional fit has been applied
+    extent: float = 0.0  # farthest fix from the first so far, m (a loop back to the start keeps it)
 
 
 def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp: float, emit: bool, late: bool):
@@ -141,13 +142,13 @@ def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[flo
     points = track.points + ((z[0], z[1], dx, dy, 1.0 / var),)
     if len(points) > HEADING_MAX_FIXES:
         points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
-    track = HeadingTrack(points, track.base, track.first, track.applied)
+    extent = max(track.extent, math.hypot(z[0] - track.first[0], z[1] - track.first[1]))
+    track = HeadingTrack(points, track.base, track.first, track.applied, extent)
     s.gps_anchor = track
-    extent = math.hypot(z[0] - track.first[0], z[1] - track.first[1])
     if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
         return
     d0 = points[0]
-    if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * extent:
+    if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * math.hypot(z[0] - d0[0], z[1] - d0[1]):
         # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
         s.gps_anchor = HeadingTrack(((z[0], z[1], dx, dy, 1.0 / var),), track.base, (z[0], z[1]), track.applied)
         return
@@ -195,7 +196,7 @@ def _apply_fit(core: "FusionCore", s: FilterState, cfg: GpsSensor, fit: RigidFit
         log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
                  fixes=len(points))
     else:
-        s.gps_anchor = HeadingTrack(points, (bx, by, track.base[2] + t[2]), track.first, True)
+        s.gps_anchor = HeadingTrack(points, (bx, by, track.base[2] + t[2]), track.first, True, track.extent)
         if not track.applied:
             log.info("gps_heading_provisional", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
                      fixes=len(points))

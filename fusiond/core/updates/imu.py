@@ -30,6 +30,7 @@ REOPEN_AFTER = 4  # consecutive rejected windows of one axis that agree: the bia
 AGREE_SIGMAS = 4.0
 LEARNING_PRIOR_RATIO = 10.0  # prior variance this many times the window's: the update learns, it does not test  # ... "agree": their spread within this many sigma of one window's mean
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
+YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (yaw_agrees_with_gyro)
 
 
 def apply_imu(core: "FusionCore", s: FilterState, idx: int, inp: ImuInput, stamp: float, emit: bool, late: bool):
@@ -40,33 +41,79 @@ def apply_imu(core: "FusionCore", s: FilterState, idx: int, inp: ImuInput, stamp
         if core.has_bias:
             records.extend(learn_bias_at_rest(core, s, cfg, inp, stamp, emit, late))
     if inp.rpy is not None and inp.rows:
-        rpy = inp.rpy
+        rpy, rows = inp.rpy, inp.rows
+        absolute = cfg.orientation == "absolute"
+        if absolute and (cfg.yaw_offset or cfg.magnetic_declination):  # navsat_transform's convention
+            rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] + cfg.yaw_offset + cfg.magnetic_declination))
         if not s.attitude_ready:
-            initialise_attitude(core, s, rpy, cfg.orientation == "absolute")
+            initialise_attitude(core, s, rpy, absolute)
         if cfg.orientation == "relative":
             off = s.yaw_offset.get(cfg.name)
             if off is None:
                 off = rot.wrap(rpy[2] - rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2])
                 s.yaw_offset[cfg.name] = off
             rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] - off))
-        y, H, R = obs.orientation(core.layout, s.ekf.x, rpy, inp.rpy_cov, inp.rows)
-        scale = adaptive_scale(core, s, cfg, "orientation")
-        tilt_only = 2 not in inp.rows
-        if tilt_only:
-            heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
-        res = s.ekf.update(y, H, R * scale if scale != 1.0 else R, cfg.mahalanobis_threshold,
-                           core.tilt_mask if tilt_only else None)
-        if tilt_only and not res.rejected:
-            restore_heading(s, heading)
-        if cfg.adaptive:
-            adapt(core, s, cfg, "orientation", res.nis, len(inp.rows))
-        if emit:
-            records.append(DiagnosticsRecord(stamp, cfg.name, [obs.RPY_NAMES[i] for i in inp.rows], y.tolist(),
-                                             res.innovation_var, res.nis, len(inp.rows), res.rejected,
-                                             channel="orientation", late=late))
+        offset = absolute and core.layout.has("yaw_offset")
+        if offset and 2 in rows:
+            jump, allowed = yaw_jump(core, s, cfg, rpy[2], inp.rpy_cov[8], stamp)
+            if jump * jump > YAW_JUMP_GATE**2 * allowed:
+                rows = tuple(i for i in rows if i != 2)  # this sample's yaw is not fused (counted as rejected)
+                if emit:
+                    records.append(DiagnosticsRecord(stamp, cfg.name, ["yaw"], [jump], [allowed], jump * jump / allowed,
+                                                     1, True, channel="yaw_jump", late=late))
+        if rows:
+            records += _fuse_orientation(core, s, cfg, rpy, inp.rpy_cov, rows, offset, stamp, emit, late)
     if inp.accel is not None:
         records.extend(tilt_from_gravity(core, s, cfg, inp.accel, stamp, emit, late))
     return records
+
+
+def _fuse_orientation(core: "FusionCore", s: FilterState, cfg: ImuSensor, rpy, cov, rows: tuple[int, ...],
+                      offset: bool, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+    observe = obs.orientation_with_offset if offset else obs.orientation
+    y, H, R = observe(core.layout, s.ekf.x, rpy, cov, rows)
+    scale = adaptive_scale(core, s, cfg, "orientation")
+    tilt_only = 2 not in rows
+    if tilt_only:
+        heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
+    res = s.ekf.update(y, H, R * scale if scale != 1.0 else R, cfg.mahalanobis_threshold,
+                       core.tilt_mask if tilt_only else None)
+    if tilt_only and not res.rejected:
+        restore_heading(s, heading)
+    if offset and not tilt_only:
+        s.yaw_offset[cfg.name + "/yaw_residual"] = _yaw_residual(core, s, rpy[2])  # after the update
+    if cfg.adaptive:
+        adapt(core, s, cfg, "orientation", res.nis, len(rows))
+    if not emit:
+        return []
+    return [DiagnosticsRecord(stamp, cfg.name, [obs.RPY_NAMES[i] for i in rows], y.tolist(), res.innovation_var,
+                              res.nis, len(rows), res.rejected, channel="orientation", late=late)]
+
+
+def _yaw_residual(core: "FusionCore", s: FilterState, yaw: float) -> float:
+    o = float(s.ekf.x[core.layout.nominal["yaw_offset"]][0])
+    return rot.wrap(yaw - rot.yaw(tuple(s.ekf.x[3:7].tolist())) - o)
+
+
+def yaw_jump(core: "FusionCore", s: FilterState, cfg: ImuSensor, yaw: float, var: float,
+             stamp: float) -> tuple[float, float]:
+    """How far the yaw reading jumped against the gyro-carried heading since the previous sample,
+    and the variance the model allows that jump.
+
+    Between two samples the filter's heading follows the gyro, so the yaw residual (reading -
+    heading - offset) changes only by the reading's noise (twice) and the offset's random walk
+    over the interval. A larger jump is the reading's own (a disturbance switching on, a
+    magnetometer near a motor): beyond YAW_JUMP_GATE sigma that sample's yaw is not fused. The
+    residual is remembered either way, so a disturbance that persists is fused from the next
+    sample on, and its slow part goes into the offset.
+    """
+    r = _yaw_residual(core, s, yaw)
+    prev = s.yaw_offset.get(cfg.name + "/yaw_residual")
+    last = s.yaw_offset.get(cfg.name + "/yaw_stamp", stamp)
+    s.yaw_offset[cfg.name + "/yaw_residual"] = r
+    s.yaw_offset[cfg.name + "/yaw_stamp"] = stamp
+    allowed = 2.0 * var + cfg.yaw_offset_walk**2 * max(stamp - last, 0.0)
+    return (0.0 if prev is None else rot.wrap(r - prev)), allowed
 
 
 def restore_heading(s: FilterState, heading: float) -> None:
@@ -74,7 +121,7 @@ def restore_heading(s: FilterState, heading: float) -> None:
     its Euler yaw a little (second order); a rotation about world z puts the heading back
     exactly and leaves roll and pitch as the update set them."""
     q = tuple(s.ekf.x[3:7].tolist())
-    s.ekf.x[3:7] = rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q)
+    s.ekf.set_attitude(rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q))
 
 
 def tilt_from_gravity(core: "FusionCore", s: FilterState, cfg: ImuSensor, accel: tuple[float, float, float],
@@ -190,7 +237,7 @@ def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: 
 def initialise_attitude(core: "FusionCore", s: FilterState, rpy: tuple[float, float, float], with_yaw: bool) -> None:
     """Take roll/pitch (and yaw when absolute) from the first orientation sample."""
     yaw = rpy[2] if with_yaw else rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2]
-    s.ekf.x[3:7] = rot.from_rpy(rpy[0], rpy[1], yaw)
+    s.ekf.set_attitude(rot.from_rpy(rpy[0], rpy[1], yaw))
     s.attitude_ready = True
 
 
