@@ -35,21 +35,19 @@ from ..estimator import (
     YawOffsetBlock, predict,
 )
 from ..estimator import mat3
-from ..estimator.geodesy import EnuFrame, enu_to_geodetic
-from ..samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+from ..estimator.geodesy import enu_to_geodetic
+from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
-from .sensors import GpsPolicy, ImuPolicy, OdomPolicy, PosePolicy, Rejected
+from .sensors import ImuPolicy, PosePolicy, Rejected
 from .state import FilterState
-from .updates import accumulate_motion, apply_gps, apply_imu, apply_odom, apply_pose
+from .updates import KINDS
 
 log = structlog.get_logger("fusiond.core")
 
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
 # sensor kind -> (sample policy, sample type, what an applied sample does)
-_KINDS = {OdomSensor: (OdomPolicy, OdomSample, apply_odom), ImuSensor: (ImuPolicy, ImuSample, apply_imu),
-          GpsSensor: (GpsPolicy, GpsSample, apply_gps), PoseSensor: (PosePolicy, PoseSample, apply_pose)}
 
 
 class Estimate(msgspec.Struct, gc=False):
@@ -106,9 +104,13 @@ class FusionCore:
         fc = cfg.filter
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
-        self.policies = [_KINDS[type(s)][0](s) for s in self.sensors]
-        self._sample_types = [_KINDS[type(s)][1] for s in self.sensors]
-        self._handlers = [_KINDS[type(s)][2] for s in self.sensors]
+        kinds = [KINDS[type(s)] for s in self.sensors]
+        self.policies = [k.policy(s) for k, s in zip(kinds, self.sensors)]
+        self._sample_types = [k.sample for k in kinds]
+        self._handlers = [k.apply for k in kinds]
+        # each kind's own bookkeeping in the filter state (once per kind, in configuration order)
+        self._start_hooks = list(dict.fromkeys(k.on_start for k in kinds if k.on_start is not None))
+        self._predict_hooks = list(dict.fromkeys(k.on_predict for k in kinds if k.on_predict is not None))
         self.odom_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, OdomSensor)), -1)
         gyro_imus = [i for i, s in enumerate(self.sensors) if isinstance(s, ImuSensor) and s.angular_velocity]
         blocks = [PoseBlock(fc.initial_sigma[0], fc.initial_sigma[1])]
@@ -533,13 +535,10 @@ class FusionCore:
         s.attitude_ready = False
         s.yaw_offset = {}
         s.adaptive = {}
-        s.frame_ready = False
-        gps = self.sensors[self.gps_index] if self.gps_index >= 0 else None
-        s.enu = EnuFrame(*gps.datum) if isinstance(gps, GpsSensor) and gps.datum is not None else None
-        s.heading_ready = False
-        s.gps_anchor = None  # (first fix in ENU, filter antenna lever R t then) for the heading
-        s.travel = _ZERO3  # dead-reckoned base motion since that fix
-        s.pose_anchor = {}  # differential pose: name -> (measured position, q, predicted motion since (dp, dq))
+        s.frame_ready = False  # the world frame: defined by the first absolute sample
+        s.enu, s.heading_ready, s.gps_anchor, s.travel, s.pose_anchor = None, False, None, _ZERO3, {}
+        for hook in self._start_hooks:
+            hook(self, s)
         self.state = s
         self._reset_history()
 
@@ -598,12 +597,8 @@ class FusionCore:
             seg = t1 - t0
             u = self._inputs(s, 0.5 * (t0 + t1))  # fresh throughout the segment iff fresh at its middle
             x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density)
-            if s.gps_anchor is not None:  # GPS heading pending: accumulate the dead-reckoned motion
-                x0 = s.ekf.x
-                tr = s.travel
-                s.travel = (tr[0] + float(x[0] - x0[0]), tr[1] + float(x[1] - x0[1]), tr[2] + float(x[2] - x0[2]))
-            if s.pose_anchor:
-                s.pose_anchor = accumulate_motion(s.pose_anchor, s.ekf.x, x)
+            for hook in self._predict_hooks:  # the kinds' own bookkeeping (GPS track, pose anchors)
+                hook(s, s.ekf.x, x)
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
             s.ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it

@@ -211,3 +211,19 @@ def _split_first_fix(s: FilterState, layout, error: str, rows: tuple[int, ...] =
     for i in rows:
         J[i, eb + i] = -1.0
     s.ekf.map_errors(J)
+
+
+def on_start(core: "FusionCore", s: FilterState) -> None:
+    """A fresh state: the ENU frame at the configured datum (or none yet), heading unknown."""
+    gps = core.sensors[core.gps_index]
+    s.enu = EnuFrame(*gps.datum) if isinstance(gps, GpsSensor) and gps.datum is not None else None
+    s.heading_ready = False
+    s.gps_anchor = None  # the track since the first fix, while the heading is being found
+    s.travel = _ZERO3  # dead-reckoned base motion since that fix
+
+
+def on_predict(s: FilterState, x0, x1) -> None:
+    """While the heading is pending, accumulate the dead-reckoned motion of each prediction."""
+    if s.gps_anchor is not None:
+        tr = s.travel
+        s.travel = (tr[0] + float(x1[0] - x0[0]), tr[1] + float(x1[1] - x0[1]), tr[2] + float(x1[2] - x0[2]))

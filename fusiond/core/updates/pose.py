@@ -104,3 +104,13 @@ def accumulate_motion(anchors: dict, x0: np.ndarray, x1: np.ndarray) -> dict:
         a = mat3.apply(rot.matrix9(dq), step_p)
         out[name] = (mp, mq, ((dp[0] + a[0], dp[1] + a[1], dp[2] + a[2]), rot.normalize(rot.mul(dq, step_q))))
     return out
+
+
+def on_start(core: "FusionCore", s: FilterState) -> None:
+    s.pose_anchor = {}  # differential pose: name -> (measured position, q, predicted motion since (dp, dq))
+
+
+def on_predict(s: FilterState, x0, x1) -> None:
+    """Carry each differential sensor's anchor along the predicted motion."""
+    if s.pose_anchor:
+        s.pose_anchor = accumulate_motion(s.pose_anchor, x0, x1)
