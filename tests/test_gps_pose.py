@@ -707,7 +707,9 @@ datum = [48.0, 11.0, 500.0]
         core.ingest(OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), cov36))
         core.ingest(ImuSample("imu", t + 0.001, q, (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0.0,) * 3, (1e-6,) * 9))
         if k % 10 == 0:
-            steps = core.ingest(GpsSample("gps", t + 0.002, 48.0, 11.0, 500.0, 0, (1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0), 2))
+            # distinct coordinates (bit-identical repeats while moving would be a frozen receiver)
+            steps = core.ingest(GpsSample("gps", t + 0.002, 48.0 + 1e-7 * k, 11.0, 500.0, 0,
+                                          (1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0), 2))
     assert core.heading_known
     assert steps.records and steps.records[0].channel == "position"
     assert rot.to_rpy(tuple(core.pose()[1][3:7].tolist()))[2] == pytest.approx(1.0, abs=0.01)
