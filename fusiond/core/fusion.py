@@ -155,8 +155,8 @@ class FusionCore:
         self.frame_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)
                                  or (isinstance(s, PoseSensor) and not s.differential)), -1)
         self.gps_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)), -1)
-        # An IMU with absolute yaw (REP-103: ENU, yaw 0 = east) already gives the GPS frame its
-        # heading: the chord-based initialisation would only fight it.
+        # An IMU with absolute yaw (REP-103: ENU, yaw 0 = east): trusted as the GPS frame's heading when
+        # yaw_offset_sigma = 0; otherwise read as heading + an estimated offset (the yaw_offset block).
         self.absolute_yaw = any(isinstance(s, ImuSensor) and s.orientation == "absolute" for s in self.sensors)
         # A pose delta fused against the filter's previous pose acts on the absolute pose as
         # if that previous pose were exact, which collapses P of position and heading. Alone

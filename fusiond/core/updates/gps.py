@@ -50,22 +50,28 @@ log = structlog.get_logger("fusiond.core")
 HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipping or GPS wander, start over
 HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad
 HEADING_PROVISIONAL_SIGMA = 0.3  # rad: apply the rigid fit provisionally (fixes still move position only)
-HEADING_READY_SIGMA = 0.05  # rad: the heading is known (an EKF linearises 0.1 rad well), fixes become full updates
+HEADING_READY_SIGMA = 0.05  # rad: the heading is known, fixes become full (gated) updates
 HEADING_MAX_FIXES = 400  # fixes kept for the fit; beyond, every other one is dropped (the extent stays)
+FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True, slots=True)
-class HeadingTrack:
-    """Fixes paired with the dead-reckoned antenna position at their stamps (immutable: shared by
-    history snapshots). ``base`` + the state's ``travel`` is the dead-reckoned base position."""
+class GpsTrack:
+    """What the GPS keeps between fixes (immutable: shared by history snapshots): while the heading
+    is unknown, the fixes paired with the dead-reckoned antenna position at their stamps; always,
+    the newest coordinates, to recognise a frozen receiver. ``base`` + the state's ``travel`` is
+    the dead-reckoned base position."""
 
     points: tuple[tuple[float, float, float, float, float], ...]  # (gx, gy, dx, dy, weight)
     base: tuple[float, float, float]
     first: tuple[float, float]  # the first fix
     applied: bool = False  # a provisional fit has been applied
     extent: float = 0.0  # farthest fix from the first so far, m (a loop back to the start keeps it)
+    t0: float = 0.0  # stamp of the first fix
+    last_lla: tuple[float, float, float] | None = None  # the newest fix's coordinates, as received ...
+    last_dr: tuple[float, float] = (0.0, 0.0)  # ... and the dead-reckoned base position when they first came
 
 
 def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp: float, emit: bool, late: bool):
@@ -91,14 +97,22 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
             _split_first_fix(s, core.layout, error, split)
         s.frame_ready = True
         s.pose_anchor = {}
+        base = (float(ekf.x[0]), float(ekf.x[1]), float(ekf.x[2]))
+        s.gps_anchor = GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=inp.lla, last_dr=base[0:2])
+        s.travel = _ZERO3
         if core.absolute_yaw and not core.layout.has("yaw_offset"):
             s.heading_ready = True  # an IMU's absolute yaw trusted as the heading in ENU
         else:
             ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
-            s.gps_anchor = HeadingTrack((), (float(ekf.x[0]), float(ekf.x[1]), float(ekf.x[2])), (z[0], z[1]))
-            s.travel = _ZERO3
-            gps_heading(core, s, cfg, z, inp.cov)
+            gps_heading(core, s, cfg, z, inp.cov, stamp)
         return []
+    if frozen(s, inp.lla):
+        # A receiver repeating its last fix with a new stamp while the wheels moved: not a measurement.
+        if not emit:
+            return []
+        return [DiagnosticsRecord(stamp, cfg.name, [ENU_NAMES[i] for i in rows], [0.0] * len(rows),
+                                  [inp.cov[4 * i] for i in rows], 0.0, len(rows), True, channel="position_frozen",
+                                  late=late)]
     y, H, R = obs.position(core.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz, error)
     if len(rows) < 3:
         if not rows:
@@ -114,11 +128,25 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
         # the offset a wrong heading builds up must not be absorbed into it as GPS error.
         res = ekf.update(y, H, R, math.inf, core.position_mask)
         channel = "position_unaligned"
-        gps_heading(core, s, cfg, z, inp.cov)  # after the fix has put the antenna where it is
+        gps_heading(core, s, cfg, z, inp.cov, stamp)  # after the fix has put the antenna where it is
     if not emit:
         return []
     return [DiagnosticsRecord(stamp, cfg.name, [ENU_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis,
                               len(rows), res.rejected, channel=channel, late=late)]
+
+
+def frozen(s: FilterState, lla: tuple[float, float, float]) -> bool:
+    """Is this fix a repeat of the previous one (bit for bit) although the robot has moved more than
+    FROZEN_MIN_TRAVEL since those coordinates first came? Independent fixes of a moving antenna are
+    never bit-identical; a robot at rest (odometry exactly zero: no dead-reckoned travel) may get
+    repeats and fuses them. Remembers the fix otherwise."""
+    track: GpsTrack = s.gps_anchor
+    t = s.travel
+    dr = (track.base[0] + t[0], track.base[1] + t[1])
+    if lla == track.last_lla:
+        return math.hypot(dr[0] - track.last_dr[0], dr[1] - track.last_dr[1]) > FROZEN_MIN_TRAVEL
+    s.gps_anchor = replace(track, last_lla=lla, last_dr=dr)
+    return False
 
 
 def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
@@ -127,9 +155,10 @@ def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
     return tuple(i for i in range(3) if cov[4 * i] <= limit)
 
 
-def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[float, float, float], cov) -> None:
+def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[float, float, float], cov,
+                stamp: float) -> None:
     """Add this fix to the track and fit; apply the fit once it is good enough (module doc)."""
-    track: HeadingTrack = s.gps_anchor
+    track: GpsTrack = s.gps_anchor
     ekf = s.ekf
     a = lever(ekf.x, cfg.extrinsic_xyz)
     t = s.travel
@@ -143,28 +172,31 @@ def gps_heading(core: "FusionCore", s: FilterState, cfg: GpsSensor, z: tuple[flo
     if len(points) > HEADING_MAX_FIXES:
         points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
     extent = max(track.extent, math.hypot(z[0] - track.first[0], z[1] - track.first[1]))
-    track = HeadingTrack(points, track.base, track.first, track.applied, extent)
+    track = replace(track, points=points, extent=extent)
     s.gps_anchor = track
     if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
         return
     d0 = points[0]
     if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * math.hypot(z[0] - d0[0], z[1] - d0[1]):
         # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
-        s.gps_anchor = HeadingTrack(((z[0], z[1], dx, dy, 1.0 / var),), track.base, (z[0], z[1]), track.applied)
+        s.gps_anchor = replace(track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]), extent=0.0,
+                               t0=stamp)
         return
     fit = fit_rigid(list(points))
     if fit is None:
         return
     if wander > 0.0:
         # A slowly wandering error moves neighbouring fixes together: it bends the track as a
-        # whole, which the residuals cannot show. Its ends may differ by ~sqrt(2) sigma_b.
-        fit = replace(fit, var_theta=fit.var_theta + 2.0 * wander / (extent * extent))
+        # whole, which the residuals cannot show. Over the track's duration T its ends differ by
+        # var(b(T) - b(0)) = 2 sigma_b^2 (1 - exp(-T / tau)), spread over the track's extent.
+        drift = 2.0 * wander * -math.expm1(-(stamp - track.t0) / cfg.error_tau_s)
+        fit = replace(fit, var_theta=fit.var_theta + drift / (extent * extent))
     if fit.var_theta > HEADING_PROVISIONAL_SIGMA**2:
         return
     _apply_fit(core, s, cfg, fit, track)
 
 
-def _apply_fit(core: "FusionCore", s: FilterState, cfg: GpsSensor, fit: RigidFit, track: HeadingTrack) -> None:
+def _apply_fit(core: "FusionCore", s: FilterState, cfg: GpsSensor, fit: RigidFit, track: GpsTrack) -> None:
     """Turn the state by the fit's angle about the antenna, which this fix has just put where the
     GPS says: the position dead-reckoned along the wrong heading since the previous fix turns with
     the heading, and P turns with both (``ErrorStateEKF.rotate_yaw``). The heading's row of P is
@@ -190,16 +222,16 @@ def _apply_fit(core: "FusionCore", s: FilterState, cfg: GpsSensor, fit: RigidFit
     s.travel = _ZERO3
     s.pose_anchor = {}  # the frame turned under them: deltas restart from the next message
     sigma = math.sqrt(fit.var_theta)
-    if sigma <= HEADING_READY_SIGMA:
-        s.heading_ready = True
-        s.gps_anchor = None
+    ready = sigma <= HEADING_READY_SIGMA
+    s.heading_ready = ready
+    s.gps_anchor = replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]), applied=True,
+                           last_dr=fit.apply(*track.last_dr))
+    if ready:
         log.info("gps_heading_initialised", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
                  fixes=len(points))
-    else:
-        s.gps_anchor = HeadingTrack(points, (bx, by, track.base[2] + t[2]), track.first, True, track.extent)
-        if not track.applied:
-            log.info("gps_heading_provisional", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
-                     fixes=len(points))
+    elif not track.applied:
+        log.info("gps_heading_provisional", sensor=cfg.name, yaw_correction=fit.theta, sigma=sigma,
+                 fixes=len(points))
 
 
 def _split_first_fix(s: FilterState, layout, error: str, rows: tuple[int, ...] = (0, 1, 2)) -> None:
