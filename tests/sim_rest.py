@@ -41,6 +41,8 @@ class RestWorld:
     wheel_sigma: float = 0.01
     accel_sigma: float | None = None  # the IMU reports its specific force with this noise (m/s^2)
     orientation_absent: bool = False  # orientation_covariance[0] = -1: the IMU gives no orientation
+    accel_scale: float = 1.0  # 1 / 9.80665: a driver reporting in g
+    accel_gravity_removed: bool = False  # a driver publishing linear acceleration without gravity
     seed: int = 11
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
@@ -76,7 +78,9 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 acc, acov = (0.0, 0.0, 0.0), (-1.0,) + (0.0,) * 8
                 if w.accel_sigma is not None:  # flat ground: gravity up, centripetal v w to the left
                     sa = w.accel_sigma
-                    acc = (rng.normal(0, sa), seg.speed * seg.yaw_rate + rng.normal(0, sa), GRAVITY + rng.normal(0, sa))
+                    g = 0.0 if w.accel_gravity_removed else GRAVITY
+                    acc = tuple(w.accel_scale * a for a in (rng.normal(0, sa), seg.speed * seg.yaw_rate
+                                                            + rng.normal(0, sa), g + rng.normal(0, sa)))
                     acov = (sa**2, 0, 0, 0, sa**2, 0, 0, 0, sa**2)
                 out.append(ImuSample("imu", T0 + t, q, ocov, gyro, (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2), acc, acov))
                 next_imu += 1.0 / w.imu_rate

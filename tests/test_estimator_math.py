@@ -33,8 +33,9 @@ def _state(layout: StateLayout, rpy: tuple[float, float, float], bias=(0.01, -0.
     return x
 
 
-def _input(world: bool = False, gyro: bool = True) -> MotionInput:
+def _input(world: bool = False, gyro: bool = True, planar: bool = False) -> MotionInput:
     u = MotionInput()
+    u.planar = planar
     u.linear = (0.8, 0.1, -0.05)
     u.angular = (0.2, -0.3, 0.9)
     u.linear_cov = (1e-3, 1e-4, 0.0, 1e-4, 2e-3, 0.0, 0.0, 0.0, 3e-3)
@@ -46,11 +47,12 @@ def _input(world: bool = False, gyro: bool = True) -> MotionInput:
 
 
 @settings(max_examples=40, deadline=None)
-@given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans())
-def test_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro):
+@given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans(),
+       planar=st.booleans())
+def test_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, planar):
     layout = _layout()
     x = _state(layout, (r, p, y))
-    u = _input(world, gyro)
+    u = _input(world, gyro, planar)
     _, F, _ = predict(layout, x, u, dt, np.zeros(9))
     F_num = transition_jacobian(layout, lambda s: propagate_state(layout, s, u, dt), x)
     np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)

@@ -50,7 +50,8 @@ def _worst_tilt_and_z(core: FusionCore, world: RestWorld) -> tuple[float, float]
 
 
 def test_gravity_gives_roll_and_pitch_when_the_imu_gives_no_orientation():
-    world = RestWorld(list(DRIVE), gyro_bias=BIAS, accel_sigma=0.05, orientation_absent=True)
+    # no standstill: the x/y biases cannot be learned at rest, only through gravity
+    world = RestWorld(list(DRIVE[1:]), gyro_bias=BIAS, accel_sigma=0.05, orientation_absent=True)
     core = _core()
     tilt, z = _worst_tilt_and_z(core, world)
     # accelerometer noise 0.05 m/s^2 is 0.005 rad of tilt per sample at 100 Hz; the centripetal
@@ -88,3 +89,26 @@ def test_the_summary_says_when_the_robot_is_taken_as_planar():
     assert "taken as planar" in summary(run_samples(simulate(world), cfg))
     world = RestWorld([Segment(1.0), Segment(3.0, speed=1.0)], accel_sigma=0.05, orientation_absent=True)
     assert "taken as planar" not in summary(run_samples(simulate(world), _core().cfg))
+
+
+def test_an_accelerometer_reporting_in_g_still_gives_the_tilt():
+    # no standstill (x/y biases unlearned): only gravity keeps the tilt down; unrecognised g units
+    # would leave 5 s of 0.01 rad/s drift before the planar fallback, 0.05 rad
+    world = RestWorld(list(DRIVE[1:]), gyro_bias=BIAS, accel_sigma=0.05, orientation_absent=True,
+                      accel_scale=1.0 / 9.80665)
+    tilt, _ = _worst_tilt_and_z(_core(), world)
+    assert tilt < 0.02  # as with m/s^2 (first test): the g units are recognised
+
+
+def test_a_configured_tilt_reference_that_gives_nothing_falls_back_to_planar():
+    """The accelerometer publishes acceleration with gravity removed: no sample passes the
+    low-dynamics gate, so no roll/pitch information arrives. After TILT_STALE_S (5 s) of that
+    the roll/pitch rates are no longer integrated: the x/y biases (0.01 rad/s) tilt the robot
+    by at most 0.01 x 5 s = 0.05 rad per axis, not 0.6 rad."""
+    # no standstill: the x/y biases are not learned either (at rest they would be, and cancel)
+    world = RestWorld(list(DRIVE[1:]), gyro_bias=BIAS, accel_sigma=0.05, orientation_absent=True,
+                      accel_gravity_removed=True)
+    core = _core()
+    assert core.tilt_reference  # configured: tilt_from_gravity with an accelerometer
+    tilt, _ = _worst_tilt_and_z(core, world)
+    assert tilt < 0.01 * 5.0 * math.sqrt(2) + 0.01

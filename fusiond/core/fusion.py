@@ -46,6 +46,7 @@ from .updates import KINDS
 log = structlog.get_logger("fusiond.core")
 
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
+TILT_STALE_S = 5.0  # no roll/pitch information for this long: roll/pitch rates are no longer integrated
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
 # sensor kind -> (sample policy, sample type, what an applied sample does)
 
@@ -382,6 +383,8 @@ class FusionCore:
                         linear = blk.correct(xl[n0:n1], linear)
                     else:
                         angular = blk.correct(xl[n0:n1], angular)
+        if u.planar:
+            angular = (0.0, 0.0, angular[2])
         twist_cov = np.zeros((6, 6))
         twist_cov[0:3, 0:3] = np.reshape(u.linear_cov, (3, 3))
         twist_cov[3:6, 3:6] = np.reshape(u.angular_cov, (3, 3))
@@ -483,6 +486,7 @@ class FusionCore:
             s.period = list(old.period)
             s.frame_ready, s.enu, s.heading_ready = old.frame_ready, old.enu, old.heading_ready
         s.t = stamp
+        s.tilt_seen = stamp
         s.ekf.set_position(p.tolist())
         s.ekf.set_attitude(q / norm)
         s.ekf.reset_covariance(list(range(6)), cov)
@@ -533,6 +537,7 @@ class FusionCore:
         s.bias_window = None
         s.bias_rejects = ((), (), ())
         s.attitude_ready = False
+        s.tilt_seen = None  # stamp of the newest roll/pitch information fused (set at the first stamp)
         s.yaw_offset = {}
         s.adaptive = {}
         s.frame_ready = False  # the world frame: defined by the first absolute sample
@@ -571,9 +576,12 @@ class FusionCore:
             u.from_gyro = False
         if self.two_d:  # vertical twist and roll/pitch rates ignored
             u.linear = (u.linear[0], u.linear[1], 0.0)
-            u.angular = (0.0, 0.0, u.angular[2])
-        elif not self.tilt_reference:  # planar: nothing could correct a tilt the rates build up
-            u.angular = (0.0, 0.0, u.angular[2])
+        # planar: roll/pitch rates not integrated, in two-D mode, or when nothing corrects (any
+        # more) a tilt the rates would build up: no tilt reference configured, or the configured
+        # one has given nothing for TILT_STALE_S (an accelerometer publishing gravity-free
+        # acceleration, an IMU without orientation)
+        u.planar = self.two_d or not self.tilt_reference or (
+            s.tilt_seen is not None and t - s.tilt_seen > TILT_STALE_S)
         return u
 
     def inputs_at(self, s: FilterState) -> MotionInput:
@@ -643,6 +651,7 @@ class FusionCore:
     def _apply(self, s: FilterState, idx: int, inp, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         if s.t is None:
             s.t = stamp
+            s.tilt_seen = stamp
         elif stamp > s.t:
             self._predict(s, stamp - s.t)
             s.t = stamp

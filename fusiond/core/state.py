@@ -16,7 +16,7 @@ class FilterState:
         "t", "ekf", "last", "period",
         "linear", "linear_cov", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
-        "still_since", "bias_window", "bias_rejects", "attitude_ready", "yaw_offset", "adaptive",
+        "still_since", "bias_window", "bias_rejects", "attitude_ready", "tilt_seen", "yaw_offset", "adaptive",
         "frame_ready", "enu", "heading_ready", "gps_anchor", "travel", "pose_anchor",
     )
 
@@ -39,6 +39,7 @@ class FilterState:
         c.gyro, c.gyro_cov, c.gyro_last = self.gyro, self.gyro_cov, self.gyro_last
         c.still_since = self.still_since
         c.bias_window, c.bias_rejects = self.bias_window, self.bias_rejects  # immutable tuples
+        c.tilt_seen = self.tilt_seen
         c.attitude_ready = self.attitude_ready
         c.yaw_offset = dict(self.yaw_offset)
         c.adaptive = {k: list(v) for k, v in self.adaptive.items()}

@@ -58,7 +58,7 @@ class MotionInput:
     __slots__ = (
         "linear", "linear_cov", "linear_period",
         "angular", "angular_cov", "angular_period",
-        "from_gyro", "world_frame", "twist_correlation",
+        "from_gyro", "world_frame", "twist_correlation", "planar",
     )
 
     def __init__(self) -> None:
@@ -71,6 +71,9 @@ class MotionInput:
         self.from_gyro = False
         self.world_frame = False
         self.twist_correlation = 0.0  # odometry twist error correlation time tau, s (see module doc)
+        # roll/pitch rates not integrated (two-D mode, or no tilt reference): the corrected rate
+        # is projected on body z, w' = P_z (w - b), and so are its Jacobian and noise
+        self.planar = False
 
 
 def _right_jacobian(x: float, y: float, z: float) -> tuple:
@@ -133,6 +136,8 @@ def predict(
         dpy = (r3 * vx + r4 * vy + r5 * vz) * dt
         dpz = (r6 * vx + r7 * vy + r8 * vz) * dt
         F[0:3, 3:6] = ((0.0, dpz, -dpy), (-dpz, 0.0, dpx), (dpy, -dpx, 0.0))  # -[dp]x
+    if u.planar:
+        w = (0.0, 0.0, w[2])
     ax, ay, az = w[0] * dt, w[1] * dt, w[2] * dt
     q1 = rot.normalize(rot.mul((qx, qy, qz, qw), rot.exp(ax, ay, az)))
     xl[0:7] = (px + dpx, py + dpy, pz + dpz, *q1)
@@ -144,6 +149,8 @@ def predict(
                 F[e0 + i, e0 + i] = a
     x_new = np.array(xl)
     G_ang = mat3.mul(rot.matrix9(q1), _right_jacobian(ax, ay, az), dt)
+    if u.planar:  # d w' / d w = P_z: the x/y columns go
+        G_ang = (0.0, 0.0, G_ang[2], 0.0, 0.0, G_ang[5], 0.0, 0.0, G_ang[8])
 
     # Blocks correct an input in turn (u1 = g1(u0), u2 = g2(u1), ...): walking them
     # backwards, each block's columns are G d u_last / d u_its_output times its own

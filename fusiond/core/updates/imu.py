@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from ..state import FilterState
 
 GRAVITY = 9.80665  # m/s^2, standard gravity
+G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer reports in g
 GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
 ZERO_RATE_GATE = 5.0  # sqrt(NIS) gate of a standstill bias update: a hand-turned robot is not at rest
 GYRO_COMPONENTS = ("gyro_x", "gyro_y", "gyro_z")
@@ -80,6 +81,8 @@ def _fuse_orientation(core: "FusionCore", s: FilterState, cfg: ImuSensor, rpy, c
                        core.tilt_mask if tilt_only else None)
     if tilt_only and not res.rejected:
         restore_heading(s, heading)
+    if not res.rejected and (0 in rows or 1 in rows):
+        s.tilt_seen = stamp
     if offset and not tilt_only:
         s.yaw_offset[cfg.name + "/yaw_residual"] = _yaw_residual(core, s, rpy[2])  # after the update
     if cfg.adaptive:
@@ -139,6 +142,9 @@ def tilt_from_gravity(core: "FusionCore", s: FilterState, cfg: ImuSensor, accel:
     vx, vy, vz = u.linear
     if u.world_frame:  # the twist is in the world: into the body
         vx, vy, vz = mat3.apply_transposed(rot.matrix9(tuple(s.ekf.x[3:7].tolist())), (vx, vy, vz))
+    n = math.sqrt(accel[0] ** 2 + accel[1] ** 2 + accel[2] ** 2)
+    if G_UNITS_BAND[0] < n < G_UNITS_BAND[1]:  # a driver that reports in g, not m/s^2
+        accel = (accel[0] * GRAVITY, accel[1] * GRAVITY, accel[2] * GRAVITY)
     ax = accel[0] - (wy * vz - wz * vy)
     ay = accel[1] - (wz * vx - wx * vz)
     az = accel[2] - (wx * vy - wy * vx)
@@ -155,6 +161,7 @@ def tilt_from_gravity(core: "FusionCore", s: FilterState, cfg: ImuSensor, accel:
     res = s.ekf.update(y, H, R, cfg.mahalanobis_threshold, core.tilt_mask)
     if not res.rejected:
         restore_heading(s, heading)
+        s.tilt_seen = stamp
     if not emit:
         return []
     return [DiagnosticsRecord(stamp, cfg.name, ["roll", "pitch"], y.tolist(), res.innovation_var, res.nis, 2,

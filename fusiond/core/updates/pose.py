@@ -31,6 +31,8 @@ def apply_pose(core: "FusionCore", s: FilterState, idx: int, inp: PoseInput, sta
         return []
     y, H, R = obs.pose(core.layout, ekf.x, inp.position, inp.rpy, inp.cov, inp.rows, cfg.extrinsic_xyz)
     res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
+    if not res.rejected and (3 in inp.rows or 4 in inp.rows):
+        s.tilt_seen = stamp
     if not emit:
         return []
     return [DiagnosticsRecord(stamp, cfg.name, [obs.POSE_NAMES[i] for i in inp.rows], y.tolist(),
