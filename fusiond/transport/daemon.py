@@ -80,6 +80,7 @@ HEALTH_LOG_S = 5.0  # period of the `health` log event
 HEALTH_POLL_S = 0.1  # how often status changes are looked for (`health_changed`)
 CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while busy
 DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
+MIN_WAIT_S = 0.001  # shortest idle wait of the worker (a batch due now is flushed on the next pass)
 MAX_BATCH = 1024  # records: a backlog (a bag played at full speed) flushes early, so one put stays bounded
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
 
@@ -314,15 +315,15 @@ class Daemon:
         handle = self._handle
         monotonic = time.monotonic
         batch_s = self._batch_s
-        # the loop wakes at least this often when idle: to flush a diagnostics batch, refresh health
-        tick = min(CORE_REFRESH_S, batch_s) if batch_s > 0.0 else CORE_REFRESH_S
         next_refresh = 0.0
         next_flush = monotonic() + batch_s
         dirty = False
         try:
             while not self._abort:
+                # idle, the loop wakes when a pending batch is due, else every CORE_REFRESH_S
+                wait = max(next_flush - monotonic(), MIN_WAIT_S) if self._diag_batch else CORE_REFRESH_S
                 try:
-                    item = get(timeout=tick)
+                    item = get(timeout=wait)
                 except queue.Empty:
                     item = None
                 if item is _STOP:
