@@ -49,6 +49,7 @@ from ..config import ZenohConfig, loads
 from ..errors import TransportError
 from ..samples import ImuSample, OdomSample
 from ..health import decode_report, encode_report
+from ..logs import configure
 from .daemon import Daemon, direct
 from .session import build_config, open_session, query_health
 
@@ -203,6 +204,7 @@ def _take(values: list[float]) -> list[float]:
 
 def _daemon_child(conn: Any, config_text: str, express: bool) -> None:
     """Child process: the daemon (as `fusiond run` builds it) plus the echo; answers the parent's commands."""
+    configure("warning")  # a spawned child starts unconfigured: logs on stderr, stdout stays the table/JSON
     cfg = loads(config_text, "<bench>")
     session = open_session(build_config(cfg.zenoh))
     daemon = Daemon(cfg, session, express=express, monitor=False)
