@@ -41,6 +41,7 @@ class OutputConfig(_Table):
     pose_key: str = "odom_combined"
     odometry_key: str = "odometry/filtered"
     diagnostics_key: str = "fusiond/diagnostics"
+    diagnostics_batch_s: float = 0.05  # one JSON array of the records of this long per put (0: a put per record)
     health_key: str = "fusiond/health"
     frame_id: str = "odom"
     child_frame_id: str = "base_link"
@@ -277,6 +278,9 @@ def _check_ros(cfg: Config) -> None:
     out, ros = cfg.output, cfg.ros
     if out.ros_diagnostics_period_s <= 0.0:
         raise ConfigError("output.ros_diagnostics_period_s: must be positive")
+    if not 0.0 <= out.diagnostics_batch_s <= 1.0:
+        raise ConfigError(f"output.diagnostics_batch_s: must be in [0, 1] s (0: one record per put), "
+                          f"got {out.diagnostics_batch_s}")
     for name in ("tf_key", "set_pose_key"):
         if not getattr(out, name):
             raise ConfigError(f"output.{name}: must not be empty")

@@ -30,6 +30,16 @@ ALIVE_SUFFIX = "/alive"
 DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"
 RATE_WINDOW_S = 5.0
 
+# The diagnostics key carries one record or a JSON array of them (the daemon's batches,
+# `[output] diagnostics_batch_s`): one decoder for both, no guessing from the first byte.
+_DIAGNOSTICS = msgspec.json.Decoder(DiagnosticsRecord | list[DiagnosticsRecord])
+
+
+def decode_diagnostics(payload: bytes) -> list[DiagnosticsRecord]:
+    """The records of one diagnostics payload, in order (raises msgspec.DecodeError on anything else)."""
+    out = _DIAGNOSTICS.decode(payload)
+    return out if type(out) is list else [out]
+
 
 @dataclass
 class ChannelView:
@@ -135,7 +145,6 @@ class Monitor:
         self.diagnostics_key = diagnostics_key
         self.window = window
         self.daemons: dict[str, DaemonView] = {}
-        self._decoder = msgspec.json.Decoder(DiagnosticsRecord)
         self.undecodable = 0
         self._lock = threading.Lock()
         self._subs = []
@@ -153,11 +162,13 @@ class Monitor:
 
     def _on_diagnostics(self, sample) -> None:
         try:
-            rec = self._decoder.decode(sample.payload.to_bytes())
+            records = decode_diagnostics(sample.payload.to_bytes())
         except msgspec.DecodeError:
             self.undecodable += 1
             return
-        self._daemon(prefix_of(sample.key_expr, self.diagnostics_key)).add(rec, time.monotonic())
+        view, now = self._daemon(prefix_of(sample.key_expr, self.diagnostics_key)), time.monotonic()
+        for rec in records:
+            view.add(rec, now)
 
     def discover(self, timeout: float) -> list[str]:
         """Prefixes of the daemons whose liveliness token is up."""
@@ -313,4 +324,4 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     return 0
 
 
-__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "render", "run"]
+__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "decode_diagnostics", "render", "run"]

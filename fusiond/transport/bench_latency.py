@@ -1,29 +1,43 @@
-"""Latency benchmark: sensor put -> fused pose at a subscriber, beside the raw Zenoh hop.
+"""Latency and CPU benchmark: sensor put -> fused pose, beside the raw Zenoh hop and a bare subscriber.
 
-One process, two Zenoh sessions on loopback TCP: the daemon's (the same `Daemon`
-class `fusiond run` uses: subscribers, queue, worker, core, publishers) and a load
-generator's, which publishes synthetic IMU (default 1 kHz) and odometry (100 Hz)
-CDR with increasing stamps and subscribes to the fused pose. Each odometry sample
-is stamped half an IMU period after the IMU before it, so the pose it triggers
-carries its stamp: poses are matched to puts by stamp.
+Three processes, three Zenoh sessions on loopback TCP:
+
+- the daemon's (a child process running the same `Daemon` class `fusiond run` uses:
+  subscribers, queue, worker, core, publishers);
+- a bare zenoh-python subscriber's (a child process: the two sensor keys with
+  zenoh-python's default callback, each payload copied to bytes and counted: the
+  least any consumer of this traffic does) -- the yardstick of the daemon's CPU;
+- the load generator's (this process), connected to both, which publishes synthetic
+  IMU (default 1 kHz) and odometry (100 Hz) CDR with increasing stamps ("live
+  stamps") and subscribes to the fused pose. Each odometry sample is stamped half
+  an IMU period after the IMU before it, so the pose it triggers carries its stamp:
+  poses are matched to puts by stamp.
+
+Separate processes because Zenoh's runtime threads are per process: CPU time of one
+process is exactly one party's cost (its session, its Python threads), so the two
+are comparable in the same run, on the same traffic, under the same machine load.
 
 Beside it, every odometry put is followed by a put on a plain echo key: the
 daemon's session timestamps it (raw one-way hop) and echoes it straight back to
 the generator (raw round trip: the same two hops a fused pose takes, without the
 queue, the filter and the encoding in between).
 
-CPU: process time per wall second over the measured window (all threads: both
-sessions, the generator and the daemon), and the worker thread and the generator
-thread on their own.
+CPU: process time per wall second over the measured window (each child reads its
+own `process_time()` at the window's start and end, asked over a pipe), for the
+daemon, the bare subscriber, and the daemon's worker thread and the generator thread
+on their own. The daemon's process also carries the echo (100 Hz, a few us each):
+counted against it, not the yardstick.
 """
 
 from __future__ import annotations
 
 import math
+import multiprocessing
 import socket
 import struct
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import msgspec
@@ -31,14 +45,17 @@ import numpy as np
 import zenoh
 
 from ..codecs import encode_imu_sample, encode_odom_sample
-from ..config import loads
+from ..config import ZenohConfig, loads
 from ..errors import TransportError
 from ..samples import ImuSample, OdomSample
+from ..health import decode_report, encode_report
+from ..logs import configure
 from .daemon import Daemon, direct
 from .session import build_config, open_session, query_health
 
 _STAMP = struct.Struct("<iI").unpack_from
 _F64 = struct.Struct("<d")
+BARE_READY_KEY = "bench/bare/ready"
 
 
 class Stats(msgspec.Struct):
@@ -57,6 +74,7 @@ class BenchResult(msgspec.Struct):
     express: bool
     imu_sent: int
     odom_sent: int
+    sent_total: int  # sensor messages of the whole run (warm-up included)
     poses_matched: int
     poses_unmatched: int  # poses whose stamp is not an odometry stamp (the odometry arrived late)
     pose: Stats  # odometry put -> fused pose callback at the generator
@@ -64,11 +82,16 @@ class BenchResult(msgspec.Struct):
     raw_echo: Stats  # put -> daemon session -> echoed back -> generator (two hops)
     raw_hop_idle: Stats  # the same two, measured before the load starts (no worker competing for the GIL)
     raw_echo_idle: Stats
-    cpu_process_pct: float  # of one core
-    cpu_worker_pct: float
+    cpu_daemon_pct: float  # the daemon's process, of one core
+    cpu_bare_pct: float  # the bare subscriber's process on the same traffic, same window
+    cpu_ratio: float  # daemon / bare
+    cpu_worker_pct: float  # the daemon's worker thread alone
     cpu_generator_pct: float
+    bare_received: int  # sensor messages the bare subscriber got (whole run: = sent_total)
+    daemon_received: int  # the same at the daemon (health's `received`)
     queue_drops: int
     core_drops: int
+    diagnostics_batch_s: float | None  # the daemon's [output] diagnostics_batch_s (None: its default)
     zenoh_version: str
 
 
@@ -86,8 +109,9 @@ def _stats(values_s: list[float]) -> Stats:
     return Stats(len(a), float(p50), float(p90), float(p99), float(a.max()), float(a.mean()))
 
 
-def _config(port: int) -> Any:
-    return loads(f"""
+def _config_text(port: int, diagnostics_batch_s: float | None = None) -> str:
+    batch = "" if diagnostics_batch_s is None else f"diagnostics_batch_s = {diagnostics_batch_s!r}\n"
+    return f"""
 [zenoh]
 mode = "peer"
 listen = ["tcp/127.0.0.1:{port}"]
@@ -97,7 +121,7 @@ pose_key = "bench/pose"
 odometry_key = "bench/odometry"
 diagnostics_key = "bench/diagnostics"
 health_key = "bench/health"
-[[sensors]]
+{batch}[[sensors]]
 name = "wheel"
 kind = "odom"
 key = "bench/odom"
@@ -107,7 +131,7 @@ kind = "imu"
 key = "bench/imu"
 orientation = "roll_pitch"
 angular_velocity = true
-""", "<bench>")
+"""
 
 
 def _schedule(seconds: float, imu_hz: float, odom_hz: float, t0: float = 1000.0
@@ -155,10 +179,8 @@ def _wait(cond, timeout: float) -> bool:
     return True
 
 
-def _ping(put: Any, hop: list[float], echo: list[float], seconds: float, hz: float = 500.0
-          ) -> tuple[list[float], list[float]]:
-    """Echo pings alone (no sensor load): the raw hop and round trip of this machine at rest."""
-    hop.clear()
+def _ping(put: Any, echo: list[float], seconds: float, hz: float = 500.0) -> list[float]:
+    """Echo pings alone (no sensor load): the round trip of this machine at rest (the hops are the daemon's)."""
     echo.clear()
     start = time.perf_counter()
     for k in range(int(seconds * hz)):
@@ -167,36 +189,123 @@ def _ping(put: Any, hop: list[float], echo: list[float], seconds: float, hz: flo
             time.sleep(delay)
         put(_F64.pack(time.perf_counter()))
     _wait(lambda: len(echo) >= int(seconds * hz), 1.0)
-    out = list(hop), list(echo)
-    hop.clear()
+    out = list(echo)
     echo.clear()
     return out
 
 
-def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 100.0, *, express: bool = False,
-              warmup_s: float = 1.0, idle_s: float = 1.0) -> BenchResult:
-    port = free_port()
-    cfg = _config(port)
-    schedule = _schedule(seconds + warmup_s, imu_hz, odom_hz)
-    d_session = open_session(build_config(cfg.zenoh))
-    daemon = Daemon(cfg, d_session, express=express, monitor=False)
-    g_conf = build_config(msgspec.structs.replace(cfg.zenoh, listen=[], connect=[f"tcp/127.0.0.1:{port}"]))
-    g_session = open_session(g_conf)
+def _take(values: list[float]) -> list[float]:
+    """Move out what a callback thread has appended so far (it may append meanwhile: nothing is lost)."""
+    n = len(values)
+    out = values[:n]
+    del values[:n]
+    return out
+
+
+def _daemon_child(conn: Any, config_text: str, express: bool) -> None:
+    """Child process: the daemon (as `fusiond run` builds it) plus the echo; answers the parent's commands."""
+    configure("warning")  # a spawned child starts unconfigured: logs on stderr, stdout stays the table/JSON
+    cfg = loads(config_text, "<bench>")
+    session = open_session(build_config(cfg.zenoh))
+    daemon = Daemon(cfg, session, express=express, monitor=False)
     hop: list[float] = []
-    echo: list[float] = []
-    pose_arrival: dict[tuple[int, int], float] = {}
-    perf = time.perf_counter
+    perf = time.perf_counter  # CLOCK_MONOTONIC: comparable with the parent's stamps
     objs: list[Any] = []
     try:
         daemon.start()
-        block = zenoh.CongestionControl.BLOCK  # as the bridge publishes reliable topics: no silent loss
-        echo_pub = d_session.declare_publisher("bench/echo_back", express=True, congestion_control=block)
+        echo_pub = session.declare_publisher("bench/echo_back", express=True,
+                                             congestion_control=zenoh.CongestionControl.BLOCK)
 
         def on_echo(sample: zenoh.Sample) -> None:
             t = perf()
             raw = sample.payload.to_bytes()
             hop.append(t - _F64.unpack(raw)[0])
             echo_pub.put(raw)
+
+        objs += [echo_pub, session.declare_subscriber("bench/echo", direct(on_echo))]
+        worker = daemon._worker.ident if daemon._worker else None
+        conn.send("ready")
+        while (cmd := conn.recv()) != "stop":
+            if cmd == "mark":
+                conn.send((time.process_time(), _thread_cpu(worker)))
+            elif cmd == "hops":
+                conn.send(_take(hop))
+            elif cmd == "drained":
+                conn.send(daemon.queue.empty())
+            elif cmd == "report":
+                conn.send(encode_report(daemon.report()))
+    finally:
+        for o in objs:
+            try:
+                o.undeclare()
+            except zenoh.ZError:
+                pass
+        daemon.stop()
+        session.close()
+
+
+def _bare_child(conn: Any, port: int, keys: list[str]) -> None:
+    """Child process: the yardstick. A plain subscriber per sensor key (zenoh-python's default
+    callback), each payload copied to bytes and counted; then a queryable that proves them declared."""
+    session = open_session(build_config(ZenohConfig(mode="peer", listen=[f"tcp/127.0.0.1:{port}"],
+                                                    multicast_scouting=False)))
+    counts = [0] * len(keys)  # one slot per subscriber: each is written by its own callback thread only
+
+    def counter(i: int) -> Callable[[zenoh.Sample], None]:
+        def on_sample(sample: zenoh.Sample) -> None:
+            sample.payload.to_bytes()
+            counts[i] += 1
+        return on_sample
+
+    objs = [session.declare_subscriber(k, counter(i)) for i, k in enumerate(keys)]
+    objs.append(session.declare_queryable(BARE_READY_KEY, lambda q: q.reply(BARE_READY_KEY, b"ready")))
+    try:
+        conn.send("ready")
+        while conn.recv() != "stop":
+            conn.send((time.process_time(), sum(counts)))
+    finally:
+        for o in objs:
+            o.undeclare()
+        session.close()
+
+
+def _ask(conn: Any, cmd: str, timeout: float = 10.0) -> Any:
+    conn.send(cmd)
+    if not conn.poll(timeout):
+        raise TransportError(f"a benchmark child did not answer {cmd!r} within {timeout:g} s")
+    return conn.recv()
+
+
+def _answered(session: zenoh.Session, key: str) -> bool:
+    return any(r.ok is not None for r in session.get(key, timeout=0.5))
+
+
+def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 100.0, *, express: bool = False,
+              warmup_s: float = 1.0, idle_s: float = 1.0, diagnostics_batch_s: float | None = None) -> BenchResult:
+    port, bare_port = free_port(), free_port()
+    text = _config_text(port, diagnostics_batch_s)
+    cfg = loads(text, "<bench>")
+    schedule = _schedule(seconds + warmup_s, imu_hz, odom_hz)
+    ctx = multiprocessing.get_context("spawn")  # no fork of a process that may hold Zenoh threads
+    d_conn, d_end = ctx.Pipe()
+    b_conn, b_end = ctx.Pipe()
+    children = [ctx.Process(target=_daemon_child, args=(d_end, text, express), name="bench-daemon", daemon=True),
+                ctx.Process(target=_bare_child, args=(b_end, bare_port, [s.key for s in cfg.sensors]),
+                            name="bench-bare-subscriber", daemon=True)]
+    for p in children:
+        p.start()
+    g_session = None
+    echo: list[float] = []
+    pose_arrival: dict[tuple[int, int], float] = {}
+    perf = time.perf_counter
+    try:
+        for conn, p in zip((d_conn, b_conn), children):
+            if not _wait(lambda: conn.poll() or not p.is_alive(), 60.0) or not conn.poll():
+                raise TransportError(f"{p.name} did not start within 60 s (exit code {p.exitcode}; a script "
+                                     "calling run_bench needs `if __name__ == '__main__':`, children are spawned)")
+            conn.recv()
+        g_session = open_session(build_config(msgspec.structs.replace(
+            cfg.zenoh, listen=[], connect=[f"tcp/127.0.0.1:{port}", f"tcp/127.0.0.1:{bare_port}"])))
 
         def on_echo_back(sample: zenoh.Sample) -> None:
             echo.append(perf() - _F64.unpack(sample.payload.to_bytes())[0])
@@ -205,32 +314,32 @@ def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 10
             t = perf()
             pose_arrival[_STAMP(sample.payload.to_bytes(), 4)] = t
 
-        objs += [echo_pub, d_session.declare_subscriber("bench/echo", direct(on_echo)),
-                 g_session.declare_subscriber("bench/echo_back", direct(on_echo_back)),
-                 g_session.declare_subscriber("bench/pose", direct(on_pose))]
-        pubs = {"imu": g_session.declare_publisher("bench/imu", express=True, congestion_control=block),
-                "odom": g_session.declare_publisher("bench/odom", express=True, congestion_control=block)}
+        block = zenoh.CongestionControl.BLOCK  # as the bridge publishes reliable topics: no silent loss
+        g_session.declare_subscriber("bench/echo_back", direct(on_echo_back))
+        g_session.declare_subscriber("bench/pose", direct(on_pose))
+        imu_put = g_session.declare_publisher("bench/imu", express=True, congestion_control=block).put
+        odom_put = g_session.declare_publisher("bench/odom", express=True, congestion_control=block).put
         echo_put = g_session.declare_publisher("bench/echo", express=True, congestion_control=block).put
-        objs += list(pubs.values())
         if not _wait(lambda: query_health(g_session, cfg.output.health_key, 0.5), 10.0):
             raise TransportError("the daemon did not answer its health query within 10 s")
+        if not _wait(lambda: _answered(g_session, BARE_READY_KEY), 10.0):
+            raise TransportError("the bare subscriber did not answer within 10 s")
         time.sleep(0.2)
-        hop_idle, echo_idle = _ping(echo_put, hop, echo, idle_s)
+        echo_idle = _ping(echo_put, echo, idle_s)
+        hop_idle = _ask(d_conn, "hops")
 
         put_time: dict[tuple[int, int], float] = {}
-        imu_put, odom_put = pubs["imu"].put, pubs["odom"].put
-        worker_ident = daemon._worker.ident if daemon._worker else None
         main_ident = threading.get_ident()
         sleep = time.sleep
         start = perf()
         measuring = False
-        marks: dict[str, float] = {}
+        marks: dict[str, Any] = {}
         for offset, kind, payload, stamp in schedule:
             if not measuring and offset >= warmup_s:
                 measuring = True
-                hop.clear()
+                _ask(d_conn, "hops")
                 echo.clear()
-                marks = {"wall": perf(), "proc": time.process_time(), "worker": _thread_cpu(worker_ident),
+                marks = {"wall": perf(), "daemon": _ask(d_conn, "mark"), "bare": _ask(b_conn, "mark"),
                          "main": _thread_cpu(main_ident), "first_stamp": stamp}
             delay = start + offset - perf()
             if delay > 0:
@@ -243,37 +352,49 @@ def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 10
                 echo_put(_F64.pack(perf()))
                 if measuring:
                     put_time[stamp] = t
-        _wait(lambda: all(k in pose_arrival for k in put_time) and daemon.queue.empty(), 2.0)
+        _wait(lambda: all(k in pose_arrival for k in put_time) and _ask(d_conn, "drained"), 2.0)
         wall = perf() - marks["wall"]
-        cpu = time.process_time() - marks["proc"]
-        worker_cpu = _thread_cpu(worker_ident) - marks["worker"]
+        (d_cpu1, w_cpu1), (b_cpu1, bare_received) = _ask(d_conn, "mark"), _ask(b_conn, "mark")
         main_cpu = _thread_cpu(main_ident) - marks["main"]
-        time.sleep(0.1)
+        (d_cpu0, w_cpu0), (b_cpu0, _) = marks["daemon"], marks["bare"]
+        hop = _ask(d_conn, "hops")
+        _wait(lambda: _ask(b_conn, "mark")[1] >= len(schedule), 1.0)  # the last puts may be in flight
+        bare_received = _ask(b_conn, "mark")[1]
+        rep = decode_report(_ask(d_conn, "report"))
         lat = [pose_arrival[s] - t for s, t in put_time.items() if s in pose_arrival]
         first = marks["first_stamp"]
-        unmatched = sum(1 for s in pose_arrival if s >= first and s not in put_time)
-        rep = daemon.report()
+        unmatched = sum(1 for s in list(pose_arrival) if s >= first and s not in put_time)
         n_imu = sum(1 for o, k, *_ in schedule if k == "imu" and o >= warmup_s)
+        daemon_pct, bare_pct = 100.0 * (d_cpu1 - d_cpu0) / wall, 100.0 * (b_cpu1 - b_cpu0) / wall
         return BenchResult(
             seconds=seconds, imu_hz=imu_hz, odom_hz=odom_hz, express=express,
-            imu_sent=n_imu, odom_sent=len(put_time), poses_matched=len(lat), poses_unmatched=unmatched,
+            imu_sent=n_imu, odom_sent=len(put_time), sent_total=len(schedule),
+            poses_matched=len(lat), poses_unmatched=unmatched,
             pose=_stats(lat), raw_hop=_stats(hop), raw_echo=_stats(echo),
             raw_hop_idle=_stats(hop_idle), raw_echo_idle=_stats(echo_idle),
-            cpu_process_pct=100.0 * cpu / wall, cpu_worker_pct=100.0 * worker_cpu / wall,
+            cpu_daemon_pct=daemon_pct, cpu_bare_pct=bare_pct,
+            cpu_ratio=daemon_pct / bare_pct if bare_pct > 0 else math.nan,
+            cpu_worker_pct=100.0 * (w_cpu1 - w_cpu0) / wall,
             cpu_generator_pct=100.0 * main_cpu / wall,
+            bare_received=bare_received, daemon_received=sum(s.received for s in rep.sensors.values()),
             queue_drops=rep.queue.dropped,
             core_drops=sum(s.dropped for s in rep.sensors.values()) - rep.queue.dropped,
+            diagnostics_batch_s=diagnostics_batch_s,
             zenoh_version=_zenoh_version(),
         )
     finally:
-        for o in objs:
+        for conn in (d_conn, b_conn):
             try:
-                o.undeclare()
-            except zenoh.ZError:
+                conn.send("stop")
+            except (OSError, ValueError):
                 pass
-        daemon.stop()
-        g_session.close()
-        d_session.close()
+        for p in children:
+            p.join(10.0)
+            if p.is_alive():
+                p.kill()
+                p.join(5.0)
+        if g_session is not None:
+            g_session.close()
 
 
 def _zenoh_version() -> str:
@@ -299,6 +420,10 @@ def format_table(r: BenchResult) -> str:
     out.append(f"p99 ratio: fused/raw hop {ratio_hop:.2f}x, fused/raw echo {ratio_echo:.2f}x")
     out.append(f"poses matched {r.poses_matched}/{r.odom_sent} (unmatched {r.poses_unmatched}); "
                f"queue drops {r.queue_drops}, core drops {r.core_drops}")
-    out.append(f"CPU (% of one core): process {r.cpu_process_pct:.1f}, worker thread {r.cpu_worker_pct:.1f}, "
+    out.append(f"CPU (% of one core): daemon process {r.cpu_daemon_pct:.1f}, bare subscriber process "
+               f"{r.cpu_bare_pct:.1f} -> ratio {r.cpu_ratio:.2f}x; daemon worker thread {r.cpu_worker_pct:.1f}, "
                f"load generator thread {r.cpu_generator_pct:.1f}")
+    batch = "default" if r.diagnostics_batch_s is None else f"{r.diagnostics_batch_s:g} s"
+    out.append(f"received (whole run, {r.sent_total} sent): daemon {r.daemon_received}, bare subscriber "
+               f"{r.bare_received}; diagnostics batch {batch}")
     return "\n".join(out)

@@ -17,12 +17,18 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 - ONE worker drains the queue: decode (`DecodeError` counted per reason),
   `core.ingest`, then publish. The core's history absorbs the arrival order.
 - Outputs are declared once: pose (PoseWithCovarianceStamped CDR) and odometry
-  (nav_msgs/Odometry CDR) on every odometry sample, one JSON diagnostics record
-  per update, a health queryable, and a liveliness token `<health_key>/alive` so
-  remote tools see the daemon come and go (with a namespace both are prefixed).
+  (nav_msgs/Odometry CDR) on every odometry sample, the JSON diagnostics records
+  (one per update), a health queryable, and a liveliness token `<health_key>/alive`
+  so remote tools see the daemon come and go (with a namespace both are prefixed).
   They are batched, not `express`: on a loaded 2-core machine express messages
   lost a few poses to Zenoh's drop-on-congestion where batching lost none, at
   the same latency.
+- Diagnostics are batched (`[output] diagnostics_batch_s`): the worker collects the
+  records and, on a timer of its own loop (never a Zenoh thread), puts ONE JSON array
+  of them, encoded in one msgspec call: at 1 kHz IMU 20 puts a second instead of
+  1,100 encodes and puts (6-9 us of worker time a message here). The batch is flushed
+  when the worker ends, so a clean stop loses no record; 0 restores one record per
+  put. Readers accept both forms (`fusiond.monitor.decode_diagnostics`).
 - ROS outputs: a TF (`tf2_msgs/msg/TFMessage`, frame_id -> child_frame_id) with
   each published pose whose stamp is newer than the last TF's (tf2 rejects a
   repeated stamp, and a late odometry sample can be answered at a stamp already
@@ -74,6 +80,8 @@ HEALTH_LOG_S = 5.0  # period of the `health` log event
 HEALTH_POLL_S = 0.1  # how often status changes are looked for (`health_changed`)
 CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while busy
 DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
+MIN_WAIT_S = 0.001  # shortest idle wait of the worker (a batch due now is flushed on the next pass)
+MAX_BATCH = 1024  # records: a backlog (a bag played at full speed) flushes early, so one put stays bounded
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
 
 _STOP = object()
@@ -171,6 +179,9 @@ class Daemon:
         self._abort = False
         self.published = 0
         self.errors = 0
+        self._batch_s = cfg.output.diagnostics_batch_s
+        self._diag_batch: list[Any] = []  # records not yet published (worker only)
+        self.diagnostics_puts = 0  # puts on the diagnostics key (one per batch, or per record with batch 0)
         self.worker_cpu_s = 0.0  # CPU time of the worker thread, set when it ends
 
     # -- life cycle ----------------------------------------------------------------------
@@ -303,31 +314,37 @@ class Daemon:
         get = self.queue.get
         handle = self._handle
         monotonic = time.monotonic
+        batch_s = self._batch_s
         next_refresh = 0.0
+        next_flush = monotonic() + batch_s
         dirty = False
         try:
             while not self._abort:
+                # idle, the loop wakes when a pending batch is due, else every CORE_REFRESH_S
+                wait = max(next_flush - monotonic(), MIN_WAIT_S) if self._diag_batch else CORE_REFRESH_S
                 try:
-                    item = get(timeout=CORE_REFRESH_S)
+                    item = get(timeout=wait)
                 except queue.Empty:
-                    if dirty:
-                        self._refresh()
-                        dirty = False
-                    continue
+                    item = None
                 if item is _STOP:
                     break
-                try:
-                    if type(item) is _SetPoseItem:
-                        self._set_pose(item)
-                    else:
-                        handle(*item)
-                except Exception:  # a bug on one sample must not stop the service
-                    self.errors += 1
-                    if self.errors == 1 or self.errors % LOG_EVERY == 0:
-                        log.exception("worker_error", count=self.errors)
-                dirty = True
+                if item is not None:
+                    try:
+                        if type(item) is _SetPoseItem:
+                            self._set_pose(item)
+                        else:
+                            handle(*item)
+                    except Exception:  # a bug on one sample must not stop the service
+                        self.errors += 1
+                        if self.errors == 1 or self.errors % LOG_EVERY == 0:
+                            log.exception("worker_error", count=self.errors)
+                    dirty = True
                 now = monotonic()
-                if now >= next_refresh:
+                if now >= next_flush:
+                    if self._diag_batch:
+                        self._flush_diagnostics()
+                    next_flush = now + batch_s
+                if dirty and now >= next_refresh:
                     self._refresh()
                     dirty = False
                     next_refresh = now + CORE_REFRESH_S
@@ -338,9 +355,22 @@ class Daemon:
             self.health.set_worker_alive(False)
             raise
         finally:
+            if self._diag_batch:  # at stop (or a crash): the records of samples already fused go out
+                self._flush_diagnostics()
             self.worker_cpu_s = time.thread_time()
         if not self._stopping.is_set():
             self.health.set_worker_alive(False)
+
+    def _flush_diagnostics(self) -> None:
+        """Publish the collected records as one JSON array: one encode, one put."""
+        batch = self._diag_batch
+        self._diag_batch = []
+        try:
+            self._diag_pub.put(_diag_encoder.encode(batch))
+        except zenoh.ZError as err:  # the publisher is gone (stop timed out): say what is lost
+            log.warning("diagnostics_lost", count=len(batch), error=str(err))
+            return
+        self.diagnostics_puts += 1
 
     def _refresh(self) -> None:
         self.health.set_core(core_counters(self.core, self.published))
@@ -363,10 +393,17 @@ class Daemon:
             self.health.on_floored(idx)
         if step.publish:
             self._publish_estimate()
-        if step.records:
-            put, enc = self._diag_pub.put, _diag_encoder.encode
-            for r in step.records:
-                put(enc(r))
+        records = step.records
+        if records:
+            if self._batch_s > 0.0:
+                self._diag_batch += records
+                if len(self._diag_batch) >= MAX_BATCH:
+                    self._flush_diagnostics()
+            else:  # the old form: one record per put
+                put, enc = self._diag_pub.put, _diag_encoder.encode
+                for r in records:
+                    put(enc(r))
+                self.diagnostics_puts += len(records)
 
     def _publish_estimate(self) -> None:
         out = self.cfg.output

@@ -1,0 +1,23 @@
+"""`fusiond bench-latency` measures what it says: the daemon and the bare subscriber (each in its own
+process) receive the same traffic, every odometry put is answered by a pose, and the CPU figures are
+the two processes' own. No timing is asserted (performance is reported by the bench, not tested)."""
+
+from __future__ import annotations
+
+import math
+
+from fusiond.transport.bench_latency import format_table, run_bench
+
+
+def test_the_bench_feeds_the_daemon_and_the_bare_subscriber_the_same_traffic():
+    r = run_bench(seconds=1.0, imu_hz=200.0, odom_hz=20.0, warmup_s=0.5, idle_s=0.2, diagnostics_batch_s=0.05)
+    # 1.5 s of schedule: 300 IMU + 30 odometry messages, 200 + 20 of them in the measured second
+    assert r.sent_total == 330 and (r.imu_sent, r.odom_sent) == (200, 20)
+    assert r.bare_received == r.daemon_received == r.sent_total  # loopback, reliable: nothing lost
+    assert r.queue_drops == 0 and r.core_drops == 0
+    assert r.poses_matched == r.odom_sent and r.poses_unmatched == 0 and r.pose.n == r.odom_sent
+    # both processes did work in the window (each payload decoded or copied); the ratio is theirs
+    assert r.cpu_daemon_pct > 0 and r.cpu_bare_pct > 0 and math.isfinite(r.cpu_worker_pct)
+    assert math.isclose(r.cpu_ratio, r.cpu_daemon_pct / r.cpu_bare_pct)
+    assert r.diagnostics_batch_s == 0.05
+    assert "bare subscriber" in format_table(r)
