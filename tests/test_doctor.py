@@ -176,6 +176,30 @@ def test_skid_steer_wheels_are_reported_as_slip():
     samples = simulate(SimConfig(duration=30.0, wheel_yaw_scale=2.3))
     v = one(verdicts_of(make_config(extra_odom="slip_threshold = 0.1"), samples), "wheel", "yaw_rate")
     assert v.level == "warn" and v.key == "sensors.wheel.slip_threshold"
+    # the scale is measured (wheel noise 0.01 rad/s over 30 s of turning: well within 5 %), and a
+    # systematic scale is never advised away as understated noise
+    assert v.evidence["wheel_vs_gyro_yaw_scale"] == pytest.approx(2.3, rel=0.05)
+    assert "twist_noise" not in v.key
+
+
+def test_wheels_reading_zero_while_turning_are_not_called_understated_noise():
+    """A race car whose drive reads exactly zero while it still coasts and turns: the wheel yaw-rate
+    NIS is high only because of those stretches (flagged as slip); the rest agree with the stated
+    noise, so the doctor must not ask for more twist_noise; and the gyro at those 'standstills'
+    turns, so they are not standstills (no gyro_noise advice from them)."""
+    from .sim_rest import RestWorld, Segment, simulate as simulate_rest
+
+    segments = [Segment(3.0)]
+    for _ in range(4):
+        segments += [Segment(8.0, speed=3.0, yaw_rate=0.2), Segment(1.5, speed=2.0, yaw_rate=0.4, odom_reads_zero=True),
+                     Segment(8.0, speed=3.0, yaw_rate=-0.2)]
+    segments += [Segment(3.0)]
+    world = RestWorld(segments, gyro_bias=(0.0, 0.0, 0.01), wheel_sigma=0.02)
+    verdicts = verdicts_of(make_config(), simulate_rest(world))
+    slip = one(verdicts, "wheel", "yaw_rate")
+    assert slip.key != "sensors.wheel.twist_noise" and "only because of the" in slip.message, slip
+    bias = one(verdicts, "imu", "gyro_bias")
+    assert bias.key != "sensors.imu.gyro_noise", bias
 
 
 def test_wheels_driving_heading_against_gyro_and_imu_yaw_are_the_culprit():
@@ -370,3 +394,15 @@ def test_records_of_another_shape_still_count_in_the_channel_verdict():
     assert ok.n == 200 and ok.n_comp == 100 and ok.dof_sum == 500
     assert ok.verdict() == "ok" and ok.nis_per_dof == pytest.approx(1.0)
     assert high.verdict() == "nis_high" and high.nis_per_dof == pytest.approx(10.0)
+
+
+def test_gps_fixes_during_the_heading_search_are_not_judged_as_gps_noise():
+    """A car already moving at 17 m/s when the recording starts: until the GPS heading is known the
+    innovations carry the dead-reckoning along a wrong heading, not the receiver's noise. Those
+    updates are marked as learning; no verdict may blame the GPS's position_noise for them."""
+    w = sim_gps.World(duration=60.0, gps_rate=10.0, gps_sigma=2.0, standstill=0.0, speed=17.0,
+                      start=(0.0, 0.0, 1.2))
+    verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
+    unaligned = [v for v in verdicts if v.channel == "position_unaligned"]
+    assert unaligned and all(v.level == "ok" and v.key != "sensors.gps.position_noise" for v in unaligned), unaligned
+    assert one(verdicts, "gps", "position").level == "ok"

@@ -22,7 +22,7 @@ from .attitude import TiltStats, lean_verdict
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
 from .gyro import bias_check
-from .heading import heading_check, wheel_heading_check
+from .heading import heading_check, wheel_heading_check, wheel_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
 from .series import Series, SeriesCollector
 from .speed import speed_check
@@ -171,7 +171,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         elif channel == "yaw_rate":
             if unmeasured is None:
                 o = s if isinstance(s, OdomSensor) else OdomSensor(name=name, key=name)
-                found[(name, channel)].append(slip_verdict(o, ch))
+                found[(name, channel)].append(slip_verdict(o, ch, wheel_yaw_fit(series) if known else None))
         elif channel == "gyro_bias":
             v = bias_check(series, cfg, ch, gyro_fused) if known else None
             if v is None:

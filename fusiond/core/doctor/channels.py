@@ -20,6 +20,8 @@ GATED_FRACTION = 0.1
 
 
 def figures(ch: ChannelStats, t0: float | None) -> str:
+    if ch.n and not ch.n_nis:  # every update was a learning one (e.g. the GPS heading search)
+        return f"{ch.n} updates while the state was being learned, not judged against the stated noise"
     now = ch.now_note(t0)
     return f"{ch.nis_per_dof:.2f} per dof over {ch.n} updates" + (f"; {now}" if now else "")
 
@@ -74,6 +76,8 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
     verdict = ch.verdict()
     ev = {"nis_per_dof": ch.nis_per_dof, "gated_fraction": frac}
+    if ch.n and not ch.n_nis:
+        return Verdict(name, channel, "ok", figures(ch, t0), evidence=ev)
     if frac > GATED_FRACTION:
         return Verdict(name, channel, "warn",
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): the sensor jumps "

@@ -22,6 +22,7 @@ from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
 
 MIN_REJECTED_FRACTION = 0.1
+QUIET_SIGMAS = 3.0  # as the core's standstill confirmation (core/updates/imu.py)
 DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
 
 
@@ -90,6 +91,23 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         return None
     fc = cfg.filter
     episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
+    # The core confirms a standstill only while the gyro is quiet (each axis within QUIET_SIGMAS of
+    # its noise plus the prior bias range, core/updates/imu.py): an episode whose gyro turns is
+    # the vehicle coasting or turning with its wheels reading zero, not a standstill. Judge the
+    # bias on the quiet ones only, and say what the others are.
+    stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0
+    quiet_bound = QUIET_SIGMAS * (stated + fc.gyro_bias_sigma)
+    turning = [e for e in episodes if abs(e.gyro_mean) > quiet_bound]
+    episodes = [e for e in episodes if abs(e.gyro_mean) <= quiet_bound]
+    if turning and (ch is None or ch.n == 0 or not episodes):
+        t_start = series.odom_t[0]
+        worst = max(turning, key=lambda e: abs(e.gyro_mean))
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"the wheels read exactly zero in {len(turning)} stretch(es) while the gyro turned (up to "
+                       f"{worst.gyro_mean:+.3f} rad/s at {worst.t0 - t_start:.1f} s): the vehicle coasted or turned "
+                       "with its drive reporting zero. Those are rightly not taken as standstills (the gyro bias is "
+                       "not learned there), and the position does not advance while the wheels read zero",
+                       evidence={"turning_at_rest": float(len(turning)), "turning_rate_rad_s": worst.gyro_mean})
     heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
         isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
     duration = (series.odom_t[-1] - series.odom_t[0]) if len(series.odom_t) > 1 else 0.0
@@ -105,6 +123,8 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        filter_key("gyro_bias_sigma"), evidence={"duration_s": duration, "standstills": 0.0})
     _count_updates(episodes, ch)
     evidence: dict[str, float] = {"standstills": float(len(episodes))}
+    if turning:
+        evidence["turning_at_rest"] = float(len(turning))
     if len(episodes) >= 2:
         ref = float(np.median([e.gyro_mean for e in episodes]))
         evidence["gyro_at_rest_rad_s"] = ref
@@ -153,6 +173,15 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                            sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
         est = evidence.get("bias_estimate_rad_s", math.nan)
         ref = evidence.get("gyro_at_rest_rad_s", episodes[-1].gyro_mean if episodes else math.nan)
+        if math.isfinite(est) and math.isfinite(ref) and abs(est - ref) <= max(DISAGREE_RAD_S / 3.0, 3.0 * (
+                episodes[-1].spread if episodes else 0.0)):
+            # z agrees: the rejected part is an x/y axis, whose bias roll/pitch updates also move
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"{100 * frac:.0f}% of standstill bias updates rejected, though the z bias ({est:+.5f} "
+                           f"rad/s) agrees with the gyro at rest ({ref:+.5f}): the rejections are on the x/y axes, "
+                           "whose bias the roll/pitch updates also move (a tilting or rocking robot at rest, or IMU "
+                           "roll/pitch that wanders); heading is not affected",
+                           evidence=evidence)
         evidence["bias_moved"] = 1.0
         return Verdict(imu.name, "gyro_bias", "warn",
                        f"{100 * frac:.0f}% of standstill bias updates rejected although the gyro is quiet at rest "

@@ -208,6 +208,25 @@ def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarra
     return float(coef[1])
 
 
+def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
+    """(scale k, offset) in wheel yaw rate = offset + k gyro rate, least squares over the run; None
+    when the robot hardly turns. Rates, not headings: a wheel yaw offset and a scale separate only
+    where the turn rate varies."""
+    if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
+        return None
+    to, wz = np.array(series.odom_t), np.array(series.odom_wz)
+    tg, hg, gz = np.array(series.gyro_t), np.array(series.gyro_heading), np.array(series.gyro_z)
+    m = (to >= tg[0]) & (to <= tg[-1])
+    # a wheel reading exactly zero while the gyro turns is the drive at rest while the vehicle
+    # coasts (or a component not measured): no scale information, left out of the fit
+    m &= ~((wz == 0.0) & (np.abs(np.interp(to, tg, gz)) > 0.05))
+    g = np.interp(to[m], tg, gz)
+    if m.sum() < 10 or np.ptp(hg) < MIN_TURN_RAD or np.std(g) < 0.02:
+        return None
+    (offset, k), *_ = np.linalg.lstsq(np.vstack([np.ones_like(g), g]).T, wz[m], rcond=None)
+    return float(k), float(offset)
+
+
 def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
     from ...config import OdomSensor
@@ -218,15 +237,11 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
         return None
     if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
         return None
-    to, wz = np.array(series.odom_t), np.array(series.odom_wz)
-    tg, hg, gz = np.array(series.gyro_t), np.array(series.gyro_heading), np.array(series.gyro_z)
-    m = (to >= tg[0]) & (to <= tg[-1])
-    g = np.interp(to[m], tg, gz)
-    if m.sum() < 10 or np.ptp(hg) < MIN_TURN_RAD or np.std(g) < 0.02:
+    fit = wheel_yaw_fit(series)
+    if fit is None:
         return None
-    # rates, not headings: a wheel yaw offset and a scale separate only where the turn rate varies
-    (offset, k), *_ = np.linalg.lstsq(np.vstack([np.ones_like(g), g]).T, wz[m], rcond=None)
-    offset, k = float(offset), float(k)
+    k, offset = fit
+    tg, hg = np.array(series.gyro_t), np.array(series.gyro_heading)
     evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
     ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
     ok = np.isfinite(yi)

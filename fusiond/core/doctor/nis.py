@@ -55,6 +55,8 @@ class ChannelStats:
     n_nis: int = 0
     rejected: int = 0
     nis_sum: float = 0.0
+    n_nis_kept: int = 0  # the same over the updates that were not rejected (gated, or flagged as slip)
+    nis_sum_kept: float = 0.0
     dof_sum: int = 0
     dof: int = 0  # of the latest record
     n_comp: int = 0  # records of the channel's first shape (per-component figures)
@@ -90,6 +92,9 @@ class ChannelStats:
             self.innovations.append(list(r.innovation))
         if getattr(r, "learning", False):
             return  # the prior's test, not the sensor's: counted, kept as an episode, not judged
+        if math.isfinite(r.nis) and r.dof > 0 and not r.rejected:
+            self.n_nis_kept += 1
+            self.nis_sum_kept += r.nis
         if math.isfinite(r.nis) and r.dof > 0:
             self.n_nis += 1
             self.nis_sum += r.nis
@@ -133,6 +138,11 @@ class ChannelStats:
     def nis_per_dof(self) -> float:
         return self.nis_sum / self.dof_sum if self.dof_sum else math.nan
 
+    def kept_verdict(self) -> str:
+        """The whole-run NIS verdict of the updates that were not rejected."""
+        mean = self.nis_sum_kept / self.n_nis_kept if self.n_nis_kept else None
+        return judge_nis(mean, self.n_nis_kept, self.dof, self.confidence)
+
     def verdict(self) -> str:
         """The whole-run NIS verdict."""
         return judge_nis(self.nis_mean, self.n_nis, self.mean_dof, self.confidence)
@@ -141,7 +151,9 @@ class ChannelStats:
         return nis_bounds(self.n_nis, self.mean_dof, self.confidence) if self.n_nis else None
 
     def component(self, i: int) -> tuple[float, float, float]:
-        """(mean, rms, rms predicted by S) of component i over the run."""
+        """(mean, rms, rms predicted by S) of component i over the run (NaN before any judged update)."""
+        if not self.sums:
+            return math.nan, math.nan, math.nan
         n = max(self.n_comp, 1)
         return self.sums[i] / n, math.sqrt(self.outer[i][i] / n), math.sqrt(self.variances[i] / n)
 

@@ -131,8 +131,11 @@ def apply_gps(core: "FusionCore", s: FilterState, idx: int, inp: GpsInput, stamp
         gps_heading(core, s, cfg, z, inp.cov, stamp)  # after the fix has put the antenna where it is
     if not emit:
         return []
+    # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
+    # heading: its NIS tests the heading search, not the receiver's noise (learning).
     return [DiagnosticsRecord(stamp, cfg.name, [ENU_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis,
-                              len(rows), res.rejected, channel=channel, late=late)]
+                              len(rows), res.rejected, channel=channel, late=late,
+                              learning=channel == "position_unaligned")]
 
 
 def frozen(s: FilterState, lla: tuple[float, float, float]) -> bool:

@@ -7,10 +7,12 @@ It also tells the core when the robot stands still (for the gyro bias).
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from ..diagnostics import DiagnosticsRecord
 from ..sensors import OdomInput
+from .imu import QUIET_SIGMAS
 
 if TYPE_CHECKING:
     from ..fusion import FusionCore
@@ -41,7 +43,11 @@ def apply_odom(core: "FusionCore", s: FilterState, idx: int, inp: OdomInput, sta
         e = core.layout.error["gyro_bias"].start + 2
         var += float(s.ekf.P[e, e])
     r = inp.angular[2] - gyro_z
-    slip = abs(r) > core.sensors[idx].slip_threshold
+    # Flagged: a wheel rate that misses the gyro's by more than slip_threshold, or wheels reading
+    # exactly zero while the gyro turns beyond the standstill quiet bound (the vehicle coasting or
+    # turned with its drive at rest: not a wheel measurement of the turn at all).
+    quiet = QUIET_SIGMAS * (math.sqrt(s.gyro_cov[8]) + core.cfg.filter.gyro_bias_sigma)
+    slip = abs(r) > core.sensors[idx].slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
     return [
         DiagnosticsRecord(stamp, core.sensors[idx].name, ["yaw_rate"], [r], [var], r * r / var, 1, slip,
                           channel="yaw_rate", late=late)
