@@ -126,3 +126,26 @@ def test_ros2_topic_without_leading_slash(jackal_bag: Path, tmp_path: Path) -> N
     with open_bag_samples([tmp_path / "bare"], SENSORS) as bag:
         assert bag.topics == {"imu": JACKAL_IMU_KEY} and bag.missing == ["wheel"]
         assert len(list(bag)) == 5
+
+
+def test_a_ros2_bag_directory_named_dot_bag(tmp_path: Path) -> None:
+    """rosbags reads a '.bag' suffix as ROS 1: a link of that name to a ROS 2 bag is followed, a
+    directory really named so is a clear error, not 'Is a directory'."""
+    bag = tmp_path / "real_bag"
+    with Writer(bag, version=9) as writer:
+        conn = writer.add_connection("/odom", ODOMETRY, typestore=TYPESTORE)
+        from fusiond.codecs import encode_sample
+
+        for k in range(3):
+            s = OdomSample("wheel", 10.0 + 0.1 * k, (0.1, 0.0, 0.0), (0.0, 0.0, 0.0), (1e-4,) * 36)
+            writer.write(conn, int(s.stamp * 1e9), encode_sample(s, "ros2-cdr"))
+    link = tmp_path / "run.bag"
+    link.symlink_to(bag, target_is_directory=True)
+    sensors = [OdomSensor(name="wheel", key="odom")]
+    with open_bag_samples([link], sensors) as samples:
+        assert len(list(samples)) == 3
+    named = tmp_path / "named.bag"
+    bag.rename(named)
+    with pytest.raises(BagError, match="named \\*.bag"):
+        with open_bag_samples([named], sensors):
+            pass

@@ -400,8 +400,8 @@ def test_gps_fixes_during_the_heading_search_are_not_judged_as_gps_noise():
     """A car already moving at 17 m/s when the recording starts: until the GPS heading is known the
     innovations carry the dead-reckoning along a wrong heading, not the receiver's noise. Those
     updates are marked as learning; no verdict may blame the GPS's position_noise for them."""
-    w = sim_gps.World(duration=60.0, gps_rate=10.0, gps_sigma=2.0, standstill=0.0, speed=17.0,
-                      start=(0.0, 0.0, 1.2))
+    w = sim_gps.World(duration=60.0, gps_rate=10.0, gps_sigma=1.0, standstill=0.0, speed=17.0,
+                      start=(0.0, 0.0, 2.5))  # 2.5 rad off the filter's initial heading
     verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
     unaligned = [v for v in verdicts if v.channel == "position_unaligned"]
     assert unaligned and all(v.level == "ok" and v.key != "sensors.gps.position_noise" for v in unaligned), unaligned

@@ -104,6 +104,13 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
     for p in paths:
         if not p.exists():
             raise BagError(f"{p}: no such bag")
+    # rosbags tells ROS 1 from ROS 2 by the ".bag" suffix: a ROS 2 bag directory reached through a
+    # link named *.bag is opened at its real path; one really named *.bag cannot be read as such
+    paths = [p.resolve() if p.is_dir() and p.suffix == ".bag" else p for p in paths]
+    for p in paths:
+        if p.is_dir() and p.suffix == ".bag":
+            raise BagError(f"{p}: a ROS 2 bag directory named *.bag is read as a ROS 1 bag by rosbags; "
+                           "rename it (or link it under another name)")
     ros1 = [p.suffix == ".bag" for p in paths]
     if any(ros1) and not all(ros1):
         raise BagError("cannot mix ROS 1 .bag files and ROS 2 bags in one replay")
