@@ -31,8 +31,8 @@ from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import (
-    ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
-    YawOffsetBlock, predict,
+    ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout,
+    WheelScaleBlock, YawOffsetBlock, predict,
 )
 from ..estimator import mat3
 from ..estimator.geodesy import enu_to_geodetic
@@ -136,6 +136,7 @@ class FusionCore:
             elif isinstance(sc, GpsSensor) and sc.vertical_error_sigma > 0.0:  # the altitude's wander alone
                 blocks.append(GpsErrorBlock(sc.vertical_error_tau_s, (0.0, 0.0, sc.vertical_error_sigma)))
         self.layout = StateLayout(blocks)
+        self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
         self.has_gyro_scale = self.layout.has("gyro_scale")
         # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
@@ -604,7 +605,7 @@ class FusionCore:
             t1 = min(t_end, self._next_expiry(s, t0))
             seg = t1 - t0
             u = self._inputs(s, 0.5 * (t0 + t1))  # fresh throughout the segment iff fresh at its middle
-            x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density)
+            x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
             for hook in self._predict_hooks:  # the kinds' own bookkeeping (GPS track, pose anchors)
                 hook(s, s.ekf.x, x)
             if gap and t1 >= t_end:
