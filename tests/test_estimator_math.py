@@ -343,3 +343,20 @@ def test_a_reused_workspace_gives_what_a_fresh_one_gives(steps):
         np.testing.assert_array_equal(F, F2)
         np.testing.assert_array_equal(Q, Q2)
         x = x1
+
+
+def test_orientation_noise_is_shared_read_only_and_follows_the_covariance():
+    """R is cached per (covariance, rows): a changed covariance must give its own R, and the shared
+    array must refuse writes (a caller scaling it in place would change every later update)."""
+    layout = _layout()
+    x = _state(layout, (0.1, 0.2, 0.3))
+    cov_a = (1e-4, 0.0, 0.0, 0.0, 2e-4, 0.0, 0.0, 0.0, 3e-4)
+    cov_b = (5e-4, 1e-5, 0.0, 1e-5, 6e-4, 0.0, 0.0, 0.0, 7e-4)
+    _, _, Ra = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
+    _, _, Rb = obs.orientation(layout, x, (0.0, 0.0, 0.0), list(cov_b), (0, 1, 2))
+    np.testing.assert_array_equal(Ra, [[1e-4, 0.0], [0.0, 2e-4]])
+    np.testing.assert_array_equal(Rb, np.reshape(cov_b, (3, 3)))
+    with pytest.raises(ValueError):
+        Ra *= 2.0
+    _, _, Ra2 = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
+    np.testing.assert_array_equal(Ra2, [[1e-4, 0.0], [0.0, 2e-4]])
