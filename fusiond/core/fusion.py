@@ -139,6 +139,10 @@ class FusionCore:
         self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
         self.has_gyro_scale = self.layout.has("gyro_scale")
+        # indices the per-message code reads (odometry's yaw-rate check), looked up once here
+        self.bias_z_nominal = self.layout.nominal["gyro_bias"].start + 2 if self.has_bias else -1
+        self.bias_z_error = self.layout.error["gyro_bias"].start + 2 if self.has_bias else -1
+        self.gyro_scale_nominal = self.layout.nominal["gyro_scale"].start if self.has_gyro_scale else -1
         # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
         # position, heading, the z bias or a scale (which drive heading and position).
         self.tilt_mask = np.ones(self.layout.error_dim, dtype=bool)
