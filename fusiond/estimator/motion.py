@@ -100,7 +100,7 @@ class PredictWorkspace:
     nested tuples, cost more than the arithmetic (each numpy call on a 3x3 is ~1 us). Here
     F stays the identity except for the entries a step writes, and Q stays zero except for
     its diagonal and the off-diagonal entries of the two input blocks: a step writes exactly
-    those, as scalars, and puts back to identity/zero what the previous step wrote and this
+    those (scalars or small slices, whichever numpy takes faster), and puts back to identity/zero what the previous step wrote and this
     one does not (an input block that no longer applies, an input that went silent).
     The arrays belong to the workspace: valid until its next use.
     """
@@ -115,14 +115,6 @@ class PredictWorkspace:
         self._q_diag = np.lib.stride_tricks.as_strided(self.Q, (n,), (self.Q.strides[0] + self.Q.strides[1],))
         self._inputs_written = [False] * len(layout.input_blocks)
         self._noise_written = [False, False]  # Q's linear / angular 3x3 off-diagonals hold values
-
-
-def _put(M: np.ndarray, r0: int, c0: int, rows) -> None:
-    """M[r0 + i, c0 + j] = rows[i][j], element by element (cheaper than a slice from tuples)."""
-    for i, row in enumerate(rows):
-        r = r0 + i
-        for j, v in enumerate(row):
-            M[r, c0 + j] = v
 
 
 def _put_noise_offdiagonal(Q: np.ndarray, k: int, c01: float, c02: float, c12: float) -> None:
@@ -165,10 +157,10 @@ def predict(
         written[k] = True
         xb = xl[n0:n1]
         if blk.corrects == "linear":
-            corrections.append((0, cols.start, blk, xb, v))
+            corrections.append((_POSITION, cols, blk, xb, v))
             v = blk.correct(xb, v)
         else:
-            corrections.append((3, cols.start, blk, xb, w))
+            corrections.append((_ATTITUDE, cols, blk, xb, w))
             w = blk.correct(xb, w)
 
     px, py, pz, qx, qy, qz, qw = xl[0:7]
@@ -206,13 +198,13 @@ def predict(
     # Blocks correct an input in turn (u1 = g1(u0), u2 = g2(u1), ...): walking them
     # backwards, each block's columns are G d u_last / d u_its_output times its own
     # input Jacobian, and G is carried through the block's d u_out / d u_in.
-    for row0, col0, blk, xb, u_in in reversed(corrections):
-        if row0 == 0:
-            _put(F, 0, col0, blk.chain(G_lin, xb, u_in))
+    for rows, cols, blk, xb, u_in in reversed(corrections):
+        if rows is _POSITION:
+            F[rows, cols] = blk.chain(G_lin, xb, u_in)
             if blk.scales_input:
                 G_lin = mat3.mul(G_lin, blk.input_derivative(xb, u_in))
         else:
-            _put(F, 3, col0, blk.chain(G_ang, xb, u_in))
+            F[rows, cols] = blk.chain(G_ang, xb, u_in)
             if blk.scales_input:
                 G_ang = mat3.mul(G_ang, blk.input_derivative(xb, u_in))
 
