@@ -100,8 +100,9 @@ class PredictWorkspace:
     nested tuples, cost more than the arithmetic (each numpy call on a 3x3 is ~1 us). Here
     F stays the identity except for the entries a step writes, and Q stays zero except for
     its diagonal and the off-diagonal entries of the two input blocks: a step writes exactly
-    those (scalars or small slices, whichever numpy takes faster), and puts back to identity/zero what the previous step wrote and this
-    one does not (an input block that no longer applies, an input that went silent).
+    those (scalars or small slices, whichever numpy takes faster), and puts back to identity
+    or zero what the previous step wrote and this one does not (an input block that no
+    longer applies, an input that went silent).
     The arrays belong to the workspace: valid until its next use.
     """
 

@@ -230,9 +230,6 @@ class StateLayout:
         self.dynamic_blocks = [(b, n0, e0) for b, n0, e0 in self._offsets if b.dynamic]
         walk = np.concatenate([np.asarray(b.random_walk(), float) for b in blocks])
         self.random_walk_var = walk**2
-        # Preallocated shapes the filter copies instead of building each step.
-        self.identity = np.eye(e)
-        self.zeros = np.zeros((e, e))
 
     def noise_density(self, pose_noise_var: np.ndarray) -> np.ndarray:
         """Per-second variance of every error component: pose model error + random walks."""
