@@ -37,10 +37,11 @@ def _best_us(fn: Callable[[], object], number: int, repeat: int) -> float:
 
 
 def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
-    from .estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+    from .estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout, predict
     from .estimator import observations as obs
 
     layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5)])
+    ws = PredictWorkspace(layout)  # as FusionCore holds one
     ekf = ErrorStateEKF(layout)
     u = MotionInput()
     u.linear, u.angular = (0.5, 0.0, 0.0), (0.01, -0.02, 0.2)
@@ -54,7 +55,7 @@ def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
     mask[[0, 1, 2, 5, 8]] = False
 
     def predict_only() -> None:
-        x, F, Q = predict(layout, ekf.x, u, 0.01, noise)
+        x, F, Q = predict(layout, ekf.x, u, 0.01, noise, ws)
         ekf.propagate(x, F, Q)
 
     def update_only() -> None:

@@ -312,3 +312,51 @@ def test_position_with_gps_error_jacobian_matches_central_differences():
     np.testing.assert_allclose(y, y0 - np.array([0.4, -0.7, 1.2]), atol=1e-15)
     np.testing.assert_array_equal(H[:, layout.error["gps_error"]], np.eye(3))
     np.testing.assert_array_equal(H0[:, layout.error["gps_error"]], 0.0)
+
+
+# -- the preallocated predict workspace ------------------------------------------------------------------------
+
+_step_inputs = st.tuples(st.booleans(), st.booleans(), st.booleans(), st.booleans(), st.booleans(),
+                         st.floats(0.0, 0.3))
+
+
+@settings(max_examples=40, deadline=None)
+@given(steps=st.lists(_step_inputs, min_size=2, max_size=8))
+def test_a_reused_workspace_gives_what_a_fresh_one_gives(steps):
+    """predict rewrites only the entries of F and Q a step sets and puts back what an earlier step
+    wrote and this one does not (an input block that stops applying when the gyro goes silent, a
+    silent input's noise, world vs body twist, dt = 0). Whatever sequence of steps went before,
+    F and Q must equal (exactly: the same float operations) those from a fresh workspace."""
+    from fusiond.estimator import GpsErrorBlock, PredictWorkspace
+
+    layout = StateLayout(_scale_layout().blocks + [GpsErrorBlock(30.0, (1.0, 1.5, 2.0))])
+    ws = PredictWorkspace(layout)
+    x = _state(layout, (0.1, -0.2, 0.7))
+    density = np.linspace(1e-6, 1e-5, layout.error_dim)
+    for world, gyro, planar, linear_on, angular_on, dt in steps:
+        u = _input(world, gyro, planar)
+        u.linear_period = 0.02 if linear_on else 0.0
+        u.angular_period = 0.02 if angular_on else 0.0
+        x1, F, Q = predict(layout, x, u, dt, density, ws)
+        x2, F2, Q2 = predict(layout, x, u, dt, density)
+        np.testing.assert_array_equal(x1, x2)
+        np.testing.assert_array_equal(F, F2)
+        np.testing.assert_array_equal(Q, Q2)
+        x = x1
+
+
+def test_orientation_noise_is_shared_read_only_and_follows_the_covariance():
+    """R is cached per (covariance, rows): a changed covariance must give its own R, and the shared
+    array must refuse writes (a caller scaling it in place would change every later update)."""
+    layout = _layout()
+    x = _state(layout, (0.1, 0.2, 0.3))
+    cov_a = (1e-4, 0.0, 0.0, 0.0, 2e-4, 0.0, 0.0, 0.0, 3e-4)
+    cov_b = (5e-4, 1e-5, 0.0, 1e-5, 6e-4, 0.0, 0.0, 0.0, 7e-4)
+    _, _, Ra = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
+    _, _, Rb = obs.orientation(layout, x, (0.0, 0.0, 0.0), list(cov_b), (0, 1, 2))
+    np.testing.assert_array_equal(Ra, [[1e-4, 0.0], [0.0, 2e-4]])
+    np.testing.assert_array_equal(Rb, np.reshape(cov_b, (3, 3)))
+    with pytest.raises(ValueError):
+        Ra *= 2.0
+    _, _, Ra2 = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
+    np.testing.assert_array_equal(Ra2, [[1e-4, 0.0], [0.0, 2e-4]])

@@ -31,8 +31,8 @@ from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import (
-    ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, StateLayout, WheelScaleBlock,
-    YawOffsetBlock, predict,
+    ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout,
+    WheelScaleBlock, YawOffsetBlock, predict,
 )
 from ..estimator import mat3
 from ..estimator.geodesy import enu_to_geodetic
@@ -136,8 +136,13 @@ class FusionCore:
             elif isinstance(sc, GpsSensor) and sc.vertical_error_sigma > 0.0:  # the altitude's wander alone
                 blocks.append(GpsErrorBlock(sc.vertical_error_tau_s, (0.0, 0.0, sc.vertical_error_sigma)))
         self.layout = StateLayout(blocks)
+        self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
         self.has_gyro_scale = self.layout.has("gyro_scale")
+        # indices the per-message code reads (odometry's yaw-rate check), looked up once here
+        self.bias_z_nominal = self.layout.nominal["gyro_bias"].start + 2 if self.has_bias else -1
+        self.bias_z_error = self.layout.error["gyro_bias"].start + 2 if self.has_bias else -1
+        self.gyro_scale_nominal = self.layout.nominal["gyro_scale"].start if self.has_gyro_scale else -1
         # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
         # position, heading, the z bias or a scale (which drive heading and position).
         self.tilt_mask = np.ones(self.layout.error_dim, dtype=bool)
@@ -206,6 +211,7 @@ class FusionCore:
         self.tilt_reference = self.two_d or any(
             (isinstance(p, ImuPolicy) and p.gives_tilt) or (isinstance(p, PosePolicy) and not p.cfg.differential)
             for p in self.policies)
+        self._timeout_base = [sc.timeout_s for sc in self.sensors]
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
@@ -440,11 +446,18 @@ class FusionCore:
         return s.t - s.last[idx] <= self.timeout(idx, s)
 
     def timeout(self, idx: int, s: FilterState | None = None) -> float:
-        s = s or self.state
-        base = self.sensors[idx].timeout_s
-        if s is None or s.period[idx] <= 0.0:
+        """How long sensor idx's input is held after its last message: its ``timeout_s``, or
+        TIMEOUT_PERIODS of its typical period when that is longer. (Several calls a message:
+        the configured values are read from a list made once.)"""
+        if s is None:
+            s = self.state
+        base = self._timeout_base[idx]
+        if s is None:
             return base
-        return max(base, TIMEOUT_PERIODS * s.period[idx])
+        period = s.period[idx]
+        if period <= 0.0:
+            return base
+        return max(base, TIMEOUT_PERIODS * period)
 
     def set_pose(self, stamp: float, position: tuple[float, float, float],
                  orientation: tuple[float, float, float, float], covariance: list[float]) -> None:
@@ -553,18 +566,29 @@ class FusionCore:
     def _reapply(self, s: FilterState, idx: int, inp, stamp: float) -> None:
         self._apply(s, idx, inp, stamp, emit=False, late=False)
 
-    def _inputs(self, s: FilterState, t: float | None = None) -> MotionInput:
-        """Motion inputs held at time t (default s.t); a silent sensor's input is not held forever."""
+    def _held_timeouts(self, s: FilterState) -> tuple[float, float]:
+        """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
+        during a prediction, so ``_predict`` reads them once for all its segments."""
+        odom = self.odom_index
+        odom_timeout = self.timeout(odom, s) if odom >= 0 and s.last[odom] is not None else 0.0
+        gyro_timeout = self.timeout(s.gyro_last[0], s) if s.gyro is not None else 0.0
+        return odom_timeout, gyro_timeout
+
+    def _inputs(self, s: FilterState, t: float | None = None,
+                timeouts: tuple[float, float] | None = None) -> MotionInput:
+        """Motion inputs held at time t (default s.t); a silent sensor's input is not held forever.
+        ``timeouts``: ``_held_timeouts(s)`` when the caller has them."""
         u = self._u
         if t is None:
             t = s.t
+        odom_timeout, gyro_timeout = self._held_timeouts(s) if timeouts is None else timeouts
         odom = self.odom_index
-        odom_fresh = odom >= 0 and s.last[odom] is not None and t - s.last[odom] <= self.timeout(odom, s)
+        odom_fresh = odom >= 0 and s.last[odom] is not None and t - s.last[odom] <= odom_timeout
         if odom_fresh:
             u.linear, u.linear_cov, u.linear_period = s.linear, s.linear_cov, s.period[odom]
         else:
             u.linear, u.linear_cov, u.linear_period = _ZERO3, self.default_linear_cov, 0.0
-        gyro_fresh = s.gyro is not None and t - s.gyro_last[1] <= self.timeout(s.gyro_last[0], s)
+        gyro_fresh = s.gyro is not None and t - s.gyro_last[1] <= gyro_timeout
         if gyro_fresh:
             u.angular, u.angular_cov, u.angular_period = s.gyro, s.gyro_cov, s.period[s.gyro_last[0]]
             u.from_gyro = True
@@ -600,11 +624,12 @@ class FusionCore:
         t0 = s.t
         t_end = t0 + dt
         gap = dt > self.cfg.filter.gap_s
+        timeouts = self._held_timeouts(s)
         while True:
-            t1 = min(t_end, self._next_expiry(s, t0))
+            t1 = min(t_end, self._next_expiry(s, t0, timeouts))
             seg = t1 - t0
-            u = self._inputs(s, 0.5 * (t0 + t1))  # fresh throughout the segment iff fresh at its middle
-            x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density)
+            u = self._inputs(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
+            x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
             for hook in self._predict_hooks:  # the kinds' own bookkeeping (GPS track, pose anchors)
                 hook(s, s.ekf.x, x)
             if gap and t1 >= t_end:
@@ -620,16 +645,16 @@ class FusionCore:
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
 
-    def _next_expiry(self, s: FilterState, t: float) -> float:
+    def _next_expiry(self, s: FilterState, t: float, timeouts: tuple[float, float]) -> float:
         """The first moment after t at which a held input's sensor times out (inf if none)."""
         nxt = math.inf
         odom = self.odom_index
         if odom >= 0 and s.last[odom] is not None:
-            e = s.last[odom] + self.timeout(odom, s)
+            e = s.last[odom] + timeouts[0]
             if t < e < nxt:
                 nxt = e
         if s.gyro_last is not None:
-            e = s.gyro_last[1] + self.timeout(s.gyro_last[0], s)
+            e = s.gyro_last[1] + timeouts[1]
             if t < e < nxt:
                 nxt = e
         return nxt

@@ -41,8 +41,8 @@ class FilterState:
         c.bias_window, c.bias_rejects = self.bias_window, self.bias_rejects  # immutable tuples
         c.tilt_seen = self.tilt_seen
         c.attitude_ready = self.attitude_ready
-        c.yaw_offset = dict(self.yaw_offset)
-        c.adaptive = {k: list(v) for k, v in self.adaptive.items()}
+        c.yaw_offset = dict(self.yaw_offset) if self.yaw_offset else {}
+        c.adaptive = {k: list(v) for k, v in self.adaptive.items()} if self.adaptive else {}
         # world frame: flags and immutable values (tuples, EnuFrame) only, so sharing is safe
         c.frame_ready, c.enu, c.heading_ready = self.frame_ready, self.enu, self.heading_ready
         c.gps_anchor, c.travel = self.gps_anchor, self.travel

@@ -56,12 +56,13 @@ class ErrorStateEKF:
         self._ws: _Workspace | None = None  # scratch shared with copies (single-threaded use per core)
 
     def _buffers(self) -> tuple[np.ndarray, "_Workspace"]:
+        # P's shape is the layout's for the filter's whole life: only a missing buffer is made here
         spare, ws = self._spare, self._ws
-        n = self.P.shape[0]
-        if spare is None or spare.shape[0] != n:
+        if spare is None:
+            n = self.P.shape[0]
             spare = self._spare = np.empty((n, n))
-        if ws is None or ws.n != n:
-            ws = self._ws = _Workspace(n)
+        if ws is None:
+            ws = self._ws = _Workspace(self.P.shape[0])
         return spare, ws
 
     # -- propagation -------------------------------------------------------
@@ -72,7 +73,10 @@ class ErrorStateEKF:
         # sizes (the out= path's checks cost more than a 9x9 allocation).
         P_new = np.dot(np.dot(F, self.P), F.T)
         P_new += Q
-        if not math.isfinite(P_new.sum()):  # one reduction: any NaN/inf makes the sum non-finite
+        # The diagonal is enough (as in ``_store``): a NaN/inf in F's row i makes (F P F^T)_ii
+        # non-finite (inf * 0 is NaN too), and Q's off-diagonal entries come from the same rows
+        # as its diagonal. A Python sum of 9-15 floats costs less than a numpy reduction.
+        if not math.isfinite(sum(P_new.diagonal().tolist())):
             self.P = self.layout.initial_covariance()
             self.resets += 1
             return False
@@ -100,7 +104,12 @@ class ErrorStateEKF:
         if white is None:
             return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
         Linv, z = white  # z = L^-1 y, the whitened innovation
-        nis = math.fsum(v * v for v in z)
+        # fsum: the NIS gates and feeds the consistency tests; for one or two terms a float
+        # addition is already the correctly rounded sum, so it is used there (the same bits).
+        if len(z) <= 2:
+            nis = sum([v * v for v in z])
+        else:
+            nis = math.fsum([v * v for v in z])
         if not math.isfinite(nis):
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
         if nis > threshold * threshold:
@@ -133,12 +142,12 @@ class ErrorStateEKF:
         NaN in C = W^T W at (i, j) comes from W's column i or j, whose C_ii or C_jj (a sum of
         squares) is then non-finite too, also where the mask weight is 0 (inf * 0 = NaN).
         """
-        d = P_new.diagonal()
-        if not math.isfinite(d.sum()):
+        d = P_new.diagonal().tolist()  # Python floats: cheaper than two numpy reductions at this size
+        if not math.isfinite(sum(d)):
             self.P = self.layout.initial_covariance()
             self.resets += 1
             return False
-        if d.min() < 0.0:
+        if min(d) < 0.0:
             # Rounding can push a tiny variance below zero: clip the spectrum.
             P_new += P_new.T
             P_new *= 0.5

@@ -93,27 +93,69 @@ def _right_jacobian(x: float, y: float, z: float) -> tuple:
     )
 
 
+class PredictWorkspace:
+    """F and Q of one layout, preallocated and rewritten in place by each ``predict``.
+
+    Building F from an identity copy and Q as a fresh dense matrix, block by block from
+    nested tuples, cost more than the arithmetic (each numpy call on a 3x3 is ~1 us). Here
+    F stays the identity except for the entries a step writes, and Q stays zero except for
+    its diagonal and the off-diagonal entries of the two input blocks: a step writes exactly
+    those (scalars or small slices, whichever numpy takes faster), and puts back to identity
+    or zero what the previous step wrote and this one does not (an input block that no
+    longer applies, an input that went silent).
+    The arrays belong to the workspace: valid until its next use.
+    """
+
+    __slots__ = ("F", "Q", "_q_diag", "_inputs_written", "_noise_written")
+
+    def __init__(self, layout: StateLayout) -> None:
+        n = layout.error_dim
+        self.F = np.eye(n)
+        self.Q = np.zeros((n, n))
+        # a writable view of Q's diagonal (np.diagonal's is read-only)
+        self._q_diag = np.lib.stride_tricks.as_strided(self.Q, (n,), (self.Q.strides[0] + self.Q.strides[1],))
+        self._inputs_written = [False] * len(layout.input_blocks)
+        self._noise_written = [False, False]  # Q's linear / angular 3x3 off-diagonals hold values
+
+
+def _put_noise_offdiagonal(Q: np.ndarray, k: int, c01: float, c02: float, c12: float) -> None:
+    """The off-diagonal entries of the symmetric 3x3 block of Q at (k, k)."""
+    Q[k, k + 1] = Q[k + 1, k] = c01
+    Q[k, k + 2] = Q[k + 2, k] = c02
+    Q[k + 1, k + 2] = Q[k + 2, k + 1] = c12
+
+
 def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float) -> np.ndarray:
     """f(x, u, dt): the exact function the filter runs (used by numeric Jacobian tests)."""
     return predict(layout, x, u, dt, np.zeros(layout.error_dim))[0]
 
 
 def predict(
-    layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, noise_density: np.ndarray
+    layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, noise_density: np.ndarray,
+    ws: PredictWorkspace | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Propagate the nominal state over dt; return (x_new, F, Q) in error space.
 
     ``noise_density``: variance per second added to each error component (model
     error of the pose plus the blocks' random walks, see ``StateLayout.noise_density``).
+    ``ws``: where F and Q are written (the filter's loop passes its own; without one a
+    fresh workspace is made). F and Q are the workspace's arrays.
     """
-    n = layout.error_dim
+    if ws is None:
+        ws = PredictWorkspace(layout)
+    F, Q = ws.F, ws.Q
     xl = x.tolist()
     v = u.linear
     w = u.angular
     corrections = []
-    for blk, n0, n1, cols in layout.input_blocks:
+    written = ws._inputs_written
+    for k, (blk, n0, n1, cols) in enumerate(layout.input_blocks):
         if not blk.applies(u.from_gyro):
+            if written[k]:  # its columns of F from an earlier step: back to the identity's zeros
+                F[_POSITION if blk.corrects == "linear" else _ATTITUDE, cols] = 0.0
+                written[k] = False
             continue
+        written[k] = True
         xb = xl[n0:n1]
         if blk.corrects == "linear":
             corrections.append((_POSITION, cols, blk, xb, v))
@@ -124,18 +166,20 @@ def predict(
 
     px, py, pz, qx, qy, qz, qw = xl[0:7]
     vx, vy, vz = v
-    R0 = rot.matrix9((qx, qy, qz, qw))
-    F = layout.identity.copy()
     if u.world_frame:
         G_lin = (dt, 0.0, 0.0, 0.0, dt, 0.0, 0.0, 0.0, dt)
         dpx, dpy, dpz = vx * dt, vy * dt, vz * dt
+        F[0, 4] = F[0, 5] = F[1, 3] = F[1, 5] = F[2, 3] = F[2, 4] = 0.0
     else:
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R0
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = rot.matrix9((qx, qy, qz, qw))
         G_lin = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
         dpx = (r0 * vx + r1 * vy + r2 * vz) * dt
         dpy = (r3 * vx + r4 * vy + r5 * vz) * dt
         dpz = (r6 * vx + r7 * vy + r8 * vz) * dt
-        F[0:3, 3:6] = ((0.0, dpz, -dpy), (-dpz, 0.0, dpx), (dpy, -dpx, 0.0))  # -[dp]x
+        # F[0:3, 3:6] = -[dp]x
+        F[0, 4], F[0, 5] = dpz, -dpy
+        F[1, 3], F[1, 5] = -dpz, dpx
+        F[2, 3], F[2, 4] = dpy, -dpx
     if u.planar:
         w = (0.0, 0.0, w[2])
     ax, ay, az = w[0] * dt, w[1] * dt, w[2] * dt
@@ -165,17 +209,34 @@ def predict(
             if blk.scales_input:
                 G_ang = mat3.mul(G_ang, blk.input_derivative(xb, u_in))
 
-    # G_lin/G_ang now map the measured inputs, whose noise the covariances describe.
-    Q = layout.zeros.copy()
+    # G_lin/G_ang now map the measured inputs, whose noise the covariances describe. Q's
+    # diagonal is assembled in floats (input noise + density * dt + the blocks' own noise,
+    # summed in that order) and written at once; the input blocks' off-diagonals as scalars.
+    noise_written = ws._noise_written
     if dt > 0.0:
-        memory = 2.0 * u.twist_correlation  # odometry: a velocity error that lasts ~tau
-        if u.linear_period > 0.0:
-            Q[0:3, 0:3] = mat3.sandwich(G_lin, u.linear_cov, max(u.linear_period, memory) / dt)
-        if u.angular_period > 0.0:
-            Q[3:6, 3:6] = mat3.sandwich(G_ang, u.angular_cov, u.angular_period / dt)
-        Q.reshape(-1)[:: n + 1] += noise_density * dt
+        qd = [d * dt for d in noise_density.tolist()]
         if dynamic:
             for blk, n0, e0 in dynamic:
                 for i, q in enumerate(blk.process_noise(dt)):
-                    Q[e0 + i, e0 + i] += q
+                    qd[e0 + i] += q
+        memory = 2.0 * u.twist_correlation  # odometry: a velocity error that lasts ~tau
+        blocks = (
+            (0, G_lin, u.linear_cov, max(u.linear_period, memory) / dt if u.linear_period > 0.0 else 0.0),
+            (3, G_ang, u.angular_cov, u.angular_period / dt if u.angular_period > 0.0 else 0.0),
+        )
+        for j, (k, G, cov, scale) in enumerate(blocks):
+            if scale > 0.0:
+                (c00, c01, c02), (_, c11, c12), (_, _, c22) = mat3.sandwich(G, cov, scale)
+                qd[k] = c00 + qd[k]
+                qd[k + 1] = c11 + qd[k + 1]
+                qd[k + 2] = c22 + qd[k + 2]
+                _put_noise_offdiagonal(Q, k, c01, c02, c12)
+                noise_written[j] = True
+            elif noise_written[j]:
+                _put_noise_offdiagonal(Q, k, 0.0, 0.0, 0.0)
+                noise_written[j] = False
+        ws._q_diag[:] = qd
+    else:
+        Q[...] = 0.0
+        noise_written[0] = noise_written[1] = False
     return x_new, F, Q

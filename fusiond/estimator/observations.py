@@ -33,8 +33,11 @@ def rpy_jacobian(q: rot.Quat) -> tuple[tuple[float, float, float], tuple[tuple[f
     R^T (-dtheta_y, dtheta_x, 0): roll = atan2(g_y, g_z) and pitch = -asin(g_x)
     follow by the chain rule and have no dtheta_z term. Yaw = atan2(R10, R00).
     """
-    roll, pitch, yaw = rot.to_rpy(q)
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rot.matrix9(q)
+    # rot.to_rpy(q) from the matrix's entries: the same float expressions, computed once
+    roll = math.atan2(r21, r22)
+    pitch = math.asin(max(-1.0, min(1.0, -r20)))
+    yaw = math.atan2(r10, r00)
     cp = max(math.cos(pitch), _MIN_COS_PITCH)
     cr, sr = math.cos(roll), math.sin(roll)
     # d g_i / d (dtheta_x, dtheta_y) = (R[1][i], -R[0][i])
@@ -53,12 +56,34 @@ def orientation(
     rows: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Observe the selected roll/pitch/yaw rows of the attitude; cov is row-major 3x3 (9-tuple)."""
-    h, Hrpy = rpy_jacobian((float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+    h, Hrpy = rpy_jacobian(tuple(x[3:7].tolist()))
     y = np.array([rot.wrap(z_rpy[i] - h[i]) for i in rows])
     H = np.zeros((len(rows), layout.error_dim))
-    H[:, 3:6] = [Hrpy[i] for i in rows]
-    R = np.array([[cov[3 * i + j] for j in rows] for i in rows])
-    return y, H, R
+    for k, i in enumerate(rows):  # element by element: cheaper than a slice from nested lists
+        H[k, 3], H[k, 4], H[k, 5] = Hrpy[i]
+    return y, H, _noise_rows(cov, rows)
+
+
+_NOISE_CACHE: dict[tuple[tuple[float, ...], tuple[int, ...]], np.ndarray] = {}
+_NOISE_CACHE_SIZE = 64
+
+
+def _noise_rows(cov: tuple[float, ...], rows: tuple[int, ...]) -> np.ndarray:
+    """R: the ``rows`` x ``rows`` part of the row-major 3x3 ``cov``, read-only.
+
+    A sensor's covariance is usually the same in every message (a driver's constant, or the
+    configured override), so R is built once per distinct (cov, rows) and shared; the cache is
+    emptied when a sensor whose covariance changes per message fills it.
+    """
+    key = (tuple(cov), tuple(rows))  # equal values share an R (0.0 and -0.0 alike: the same sum)
+    R = _NOISE_CACHE.get(key)
+    if R is None:
+        if len(_NOISE_CACHE) >= _NOISE_CACHE_SIZE:
+            _NOISE_CACHE.clear()
+        R = np.array([[cov[3 * i + j] for j in rows] for i in rows], dtype=float)
+        R.flags.writeable = False
+        _NOISE_CACHE[key] = R
+    return R
 
 
 def orientation_with_offset(

@@ -54,6 +54,11 @@ class StateBlock:
         """Discrete variance added to each error component over dt (beyond ``random_walk``)."""
         return [0.0] * self.error_size
 
+    # True when boxplus is plain addition, x[n0 + i] += dx[e0 + i] (nominal_size == error_size):
+    # the layout then adds such blocks in one loop instead of a call per block. A block whose
+    # boxplus does anything else must set it False.
+    additive = True
+
     def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
         """Inject the correction dx[e0:e0+error_size] into x[n0:n0+nominal_size], in place."""
         for i in range(self.nominal_size):
@@ -66,6 +71,7 @@ class PoseBlock(StateBlock):
     name = "pose"
     nominal_size = 7
     error_size = 6
+    additive = False
 
     def __init__(self, position_sigma: float = 0.0, attitude_sigma: float = 0.1) -> None:
         self.position_sigma = position_sigma
@@ -215,15 +221,15 @@ class StateLayout:
         ]
         self._offsets = [(b, self.nominal[b.name].start, self.error[b.name].start) for b in blocks]
         for b in blocks:
-            if b.dynamic and b.nominal_size != b.error_size:
-                raise ValueError(f"state block {b.name!r} has dynamics but is not additive")
+            if (b.dynamic or b.additive) and b.nominal_size != b.error_size:
+                raise ValueError(f"state block {b.name!r} is declared additive but its sizes differ")
+        # Everything after the pose is additive (the usual case): boxplus adds it in one loop,
+        # nominal component i taking error component i - 1 (the quaternion's extra slot).
+        self._additive_tail = all(b.additive for b in blocks[1:])
         # Blocks with their own dynamics; empty for odometry/IMU-only layouts (predict skips them).
         self.dynamic_blocks = [(b, n0, e0) for b, n0, e0 in self._offsets if b.dynamic]
         walk = np.concatenate([np.asarray(b.random_walk(), float) for b in blocks])
         self.random_walk_var = walk**2
-        # Preallocated shapes the filter copies instead of building each step.
-        self.identity = np.eye(e)
-        self.zeros = np.zeros((e, e))
 
     def noise_density(self, pose_noise_var: np.ndarray) -> np.ndarray:
         """Per-second variance of every error component: pose model error + random walks."""
@@ -245,8 +251,13 @@ class StateLayout:
         """x [+]= dx, in place."""
         xl = x.tolist()
         dl = dx.tolist()
-        for b, n0, e0 in self._offsets:
-            b.boxplus(xl, dl, n0, e0)
+        if self._additive_tail:
+            self.blocks[0].boxplus(xl, dl, 0, 0)
+            for i in range(7, len(xl)):
+                xl[i] += dl[i - 1]
+        else:
+            for b, n0, e0 in self._offsets:
+                b.boxplus(xl, dl, n0, e0)
         x[:] = xl
 
     def boxminus(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -34,13 +34,13 @@ def apply_odom(core: "FusionCore", s: FilterState, idx: int, inp: OdomInput, sta
         return []
     # The wheels' yaw rate is not fused once the gyro drives heading; it only
     # checks the gyro, so that skid and hand-turning show up as slip.
-    bias_z = s.ekf.x[core.layout.nominal["gyro_bias"]][2] if core.has_bias else 0.0
-    gyro_z = s.gyro[2] - float(bias_z)
+    x = s.ekf.x
+    gyro_z = s.gyro[2] - (float(x[core.bias_z_nominal]) if core.has_bias else 0.0)
     if core.has_gyro_scale:
-        gyro_z *= float(s.ekf.x[core.layout.nominal["gyro_scale"]][0])
+        gyro_z *= float(x[core.gyro_scale_nominal])
     var = inp.angular_cov[8] + s.gyro_cov[8]
     if core.has_bias:
-        e = core.layout.error["gyro_bias"].start + 2
+        e = core.bias_z_error
         var += float(s.ekf.P[e, e])
     r = inp.angular[2] - gyro_z
     # Flagged: a wheel rate that misses the gyro's by more than slip_threshold, or wheels reading
