@@ -31,7 +31,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...estimator import observations as obs
-from ...estimator import rotation as rot
 from ..diagnostics import DiagnosticsRecord
 import structlog
 
