@@ -12,35 +12,20 @@ import math
 
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 
 from .sim import SimConfig, simulate
+from .test_fusion_core import make_config
 
 GAP_START, GAP = 1010.0, 26.4  # sim stamps start at 1000 s
-
-
-def _config(orientation: str) -> str:
-    return f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-orientation = "{orientation}"
-angular_velocity = true
-"""
 
 
 @pytest.mark.parametrize("orientation", ["roll_pitch", "absolute"])
 def test_a_long_gap_moves_the_pose_by_at_most_speed_times_timeout(orientation):
     sim = SimConfig(duration=40.0, odom_rate=50.0, imu_rate=100.0, gyro_bias=(0.02, -0.02, 0.0))
     samples = [s for s in simulate(sim) if not GAP_START <= s.stamp < GAP_START + GAP]
-    core = FusionCore(loads(_config(orientation)))
+    core = FusionCore(make_config(orientation))
     before = [s for s in samples if s.stamp < GAP_START]
     after = [s for s in samples if s.stamp >= GAP_START]
     for s in before:
@@ -79,7 +64,7 @@ def test_a_gap_shorter_than_the_jump_threshold_is_bounded_too():
     """A 3 s gap (below jump_s) is one prediction step: split at each sensor's timeout."""
     sim = SimConfig(duration=20.0, odom_rate=50.0, imu_rate=100.0)
     samples = [s for s in simulate(sim) if not 1010.0 <= s.stamp < 1013.0]
-    core = FusionCore(loads(_config("roll_pitch")))
+    core = FusionCore(make_config("roll_pitch"))
     for s in samples:
         if s.stamp >= 1013.0:
             t0, x0 = core.pose()

@@ -11,27 +11,16 @@ from __future__ import annotations
 
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 
 from .sim_rest import RestWorld, Segment, simulate
+from .test_fusion_core import make_config
 
 BIAS = (0.004, -0.003, 0.005)
 
 
 def _core(orientation: str = "roll_pitch") -> FusionCore:
-    return FusionCore(loads(f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-orientation = "{orientation}"
-angular_velocity = true
-"""))
+    return FusionCore(make_config(orientation))
 
 
 def _run(world: RestWorld, core: FusionCore):

@@ -11,30 +11,18 @@ from __future__ import annotations
 
 import math
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 
 from .sim_rest import RestWorld, Segment, simulate
+from .test_fusion_core import make_config
 
 BIAS = (0.01, -0.01, 0.002)
 DRIVE = [Segment(2.0)] + [Segment(9.5, speed=1.0, yaw_rate=w) for w in (0.3, -0.2, 0.1, 0.0, -0.3, 0.2)]
 
 
 def _core(extra: str = "") -> FusionCore:
-    return FusionCore(loads(f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-orientation = "off"
-angular_velocity = true
-{extra}
-"""))
+    return FusionCore(make_config("off", extra_imu=extra))
 
 
 def _worst_tilt_and_z(core: FusionCore, world: RestWorld) -> tuple[float, float]:

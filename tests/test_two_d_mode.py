@@ -19,23 +19,11 @@ from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
 
 from .sim import SimConfig, simulate
+from .test_fusion_core import make_config
 
 
-def _config(two_d: bool, orientation: str = "absolute") -> str:
-    return f"""
-[filter]
-two_d_mode = {"true" if two_d else "false"}
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-orientation = "{orientation}"
-angular_velocity = true
-"""
+def _config(two_d: bool, orientation: str = "absolute"):
+    return make_config(orientation, extra_filter=f"two_d_mode = {'true' if two_d else 'false'}")
 
 
 def _lying_about_the_vertical(samples):
@@ -57,7 +45,7 @@ def _lying_about_the_vertical(samples):
 def test_two_d_mode_outputs_z_roll_pitch_exactly_zero(orientation):
     sim = SimConfig(duration=20.0, standstill=1.0)
     samples = _lying_about_the_vertical(simulate(sim))
-    core = FusionCore(loads(_config(True, orientation)))
+    core = FusionCore(_config(True, orientation))
     published = 0
     for s in samples:
         step = core.ingest(s)
@@ -79,7 +67,7 @@ def test_two_d_mode_outputs_z_roll_pitch_exactly_zero(orientation):
     assert math.hypot(xs[0] - x, xs[1] - y) < 0.5
     # and the same data without two_d_mode does move z (the lie reaches the state): the
     # test's input really is non-planar
-    core3 = FusionCore(loads(_config(False, orientation)))
+    core3 = FusionCore(_config(False, orientation))
     for s in samples:
         core3.ingest(s)
     assert abs(core3.pose()[1][2]) > 1.0

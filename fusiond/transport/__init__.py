@@ -4,10 +4,9 @@ Its public surface is ``__all__``; the rest are this package's internals.
 
 from __future__ import annotations
 
-from importlib import import_module
+from ..lazy_exports import lazy_exports
 
-# public name -> the module of this package that defines it (imported on first use, so that
-# importing the package stays cheap and no import cycle is created)
+# public name -> the module of this package that defines it (imported on first use)
 _EXPORTS = {
     "Daemon": "daemon",
     "run": "daemon",
@@ -22,17 +21,4 @@ _EXPORTS = {
     "BenchResult": "bench_latency",
 }
 
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__all__, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
