@@ -13,7 +13,6 @@ import math
 import msgspec
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
@@ -81,25 +80,9 @@ def test_two_d_mode_does_not_fuse_gps_altitude():
     samples = simulate_gps(world)
     samples = [msgspec.structs.replace(s, altitude=s.altitude + 0.2 * (s.stamp - 1000.0))
                if hasattr(s, "altitude") else s for s in samples]  # 12 m of altitude drift
-    cfg = loads("""
-[filter]
-two_d_mode = true
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "gps"
-datum = [48.137, 11.575, 500.0]
-""")
+    from .test_gps_pose import config
+
+    cfg = config(gps="datum = [48.137, 11.575, 500.0]", filt="two_d_mode = true")
     core = FusionCore(cfg)
     dofs = set()
     for s in samples:
