@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import msgspec
 import numpy as np
@@ -39,6 +38,7 @@ from ..estimator.geodesy import enu_to_geodetic
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
+from .time_jumps import HeldTimeline
 from .sensors import ImuPolicy, PosePolicy, Rejected
 from .state import FilterState
 from .updates import KINDS
@@ -73,16 +73,6 @@ class Step:
     late: bool = False
     publish: bool = False  # an odometry sample: the daemon publishes the newest estimate now
     records: list[DiagnosticsRecord] = field(default_factory=list)
-
-
-@dataclass(slots=True)
-class _PendingJump:
-    """Samples stamped far from filter time, held until their timeline persists (or is left)."""
-
-    first: float
-    lo: float = math.inf
-    hi: float = -math.inf
-    samples: list[tuple[float, int, Any]] = field(default_factory=list)
 
 
 @dataclass(slots=True)
@@ -216,7 +206,7 @@ class FusionCore:
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
         self._reset_history()
-        self._jump: _PendingJump | None = None  # samples held while a far-off timeline is unconfirmed
+        self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max)
         self.resets = 0
         self.covariance_resets = 0
 
@@ -242,9 +232,9 @@ class FusionCore:
             self._start()
         assert self.state is not None
         t = self.state.t
-        if t is not None and (stamp < t - self.cfg.filter.jump_s or stamp > t + self.cfg.filter.jump_s):
+        if self._held.far(stamp, t):
             return self._hold_jump(idx, inp, stamp)
-        if self._jump is not None and stamp > t:
+        if self._held.cluster is not None and stamp > t:
             self._abandon_jump()  # the stream moved on along the old timeline: the far stamps were a glitch
         return self._place(idx, inp, stamp)
 
@@ -285,55 +275,50 @@ class FusionCore:
 
     # -- time jumps ------------------------------------------------------------------------------------
     def _hold_jump(self, idx: int, inp, stamp: float) -> Step:
-        """A stamp far from filter time: a clock glitch, or a new timeline (bag restarted, clock
-        reset, a long logging gap). Hold it, with the others of its cluster, until the cluster
-        has persisted for ``jump_confirm`` samples AND ``jump_persist_s`` seconds of its own
-        stamps; only then is it a new timeline. A burst of far stamps that the stream leaves
-        again (the old timeline advances) is dropped whole: nothing stamped in it is applied or
-        published, and the filter carries on from its history instead of resetting."""
-        fc = self.cfg.filter
-        j = self._jump
-        if j is not None and abs(stamp - j.first) > fc.jump_s:
-            self._abandon_jump()  # a different far timeline: the held one did not persist
-            j = None
-        if j is None:
-            j = self._jump = _PendingJump(first=stamp)
-        if len(j.samples) >= fc.history_max:
-            return self._drop(idx, reasons.FUTURE_STAMP if stamp > (self.state.t or 0.0) else reasons.STALE_STAMP, stamp)
-        j.samples.append((stamp, idx, inp))
-        j.lo, j.hi = min(j.lo, stamp), max(j.hi, stamp)
-        if len(j.samples) < fc.jump_confirm or j.hi - j.lo < fc.jump_persist_s:
-            return Step(self.sensors[idx].name, False, reasons.HELD_TIME_JUMP)
-        return self._confirm_jump()
+        """A stamp far from filter time: a clock glitch, or a new timeline (see ``time_jumps``).
+        Nothing stamped in it is applied or published until its timeline is confirmed; a burst
+        the stream leaves again is dropped whole, and the filter carries on from its history
+        instead of resetting."""
+        dropped, confirmed = self._held.hold(stamp, idx, inp)
+        self._drop_held(dropped)
+        if confirmed:
+            return self._confirm_jump()
+        if dropped and dropped[-1][0] == stamp and dropped[-1][1] == idx:
+            return Step(self.sensors[idx].name, False, self._far_reason(stamp))  # beyond capacity
+        return Step(self.sensors[idx].name, False, reasons.HELD_TIME_JUMP)
 
     def _confirm_jump(self) -> Step:
-        j = self._jump
-        assert j is not None and self.state is not None
-        self._jump = None
+        cluster = self._held.take()
+        assert self.state is not None
         t = self.state.t
-        if j.first < t:
-            log.warning("time_jump_reset", stamp=j.first, filter_time=t, held=len(j.samples))
+        if cluster.first < t:
+            log.warning("time_jump_reset", stamp=cluster.first, filter_time=t, held=len(cluster.samples))
             self.resets += 1
             self._start()
         else:
             # Not a reset: the pose carries across the gap (inputs end at their sensors'
             # timeouts, covariance inflated); the history before the jump stays, so a sensor
             # lagging the jump is still applied at its stamp.
-            log.warning("time_jump_forward", stamp=j.first, filter_time=t, held=len(j.samples))
-        steps = [self._place(i, inp, stamp) for stamp, i, inp in sorted(j.samples, key=lambda e: (e[0], e[1]))]
+            log.warning("time_jump_forward", stamp=cluster.first, filter_time=t, held=len(cluster.samples))
+        steps = [self._place(i, inp, stamp) for stamp, i, inp in cluster.in_order()]
         last = steps[-1]
         return Step(last.sensor, last.accepted, last.reason, late=any(s.late for s in steps),
                     publish=any(s.publish for s in steps), records=[r for s in steps for r in s.records])
 
     def _abandon_jump(self) -> None:
-        j = self._jump
-        self._jump = None
-        if j is None:
+        self._drop_held(self._held.abandon())
+
+    def _drop_held(self, samples: list) -> None:
+        if not samples:
             return
+        for stamp, idx, _ in samples:
+            self._drop(idx, self._far_reason(stamp), stamp)
+        log.warning("time_glitch_dropped", samples=len(samples), first_stamp=samples[0][0],
+                    filter_time=self.state.t if self.state is not None else None)
+
+    def _far_reason(self, stamp: float) -> str:
         t = self.state.t if self.state is not None else None
-        for stamp, idx, _ in j.samples:
-            self._drop(idx, reasons.FUTURE_STAMP if t is None or stamp > t else reasons.STALE_STAMP, stamp)
-        log.warning("time_glitch_dropped", samples=len(j.samples), first_stamp=j.first, filter_time=t)
+        return reasons.FUTURE_STAMP if t is None or stamp > t else reasons.STALE_STAMP
 
     @property
     def initialised(self) -> bool:
@@ -428,11 +413,7 @@ class FusionCore:
 
     def held(self) -> list[int]:
         """Per sensor: samples held while a far-off time jump is unconfirmed (later applied or dropped)."""
-        n = [0] * len(self.sensors)
-        if self._jump is not None:
-            for _, idx, _ in self._jump.samples:
-                n[idx] += 1
-        return n
+        return self._held.counts(len(self.sensors))
 
     def consistency(self) -> dict[str, dict]:
         return {f"{self.sensors[i].name}/{ch}": w.summary() for (i, ch), w in sorted(self.windows.items())}

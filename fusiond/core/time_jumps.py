@@ -1,0 +1,80 @@
+"""Samples stamped far from filter time, held until their timeline is confirmed or left.
+
+A stamp more than ``jump_s`` from filter time is either a clock glitch (a driver's
+clock stepping for a few messages, an NTP step undone) or a new timeline (a bag
+restarted, a clock reset, a long logging gap). Which one only the following
+samples can tell: the far ones are held together as one cluster; the cluster is a
+new timeline once it has ``confirm`` samples spanning ``persist_s`` of its own
+stamps, and a glitch when the stream goes on along the old timeline first. The core
+decides what each outcome does to the filter (reset, carry on, drop and count).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+Held = tuple[float, int, Any]  # (stamp, sensor index, converted input)
+
+
+@dataclass(slots=True)
+class Cluster:
+    first: float  # the stamp that opened it
+    lo: float = math.inf
+    hi: float = -math.inf
+    samples: list[Held] = field(default_factory=list)
+
+    def in_order(self) -> list[Held]:
+        """The held samples in (stamp, sensor) order, as the history orders events."""
+        return sorted(self.samples, key=lambda e: (e[0], e[1]))
+
+
+class HeldTimeline:
+    def __init__(self, jump_s: float, confirm: int, persist_s: float, capacity: int) -> None:
+        self.jump_s = jump_s
+        self.confirm = confirm
+        self.persist_s = persist_s
+        self.capacity = capacity
+        self.cluster: Cluster | None = None
+
+    def far(self, stamp: float, t: float | None) -> bool:
+        """Is this stamp too far from filter time t to be applied now?"""
+        return t is not None and (stamp < t - self.jump_s or stamp > t + self.jump_s)
+
+    def hold(self, stamp: float, idx: int, inp: Any) -> tuple[list[Held], bool]:
+        """Hold a far sample. Returns the samples of a previous cluster this one replaces (they did
+        not persist: glitches to drop) and whether the cluster is now a confirmed timeline. A
+        sample beyond ``capacity`` is not held (returned with the replaced ones to be dropped)."""
+        dropped: list[Held] = []
+        c = self.cluster
+        if c is not None and abs(stamp - c.first) > self.jump_s:
+            dropped = self.abandon()  # a different far timeline: the held one did not persist
+            c = None
+        if c is None:
+            c = self.cluster = Cluster(first=stamp)
+        if len(c.samples) >= self.capacity:
+            return dropped + [(stamp, idx, inp)], False
+        c.samples.append((stamp, idx, inp))
+        c.lo, c.hi = min(c.lo, stamp), max(c.hi, stamp)
+        return dropped, len(c.samples) >= self.confirm and c.hi - c.lo >= self.persist_s
+
+    def take(self) -> Cluster:
+        """The confirmed cluster, no longer held."""
+        c = self.cluster
+        assert c is not None
+        self.cluster = None
+        return c
+
+    def abandon(self) -> list[Held]:
+        """Give up the held cluster (a glitch, or a reset): its samples, to be dropped."""
+        c, self.cluster = self.cluster, None
+        return [] if c is None else c.samples
+
+    def counts(self, n_sensors: int) -> list[int]:
+        """Held samples per sensor."""
+        n = [0] * n_sensors
+        if self.cluster is not None:
+            for _, idx, _ in self.cluster.samples:
+                n[idx] += 1
+        return n

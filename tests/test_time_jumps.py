@@ -1,0 +1,29 @@
+"""The held-timeline bookkeeping on its own: what confirms a new timeline, what is a glitch."""
+
+from __future__ import annotations
+
+from fusiond.core.time_jumps import HeldTimeline
+
+
+def test_a_cluster_is_confirmed_by_count_and_persistence_together():
+    h = HeldTimeline(jump_s=5.0, confirm=3, persist_s=1.0, capacity=100)
+    assert h.far(20.0, 10.0) and h.far(4.0, 10.0) and not h.far(14.9, 10.0) and not h.far(20.0, None)
+    # three samples within 0.2 s: enough by count, not by persistence
+    assert [h.hold(20.0 + 0.1 * k, 0, k) for k in range(3)] == [([], False)] * 3
+    dropped, confirmed = h.hold(21.0, 1, "x")  # 1.0 s after the first: confirmed
+    assert dropped == [] and confirmed
+    c = h.take()
+    assert [(s, i) for s, i, _ in c.in_order()] == [(20.0, 0), (20.1, 0), (20.2, 0), (21.0, 1)]
+    assert h.cluster is None and h.counts(2) == [0, 0]
+
+
+def test_a_different_far_timeline_replaces_the_held_one_and_capacity_is_bounded():
+    h = HeldTimeline(jump_s=5.0, confirm=3, persist_s=1.0, capacity=2)
+    h.hold(100.0, 0, "a")
+    h.hold(100.1, 1, "b")
+    assert h.counts(2) == [1, 1]
+    dropped, confirmed = h.hold(100.2, 0, "c")  # beyond capacity: not held
+    assert dropped == [(100.2, 0, "c")] and not confirmed and h.counts(2) == [1, 1]
+    dropped, confirmed = h.hold(500.0, 0, "d")  # far from the held cluster: that one did not persist
+    assert [s for s, _, _ in dropped] == [100.0, 100.1] and not confirmed and h.counts(2) == [1, 0]
+    assert [s for s, _, _ in h.abandon()] == [500.0] and h.cluster is None
