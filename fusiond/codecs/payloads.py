@@ -628,9 +628,10 @@ _POSE_BLOCK = struct.Struct("<43d")  # pose (7) + covariance (36)
 _ODOMETRY_BLOCK = struct.Struct("<85d")  # pose (7) + covariance (36) + twist (6) + covariance (36)
 
 
-def _cdr_prefix(stamp: float, strings: Sequence[str]) -> bytearray:
-    """Encapsulation header, header.stamp, the frame id strings, padding to the float64 block."""
-    buf = bytearray(_CDR_HEADER)
+def _cdr_prefix(stamp: float, strings: Sequence[str], head: bytes = _CDR_HEADER) -> bytearray:
+    """``head`` (the encapsulation header, and what precedes the header field, e.g. a sequence
+    length), header.stamp, the frame id strings, padding to the float64 block."""
+    buf = bytearray(head)
     buf += _STAMP_PACK(*stamp_to_ros(stamp))
     for text in strings:
         pad = (len(buf) - 4) & 3

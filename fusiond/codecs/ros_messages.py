@@ -24,7 +24,8 @@ import msgspec
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from .payloads import POSE_COV_STAMPED, TYPESTORE, DecodeError, Payload, _check_size, _deserialize, stamp_to_ros
+from .payloads import (POSE_COV_STAMPED, TYPESTORE, DecodeError, Payload, _cdr_prefix, _check_size, _deserialize,
+                       stamp_to_ros)
 
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 DIAGNOSTIC_ARRAY: Final = "diagnostic_msgs/msg/DiagnosticArray"
@@ -50,8 +51,6 @@ def _serialize(msg: Any, msgtype: str) -> bytes:
 
 
 _TF_HEAD: Final = b"\x00\x01\x00\x00" + struct.pack("<I", 1)  # encapsulation, then a sequence of 1 transform
-_STAMP_PACK = struct.Struct("<iI").pack
-_U32_PACK = struct.Struct("<I").pack
 _TRANSFORM_BLOCK = struct.Struct("<7d")  # translation (3) + rotation (4)
 
 
@@ -62,19 +61,7 @@ def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Se
     Packed with struct, byte for byte what rosbags serialises (a test compares both on many
     inputs; `tests/cdr_reference.py` holds the rosbags version): it is sent with every pose.
     """
-    buf = bytearray(_TF_HEAD)
-    buf += _STAMP_PACK(*stamp_to_ros(stamp))
-    for text in (frame_id, child_frame_id):
-        pad = (len(buf) - 4) & 3
-        if pad:
-            buf += bytes(4 - pad)
-        raw = text.encode()
-        buf += _U32_PACK(len(raw) + 1)
-        buf += raw
-        buf += b"\x00"
-    pad = (len(buf) - 4) & 7
-    if pad:
-        buf += bytes(8 - pad)
+    buf = _cdr_prefix(stamp, (frame_id, child_frame_id), _TF_HEAD)
     x, y, z = position
     qx, qy, qz, qw = quat_xyzw
     buf += _TRANSFORM_BLOCK.pack(x, y, z, qx, qy, qz, qw)
