@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..updates.imu import quiet_bound
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
 
 MIN_REJECTED_FRACTION = 0.1
-QUIET_SIGMAS = 3.0  # as the core's standstill confirmation (core/updates/imu.py)
 DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
 
 
@@ -91,14 +91,14 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         return None
     fc = cfg.filter
     episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
-    # The core confirms a standstill only while the gyro is quiet (each axis within QUIET_SIGMAS of
+    # The core confirms a standstill only while the gyro is quiet (each axis within quiet_bound:
     # its noise plus the prior bias range, core/updates/imu.py): an episode whose gyro turns is
     # the vehicle coasting or turning with its wheels reading zero, not a standstill. Judge the
     # bias on the quiet ones only, and say what the others are.
     stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0
-    quiet_bound = QUIET_SIGMAS * (stated + fc.gyro_bias_sigma)
-    turning = [e for e in episodes if abs(e.gyro_mean) > quiet_bound]
-    episodes = [e for e in episodes if abs(e.gyro_mean) <= quiet_bound]
+    bound = quiet_bound(stated, fc.gyro_bias_sigma)
+    turning = [e for e in episodes if abs(e.gyro_mean) > bound]
+    episodes = [e for e in episodes if abs(e.gyro_mean) <= bound]
     if turning and (ch is None or ch.n == 0 or not episodes):
         t_start = series.odom_t[0]
         worst = max(turning, key=lambda e: abs(e.gyro_mean))

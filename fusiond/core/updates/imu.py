@@ -168,6 +168,13 @@ def tilt_from_gravity(core: "FusionCore", s: FilterState, cfg: ImuSensor, accel:
                               res.rejected, channel="gravity", late=late)]
 
 
+def quiet_bound(gyro_sigma: float, bias_sigma: float) -> float:
+    """The largest raw gyro rate that is still "not turning": noise plus the prior bias range, each
+    QUIET_SIGMAS wide. Judged on the raw reading, so that a wrong bias estimate cannot veto it. The
+    standstill confirmation, the slip check and the doctor's standstill episodes all use it."""
+    return QUIET_SIGMAS * (gyro_sigma + bias_sigma)
+
+
 def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: ImuInput, stamp: float,
                        emit: bool, late: bool) -> list[DiagnosticsRecord]:
     """At a confirmed standstill the gyro reads its bias: learn it, per axis, robustly.
@@ -192,7 +199,7 @@ def learn_bias_at_rest(core: "FusionCore", s: FilterState, cfg: ImuSensor, inp: 
         and stamp - s.last[odom] <= core.timeout(odom, s)
     )
     g, gc = inp.gyro, inp.gyro_cov
-    if not resting or any(abs(g[i]) > QUIET_SIGMAS * (math.sqrt(gc[4 * i]) + fc.gyro_bias_sigma) for i in range(3)):
+    if not resting or any(abs(g[i]) > quiet_bound(math.sqrt(gc[4 * i]), fc.gyro_bias_sigma) for i in range(3)):
         s.bias_window = None  # moving, or turning with the wheels at rest: not a standstill
         return []
     w = s.bias_window

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from ..diagnostics import DiagnosticsRecord
 from ..sensors import OdomInput
-from .imu import QUIET_SIGMAS
+from .imu import quiet_bound
 
 if TYPE_CHECKING:
     from ..fusion import FusionCore
@@ -46,7 +46,7 @@ def apply_odom(core: "FusionCore", s: FilterState, idx: int, inp: OdomInput, sta
     # Flagged: a wheel rate that misses the gyro's by more than slip_threshold, or wheels reading
     # exactly zero while the gyro turns beyond the standstill quiet bound (the vehicle coasting or
     # turned with its drive at rest: not a wheel measurement of the turn at all).
-    quiet = QUIET_SIGMAS * (math.sqrt(s.gyro_cov[8]) + core.cfg.filter.gyro_bias_sigma)
+    quiet = quiet_bound(math.sqrt(s.gyro_cov[8]), core.cfg.filter.gyro_bias_sigma)
     slip = abs(r) > core.sensors[idx].slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
     return [
         DiagnosticsRecord(stamp, core.sensors[idx].name, ["yaw_rate"], [r], [var], r * r / var, 1, slip,
