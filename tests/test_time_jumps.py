@@ -22,8 +22,8 @@ def test_a_different_far_timeline_replaces_the_held_one_and_capacity_is_bounded(
     h.hold(100.0, 0, "a")
     h.hold(100.1, 1, "b")
     assert h.counts(2) == [1, 1]
-    dropped, confirmed = h.hold(100.2, 0, "c")  # beyond capacity: not held
-    assert dropped == [(100.2, 0, "c")] and not confirmed and h.counts(2) == [1, 1]
+    assert h.full(100.2)  # beyond capacity: the caller drops it instead of holding it
+    assert not h.full(500.0)  # a different far timeline would replace the held one
     dropped, confirmed = h.hold(500.0, 0, "d")  # far from the held cluster: that one did not persist
     assert [s for s, _, _ in dropped] == [100.0, 100.1] and not confirmed and h.counts(2) == [1, 0]
     assert [s for s, _, _ in h.abandon()] == [500.0] and h.cluster is None

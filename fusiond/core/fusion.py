@@ -279,12 +279,12 @@ class FusionCore:
         Nothing stamped in it is applied or published until its timeline is confirmed; a burst
         the stream leaves again is dropped whole, and the filter carries on from its history
         instead of resetting."""
+        if self._held.full(stamp):
+            return self._drop(idx, self._far_reason(stamp), stamp)
         dropped, confirmed = self._held.hold(stamp, idx, inp)
         self._drop_held(dropped)
         if confirmed:
             return self._confirm_jump()
-        if dropped and dropped[-1][0] == stamp and dropped[-1][1] == idx:
-            return Step(self.sensors[idx].name, False, self._far_reason(stamp))  # beyond capacity
         return Step(self.sensors[idx].name, False, reasons.HELD_TIME_JUMP)
 
     def _confirm_jump(self) -> Step:

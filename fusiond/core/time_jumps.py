@@ -42,10 +42,15 @@ class HeldTimeline:
         """Is this stamp too far from filter time t to be applied now?"""
         return t is not None and (stamp < t - self.jump_s or stamp > t + self.jump_s)
 
+    def full(self, stamp: float) -> bool:
+        """Would this sample join a cluster that already holds ``capacity`` samples?"""
+        c = self.cluster
+        return c is not None and abs(stamp - c.first) <= self.jump_s and len(c.samples) >= self.capacity
+
     def hold(self, stamp: float, idx: int, inp: Any) -> tuple[list[Held], bool]:
-        """Hold a far sample. Returns the samples of a previous cluster this one replaces (they did
-        not persist: glitches to drop) and whether the cluster is now a confirmed timeline. A
-        sample beyond ``capacity`` is not held (returned with the replaced ones to be dropped)."""
+        """Hold a far sample (the caller checks ``full`` first). Returns the samples of a previous
+        cluster this one replaces (they did not persist: glitches to drop) and whether the cluster
+        is now a confirmed timeline."""
         dropped: list[Held] = []
         c = self.cluster
         if c is not None and abs(stamp - c.first) > self.jump_s:
@@ -53,8 +58,6 @@ class HeldTimeline:
             c = None
         if c is None:
             c = self.cluster = Cluster(first=stamp)
-        if len(c.samples) >= self.capacity:
-            return dropped + [(stamp, idx, inp)], False
         c.samples.append((stamp, idx, inp))
         c.lo, c.hi = min(c.lo, stamp), max(c.hi, stamp)
         return dropped, len(c.samples) >= self.confirm and c.hi - c.lo >= self.persist_s
