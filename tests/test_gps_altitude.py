@@ -5,31 +5,18 @@ from __future__ import annotations
 
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.samples import GpsSample
 
+from .configs import robot_config
 from .sim_gps import World, simulate
 
-ROBOT = """
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-"""
-GPS = '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps"\n'
 
 
 def _max_z_departure(w: World, gps: str) -> tuple[float, list]:
     """Largest |z with GPS - z without| over the run (same samples, GPS left out of the second)."""
     samples = simulate(w)
-    with_gps, without = FusionCore(loads(ROBOT + GPS + gps)), FusionCore(loads(ROBOT))
+    with_gps, without = FusionCore(robot_config(gps=gps)), FusionCore(robot_config())
     worst, records = 0.0, []
     for s in samples:
         step = with_gps.ingest(s)
@@ -79,4 +66,4 @@ def test_vertical_error_keys_are_validated(gps, needle):
     from fusiond.config import ConfigError
 
     with pytest.raises(ConfigError, match=needle):
-        loads(ROBOT + GPS + gps)
+        robot_config(gps=gps)

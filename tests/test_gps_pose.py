@@ -26,33 +26,13 @@ from fusiond.codecs import (
     encode_pose_sample, encode_sample, make_decoder,
 )
 
+from .configs import robot_config
 from .sim_gps import World, simulate, truth_at
 
 DATUM = "datum = [48.137, 11.575, 520.0]"
 
 
-def config(gps: str | None = None, pose: str | None = None, odom: str = "", imu: str = "", filt: str = ""):
-    text = f"""
-[filter]
-{filt}
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-{odom}
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-{imu}
-"""
-    if gps is not None:
-        text += f'[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps"\n{gps}\n'
-    if pose is not None:
-        text += f'[[sensors]]\nname = "pose"\nkind = "pose"\nkey = "pose"\n{pose}\n'
-    return loads(text)
+config = robot_config  # the builder these tests have always called
 
 
 def yaw(x) -> float:

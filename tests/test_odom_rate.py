@@ -6,29 +6,17 @@ import math
 
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
+
+from .configs import robot_config
 
 SPEED, SIGMA_V, DURATION = 10.0, 0.1, 60.0
 
 
 def _config(odom: str = "", extra: str = ""):
-    return loads(f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-{odom}
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-{extra}
-""")
+    return robot_config(odom=odom, imu=extra)
 
 
 def _straight_drive(odom_rate: float) -> list:

@@ -187,7 +187,6 @@ def parse_token(key: str) -> dict:
 @pytest.mark.e2e
 def test_sdk_publishers_feed_the_daemon_and_sdk_subscribers_get_its_outputs(world):
     client: zenoh.Session = world["client"]
-    daemon: Daemon = world["daemon"]
     port = world["port"]
     wait_until(lambda: health(client), 10, "the daemon")
 

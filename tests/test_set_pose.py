@@ -7,23 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator.rotation import from_rpy, to_rpy
 from fusiond.samples import ImuSample, OdomSample
 
-CONFIG = """
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "{mode}"
-angular_velocity = true
-"""
+from .configs import robot_config
+
 
 COV6 = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
 COV3 = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
@@ -43,7 +32,7 @@ def drive(core: FusionCore, t0: float, t1: float, imu_yaw: float = 0.0, v: float
 
 
 def test_set_pose_resets_the_pose_and_history_and_keeps_the_gyro_bias():
-    core = FusionCore(loads(CONFIG.format(mode="roll_pitch")))
+    core = FusionCore(robot_config())
     drive(core, 10.0, 20.0, v=0.0)  # standing still: the gyro bias is learned
     bias = float(core.gyro_bias[2])
     assert bias == pytest.approx(BIAS, abs=2e-3)
@@ -65,7 +54,7 @@ def test_set_pose_resets_the_pose_and_history_and_keeps_the_gyro_bias():
 
 
 def test_a_relative_imu_measures_its_offset_again_instead_of_pulling_yaw_back():
-    core = FusionCore(loads(CONFIG.format(mode="relative")))
+    core = FusionCore(robot_config(orientation="relative"))
     drive(core, 10.0, 12.0, imu_yaw=0.4)  # the IMU reads 0.4 rad while the filter starts at yaw 0
     core.set_pose(core.time, (0.0, 0.0, 0.0), from_rpy(0.0, 0.0, -1.0), [1e-4 if i % 7 == 0 else 0.0
                                                                           for i in range(36)])
@@ -85,7 +74,7 @@ def test_a_relative_imu_measures_its_offset_again_instead_of_pulling_yaw_back():
     ((5.0, (0, 0, 0), (0, 0, 0, 1), [-1.0] + [0.0] * 35), "negative variance"),
 ])
 def test_invalid_set_pose_raises_naming_the_problem_and_changes_nothing(args, problem):
-    core = FusionCore(loads(CONFIG.format(mode="roll_pitch")))
+    core = FusionCore(robot_config())
     drive(core, 10.0, 11.0)
     before = core.estimate()
     with pytest.raises(ValueError, match=problem):

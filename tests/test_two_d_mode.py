@@ -17,6 +17,7 @@ from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
 
+from .configs import robot_config
 from .sim import SimConfig, simulate
 from .test_fusion_core import make_config
 
@@ -80,9 +81,7 @@ def test_two_d_mode_does_not_fuse_gps_altitude():
     samples = simulate_gps(world)
     samples = [msgspec.structs.replace(s, altitude=s.altitude + 0.2 * (s.stamp - 1000.0))
                if hasattr(s, "altitude") else s for s in samples]  # 12 m of altitude drift
-    from .test_gps_pose import config
-
-    cfg = config(gps="datum = [48.137, 11.575, 500.0]", filt="two_d_mode = true")
+    cfg = robot_config(gps="datum = [48.137, 11.575, 500.0]", filt="two_d_mode = true")
     core = FusionCore(cfg)
     dofs = set()
     for s in samples:

@@ -11,31 +11,16 @@ import math
 
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
 
+from .configs import robot_config
 from .sim_gps import World, simulate
 
 
 def _config(orientation: str, imu: str = "", gps: bool = True):
-    text = f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "{orientation}"
-angular_velocity = true
-{imu}
-"""
-    if gps:
-        text += '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps"\n'
-    return loads(text)
+    return robot_config(gps="" if gps else None, imu=imu, orientation=orientation)
 
 
 def _fuse(samples, w: World, cfg) -> tuple[float, FusionCore, list[float]]:

@@ -1,0 +1,32 @@
+"""The config most fusion tests start from: one odometry ("wheel", key "odom") and one IMU
+("imu", key "imu", gyro fused), plus optional GPS and pose sensors and extra lines per table."""
+
+from __future__ import annotations
+
+from fusiond.config import Config, loads
+
+
+def robot_config(gps: str | None = None, pose: str | None = None, odom: str = "", imu: str = "",
+                 filt: str = "", orientation: str = "roll_pitch") -> Config:
+    """``gps``/``pose``: None for no such sensor, else the extra lines of its table."""
+    text = f"""
+[filter]
+{filt}
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+{odom}
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+orientation = "{orientation}"
+angular_velocity = true
+{imu}
+"""
+    if gps is not None:
+        text += f'[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps"\n{gps}\n'
+    if pose is not None:
+        text += f'[[sensors]]\nname = "pose"\nkind = "pose"\nkey = "pose"\n{pose}\n'
+    return loads(text)
