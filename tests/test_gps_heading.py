@@ -12,37 +12,20 @@ import math
 import numpy as np
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, PoseBlock, StateLayout
 from fusiond.estimator import rotation as rot
 from fusiond.estimator.rigid_fit import fit_rigid
 from fusiond.samples import GpsSample
 
+from .configs import robot_config
 from .sim_gps import World, simulate
 
 GPS_SIGMA = 2.1
 
 
 def _config(extra: str = ""):
-    return loads(f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "gps"
-datum = [48.137, 11.575, 520.0]
-{extra}
-""")
+    return robot_config(gps=f"datum = [48.137, 11.575, 520.0]\n{extra}")
 
 
 def _rms(v: list[float]) -> float:
