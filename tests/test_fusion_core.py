@@ -363,7 +363,7 @@ def test_adaptive_noise_scales_r_towards_the_truth():
         t = 1.0 + 0.01 * k
         core.ingest(odom(t))
         core.ingest(imu(t + 0.001, rpy=tuple(rng.normal(0, 0.02, 3)), ovar=0.002**2))
-    scale = core.state.adaptive["imu/orientation"][0]
+    scale = core.state.own[core.index["imu"]].adaptive[0]
     assert 20.0 < scale < 400.0  # true/stated variance ratio is 100; adaptive lands in the vicinity
 
 

@@ -1,6 +1,6 @@
 """The fusion core: time, ordering, sensor policies and diagnostics around the estimator.
 
-What each kind of sample does to the state lives in ``core/updates/``; the state
+What each kind of sample does to the state lives in ``core/sensors/``; the state
 in ``core/state.py``; the late-data history in ``core/history.py``. This module
 owns time: validation, jumps, ordering, prediction to each stamp, counters.
 
@@ -39,9 +39,8 @@ from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
 from .time_jumps import HeldTimeline
-from .sensors import ImuPolicy, PosePolicy, Rejected
+from .sensors import Rejected, SensorContext, build_models
 from .state import FilterState
-from .updates import KINDS
 
 log = structlog.get_logger("fusiond.core")
 
@@ -95,13 +94,6 @@ class FusionCore:
         fc = cfg.filter
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
-        kinds = [KINDS[type(s)] for s in self.sensors]
-        self.policies = [k.policy(s) for k, s in zip(kinds, self.sensors)]
-        self._sample_types = [k.sample for k in kinds]
-        self._handlers = [k.apply for k in kinds]
-        # each kind's own bookkeeping in the filter state (once per kind, in configuration order)
-        self._start_hooks = list(dict.fromkeys(k.on_start for k in kinds if k.on_start is not None))
-        self._predict_hooks = list(dict.fromkeys(k.on_predict for k in kinds if k.on_predict is not None))
         self.odom_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, OdomSensor)), -1)
         gyro_imus = [i for i, s in enumerate(self.sensors) if isinstance(s, ImuSensor) and s.angular_velocity]
         blocks = [PoseBlock(fc.initial_sigma[0], fc.initial_sigma[1])]
@@ -128,11 +120,6 @@ class FusionCore:
         self.layout = StateLayout(blocks)
         self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
-        self.has_gyro_scale = self.layout.has("gyro_scale")
-        # indices the per-message code reads (odometry's yaw-rate check), looked up once here
-        self.bias_z_nominal = self.layout.nominal["gyro_bias"].start + 2 if self.has_bias else -1
-        self.bias_z_error = self.layout.error["gyro_bias"].start + 2 if self.has_bias else -1
-        self.gyro_scale_nominal = self.layout.nominal["gyro_scale"].start if self.has_gyro_scale else -1
         # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
         # position, heading, the z bias or a scale (which drive heading and position).
         self.tilt_mask = np.ones(self.layout.error_dim, dtype=bool)
@@ -191,16 +178,21 @@ class FusionCore:
             error_zero += [eb, eb + 1]
         self._planar_nominal = tuple(nominal_zero)
         self._planar_error = np.array(error_zero)
+        # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
+        self.context = SensorContext(
+            self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
+            tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
+            timeout=self.timeout, inputs_at=self.inputs_at)
+        self.models = build_models(self.sensors, self.context)
+        self._predicting = [m for m in self.models if m.predicts]  # on_predict hooks (GPS track, pose anchors)
         if self.two_d:
-            for p in self.policies:
-                if isinstance(p, (ImuPolicy, PosePolicy)):
-                    p.planar()
+            for m in self.models:
+                m.planar()
         # Without any tilt reference (no IMU roll/pitch, no accelerometer, no absolute pose) the
         # gyro's x/y rates would integrate their biases into tens of degrees of tilt: the robot is
         # taken as planar instead (roll/pitch rates not integrated), and the summary says so.
-        self.tilt_reference = self.two_d or any(
-            (isinstance(p, ImuPolicy) and p.gives_tilt) or (isinstance(p, PosePolicy) and not p.cfg.differential)
-            for p in self.policies)
+        self.tilt_reference = self.two_d or any(m.gives_tilt for m in self.models)
+        self.context.tilt_reference = self.tilt_reference
         self._timeout_base = [sc.timeout_s for sc in self.sensors]
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
@@ -220,11 +212,11 @@ class FusionCore:
         stamp = sample.stamp
         if not (math.isfinite(stamp) and stamp > 0.0):
             return self._drop(idx, reasons.INVALID_STAMP, stamp)
-        policy = self.policies[idx]
+        model = self.models[idx]
         try:
-            if type(sample) is not self._sample_types[idx]:
-                raise Rejected(reasons.WRONG_TYPE, f"expected {self._sample_types[idx].__name__}")
-            inp = policy.convert(sample)  # type: ignore[arg-type]
+            if type(sample) is not model.sample_type:
+                raise Rejected(reasons.WRONG_TYPE, f"expected {model.sample_type.__name__}")
+            inp = model.convert(sample)
         except Rejected as r:
             return self._drop(idx, r.reason, stamp)
 
@@ -513,31 +505,10 @@ class FusionCore:
     def _start(self) -> None:
         """A fresh state with no time yet: the first sample in stamp order sets it, so the
         start does not depend on which sensor happened to arrive first."""
-        s = FilterState()
-        s.t = None
-        s.ekf = ErrorStateEKF(self.layout)
-        n = len(self.sensors)
-        s.last = [None] * n
-        s.period = [0.0] * n
-        s.linear = _ZERO3
-        s.linear_cov = self.default_linear_cov
-        s.wheel_angular = _ZERO3
-        s.wheel_angular_cov = self.default_angular_cov
-        s.wheel_yaw_measured = False
-        s.gyro = None
-        s.gyro_cov = None
-        s.gyro_last = None
-        s.still_since = None
-        s.bias_window = None
-        s.bias_rejects = ((), (), ())
-        s.attitude_ready = False
-        s.tilt_seen = None  # stamp of the newest roll/pitch information fused (set at the first stamp)
-        s.yaw_offset = {}
-        s.adaptive = {}
-        s.frame_ready = False  # the world frame: defined by the first absolute sample
-        s.enu, s.heading_ready, s.gps_anchor, s.travel, s.pose_anchor = None, False, None, _ZERO3, {}
-        for hook in self._start_hooks:
-            hook(self, s)
+        s = FilterState.initial(ErrorStateEKF(self.layout), len(self.sensors), self.default_linear_cov,
+                                self.default_angular_cov)
+        for m in self.models:
+            m.on_start(s)
         self.state = s
         self._reset_history()
 
@@ -611,8 +582,8 @@ class FusionCore:
             seg = t1 - t0
             u = self._inputs(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
             x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
-            for hook in self._predict_hooks:  # the kinds' own bookkeeping (GPS track, pose anchors)
-                hook(s, s.ekf.x, x)
+            for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
+                m.on_predict(s, s.ekf.x, x)
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
             s.ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it
@@ -662,7 +633,7 @@ class FusionCore:
             self._predict(s, stamp - s.t)
             s.t = stamp
         self._note_period(s, idx, stamp)
-        records = self._handlers[idx](self, s, idx, inp, stamp, emit, late)
+        records = self.models[idx].apply(s, inp, stamp, emit, late)
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
         return records

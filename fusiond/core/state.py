@@ -8,17 +8,49 @@ reproduces the same numbers.
 
 from __future__ import annotations
 
+_ZERO3 = (0.0, 0.0, 0.0)
+
 
 class FilterState:
-    """Everything that affects the estimate; copied into the history after each event."""
+    """Everything that affects the estimate; copied into the history after each event.
+
+    Shared by every sensor kind: filter time and the EKF, per-sensor stamps and periods, the held
+    motion inputs (odometry twist, gyro rate) and the facts several kinds read (standstill since,
+    attitude initialised, newest tilt information, the world frame). What only one sensor needs
+    between its messages is its own immutable slice, ``own[index]`` (``core/sensors/``).
+    """
 
     __slots__ = (
         "t", "ekf", "last", "period",
         "linear", "linear_cov", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
-        "still_since", "bias_window", "bias_rejects", "attitude_ready", "tilt_seen", "yaw_offset", "adaptive",
-        "frame_ready", "enu", "heading_ready", "gps_anchor", "travel", "pose_anchor",
+        "still_since", "attitude_ready", "tilt_seen",
+        "frame_ready", "frame_epoch", "enu", "heading_ready",
+        "own",
     )
+
+    @classmethod
+    def initial(cls, ekf, sensors: int, linear_cov: tuple[float, ...], angular_cov: tuple[float, ...]) -> "FilterState":
+        """A fresh state with no time yet (the first sample in stamp order sets it): nothing held,
+        no frame, every sensor's slice None until its model's ``on_start`` puts one in place.
+        ``linear_cov``/``angular_cov``: the variances of a twist nobody measures."""
+        s = cls.__new__(cls)
+        s.t = None
+        s.ekf = ekf
+        s.last = [None] * sensors
+        s.period = [0.0] * sensors
+        s.linear, s.linear_cov = _ZERO3, linear_cov
+        s.wheel_angular, s.wheel_angular_cov = _ZERO3, angular_cov
+        s.wheel_yaw_measured = False
+        s.gyro = s.gyro_cov = s.gyro_last = None
+        s.still_since = None  # the odometry has read zero since this stamp
+        s.attitude_ready = False  # roll/pitch (and yaw) taken from a first orientation
+        s.tilt_seen = None  # stamp of the newest roll/pitch information fused (set at the first stamp)
+        s.frame_ready = False  # the world frame: defined by the first absolute sample
+        s.frame_epoch = 0  # counts the frame being defined or turned (differential sensors restart)
+        s.enu, s.heading_ready = None, False
+        s.own = [None] * sensors
+        return s
 
     def copy(self, into: "FilterState | None" = None) -> "FilterState":
         """A snapshot; ``into`` (a snapshot the history no longer needs) is overwritten instead of
@@ -38,13 +70,10 @@ class FilterState:
         c.wheel_yaw_measured = self.wheel_yaw_measured
         c.gyro, c.gyro_cov, c.gyro_last = self.gyro, self.gyro_cov, self.gyro_last
         c.still_since = self.still_since
-        c.bias_window, c.bias_rejects = self.bias_window, self.bias_rejects  # immutable tuples
         c.tilt_seen = self.tilt_seen
         c.attitude_ready = self.attitude_ready
-        c.yaw_offset = dict(self.yaw_offset) if self.yaw_offset else {}
-        c.adaptive = {k: list(v) for k, v in self.adaptive.items()} if self.adaptive else {}
-        # world frame: flags and immutable values (tuples, EnuFrame) only, so sharing is safe
-        c.frame_ready, c.enu, c.heading_ready = self.frame_ready, self.enu, self.heading_ready
-        c.gps_anchor, c.travel = self.gps_anchor, self.travel
-        c.pose_anchor = self.pose_anchor  # copy-on-write: replaced, never mutated
+        # world frame: flags and immutable values (EnuFrame) only, so sharing is safe
+        c.frame_ready, c.frame_epoch, c.enu, c.heading_ready = (self.frame_ready, self.frame_epoch, self.enu,
+                                                               self.heading_ready)
+        c.own = self.own.copy()  # each sensor's slice is immutable: replaced, never mutated
         return c

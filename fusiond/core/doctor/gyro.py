@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor, PoseSensor
-from ..updates.imu import quiet_bound
+from ..sensors.gyro_bias import quiet_bound
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
@@ -92,7 +92,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     fc = cfg.filter
     episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
     # The core confirms a standstill only while the gyro is quiet (each axis within quiet_bound:
-    # its noise plus the prior bias range, core/updates/imu.py): an episode whose gyro turns is
+    # its noise plus the prior bias range, core/sensors/gyro_bias.py): an episode whose gyro turns is
     # the vehicle coasting or turning with its wheels reading zero, not a standstill. Judge the
     # bias on the quiet ones only, and say what the others are.
     stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0

@@ -21,6 +21,12 @@ def set_position(s: FilterState, z, cov9, offset, rows: tuple[int, ...] = (0, 1,
     ekf.reset_covariance(list(rows), np.array([[cov9[3 * i + j] for j in rows] for i in rows]))
 
 
+def new_frame(s: FilterState) -> None:
+    """The world frame was defined or turned under the state: what a sensor measured relative to
+    the old one (a differential pose sensor's anchor) restarts from its next message."""
+    s.frame_epoch += 1
+
+
 def lever(x: np.ndarray, t: tuple[float, float, float]) -> tuple[float, float, float]:
     """R(q) t: the sensor's offset from base_link, in the world."""
     return mat3.apply(rot.matrix9((float(x[3]), float(x[4]), float(x[5]), float(x[6]))), t)

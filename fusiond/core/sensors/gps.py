@@ -1,0 +1,342 @@
+"""GPS: position fixes in ENU at the datum; heading from a rigid fit of the first metres of travel.
+
+Heading. A GPS measures where the antenna is, not where it points. Until travel has
+shown the heading, the fix may move position only (channel ``position_unaligned``) and
+the published heading variance says it is unknown (HEADING_UNKNOWN_SIGMA, rad). Every fix
+since the first is paired with the dead-reckoned antenna position at its stamp; a
+least-squares rigid fit (``estimator.rigid_fit``) of that track to the fixes gives the
+heading correction and its uncertainty. Once that uncertainty is below
+HEADING_PROVISIONAL_SIGMA the fit is applied: the state turns about the antenna (which the
+fix has just put where the GPS says), so the position dead-reckoned along the wrong heading
+since the previous fix turns with the heading, P turns with both, and the heading's
+variance is re-set to the fit's. The fit keeps being refined with every fix (the stored
+track turned with the state, so each new fit measures what is left) and re-applied until
+its uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixes become
+ordinary, gated updates (channel ``position``).
+
+Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
+1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
+so the fixes pull z only as far as that wander and the odometry allow.
+
+Axes. A fix axis whose stated variance exceeds ``max_sigma``^2 is not measured and not
+fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitude).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import msgspec
+import numpy as np
+import structlog
+
+from ... import reasons
+from ...config import GpsSensor
+from ...estimator import mat3
+from ...estimator import observations as obs
+from ...estimator.geodesy import EnuFrame
+from ...estimator.rigid_fit import RigidFit, fit_rigid
+from ...samples import GpsSample
+from ..diagnostics import DiagnosticsRecord
+from .base import SensorContext, SensorModel
+from .checks import Rejected, finite
+from .frame import lever, new_frame, set_position
+
+if TYPE_CHECKING:
+    from ..state import FilterState
+
+log = structlog.get_logger("fusiond.core")
+
+HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipping or GPS wander, start over
+HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad
+HEADING_PROVISIONAL_SIGMA = 0.3  # rad: apply the rigid fit provisionally (fixes still move position only)
+HEADING_READY_SIGMA = 0.05  # rad: the heading is known, fixes become full (gated) updates
+HEADING_MAX_FIXES = 400  # fixes kept for the fit; beyond, every other one is dropped (the extent stays)
+FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
+ENU_NAMES = ("east", "north", "up")
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class GpsTrack:
+    """What the GPS keeps between fixes (immutable: shared by history snapshots): while the heading
+    is unknown, the fixes paired with the dead-reckoned antenna position at their stamps; always,
+    the newest coordinates, to recognise a frozen receiver. ``base`` + the state's ``travel`` is
+    the dead-reckoned base position."""
+
+    points: tuple[tuple[float, float, float, float, float], ...]  # (gx, gy, dx, dy, weight)
+    base: tuple[float, float, float]
+    first: tuple[float, float]  # the first fix
+    applied: bool = False  # a provisional fit has been applied
+    extent: float = 0.0  # farthest fix from the first so far, m (a loop back to the start keeps it)
+    t0: float = 0.0  # stamp of the first fix
+    last_lla: tuple[float, float, float] | None = None  # the newest fix's coordinates, as received ...
+    last_dr: tuple[float, float] = (0.0, 0.0)  # ... and the dead-reckoned base position when they first came
+
+
+@dataclass(slots=True)
+class GpsInput:
+    """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2)."""
+
+    lla: tuple[float, float, float]
+    cov: tuple[float, ...]
+
+
+class GpsPolicy:
+    """NavSatFix: skip fixes without a fix (status < 0), take the noise from the message
+    covariance (floored), the config's ``position_noise``, or a conservative default
+    when the receiver says its covariance is unknown."""
+
+    def __init__(self, cfg: GpsSensor) -> None:
+        self.cfg = cfg
+        self._floor = cfg.position_min_sigma**2
+        self._override = None if cfg.position_noise is None else mat3.diag(*[v * v for v in cfg.position_noise])
+        self._unknown = mat3.diag(*[v * v for v in cfg.unknown_position_sigma])
+
+    def convert(self, s: GpsSample) -> GpsInput:
+        if s.status < 0:
+            raise Rejected(reasons.NO_FIX, f"status {s.status}")
+        lla = (s.latitude, s.longitude, s.altitude)
+        if not finite(lla):
+            raise Rejected(reasons.NON_FINITE, "latitude/longitude/altitude")
+        if not (-90.0 <= s.latitude <= 90.0 and -180.0 <= s.longitude <= 180.0 and -1e5 < s.altitude < 1e6):
+            raise Rejected(reasons.IMPLAUSIBLE_VALUE, "latitude/longitude/altitude out of range")
+        if self._override is not None:
+            return GpsInput(lla, self._override)
+        if s.covariance_type == 0:
+            return GpsInput(lla, self._unknown)
+        c = s.position_covariance
+        if len(c) != 9 or not finite(c):
+            raise Rejected(reasons.BAD_COVARIANCE, "position covariance must be 9 finite numbers")
+        if c[0] < 0.0 or c[4] < 0.0 or c[8] < 0.0:
+            raise Rejected(reasons.NEGATIVE_COVARIANCE, "position")
+        if s.covariance_type == 2:  # COVARIANCE_TYPE_DIAGONAL_KNOWN: off-diagonals are not meaningful
+            c = mat3.diag(c[0], c[4], c[8])
+        f = self._floor
+        cov = (max(c[0], f), c[1], c[2], c[3], max(c[4], f), c[5], c[6], c[7], max(c[8], f))
+        return GpsInput(lla, cov)
+
+
+
+
+class GpsOwn(msgspec.Struct, frozen=True, gc=False):
+    """The GPS's slice of the filter state (immutable: history snapshots share it)."""
+
+    track: GpsTrack | None = None  # the fixes since the first one (heading search, frozen-receiver check)
+    travel: tuple[float, float, float] = _ZERO3  # dead-reckoned base motion since the track's base
+
+
+class GpsModel(SensorModel):
+    config_type = GpsSensor
+    sample_type = GpsSample
+    policy_type = GpsPolicy
+    predicts = True  # accumulates the dead-reckoned travel between fixes
+
+    def __init__(self, cfg: GpsSensor, index: int, ctx: SensorContext) -> None:
+        super().__init__(cfg, index, ctx)
+        layout = ctx.layout
+        self.error = "gps_error" if layout.has("gps_error") else None
+        self._error_rows = None
+        if self.error is not None:
+            e = layout.error["gps_error"]
+            self._error_rows = list(range(e.start, e.stop))
+        # variance of the receiver's slowly wandering horizontal error (the Gauss-Markov state's prior)
+        self.wander = 0.0
+        if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
+            self.wander = max(cfg.error_sigma[0], cfg.error_sigma[1]) ** 2
+        # An IMU's absolute yaw trusted as the heading in ENU (no offset estimated): no heading search.
+        self.yaw_given = ctx.absolute_yaw and not layout.has("yaw_offset")
+
+    def on_start(self, s: "FilterState") -> None:
+        """A fresh state: the ENU frame at the configured datum (or none yet), heading unknown."""
+        s.enu = EnuFrame(*self.cfg.datum) if self.cfg.datum is not None else None
+        s.heading_ready = False
+        s.own[self.index] = GpsOwn()
+
+    def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> None:
+        """While a track is kept, accumulate the dead-reckoned motion of each prediction."""
+        own: GpsOwn = s.own[self.index]
+        if own.track is not None:
+            tr = own.travel
+            s.own[self.index] = GpsOwn(own.track, (tr[0] + float(x1[0] - x0[0]), tr[1] + float(x1[1] - x0[1]),
+                                                   tr[2] + float(x1[2] - x0[2])))
+
+    def apply(self, s: "FilterState", inp: GpsInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+        cfg = self.cfg
+        if s.enu is None:
+            s.enu = EnuFrame(*inp.lla)  # no datum configured: the first valid fix (in stamp order)
+        z = s.enu.enu(*inp.lla)
+        ekf = s.ekf
+        rows = measured_axes(cfg, inp.cov)
+        if self.ctx.two_d:  # altitude is not fused: z is held at 0
+            rows = tuple(r for r in rows if r != 2)
+        if not s.frame_ready:
+            self._first_fix(s, z, inp, rows, stamp)
+            return []
+        if s.own[self.index].track is None:
+            # The world frame is defined but this GPS keeps no track (set_pose restarted it): start
+            # one at this fix, and look for the heading again if it is not known.
+            self._start_track(s, z, inp.lla, stamp)
+            if not s.heading_ready:
+                self._heading(s, z, inp.cov, stamp)
+        if self._frozen(s, inp.lla):
+            # A receiver repeating its last fix with a new stamp while the wheels moved: not a measurement.
+            if not emit:
+                return []
+            return [self.record(stamp, [ENU_NAMES[i] for i in rows], [0.0] * len(rows),
+                                [inp.cov[4 * i] for i in rows], 0.0, len(rows), True, "position_frozen", late)]
+        y, H, R = obs.position(self.ctx.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz, self.error)
+        if len(rows) < 3:
+            if not rows:
+                return []
+            y, H, R = y[list(rows)], H[list(rows)], R[np.ix_(rows, rows)]
+        if s.heading_ready:
+            res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
+            channel = "position"
+        else:
+            # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
+            # track along a wrong heading must not lock the filter out of the GPS). A Gauss-Markov
+            # GPS error is a "consider" state here: its variance widens S (H has its columns) but
+            # the offset a wrong heading builds up must not be absorbed into it as GPS error.
+            res = ekf.update(y, H, R, math.inf, self.ctx.position_mask)
+            channel = "position_unaligned"
+            self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
+        if not emit:
+            return []
+        # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
+        # heading: its NIS tests the heading search, not the receiver's noise (learning).
+        return [self.record(stamp, [ENU_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis, len(rows),
+                            res.rejected, channel, late, learning=channel == "position_unaligned")]
+
+    def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
+        """The first fix defines the world frame: the base goes where it says, heading unknown
+        (unless an absolute IMU yaw is trusted as ENU heading)."""
+        ekf = s.ekf
+        set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, rows)
+        split = (0, 1, 2)
+        if self.cfg.datum is None and 2 in rows:
+            # The datum's altitude is this fix's: the frame's zero height is where the antenna is
+            # now, exactly, whatever this fix's own error. (With a configured datum the first
+            # altitude is as uncertain as the fix, slow error included.)
+            ekf.reset_covariance([2], np.zeros((1, 1)))
+            split = (0, 1)
+        if self.error is not None:
+            self._split_first_fix(s, split)
+        s.frame_ready = True
+        new_frame(s)
+        self._start_track(s, z, inp.lla, stamp)
+        if self.yaw_given:
+            s.heading_ready = True
+        else:
+            ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            self._heading(s, z, inp.cov, stamp)
+
+    def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
+        x = s.ekf.x
+        base = (float(x[0]), float(x[1]), float(x[2]))
+        s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2]))
+
+    def _frozen(self, s: "FilterState", lla: tuple[float, float, float]) -> bool:
+        """Is this fix a repeat of the previous one (bit for bit) although the robot has moved more than
+        FROZEN_MIN_TRAVEL since those coordinates first came? Independent fixes of a moving antenna are
+        never bit-identical; a robot at rest (odometry exactly zero: no dead-reckoned travel) may get
+        repeats and fuses them. Remembers the fix otherwise."""
+        own: GpsOwn = s.own[self.index]
+        track, t = own.track, own.travel
+        dr = (track.base[0] + t[0], track.base[1] + t[1])
+        if lla == track.last_lla:
+            return math.hypot(dr[0] - track.last_dr[0], dr[1] - track.last_dr[1]) > FROZEN_MIN_TRAVEL
+        s.own[self.index] = GpsOwn(replace(track, last_lla=lla, last_dr=dr), t)
+        return False
+
+    def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float) -> None:
+        """Add this fix to the track and fit; apply the fit once it is good enough (module doc)."""
+        cfg = self.cfg
+        own: GpsOwn = s.own[self.index]
+        track, t = own.track, own.travel
+        a = lever(s.ekf.x, cfg.extrinsic_xyz)
+        dx, dy = track.base[0] + t[0] + a[0], track.base[1] + t[1] + a[1]  # dead-reckoned antenna
+        var = max(cov[0], cov[4]) + self.wander
+        points = track.points + ((z[0], z[1], dx, dy, 1.0 / var),)
+        if len(points) > HEADING_MAX_FIXES:
+            points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
+        extent = max(track.extent, math.hypot(z[0] - track.first[0], z[1] - track.first[1]))
+        track = replace(track, points=points, extent=extent)
+        s.own[self.index] = GpsOwn(track, t)
+        if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
+            return
+        d0 = points[0]
+        if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * math.hypot(z[0] - d0[0], z[1] - d0[1]):
+            # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
+            s.own[self.index] = GpsOwn(replace(track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]),
+                                               extent=0.0, t0=stamp), t)
+            return
+        fit = fit_rigid(list(points))
+        if fit is None:
+            return
+        if self.wander > 0.0:
+            # A slowly wandering error moves neighbouring fixes together: it bends the track as a
+            # whole, which the residuals cannot show. Over the track's duration T its ends differ by
+            # var(b(T) - b(0)) = 2 sigma_b^2 (1 - exp(-T / tau)), spread over the track's extent.
+            drift = 2.0 * self.wander * -math.expm1(-(stamp - track.t0) / cfg.error_tau_s)
+            fit = replace(fit, var_theta=fit.var_theta + drift / (extent * extent))
+        if fit.var_theta > HEADING_PROVISIONAL_SIGMA**2:
+            return
+        self._apply_fit(s, fit, track, t)
+
+    def _apply_fit(self, s: "FilterState", fit: RigidFit, track: GpsTrack, t: tuple[float, float, float]) -> None:
+        """Turn the state by the fit's angle about the antenna, which this fix has just put where the
+        GPS says: the position dead-reckoned along the wrong heading since the previous fix turns with
+        the heading, and P turns with both (``ErrorStateEKF.rotate_yaw``). The heading's row of P is
+        then re-set to the fit's variance: its old correlations described the wrong heading."""
+        ekf = s.ekf
+        a = lever(ekf.x, self.cfg.extrinsic_xyz)
+        ekf.rotate_yaw(fit.theta, (float(ekf.x[0]) + a[0], float(ekf.x[1]) + a[1]))
+        if self.ctx.layout.has("yaw_offset"):  # an absolute IMU yaw reads the same: its offset turns the other way
+            ekf.shift("yaw_offset", [-fit.theta])
+        # While the heading was unknown, the position's correlations with the gyro bias and the scales
+        # were built through a heading error of ~1.8 rad: kept, they would feed the next fixes'
+        # innovations into those states. They are dropped with the heading's row and column; the
+        # position's own covariance and its relation to the GPS error state are what the fixes made them.
+        group = [0, 1, 2]
+        if self._error_rows is not None:
+            group += self._error_rows
+        ekf.decorrelate(group)
+        ekf.reset_covariance([5], np.array([[fit.var_theta]]))
+        # the stored track is now seen in the turned frame: the next fit measures what is left
+        points = tuple((gx, gy, *fit.apply(px, py), w) for gx, gy, px, py, w in track.points)
+        bx, by = fit.apply(track.base[0] + t[0], track.base[1] + t[1])
+        new_frame(s)  # the frame turned under the differential pose sensors: their deltas restart
+        sigma = math.sqrt(fit.var_theta)
+        ready = sigma <= HEADING_READY_SIGMA
+        s.heading_ready = ready
+        s.own[self.index] = GpsOwn(replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
+                                           applied=True, last_dr=fit.apply(*track.last_dr)))
+        if ready:
+            log.info("gps_heading_initialised", sensor=self.name, yaw_correction=fit.theta, sigma=sigma,
+                     fixes=len(points))
+        elif not track.applied:
+            log.info("gps_heading_provisional", sensor=self.name, yaw_correction=fit.theta, sigma=sigma,
+                     fixes=len(points))
+
+    def _split_first_fix(self, s: "FilterState", rows: tuple[int, ...]) -> None:
+        """The first fix put the base at z - R t, but z also carries the GPS error b: the base
+        position is off by -(b + noise), so P_pp gains P_bb and P_pb = -P_bb (b keeps its prior).
+        That is the change of variables dp <- dp - db: J = I with -I in the position rows' b columns."""
+        layout = self.ctx.layout
+        J = np.eye(layout.error_dim)
+        eb = layout.error[self.error].start
+        for i in rows:
+            J[i, eb + i] = -1.0
+        s.ekf.map_errors(J)
+
+
+def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
+    """The ENU axes the fix measures: a variance above ``max_sigma``^2 means "not measured"."""
+    limit = cfg.max_sigma * cfg.max_sigma
+    return tuple(i for i in range(3) if cov[4 * i] <= limit)
+
+
+__all__ = ["GpsInput", "GpsModel", "GpsOwn", "GpsPolicy", "GpsTrack"]

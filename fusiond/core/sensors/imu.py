@@ -1,0 +1,325 @@
+"""IMU: orientation observed as roll/pitch(/yaw) per mode; gyro as motion input; roll/pitch from gravity.
+
+The gyro rate is held as the motion input until the next sample (or its timeout); at
+a confirmed standstill it also teaches the filter its bias (``gyro_bias.py``). The
+orientation is an update of roll/pitch(/yaw) by mode: ``absolute`` yaw is ENU heading
+(with an estimated offset beside GPS/pose), ``relative`` yaw is measured against the
+yaw the filter had at the IMU's first message, ``roll_pitch`` fuses tilt only. Without
+orientation, the accelerometer's gravity gives roll/pitch (``tilt_from_gravity``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import msgspec
+
+from ... import reasons
+from ...config import ImuSensor
+from ...estimator import mat3
+from ...estimator import observations as obs
+from ...estimator import rotation as rot
+from ...samples import ImuSample
+from ..diagnostics import DiagnosticsRecord
+from .base import SensorContext, SensorModel
+from .checks import MAX_RATE, Rejected, finite, plausible, resolve_variances, unit_quaternion
+from .gyro_bias import BiasLearning, learn_bias_at_rest
+
+if TYPE_CHECKING:
+    from ..state import FilterState
+
+GRAVITY = 9.80665  # m/s^2, standard gravity
+G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer reports in g
+GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
+ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
+YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
+
+
+class ImuOwn(msgspec.Struct, frozen=True, gc=False):
+    """The IMU's slice of the filter state (immutable: history snapshots share it)."""
+
+    yaw_offset: float | None = None  # relative orientation: the yaw read at the first message minus the filter's
+    yaw_residual: float | None = None  # absolute yaw: reading - heading - offset after the previous sample ...
+    yaw_stamp: float | None = None  # ... and its stamp (the yaw-jump gate)
+    adaptive: tuple[float, float, int] = (1.0, 0.0, 0)  # R scale of the orientation, window NIS/dof sum, count
+    bias: BiasLearning = BiasLearning()  # the standstill windows of the gyro-bias learning
+
+
+@dataclass(slots=True)
+class ImuInput:
+    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate; 9-tuple covariances."""
+
+    rpy: tuple[float, float, float] | None
+    rpy_cov: tuple[float, ...] | None
+    rows: tuple[int, ...]
+    gyro: tuple[float, float, float] | None
+    gyro_cov: tuple[float, ...] | None
+    accel: tuple[float, float, float] | None = None  # base-frame specific force, when gravity gives the tilt
+
+
+class ImuPolicy:
+    """sensor_msgs/Imu: orientation rows per ``orientation`` mode, gyro rate, accelerometer, all turned
+    from the IMU's axes into base_link by ``extrinsic_rpy`` (covariances too), so the estimator only
+    ever sees base_link quantities."""
+
+    def __init__(self, cfg: ImuSensor) -> None:
+        self.cfg = cfg
+        r, p, y = cfg.extrinsic_rpy
+        self.q_ext = rot.from_rpy(r, p, y)
+        self.q_ext_inv = rot.conj(self.q_ext)
+        self.R_ext = rot.matrix9(self.q_ext)
+        self._identity = (r, p, y) == (0.0, 0.0, 0.0)
+        self.mode = cfg.orientation
+        self._rows = {"absolute": (0, 1, 2), "relative": (0, 1, 2), "roll_pitch": (0, 1), "off": ()}[self.mode]
+        self._ori_floor = cfg.orientation_min_sigma**2
+        self._ori_unmeasured = cfg.orientation_max_sigma**2
+        self._ori_override = None if cfg.orientation_noise is None else [s * s for s in cfg.orientation_noise]
+        self._gyro_floor = cfg.gyro_min_sigma**2
+        self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
+        self._gravity_tilt = cfg.tilt_from_gravity
+
+    @property
+    def gives_tilt(self) -> bool:
+        """Can this IMU's messages constrain roll/pitch (orientation rows or gravity)?"""
+        return 0 in self._rows or 1 in self._rows or self._gravity_tilt
+
+    def planar(self) -> None:
+        """Two-D mode: roll and pitch are held at 0, so only a yaw row can be fused."""
+        self._rows = tuple(r for r in self._rows if r == 2)
+        self._gravity_tilt = False
+
+    def _rotate_cov(self, diag: list[float]) -> mat3.Mat3:
+        C = mat3.diag(diag[0], diag[1], diag[2])
+        if self._identity:
+            return C
+        return mat3.flat(mat3.sandwich(self.R_ext, C))
+
+    def convert(self, s: ImuSample) -> ImuInput:
+        rpy = rpy_cov = None
+        rows: tuple[int, ...] = ()
+        if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
+            if not (finite(s.orientation) and finite(s.orientation_covariance)):
+                raise Rejected(reasons.NON_FINITE, "orientation")
+            q_imu = unit_quaternion(s.orientation)
+            q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
+            rpy = rot.to_rpy(q_base)
+            if self._ori_override is not None:
+                var, measured = list(self._ori_override), [True, True, True]
+            else:
+                oc = s.orientation_covariance
+                diag = [oc[0], oc[4], oc[8]]
+                if any(d < 0.0 for d in diag):
+                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "orientation")
+                var, measured = resolve_variances(diag, self._ori_floor, self._ori_unmeasured, 1.0)
+            rows = tuple(i for i in self._rows if measured[i])
+            rpy_cov = self._rotate_cov(var)
+        elif len(s.orientation_covariance) != 9:
+            raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
+
+        gyro = gyro_cov = None
+        if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
+            gc = s.angular_velocity_covariance
+            if gc[0] != -1.0:
+                if not (finite(s.angular_velocity) and finite(gc)):
+                    raise Rejected(reasons.NON_FINITE, "angular_velocity")
+                if not plausible(s.angular_velocity, MAX_RATE):
+                    raise Rejected(reasons.IMPLAUSIBLE_VALUE, "angular velocity beyond 100 rad/s")
+                if self._gyro_override is not None:
+                    var = [self._gyro_override] * 3
+                else:
+                    diag = [gc[0], gc[4], gc[8]]
+                    if any(d < 0.0 for d in diag):
+                        raise Rejected(reasons.NEGATIVE_COVARIANCE, "angular_velocity")
+                    var = [max(d, self._gyro_floor) for d in diag]
+                w = s.angular_velocity
+                gyro = w if self._identity else mat3.apply(self.R_ext, w)
+                gyro_cov = self._rotate_cov(var)
+        elif self.cfg.angular_velocity:
+            raise Rejected(reasons.BAD_COVARIANCE, "angular velocity covariance must have 9 entries")
+        accel = None
+        if self._gravity_tilt and not (0 in rows or 1 in rows):
+            a = s.linear_acceleration
+            ac = s.linear_acceleration_covariance
+            # [0] == -1: no accelerometer (sensor_msgs/Imu); an all-zero vector: not filled in
+            if len(ac) == 9 and ac[0] != -1.0 and finite(a) and a != (0.0, 0.0, 0.0):
+                accel = a if self._identity else mat3.apply(self.R_ext, a)
+        if rpy is None and gyro is None and accel is None:
+            raise Rejected(reasons.NOTHING_TO_FUSE, "no orientation, angular velocity or acceleration in the message")
+        return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov, accel)
+
+
+class ImuModel(SensorModel):
+    config_type = ImuSensor
+    sample_type = ImuSample
+    policy_type = ImuPolicy
+
+    def __init__(self, cfg: ImuSensor, index: int, ctx: SensorContext) -> None:
+        super().__init__(cfg, index, ctx)
+        self.absolute = cfg.orientation == "absolute"
+        self.relative = cfg.orientation == "relative"
+        # absolute yaw read as heading + an estimated offset (the core adds the yaw_offset block)
+        self.offset = self.absolute and ctx.layout.has("yaw_offset")
+        self._offset_index = ctx.layout.nominal["yaw_offset"].start if self.offset else -1
+        self.learns_bias = cfg.angular_velocity and ctx.layout.has("gyro_bias")
+        self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
+
+    @property
+    def gives_tilt(self) -> bool:
+        return self.policy.gives_tilt
+
+    def planar(self) -> None:
+        self.policy.planar()
+
+    def on_start(self, s: "FilterState") -> None:
+        s.own[self.index] = ImuOwn()
+
+    def apply(self, s: "FilterState", inp: ImuInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+        records: list[DiagnosticsRecord] = []
+        if inp.gyro is not None:
+            s.gyro, s.gyro_cov, s.gyro_last = inp.gyro, inp.gyro_cov, (self.index, stamp)
+            if self.learns_bias:
+                records.extend(learn_bias_at_rest(self, s, inp, stamp, emit, late))
+        if inp.rpy is not None and inp.rows:
+            rpy, rows = inp.rpy, inp.rows
+            if self.absolute and self._fixed_yaw:
+                rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] + self._fixed_yaw))
+            if not s.attitude_ready:
+                initialise_attitude(s, rpy, self.absolute)
+            if self.relative:
+                own: ImuOwn = s.own[self.index]
+                off = own.yaw_offset
+                if off is None:
+                    off = rot.wrap(rpy[2] - rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2])
+                    s.own[self.index] = msgspec.structs.replace(own, yaw_offset=off)
+                rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] - off))
+            if self.offset and 2 in rows:
+                jump, allowed = self._yaw_jump(s, rpy[2], inp.rpy_cov[8], stamp)
+                if jump * jump > YAW_JUMP_GATE**2 * allowed:
+                    rows = tuple(i for i in rows if i != 2)  # this sample's yaw is not fused (counted as rejected)
+                    if emit:
+                        records.append(self.record(stamp, ["yaw"], [jump], [allowed], jump * jump / allowed, 1, True,
+                                                   "yaw_jump", late))
+            if rows:
+                records += self._fuse_orientation(s, rpy, inp.rpy_cov, rows, stamp, emit, late)
+        if inp.accel is not None:
+            records.extend(self._tilt_from_gravity(s, inp.accel, stamp, emit, late))
+        return records
+
+    def _fuse_orientation(self, s: "FilterState", rpy, cov, rows: tuple[int, ...], stamp: float, emit: bool,
+                          late: bool) -> list[DiagnosticsRecord]:
+        cfg = self.cfg
+        observe = obs.orientation_with_offset if self.offset else obs.orientation
+        y, H, R = observe(self.ctx.layout, s.ekf.x, rpy, cov, rows)
+        own: ImuOwn = s.own[self.index]
+        scale = own.adaptive[0] if cfg.adaptive else 1.0
+        tilt_only = 2 not in rows
+        if tilt_only:
+            heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
+        res = s.ekf.update(y, H, R * scale if scale != 1.0 else R, cfg.mahalanobis_threshold,
+                           self.ctx.tilt_mask if tilt_only else None)
+        if tilt_only and not res.rejected:
+            restore_heading(s, heading)
+        if not res.rejected and (0 in rows or 1 in rows):
+            s.tilt_seen = stamp
+        if self.offset and not tilt_only:
+            own = msgspec.structs.replace(own, yaw_residual=self._yaw_residual(s, rpy[2]))  # after the update
+        if cfg.adaptive:
+            own = msgspec.structs.replace(own, adaptive=adapt(own.adaptive, res.nis, len(rows), cfg.adaptive_window))
+        s.own[self.index] = own
+        if not emit:
+            return []
+        return [self.record(stamp, [obs.RPY_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis,
+                            len(rows), res.rejected, "orientation", late)]
+
+    def _yaw_residual(self, s: "FilterState", yaw: float) -> float:
+        o = float(s.ekf.x[self._offset_index])
+        return rot.wrap(yaw - rot.yaw(tuple(s.ekf.x[3:7].tolist())) - o)
+
+    def _yaw_jump(self, s: "FilterState", yaw: float, var: float, stamp: float) -> tuple[float, float]:
+        """How far the yaw reading jumped against the gyro-carried heading since the previous sample,
+        and the variance the model allows that jump.
+
+        Between two samples the filter's heading follows the gyro, so the yaw residual (reading -
+        heading - offset) changes only by the reading's noise (twice) and the offset's random walk
+        over the interval. A larger jump is the reading's own (a disturbance switching on, a
+        magnetometer near a motor): beyond YAW_JUMP_GATE sigma that sample's yaw is not fused. The
+        residual is remembered either way, so a disturbance that persists is fused from the next
+        sample on, and its slow part goes into the offset.
+        """
+        r = self._yaw_residual(s, yaw)
+        own: ImuOwn = s.own[self.index]
+        prev = own.yaw_residual
+        last = stamp if own.yaw_stamp is None else own.yaw_stamp
+        s.own[self.index] = msgspec.structs.replace(own, yaw_residual=r, yaw_stamp=stamp)
+        allowed = 2.0 * var + self.cfg.yaw_offset_walk**2 * max(stamp - last, 0.0)
+        return (0.0 if prev is None else rot.wrap(r - prev)), allowed
+
+    def _tilt_from_gravity(self, s: "FilterState", accel: tuple[float, float, float], stamp: float, emit: bool,
+                           late: bool) -> list[DiagnosticsRecord]:
+        """Roll and pitch from the accelerometer, when the IMU gives no orientation.
+
+        At low dynamics the accelerometer reads the specific force R^T (0, 0, g) plus the
+        centripetal term w x v: that term is removed with the gyro rate and the odometry
+        twist held now, and a sample whose remaining magnitude is not g (braking,
+        bumps) is skipped. Without this an ``orientation = "off"`` IMU left the tilt to
+        integrate the gyro's x/y bias: tens of degrees and metres of z on a flat floor.
+        """
+        u = self.ctx.inputs_at(s)
+        wx, wy, wz = u.angular
+        vx, vy, vz = u.linear
+        if u.world_frame:  # the twist is in the world: into the body
+            vx, vy, vz = mat3.apply_transposed(rot.matrix9(tuple(s.ekf.x[3:7].tolist())), (vx, vy, vz))
+        n = math.sqrt(accel[0] ** 2 + accel[1] ** 2 + accel[2] ** 2)
+        if G_UNITS_BAND[0] < n < G_UNITS_BAND[1]:  # a driver that reports in g, not m/s^2
+            accel = (accel[0] * GRAVITY, accel[1] * GRAVITY, accel[2] * GRAVITY)
+        ax = accel[0] - (wy * vz - wz * vy)
+        ay = accel[1] - (wz * vx - wx * vz)
+        az = accel[2] - (wx * vy - wy * vx)
+        if abs(math.sqrt(ax * ax + ay * ay + az * az) - GRAVITY) > GRAVITY_DYNAMIC_GATE:
+            return []
+        roll = math.atan2(ay, az)
+        pitch = math.atan2(-ax, math.hypot(ay, az))
+        if not s.attitude_ready:
+            initialise_attitude(s, (roll, pitch, 0.0), False)
+        var = self.cfg.gravity_tilt_noise**2
+        y, H, R = obs.orientation(self.ctx.layout, s.ekf.x, (roll, pitch, 0.0),
+                                  (var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var), (0, 1))
+        heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
+        res = s.ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.tilt_mask)
+        if not res.rejected:
+            restore_heading(s, heading)
+            s.tilt_seen = stamp
+        if not emit:
+            return []
+        return [self.record(stamp, ["roll", "pitch"], y.tolist(), res.innovation_var, res.nis, 2, res.rejected,
+                            "gravity", late)]
+
+
+def restore_heading(s: "FilterState", heading: float) -> None:
+    """After a roll/pitch-only update: a world-x/y correction of a tilted body still turns
+    its Euler yaw a little (second order); a rotation about world z puts the heading back
+    exactly and leaves roll and pitch as the update set them."""
+    q = tuple(s.ekf.x[3:7].tolist())
+    s.ekf.set_attitude(rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q))
+
+
+def initialise_attitude(s: "FilterState", rpy: tuple[float, float, float], with_yaw: bool) -> None:
+    """Take roll/pitch (and yaw when absolute) from the first orientation sample."""
+    yaw = rpy[2] if with_yaw else rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2]
+    s.ekf.set_attitude(rot.from_rpy(rpy[0], rpy[1], yaw))
+    s.attitude_ready = True
+
+
+def adapt(a: tuple[float, float, int], nis: float, dof: int, window: int) -> tuple[float, float, int]:
+    """Window of NIS/dof; at its end R's scale moves by the window mean (bounded)."""
+    if not math.isfinite(nis):
+        return a
+    scale, total, n = a[0], a[1] + nis / dof, a[2] + 1
+    if n >= window:
+        return (min(max(scale * (total / n), ADAPTIVE_MIN), ADAPTIVE_MAX), 0.0, 0)
+    return (scale, total, n)
+
+
+__all__ = ["ImuInput", "ImuModel", "ImuOwn", "ImuPolicy"]

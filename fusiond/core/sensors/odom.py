@@ -1,0 +1,154 @@
+"""Wheel odometry: the twist is the motion input (held until the next message), not an update.
+
+Once the gyro drives heading the wheels' yaw rate is not fused; it only checks
+the gyro (channel ``yaw_rate``), so that skid-steer slip and hand-turning show.
+It also tells the IMU when the robot stands still (for the gyro bias), through
+``still_since`` in the state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ... import reasons
+from ...config import OdomSensor
+from ...estimator import mat3
+from ...samples import OdomSample
+from ..diagnostics import DiagnosticsRecord
+from .base import SensorContext, SensorModel
+from .checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
+from .gyro_bias import quiet_bound
+
+if TYPE_CHECKING:
+    from ..state import FilterState
+
+
+@dataclass(slots=True)
+class OdomInput:
+    """Body (or world) twist with per-sample covariances (row-major 9-tuples), ready for the motion model."""
+
+    linear: tuple[float, float, float]
+    linear_cov: tuple[float, ...]
+    angular: tuple[float, float, float]
+    angular_cov: tuple[float, ...]
+    yaw_rate_measured: bool
+    stationary: bool
+
+
+class OdomPolicy:
+    STATIONARY_LINEAR = 1e-3  # m/s
+    STATIONARY_ANGULAR = 1e-3  # rad/s
+
+    def __init__(self, cfg: OdomSensor) -> None:
+        self.cfg = cfg
+        lin_min, ang_min = cfg.twist_min_sigma
+        lin_max, ang_max = cfg.twist_max_sigma
+        lin_def, ang_def = cfg.twist_unmeasured_sigma
+        self._floor = [lin_min**2] * 3 + [ang_min**2] * 3
+        self._unmeasured = [lin_max**2] * 3 + [ang_max**2] * 3
+        self._default = [lin_def**2] * 3 + [ang_def**2] * 3
+        self._override = None if cfg.twist_noise is None else [s * s for s in cfg.twist_noise]
+        # twist_measured: a component the driver does not measure takes the "not measured" path
+        # whatever its covariance says (a lost yaw rate reads 0 with covariance 0)
+        self._declared = tuple(cfg.twist_measured)
+        self._all_measured = all(self._declared)
+
+    def convert(self, s: OdomSample) -> OdomInput:
+        if not (finite(s.linear) and finite(s.angular)):
+            raise Rejected(reasons.NON_FINITE, "twist")
+        if not (plausible(s.linear, MAX_SPEED) and plausible(s.angular, MAX_RATE)):
+            raise Rejected(reasons.IMPLAUSIBLE_VALUE, "twist beyond 100 m/s or 100 rad/s")
+        cov = s.twist_covariance
+        if len(cov) != 36:
+            raise Rejected(reasons.BAD_COVARIANCE, "twist covariance must have 36 entries")
+        twist = (*s.linear, *s.angular)
+        if self._override is not None and self._all_measured:
+            var = self._override
+            values = twist
+            measured = (True,) * 6
+        else:
+            var, values, measured = [], [], []
+            for i in range(6):
+                if self._override is not None:  # the user's noise, for the components declared measured
+                    measured.append(self._declared[i])
+                    var.append(self._override[i] if self._declared[i] else self._default[i])
+                    values.append(twist[i] if self._declared[i] else 0.0)
+                    continue
+                d = cov[7 * i]
+                if d < 0.0:
+                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "twist")
+                if not self._declared[i] or d >= self._unmeasured[i] or d != d or d == math.inf:
+                    var.append(self._default[i])  # "not measured": not used, default noise
+                    values.append(0.0)
+                    measured.append(False)
+                else:
+                    var.append(d if d > self._floor[i] else self._floor[i])
+                    values.append(twist[i])
+                    measured.append(True)
+        lin, ang = self.STATIONARY_LINEAR, self.STATIONARY_ANGULAR
+        v0, v1, v2, w0, w1, w2 = values
+        stationary = (
+            -lin <= v0 <= lin and -lin <= v1 <= lin and -lin <= v2 <= lin
+            and -ang <= w0 <= ang and -ang <= w1 <= ang and -ang <= w2 <= ang
+        )
+        return OdomInput(
+            (v0, v1, v2),
+            mat3.diag(var[0], var[1], var[2]),
+            (w0, w1, w2),
+            mat3.diag(var[3], var[4], var[5]),
+            measured[5],
+            stationary,
+        )
+
+
+
+
+class OdomModel(SensorModel):
+    config_type = OdomSensor
+    sample_type = OdomSample
+    policy_type = OdomPolicy
+
+    def __init__(self, cfg: OdomSensor, index: int, ctx: SensorContext) -> None:
+        super().__init__(cfg, index, ctx)
+        layout = ctx.layout
+        # the gyro's z rate as the filter corrects it (bias, scale): what the wheels' yaw rate checks
+        self._bias_z = layout.nominal["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
+        self._bias_z_error = layout.error["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
+        self._gyro_scale = layout.nominal["gyro_scale"].start if layout.has("gyro_scale") else -1
+
+    def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+        s.linear, s.linear_cov = inp.linear, inp.linear_cov
+        s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
+        s.wheel_yaw_measured = inp.yaw_rate_measured
+        if inp.stationary:
+            if s.still_since is None:
+                s.still_since = stamp
+        else:
+            s.still_since = None
+        if not emit or s.gyro is None or not inp.yaw_rate_measured:
+            return []
+        if stamp - s.gyro_last[1] > self.ctx.timeout(s.gyro_last[0], s):
+            return []
+        # The wheels' yaw rate is not fused once the gyro drives heading; it only
+        # checks the gyro, so that skid and hand-turning show up as slip.
+        x = s.ekf.x
+        gyro_z = s.gyro[2]
+        var = inp.angular_cov[8] + s.gyro_cov[8]
+        if self._bias_z >= 0:
+            gyro_z -= float(x[self._bias_z])
+            e = self._bias_z_error
+            var += float(s.ekf.P[e, e])
+        if self._gyro_scale >= 0:
+            gyro_z *= float(x[self._gyro_scale])
+        r = inp.angular[2] - gyro_z
+        # Flagged: a wheel rate that misses the gyro's by more than slip_threshold, or wheels reading
+        # exactly zero while the gyro turns beyond the standstill quiet bound (the vehicle coasting or
+        # turned with its drive at rest: not a wheel measurement of the turn at all).
+        quiet = quiet_bound(math.sqrt(s.gyro_cov[8]), self.ctx.filter.gyro_bias_sigma)
+        slip = abs(r) > self.cfg.slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
+        return [self.record(stamp, ["yaw_rate"], [r], [var], r * r / var, 1, slip, "yaw_rate", late)]
+
+
+__all__ = ["OdomInput", "OdomModel", "OdomPolicy"]

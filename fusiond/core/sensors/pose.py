@@ -1,0 +1,210 @@
+"""Pose sensors (visual odometry, motion capture, ceiling camera): absolute or differential.
+
+An absolute pose is an update of the pose rows it measures; its first message defines the
+world frame when no GPS does. A differential sensor (visual odometry with a drifting
+origin) is fused as the motion between its consecutive messages against the filter's
+predicted motion over the same interval, kept in its slice of the state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import msgspec
+import numpy as np
+
+from ... import reasons
+from ...config import PoseSensor
+from ...estimator import mat3
+from ...estimator import observations as obs
+from ...estimator import rotation as rot
+from ...samples import PoseSample
+from ..diagnostics import DiagnosticsRecord
+from .base import SensorContext, SensorModel
+from .checks import Rejected, finite, plausible, unit_quaternion
+from .frame import new_frame, set_position
+
+if TYPE_CHECKING:
+    from ..state import FilterState
+
+NO_MOTION = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+
+
+class PoseAnchor(msgspec.Struct, frozen=True, gc=False):
+    """A differential sensor's slice of the state: its previous message (position, quaternion), the
+    filter's predicted motion since then (in the body frame at that message), and the world frame
+    it was taken in (``FilterState.frame_epoch``: a frame defined or turned since restarts it)."""
+
+    position: tuple[float, float, float]
+    q: tuple[float, float, float, float]
+    moved: tuple[tuple[float, float, float], tuple[float, float, float, float]]
+    epoch: int
+
+
+@dataclass(slots=True)
+class PoseInput:
+    """Sensor pose (position, unit quaternion, its rpy) with a 6x6 covariance (x y z roll pitch yaw,
+    row-major 36-tuple, diagonal) and the usable rows."""
+
+    position: tuple[float, float, float]
+    q: tuple[float, float, float, float]
+    rpy: tuple[float, float, float]
+    cov: tuple[float, ...]
+    rows: tuple[int, ...]
+
+
+class PosePolicy:
+    """Covariances of pose sensors are as unreliable as any: the diagonal is used, floored,
+    replaced by the config's noise when given, and a component above ``max_sigma`` is not
+    measured (a 2D visual odometry sends 1e6 for z, roll and pitch)."""
+
+    def __init__(self, cfg: PoseSensor) -> None:
+        self.cfg = cfg
+        pmin, omin = cfg.position_min_sigma**2, cfg.orientation_min_sigma**2
+        self._floor = [pmin] * 3 + [omin] * 3
+        self._max = [cfg.max_sigma[0] ** 2] * 3 + [cfg.max_sigma[1] ** 2] * 3
+        self._unknown = [cfg.unknown_sigma[0] ** 2] * 3 + [cfg.unknown_sigma[1] ** 2] * 3
+        self._pos_override = None if cfg.position_noise is None else [v * v for v in cfg.position_noise]
+        self._ori_override = None if cfg.orientation_noise is None else [v * v for v in cfg.orientation_noise]
+        self._held: tuple[int, ...] = ()
+
+    def planar(self) -> None:
+        """Two-D mode: z, roll and pitch are held at 0 and never fused."""
+        self._held = (2, 3, 4)
+
+    def convert(self, s: PoseSample) -> PoseInput:
+        if not (finite(s.position) and finite(s.orientation)):
+            raise Rejected(reasons.NON_FINITE, "pose")
+        if not plausible(s.position, 1e6):
+            raise Rejected(reasons.IMPLAUSIBLE_VALUE, "position beyond 1000 km")
+        q = unit_quaternion(s.orientation)
+        c = s.covariance
+        if len(c) == 36:
+            diag = [c[7 * i] for i in range(6)]
+            if any(d < 0.0 for d in diag):
+                raise Rejected(reasons.NEGATIVE_COVARIANCE, "pose")
+        elif len(c) == 0:
+            diag = list(self._unknown)
+        else:
+            raise Rejected(reasons.BAD_COVARIANCE, "pose covariance must have 36 entries")
+        if self._pos_override is not None:
+            diag[0:3] = self._pos_override
+        if self._ori_override is not None:
+            diag[3:6] = self._ori_override
+        rows = []
+        var = [0.0] * 6
+        for i, d in enumerate(diag):
+            if d != d or d >= self._max[i] or i in self._held:
+                continue
+            var[i] = d if d > self._floor[i] else self._floor[i]
+            rows.append(i)
+        if not rows:
+            raise Rejected(reasons.NOTHING_TO_FUSE, "every pose component is marked not measured")
+        cov = [0.0] * 36
+        for i in range(6):
+            cov[7 * i] = var[i] if var[i] > 0.0 else 1.0
+        return PoseInput(s.position, q, rot.to_rpy(q), tuple(cov), tuple(rows))
+
+
+class PoseModel(SensorModel):
+    config_type = PoseSensor
+    sample_type = PoseSample
+    policy_type = PosePolicy
+
+    def __init__(self, cfg: PoseSensor, index: int, ctx: SensorContext) -> None:
+        super().__init__(cfg, index, ctx)
+        self.predicts = cfg.differential  # carries its anchor along the predicted motion
+
+    @property
+    def gives_tilt(self) -> bool:
+        return not self.cfg.differential
+
+    def planar(self) -> None:
+        self.policy.planar()
+
+    def apply(self, s: "FilterState", inp: PoseInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+        if self.cfg.differential:
+            return self._apply_delta(s, inp, stamp, emit, late)
+        ekf = s.ekf
+        if not s.frame_ready:
+            self._define_frame(s, inp)
+            return []
+        y, H, R = obs.pose(self.ctx.layout, ekf.x, inp.position, inp.rpy, inp.cov, inp.rows, self.cfg.extrinsic_xyz)
+        res = ekf.update(y, H, R, self.cfg.mahalanobis_threshold)
+        if not res.rejected and (3 in inp.rows or 4 in inp.rows):
+            s.tilt_seen = stamp
+        if not emit:
+            return []
+        return [self.record(stamp, [obs.POSE_NAMES[i] for i in inp.rows], y.tolist(), res.innovation_var, res.nis,
+                            len(inp.rows), res.rejected, "pose", late)]
+
+    def _define_frame(self, s: "FilterState", inp: PoseInput) -> None:
+        """The first absolute pose defines the world frame: position and heading (and roll/pitch
+        when no IMU has set them) are taken from it, with its variances."""
+        ekf = s.ekf
+        r, p, y = rot.to_rpy((float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6])))
+        mr, mp, my = inp.rpy
+        rows = inp.rows
+        if not s.attitude_ready:
+            r = mr if 3 in rows else r
+            p = mp if 4 in rows else p
+        y = my if 5 in rows else y
+        ekf.set_attitude(rot.from_rpy(r, p, y))
+        var = [inp.cov[7 * i] for i in range(6)]
+        pos_rows = tuple(i for i in rows if i < 3)
+        set_position(s, inp.position, (var[0], 0.0, 0.0, 0.0, var[1], 0.0, 0.0, 0.0, var[2]),
+                     self.cfg.extrinsic_xyz, pos_rows)
+        if 5 in rows:
+            ekf.reset_covariance([5], np.array([[var[5]]]))
+        s.frame_ready = True
+        new_frame(s)  # differential sensors restart in the new frame
+
+    def _apply_delta(self, s: "FilterState", inp: PoseInput, stamp: float, emit: bool,
+                     late: bool) -> list[DiagnosticsRecord]:
+        """Fuse the sensor's motion since its previous message against the filter's motion since
+        then (accumulated by the predictions, kept with the anchor in the snapshot): the
+        sensor's drifting origin never enters. The stated noise (message covariance or override) is
+        that of one delta, as robot_pose_ekf reads visual odometry's covariance: VO's error
+        lives in its increments."""
+        ekf = s.ekf
+        anchor: PoseAnchor | None = s.own[self.index]
+        s.own[self.index] = PoseAnchor(inp.position, inp.q, NO_MOTION, s.frame_epoch)
+        if anchor is None or anchor.epoch != s.frame_epoch:
+            return []
+        dp, dqf = anchor.moved
+        # The filter's pose at the previous message, moved along with every correction made
+        # since (x_now o D^-1): the delta then checks only the predicted motion D, and does
+        # not undo what other sensors (GPS, heading initialisation) corrected meanwhile.
+        qn = (float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6]))
+        qa = rot.mul(qn, rot.conj(dqf))
+        a = mat3.apply(rot.matrix9(qa), dp)
+        x_prev = (float(ekf.x[0]) - a[0], float(ekf.x[1]) - a[1], float(ekf.x[2]) - a[2], *qa)
+        dpos, dq = obs.relative_pose(anchor.position, anchor.q, inp.position, inp.q)
+        y, H, R = obs.delta_pose(self.ctx.layout, ekf.x, x_prev, dpos, dq, inp.cov, inp.rows, self.cfg.extrinsic_xyz)
+        res = ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.delta_mask)
+        if not emit:
+            return []
+        return [self.record(stamp, [obs.DELTA_NAMES[i] for i in inp.rows], y.tolist(), res.innovation_var, res.nis,
+                            len(inp.rows), res.rejected, "pose_delta", late)]
+
+    def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> None:
+        """Compose one prediction step's relative motion (x0^-1 x1) onto the anchor's.
+
+        The motion is expressed in the body frame at the anchor, so corrections of the
+        world pose (updates, heading initialisation) between messages do not enter it.
+        """
+        anchor: PoseAnchor | None = s.own[self.index]
+        if anchor is None or anchor.epoch != s.frame_epoch:
+            return
+        q0 = (float(x0[3]), float(x0[4]), float(x0[5]), float(x0[6]))
+        step_p, step_q = obs.relative_pose((float(x0[0]), float(x0[1]), float(x0[2])), q0,
+                                           (float(x1[0]), float(x1[1]), float(x1[2])),
+                                           (float(x1[3]), float(x1[4]), float(x1[5]), float(x1[6])))
+        dp, dq = anchor.moved
+        a = mat3.apply(rot.matrix9(dq), step_p)
+        moved = ((dp[0] + a[0], dp[1] + a[1], dp[2] + a[2]), rot.normalize(rot.mul(dq, step_q)))
+        s.own[self.index] = PoseAnchor(anchor.position, anchor.q, moved, anchor.epoch)
+
+
+__all__ = ["PoseAnchor", "PoseInput", "PoseModel", "PosePolicy"]
