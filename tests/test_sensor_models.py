@@ -21,7 +21,7 @@ from fusiond.core.sensors.imu import ImuOwn
 from fusiond.core.state import FilterState
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout
 from fusiond.estimator import rotation as rot
-from fusiond.samples import GpsSample, ImuSample, OdomSample
+from fusiond.samples import ImuSample, OdomSample
 
 from .configs import robot_config
 from .sim_gps import World, simulate, truth_at

@@ -1,8 +1,10 @@
-"""The fusion core: time, ordering, sensor policies and diagnostics around the estimator.
+"""The fusion core: time, ordering, prediction and counters around the estimator.
 
-What each kind of sample does to the state lives in ``core/sensors/``; the state
-in ``core/state.py``; the late-data history in ``core/history.py``. This module
-owns time: validation, jumps, ordering, prediction to each stamp, counters.
+What each kind of sample does to the state lives in ``core/sensors/`` (one model per
+kind); the state in ``core/state.py``; the late-data history in ``core/history.py``; the
+held motion inputs and their timeouts in ``core/inputs.py``; the state blocks and update
+masks a configuration needs in ``core/layout.py``; far stamps in ``core/time_jumps.py``.
+This module owns time: validation, jumps, ordering, prediction to each stamp, counters.
 
 Fed by the live daemon and by bag replay alike. Time is message time (header
 stamps) only; wall clock never enters here.
@@ -26,28 +28,22 @@ import msgspec
 import numpy as np
 import structlog
 
-from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor
 from .. import reasons
 from ..errors import CoreError
-from ..estimator import (
-    ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout,
-    WheelScaleBlock, YawOffsetBlock, predict,
-)
-from ..estimator import mat3
+from ..estimator import ErrorStateEKF, PredictWorkspace, predict
 from ..estimator.geodesy import enu_to_geodetic
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
+from .inputs import HeldInputs, note_period
+from .layout import absolute_sensor, state_layout, update_masks
 from .time_jumps import HeldTimeline
 from .sensors import Rejected, SensorContext, build_models
 from .state import FilterState
 
 log = structlog.get_logger("fusiond.core")
 
-PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
-TILT_STALE_S = 5.0  # no roll/pitch information for this long: roll/pitch rates are no longer integrated
-TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
-# sensor kind -> (sample policy, sample type, what an applied sample does)
 
 
 class Estimate(msgspec.Struct, gc=False):
@@ -95,64 +91,18 @@ class FusionCore:
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
         self.odom_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, OdomSensor)), -1)
-        gyro_imus = [i for i, s in enumerate(self.sensors) if isinstance(s, ImuSensor) and s.angular_velocity]
-        blocks = [PoseBlock(fc.initial_sigma[0], fc.initial_sigma[1])]
-        if gyro_imus:
-            blocks.append(GyroBiasBlock(fc.gyro_bias_sigma, fc.gyro_bias_walk))
-        if any(isinstance(s, ImuSensor) and s.gyro_scale_estimation for s in self.sensors):
-            blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
-        # A wheel scale is observable once an absolute position is fused: on by default there.
-        absolute = any(isinstance(s, GpsSensor) or (isinstance(s, PoseSensor) and not s.differential)
-                       for s in self.sensors)
-        if any(isinstance(s, OdomSensor) and (s.scale_estimation or (s.scale_estimation is None and absolute))
-               for s in self.sensors):
-            blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
-        # An absolute IMU yaw beside an absolute position or pose: heading + an estimated offset.
-        yaw_imu = next((s for s in self.sensors if isinstance(s, ImuSensor) and s.orientation == "absolute"
-                        and s.yaw_offset_sigma > 0.0), None)
-        if yaw_imu is not None and absolute:
-            blocks.append(YawOffsetBlock(yaw_imu.yaw_offset_sigma, yaw_imu.yaw_offset_walk))
-        for sc in self.sensors:  # at most one GPS (it defines the world frame)
-            if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
-                blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
-            elif isinstance(sc, GpsSensor) and sc.vertical_error_sigma > 0.0:  # the altitude's wander alone
-                blocks.append(GpsErrorBlock(sc.vertical_error_tau_s, (0.0, 0.0, sc.vertical_error_sigma)))
-        self.layout = StateLayout(blocks)
+        self.layout = state_layout(cfg)
         self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
-        # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
-        # position, heading, the z bias or a scale (which drive heading and position).
-        self.tilt_mask = np.ones(self.layout.error_dim, dtype=bool)
-        self.tilt_mask[[0, 1, 2, 5]] = False
-        if self.has_bias:
-            self.tilt_mask[self.layout.error["gyro_bias"].start + 2] = False
-        for name in ("gyro_scale", "wheel_scale", "gps_error", "yaw_offset"):
-            if self.layout.has(name):
-                self.tilt_mask[self.layout.error[name]] = False
-        # While the GPS heading is unknown a fix may only move position: a wrong heading
-        # must not be "explained" by attitude, biases or scales.
-        self.position_mask = np.zeros(self.layout.error_dim, dtype=bool)
-        self.position_mask[0:3] = True
         # The sensor that defines the world frame (GPS: ENU at the datum; an absolute pose
         # sensor: its own frame); nothing is published before its first message.
-        self.frame_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)
-                                 or (isinstance(s, PoseSensor) and not s.differential)), -1)
+        self.frame_index = next((i for i, s in enumerate(self.sensors) if absolute_sensor(s)), -1)
         self.gps_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)), -1)
+        masks = update_masks(self.layout, self.frame_index >= 0)
+        self.tilt_mask, self.position_mask, self.delta_mask = masks.tilt, masks.position, masks.delta
         # An IMU with absolute yaw (REP-103: ENU, yaw 0 = east): trusted as the GPS frame's heading when
         # yaw_offset_sigma = 0; otherwise read as heading + an estimated offset (the yaw_offset block).
         self.absolute_yaw = any(isinstance(s, ImuSensor) and s.orientation == "absolute" for s in self.sensors)
-        # A pose delta fused against the filter's previous pose acts on the absolute pose as
-        # if that previous pose were exact, which collapses P of position and heading. Alone
-        # that is robot_pose_ekf's behaviour; beside an absolute sensor it would lock the GPS
-        # out, so there the delta may correct tilt, biases and scales only (Schmidt update).
-        # The exact treatment, cloning the previous pose into the state, is not done yet.
-        self.delta_mask = None
-        if self.frame_index >= 0:
-            self.delta_mask = np.ones(self.layout.error_dim, dtype=bool)
-            self.delta_mask[[0, 1, 2, 5]] = False
-            for name in ("gps_error", "yaw_offset"):  # a pose delta says nothing about these
-                if self.layout.has(name):
-                    self.delta_mask[self.layout.error[name]] = False
         self.noise_density = self.layout.noise_density(
             np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
         )
@@ -162,13 +112,6 @@ class FusionCore:
         self.caps = np.full(self.layout.error_dim, math.inf)
         self.caps[0:3] = fc.covariance_cap[0]
         self.caps[3:6] = fc.covariance_cap[1]
-        odom = self.sensors[self.odom_index] if self.odom_index >= 0 else None
-        unmeasured = odom.twist_unmeasured_sigma if isinstance(odom, OdomSensor) else [0.1, 0.1]
-        self.default_linear_cov = mat3.diag(*[unmeasured[0] ** 2] * 3)
-        self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
-        self._u = MotionInput()
-        self._u.world_frame = isinstance(odom, OdomSensor) and odom.twist_frame == "world"
-        self._u.twist_correlation = odom.twist_correlation_s if isinstance(odom, OdomSensor) else 0.0
         # Two-D mode: z, roll, pitch (and the x/y gyro bias they alone would reveal) held at 0.
         self.two_d = fc.two_d_mode
         nominal_zero, error_zero = [2], [2, 3, 4]
@@ -178,11 +121,12 @@ class FusionCore:
             error_zero += [eb, eb + 1]
         self._planar_nominal = tuple(nominal_zero)
         self._planar_error = np.array(error_zero)
+        self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d)
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
             tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
-            timeout=self.timeout, inputs_at=self.inputs_at)
+            timeout=self.inputs.timeout, inputs_at=self.inputs.at)
         self.models = build_models(self.sensors, self.context)
         self._predicting = [m for m in self.models if m.predicts]  # on_predict hooks (GPS track, pose anchors)
         if self.two_d:
@@ -192,8 +136,7 @@ class FusionCore:
         # gyro's x/y rates would integrate their biases into tens of degrees of tilt: the robot is
         # taken as planar instead (roll/pitch rates not integrated), and the summary says so.
         self.tilt_reference = self.two_d or any(m.gives_tilt for m in self.models)
-        self.context.tilt_reference = self.tilt_reference
-        self._timeout_base = [sc.timeout_s for sc in self.sensors]
+        self.context.tilt_reference = self.inputs.tilt_reference = self.tilt_reference
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
@@ -356,7 +299,7 @@ class FusionCore:
         if s is None or s.t is None:
             raise CoreError("no sample has been fused yet")
         x, P = s.ekf.x, s.ekf.P
-        u = self._inputs(s)
+        u = self.inputs.at(s)
         linear, angular = u.linear, u.angular
         if self.layout.input_blocks:
             xl = x.tolist()
@@ -419,18 +362,8 @@ class FusionCore:
         return s.t - s.last[idx] <= self.timeout(idx, s)
 
     def timeout(self, idx: int, s: FilterState | None = None) -> float:
-        """How long sensor idx's input is held after its last message: its ``timeout_s``, or
-        TIMEOUT_PERIODS of its typical period when that is longer. (Several calls a message:
-        the configured values are read from a list made once.)"""
-        if s is None:
-            s = self.state
-        base = self._timeout_base[idx]
-        if s is None:
-            return base
-        period = s.period[idx]
-        if period <= 0.0:
-            return base
-        return max(base, TIMEOUT_PERIODS * period)
+        """How long sensor idx's input is held after its last message (``HeldInputs.timeout``)."""
+        return self.inputs.timeout(idx, self.state if s is None else s)
 
     def set_pose(self, stamp: float, position: tuple[float, float, float],
                  orientation: tuple[float, float, float, float], covariance: list[float]) -> None:
@@ -505,8 +438,8 @@ class FusionCore:
     def _start(self) -> None:
         """A fresh state with no time yet: the first sample in stamp order sets it, so the
         start does not depend on which sensor happened to arrive first."""
-        s = FilterState.initial(ErrorStateEKF(self.layout), len(self.sensors), self.default_linear_cov,
-                                self.default_angular_cov)
+        s = FilterState.initial(ErrorStateEKF(self.layout), len(self.sensors), self.inputs.default_linear_cov,
+                                self.inputs.default_angular_cov)
         for m in self.models:
             m.on_start(s)
         self.state = s
@@ -517,52 +450,6 @@ class FusionCore:
 
     def _reapply(self, s: FilterState, idx: int, inp, stamp: float) -> None:
         self._apply(s, idx, inp, stamp, emit=False, late=False)
-
-    def _held_timeouts(self, s: FilterState) -> tuple[float, float]:
-        """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
-        during a prediction, so ``_predict`` reads them once for all its segments."""
-        odom = self.odom_index
-        odom_timeout = self.timeout(odom, s) if odom >= 0 and s.last[odom] is not None else 0.0
-        gyro_timeout = self.timeout(s.gyro_last[0], s) if s.gyro is not None else 0.0
-        return odom_timeout, gyro_timeout
-
-    def _inputs(self, s: FilterState, t: float | None = None,
-                timeouts: tuple[float, float] | None = None) -> MotionInput:
-        """Motion inputs held at time t (default s.t); a silent sensor's input is not held forever.
-        ``timeouts``: ``_held_timeouts(s)`` when the caller has them."""
-        u = self._u
-        if t is None:
-            t = s.t
-        odom_timeout, gyro_timeout = self._held_timeouts(s) if timeouts is None else timeouts
-        odom = self.odom_index
-        odom_fresh = odom >= 0 and s.last[odom] is not None and t - s.last[odom] <= odom_timeout
-        if odom_fresh:
-            u.linear, u.linear_cov, u.linear_period = s.linear, s.linear_cov, s.period[odom]
-        else:
-            u.linear, u.linear_cov, u.linear_period = _ZERO3, self.default_linear_cov, 0.0
-        gyro_fresh = s.gyro is not None and t - s.gyro_last[1] <= gyro_timeout
-        if gyro_fresh:
-            u.angular, u.angular_cov, u.angular_period = s.gyro, s.gyro_cov, s.period[s.gyro_last[0]]
-            u.from_gyro = True
-        elif odom_fresh:
-            u.angular, u.angular_cov, u.angular_period = s.wheel_angular, s.wheel_angular_cov, s.period[odom]
-            u.from_gyro = False
-        else:
-            u.angular, u.angular_cov, u.angular_period = _ZERO3, self.default_angular_cov, 0.0
-            u.from_gyro = False
-        if self.two_d:  # vertical twist and roll/pitch rates ignored
-            u.linear = (u.linear[0], u.linear[1], 0.0)
-        # planar: roll/pitch rates not integrated, in two-D mode, or when nothing corrects (any
-        # more) a tilt the rates would build up: no tilt reference configured, or the configured
-        # one has given nothing for TILT_STALE_S (an accelerometer publishing gravity-free
-        # acceleration, an IMU without orientation)
-        u.planar = self.two_d or not self.tilt_reference or (
-            s.tilt_seen is not None and t - s.tilt_seen > TILT_STALE_S)
-        return u
-
-    def inputs_at(self, s: FilterState) -> MotionInput:
-        """The motion inputs held at the state's time (the twist and rate a sensor model may need)."""
-        return self._inputs(s)
 
     def _predict(self, s: FilterState, dt: float) -> None:
         """Predict over dt from s.t, in segments: no input outlives its sensor.
@@ -576,11 +463,12 @@ class FusionCore:
         t0 = s.t
         t_end = t0 + dt
         gap = dt > self.cfg.filter.gap_s
-        timeouts = self._held_timeouts(s)
+        held = self.inputs
+        timeouts = held.timeouts(s)
         while True:
-            t1 = min(t_end, self._next_expiry(s, t0, timeouts))
+            t1 = min(t_end, held.next_expiry(s, t0, timeouts))
             seg = t1 - t0
-            u = self._inputs(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
+            u = held.at(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
             x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
                 m.on_predict(s, s.ekf.x, x)
@@ -597,33 +485,12 @@ class FusionCore:
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
 
-    def _next_expiry(self, s: FilterState, t: float, timeouts: tuple[float, float]) -> float:
-        """The first moment after t at which a held input's sensor times out (inf if none)."""
-        nxt = math.inf
-        odom = self.odom_index
-        if odom >= 0 and s.last[odom] is not None:
-            e = s.last[odom] + timeouts[0]
-            if t < e < nxt:
-                nxt = e
-        if s.gyro_last is not None:
-            e = s.gyro_last[1] + timeouts[1]
-            if t < e < nxt:
-                nxt = e
-        return nxt
-
     def _covariance_reset(self, n: int) -> None:
         """Count resets (propagate's and update's) by the EKF's own counter, which snapshots carry:
         the resets a sample added to the newest timeline, so a prediction re-applied after a late
         sample does not count its reset again."""
         self.covariance_resets += n
         log.error("covariance_reset", stamp=self.state.t, count=n, reason="non-finite covariance")
-
-    def _note_period(self, s: FilterState, idx: int, stamp: float) -> None:
-        last = s.last[idx]
-        if last is not None and stamp > last:
-            d = min(stamp - last, 1.0)
-            s.period[idx] = d if s.period[idx] <= 0.0 else s.period[idx] + PERIOD_SMOOTHING * (d - s.period[idx])
-        s.last[idx] = stamp if last is None else max(last, stamp)
 
     def _apply(self, s: FilterState, idx: int, inp, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         if s.t is None:
@@ -632,11 +499,8 @@ class FusionCore:
         elif stamp > s.t:
             self._predict(s, stamp - s.t)
             s.t = stamp
-        self._note_period(s, idx, stamp)
+        note_period(s, idx, stamp)
         records = self.models[idx].apply(s, inp, stamp, emit, late)
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
         return records
-
-    # -- absolute and relative position sensors ---------------------------------------------------------------
-_ZERO3 = (0.0, 0.0, 0.0)

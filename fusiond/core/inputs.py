@@ -1,0 +1,117 @@
+"""The motion inputs held between messages, and how long each is held.
+
+The odometry twist and the gyro rate drive the prediction from their sensor's message
+until the next one. A silent sensor's input is not held forever: only for its
+``timeout_s``, or TIMEOUT_PERIODS of its typical period when that is longer (a 5 Hz
+drive is not "silent" after 0.3 s). Past that, the prediction runs with zero twist and no
+rotation, and the core splits a prediction step at the moment an input expires.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..config import OdomSensor
+from ..estimator import MotionInput, mat3
+from .state import FilterState
+
+PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
+TILT_STALE_S = 5.0  # no roll/pitch information for this long: roll/pitch rates are no longer integrated
+TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+class HeldInputs:
+    """Which inputs hold at a time t in a state s, as one reused ``MotionInput``."""
+
+    def __init__(self, sensors: list, odom_index: int, two_d: bool) -> None:
+        self.odom_index = odom_index
+        self.two_d = two_d
+        self.tilt_reference = True  # set by the core once the sensor models say whether any gives tilt
+        self._timeout_base = [sc.timeout_s for sc in sensors]
+        odom = sensors[odom_index] if odom_index >= 0 else None
+        unmeasured = odom.twist_unmeasured_sigma if isinstance(odom, OdomSensor) else [0.1, 0.1]
+        # the twist nobody measures: zero, with the "not measured" variances
+        self.default_linear_cov = mat3.diag(*[unmeasured[0] ** 2] * 3)
+        self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
+        self._u = MotionInput()
+        self._u.world_frame = isinstance(odom, OdomSensor) and odom.twist_frame == "world"
+        self._u.twist_correlation = odom.twist_correlation_s if isinstance(odom, OdomSensor) else 0.0
+
+    def timeout(self, idx: int, s: FilterState | None) -> float:
+        """How long sensor idx's input is held after its last message in state s."""
+        base = self._timeout_base[idx]
+        if s is None:
+            return base
+        period = s.period[idx]
+        if period <= 0.0:
+            return base
+        return max(base, TIMEOUT_PERIODS * period)
+
+    def timeouts(self, s: FilterState) -> tuple[float, float]:
+        """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
+        during a prediction, so it reads them once for all its segments."""
+        odom = self.odom_index
+        odom_timeout = self.timeout(odom, s) if odom >= 0 and s.last[odom] is not None else 0.0
+        gyro_timeout = self.timeout(s.gyro_last[0], s) if s.gyro is not None else 0.0
+        return odom_timeout, gyro_timeout
+
+    def at(self, s: FilterState, t: float | None = None,
+           timeouts: tuple[float, float] | None = None) -> MotionInput:
+        """Motion inputs held at time t (default s.t). ``timeouts``: ``timeouts(s)`` when the caller has them."""
+        u = self._u
+        if t is None:
+            t = s.t
+        odom_timeout, gyro_timeout = self.timeouts(s) if timeouts is None else timeouts
+        odom = self.odom_index
+        odom_fresh = odom >= 0 and s.last[odom] is not None and t - s.last[odom] <= odom_timeout
+        if odom_fresh:
+            u.linear, u.linear_cov, u.linear_period = s.linear, s.linear_cov, s.period[odom]
+        else:
+            u.linear, u.linear_cov, u.linear_period = _ZERO3, self.default_linear_cov, 0.0
+        gyro_fresh = s.gyro is not None and t - s.gyro_last[1] <= gyro_timeout
+        if gyro_fresh:
+            u.angular, u.angular_cov, u.angular_period = s.gyro, s.gyro_cov, s.period[s.gyro_last[0]]
+            u.from_gyro = True
+        elif odom_fresh:
+            u.angular, u.angular_cov, u.angular_period = s.wheel_angular, s.wheel_angular_cov, s.period[odom]
+            u.from_gyro = False
+        else:
+            u.angular, u.angular_cov, u.angular_period = _ZERO3, self.default_angular_cov, 0.0
+            u.from_gyro = False
+        if self.two_d:  # vertical twist and roll/pitch rates ignored
+            u.linear = (u.linear[0], u.linear[1], 0.0)
+        # planar: roll/pitch rates not integrated, in two-D mode, or when nothing corrects (any
+        # more) a tilt the rates would build up: no tilt reference configured, or the configured
+        # one has given nothing for TILT_STALE_S (an accelerometer publishing gravity-free
+        # acceleration, an IMU without orientation)
+        u.planar = self.two_d or not self.tilt_reference or (
+            s.tilt_seen is not None and t - s.tilt_seen > TILT_STALE_S)
+        return u
+
+    def next_expiry(self, s: FilterState, t: float, timeouts: tuple[float, float]) -> float:
+        """The first moment after t at which a held input's sensor times out (inf if none)."""
+        nxt = math.inf
+        odom = self.odom_index
+        if odom >= 0 and s.last[odom] is not None:
+            e = s.last[odom] + timeouts[0]
+            if t < e < nxt:
+                nxt = e
+        if s.gyro_last is not None:
+            e = s.gyro_last[1] + timeouts[1]
+            if t < e < nxt:
+                nxt = e
+        return nxt
+
+
+def note_period(s: FilterState, idx: int, stamp: float) -> None:
+    """Sensor idx's newest stamp and its typical message period (an EMA of the intervals, each capped
+    at 1 s so that a gap does not make the sensor's timeout long)."""
+    last = s.last[idx]
+    if last is not None and stamp > last:
+        d = min(stamp - last, 1.0)
+        s.period[idx] = d if s.period[idx] <= 0.0 else s.period[idx] + PERIOD_SMOOTHING * (d - s.period[idx])
+    s.last[idx] = stamp if last is None else max(last, stamp)
+
+
+__all__ = ["HeldInputs", "note_period", "TIMEOUT_PERIODS", "TILT_STALE_S"]
