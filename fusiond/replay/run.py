@@ -100,6 +100,33 @@ def tum_text(trajectory: array) -> str:
     return "".join([fmt % tuple(trajectory[i : i + 8]) for i in range(0, len(trajectory), 8)])
 
 
+class _JsonLines:
+    """The --diagnostics file: each record encoded as it comes (records are not kept), the lines
+    gathered in one buffer and written in blocks of ~1 MiB rather than two writes a record."""
+
+    BLOCK = 1 << 20
+
+    def __init__(self, path: Path) -> None:
+        self._file = open(path, "wb")
+        self._buf = bytearray()
+        self._encode_into = msgspec.json.Encoder().encode_into
+
+    def add(self, record: object) -> None:
+        buf = self._buf
+        self._encode_into(record, buf, -1)  # appended at the end of the buffer
+        buf += b"\n"
+        if len(buf) >= self.BLOCK:
+            self._file.write(buf)
+            buf.clear()
+
+    def close(self) -> None:
+        try:
+            self._file.write(self._buf)
+        finally:
+            self._buf.clear()
+            self._file.close()
+
+
 class _Progress:
     """A one-line progress bar on a terminal; silent otherwise (CI logs, pipes)."""
 
@@ -131,15 +158,14 @@ def replay(
     progress: bool = True,
     warn: Callable[[str], None] | None = None,
 ) -> ReplayResult:
-    enc = msgspec.json.Encoder()
-    diag_out = open(diagnostics, "wb") if diagnostics else None
+    diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn)
             runner = Runner(cfg, keep_trace)
             if diag_out is not None:
-                runner.on_record = lambda r: (diag_out.write(enc.encode(r)), diag_out.write(b"\n"))
+                runner.on_record = diag_out.add
             bar = _Progress(bag.total if progress else 0)
             for sample in bag:
                 runner.feed(sample)
