@@ -31,7 +31,6 @@ TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 DIAGNOSTIC_ARRAY: Final = "diagnostic_msgs/msg/DiagnosticArray"
 
 
-
 def _header(stamp: float, frame_id: str) -> Any:
     sec, nanosec = stamp_to_ros(stamp)
     T = _types()
