@@ -76,3 +76,23 @@ def test_targets_are_ratios_of_the_same_run():
     assert t["replay_process_vs_bare_jackal_wall (<=1.0)"] == pytest.approx(1.25)
     assert t["replay_process_vs_bare_jackal_cpu (<=1.0)"] == pytest.approx(1.5)
     assert not any("synthetic" in k for k in t)
+
+
+def test_process_benchmark_runs_fusiond_byte_compiled_as_installed():
+    """`bench_process` compiles the package first, as pip does on install: every module of fusiond
+    then has a cached bytecode file that CPython accepts for its current source."""
+    import importlib.util
+    from pathlib import Path
+
+    bench._compile_package()
+    package = Path(bench.__file__).resolve().parent
+    sources = sorted(package.rglob("*.py"))
+    assert len(sources) > 40
+    for src in sources:
+        cached = Path(importlib.util.cache_from_source(str(src)))
+        assert cached.is_file(), src
+        # the header's source mtime and size are what the import system checks before using it
+        header = cached.read_bytes()[8:16]
+        stat = src.stat()
+        assert int.from_bytes(header[:4], "little") == int(stat.st_mtime) & 0xFFFFFFFF
+        assert int.from_bytes(header[4:], "little") == stat.st_size & 0xFFFFFFFF

@@ -14,7 +14,6 @@ from .payloads import (
     POSE_STAMPED,
     POSE_TYPES,
     REASONS,
-    TYPESTORE,
     DecodeError,
     Decoder,
     Encoding,
@@ -23,6 +22,7 @@ from .payloads import (
     OdomMessage,
     Payload,
     PoseMessage,
+    bag_fast_path,
     decode_odometry_cdr,
     decode_pose_cdr,
     encode_gps_sample,
@@ -33,6 +33,7 @@ from .payloads import (
     encode_pose_cdr,
     encode_pose_sample,
     encode_sample,
+    flat_layout,
     gps_from_ros,
     imu_from_ros,
     make_decoder,
@@ -41,6 +42,7 @@ from .payloads import (
     ros_converter,
     ros_msgtype,
     stamp_to_ros,
+    typestore,
 )
 from .ros_messages import (
     DIAGNOSTIC_ARRAY,
@@ -62,10 +64,17 @@ from .ros_messages import (
 __all__ = [
     "IMU", "MAX_PAYLOAD", "NAVSATFIX", "ODOMETRY", "POSE_COV_STAMPED", "POSE_STAMPED", "POSE_TYPES", "REASONS",
     "TYPESTORE", "DecodeError", "Decoder", "Encoding", "GpsMessage", "ImuMessage", "OdomMessage", "Payload",
-    "PoseMessage", "decode_odometry_cdr", "decode_pose_cdr", "encode_gps_sample", "encode_imu_sample",
+    "PoseMessage", "bag_fast_path", "decode_odometry_cdr", "decode_pose_cdr", "encode_gps_sample", "encode_imu_sample",
     "encode_navsat_cdr", "encode_odom_sample", "encode_odometry_cdr", "encode_pose_cdr", "encode_pose_sample",
-    "encode_sample", "gps_from_ros", "imu_from_ros", "make_decoder", "odom_from_ros", "pose_from_ros",
-    "ros_converter", "ros_msgtype", "stamp_to_ros",
+    "encode_sample", "flat_layout", "gps_from_ros", "imu_from_ros", "make_decoder", "odom_from_ros", "pose_from_ros",
+    "ros_converter", "ros_msgtype", "stamp_to_ros", "typestore",
     "DIAGNOSTIC_ARRAY", "ERROR", "OK", "TF_MESSAGE", "WARN", "DiagnosticStatus", "SetPose", "SetPoseMessage",
     "check_set_pose", "dds_type_name", "decode_set_pose", "encode_diagnostic_array_cdr", "encode_tf_cdr", "type_hash",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """`TYPESTORE`: the Humble type store, built when first asked for (see `typestore`)."""
+    if name == "TYPESTORE":
+        return typestore()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -12,14 +12,17 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable, Sequence
-from typing import Annotated, Any, Final, Literal
+from functools import cache
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
 import msgspec
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
 
 from fusiond.errors import CodecError
 from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 MAX_PAYLOAD: Final = 64 * 1024
 """Larger payloads are rejected before parsing: no sensor message fusiond reads is near this."""
@@ -53,22 +56,28 @@ class DecodeError(CodecError):
 
 # --------------------------------------------------------------------------- typestore
 
-TYPESTORE: Final = get_typestore(Stores.ROS2_HUMBLE)
-"""Humble types; Odometry, Imu and the pose messages have the same wire format in every ROS 2 distro."""
 
-_T = TYPESTORE.types
-_Time = _T["builtin_interfaces/msg/Time"]
-_Header = _T["std_msgs/msg/Header"]
-_Point = _T["geometry_msgs/msg/Point"]
-_Quaternion = _T["geometry_msgs/msg/Quaternion"]
-_Vector3 = _T["geometry_msgs/msg/Vector3"]
-_Pose = _T["geometry_msgs/msg/Pose"]
-_PoseWithCovariance = _T["geometry_msgs/msg/PoseWithCovariance"]
-_PoseWithCovarianceStamped = _T[POSE_COV_STAMPED]
-_Imu = _T[IMU]
-_PoseStamped = _T[POSE_STAMPED]
-_NavSatFix = _T[NAVSATFIX]
-_NavSatStatus = _T["sensor_msgs/msg/NavSatStatus"]
+@cache
+def typestore() -> Typestore:
+    """The Humble type store (Odometry, Imu and the pose messages have the same wire format in
+    every ROS 2 distro), built on first use: importing its type definitions takes ~70 ms, which a
+    replay of a bag that carries its own definitions (every ROS 1 bag; ROS 2 bags written with
+    them) and the fast paths below never need. `TYPESTORE` is the same object."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def __getattr__(name: str) -> Any:
+    if name == "TYPESTORE":  # the old constant, now built when first asked for
+        return typestore()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _types() -> dict[str, Any]:
+    """Message classes of the type store, by ROS type name (for the rosbags-built encoders)."""
+    return typestore().types
+
 
 # Stamped types a misconfigured key plausibly carries. Only types that start with a
 # Header (a NUL-terminated string) are probed: header-less types such as Twist
@@ -83,13 +92,13 @@ _PROBE_TYPES: Final = (
 def _deserialize(payload: Payload, msgtype: str) -> Any:
     """rosbags deserialisation that fails only with DecodeError, naming the type actually sent if it can."""
     try:
-        return TYPESTORE.deserialize_cdr(memoryview(payload), msgtype)
+        return typestore().deserialize_cdr(memoryview(payload), msgtype)
     except Exception as exc:  # rosbags raises SerdeError, IndexError, struct.error, ... on garbage
         for other in _PROBE_TYPES:
             if other == msgtype:
                 continue
             try:
-                TYPESTORE.deserialize_cdr(memoryview(payload), other)
+                typestore().deserialize_cdr(memoryview(payload), other)
             except Exception:
                 continue
             raise DecodeError("wrong_type", f"payload is a {other}, expected {msgtype}") from None
@@ -115,7 +124,7 @@ def stamp_to_ros(stamp: float) -> tuple[int, int]:
 
 def _ros_time(stamp: float) -> Any:
     sec, nanosec = stamp_to_ros(stamp)
-    return _Time(sec=sec, nanosec=nanosec)
+    return _types()["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 # --------------------------------------------------------------------------- ROS message -> sample
@@ -233,6 +242,115 @@ def _fast_imu(buf: Payload, sensor: str) -> ImuSample | None:
         return None
     stamp, d = got
     return ImuSample(sensor, stamp, d[0:4], d[4:13], d[13:16], d[16:25], d[25:28], d[28:37])
+
+
+# --------------------------------------------------------------------------- bag fast paths
+#
+# A bag replay reads the same two messages thousands of times a second. ROS 2 bags hold
+# the CDR above; ROS 1 bags hold ROS 1 serialisation: the same fields with a `seq` in the
+# header, strings without a terminator and no alignment, so one struct call reads the
+# float64 block as well. A bag carries its own message definitions, which may differ from
+# the standard ones under the same name: a fast path is used only for a type whose
+# definition in the bag's store (rosbags parsed it) has exactly the layout it reads.
+
+_ROS1_HEAD = struct.Struct("<IiI").unpack_from  # header.seq, header.stamp.sec, header.stamp.nanosec
+
+
+def _ros1_string_end(buf: Payload, pos: int) -> int:
+    """End of the ROS 1 string at `pos` (length prefix, no terminator), -1 where rosbags would reject it."""
+    (length,) = _U32(buf, pos)
+    end = pos + 4 + length
+    if end > len(buf):
+        return -1
+    str(buf[pos + 4 : end], "utf-8")  # rosbags decodes the string; invalid UTF-8 raises here
+    return end
+
+
+def _ros1_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> tuple[float, tuple[float, ...]] | None:
+    try:
+        _, sec, nanosec = _ROS1_HEAD(buf, 0)
+        pos = _ros1_string_end(buf, 12)
+        if pos >= 0 and has_child_frame:
+            pos = _ros1_string_end(buf, pos)
+        if pos < 0 or pos + block.size != len(buf):  # rosbags rejects any size mismatch in ROS 1
+            return None
+        return sec + nanosec * 1e-9, block.unpack_from(buf, pos)
+    except (struct.error, UnicodeDecodeError):
+        return None
+
+
+def _fast_odom_ros1(buf: Payload, sensor: str) -> OdomSample | None:
+    got = _ros1_block(buf, True, _ODOM_BLOCK)
+    if got is None:
+        return None
+    stamp, d = got
+    return OdomSample(sensor, stamp, d[43:46], d[46:49], d[49:85], d[0:3], d[3:7])
+
+
+def _fast_imu_ros1(buf: Payload, sensor: str) -> ImuSample | None:
+    got = _ros1_block(buf, False, _IMU_BLOCK)
+    if got is None:
+        return None
+    stamp, d = got
+    return ImuSample(sensor, stamp, d[0:4], d[4:13], d[13:16], d[16:25], d[25:28], d[28:37])
+
+
+_HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id
+_FAST_LAYOUTS: Final = {
+    ODOMETRY: (*_HEADER_LAYOUT, "string", *("float64",) * 85),  # + child_frame_id, pose, twist
+    IMU: (*_HEADER_LAYOUT, *("float64",) * 37),
+}
+_FAST_PATHS: Final = {
+    (ODOMETRY, False): _fast_odom, (ODOMETRY, True): _fast_odom_ros1,
+    (IMU, False): _fast_imu, (IMU, True): _fast_imu_ros1,
+}
+
+
+def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
+    """The base types of a message's fields in wire order, nested messages and fixed arrays
+    expanded, from the field definitions in ``store``; None when it holds a variable-length
+    sequence (no fixed layout) or a type the store does not know."""
+    from rosbags.interfaces import Nodetype
+
+    out: list[str] = []
+
+    def walk(name: str) -> bool:
+        fields = store.fielddefs.get(name)
+        if fields is None:
+            return False
+        for _, (node, detail) in fields[1]:
+            if node == Nodetype.BASE:
+                out.append(detail[0])
+            elif node == Nodetype.NAME:
+                if not walk(detail):
+                    return False
+            elif node == Nodetype.ARRAY and detail[0][0] == Nodetype.BASE:
+                out.extend([detail[0][1][0]] * detail[1])
+            elif node == Nodetype.ARRAY and detail[0][0] == Nodetype.NAME:
+                for _ in range(detail[1]):
+                    if not walk(detail[0][1]):
+                        return False
+            else:
+                return False
+        return True
+
+    return tuple(out) if walk(msgtype) else None
+
+
+def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Payload, str], Sample | None] | None:
+    """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR), when the
+    bag's definition of it (in ``store``, the bag reader's type store) has the standard layout.
+
+    It returns the sample, or None for a message it does not read exactly as rosbags would
+    (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority
+    on errors. None when ``msgtype`` has no fast path or the bag defines it differently.
+    """
+    want = _FAST_LAYOUTS.get(msgtype)
+    if want is None:
+        return None
+    if ros1:
+        want = ("uint32", *want)  # header.seq
+    return _FAST_PATHS[msgtype, ros1] if flat_layout(store, msgtype) == want else None
 
 
 # --------------------------------------------------------------------------- JSON / msgpack wire format
@@ -396,7 +514,7 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
             _check_size(payload)
             for t in POSE_TYPES:
                 try:
-                    return from_ros(TYPESTORE.deserialize_cdr(memoryview(payload), t), sensor)
+                    return from_ros(typestore().deserialize_cdr(memoryview(payload), t), sensor)
                 except Exception:
                     continue
             return from_ros(_deserialize(payload, POSE_COV_STAMPED), sensor)  # raises the DecodeError
@@ -457,7 +575,7 @@ def _warm(msgtype: str) -> None:
         raw = encode_gps_sample(GpsSample("", 0.0, 0.0, 0.0, 0.0), "ros2-cdr")
     else:
         raw = encode_pose_sample(PoseSample("", 0.0, (0.0,) * 3, (0.0, 0.0, 0.0, 1.0)), "ros2-cdr", msgtype)
-    TYPESTORE.deserialize_cdr(raw, msgtype)
+    typestore().deserialize_cdr(raw, msgtype)
     _warmed.add(msgtype)
 
 
@@ -487,7 +605,7 @@ def _cov(values: Sequence[float] | np.ndarray, n: int) -> np.ndarray:
 
 
 def _serialize(msg: Any, msgtype: str) -> bytes:
-    return bytes(TYPESTORE.serialize_cdr(msg, msgtype, little_endian=True))
+    return bytes(typestore().serialize_cdr(msg, msgtype, little_endian=True))
 
 
 def _structured(message: msgspec.Struct, encoding: str) -> bytes:
@@ -501,11 +619,13 @@ def _structured(message: msgspec.Struct, encoding: str) -> bytes:
 def _pose(position: Sequence[float], quat_xyzw: Sequence[float]) -> Any:
     x, y, z = (float(v) for v in position)
     qx, qy, qz, qw = (float(v) for v in quat_xyzw)
-    return _Pose(position=_Point(x=x, y=y, z=z), orientation=_Quaternion(x=qx, y=qy, z=qz, w=qw))
+    T = _types()
+    return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
+                                      orientation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
 
 
 def _vec3(v: Sequence[float]) -> Any:
-    return _Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+    return _types()["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 def encode_odom_sample(sample: OdomSample, encoding: str) -> bytes:
@@ -528,9 +648,10 @@ def encode_imu_sample(sample: ImuSample, encoding: str) -> bytes:
     """What an IMU publisher puts on the key (CDR: frame base_link)."""
     if encoding == "ros2-cdr":
         q = sample.orientation
-        msg = _Imu(
-            header=_Header(stamp=_ros_time(sample.stamp), frame_id="base_link"),
-            orientation=_Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+        T = _types()
+        msg = T[IMU](
+            header=T["std_msgs/msg/Header"](stamp=_ros_time(sample.stamp), frame_id="base_link"),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
             orientation_covariance=_cov(sample.orientation_covariance, 9),
             angular_velocity=_vec3(sample.angular_velocity),
             angular_velocity_covariance=_cov(sample.angular_velocity_covariance, 9),
@@ -555,9 +676,10 @@ def encode_navsat_cdr(stamp: float, frame_id: str, lat: float, lon: float, alt: 
                       cov9: Sequence[float]) -> bytes:
     """The fused position as sensor_msgs/msg/NavSatFix (what navsat_transform publishes as
     gps/filtered): status FIX, covariance known (ENU, m^2)."""
-    msg = _NavSatFix(
-        header=_Header(stamp=_ros_time(stamp), frame_id=frame_id),
-        status=_NavSatStatus(status=0, service=1),
+    T = _types()
+    msg = T[NAVSATFIX](
+        header=T["std_msgs/msg/Header"](stamp=_ros_time(stamp), frame_id=frame_id),
+        status=T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
         latitude=float(lat), longitude=float(lon), altitude=float(alt),
         position_covariance=_cov(cov9, 9),
         position_covariance_type=3,
@@ -568,9 +690,10 @@ def encode_navsat_cdr(stamp: float, frame_id: str, lat: float, lon: float, alt: 
 def encode_gps_sample(sample: GpsSample, encoding: str) -> bytes:
     """What a GPS driver puts on the key (CDR: sensor_msgs/msg/NavSatFix, frame gps)."""
     if encoding == "ros2-cdr":
-        msg = _NavSatFix(
-            header=_Header(stamp=_ros_time(sample.stamp), frame_id="gps"),
-            status=_NavSatStatus(status=int(sample.status), service=1),
+        T = _types()
+        msg = T[NAVSATFIX](
+            header=T["std_msgs/msg/Header"](stamp=_ros_time(sample.stamp), frame_id="gps"),
+            status=T["sensor_msgs/msg/NavSatStatus"](status=int(sample.status), service=1),
             latitude=float(sample.latitude), longitude=float(sample.longitude), altitude=float(sample.altitude),
             position_covariance=_cov(sample.position_covariance, 9),
             position_covariance_type=int(sample.covariance_type),
@@ -587,13 +710,14 @@ def encode_gps_sample(sample: GpsSample, encoding: str) -> bytes:
 def encode_pose_sample(sample: PoseSample, encoding: str, msgtype: str = POSE_COV_STAMPED) -> bytes:
     """What a pose publisher puts on the key, as ``msgtype`` (CDR; frame map, child base_link)."""
     if encoding == "ros2-cdr":
-        header = _Header(stamp=_ros_time(sample.stamp), frame_id="map")
+        T = _types()
+        header = T["std_msgs/msg/Header"](stamp=_ros_time(sample.stamp), frame_id="map")
         pose = _pose(sample.position, sample.orientation)
         cov = _cov(sample.covariance or (0.0,) * 36, 36)
         if msgtype == POSE_STAMPED:
-            return _serialize(_PoseStamped(header=header, pose=pose), POSE_STAMPED)
+            return _serialize(T[POSE_STAMPED](header=header, pose=pose), POSE_STAMPED)
         if msgtype == POSE_COV_STAMPED:
-            msg = _PoseWithCovarianceStamped(header=header, pose=_PoseWithCovariance(pose=pose, covariance=cov))
+            msg = T[POSE_COV_STAMPED](header=header, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov))
             return _serialize(msg, POSE_COV_STAMPED)
         if msgtype == ODOMETRY:
             return encode_odometry_cdr(sample.stamp, "map", "base_link", sample.position, sample.orientation, cov,

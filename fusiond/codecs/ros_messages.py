@@ -24,27 +24,22 @@ import msgspec
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from .payloads import (POSE_COV_STAMPED, TYPESTORE, DecodeError, Payload, _cdr_prefix, _check_size, _deserialize,
-                       stamp_to_ros)
+from .payloads import (POSE_COV_STAMPED, DecodeError, Payload, _cdr_prefix, _check_size, _deserialize, _types,
+                       stamp_to_ros, typestore)
 
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 DIAGNOSTIC_ARRAY: Final = "diagnostic_msgs/msg/DiagnosticArray"
 
-_T = TYPESTORE.types
-_Time = _T["builtin_interfaces/msg/Time"]
-_Header = _T["std_msgs/msg/Header"]
-_KeyValue = _T["diagnostic_msgs/msg/KeyValue"]
-_DiagnosticStatus = _T["diagnostic_msgs/msg/DiagnosticStatus"]
-_DiagnosticArray = _T[DIAGNOSTIC_ARRAY]
-
 
 def _header(stamp: float, frame_id: str) -> Any:
     sec, nanosec = stamp_to_ros(stamp)
-    return _Header(stamp=_Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
+    T = _types()
+    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+                                    frame_id=frame_id)
 
 
 def _serialize(msg: Any, msgtype: str) -> bytes:
-    return bytes(TYPESTORE.serialize_cdr(msg, msgtype, little_endian=True))
+    return bytes(typestore().serialize_cdr(msg, msgtype, little_endian=True))
 
 
 # --------------------------------------------------------------------------- TF
@@ -88,10 +83,12 @@ class DiagnosticStatus(msgspec.Struct, frozen=True):
 
 def encode_diagnostic_array_cdr(stamp: float, statuses: Sequence[DiagnosticStatus]) -> bytes:
     """A diagnostic_msgs/msg/DiagnosticArray (header frame_id empty, as diagnostic_updater sends it)."""
-    msg = _DiagnosticArray(
+    T = _types()
+    status, key_value = T["diagnostic_msgs/msg/DiagnosticStatus"], T["diagnostic_msgs/msg/KeyValue"]
+    msg = T[DIAGNOSTIC_ARRAY](
         header=_header(stamp, ""),
-        status=[_DiagnosticStatus(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
-                                  values=[_KeyValue(key=k, value=v) for k, v in s.values]) for s in statuses],
+        status=[status(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
+                       values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
     )
     return _serialize(msg, DIAGNOSTIC_ARRAY)
 

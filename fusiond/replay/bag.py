@@ -13,12 +13,13 @@ from typing import TYPE_CHECKING, Any
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
-from fusiond.codecs import TYPESTORE, ros_converter, ros_msgtype
+from fusiond.codecs import bag_fast_path, ros_converter, ros_msgtype, typestore
 from fusiond.samples import Sample
 from fusiond.errors import BagError  # importable from here, as before
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
 
     from fusiond.config import SensorConfig
 
@@ -57,11 +58,21 @@ class BagSamples:
 
     def __iter__(self) -> Iterator[Sample]:
         reader = self._reader
-        convert = {topic: (s.name, *expected(s)) for topic, s in self._by_topic.items()}
+        ros1 = not reader.is2
+        convert = {}
+        for topic, s in self._by_topic.items():
+            msgtype, from_ros = expected(s)
+            convert[topic] = (s.name, msgtype, from_ros, bag_fast_path(reader.typestore, msgtype, ros1))
+        deserialize = reader.deserialize
         for connection, _, raw in reader.messages(connections=self._connections):
-            name, msgtype, from_ros = convert[connection.topic]
+            name, msgtype, from_ros, fast = convert[connection.topic]
+            if fast is not None:  # odometry and IMU: read straight into the sample
+                sample = fast(raw, name)
+                if sample is not None:
+                    yield sample
+                    continue
             try:
-                msg = reader.deserialize(raw, msgtype)
+                msg = deserialize(raw, msgtype)
             except Exception:  # AnyReaderError on a bad message, or anything rosbags raises on garbage
                 self.decode_errors += 1
                 continue
@@ -80,7 +91,7 @@ class BagSamples:
                 yield bag_time, sensor, bytes(raw)
                 continue
             try:
-                cdr = TYPESTORE.ros1_to_cdr(raw, expected(sensor)[0])
+                cdr = typestore().ros1_to_cdr(raw, expected(sensor)[0])
             except Exception:
                 self.decode_errors += 1
                 continue
@@ -117,9 +128,25 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
     if len(paths) > 1 and not any(ros1):
         raise BagError("give one ROS 2 bag (directory) at a time; several ROS 1 .bag files can be merged")
     try:
-        reader = AnyReader(list(paths), default_typestore=TYPESTORE)
+        return _opened(paths, None)
+    except AnyReaderError as err:
+        # rosbags' answer to a ROS 2 bag recorded without message definitions (before Iron): "Bag
+        # contains no type definitions. Instantiate AnyReader with a default_typestore argument."
+        if "default_typestore" not in str(err):
+            names = ", ".join(str(p) for p in paths)
+            raise BagError(f"{names}: cannot read bag: {err}") from None
+    return _opened(paths, typestore())  # the standard (Humble) definitions
+
+
+def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
+    """An open AnyReader; BagError when the files cannot be read. Types come from the bag's own
+    definitions; ``default`` (the Humble store, ~70 ms to build) only for a bag that has none."""
+    try:
+        reader = AnyReader(list(paths), default_typestore=default)
         reader.open()
     except (AnyReaderError, OSError) as err:
+        if default is None and isinstance(err, AnyReaderError):
+            raise
         names = ", ".join(str(p) for p in paths)
         raise BagError(f"{names}: cannot read bag: {err}") from None
     return reader

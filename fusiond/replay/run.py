@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 import time
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Callable
@@ -84,10 +85,46 @@ def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | Non
             warn(f"sensor {name!r}: topic /{s.key} is not in the bag; replaying without it (the bag has: {have})")
 
 
+_TUM = "%.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n"
+
+
 def tum_line(t: float, x) -> str:
-    return (
-        f"{t:.9f} {x[0]:.9f} {x[1]:.9f} {x[2]:.9f} {x[3]:.9f} {x[4]:.9f} {x[5]:.9f} {x[6]:.9f}\n"
-    )
+    """One TUM trajectory line: stamp x y z qx qy qz qw."""
+    return _TUM % (t, x[0], x[1], x[2], x[3], x[4], x[5], x[6])
+
+
+def tum_text(trajectory: array) -> str:
+    """The TUM file of a run's published poses (``trajectory``: 8 doubles a pose, t x y z qx qy qz qw),
+    formatted in one pass at the end rather than a string per message."""
+    fmt = _TUM
+    return "".join([fmt % tuple(trajectory[i : i + 8]) for i in range(0, len(trajectory), 8)])
+
+
+class _JsonLines:
+    """The --diagnostics file: each record encoded as it comes (records are not kept), the lines
+    gathered in one buffer and written in blocks of ~1 MiB rather than two writes a record."""
+
+    BLOCK = 1 << 20
+
+    def __init__(self, path: Path) -> None:
+        self._file = open(path, "wb")
+        self._buf = bytearray()
+        self._encode_into = msgspec.json.Encoder().encode_into
+
+    def add(self, record: object) -> None:
+        buf = self._buf
+        self._encode_into(record, buf, -1)  # appended at the end of the buffer
+        buf += b"\n"
+        if len(buf) >= self.BLOCK:
+            self._file.write(buf)
+            buf.clear()
+
+    def close(self) -> None:
+        try:
+            self._file.write(self._buf)
+        finally:
+            self._buf.clear()
+            self._file.close()
 
 
 class _Progress:
@@ -121,15 +158,14 @@ def replay(
     progress: bool = True,
     warn: Callable[[str], None] | None = None,
 ) -> ReplayResult:
-    enc = msgspec.json.Encoder()
-    diag_out = open(diagnostics, "wb") if diagnostics else None
+    diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn)
             runner = Runner(cfg, keep_trace)
             if diag_out is not None:
-                runner.on_record = lambda r: (diag_out.write(enc.encode(r)), diag_out.write(b"\n"))
+                runner.on_record = diag_out.add
             bar = _Progress(bag.total if progress else 0)
             for sample in bag:
                 runner.feed(sample)
@@ -144,7 +180,7 @@ def replay(
     seconds = time.perf_counter() - t0
     if tum is not None:
         tum.parent.mkdir(parents=True, exist_ok=True)
-        tum.write_text("".join(runner.lines))
+        tum.write_text(tum_text(runner.trajectory))
     return runner.result(seconds, missing, decode_errors)
 
 
@@ -157,7 +193,7 @@ class Runner:
         self.doctor = Doctor(cfg)
         self.trace = Trace()
         self.keep_trace = keep_trace
-        self.lines: list[str] = []
+        self.trajectory = array("d")  # t x y z qx qy qz qw of every published pose (64 bytes each)
         self.messages = 0
         self.on_record: Callable | None = None
 
@@ -168,8 +204,10 @@ class Runner:
         doctor.add_sample(sample)
         if step.publish:
             t, x = core.pose()
-            self.lines.append(tum_line(t, x))
-            q = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
+            p = x.tolist()  # one conversion for the trajectory, the doctor and the trace
+            self.trajectory.append(t)
+            self.trajectory.extend(p)
+            q = (p[3], p[4], p[5], p[6])
             roll, pitch, _ = to_rpy(q)
             doctor.add_attitude(roll, pitch)
             if doctor.wants_estimate(t):
@@ -177,7 +215,7 @@ class Runner:
                 bias = core.gyro_bias
                 doctor.add_estimate(t, q, pos_var, att_var, float(bias[2]) if bias is not None else 0.0)
             if keep_trace:
-                trace.fused.append((t, float(x[0]), float(x[1]), float(x[2])))
+                trace.fused.append((t, p[0], p[1], p[2]))
         if isinstance(sample, OdomSample) and step.accepted:
             doctor.add_twist(sample.linear, sample.angular)
             if keep_trace:
@@ -194,7 +232,7 @@ class Runner:
                     rows.append((r.stamp, r.innovation, r.innovation_var))
 
     def result(self, seconds: float = 0.0, missing: list[str] | None = None, decode_errors: int = 0) -> ReplayResult:
-        return ReplayResult(self.core, self.doctor, self.trace, self.messages, len(self.lines), seconds,
+        return ReplayResult(self.core, self.doctor, self.trace, self.messages, len(self.trajectory) // 8, seconds,
                             missing or [], decode_errors)
 
 

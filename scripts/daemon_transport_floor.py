@@ -1,0 +1,70 @@
+"""How much of the daemon's CPU is transport and how much is the fusion core, in one table.
+
+Runs `fusiond bench-latency`'s benchmark (daemon, bare zenoh-python subscriber and load
+generator in their own processes, 1 kHz IMU + 100 Hz odometry, live stamps) twice per round,
+alternating: once with the real daemon, once with its core stubbed out (each sample is decoded and
+accepted by health, and each odometry sample answered with a pose at its own stamp, without
+`core.ingest`). The stubbed run is the daemon's transport floor: subscribers, queue, worker
+wake-ups, decoding, health, a pose put per odometry message, the Zenoh session. Its ratio to the bare subscriber is the best the daemon's
+ratio could be with a free core; the difference to the real run is the core's share.
+
+    .venv/bin/python scripts/daemon_transport_floor.py [--rounds 3] [--seconds 8]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from typing import Any
+
+from fusiond.transport import bench_latency
+
+
+def _floor_child(conn: Any, config_text: str, express: bool) -> None:
+    """The benchmark's daemon child with `_handle` cut after decoding (spawned: runs in the child)."""
+    from fusiond.codecs import DecodeError, encode_pose_cdr
+    from fusiond.samples import OdomSample
+    from fusiond.transport.daemon import Daemon
+
+    zero_cov = (0.0,) * 36
+
+    def decode_only(self: Daemon, idx: int, payload: bytes, arrival: float) -> None:
+        try:
+            sample = self._decoders[idx](payload)
+        except DecodeError as err:
+            self.health.on_dropped(idx, err.reason)
+            return
+        self.health.on_accepted(idx, arrival)
+        if isinstance(sample, OdomSample):  # the generator matches poses to its puts by stamp
+            self._pose_pub.put(encode_pose_cdr(sample.stamp, "odom", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), zero_cov))
+
+    Daemon._handle = decode_only  # type: ignore[method-assign]
+    bench_latency._daemon_child(conn, config_text, express)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=8.0)
+    args = ap.parse_args()
+    real_child = bench_latency._daemon_child
+    rows: dict[str, list[tuple[float, float, float, float]]] = {"daemon": [], "transport floor": []}
+    for _ in range(args.rounds):
+        for label, child in (("daemon", real_child), ("transport floor", _floor_child)):
+            bench_latency._daemon_child = child  # run_bench spawns whatever this name holds
+            try:
+                r = bench_latency.run_bench(seconds=args.seconds)
+            finally:
+                bench_latency._daemon_child = real_child
+            drops = r.queue_drops + r.core_drops
+            if drops or r.daemon_received != r.sent_total:
+                raise SystemExit(f"{label}: {drops} drops, {r.daemon_received}/{r.sent_total} received")
+            rows[label].append((r.cpu_daemon_pct, r.cpu_bare_pct, r.cpu_ratio, r.cpu_worker_pct))
+    print(f"{'run':<16}{'daemon %':>10}{'bare %':>9}{'ratio':>8}{'worker %':>10}   (medians of {args.rounds} rounds)")
+    for label, values in rows.items():
+        cols = [statistics.median(v[i] for v in values) for i in range(4)]
+        print(f"{label:<16}{cols[0]:>10.1f}{cols[1]:>9.1f}{cols[2]:>8.2f}{cols[3]:>10.1f}")
+
+
+if __name__ == "__main__":
+    main()
