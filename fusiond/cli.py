@@ -62,6 +62,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             keep_trace=bool(args.plot or args.report),
             progress=not args.quiet,
             warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
+            doctor=not args.quiet or bool(args.plot or args.report),  # --quiet: no summary to judge for
         )
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)

@@ -7,8 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import msgspec
+import pytest
 
 from fusiond.config import load
+from fusiond.errors import ReplayError
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.bag import open_bag_samples
 from fusiond.replay.run import replay, tum_line
@@ -37,3 +39,17 @@ def test_tum_and_diagnostics_files_hold_every_pose_and_record_in_order(jackal_ba
     written = diag.read_bytes()
     assert len(written) > 1 << 20  # more than one block: the block boundary is crossed
     assert written == b"".join(records)
+
+
+def test_a_replay_without_the_doctor_writes_the_same_files_and_says_it_has_no_verdicts(jackal_bag: Path,
+                                                                                        tmp_path: Path) -> None:
+    """`fusiond replay --quiet` (no summary, plot or report to judge for) skips the doctor: the
+    fusion and its files do not depend on it."""
+    cfg = load(ROOT / "examples/jackal.toml")
+    with_doctor, without = tmp_path / "a.tum", tmp_path / "b.tum"
+    full = replay([jackal_bag], cfg, tum=with_doctor, keep_trace=False, progress=False)
+    lean = replay([jackal_bag], cfg, tum=without, keep_trace=False, progress=False, doctor=False)
+    assert without.read_text() == with_doctor.read_text() and lean.poses == full.poses > 0
+    assert full.verdicts() and lean.doctor is None
+    with pytest.raises(ReplayError, match="without the doctor"):
+        lean.verdicts()

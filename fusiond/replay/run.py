@@ -16,6 +16,7 @@ from typing import IO, Callable
 import msgspec
 
 from ..config import Config, OdomSensor
+from ..errors import ReplayError
 from ..core.doctor import Doctor, Verdict, format_verdicts
 from ..core.fusion import FusionCore
 from ..estimator.rotation import to_rpy
@@ -37,7 +38,7 @@ class Trace:
 @dataclass
 class ReplayResult:
     core: FusionCore
-    doctor: Doctor
+    doctor: Doctor | None  # None: the replay was run without the doctor (nothing would read it)
     trace: Trace
     messages: int
     poses: int
@@ -46,6 +47,8 @@ class ReplayResult:
     decode_errors: int
 
     def verdicts(self) -> list[Verdict]:
+        if self.doctor is None:
+            raise ReplayError("this replay was run without the doctor (replay(..., doctor=False))")
         core = self.core
         stats = {s.name: {"received": st.received, "dropped": st.dropped} for s, st in zip(core.sensors, core.stats)}
         at_cap = False
@@ -157,13 +160,17 @@ def replay(
     keep_trace: bool = True,
     progress: bool = True,
     warn: Callable[[str], None] | None = None,
+    doctor: bool = True,
 ) -> ReplayResult:
+    """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
+    also feed the tuning doctor (its verdicts are the summary, the report and the plots read
+    its series); a replay whose only output is files (``--quiet`` without plot or report) skips it."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn)
-            runner = Runner(cfg, keep_trace)
+            runner = Runner(cfg, keep_trace, doctor)
             if diag_out is not None:
                 runner.on_record = diag_out.add
             bar = _Progress(bag.total if progress else 0)
@@ -188,9 +195,9 @@ class Runner:
     """One sample at a time through the core, the doctor and the trace: the loop of `replay`, also
     used on simulated samples by the tests (so they judge exactly what a replay would)."""
 
-    def __init__(self, cfg: Config, keep_trace: bool = True) -> None:
+    def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True) -> None:
         self.core = FusionCore(cfg)
-        self.doctor = Doctor(cfg)
+        self.doctor = Doctor(cfg) if doctor else None
         self.trace = Trace()
         self.keep_trace = keep_trace
         self.trajectory = array("d")  # t x y z qx qy qz qw of every published pose (64 bytes each)
@@ -201,27 +208,31 @@ class Runner:
         core, doctor, trace, keep_trace = self.core, self.doctor, self.trace, self.keep_trace
         self.messages += 1
         step = core.ingest(sample)
-        doctor.add_sample(sample)
+        if doctor is not None:
+            doctor.add_sample(sample)
         if step.publish:
             t, x = core.pose()
             p = x.tolist()  # one conversion for the trajectory, the doctor and the trace
             self.trajectory.append(t)
             self.trajectory.extend(p)
-            q = (p[3], p[4], p[5], p[6])
-            roll, pitch, _ = to_rpy(q)
-            doctor.add_attitude(roll, pitch)
-            if doctor.wants_estimate(t):
-                pos_var, att_var = _variances(core)
-                bias = core.gyro_bias
-                doctor.add_estimate(t, q, pos_var, att_var, float(bias[2]) if bias is not None else 0.0)
+            if doctor is not None:
+                q = (p[3], p[4], p[5], p[6])
+                roll, pitch, _ = to_rpy(q)
+                doctor.add_attitude(roll, pitch)
+                if doctor.wants_estimate(t):
+                    pos_var, att_var = _variances(core)
+                    bias = core.gyro_bias
+                    doctor.add_estimate(t, q, pos_var, att_var, float(bias[2]) if bias is not None else 0.0)
             if keep_trace:
                 trace.fused.append((t, p[0], p[1], p[2]))
         if isinstance(sample, OdomSample) and step.accepted:
-            doctor.add_twist(sample.linear, sample.angular)
+            if doctor is not None:
+                doctor.add_twist(sample.linear, sample.angular)
             if keep_trace:
                 trace.raw_odom.append((sample.stamp, *sample.position))
         for r in step.records:
-            doctor.add(r)
+            if doctor is not None:
+                doctor.add(r)
             if self.on_record is not None:
                 self.on_record(r)
             if keep_trace:
