@@ -360,7 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--diagnostics", help="write one JSON diagnostics record per update (JSON lines)")
     r.add_argument("--plot", help="write a PNG of the trajectory and NIS per sensor")
     r.add_argument("--report", metavar="DIR", help="write an HTML report (plots, doctor's verdicts) into DIR")
-    r.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress bar, no summary (and no doctor, unless --plot or --report reads it)")
     r.set_defaults(func=cmd_replay)
 
     m = sub.add_parser("monitor", help="live per-sensor innovation/NIS view of running daemons")
