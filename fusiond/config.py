@@ -68,7 +68,7 @@ class FilterConfig(_Table):
     history_max: int = 4096  # hard bound on stored events, whatever their rate
     gap_s: float = 0.5  # a prediction step longer than this inflates the covariance
     gap_inflation: Vec2 = (0.05, 0.05)  # position m/sqrt(s), attitude rad/sqrt(s) added per s of gap
-    covariance_cap: Vec2 = (1.0e4, 10.0)  # max variance: position m^2, attitude rad^2
+    covariance_cap: Vec2 = (1.0e6, 10.0)  # max variance: position m^2 (1 km: a car after a gap), attitude rad^2
     jump_s: float = 5.0  # a stamp this far from filter time is suspect (clock reset, bag restart)
     jump_confirm: int = 3  # suspect messages that, with jump_persist_s, confirm a jump (reset if backwards)
     jump_persist_s: float = 1.0  # and the suspect stamps must span this long: a short clock glitch is dropped

@@ -77,3 +77,58 @@ def test_a_gap_shorter_than_the_jump_threshold_is_bounded_too():
     # held input 0.2 s at 1 m/s, then the first sample after the gap is predicted to at zero speed
     assert math.dist(x0[0:3], x1[0:3]) <= 1.0 * 0.2 + 1e-6
     assert t1 - t0 > 2.9
+
+
+# -- a gap in a fast vehicle's recording, with GPS ---------------------------------------------------------------
+
+def _car_with_gps(gate: float | None, filt: str = ""):
+    """A car at 30 m/s with 10 Hz GPS of 2 m, wheels reading 1 % slow; every sensor silent for 20 s."""
+    from .configs import robot_config
+    from .sim_gps import World, simulate as simulate_gps, truth_at
+
+    w = World(duration=100.0, speed=30.0, gps_rate=10.0, gps_sigma=2.0, wheel_scale=1.01, odom_rate=50.0,
+              imu_rate=100.0, datum=(48.137, 11.575, 520.0))
+    gap0 = 1000.0 + 50.0
+    samples = [s for s in simulate_gps(w) if not gap0 <= s.stamp < gap0 + 20.0]
+    extra = "" if gate is None else f"mahalanobis_threshold = {gate}"
+    core = FusionCore(robot_config(gps=f"datum = [48.137, 11.575, 520.0]\n{extra}", filt=filt))
+    gps_after = []
+    for s in samples:
+        step = core.ingest(s)
+        if s.stamp >= gap0 + 20.0:
+            gps_after += [r for r in step.records if r.sensor == "gps"]
+    t, x = core.pose()
+    tx, ty, _ = truth_at(w, t)
+    return core, gps_after, math.hypot(x[0] - tx, x[1] - ty)
+
+
+@pytest.mark.parametrize("gate", [None, 5.0])
+def test_a_gap_in_a_fast_vehicle_widens_the_position_by_its_speed_and_the_gps_takes_it_back(gate):
+    core, gps_after, err = _car_with_gps(gate)
+    # 20 s at 30 m/s: the car is ~600 m from where the held inputs left it (they stop at the
+    # timeout). The position variance must cover that, or the first fixes are gated out (with a
+    # gate) or explained as a wheel-scale error through the odometry's correlations.
+    assert gps_after and not gps_after[0].rejected
+    assert sum(r.rejected for r in gps_after) <= 0.05 * len(gps_after)  # ~ the gate's own false alarms
+    # the wheel scale (truth 1.01) is not corrupted by the jump: within the ~1 % a 50 s GPS
+    # track of 2 m fixes over 1.5 km resolves (before: 1.195)
+    assert core.scales["wheel_scale"] == pytest.approx(1.01, abs=0.01)
+    # 30 s of 10 Hz fixes after the gap: back to GPS accuracy (fixes of 2 m per axis, averaged
+    # along the track by the odometry; before: tens to hundreds of metres)
+    assert err < 2.0
+
+
+def test_a_gps_locked_out_by_its_gate_is_reacquired():
+    """A position cap of 10 m std dev (a user's setting) hides the ~600 m the gap may have moved the
+    car: the fixes after it are gated out (5 sigma). They agree with each other (a constant offset,
+    not a multipath burst), so after REACQUIRE_S of them the filter takes the GPS position again and
+    searches the heading anew, instead of staying locked out for good (before: 805 m at the end)."""
+    core, gps_after, err = _car_with_gps(5.0, filt="covariance_cap = [100.0, 10.0]")
+    channels = [r.channel for r in gps_after]
+    assert channels[0] == "position" and gps_after[0].rejected  # locked out at first ...
+    assert channels.count("position_reacquired") == 1  # ... re-acquired once ...
+    k = channels.index("position_reacquired")
+    from fusiond.core.sensors.gps import REACQUIRE_S
+    assert gps_after[k].stamp - gps_after[0].stamp == pytest.approx(REACQUIRE_S, abs=0.15)  # ... after REACQUIRE_S
+    assert not any(r.rejected for r in gps_after[k + 1:] if r.channel == "position")
+    assert err < 2.0  # and back to GPS accuracy by the end, as without the cap

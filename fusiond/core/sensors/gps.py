@@ -54,6 +54,10 @@ HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform
 HEADING_PROVISIONAL_SIGMA = 0.3  # rad: apply the rigid fit provisionally (fixes still move position only)
 HEADING_READY_SIGMA = 0.05  # rad: the heading is known, fixes become full (gated) updates
 HEADING_MAX_FIXES = 400  # fixes kept for the fit; beyond, every other one is dropped (the extent stays)
+REACQUIRE_S = 3.0  # s of consecutive gated-out fixes ...
+REACQUIRE_FIXES = 5  # ... and at least this many, agreeing with each other: the filter is what is wrong
+REACQUIRE_AGREE = 0.1  # "agreeing": spread of their innovations within this fraction of the innovation ...
+REACQUIRE_SIGMAS = 3.0  # ... or within this many fix sigmas
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
@@ -126,6 +130,7 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
 
     track: GpsTrack | None = None  # the fixes since the first one (heading search, frozen-receiver check)
     travel: tuple[float, float, float] = _ZERO3  # dead-reckoned base motion since the track's base
+    rejected: tuple[tuple[float, float, float, float], ...] = ()  # consecutive gated-out fixes: (t, de, dn, var)
 
 
 class GpsModel(SensorModel):
@@ -161,7 +166,7 @@ class GpsModel(SensorModel):
         if own.track is not None:
             tr = own.travel
             s.own[self.index] = GpsOwn(own.track, (tr[0] + float(x1[0] - x0[0]), tr[1] + float(x1[1] - x0[1]),
-                                                   tr[2] + float(x1[2] - x0[2])))
+                                                   tr[2] + float(x1[2] - x0[2])), own.rejected)
 
     def apply(self, s: "FilterState", inp: GpsInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         cfg = self.cfg
@@ -195,6 +200,10 @@ class GpsModel(SensorModel):
         if s.heading_ready:
             res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
             channel = "position"
+            if res.rejected or s.own[self.index].rejected:
+                if self._locked_out(s, res.rejected, y, R, stamp):
+                    self._reacquire(s, z, inp, rows, stamp)
+                    channel = "position_reacquired"
         else:
             # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
             # track along a wrong heading must not lock the filter out of the GPS). A Gauss-Markov
@@ -206,9 +215,10 @@ class GpsModel(SensorModel):
         if not emit:
             return []
         # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
-        # heading: its NIS tests the heading search, not the receiver's noise (learning).
+        # heading: its NIS tests the heading search, not the receiver's noise (learning); so does
+        # the fix that re-acquired a locked-out filter.
         return [self.record(stamp, [ENU_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis, len(rows),
-                            res.rejected, channel, late, learning=channel == "position_unaligned")]
+                            res.rejected, channel, late, learning=channel != "position")]
 
     def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
         """The first fix defines the world frame: the base goes where it says, heading unknown
@@ -233,6 +243,44 @@ class GpsModel(SensorModel):
             ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             self._heading(s, z, inp.cov, stamp)
 
+    def _locked_out(self, s: "FilterState", rejected: bool, y: np.ndarray, R: np.ndarray, stamp: float) -> bool:
+        """Is the filter locked out of the GPS? A gate protects against outliers, but once the
+        estimate is far off (a gap longer than its covariance allows, a wrong heading) every fix
+        is an "outlier" and the gate never lets the truth back in. Fixes rejected for
+        REACQUIRE_S in a row (at least REACQUIRE_FIXES) whose innovations agree with each other
+        (a constant offset, not a multipath burst whose error jumps around) say so."""
+        own: GpsOwn = s.own[self.index]
+        if not rejected:
+            s.own[self.index] = msgspec.structs.replace(own, rejected=())
+            return False
+        run = own.rejected + ((stamp, float(y[0]), float(y[1]), float(max(R[0, 0], R[1, 1]))),)
+        s.own[self.index] = msgspec.structs.replace(own, rejected=run)
+        if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < REACQUIRE_S:
+            return False
+        de = [r[1] for r in run]
+        dn = [r[2] for r in run]
+        me, mn = sum(de) / len(de), sum(dn) / len(dn)
+        spread = math.sqrt(sum((a - me) ** 2 + (b - mn) ** 2 for a, b in zip(de, dn)) / len(run))
+        allowed = max(REACQUIRE_AGREE * math.hypot(me, mn), REACQUIRE_SIGMAS * math.sqrt(max(r[3] for r in run)))
+        if spread > allowed:
+            s.own[self.index] = msgspec.structs.replace(own, rejected=run[1:])  # slide: keep looking
+            return False
+        return True
+
+    def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
+        """Put the base where the fix says and look for the heading again (it may be as wrong as the
+        position was), as at the first fix but in the frame already defined."""
+        own: GpsOwn = s.own[self.index]
+        last = own.rejected[-1]
+        log.warning("gps_reacquired", sensor=self.name, stamp=stamp, rejected=len(own.rejected),
+                    seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
+        set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, tuple(r for r in rows if r < 2))
+        if not self.yaw_given:
+            s.ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            s.heading_ready = False
+        new_frame(s)
+        self._start_track(s, z, inp.lla, stamp)
+
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
         x = s.ekf.x
         base = (float(x[0]), float(x[1]), float(x[2]))
@@ -248,7 +296,7 @@ class GpsModel(SensorModel):
         dr = (track.base[0] + t[0], track.base[1] + t[1])
         if lla == track.last_lla:
             return math.hypot(dr[0] - track.last_dr[0], dr[1] - track.last_dr[1]) > FROZEN_MIN_TRAVEL
-        s.own[self.index] = GpsOwn(replace(track, last_lla=lla, last_dr=dr), t)
+        s.own[self.index] = GpsOwn(replace(track, last_lla=lla, last_dr=dr), t, own.rejected)
         return False
 
     def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float) -> None:
