@@ -36,6 +36,7 @@ class RestWorld:
     imu_rate: float = 100.0
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gyro_sigma: float = 0.002
+    gyro_stated_sigma: float | None = None  # the covariance the driver states (None: the true sigma)
     orientation_sigma: float = 0.002
     roll_drift: float = 0.0  # rad/s: the IMU's reported roll wanders away from the truth
     wheel_sigma: float = 0.01
@@ -82,7 +83,8 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                     acc = tuple(w.accel_scale * a for a in (rng.normal(0, sa), seg.speed * seg.yaw_rate
                                                             + rng.normal(0, sa), g + rng.normal(0, sa)))
                     acov = (sa**2, 0, 0, 0, sa**2, 0, 0, 0, sa**2)
-                out.append(ImuSample("imu", T0 + t, q, ocov, gyro, (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2), acc, acov))
+                sv = (gs if w.gyro_stated_sigma is None else w.gyro_stated_sigma) ** 2
+                out.append(ImuSample("imu", T0 + t, q, ocov, gyro, (sv, 0, 0, 0, sv, 0, 0, 0, sv), acc, acov))
                 next_imu += 1.0 / w.imu_rate
             x += seg.speed * math.cos(yaw) * dt
             y += seg.speed * math.sin(yaw) * dt
