@@ -37,6 +37,7 @@ class RestWorld:
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gyro_sigma: float = 0.002
     gyro_stated_sigma: float | None = None  # the covariance the driver states (None: the true sigma)
+    ramp_s: float = 0.0  # > 0: each segment's speed is reached over this long (the accelerometer feels it)
     orientation_sigma: float = 0.002
     roll_drift: float = 0.0  # rad/s: the IMU's reported roll wanders away from the truth
     wheel_sigma: float = 0.01
@@ -61,12 +62,17 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
     odom_cov = tuple(ws**2 if i % 7 == 0 else 0.0 for i in range(36))
     next_odom = next_imu = 0.0
     t = 0.0
+    v_prev = 0.0  # speed at the end of the previous segment
     for seg in w.segments:
-        t_end = t + seg.duration
+        t_seg, t_end = t, t + seg.duration
         while t < t_end - 1e-9:
+            # speed now, and the forward acceleration: steps, or ramps of ramp_s into each segment
+            ramping = w.ramp_s > 0.0 and t - t_seg < w.ramp_s
+            accel = (seg.speed - v_prev) / w.ramp_s if ramping else 0.0
+            speed = v_prev + accel * (t - t_seg) if ramping else seg.speed
             if t >= next_odom:
-                moving = (seg.speed != 0.0 or seg.yaw_rate != 0.0) and not seg.odom_reads_zero
-                v = seg.speed + rng.normal(0, ws) if moving else 0.0
+                moving = (speed != 0.0 or seg.yaw_rate != 0.0) and not seg.odom_reads_zero
+                v = speed + rng.normal(0, ws) if moving else 0.0
                 wz = seg.yaw_rate + rng.normal(0, ws) if moving else 0.0
                 out.append(OdomSample("wheel", T0 + t, (v, 0.0, 0.0), (0.0, 0.0, wz), odom_cov))
                 w.truth.append((T0 + t, x, y, yaw))
@@ -80,15 +86,16 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 if w.accel_sigma is not None:  # flat ground: gravity up, centripetal v w to the left
                     sa = w.accel_sigma
                     g = 0.0 if w.accel_gravity_removed else GRAVITY
-                    acc = tuple(w.accel_scale * a for a in (rng.normal(0, sa), seg.speed * seg.yaw_rate
+                    acc = tuple(w.accel_scale * a for a in (accel + rng.normal(0, sa), speed * seg.yaw_rate
                                                             + rng.normal(0, sa), g + rng.normal(0, sa)))
                     acov = (sa**2, 0, 0, 0, sa**2, 0, 0, 0, sa**2)
                 sv = (gs if w.gyro_stated_sigma is None else w.gyro_stated_sigma) ** 2
                 out.append(ImuSample("imu", T0 + t, q, ocov, gyro, (sv, 0, 0, 0, sv, 0, 0, 0, sv), acc, acov))
                 next_imu += 1.0 / w.imu_rate
-            x += seg.speed * math.cos(yaw) * dt
-            y += seg.speed * math.sin(yaw) * dt
+            x += speed * math.cos(yaw) * dt
+            y += speed * math.sin(yaw) * dt
             yaw += seg.yaw_rate * dt
             t += dt
+        v_prev = seg.speed
     out.sort(key=lambda s: (s.stamp, isinstance(s, ImuSample)))
     return out

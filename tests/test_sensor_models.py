@@ -40,7 +40,8 @@ def _context(layout: StateLayout, timeout: float = 1.0) -> SensorContext:
     position = np.zeros(layout.error_dim, dtype=bool)
     position[0:3] = True
     cfg = robot_config()
-    return SensorContext(layout, cfg.filter, two_d=False, absolute_yaw=False, odom_index=0, tilt_mask=tilt,
+    return SensorContext(layout, cfg.filter, two_d=False, absolute_yaw=False, odom_index=0,
+                         track_acceleration=False, tilt_mask=tilt,
                          position_mask=position, delta_mask=None, timeout=lambda idx, s: timeout,
                          inputs_at=lambda s: MotionInput())
 

@@ -38,8 +38,10 @@ def _worst_tilt_and_z(core: FusionCore, world: RestWorld) -> tuple[float, float]
 
 
 def test_gravity_gives_roll_and_pitch_when_the_imu_gives_no_orientation():
-    # no standstill: the x/y biases cannot be learned at rest, only through gravity
-    world = RestWorld(list(DRIVE[1:]), gyro_bias=BIAS, accel_sigma=0.05, orientation_absent=True)
+    # no standstill: the x/y biases cannot be learned at rest, only through gravity. The robot
+    # starts off at 0.25 m/s^2 (4 s to 1 m/s), which the accelerometer feels: removed with the
+    # slope of the odometry's speed, skipped where the acceleration changes (its first samples)
+    world = RestWorld(list(DRIVE[1:]), gyro_bias=BIAS, accel_sigma=0.05, orientation_absent=True, ramp_s=4.0)
     core = _core()
     tilt, z = _worst_tilt_and_z(core, world)
     # accelerometer noise 0.05 m/s^2 is 0.005 rad of tilt per sample at 100 Hz; the centripetal
@@ -63,10 +65,25 @@ def test_centripetal_acceleration_is_not_read_as_roll():
     """A steady 0.3 rad/s turn at 1 m/s: the accelerometer reads 0.3 m/s^2 sideways. Read as
     gravity that is atan(0.3 / 9.81) = 0.031 rad of roll; compensated, the roll stays at noise."""
     world = RestWorld([Segment(1.0), Segment(20.0, speed=1.0, yaw_rate=0.3)], accel_sigma=0.02,
-                      orientation_absent=True)
+                      orientation_absent=True, ramp_s=1.0)
     core = _core()
     tilt, _ = _worst_tilt_and_z(core, world)
     assert tilt < 0.5 * math.atan2(0.3, 9.80665)
+
+
+def test_forward_acceleration_is_not_read_as_pitch():
+    """A car starting off to 5 m/s over 20 s, accelerating to 7.5 m/s over 20 s (0.125 m/s^2), cruising,
+    then braking to 2.5 m/s over 20 s (-0.25 m/s^2) on a flat road: read as gravity that is atan(a / g) = 0.0127 and 0.0255
+    rad of pitch, and at 5-7.5 m/s 0.0255 rad of pitch climbs 0.13-0.19 m of z a second. Removed with
+    the slope of the odometry's speed (noise 0.01 m/s at 50 Hz: ~0.015 m/s^2 over 0.5 s, 0.0015 rad),
+    the pitch stays within a quarter of the smaller uncompensated value, and z within what that
+    leaves over the 85 s (7.5 m/s x 0.0032 rad x 70 s = 1.7 m; 6-13 m before)."""
+    world = RestWorld([Segment(20.0, speed=5.0), Segment(20.0, speed=7.5), Segment(25.0, speed=7.5),
+                       Segment(20.0, speed=2.5)], accel_sigma=0.02, orientation_absent=True, ramp_s=20.0)
+    core = _core()
+    tilt, z = _worst_tilt_and_z(core, world)
+    assert tilt < 0.25 * math.atan2(0.125, 9.80665)
+    assert z < 1.7
 
 
 def test_the_summary_says_when_the_robot_is_taken_as_planar():

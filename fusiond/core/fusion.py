@@ -125,6 +125,7 @@ class FusionCore:
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
+            track_acceleration=any(isinstance(sc, ImuSensor) and sc.tilt_from_gravity for sc in self.sensors),
             tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
             timeout=self.inputs.timeout, inputs_at=self.inputs.at)
         self.models = build_models(self.sensors, self.context)

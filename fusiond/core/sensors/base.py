@@ -31,11 +31,11 @@ class SensorContext:
     and two queries about held inputs. ``tilt_reference`` is set once every model exists (it
     asks the models whether they give roll/pitch)."""
 
-    __slots__ = ("layout", "filter", "two_d", "tilt_reference", "absolute_yaw", "odom_index",
+    __slots__ = ("layout", "filter", "two_d", "tilt_reference", "absolute_yaw", "odom_index", "track_acceleration",
                  "tilt_mask", "position_mask", "delta_mask", "timeout", "inputs_at")
 
     def __init__(self, layout: "StateLayout", filter_cfg: FilterConfig, *, two_d: bool, absolute_yaw: bool,
-                 odom_index: int, tilt_mask: np.ndarray, position_mask: np.ndarray, delta_mask: np.ndarray | None,
+                 odom_index: int, track_acceleration: bool, tilt_mask: np.ndarray, position_mask: np.ndarray, delta_mask: np.ndarray | None,
                  timeout: Callable[[int, "FilterState"], float],
                  inputs_at: Callable[["FilterState"], "MotionInput"]) -> None:
         self.layout = layout
@@ -44,6 +44,8 @@ class SensorContext:
         self.tilt_reference = False
         self.absolute_yaw = absolute_yaw  # an IMU gives absolute yaw (trusted as heading unless offset-estimated)
         self.odom_index = odom_index  # the odometry sensor, -1 if none
+        # some IMU takes roll/pitch from gravity: the odometry keeps the forward acceleration for it
+        self.track_acceleration = track_acceleration
         # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never position,
         # heading, the z bias or a scale (which drive heading and position).
         self.tilt_mask = tilt_mask

@@ -261,12 +261,14 @@ class ImuModel(SensorModel):
         """Roll and pitch from the accelerometer, when the IMU gives no orientation.
 
         At low dynamics the accelerometer reads the specific force R^T (0, 0, g) plus the
-        centripetal term w x v: that term is removed with the gyro rate and the odometry
-        twist held now, and a sample whose remaining magnitude is not g (braking,
-        bumps) is skipped. Without this an ``orientation = "off"`` IMU left the tilt to
+        centripetal term w x v and the forward acceleration: both are removed (the gyro rate and
+        odometry twist held now, the slope of the odometry's speed), and a sample whose
+        remaining magnitude is not g (hard braking, bumps) is skipped. Without this an ``orientation = "off"`` IMU left the tilt to
         integrate the gyro's x/y bias: tens of degrees and metres of z on a flat floor.
         """
         u = self.ctx.inputs_at(s)
+        if not u.world_frame and s.linear_accel != s.linear_accel:
+            return []  # the acceleration is changing: not known well enough to separate from gravity
         wx, wy, wz = u.angular
         vx, vy, vz = u.linear
         if u.world_frame:  # the twist is in the world: into the body
@@ -274,7 +276,7 @@ class ImuModel(SensorModel):
         n = math.sqrt(accel[0] ** 2 + accel[1] ** 2 + accel[2] ** 2)
         if G_UNITS_BAND[0] < n < G_UNITS_BAND[1]:  # a driver that reports in g, not m/s^2
             accel = (accel[0] * GRAVITY, accel[1] * GRAVITY, accel[2] * GRAVITY)
-        ax = accel[0] - (wy * vz - wz * vy)
+        ax = accel[0] - (wy * vz - wz * vy) - (0.0 if u.world_frame else s.linear_accel)  # forward acceleration too
         ay = accel[1] - (wz * vx - wx * vz)
         az = accel[2] - (wx * vy - wy * vx)
         if abs(math.sqrt(ax * ax + ay * ay + az * az) - GRAVITY) > GRAVITY_DYNAMIC_GATE:

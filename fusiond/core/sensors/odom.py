@@ -24,6 +24,10 @@ from .gyro_bias import quiet_bound
 if TYPE_CHECKING:
     from ..state import FilterState
 
+ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
+ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
+ACCEL_FIT_FLOOR = 0.02  # ... or within this many m/s (encoders quantise; drivers understate the noise)
+
 
 @dataclass(slots=True)
 class OdomInput:
@@ -119,6 +123,8 @@ class OdomModel(SensorModel):
         self._gyro_scale = layout.nominal["gyro_scale"].start if layout.has("gyro_scale") else -1
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
+        if self.ctx.track_acceleration:
+            self._track_acceleration(s, inp.linear[0], inp.linear_cov[0], stamp)
         s.linear, s.linear_cov = inp.linear, inp.linear_cov
         s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
         s.wheel_yaw_measured = inp.yaw_rate_measured
@@ -149,6 +155,34 @@ class OdomModel(SensorModel):
         quiet = quiet_bound(math.sqrt(s.gyro_cov[8]), self.ctx.filter.gyro_bias_sigma)
         slip = abs(r) > self.cfg.slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
         return [self.record(stamp, ["yaw_rate"], [r], [var], r * r / var, 1, slip, "yaw_rate", late)]
+
+    def _track_acceleration(self, s: "FilterState", speed: float, linear_var: float, stamp: float) -> None:
+        """The forward acceleration, for an IMU that takes roll/pitch from gravity: braking or
+        accelerating at a reads as a pitch of a/g (0.7 deg at 0.125 m/s^2), which on a car at
+        30 m/s climbs metres of z. It is the least-squares slope of the odometry's forward speed
+        over the last ACCEL_WINDOW_S (a two-point difference of 0.02 m/s noise at 50 Hz would be
+        1.4 m/s^2 of noise; the slope over 25 points of 0.5 s is ~0.03 m/s^2). The speeds live in
+        this sensor's slice; the result in ``s.linear_accel``, which the IMU reads.
+
+        A line fits the speeds only while the acceleration is steady: where it changes (a robot
+        starting off, the brakes coming on) the slope lags by half the window. There the fit's
+        residual exceeds the speed noise, and the acceleration is "unknown" (NaN): the IMU skips
+        those samples rather than read the lag as tilt."""
+        window = s.own[self.index] or ()
+        window = tuple(p for p in window if stamp - p[0] < ACCEL_WINDOW_S) + ((stamp, speed),)
+        s.own[self.index] = window
+        n = len(window)
+        if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
+            # too few speeds for a slope: known only when they are all alike (at rest, cruising)
+            s.linear_accel = 0.0 if all(p[1] == speed for p in window) else math.nan
+            return
+        tm = sum(p[0] for p in window) / n
+        vm = sum(p[1] for p in window) / n
+        stt = sum((p[0] - tm) ** 2 for p in window)
+        slope = sum((p[0] - tm) * (p[1] - vm) for p in window) / stt
+        misfit = math.sqrt(sum((p[1] - vm - slope * (p[0] - tm)) ** 2 for p in window) / (n - 2)) if n > 2 else 0.0
+        noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
+        s.linear_accel = slope if misfit <= noise else math.nan
 
 
 __all__ = ["OdomInput", "OdomModel", "OdomPolicy"]
