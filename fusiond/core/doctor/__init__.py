@@ -18,11 +18,12 @@ from __future__ import annotations
 from collections import defaultdict
 
 from ...config import Config, ImuSensor, OdomSensor
-from .attitude import TiltStats, lean_verdict
+from .attitude import TiltStats, lean_verdict, mount_verdict
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
 from .gyro import bias_check
 from .heading import heading_check, wheel_heading_check, wheel_yaw_fit
+from .mounting import mount_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
 from .series import Series, SeriesCollector
 from .speed import speed_check
@@ -199,9 +200,10 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
         imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
-        v = lean_verdict(tilt, imu, MIN_UPDATES)
-        if v is not None:
-            found[(v.sensor, v.channel)].append(v)
+        mount = mount_yaw_fit(series, imu)
+        for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mount_verdict(imu, mount, tilt, MIN_UPDATES)):
+            if v is not None:
+                found[(v.sensor, v.channel)].append(v)
         if odom is not None:
             v = twist_frame_verdict(odom, twist, MIN_UPDATES)
             if v is not None:
