@@ -99,6 +99,9 @@ class SeriesCollector:
                      for n, s in self._imu_cfg.items()}
         self._R = {n: tuple(tuple(float(v) for v in row) for row in rot.matrix(rot.from_rpy(*s.extrinsic_rpy)))
                    for n, s in self._imu_cfg.items()}  # IMU -> base, as configured
+        # the accelerometer series is the first IMU's (the one the mounting check judges): two IMUs' axes
+        # averaged into one bin would show neither mounting
+        self._acc_imu = next(iter(self._imu_cfg), None)
         self._gap_s = cfg.filter.gap_s
         # integration state
         self._odom_last: tuple[float, float] | None = None  # (stamp, wz)
@@ -276,6 +279,8 @@ class SeriesCollector:
         (the doctor fits a constant for it). Then the configured IMU -> base rotation: an IMU turned
         about z by an angle extrinsic_rpy does not state shows the motion's acceleration turned by it.
         """
+        if s.sensor != self._acc_imu:
+            return
         a = s.linear_acceleration
         ac = s.linear_acceleration_covariance
         # as the core reads it: [0] == -1 is no accelerometer, an all-zero vector was not filled in
