@@ -90,3 +90,28 @@ def simulate(w: MountWorld) -> list[OdomSample | ImuSample]:
         yaw += wz * dt
         rel += dt
     return out
+
+
+def mount_imu(samples: list, mount_rpy: tuple[float, float, float], motion, accel_sigma: float = 0.05,
+              seed: int = 23) -> list:
+    """Another simulator's run with its IMU mounted at ``mount_rpy`` and given an accelerometer.
+
+    ``motion(t)`` is the truth's (v, dv/dt, yaw rate) at stamp t. The IMU's orientation becomes
+    q_base * q_mount, its gyro and specific force (dv/dt, v w, g) are turned into its axes; the rest
+    of the samples pass unchanged."""
+    rng = np.random.default_rng(seed)
+    q_mount = rot.from_rpy(*mount_rpy)
+    R_T = rot.matrix(q_mount).T
+    sa = accel_sigma
+    out = []
+    for s in samples:
+        if isinstance(s, ImuSample):
+            v, dv, wz = motion(s.stamp)
+            gyro = R_T @ np.array(s.angular_velocity)
+            f = R_T @ np.array([dv, v * wz, GRAVITY])
+            s = ImuSample(s.sensor, s.stamp, rot.mul(s.orientation, q_mount), s.orientation_covariance,
+                          tuple(float(g) for g in gyro), s.angular_velocity_covariance,
+                          tuple(float(f[k] + rng.normal(0, sa)) for k in range(3)),
+                          (sa**2, 0, 0, 0, sa**2, 0, 0, 0, sa**2))
+        out.append(s)
+    return out

@@ -368,6 +368,37 @@ def test_imu_mounted_yawed_is_named_without_orientation_in_g_units_and_with_a_bi
     assert vector(v.suggestion) == pytest.approx([0.0, 0.0, -math.pi / 2], abs=MOUNT_TOLERANCE_RAD)
 
 
+@pytest.mark.parametrize("declination", [0.0, 0.4])
+def test_imu_mounted_yawed_with_gps_and_absolute_yaw_gets_one_fix_not_two(declination):
+    """With a GPS the mounting also shows as the IMU's absolute yaw sitting off the track. That is the same
+    turn: the doctor must say extrinsic_rpy once, not also yaw_offset (both pasted would turn the yaw back);
+    a real declination on top remains a yaw_offset of its own size. Precision: the GPS track direction to
+    ~0.03 rad (0.3 m over 10 m chords, ~100 of them), the mounting to ~0.03 rad (0.05 m/s^2 against a
+    centripetal v w of at most 0.3 m/s^2 here), so the offset beyond the mounting to sqrt(2) x 0.03 = 0.042
+    rad: 0.13 rad is three of those."""
+    from .sim_mount import mount_imu
+
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=declination, imu_yaw_sigma=0.002)
+
+    def motion(t: float) -> tuple[float, float, float]:  # sim_gps drives at a constant speed
+        v, wz, _ = sim_gps.commanded(t - sim_gps.T0, w)
+        return v, 0.0, wz
+
+    samples = mount_imu(sim_gps.simulate(w), (0.0, 0.0, math.pi / 2), motion)
+    verdicts = verdicts_of(robot_config(gps="", orientation="absolute"), samples)
+    mount = one(verdicts, "imu", "attitude")
+    assert mount.key == "sensors.imu.extrinsic_rpy"
+    assert vector(mount.suggestion)[2] == pytest.approx(math.pi / 2, abs=0.09)  # three of the mounting's 0.03
+    heading = one(verdicts, "imu", "orientation")
+    if declination == 0.0:
+        assert heading.key == "sensors.imu.extrinsic_rpy" and "yaw_offset =" not in heading.suggestion, heading
+        assert not [v for v in verdicts if v.key.endswith("yaw_offset")], verdicts
+    else:  # corrected = raw + yaw_offset: the declination's own -0.4, not -(0.4 + pi/2)
+        assert heading.key == "sensors.imu.yaw_offset", heading
+        (value,) = [float(x) for x in re.findall(r"-?\d+\.\d+", heading.suggestion)]
+        assert value == pytest.approx(-declination, abs=0.13)
+
+
 @pytest.mark.parametrize("mount_yaw", [0.0, 0.03])
 def test_imu_mounted_as_configured_or_within_a_few_degrees_is_ok(mount_yaw):
     """Clean: the mounting is measured (0 or 0.03 rad, within the tolerance) and every verdict is ok."""
