@@ -368,6 +368,27 @@ def test_imu_mounted_yawed_is_named_without_orientation_in_g_units_and_with_a_bi
     assert vector(v.suggestion) == pytest.approx([0.0, 0.0, -math.pi / 2], abs=MOUNT_TOLERANCE_RAD)
 
 
+def test_mirrored_accelerometer_axis_is_not_read_as_a_mounting_yaw():
+    """A driver that flips the sign of the accelerometer's y: no turn about z makes (e_x, -e_y) from
+    (e_x, e_y). The best turn then fits with |(c, s)| = |E e_x^2 - E e_y^2| / (E e_x^2 + E e_y^2), about
+    0.1 here (dv/dt rms 0.28, v w rms 0.30 m/s^2), far below the 0.5 at which an angle means something:
+    no yaw is named, and no agreement claimed."""
+    import msgspec
+
+    from fusiond.core.doctor.mounting import mount_yaw_fit
+    from fusiond.samples import ImuSample
+
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    samples = [msgspec.structs.replace(s, linear_acceleration=(s.linear_acceleration[0], -s.linear_acceleration[1],
+                                                               s.linear_acceleration[2]))
+               if isinstance(s, ImuSample) else s for s in simulate_mount(MountWorld(duration=60.0))]
+    cfg = robot_config()
+    result = run_samples(samples, cfg)
+    assert mount_yaw_fit(result.doctor.series(), cfg.sensors[1]).gain < 0.25
+    assert not [v for v in result.verdicts() if v.channel == "attitude"], result.verdicts()
+
+
 @pytest.mark.parametrize("declination", [0.0, 0.4])
 def test_imu_mounted_yawed_with_gps_and_absolute_yaw_gets_one_fix_not_two(declination):
     """With a GPS the mounting also shows as the IMU's absolute yaw sitting off the track. That is the same

@@ -40,6 +40,10 @@ MOUNT_YAW_RAD = 0.05
 MIN_SPEED = 0.2  # m/s: slower, dv/dt and v w are too small and the wheels too coarse to compare
 SMOOTH_BINS = 5  # 1 s at 5 Hz: vibration averaged, manoeuvres (seconds long) kept
 MIN_SAMPLES = 20  # decimated driving samples: 20 s of driving
+# |(c, s)| is 1 for an accelerometer that sees the motion turned; at half or twice that it is not a turn
+# (a mirrored axis, e.g. one sign flipped in the driver, fits with |(c, s)| near 0; wrong units near 10):
+# the angle then means nothing and is not named
+GAIN_BAND = (0.5, 2.0)
 MAX_ALIGN_S = 1.5 * BIN_S  # an accelerometer bin with no wheel bin this close is not compared
 Z_SIGMAS = 3.0
 
@@ -58,12 +62,17 @@ class MountYaw:
     @property
     def named(self) -> bool:
         """Clearly nonzero: beyond the threshold and beyond Z_SIGMAS standard errors."""
-        return abs(self.delta) > max(MOUNT_YAW_RAD, Z_SIGMAS * self.se)
+        return self.turned and abs(self.delta) > max(MOUNT_YAW_RAD, Z_SIGMAS * self.se)
 
     @property
     def resolved(self) -> bool:
         """Known well enough to say the mounting agrees (a 3-sigma band inside the threshold)."""
-        return Z_SIGMAS * self.se < MOUNT_YAW_RAD
+        return self.turned and Z_SIGMAS * self.se < MOUNT_YAW_RAD
+
+    @property
+    def turned(self) -> bool:
+        """The accelerometer sees the motion at its size, only turned: the fit's angle is meaningful."""
+        return GAIN_BAND[0] <= self.gain <= GAIN_BAND[1]
 
     def evidence(self) -> dict[str, float]:
         return {"mount_yaw_error_rad": self.delta, "mount_yaw_error_se": self.se, "accel_vs_wheels_gain": self.gain,
