@@ -158,8 +158,9 @@ def test_wheel_scale_error_against_gps_names_scale_estimation():
 # while it states 0.3 m. Over chords of the track its error telescopes: the chord sum carries the wander's
 # change along a stretch, ~2 sqrt(2) m per ~tau of travel (400 m at 4 m/s), so over the ~1170 m of chords of
 # a 300 s drive the scale is known to about 2.8 / 400 / sqrt(3) = 0.4 %; the doctor's standard error
-# (model and residuals) must say as much (below 0.6 %: 1.5 x that). A 3 % scale is then beyond the 2 % tolerance by > 2 standard
-# errors and named; no scale stays within 3 standard errors (1.2 %) of 1, inside the tolerance.
+# (model and residuals) must say as much (below 0.6 %: 1.5 x that). A 3 % scale is then beyond the 2 %
+# tolerance by > 2 standard errors and named; no scale stays within 3 standard errors (1.2 %) of 1, inside
+# the tolerance.
 WANDERING_GPS = dict(duration=300.0, speed=4.0, gps_rate=1.0, gps_error_tau=100.0, gps_error_sigma=2.0)
 
 
