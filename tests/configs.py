@@ -7,8 +7,9 @@ from fusiond.config import Config, loads
 
 
 def robot_config(gps: str | None = None, pose: str | None = None, odom: str = "", imu: str = "",
-                 filt: str = "", orientation: str = "roll_pitch") -> Config:
-    """``gps``/``pose``: None for no such sensor, else the extra lines of its table."""
+                 filt: str = "", orientation: str = "roll_pitch", gyro: bool = True) -> Config:
+    """``gps``/``pose``: None for no such sensor, else the extra lines of its table; ``gyro``: whether
+    the IMU's angular velocity is fused."""
     text = f"""
 [filter]
 {filt}
@@ -22,7 +23,7 @@ name = "imu"
 kind = "imu"
 key = "imu"
 orientation = "{orientation}"
-angular_velocity = true
+angular_velocity = {"true" if gyro else "false"}
 {imu}
 """
     if gps is not None:

@@ -12,13 +12,13 @@ import re
 
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.doctor import Verdict
 from fusiond.core.sensors import OdomPolicy
 from fusiond.replay.run import run_samples
 from fusiond.samples import OdomSample
 
 from . import sim_gps
+from .configs import robot_config
 from .sim import SimConfig, simulate
 from .test_fusion_core import make_config
 
@@ -54,26 +54,6 @@ def vector(suggestion: str) -> list[float]:
     return [float(v) for v in re.search(r"\[([^\]]*)\]", suggestion).group(1).split(",")]
 
 
-def gps_config(imu: str, odom: str = "", gps: str = ""):
-    return loads(f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-{odom}
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-{imu}
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "gps"
-{gps}
-""")
-
-
 def never_trusts_more(verdicts: list[Verdict], sensor: str) -> None:
     """No verdict advises trusting a contradicted sensor more (a smaller noise, or 'under-uses')."""
     for v in verdicts:
@@ -92,7 +72,7 @@ def test_clean_simulation_every_verdict_is_ok():
 
 def test_clean_gps_simulation_every_verdict_is_ok():
     w = sim_gps.World(duration=120.0, gps_rate=1.0)
-    verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
+    verdicts = verdicts_of(robot_config(gps=""), sim_gps.simulate(w))
     assert all(v.level == "ok" for v in verdicts), verdicts
     # the cross-source speed check ran and found the wheels right (scale 1 within its standard error)
     speed = one(verdicts, "wheel", "speed")
@@ -117,7 +97,7 @@ def test_magnetometer_offset_and_disturbance_without_gps_blames_the_imu_yaw():
 def test_magnetometer_offset_and_disturbance_with_gps_blames_the_imu_not_the_gps():
     w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.4, imu_yaw_sigma=0.002,
                          imu_yaw_disturbance=(0.3, 2 * math.pi / 0.4))
-    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = true'), sim_gps.simulate(w))
+    verdicts = verdicts_of(robot_config(gps="", orientation="absolute"), sim_gps.simulate(w))
     v = one(verdicts, "imu", "orientation")
     assert v.level == "problem" and v.key == "sensors.imu.orientation" and "roll_pitch" in v.suggestion
     # with the yaw-offset state the filter keeps the GPS consistent (its NIS is fine); if it were not,
@@ -129,7 +109,7 @@ def test_magnetometer_offset_and_disturbance_with_gps_blames_the_imu_not_the_gps
 
 def test_magnetometer_offset_alone_with_gps_gets_a_yaw_offset():
     w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.4, imu_yaw_sigma=0.002)
-    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = true'), sim_gps.simulate(w))
+    verdicts = verdicts_of(robot_config(gps="", orientation="absolute"), sim_gps.simulate(w))
     v = one(verdicts, "imu", "orientation")
     assert v.level == "problem" and v.key == "sensors.imu.yaw_offset"
     # corrected = raw + yaw_offset: the offset to state is -0.4; its standard error (GPS sigma 0.3 m over
@@ -165,11 +145,51 @@ def test_twist_measured_takes_the_not_measured_path_even_with_zero_covariance():
 
 
 def test_wheel_scale_error_against_gps_names_scale_estimation():
-    w = sim_gps.World(duration=120.0, gps_rate=1.0, wheel_scale=0.95)
-    verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
-    v = one(verdicts, "wheel", "speed")
+    samples = sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0, wheel_scale=0.95))
+    v = one(verdicts_of(robot_config(gps="", odom="scale_estimation = false"), samples), "wheel", "speed")
     assert v.level == "problem" and v.key == "sensors.wheel.scale_estimation"
-    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(0.95, abs=3 * v.evidence["wheel_scale_se"] + 0.005)
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(0.95, abs=3 * v.evidence["wheel_scale_se"])
+    # scale_estimation unset is on with a GPS: the core estimates it, and the doctor does not ask for it again
+    v = one(verdicts_of(robot_config(gps=""), samples), "wheel", "speed")
+    assert v.key != "sensors.wheel.scale_estimation" and "estimated wheel scale" in v.message, v
+
+
+# A receiver whose error wanders (Gauss-Markov, tau 100 s, sigma 2 m: the harsh end of consumer receivers)
+# while it states 0.3 m. Over chords of the track its error telescopes: the chord sum carries the wander's
+# change along a stretch, ~2 sqrt(2) m per ~tau of travel (400 m at 4 m/s), so over the ~1170 m of chords of
+# a 300 s drive the scale is known to about 2.8 / 400 / sqrt(3) = 0.4 %; the doctor's standard error
+# (model and residuals) must say as much (below 0.6 %: 1.5 x that). A 3 % scale is then beyond the 2 %
+# tolerance by > 2 standard errors and named; no scale stays within 3 standard errors (1.2 %) of 1, inside
+# the tolerance.
+WANDERING_GPS = dict(duration=300.0, speed=4.0, gps_rate=1.0, gps_error_tau=100.0, gps_error_sigma=2.0)
+
+
+def test_wheel_scale_of_3_percent_is_named_through_a_wandering_gps():
+    samples = sim_gps.simulate(sim_gps.World(wheel_scale=0.97, **WANDERING_GPS))
+    v = one(verdicts_of(robot_config(gps="", odom="scale_estimation = false"), samples), "wheel", "speed")
+    assert v.level == "problem" and v.key == "sensors.wheel.scale_estimation", v
+    se = v.evidence["wheel_scale_se"]
+    assert se < 0.006 and v.evidence["wheel_scale_vs_gps"] == pytest.approx(0.97, abs=3 * se)
+
+
+def test_no_wheel_scale_with_a_wandering_gps_is_ok():
+    samples = sim_gps.simulate(sim_gps.World(**WANDERING_GPS))
+    verdicts = verdicts_of(robot_config(gps="", odom="scale_estimation = false"), samples)
+    v = one(verdicts, "wheel", "speed")
+    assert v.level == "ok", v
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(1.0, abs=3 * v.evidence["wheel_scale_se"])
+
+
+def test_short_drive_with_a_wandering_gps_claims_no_scale():
+    """120 s at 1 m/s with the same wander: over ~100 m of chords the wander's change (2 m x sqrt(2 (1 -
+    e^-1.2)) = 2.4 m over the run) is a few percent, as large as the scales in question. The doctor must
+    not name a scale, and its standard error must cover its error (counting the fixes' white noise only,
+    it called this run +7.8 % +- 1.5 %)."""
+    samples = sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0, gps_error_tau=100.0, gps_error_sigma=2.0,
+                                             seed=7))
+    v = one(verdicts_of(robot_config(gps="", odom="scale_estimation = false"), samples), "wheel", "speed")
+    assert v.level == "ok", v
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(1.0, abs=3 * v.evidence["wheel_scale_se"])
 
 
 def test_skid_steer_wheels_are_reported_as_slip():
@@ -304,6 +324,115 @@ def test_lean_prints_the_full_two_axis_mount(configured_yaw):
     assert not [x for x in verdicts_of(fixed, samples) if x.channel == "attitude"]
 
 
+# The mounting-yaw fit's precision in sim_mount's world (no GPS): the accelerometer's 0.05 m/s^2 per sample,
+# averaged over the fit's 1 s windows of 100 samples, is 0.005 m/s^2 per axis; the driving gives a horizontal
+# acceleration of rms ~0.45 m/s^2 (dv/dt = 0.4 sin, v w with v in [0, 2] and w = 0.35 sin) over ~40 windows
+# above 0.2 m/s, so the angle's standard error is about 0.005 / (0.45 sqrt(40)) = 0.002 rad: 0.01 rad is five
+# of them. A 90 or 180 degree turn is far beyond the 0.05 rad threshold; 0.03 rad (1.7 degrees) is below it.
+MOUNT_TOLERANCE_RAD = 0.01
+
+
+@pytest.mark.parametrize(("configured", "true_mount"), [
+    ((0.0, 0.0, 0.0), (0.0, 0.0, math.pi / 2)),
+    ((0.0, 0.0, 0.0), (0.0, 0.0, math.pi)),
+    ((0.1, 0.0, 0.0), (0.1, 0.0, math.pi / 2)),  # the roll is configured right: the verdict keeps it
+])
+def test_imu_mounted_yawed_is_named_from_the_accelerometer_without_gps(configured, true_mount):
+    """A turn about z leaves the gyro's z rate as it is and the ground level: only the accelerometer's
+    centripetal (v w, to the left) and longitudinal (dv/dt) axes show it, turned by the mounting."""
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    samples = simulate_mount(MountWorld(duration=60.0, imu_mount_rpy=true_mount))
+    verdicts = verdicts_of(robot_config(imu=f"extrinsic_rpy = {list(configured)}"), samples)
+    v = one(verdicts, "imu", "attitude")
+    assert v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy", v
+    roll, pitch, yaw = vector(v.suggestion)
+    assert [roll, pitch] == pytest.approx(list(true_mount[:2]), abs=MOUNT_TOLERANCE_RAD)
+    assert abs(math.remainder(yaw - true_mount[2], 2 * math.pi)) < MOUNT_TOLERANCE_RAD
+    assert v.evidence["mount_yaw_error_se"] < MOUNT_TOLERANCE_RAD / 3
+    # nothing else is blamed for it
+    assert [x for x in verdicts if x.level != "ok"] == [v], verdicts
+    # pasting the suggestion: the accelerometer agrees, and says so
+    fixed = one(verdicts_of(robot_config(imu=v.suggestion), samples), "imu", "attitude")
+    assert fixed.level == "ok" and abs(fixed.evidence["mount_yaw_error_rad"]) < MOUNT_TOLERANCE_RAD, fixed
+
+
+def test_imu_mounted_yawed_is_named_without_orientation_in_g_units_and_with_a_bias():
+    """An IMU that gives no attitude (gravity stays in the accelerometer; on level ground it is on z) and
+    reports in g, with a 0.2 m/s^2 accelerometer bias: the fit's constant takes the bias, the turn is named."""
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    world = MountWorld(duration=60.0, imu_mount_rpy=(0.0, 0.0, -math.pi / 2), orientation_absent=True,
+                       accel_scale=1.0 / 9.80665, accel_bias=(0.2, -0.2, 0.0))
+    v = one(verdicts_of(robot_config(), simulate_mount(world)), "imu", "attitude")
+    assert v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy", v
+    assert vector(v.suggestion) == pytest.approx([0.0, 0.0, -math.pi / 2], abs=MOUNT_TOLERANCE_RAD)
+
+
+def test_mirrored_accelerometer_axis_is_not_read_as_a_mounting_yaw():
+    """A driver that flips the sign of the accelerometer's y: no turn about z makes (e_x, -e_y) from
+    (e_x, e_y). The best turn then fits with |(c, s)| = |E e_x^2 - E e_y^2| / (E e_x^2 + E e_y^2), about
+    0.1 here (dv/dt rms 0.28, v w rms 0.30 m/s^2), far below the 0.5 at which an angle means something:
+    no yaw is named, and no agreement claimed."""
+    import msgspec
+
+    from fusiond.core.doctor.mounting import mount_yaw_fit
+    from fusiond.samples import ImuSample
+
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    samples = [msgspec.structs.replace(s, linear_acceleration=(s.linear_acceleration[0], -s.linear_acceleration[1],
+                                                               s.linear_acceleration[2]))
+               if isinstance(s, ImuSample) else s for s in simulate_mount(MountWorld(duration=60.0))]
+    cfg = robot_config()
+    result = run_samples(samples, cfg)
+    assert mount_yaw_fit(result.doctor.series(), cfg.sensors[1]).gain < 0.25
+    assert not [v for v in result.verdicts() if v.channel == "attitude"], result.verdicts()
+
+
+@pytest.mark.parametrize("declination", [0.0, 0.4])
+def test_imu_mounted_yawed_with_gps_and_absolute_yaw_gets_one_fix_not_two(declination):
+    """With a GPS the mounting also shows as the IMU's absolute yaw sitting off the track. That is the same
+    turn: the doctor must say extrinsic_rpy once, not also yaw_offset (both pasted would turn the yaw back);
+    a real declination on top remains a yaw_offset of its own size. Precision: the GPS track direction to
+    ~0.03 rad (0.3 m over 10 m chords, ~100 of them), the mounting to ~0.03 rad (0.05 m/s^2 against a
+    centripetal v w of at most 0.3 m/s^2 here), so the offset beyond the mounting to sqrt(2) x 0.03 = 0.042
+    rad: 0.13 rad is three of those."""
+    from .sim_mount import mount_imu
+
+    w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=declination, imu_yaw_sigma=0.002)
+
+    def motion(t: float) -> tuple[float, float, float]:  # sim_gps drives at a constant speed
+        v, wz, _ = sim_gps.commanded(t - sim_gps.T0, w)
+        return v, 0.0, wz
+
+    samples = mount_imu(sim_gps.simulate(w), (0.0, 0.0, math.pi / 2), motion)
+    verdicts = verdicts_of(robot_config(gps="", orientation="absolute"), samples)
+    mount = one(verdicts, "imu", "attitude")
+    assert mount.key == "sensors.imu.extrinsic_rpy"
+    assert vector(mount.suggestion)[2] == pytest.approx(math.pi / 2, abs=0.09)  # three of the mounting's 0.03
+    heading = one(verdicts, "imu", "orientation")
+    if declination == 0.0:
+        assert heading.key == "sensors.imu.extrinsic_rpy" and "yaw_offset =" not in heading.suggestion, heading
+        assert not [v for v in verdicts if v.key.endswith("yaw_offset")], verdicts
+    else:  # corrected = raw + yaw_offset: the declination's own -0.4, not -(0.4 + pi/2)
+        assert heading.key == "sensors.imu.yaw_offset", heading
+        (value,) = [float(x) for x in re.findall(r"-?\d+\.\d+", heading.suggestion)]
+        assert value == pytest.approx(-declination, abs=0.13)
+
+
+@pytest.mark.parametrize("mount_yaw", [0.0, 0.03])
+def test_imu_mounted_as_configured_or_within_a_few_degrees_is_ok(mount_yaw):
+    """Clean: the mounting is measured (0 or 0.03 rad, within the tolerance) and every verdict is ok."""
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    samples = simulate_mount(MountWorld(duration=60.0, imu_mount_rpy=(0.0, 0.0, mount_yaw)))
+    verdicts = verdicts_of(robot_config(), samples)
+    assert all(v.level == "ok" for v in verdicts), verdicts
+    v = one(verdicts, "imu", "attitude")
+    assert v.evidence["mount_yaw_error_rad"] == pytest.approx(mount_yaw, abs=MOUNT_TOLERANCE_RAD)
+
+
 def test_understated_orientation_noise_is_flagged_with_a_measured_suggestion():
     samples = simulate(SimConfig(duration=20.0, orientation_sigma=0.02))
     v = one(verdicts_of(make_config(extra_imu="orientation_noise = [0.002, 0.002, 0.002]"), samples),
@@ -348,7 +477,7 @@ def test_plot_breaks_lines_at_gaps_and_draws_gps_runs_in_enu(tmp_path):
     assert len(break_gaps(t[:3], np.arange(3.0))[0]) == 3  # no gap: unchanged
     w = sim_gps.World(duration=60.0, gps_rate=1.0)
     samples = [s for s in sim_gps.simulate(w) if not 1020.0 <= s.stamp < 1035.0]
-    result = run_samples(samples, gps_config('orientation = "roll_pitch"\nangular_velocity = true'),
+    result = run_samples(samples, robot_config(gps=""),
                          keep_trace=True)
     out = tmp_path / "gps.png"
     plot_replay(result, out, title="gps")
@@ -366,7 +495,7 @@ def test_magnetometer_yaw_without_any_gyro_is_judged_against_the_gps_track():
                          imu_yaw_disturbance=(0.2, 2 * math.pi / 0.4))
     samples = [ImuSample(s.sensor, s.stamp, s.orientation, s.orientation_covariance, (0.0, 0.0, 0.0),
                          (-1.0,) + (0.0,) * 8) if isinstance(s, ImuSample) else s for s in sim_gps.simulate(w)]
-    verdicts = verdicts_of(gps_config('orientation = "absolute"\nangular_velocity = false'), samples)
+    verdicts = verdicts_of(robot_config(gps="", orientation="absolute", gyro=False), samples)
     v = one(verdicts, "imu", "orientation")
     assert v.level == "problem" and v.key == "sensors.imu.orientation" and "GPS track" in v.message
     assert v.evidence["imu_vs_gps_track_wander_rad"] == pytest.approx(0.2 / math.sqrt(2), rel=0.35)
@@ -402,7 +531,7 @@ def test_gps_fixes_during_the_heading_search_are_not_judged_as_gps_noise():
     updates are marked as learning; no verdict may blame the GPS's position_noise for them."""
     w = sim_gps.World(duration=60.0, gps_rate=10.0, gps_sigma=1.0, standstill=0.0, speed=17.0,
                       start=(0.0, 0.0, 2.5))  # 2.5 rad off the filter's initial heading
-    verdicts = verdicts_of(gps_config('orientation = "roll_pitch"\nangular_velocity = true'), sim_gps.simulate(w))
+    verdicts = verdicts_of(robot_config(gps=""), sim_gps.simulate(w))
     unaligned = [v for v in verdicts if v.channel == "position_unaligned"]
     assert unaligned and all(v.level == "ok" and v.key != "sensors.gps.position_noise" for v in unaligned), unaligned
     assert one(verdicts, "gps", "position").level == "ok"

@@ -15,14 +15,16 @@ them all; the live monitor only the diagnostics stream) and returns
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 
 from ...config import Config, ImuSensor, OdomSensor
-from .attitude import TiltStats, lean_verdict
+from .attitude import TiltStats, lean_verdict, mount_verdict
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
 from .gyro import bias_check
-from .heading import heading_check, wheel_heading_check, wheel_yaw_fit
+from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
+from .mounting import MountYaw, mount_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
 from .series import Series, SeriesCollector
 from .speed import speed_check
@@ -112,6 +114,28 @@ def _explained(v: Verdict, culprit: Verdict, ch: ChannelStats, t0: float | None)
                    "fix that first", culprit.key, evidence=v.evidence)
 
 
+def _mount_explains_offset(heading: Verdict, mount: MountYaw, imu: ImuSensor | None) -> Verdict:
+    """An IMU yaw off the GPS track by the mounting yaw the accelerometer measures is that mounting, not a
+    declination: one fix (extrinsic_rpy), never both (a yaw_offset on top of the corrected mount would
+    turn the yaw back by as much). Beyond the mounting, what remains is the yaw_offset to state."""
+    off = heading.evidence.get("imu_vs_gps_track_offset_rad")
+    if not mount.named or off is None or not heading.key.endswith(".yaw_offset"):
+        return heading
+    se = math.hypot(heading.evidence.get("imu_vs_gps_track_offset_se_rad", 0.0), mount.se)
+    rest = math.remainder(off - mount.delta, 2.0 * math.pi)
+    mounting = f"the mounting yaw the accelerometer measures ({mount.delta:+.3f} rad, see {heading.sensor}/attitude)"
+    if abs(rest) <= max(OFFSET_RAD, 3.0 * se):
+        return Verdict(heading.sensor, heading.channel, "warn",
+                       f"the IMU's absolute yaw sits {off:+.3f} rad off the GPS track: that is {mounting}, not a "
+                       "declination; set extrinsic_rpy there, not yaw_offset",
+                       heading.key.rsplit(".", 1)[0] + ".extrinsic_rpy", evidence=heading.evidence)
+    configured = getattr(imu, "yaw_offset", 0.0) if imu is not None else 0.0
+    return Verdict(heading.sensor, heading.channel, heading.level,
+                   heading.message + f"; {mounting} accounts for part of it, {rest:+.3f} rad remain: with "
+                   "extrinsic_rpy corrected, the yaw_offset below", heading.key,
+                   f"yaw_offset = {configured - rest:.4f}", heading.evidence | {"offset_beyond_mount_rad": rest})
+
+
 def _merge(candidates: list[Verdict]) -> Verdict:
     """One verdict per channel: the most severe finding leads, the others are appended."""
     ranked = sorted(candidates, key=lambda v: -LEVELS.index(v.level))
@@ -137,7 +161,11 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
     gyro_fused = any(isinstance(s, ImuSensor) and s.angular_velocity for s in cfg.sensors)
 
     # cross-source checks first: they decide who is to blame
+    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
+    mount = mount_yaw_fit(series, imu) if known else None
     heading = heading_check(series, cfg) if known else None
+    if heading is not None and mount is not None:
+        heading = _mount_explains_offset(heading, mount, imu)
     speed = speed_check(series, cfg, scales) if known else None
     unmeasured = unmeasured_yaw_rate(series, odom) if known and odom is not None else None
     wheel_heading = wheel_heading_check(series, cfg) if known and unmeasured is None else None
@@ -198,10 +226,9 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             v = bias_check(series, cfg, None, gyro_fused)
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
-        imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
-        v = lean_verdict(tilt, imu, MIN_UPDATES)
-        if v is not None:
-            found[(v.sensor, v.channel)].append(v)
+        for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mount_verdict(imu, mount, tilt, MIN_UPDATES)):
+            if v is not None:
+                found[(v.sensor, v.channel)].append(v)
         if odom is not None:
             v = twist_frame_verdict(odom, twist, MIN_UPDATES)
             if v is not None:

@@ -8,8 +8,10 @@ it can see, so a noise measured on base pitch of an IMU rolled by 90 degrees is
 reported where it belongs: on the IMU's yaw.
 
 A steady lean of the estimate on level ground is a mounting rotation missing from
-``extrinsic_rpy``; the verdict prints the full mount (both tilt axes, composed
-with the configured one) as a ready-to-paste value.
+``extrinsic_rpy``; so is an accelerometer whose horizontal axes are turned against
+the motion the wheels report (``mounting``: an IMU mounted yawed, which neither the
+gyro nor the lean shows). Both verdicts print the full mount (the tilt, the yaw and
+the configured one composed) as one ready-to-paste value.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from ...config import ImuSensor
 from ...estimator import rotation as rot
+from .mounting import MountYaw
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
 
@@ -77,25 +80,69 @@ def noise_suggestion(ch: ChannelStats, imu: ImuSensor) -> tuple[str, str]:
     return "orientation_noise = [" + ", ".join(f"{v:.4f}" for v in filled) + "]", note
 
 
-def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50) -> Verdict | None:
-    if tilt.n < min_updates or imu is None:
-        return None
+def full_mount(imu: ImuSensor, lean: tuple[float, float] = (0.0, 0.0), yaw: float = 0.0) -> tuple[float, ...]:
+    """The IMU's true mounting as roll, pitch, yaw: Rz(yaw) * tilt(lean) * configured.
+
+    A lean: estimated base = q_imu * q_cfg^-1 = yaw * q_true * q_cfg^-1, so on level ground
+    q_true = tilt * q_cfg. A yaw error from the accelerometer is a turn about base z before that
+    (see ``mounting``); for a configured mount without tilt it simply adds to the configured yaw."""
+    q = rot.mul(rot.from_rpy(lean[0], lean[1], 0.0), rot.from_rpy(*imu.extrinsic_rpy))
+    return rot.to_rpy(rot.mul(rot.from_rpy(0.0, 0.0, yaw), q))
+
+
+def paste_mount(rpy: tuple[float, ...]) -> str:
+    return "extrinsic_rpy = [" + ", ".join(f"{v:.4f}" for v in rpy) + "]"
+
+
+def lean_of(tilt: TiltStats, min_updates: int = 50) -> tuple[list[float], list[float], list[int]]:
+    """Mean and std of the estimated roll and pitch, and the axes that lean steadily."""
+    if tilt.n < min_updates:
+        return [], [], []
     means, stds = [], []
     for k in range(2):
         m = tilt.sums[k] / tilt.n
         means.append(m)
         stds.append(math.sqrt(max(tilt.squares[k] / tilt.n - m * m, 0.0)))
-    leaning = [k for k in range(2) if abs(means[k]) > LEAN_RAD and stds[k] < 0.5 * abs(means[k])]
+    return means, stds, [k for k in range(2) if abs(means[k]) > LEAN_RAD and stds[k] < 0.5 * abs(means[k])]
+
+
+def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50,
+                 mount: MountYaw | None = None) -> Verdict | None:
+    """``mount``: the accelerometer's yaw fit; when it names a yaw error, the suggestion includes it."""
+    if imu is None:
+        return None
+    means, stds, leaning = lean_of(tilt, min_updates)
     if not leaning:
         return None
-    # estimated base = q_imu * q_cfg^-1 = yaw * q_true * q_cfg^-1; level ground: q_true = tilt * q_cfg
-    q_true = rot.mul(rot.from_rpy(means[0], means[1], 0.0), rot.from_rpy(*imu.extrinsic_rpy))
-    rpy = rot.to_rpy(q_true)
+    rpy = full_mount(imu, (means[0], means[1]), mount.delta if mount is not None and mount.named else 0.0)
     what = " and ".join(f"{('roll', 'pitch')[k]} {means[k]:+.3f} rad (std {stds[k]:.3f})" for k in leaning)
     return Verdict(imu.name, "attitude", "warn",
                    f"the robot leans by {what} on average: on level ground that is an IMU mounting rotation "
                    "missing from, or wrong in, extrinsic_rpy (the body-frame twist then climbs or sinks). The full "
                    "mount, both tilt axes composed with the configured one, is below",
-                   sensor_key(imu.name, "extrinsic_rpy"),
-                   "extrinsic_rpy = [" + ", ".join(f"{v:.4f}" for v in rpy) + "]",
+                   sensor_key(imu.name, "extrinsic_rpy"), paste_mount(rpy),
                    {"lean_roll_rad": means[0], "lean_pitch_rad": means[1]})
+
+
+def mount_verdict(imu: ImuSensor | None, mount: MountYaw | None, tilt: TiltStats,
+                  min_updates: int = 50) -> Verdict | None:
+    """The accelerometer's verdict on the mounting yaw; None when the driving could not tell."""
+    if imu is None or mount is None:
+        return None
+    ev = mount.evidence()
+    deg = math.degrees(mount.delta)
+    se_deg = math.degrees(mount.se)
+    if mount.named:
+        means, _, leaning = lean_of(tilt, min_updates)
+        lean = (means[0], means[1]) if leaning else (0.0, 0.0)
+        return Verdict(imu.name, "attitude", "problem",
+                       f"the accelerometer's horizontal axes are turned by {deg:+.1f} deg (+- {se_deg:.1f}) against "
+                       f"the motion the wheels and the gyro report ({mount.samples} s of driving): the IMU is mounted "
+                       "yawed by that and extrinsic_rpy does not say so (the gyro's z rate cannot show it; the IMU's "
+                       "roll and pitch land on the wrong base axes). The full mount is below",
+                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, lean, mount.delta)), ev)
+    if mount.resolved:
+        return Verdict(imu.name, "attitude", "ok",
+                       f"the accelerometer agrees with the wheels' motion: mounting yaw {deg:+.1f} deg "
+                       f"(+- {se_deg:.1f}) against extrinsic_rpy", evidence=ev)
+    return None

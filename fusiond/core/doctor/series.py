@@ -23,6 +23,7 @@ from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...estimator import rotation as rot
 from ...estimator.geodesy import EnuFrame
 from ...samples import GpsSample, ImuSample, OdomSample
+from ..updates.imu import G_UNITS_BAND, GRAVITY
 
 BIN_S = 0.2  # series resolution: 5 Hz
 REORDER_S = 1.0  # samples are integrated in stamp order once they are this much older than the newest
@@ -51,6 +52,10 @@ class Series(msgspec.Struct):
     gyro_n: list[int] = []
     gyro_heading: list[float] = []  # integrated raw gyro z (no bias removed), rad
     gyro_stated_sigma: float = float("nan")  # the noise the filter assumes for the gyro z, rad/s (mean)
+    acc_t: list[float] = []
+    acc_x: list[float] = []  # accelerometer specific force minus gravity, base_link x through the configured
+    acc_y: list[float] = []  # extrinsic_rpy (so a mounting missing from it shows), m/s^2
+    acc_level: list[float] = []  # fraction of the bin's samples whose gravity was removed with the IMU's attitude
     gps_t: list[float] = []
     gps_e: list[float] = []
     gps_n: list[float] = []
@@ -92,8 +97,11 @@ class SeriesCollector:
         # IMU -> base: None for an IMU mounted as base_link (the common case: nothing to rotate)
         self._ext = {n: None if s.extrinsic_rpy == (0.0, 0.0, 0.0) else rot.conj(rot.from_rpy(*s.extrinsic_rpy))
                      for n, s in self._imu_cfg.items()}
-        self._Rz = {n: tuple(float(v) for v in rot.matrix(rot.from_rpy(*s.extrinsic_rpy))[2])
-                    for n, s in self._imu_cfg.items()}
+        self._R = {n: tuple(tuple(float(v) for v in row) for row in rot.matrix(rot.from_rpy(*s.extrinsic_rpy)))
+                   for n, s in self._imu_cfg.items()}  # IMU -> base, as configured
+        # the accelerometer series is the first IMU's (the one the mounting check judges): two IMUs' axes
+        # averaged into one bin would show neither mounting
+        self._acc_imu = next(iter(self._imu_cfg), None)
         self._gap_s = cfg.filter.gap_s
         # integration state
         self._odom_last: tuple[float, float] | None = None  # (stamp, wz)
@@ -103,7 +111,7 @@ class SeriesCollector:
         self._yaw_prev: float | None = None
         self._yaw_unwrapped = 0.0
         self._enu: EnuFrame | None = EnuFrame(*gps[0].datum) if gps and gps[0].datum is not None else None
-        self._bins: dict[str, _Bin | None] = {"odom": None, "imu": None, "gyro": None}
+        self._bins: dict[str, _Bin | None] = {"odom": None, "imu": None, "gyro": None, "acc": None}
         self._rest = True
         self._est_next = -math.inf
         self._stated = [0.0, 0]
@@ -142,7 +150,7 @@ class SeriesCollector:
     def finish(self) -> Series:
         while self._heap:
             self._process(heapq.heappop(self._heap)[2])
-        for kind in ("odom", "imu", "gyro"):
+        for kind in ("odom", "imu", "gyro", "acc"):
             self._flush(kind)
         if self._stated[1]:
             self.series.gyro_stated_sigma = self._stated[0] / self._stated[1]
@@ -184,6 +192,11 @@ class SeriesCollector:
         elif kind == "imu":
             s.imu_t.append(b.t0 + BIN_S / 2)
             s.imu_yaw.append(b.sums[0] / n)
+        elif kind == "acc":
+            s.acc_t.append(b.t0 + BIN_S / 2)
+            s.acc_x.append(b.sums[0] / n)
+            s.acc_y.append(b.sums[1] / n)
+            s.acc_level.append(b.extra / n)
         else:
             m = b.sums[0] / n
             s.gyro_t.append(b.t0 + BIN_S / 2)
@@ -219,6 +232,7 @@ class SeriesCollector:
         name = s.sensor
         cfg = self._imu_cfg[name]
         oc = s.orientation_covariance
+        q = None  # the IMU's own attitude, when it reports one
         if len(oc) == 9 and oc[0] != -1.0 and all(map(math.isfinite, s.orientation)):
             n = math.sqrt(sum(v * v for v in s.orientation))
             if n > 0.5:
@@ -241,7 +255,7 @@ class SeriesCollector:
                     b.sums[0] += self._yaw_unwrapped
         gc = s.angular_velocity_covariance
         if len(gc) == 9 and gc[0] != -1.0 and all(map(math.isfinite, s.angular_velocity)):
-            r0, r1, r2 = self._Rz[name]
+            r0, r1, r2 = self._R[name][2]
             w = s.angular_velocity
             wz = r0 * w[0] + r1 * w[1] + r2 * w[2]
             last = self._gyro_last
@@ -255,6 +269,39 @@ class SeriesCollector:
             b.n += 1
             b.sums[0] += wz
             b.sq += wz * wz
+        self._accel(s, q)
+
+    def _accel(self, s: ImuSample, q: tuple[float, ...] | None) -> None:
+        """The horizontal specific force minus gravity, in base_link as the configured extrinsic_rpy puts it.
+
+        Gravity is removed in the IMU's own axes with the IMU's own attitude (R(q)^T (0, 0, g) is g times
+        the third row of R(q)), which does not depend on the mounting; without an attitude it stays in
+        (the doctor fits a constant for it). Then the configured IMU -> base rotation: an IMU turned
+        about z by an angle extrinsic_rpy does not state shows the motion's acceleration turned by it.
+        """
+        if s.sensor != self._acc_imu:
+            return
+        a = s.linear_acceleration
+        ac = s.linear_acceleration_covariance
+        # as the core reads it: [0] == -1 is no accelerometer, an all-zero vector was not filled in
+        if len(ac) != 9 or ac[0] == -1.0 or a == _ZERO3 or not all(map(math.isfinite, a)):
+            return
+        fx, fy, fz = a
+        norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+        if G_UNITS_BAND[0] <= norm <= G_UNITS_BAND[1]:  # a driver reporting in g
+            fx, fy, fz = fx * GRAVITY, fy * GRAVITY, fz * GRAVITY
+        level = q is not None
+        if level:
+            x, y, z, w = q
+            fx -= GRAVITY * 2.0 * (x * z - w * y)
+            fy -= GRAVITY * 2.0 * (y * z + w * x)
+            fz -= GRAVITY * (1.0 - 2.0 * (x * x + y * y))
+        R = self._R[s.sensor]
+        b = self._bin("acc", s.stamp, 2)
+        b.n += 1
+        b.sums[0] += R[0][0] * fx + R[0][1] * fy + R[0][2] * fz
+        b.sums[1] += R[1][0] * fx + R[1][1] * fy + R[1][2] * fz
+        b.extra += level
 
     def _gps(self, s: GpsSample) -> None:
         if s.status < 0 or not all(map(math.isfinite, (s.latitude, s.longitude, s.altitude))):
