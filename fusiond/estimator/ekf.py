@@ -24,7 +24,7 @@ import math
 import msgspec
 import numpy as np
 from . import rotation as rot
-from .cholesky import whiten
+from .cholesky import gain_rows
 from .state import StateLayout
 
 
@@ -51,19 +51,9 @@ class ErrorStateEKF:
         # with copies, so a history snapshot knows how many resets its timeline has had.
         self.resets = 0
         self._mask: np.ndarray | None = None
-        self._weights = np.ones((layout.error_dim, layout.error_dim))
+        self._weights: tuple[np.ndarray, np.ndarray] | None = None
         self._spare: np.ndarray | None = None  # the next P's buffer (never self.P); allocated on first use
-        self._ws: _Workspace | None = None  # scratch shared with copies (single-threaded use per core)
-
-    def _buffers(self) -> tuple[np.ndarray, "_Workspace"]:
-        # P's shape is the layout's for the filter's whole life: only a missing buffer is made here
-        spare, ws = self._spare, self._ws
-        if spare is None:
-            n = self.P.shape[0]
-            spare = self._spare = np.empty((n, n))
-        if ws is None:
-            ws = self._ws = _Workspace(self.P.shape[0])
-        return spare, ws
+        self._ws = _Workspace(layout.error_dim)  # scratch shared with copies (single-threaded use per core)
 
     # -- propagation -------------------------------------------------------
     def propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
@@ -95,43 +85,55 @@ class ErrorStateEKF:
         uses it so that correlations in P cannot leak it into heading or position.
         """
         P = self.P
-        PHt = np.dot(P, H.T)
-        S = np.dot(H, PHt)
+        HP = np.dot(H, P)  # H P = (P H^T)^T: P is symmetric
+        S = np.dot(HP, H.T)
         S += R
         S_rows = S.tolist()
-        s_diag = [S_rows[i][i] for i in range(len(S_rows))]
-        white = whiten(S_rows, y.tolist())
-        if white is None:
+        s_diag = S.diagonal().tolist()
+        solved = gain_rows(S_rows, y.tolist())
+        if solved is None:
             return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
-        Linv, z = white  # z = L^-1 y, the whitened innovation
+        z, rows = solved  # z = L^-1 y, the whitened innovation; rows = [L^-1; (L^-T z)^T]
         # fsum: the NIS gates and feeds the consistency tests; for one or two terms a float
         # addition is already the correctly rounded sum, so it is used there (the same bits).
-        if len(z) <= 2:
-            nis = sum([v * v for v in z])
+        m = len(z)
+        if m == 2:
+            nis = z[0] * z[0] + z[1] * z[1]
+        elif m == 1:
+            nis = z[0] * z[0]
         else:
             nis = math.fsum([v * v for v in z])
         if not math.isfinite(nis):
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
         if nis > threshold * threshold:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
-        W = np.dot(Linv, PHt.T)  # L^-1 H P
-        dx = np.dot(z, W)  # K y = P H^T S^-1 y = W^T z
-        P_new, ws = self._buffers()
+        # One product gives both W = L^-1 H P and the correction K y = P H^T S^-1 y = (H P)^T L^-T z:
+        # [W; (K y)^T] = [L^-1; (L^-T z)^T] H P, its m + 1 rows on the left written in place.
+        ws = self._ws
+        A, A_flat = ws.gain_rows(m)
+        A_flat[:] = rows
+        WD = np.dot(A, HP)
+        W, dx = WD[:m], WD[m]
+        P_new = self._spare
+        if P_new is None:
+            P_new = self._spare = np.empty_like(P)
         C = np.dot(W.T, W, out=ws.nn)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
         if mask is not None:
             # Gain rows zeroed by the mask (M K): Joseph's P - MKHP - PH^TK^TM + MKSK^TM
             # collapses to P - C * W with W_ij = 1 - (1 - m_i)(1 - m_j).
-            dx *= mask
-            C *= self._mask_weights(mask)
+            keep, weights = self._mask_weights(mask)
+            dx *= keep
+            C *= weights
         np.subtract(P, C, out=P_new)
         self.layout.boxplus(self.x, dx)
         reset = not self._store(P_new)
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 
-    def _mask_weights(self, mask: np.ndarray) -> np.ndarray:
+    def _mask_weights(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the mask as floats, the Joseph weights W), made once per mask array."""
         if self._mask is not mask:
-            keep = 1.0 - mask.astype(float)
-            self._mask, self._weights = mask, 1.0 - np.outer(keep, keep)
+            keep = mask.astype(float)
+            self._mask, self._weights = mask, (keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep))
         return self._weights
 
     # -- covariance hygiene ------------------------------------------------
@@ -297,8 +299,17 @@ class ErrorStateEKF:
 class _Workspace:
     """Per-dimension scratch for the products of one step (never holds state between calls)."""
 
-    __slots__ = ("n", "nn")
+    __slots__ = ("n", "nn", "_gain_rows")
 
     def __init__(self, n: int) -> None:
         self.n = n
         self.nn = np.empty((n, n))
+        self._gain_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def gain_rows(self, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """An (m + 1) x m array for an m-row update, and a flat view of it to write it through."""
+        rows = self._gain_rows.get(m)
+        if rows is None:
+            A = np.empty((m + 1, m))
+            rows = self._gain_rows[m] = (A, A.reshape(-1))
+        return rows

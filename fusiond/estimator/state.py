@@ -13,6 +13,7 @@ observations have an exactly zero yaw column and cannot leak into heading.
 
 from __future__ import annotations
 
+import operator
 from typing import Literal
 
 import numpy as np
@@ -84,11 +85,11 @@ class PoseBlock(StateBlock):
         return [self.position_sigma] * 3 + [self.attitude_sigma] * 3
 
     def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
+        # p += dp; q = Exp(dtheta) q (global attitude error)
         x[n0] += dx[e0]
         x[n0 + 1] += dx[e0 + 1]
         x[n0 + 2] += dx[e0 + 2]
-        q = rot.mul(rot.exp(dx[e0 + 3], dx[e0 + 4], dx[e0 + 5]), (x[n0 + 3], x[n0 + 4], x[n0 + 5], x[n0 + 6]))
-        x[n0 + 3 : n0 + 7] = rot.normalize(q)
+        x[n0 + 3 : n0 + 7] = rot.turn(dx[e0 + 3], dx[e0 + 4], dx[e0 + 5], x[n0 + 3 : n0 + 7])
 
 
 InputName = Literal["linear", "angular"]
@@ -253,8 +254,7 @@ class StateLayout:
         dl = dx.tolist()
         if self._additive_tail:
             self.blocks[0].boxplus(xl, dl, 0, 0)
-            for i in range(7, len(xl)):
-                xl[i] += dl[i - 1]
+            xl[7:] = map(operator.add, xl[7:], dl[6:])  # x_i += dx_(i-1) after the quaternion
         else:
             for b, n0, e0 in self._offsets:
                 b.boxplus(xl, dl, n0, e0)
