@@ -50,8 +50,9 @@ class ErrorStateEKF:
         # Covariance resets after a non-finite value, in propagate and update alike. It travels
         # with copies, so a history snapshot knows how many resets its timeline has had.
         self.resets = 0
-        self._mask: np.ndarray | None = None
-        self._weights: tuple[np.ndarray, np.ndarray] | None = None
+        self._mask: np.ndarray | None = None  # the last mask seen, with its float form and weights
+        self._keep: np.ndarray | None = None
+        self._joseph: np.ndarray | None = None
         self._spare: np.ndarray | None = None  # the next P's buffer (never self.P); allocated on first use
         self._ws = _Workspace(layout.error_dim)  # scratch shared with copies (single-threaded use per core)
 
@@ -89,7 +90,7 @@ class ErrorStateEKF:
         S = np.dot(HP, H.T)
         S += R
         S_rows = S.tolist()
-        s_diag = S.diagonal().tolist()
+        s_diag = [row[i] for i, row in enumerate(S_rows)]
         solved = gain_rows(S_rows, y.tolist())
         if solved is None:
             return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
@@ -109,32 +110,31 @@ class ErrorStateEKF:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
         # One product gives both W = L^-1 H P and the correction K y = P H^T S^-1 y = (H P)^T L^-T z:
         # [W; (K y)^T] = [L^-1; (L^-T z)^T] H P, its m + 1 rows on the left written in place.
-        ws = self._ws
-        A, A_flat = ws.gain_rows(m)
-        A_flat[:] = rows
-        WD = np.dot(A, HP)
-        W, dx = WD[:m], WD[m]
+        g = self._ws.gain(m)
+        g.rows_flat[:] = rows
+        np.dot(g.rows, HP, out=g.product)  # g.W and g.dx are views of the product's rows
+        W, dx = g.W, g.dx
         P_new = self._spare
         if P_new is None:
             P_new = self._spare = np.empty_like(P)
-        C = np.dot(W.T, W, out=ws.nn)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
+        C = np.dot(W.T, W, out=self._ws.nn)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
         if mask is not None:
             # Gain rows zeroed by the mask (M K): Joseph's P - MKHP - PH^TK^TM + MKSK^TM
-            # collapses to P - C * W with W_ij = 1 - (1 - m_i)(1 - m_j).
-            keep, weights = self._mask_weights(mask)
-            dx *= keep
-            C *= weights
+            # collapses to P - C * J with J_ij = 1 - (1 - m_i)(1 - m_j).
+            if mask is not self._mask:
+                self._set_mask(mask)
+            dx *= self._keep
+            C *= self._joseph
         np.subtract(P, C, out=P_new)
         self.layout.boxplus(self.x, dx)
         reset = not self._store(P_new)
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 
-    def _mask_weights(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(the mask as floats, the Joseph weights W), made once per mask array."""
-        if self._mask is not mask:
-            keep = mask.astype(float)
-            self._mask, self._weights = mask, (keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep))
-        return self._weights
+    def _set_mask(self, mask: np.ndarray) -> None:
+        """The mask as floats and the Joseph weights J, made once per mask array (the core holds one
+        per kind of masked update)."""
+        keep = mask.astype(float)
+        self._mask, self._keep, self._joseph = mask, keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep)
 
     # -- covariance hygiene ------------------------------------------------
     def _store(self, P_new: np.ndarray) -> bool:
@@ -288,7 +288,7 @@ class ErrorStateEKF:
             np.copyto(c.P, self.P)
         c.layout = self.layout
         c.resets = self.resets
-        c._mask, c._weights = self._mask, self._weights
+        c._mask, c._keep, c._joseph = self._mask, self._keep, self._joseph
         c._ws = self._ws
         return c
 
@@ -299,17 +299,29 @@ class ErrorStateEKF:
 class _Workspace:
     """Per-dimension scratch for the products of one step (never holds state between calls)."""
 
-    __slots__ = ("n", "nn", "_gain_rows")
+    __slots__ = ("n", "nn", "_gains")
 
     def __init__(self, n: int) -> None:
         self.n = n
         self.nn = np.empty((n, n))
-        self._gain_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._gains: dict[int, _GainRows] = {}
 
-    def gain_rows(self, m: int) -> tuple[np.ndarray, np.ndarray]:
-        """An (m + 1) x m array for an m-row update, and a flat view of it to write it through."""
-        rows = self._gain_rows.get(m)
-        if rows is None:
-            A = np.empty((m + 1, m))
-            rows = self._gain_rows[m] = (A, A.reshape(-1))
-        return rows
+    def gain(self, m: int) -> "_GainRows":
+        g = self._gains.get(m)
+        if g is None:
+            g = self._gains[m] = _GainRows(m, self.n)
+        return g
+
+
+class _GainRows:
+    """The arrays of an m-row update: [L^-1; (L^-T z)^T] (written through a flat view) and its
+    product with H P, whose first m rows are W and last row K y (views made once)."""
+
+    __slots__ = ("rows", "rows_flat", "product", "W", "dx")
+
+    def __init__(self, m: int, n: int) -> None:
+        self.rows = np.empty((m + 1, m))
+        self.rows_flat = self.rows.reshape(-1)
+        self.product = np.empty((m + 1, n))
+        self.W = self.product[:m]
+        self.dx = self.product[m]

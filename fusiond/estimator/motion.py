@@ -147,12 +147,14 @@ _NO_CROSS = (0.0,) * 6
 _NO_NOISE = (0.0,) * 6
 
 
-def _input_noise(ws: PredictWorkspace, j: int, G: mat3.Mat3, cov, scale: float) -> tuple:
-    """G (cov * scale) G^T of input j (0 linear, 1 angular), as ``mat3.sandwich`` (the same floats).
+def _input_noise(ws: PredictWorkspace, j: int, qd: list[float], G: mat3.Mat3, cov, scale: float) -> tuple:
+    """G (cov * scale) G^T of input j (0: linear, into Q's position block; 1: angular, attitude).
 
-    A sensor's covariance is usually diagonal and the same tuple for every prediction until its
-    next message: whether it is diagonal is decided once per tuple (by identity: tuples do not
-    change), and a diagonal one takes the column-scaling form.
+    Its diagonal is added into ``qd`` (Q's diagonal so far) in place; returned are its
+    off-diagonal entries in ``PredictWorkspace``'s order. A sensor's covariance is usually
+    diagonal and the same tuple for every prediction until its next message: whether it is
+    diagonal is decided once per tuple (by identity: tuples do not change), and a diagonal one
+    takes ``mat3.sandwich_diag`` (the same floats as ``mat3.sandwich``).
     """
     if cov is not ws._cov_seen[j]:
         diagonal = None
@@ -162,13 +164,14 @@ def _input_noise(ws: PredictWorkspace, j: int, G: mat3.Mat3, cov, scale: float) 
         ws._cov_seen[j] = cov if type(cov) is tuple else None  # a list could change in place: not kept
     d = ws._cov_diagonal[j]
     if d is None:
-        return mat3.sandwich(G, cov, scale)
-    return mat3.sandwich_diag(G, d[0], d[1], d[2], scale)
-
-
-def _row_major(block) -> list[float]:
-    """A block's columns of F (nested rows, as ``InputBlock.chain`` returns them) as one flat list."""
-    return [v for row in block for v in row]
+        (c00, c01, c02), (_, c11, c12), (_, _, c22) = mat3.sandwich(G, cov, scale)
+    else:
+        (c00, c01, c02), (_, c11, c12), (_, _, c22) = mat3.sandwich_diag(G, d[0], d[1], d[2], scale)
+    k = 3 * j
+    qd[k] = c00 + qd[k]
+    qd[k + 1] = c11 + qd[k + 1]
+    qd[k + 2] = c22 + qd[k + 2]
+    return (c01, c01, c02, c02, c12, c12)
 
 
 def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float) -> np.ndarray:
@@ -193,7 +196,7 @@ def predict(
     v = u.linear
     w = u.angular
     corrections = []
-    columns = ws._zero_columns.copy()  # each input block's columns of F; zeros unless it applies
+    columns = ws._zero_columns.copy()  # each input block's columns of F (row-major); zeros unless it applies
     for k, (blk, n0, n1, _) in enumerate(layout.input_blocks):
         if not blk.applies(u.from_gyro):
             continue
@@ -221,7 +224,7 @@ def predict(
     if u.planar:
         w = (0.0, 0.0, w[2])
     ax, ay, az = w[0] * dt, w[1] * dt, w[2] * dt
-    q1 = rot.normalize(rot.mul((qx, qy, qz, qw), rot.exp(ax, ay, az)))
+    q1 = rot.advance((qx, qy, qz, qw), ax, ay, az)  # q Exp(w dt)
     xl[0:7] = (px + dpx, py + dpy, pz + dpz, *q1)
     f_values = [*cross]
     dynamic = layout.dynamic_blocks
@@ -241,16 +244,18 @@ def predict(
     # input Jacobian, and G is carried through the block's d u_out / d u_in.
     for k, linear, blk, xb, u_in in reversed(corrections):
         if linear:
-            columns[k] = _row_major(blk.chain(G_lin, xb, u_in))
+            columns[k] = blk.chain(G_lin, xb, u_in)
             if blk.scales_input:
                 G_lin = mat3.mul(G_lin, blk.input_derivative(xb, u_in))
         else:
-            columns[k] = _row_major(blk.chain(G_ang, xb, u_in))
+            columns[k] = blk.chain(G_ang, xb, u_in)
             if blk.scales_input:
                 G_ang = mat3.mul(G_ang, blk.input_derivative(xb, u_in))
     for c in columns:
         f_values += c
-    ws._f_flat[ws._f_index] = f_values + decay
+    if decay:
+        f_values += decay
+    ws._f_flat[ws._f_index] = f_values
 
     # G_lin/G_ang now map the measured inputs, whose noise the covariances describe. Q's
     # diagonal is assembled in floats (input noise + density * dt + the blocks' own noise,
@@ -261,21 +266,16 @@ def predict(
             for blk, n0, e0 in dynamic:
                 for i, q in enumerate(blk.process_noise(dt)):
                     qd[e0 + i] += q
-        memory = 2.0 * u.twist_correlation  # odometry: a velocity error that lasts ~tau
-        off = []
-        for j, k, G, cov, scale in (
-            (0, 0, G_lin, u.linear_cov, max(u.linear_period, memory) / dt if u.linear_period > 0.0 else 0.0),
-            (1, 3, G_ang, u.angular_cov, u.angular_period / dt if u.angular_period > 0.0 else 0.0),
-        ):
-            if scale > 0.0:
-                (c00, c01, c02), (_, c11, c12), (_, _, c22) = _input_noise(ws, j, G, cov, scale)
-                qd[k] = c00 + qd[k]
-                qd[k + 1] = c11 + qd[k + 1]
-                qd[k + 2] = c22 + qd[k + 2]
-                off += (c01, c01, c02, c02, c12, c12)
-            else:
-                off += _NO_NOISE
-        ws._q_flat[ws._q_index] = qd + off
+        if u.linear_period > 0.0:  # odometry: a velocity error that lasts ~tau (module doc)
+            period = max(u.linear_period, 2.0 * u.twist_correlation)
+            qd += _input_noise(ws, 0, qd, G_lin, u.linear_cov, period / dt)
+        else:
+            qd += _NO_NOISE
+        if u.angular_period > 0.0:
+            qd += _input_noise(ws, 1, qd, G_ang, u.angular_cov, u.angular_period / dt)
+        else:
+            qd += _NO_NOISE
+        ws._q_flat[ws._q_index] = qd
     else:
         ws._q_flat[ws._q_index] = 0.0
     return x_new, ws.F, ws.Q

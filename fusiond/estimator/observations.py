@@ -56,7 +56,7 @@ def orientation(
     rows: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Observe the selected roll/pitch/yaw rows of the attitude; cov is row-major 3x3 (9-tuple)."""
-    h, Hrpy = rpy_jacobian(tuple(x[3:7].tolist()))
+    h, Hrpy = rpy_jacobian(x[3:7].tolist())
     y = np.array([rot.wrap(z_rpy[i] - h[i]) for i in rows])
     H = np.zeros((len(rows), layout.error_dim))
     for k, i in enumerate(rows):  # element by element: cheaper than a slice from nested lists

@@ -13,7 +13,6 @@ observations have an exactly zero yaw column and cannot leak into heading.
 
 from __future__ import annotations
 
-import operator
 from typing import Literal
 
 import numpy as np
@@ -124,13 +123,13 @@ class InputBlock(StateBlock):
         """
         return None
 
-    def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
-        """This block's columns of F: G (d state / d input, row-major 3x3) times the input Jacobian.
+    def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3) -> tuple[float, ...] | list[float]:
+        """This block's columns of F: G (d state / d input, row-major 3x3) times the input Jacobian,
+        as 3 x error_size floats, row-major (the motion model writes them into F at once).
 
-        Blocks may override it with a cheaper closed form; the result is anything
-        numpy can assign to a (3, error_size) slice.
+        Blocks may override it with a cheaper closed form.
         """
-        return np.dot(np.array(G).reshape(3, 3), self.input_jacobian(xb, u))
+        return np.dot(np.array(G).reshape(3, 3), self.input_jacobian(xb, u)).ravel().tolist()
 
 
 class GyroBiasBlock(InputBlock):
@@ -168,7 +167,7 @@ class GyroBiasBlock(InputBlock):
 
     def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
         g0, g1, g2, g3, g4, g5, g6, g7, g8 = G  # G (-I) = -G
-        return ((-g0, -g1, -g2), (-g3, -g4, -g5), (-g6, -g7, -g8))
+        return (-g0, -g1, -g2, -g3, -g4, -g5, -g6, -g7, -g8)
 
 
 class YawOffsetBlock(StateBlock):
@@ -254,7 +253,8 @@ class StateLayout:
         dl = dx.tolist()
         if self._additive_tail:
             self.blocks[0].boxplus(xl, dl, 0, 0)
-            xl[7:] = map(operator.add, xl[7:], dl[6:])  # x_i += dx_(i-1) after the quaternion
+            for i in range(7, len(xl)):  # after the quaternion's extra slot: x_i += dx_(i-1)
+                xl[i] += dl[i - 1]
         else:
             for b, n0, e0 in self._offsets:
                 b.boxplus(xl, dl, n0, e0)
