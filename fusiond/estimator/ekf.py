@@ -7,11 +7,14 @@ and the covariance update K S K^T = W^T W is symmetric by construction; a masked
 (Schmidt) update uses the Joseph form's closed form.
 
 Cost. For the 9-15 dimensional states here every numpy call costs more in
-dispatch than in arithmetic, so the per-step work is a fixed, short list of calls:
-P - K S K^T is written into a spare n x n buffer that is then swapped with P (P
-itself is never shared: copies and history snapshots copy it), with K S K^T in a
-per-dimension workspace. Checks on every step are the ones that guard the next
-step: a non-finite P is reset (counted in ``resets``), a negative variance clipped.
+dispatch than in arithmetic, so the per-step work is a fixed, short list of calls
+(products through ``ndarray.dot``, which skips np.dot's Python-level dispatch):
+the update forms H P once, takes W = L^-1 H P and K y in a single product with
+the small matrix [L^-1; (L^-T z)^T] (see ``cholesky.gain_rows``), and writes
+P - K S K^T into a spare n x n buffer that is then swapped with P (P itself is
+never shared: copies and history snapshots copy it). Checks on every step are the
+ones that guard the next step: a non-finite P is reset (counted in ``resets``), a
+negative variance clipped.
 Symmetrising is hygiene against rounding, not correctness (the gain uses P H^T
 only): ``cap_covariance``, called once per second of message time by the core, does
 it with the caps.
