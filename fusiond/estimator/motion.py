@@ -106,20 +106,21 @@ class PredictWorkspace:
     - Q: the diagonal and the off-diagonals of the two 3x3 input-noise blocks (position and
       attitude).
 
-    A step writes every one of them, with one fancy-index assignment per matrix from a flat
-    list of floats (zeros where a block does not apply this step or an input is silent), so
-    no entry keeps a value from an earlier step and there is nothing to put back.
-    The arrays belong to the workspace: valid until its next use.
+    F and Q are the two halves of one buffer, so a step writes every one of those entries with
+    a single fancy-index assignment from a flat list of floats (zeros where a block does not
+    apply this step or an input is silent): no entry keeps a value from an earlier step, and
+    there is nothing to put back. The arrays belong to the workspace: valid until its next use.
     """
 
-    __slots__ = ("F", "Q", "_f_flat", "_f_index", "_q_flat", "_q_index", "_zero_columns", "_cov_seen", "_cov_diagonal")
+    __slots__ = ("F", "Q", "_flat", "_index", "_q_entries", "_zero_columns", "_cov_seen", "_cov_diagonal")
 
     def __init__(self, layout: StateLayout) -> None:
         n = layout.error_dim
-        self.F = np.eye(n)
-        self.Q = np.zeros((n, n))
-        self._f_flat = self.F.reshape(-1)  # views: a write through them is a write into F and Q
-        self._q_flat = self.Q.reshape(-1)
+        buffer = np.zeros(2 * n * n)
+        self.F = buffer[: n * n].reshape(n, n)  # C-contiguous views of the buffer's halves
+        self.Q = buffer[n * n :].reshape(n, n)
+        self.F[np.diag_indices(n)] = 1.0
+        self._flat = buffer
         # F's written entries, in the order ``predict`` lists their values
         f = [r * n + c for r, c in _CROSS_ENTRIES]
         for blk, _, _, cols in layout.input_blocks:
@@ -127,13 +128,13 @@ class PredictWorkspace:
             f += [(r0 + r) * n + c for r in range(3) for c in range(cols.start, cols.stop)]
         for blk, _, e0 in layout.dynamic_blocks:
             f += [(e0 + i) * (n + 1) for i in range(blk.error_size)]
-        self._f_index = np.array(f, dtype=np.intp)
-        # Q's: the diagonal, then each noise block's (k, k+1), (k, k+2), (k+1, k+2) and their mirrors
+        # then Q's: the diagonal, then each noise block's (k, k+1), (k, k+2), (k+1, k+2) and their mirrors
         q = [i * (n + 1) for i in range(n)]
         for k in (_POSITION.start, _ATTITUDE.start):
             for a, b in ((k, k + 1), (k, k + 2), (k + 1, k + 2)):
                 q += [a * n + b, b * n + a]
-        self._q_index = np.array(q, dtype=np.intp)
+        self._index = np.array(f + [n * n + i for i in q], dtype=np.intp)
+        self._q_entries = len(q)
         # an input block's columns while it does not apply (row-major, 3 x error_size)
         self._zero_columns = [[0.0] * (3 * blk.error_size) for blk, _, _, _ in layout.input_blocks]
         # the last covariance tuple of each input (linear, angular) and its diagonal (None: not diagonal)
@@ -255,7 +256,6 @@ def predict(
         f_values += c
     if decay:
         f_values += decay
-    ws._f_flat[ws._f_index] = f_values
 
     # G_lin/G_ang now map the measured inputs, whose noise the covariances describe. Q's
     # diagonal is assembled in floats (input noise + density * dt + the blocks' own noise,
@@ -275,7 +275,8 @@ def predict(
             qd += _input_noise(ws, 1, qd, G_ang, u.angular_cov, u.angular_period / dt)
         else:
             qd += _NO_NOISE
-        ws._q_flat[ws._q_index] = qd
     else:
-        ws._q_flat[ws._q_index] = 0.0
+        qd = [0.0] * ws._q_entries
+    f_values += qd
+    ws._flat[ws._index] = f_values  # F's entries, then Q's
     return x_new, ws.F, ws.Q
