@@ -252,8 +252,13 @@ class StateLayout:
         xl = x.tolist()
         dl = dx.tolist()
         if self._additive_tail:
-            self.blocks[0].boxplus(xl, dl, 0, 0)
-            for i in range(7, len(xl)):  # after the quaternion's extra slot: x_i += dx_(i-1)
+            # PoseBlock.boxplus at offset 0 (p += dp, q = Exp(dtheta) q), then the additive blocks
+            # after the quaternion's extra slot: x_i += dx_(i-1)
+            xl[0] += dl[0]
+            xl[1] += dl[1]
+            xl[2] += dl[2]
+            xl[3:7] = rot.turn(dl[3], dl[4], dl[5], xl[3:7])
+            for i in range(7, len(xl)):
                 xl[i] += dl[i - 1]
         else:
             for b, n0, e0 in self._offsets:
