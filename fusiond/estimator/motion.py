@@ -211,12 +211,13 @@ def predict(
 
     px, py, pz, qx, qy, qz, qw = xl[0:7]
     vx, vy, vz = v
+    R = rot.matrix9((qx, qy, qz, qw))
     if u.world_frame:
         G_lin = (dt, 0.0, 0.0, 0.0, dt, 0.0, 0.0, 0.0, dt)
         dpx, dpy, dpz = vx * dt, vy * dt, vz * dt
         cross = _NO_CROSS
     else:
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = rot.matrix9((qx, qy, qz, qw))
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
         G_lin = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
         dpx = (r0 * vx + r1 * vy + r2 * vz) * dt
         dpy = (r3 * vx + r4 * vy + r5 * vz) * dt
@@ -236,7 +237,8 @@ def predict(
                 xl[n0 + i] *= a
                 decay.append(a)
     x_new = np.array(xl)
-    G_ang = mat3.mul(rot.matrix9(q1), _right_jacobian(ax, ay, az), dt)
+    # d theta' / d w = R' Jr(w dt) dt = R Exp(w dt) Jr(w dt) dt = R Jl(w dt) dt, Jl(phi) = Jr(-phi)
+    G_ang = mat3.mul(R, _right_jacobian(-ax, -ay, -az), dt)
     if u.planar:  # d w' / d w = P_z: the x/y columns go
         G_ang = (0.0, 0.0, G_ang[2], 0.0, 0.0, G_ang[5], 0.0, 0.0, G_ang[8])
 
