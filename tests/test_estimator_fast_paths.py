@@ -90,3 +90,32 @@ def test_input_noise_follows_a_covariance_that_changes():
     _, _, Q_ref = predict(layout, x, _inputs(changing, diag), 0.01, density)
     np.testing.assert_array_equal(Q, Q_ref)
     assert Q[0, 1] != 0.0  # the off-diagonal input noise is there
+
+
+def test_interleaved_masks_each_get_their_own_weights():
+    """Masked updates of two kinds (tilt, position) alternate in the core; the weights kept per mask
+    must be the ones of the mask at hand: the same floats as a filter that sees that mask first."""
+    from fusiond.estimator import ErrorStateEKF
+    from fusiond.estimator import observations as obs
+
+    layout = StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4)])
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(9, 9))
+    ekf = ErrorStateEKF(layout, P=A @ A.T * 1e-2 + np.eye(9) * 1e-3)
+    tilt = np.ones(9, dtype=bool)
+    tilt[[0, 1, 2, 5, 8]] = False
+    position = np.zeros(9, dtype=bool)
+    position[0:3] = True
+    cov3 = (1e-3, 0.0, 0.0, 0.0, 2e-3, 0.0, 0.0, 0.0, 3e-3)
+    for k in range(6):
+        mask = tilt if k % 2 == 0 else position
+        if mask is tilt:
+            y, H, R = obs.orientation(layout, ekf.x, (0.02, -0.01, 0.0), cov3, (0, 1))
+        else:
+            y, H, R = obs.position(layout, ekf.x, (0.1, -0.2, 0.05), cov3)
+        fresh = ErrorStateEKF(layout, x=ekf.x, P=ekf.P)  # has seen no mask yet
+        fresh.update(y, H, R, mask=mask)
+        ekf.update(y, H, R, mask=mask)
+        np.testing.assert_array_equal(ekf.P, fresh.P)
+        np.testing.assert_array_equal(ekf.x, fresh.x)
+    assert len(ekf._ws.masks) == 2

@@ -135,10 +135,17 @@ class ErrorStateEKF:
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 
     def _set_mask(self, mask: np.ndarray) -> None:
-        """The mask as floats and the Joseph weights J, made once per mask array (the core holds one
-        per kind of masked update)."""
-        keep = mask.astype(float)
-        self._mask, self._keep, self._joseph = mask, keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep)
+        """The mask as floats and the Joseph weights J, made once per mask array: the core holds one
+        array per kind of masked update (tilt, GPS position, pose delta), and updates of different
+        kinds interleave, so the workspace (shared with copies) keeps them all."""
+        masks = self._ws.masks
+        entry = masks.get(id(mask))
+        if entry is None or entry[0] is not mask:
+            if len(masks) >= _MASKS_KEPT:
+                masks.clear()
+            keep = mask.astype(float)
+            entry = masks[id(mask)] = (mask, keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep))
+        self._mask, self._keep, self._joseph = entry
 
     # -- covariance hygiene ------------------------------------------------
     def _store(self, P_new: np.ndarray) -> bool:
@@ -300,14 +307,20 @@ class ErrorStateEKF:
         return self.x.copy(), self.P.copy()
 
 
+_MASKS_KEPT = 8  # distinct masks held by a workspace (the core uses at most three)
+
+
 class _Workspace:
     """Per-dimension scratch for the products of one step (never holds state between calls)."""
 
-    __slots__ = ("n", "_gains")
+    __slots__ = ("n", "_gains", "masks")
 
     def __init__(self, n: int) -> None:
         self.n = n
         self._gains: dict[int, _GainRows] = {}
+        # id(mask) -> (mask, its floats, its Joseph weights); the mask itself is kept so that its id
+        # cannot be reused by another array while the entry lives
+        self.masks: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     def gain(self, m: int) -> "_GainRows":
         g = self._gains.get(m)
