@@ -45,6 +45,45 @@ def whiten(S: list[list[float]], y: list[float]) -> tuple[list[list[float]], lis
     return inv, [sum(a * b for a, b in zip(row, y)) for row in inv]
 
 
+def gain_rows(S: list[list[float]], y: list[float]) -> tuple[list[float], list[float]] | None:
+    """(z, rows) for S = L L^T, or None when S is not positive definite.
+
+    z = L^-1 y is the whitened innovation; ``rows`` is the (m + 1) x m matrix [L^-1; (L^-T z)^T]
+    row-major. Left-multiplying H P by it gives W = L^-1 H P and, in its last row, the
+    correction K y = P H^T S^-1 y = (H P)^T L^-T z, in one product. Closed forms for the 1x1
+    and 2x2 cases the IMU updates produce (the same floats as ``whiten``).
+    """
+    m = len(S)
+    if m == 1:
+        s = S[0][0]
+        if not s > 0.0 or s == math.inf:
+            return None
+        r = 1.0 / math.sqrt(s)
+        z0 = y[0] * r
+        return [z0], [r, z0 * r]
+    if m == 2:
+        a, b, c = S[0][0], S[1][0], S[1][1]
+        if not a > 0.0 or a == math.inf:
+            return None
+        l00 = math.sqrt(a)
+        l10 = b / l00
+        d = c - l10 * l10
+        if not d > 0.0 or d == math.inf:
+            return None
+        l11 = math.sqrt(d)
+        i00, i11 = 1.0 / l00, 1.0 / l11
+        i10 = -l10 * i00 * i11
+        z0, z1 = i00 * y[0], i10 * y[0] + i11 * y[1]
+        return [z0, z1], [i00, 0.0, i10, i11, z0 * i00 + z1 * i10, z1 * i11]
+    white = whiten(S, y)
+    if white is None:
+        return None
+    inv, z = white
+    rows = [v for row in inv for v in row]
+    rows += [sum([z[i] * inv[i][j] for i in range(j, m)]) for j in range(m)]  # L^-T z
+    return z, rows
+
+
 def factor(S: list[list[float]]) -> list[list[float]] | None:
     """Lower-triangular L with S = L L^T, or None when S is not positive definite."""
     m = len(S)

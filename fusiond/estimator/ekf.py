@@ -7,11 +7,14 @@ and the covariance update K S K^T = W^T W is symmetric by construction; a masked
 (Schmidt) update uses the Joseph form's closed form.
 
 Cost. For the 9-15 dimensional states here every numpy call costs more in
-dispatch than in arithmetic, so the per-step work is a fixed, short list of calls:
-P - K S K^T is written into a spare n x n buffer that is then swapped with P (P
-itself is never shared: copies and history snapshots copy it), with K S K^T in a
-per-dimension workspace. Checks on every step are the ones that guard the next
-step: a non-finite P is reset (counted in ``resets``), a negative variance clipped.
+dispatch than in arithmetic, so the per-step work is a fixed, short list of calls
+(products through ``ndarray.dot``, which skips np.dot's Python-level dispatch):
+the update forms H P once, takes W = L^-1 H P and K y in a single product with
+the small matrix [L^-1; (L^-T z)^T] (see ``cholesky.gain_rows``), and writes
+P - K S K^T into a spare n x n buffer that is then swapped with P (P itself is
+never shared: copies and history snapshots copy it). Checks on every step are the
+ones that guard the next step: a non-finite P is reset (counted in ``resets``), a
+negative variance clipped.
 Symmetrising is hygiene against rounding, not correctness (the gain uses P H^T
 only): ``cap_covariance``, called once per second of message time by the core, does
 it with the caps.
@@ -24,7 +27,7 @@ import math
 import msgspec
 import numpy as np
 from . import rotation as rot
-from .cholesky import whiten
+from .cholesky import gain_rows
 from .state import StateLayout
 
 
@@ -50,28 +53,20 @@ class ErrorStateEKF:
         # Covariance resets after a non-finite value, in propagate and update alike. It travels
         # with copies, so a history snapshot knows how many resets its timeline has had.
         self.resets = 0
-        self._mask: np.ndarray | None = None
-        self._weights = np.ones((layout.error_dim, layout.error_dim))
+        self._mask: np.ndarray | None = None  # the last mask seen, with its float form and weights
+        self._keep: np.ndarray | None = None
+        self._joseph: np.ndarray | None = None
         self._spare: np.ndarray | None = None  # the next P's buffer (never self.P); allocated on first use
-        self._ws: _Workspace | None = None  # scratch shared with copies (single-threaded use per core)
-
-    def _buffers(self) -> tuple[np.ndarray, "_Workspace"]:
-        # P's shape is the layout's for the filter's whole life: only a missing buffer is made here
-        spare, ws = self._spare, self._ws
-        if spare is None:
-            n = self.P.shape[0]
-            spare = self._spare = np.empty((n, n))
-        if ws is None:
-            ws = self._ws = _Workspace(self.P.shape[0])
-        return spare, ws
+        self._ws = _Workspace(layout.error_dim)  # scratch shared with copies (single-threaded use per core)
 
     # -- propagation -------------------------------------------------------
     def propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
         """Accept a propagated state; False if the covariance had to be reset."""
         self.x = x_new
         # Two fresh products: measured faster than np.dot(..., out=) into the workspace at these
-        # sizes (the out= path's checks cost more than a 9x9 allocation).
-        P_new = np.dot(np.dot(F, self.P), F.T)
+        # sizes (the out= path's checks cost more than a 9x9 allocation). ndarray.dot is np.dot
+        # without its Python-level dispatch (~0.2 us a call here), so the products use the method.
+        P_new = F.dot(self.P).dot(F.T)
         P_new += Q
         # The diagonal is enough (as in ``_store``): a NaN/inf in F's row i makes (F P F^T)_ii
         # non-finite (inf * 0 is NaN too), and Q's off-diagonal entries come from the same rows
@@ -95,44 +90,62 @@ class ErrorStateEKF:
         uses it so that correlations in P cannot leak it into heading or position.
         """
         P = self.P
-        PHt = np.dot(P, H.T)
-        S = np.dot(H, PHt)
+        HP = H.dot(P)  # H P = (P H^T)^T: P is symmetric
+        S = HP.dot(H.T)
         S += R
         S_rows = S.tolist()
-        s_diag = [S_rows[i][i] for i in range(len(S_rows))]
-        white = whiten(S_rows, y.tolist())
-        if white is None:
+        s_diag = [row[i] for i, row in enumerate(S_rows)]
+        solved = gain_rows(S_rows, y.tolist())
+        if solved is None:
             return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
-        Linv, z = white  # z = L^-1 y, the whitened innovation
+        z, rows = solved  # z = L^-1 y, the whitened innovation; rows = [L^-1; (L^-T z)^T]
         # fsum: the NIS gates and feeds the consistency tests; for one or two terms a float
         # addition is already the correctly rounded sum, so it is used there (the same bits).
-        if len(z) <= 2:
-            nis = sum([v * v for v in z])
+        m = len(z)
+        if m == 2:
+            nis = z[0] * z[0] + z[1] * z[1]
+        elif m == 1:
+            nis = z[0] * z[0]
         else:
             nis = math.fsum([v * v for v in z])
         if not math.isfinite(nis):
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
         if nis > threshold * threshold:
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
-        W = np.dot(Linv, PHt.T)  # L^-1 H P
-        dx = np.dot(z, W)  # K y = P H^T S^-1 y = W^T z
-        P_new, ws = self._buffers()
-        C = np.dot(W.T, W, out=ws.nn)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
+        # One product gives both W = L^-1 H P and the correction K y = P H^T S^-1 y = (H P)^T L^-T z:
+        # [W; (K y)^T] = [L^-1; (L^-T z)^T] H P, its m + 1 rows on the left written in place.
+        g = self._ws.gain(m)
+        g.rows_flat[:] = rows
+        g.rows.dot(HP, g.product)  # into g.product: g.W and g.dx are views of its rows
+        W, dx = g.W, g.dx
+        P_new = self._spare
+        if P_new is None:
+            P_new = self._spare = np.empty_like(P)
+        C = W.T.dot(W)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
         if mask is not None:
             # Gain rows zeroed by the mask (M K): Joseph's P - MKHP - PH^TK^TM + MKSK^TM
-            # collapses to P - C * W with W_ij = 1 - (1 - m_i)(1 - m_j).
-            dx *= mask
-            C *= self._mask_weights(mask)
+            # collapses to P - C * J with J_ij = 1 - (1 - m_i)(1 - m_j).
+            if mask is not self._mask:
+                self._set_mask(mask)
+            dx *= self._keep
+            C *= self._joseph
         np.subtract(P, C, out=P_new)
         self.layout.boxplus(self.x, dx)
         reset = not self._store(P_new)
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 
-    def _mask_weights(self, mask: np.ndarray) -> np.ndarray:
-        if self._mask is not mask:
-            keep = 1.0 - mask.astype(float)
-            self._mask, self._weights = mask, 1.0 - np.outer(keep, keep)
-        return self._weights
+    def _set_mask(self, mask: np.ndarray) -> None:
+        """The mask as floats and the Joseph weights J, made once per mask array: the core holds one
+        array per kind of masked update (tilt, GPS position, pose delta), and updates of different
+        kinds interleave, so the workspace (shared with copies) keeps them all."""
+        masks = self._ws.masks
+        entry = masks.get(id(mask))
+        if entry is None or entry[0] is not mask:
+            if len(masks) >= _MASKS_KEPT:
+                masks.clear()
+            keep = mask.astype(float)
+            entry = masks[id(mask)] = (mask, keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep))
+        self._mask, self._keep, self._joseph = entry
 
     # -- covariance hygiene ------------------------------------------------
     def _store(self, P_new: np.ndarray) -> bool:
@@ -286,7 +299,7 @@ class ErrorStateEKF:
             np.copyto(c.P, self.P)
         c.layout = self.layout
         c.resets = self.resets
-        c._mask, c._weights = self._mask, self._weights
+        c._mask, c._keep, c._joseph = self._mask, self._keep, self._joseph
         c._ws = self._ws
         return c
 
@@ -294,11 +307,37 @@ class ErrorStateEKF:
         return self.x.copy(), self.P.copy()
 
 
+_MASKS_KEPT = 8  # distinct masks held by a workspace (the core uses at most three)
+
+
 class _Workspace:
     """Per-dimension scratch for the products of one step (never holds state between calls)."""
 
-    __slots__ = ("n", "nn")
+    __slots__ = ("n", "_gains", "masks")
 
     def __init__(self, n: int) -> None:
         self.n = n
-        self.nn = np.empty((n, n))
+        self._gains: dict[int, _GainRows] = {}
+        # id(mask) -> (mask, its floats, its Joseph weights); the mask itself is kept so that its id
+        # cannot be reused by another array while the entry lives
+        self.masks: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def gain(self, m: int) -> "_GainRows":
+        g = self._gains.get(m)
+        if g is None:
+            g = self._gains[m] = _GainRows(m, self.n)
+        return g
+
+
+class _GainRows:
+    """The arrays of an m-row update: [L^-1; (L^-T z)^T] (written through a flat view) and its
+    product with H P, whose first m rows are W and last row K y (views made once)."""
+
+    __slots__ = ("rows", "rows_flat", "product", "W", "dx")
+
+    def __init__(self, m: int, n: int) -> None:
+        self.rows = np.empty((m + 1, m))
+        self.rows_flat = self.rows.reshape(-1)
+        self.product = np.empty((m + 1, n))
+        self.W = self.product[:m]
+        self.dx = self.product[m]

@@ -33,6 +33,25 @@ def sandwich(A: Mat3, S: Mat3, scale: float = 1.0) -> tuple:
     return ((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))
 
 
+def sandwich_diag(A: Mat3, s0: float, s4: float, s8: float, scale: float = 1.0) -> tuple:
+    """``sandwich`` for a diagonal S = diag(s0, s4, s8) (the usual sensor covariance).
+
+    M = A S scales A's columns; the products are the general ones' floats (their other terms
+    are exact zeros), so both give the same bits.
+    """
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
+    m0, m1, m2 = a0 * s0, a1 * s4, a2 * s8
+    m3, m4, m5 = a3 * s0, a4 * s4, a5 * s8
+    m6, m7, m8 = a6 * s0, a7 * s4, a8 * s8
+    c00 = (m0 * a0 + m1 * a1 + m2 * a2) * scale
+    c01 = (m0 * a3 + m1 * a4 + m2 * a5) * scale
+    c02 = (m0 * a6 + m1 * a7 + m2 * a8) * scale
+    c11 = (m3 * a3 + m4 * a4 + m5 * a5) * scale
+    c12 = (m3 * a6 + m4 * a7 + m5 * a8) * scale
+    c22 = (m6 * a6 + m7 * a7 + m8 * a8) * scale
+    return ((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))
+
+
 def mul(A: Mat3, B: Mat3, k: float = 1.0) -> Mat3:
     """k * A B for row-major 3x3 tuples."""
     a0, a1, a2, a3, a4, a5, a6, a7, a8 = A

@@ -97,32 +97,82 @@ class PredictWorkspace:
     """F and Q of one layout, preallocated and rewritten in place by each ``predict``.
 
     Building F from an identity copy and Q as a fresh dense matrix, block by block from
-    nested tuples, cost more than the arithmetic (each numpy call on a 3x3 is ~1 us). Here
-    F stays the identity except for the entries a step writes, and Q stays zero except for
-    its diagonal and the off-diagonal entries of the two input blocks: a step writes exactly
-    those (scalars or small slices, whichever numpy takes faster), and puts back to identity
-    or zero what the previous step wrote and this one does not (an input block that no
-    longer applies, an input that went silent).
-    The arrays belong to the workspace: valid until its next use.
+    nested tuples, cost more than the arithmetic (each numpy call on a 3x3 is ~1 us, and a
+    scalar write ~0.1 us). Here F stays the identity and Q zero except for a fixed set of
+    entries, fixed by the layout alone:
+
+    - F: the off-diagonal of F[0:3, 3:6] (-[R v dt]x), each input block's columns in the
+      rows of the input it corrects, each dynamic block's diagonal;
+    - Q: the diagonal and the off-diagonals of the two 3x3 input-noise blocks (position and
+      attitude).
+
+    F and Q are the two halves of one buffer, so a step writes every one of those entries with
+    a single fancy-index assignment from a flat list of floats (zeros where a block does not
+    apply this step or an input is silent): no entry keeps a value from an earlier step, and
+    there is nothing to put back. The arrays belong to the workspace: valid until its next use.
     """
 
-    __slots__ = ("F", "Q", "_q_diag", "_inputs_written", "_noise_written")
+    __slots__ = ("F", "Q", "_flat", "_index", "_q_entries", "_zero_columns", "_cov_seen", "_cov_diagonal")
 
     def __init__(self, layout: StateLayout) -> None:
         n = layout.error_dim
-        self.F = np.eye(n)
-        self.Q = np.zeros((n, n))
-        # a writable view of Q's diagonal (np.diagonal's is read-only)
-        self._q_diag = np.lib.stride_tricks.as_strided(self.Q, (n,), (self.Q.strides[0] + self.Q.strides[1],))
-        self._inputs_written = [False] * len(layout.input_blocks)
-        self._noise_written = [False, False]  # Q's linear / angular 3x3 off-diagonals hold values
+        buffer = np.zeros(2 * n * n)
+        self.F = buffer[: n * n].reshape(n, n)  # C-contiguous views of the buffer's halves
+        self.Q = buffer[n * n :].reshape(n, n)
+        self.F[np.diag_indices(n)] = 1.0
+        self._flat = buffer
+        # F's written entries, in the order ``predict`` lists their values
+        f = [r * n + c for r, c in _CROSS_ENTRIES]
+        for blk, _, _, cols in layout.input_blocks:
+            r0 = _POSITION.start if blk.corrects == "linear" else _ATTITUDE.start
+            f += [(r0 + r) * n + c for r in range(3) for c in range(cols.start, cols.stop)]
+        for blk, _, e0 in layout.dynamic_blocks:
+            f += [(e0 + i) * (n + 1) for i in range(blk.error_size)]
+        # then Q's: the diagonal, then each noise block's (k, k+1), (k, k+2), (k+1, k+2) and their mirrors
+        q = [i * (n + 1) for i in range(n)]
+        for k in (_POSITION.start, _ATTITUDE.start):
+            for a, b in ((k, k + 1), (k, k + 2), (k + 1, k + 2)):
+                q += [a * n + b, b * n + a]
+        self._index = np.array(f + [n * n + i for i in q], dtype=np.intp)
+        self._q_entries = len(q)
+        # an input block's columns while it does not apply (row-major, 3 x error_size)
+        self._zero_columns = [[0.0] * (3 * blk.error_size) for blk, _, _, _ in layout.input_blocks]
+        # the last covariance tuple of each input (linear, angular) and its diagonal (None: not diagonal)
+        self._cov_seen: list[tuple | None] = [None, None]
+        self._cov_diagonal: list[tuple[float, float, float] | None] = [None, None]
 
 
-def _put_noise_offdiagonal(Q: np.ndarray, k: int, c01: float, c02: float, c12: float) -> None:
-    """The off-diagonal entries of the symmetric 3x3 block of Q at (k, k)."""
-    Q[k, k + 1] = Q[k + 1, k] = c01
-    Q[k, k + 2] = Q[k + 2, k] = c02
-    Q[k + 1, k + 2] = Q[k + 2, k + 1] = c12
+# F[0:3, 3:6] = -[dp]x: its off-diagonal entries, row-major (the diagonal stays 0)
+_CROSS_ENTRIES = ((0, 4), (0, 5), (1, 3), (1, 5), (2, 3), (2, 4))
+_NO_CROSS = (0.0,) * 6
+_NO_NOISE = (0.0,) * 6
+
+
+def _input_noise(ws: PredictWorkspace, j: int, qd: list[float], G: mat3.Mat3, cov, scale: float) -> tuple:
+    """G (cov * scale) G^T of input j (0: linear, into Q's position block; 1: angular, attitude).
+
+    Its diagonal is added into ``qd`` (Q's diagonal so far) in place; returned are its
+    off-diagonal entries in ``PredictWorkspace``'s order. A sensor's covariance is usually
+    diagonal and the same tuple for every prediction until its next message: whether it is
+    diagonal is decided once per tuple (by identity: tuples do not change), and a diagonal one
+    takes ``mat3.sandwich_diag`` (the same floats as ``mat3.sandwich``).
+    """
+    if cov is not ws._cov_seen[j]:
+        diagonal = None
+        if cov[1] == 0.0 and cov[2] == 0.0 and cov[3] == 0.0 and cov[5] == 0.0 and cov[6] == 0.0 and cov[7] == 0.0:
+            diagonal = (float(cov[0]), float(cov[4]), float(cov[8]))
+        ws._cov_diagonal[j] = diagonal
+        ws._cov_seen[j] = cov if type(cov) is tuple else None  # a list could change in place: not kept
+    d = ws._cov_diagonal[j]
+    if d is None:
+        (c00, c01, c02), (_, c11, c12), (_, _, c22) = mat3.sandwich(G, cov, scale)
+    else:
+        (c00, c01, c02), (_, c11, c12), (_, _, c22) = mat3.sandwich_diag(G, d[0], d[1], d[2], scale)
+    k = 3 * j
+    qd[k] = c00 + qd[k]
+    qd[k + 1] = c11 + qd[k + 1]
+    qd[k + 2] = c22 + qd[k + 2]
+    return (c01, c01, c02, c02, c12, c12)
 
 
 def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float) -> np.ndarray:
@@ -143,100 +193,92 @@ def predict(
     """
     if ws is None:
         ws = PredictWorkspace(layout)
-    F, Q = ws.F, ws.Q
     xl = x.tolist()
     v = u.linear
     w = u.angular
     corrections = []
-    written = ws._inputs_written
-    for k, (blk, n0, n1, cols) in enumerate(layout.input_blocks):
+    columns = ws._zero_columns.copy()  # each input block's columns of F (row-major); zeros unless it applies
+    for k, (blk, n0, n1, _) in enumerate(layout.input_blocks):
         if not blk.applies(u.from_gyro):
-            if written[k]:  # its columns of F from an earlier step: back to the identity's zeros
-                F[_POSITION if blk.corrects == "linear" else _ATTITUDE, cols] = 0.0
-                written[k] = False
             continue
-        written[k] = True
         xb = xl[n0:n1]
         if blk.corrects == "linear":
-            corrections.append((_POSITION, cols, blk, xb, v))
+            corrections.append((k, True, blk, xb, v))
             v = blk.correct(xb, v)
         else:
-            corrections.append((_ATTITUDE, cols, blk, xb, w))
+            corrections.append((k, False, blk, xb, w))
             w = blk.correct(xb, w)
 
     px, py, pz, qx, qy, qz, qw = xl[0:7]
     vx, vy, vz = v
+    R = rot.matrix9((qx, qy, qz, qw))
     if u.world_frame:
         G_lin = (dt, 0.0, 0.0, 0.0, dt, 0.0, 0.0, 0.0, dt)
         dpx, dpy, dpz = vx * dt, vy * dt, vz * dt
-        F[0, 4] = F[0, 5] = F[1, 3] = F[1, 5] = F[2, 3] = F[2, 4] = 0.0
+        cross = _NO_CROSS
     else:
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = rot.matrix9((qx, qy, qz, qw))
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
         G_lin = (r0 * dt, r1 * dt, r2 * dt, r3 * dt, r4 * dt, r5 * dt, r6 * dt, r7 * dt, r8 * dt)
         dpx = (r0 * vx + r1 * vy + r2 * vz) * dt
         dpy = (r3 * vx + r4 * vy + r5 * vz) * dt
         dpz = (r6 * vx + r7 * vy + r8 * vz) * dt
-        # F[0:3, 3:6] = -[dp]x
-        F[0, 4], F[0, 5] = dpz, -dpy
-        F[1, 3], F[1, 5] = -dpz, dpx
-        F[2, 3], F[2, 4] = dpy, -dpx
+        cross = (dpz, -dpy, -dpz, dpx, dpy, -dpx)  # F[0:3, 3:6] = -[dp]x at _CROSS_ENTRIES
     if u.planar:
         w = (0.0, 0.0, w[2])
     ax, ay, az = w[0] * dt, w[1] * dt, w[2] * dt
-    q1 = rot.normalize(rot.mul((qx, qy, qz, qw), rot.exp(ax, ay, az)))
+    q1 = rot.advance((qx, qy, qz, qw), ax, ay, az)  # q Exp(w dt)
     xl[0:7] = (px + dpx, py + dpy, pz + dpz, *q1)
+    f_values = [*cross]
     dynamic = layout.dynamic_blocks
+    decay: list[float] = []
     if dynamic:  # blocks with their own dynamics (Gauss-Markov errors): x' = a x, F diagonal a
-        for blk, n0, e0 in dynamic:
+        for blk, n0, _ in dynamic:
             for i, a in enumerate(blk.transition(dt)):
                 xl[n0 + i] *= a
-                F[e0 + i, e0 + i] = a
+                decay.append(a)
     x_new = np.array(xl)
-    G_ang = mat3.mul(rot.matrix9(q1), _right_jacobian(ax, ay, az), dt)
+    # d theta' / d w = R' Jr(w dt) dt = R Exp(w dt) Jr(w dt) dt = R Jl(w dt) dt, Jl(phi) = Jr(-phi)
+    G_ang = mat3.mul(R, _right_jacobian(-ax, -ay, -az), dt)
     if u.planar:  # d w' / d w = P_z: the x/y columns go
         G_ang = (0.0, 0.0, G_ang[2], 0.0, 0.0, G_ang[5], 0.0, 0.0, G_ang[8])
 
     # Blocks correct an input in turn (u1 = g1(u0), u2 = g2(u1), ...): walking them
     # backwards, each block's columns are G d u_last / d u_its_output times its own
     # input Jacobian, and G is carried through the block's d u_out / d u_in.
-    for rows, cols, blk, xb, u_in in reversed(corrections):
-        if rows is _POSITION:
-            F[rows, cols] = blk.chain(G_lin, xb, u_in)
+    for k, linear, blk, xb, u_in in reversed(corrections):
+        if linear:
+            columns[k] = blk.chain(G_lin, xb, u_in)
             if blk.scales_input:
                 G_lin = mat3.mul(G_lin, blk.input_derivative(xb, u_in))
         else:
-            F[rows, cols] = blk.chain(G_ang, xb, u_in)
+            columns[k] = blk.chain(G_ang, xb, u_in)
             if blk.scales_input:
                 G_ang = mat3.mul(G_ang, blk.input_derivative(xb, u_in))
+    for c in columns:
+        f_values += c
+    if decay:
+        f_values += decay
 
     # G_lin/G_ang now map the measured inputs, whose noise the covariances describe. Q's
     # diagonal is assembled in floats (input noise + density * dt + the blocks' own noise,
-    # summed in that order) and written at once; the input blocks' off-diagonals as scalars.
-    noise_written = ws._noise_written
+    # summed in that order), then the input blocks' off-diagonals; all written at once.
     if dt > 0.0:
         qd = [d * dt for d in noise_density.tolist()]
         if dynamic:
             for blk, n0, e0 in dynamic:
                 for i, q in enumerate(blk.process_noise(dt)):
                     qd[e0 + i] += q
-        memory = 2.0 * u.twist_correlation  # odometry: a velocity error that lasts ~tau
-        blocks = (
-            (0, G_lin, u.linear_cov, max(u.linear_period, memory) / dt if u.linear_period > 0.0 else 0.0),
-            (3, G_ang, u.angular_cov, u.angular_period / dt if u.angular_period > 0.0 else 0.0),
-        )
-        for j, (k, G, cov, scale) in enumerate(blocks):
-            if scale > 0.0:
-                (c00, c01, c02), (_, c11, c12), (_, _, c22) = mat3.sandwich(G, cov, scale)
-                qd[k] = c00 + qd[k]
-                qd[k + 1] = c11 + qd[k + 1]
-                qd[k + 2] = c22 + qd[k + 2]
-                _put_noise_offdiagonal(Q, k, c01, c02, c12)
-                noise_written[j] = True
-            elif noise_written[j]:
-                _put_noise_offdiagonal(Q, k, 0.0, 0.0, 0.0)
-                noise_written[j] = False
-        ws._q_diag[:] = qd
+        if u.linear_period > 0.0:  # odometry: a velocity error that lasts ~tau (module doc)
+            period = max(u.linear_period, 2.0 * u.twist_correlation)
+            qd += _input_noise(ws, 0, qd, G_lin, u.linear_cov, period / dt)
+        else:
+            qd += _NO_NOISE
+        if u.angular_period > 0.0:
+            qd += _input_noise(ws, 1, qd, G_ang, u.angular_cov, u.angular_period / dt)
+        else:
+            qd += _NO_NOISE
     else:
-        Q[...] = 0.0
-        noise_written[0] = noise_written[1] = False
-    return x_new, F, Q
+        qd = [0.0] * ws._q_entries
+    f_values += qd
+    ws._flat[ws._index] = f_values  # F's entries, then Q's
+    return x_new, ws.F, ws.Q

@@ -56,12 +56,13 @@ def orientation(
     rows: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Observe the selected roll/pitch/yaw rows of the attitude; cov is row-major 3x3 (9-tuple)."""
-    h, Hrpy = rpy_jacobian(tuple(x[3:7].tolist()))
-    y = np.array([rot.wrap(z_rpy[i] - h[i]) for i in rows])
+    h, Hrpy = rpy_jacobian(x[3:7].tolist())
     H = np.zeros((len(rows), layout.error_dim))
-    for k, i in enumerate(rows):  # element by element: cheaper than a slice from nested lists
+    residual = []
+    for k, i in enumerate(rows):  # H element by element: cheaper than a slice from nested lists
+        residual.append(rot.wrap(z_rpy[i] - h[i]))
         H[k, 3], H[k, 4], H[k, 5] = Hrpy[i]
-    return y, H, _noise_rows(cov, rows)
+    return np.array(residual), H, _noise_rows(cov, rows)
 
 
 _NOISE_CACHE: dict[tuple[tuple[float, ...], tuple[int, ...]], np.ndarray] = {}

@@ -58,6 +58,47 @@ def exp(vx: float, vy: float, vz: float) -> Quat:
     return (vx * s, vy * s, vz * s, math.cos(0.5 * angle))
 
 
+def advance(q: Quat, vx: float, vy: float, vz: float) -> Quat:
+    """normalize(mul(q, exp(v))): q moved by the body-frame rotation vector v (attitude
+    propagation), in one call: the same float expressions as the three."""
+    angle = math.sqrt(vx * vx + vy * vy + vz * vz)
+    if angle < 1e-8:
+        bx, by, bz, bw = normalize((0.5 * vx, 0.5 * vy, 0.5 * vz, 1.0 - angle * angle / 8.0))
+    else:
+        s = math.sin(0.5 * angle) / angle
+        bx, by, bz, bw = vx * s, vy * s, vz * s, math.cos(0.5 * angle)
+    ax, ay, az, aw = q
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    w = aw * bw - ax * bx - ay * by - az * bz
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not n > 0.0 or not math.isfinite(n):
+        raise EstimatorError("quaternion has zero or non-finite norm")
+    return (x / n, y / n, z / n, w / n)
+
+
+def turn(vx: float, vy: float, vz: float, q: Quat) -> Quat:
+    """normalize(mul(exp(v), q)): q turned by the world-frame rotation vector v (the global
+    attitude boxplus), in one call: the same float expressions as the three, which cost more
+    in calls than in arithmetic on this path."""
+    angle = math.sqrt(vx * vx + vy * vy + vz * vz)
+    if angle < 1e-8:
+        ax, ay, az, aw = normalize((0.5 * vx, 0.5 * vy, 0.5 * vz, 1.0 - angle * angle / 8.0))
+    else:
+        s = math.sin(0.5 * angle) / angle
+        ax, ay, az, aw = vx * s, vy * s, vz * s, math.cos(0.5 * angle)
+    bx, by, bz, bw = q
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    w = aw * bw - ax * bx - ay * by - az * bz
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not n > 0.0 or not math.isfinite(n):
+        raise EstimatorError("quaternion has zero or non-finite norm")
+    return (x / n, y / n, z / n, w / n)
+
+
 def log(q: Quat) -> tuple[float, float, float]:
     """Rotation vector of q, angle in [0, pi]: q and -q give the same answer."""
     x, y, z, w = q

@@ -55,7 +55,7 @@ class WheelScaleBlock(_ScalarScale):
     def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
         g0, g1, g2, g3, g4, g5, g6, g7, g8 = G
         a, b, c = u
-        return ((g0 * a + g1 * b + g2 * c,), (g3 * a + g4 * b + g5 * c,), (g6 * a + g7 * b + g8 * c,))
+        return (g0 * a + g1 * b + g2 * c, g3 * a + g4 * b + g5 * c, g6 * a + g7 * b + g8 * c)
 
 
 class GyroScaleBlock(_ScalarScale):
@@ -82,4 +82,4 @@ class GyroScaleBlock(_ScalarScale):
 
     def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
         wz = u[2]
-        return ((G[2] * wz,), (G[5] * wz,), (G[8] * wz,))
+        return (G[2] * wz, G[5] * wz, G[8] * wz)

@@ -84,11 +84,11 @@ class PoseBlock(StateBlock):
         return [self.position_sigma] * 3 + [self.attitude_sigma] * 3
 
     def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
+        # p += dp; q = Exp(dtheta) q (global attitude error)
         x[n0] += dx[e0]
         x[n0 + 1] += dx[e0 + 1]
         x[n0 + 2] += dx[e0 + 2]
-        q = rot.mul(rot.exp(dx[e0 + 3], dx[e0 + 4], dx[e0 + 5]), (x[n0 + 3], x[n0 + 4], x[n0 + 5], x[n0 + 6]))
-        x[n0 + 3 : n0 + 7] = rot.normalize(q)
+        x[n0 + 3 : n0 + 7] = rot.turn(dx[e0 + 3], dx[e0 + 4], dx[e0 + 5], x[n0 + 3 : n0 + 7])
 
 
 InputName = Literal["linear", "angular"]
@@ -123,13 +123,13 @@ class InputBlock(StateBlock):
         """
         return None
 
-    def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
-        """This block's columns of F: G (d state / d input, row-major 3x3) times the input Jacobian.
+    def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3) -> tuple[float, ...] | list[float]:
+        """This block's columns of F: G (d state / d input, row-major 3x3) times the input Jacobian,
+        as 3 x error_size floats, row-major (the motion model writes them into F at once).
 
-        Blocks may override it with a cheaper closed form; the result is anything
-        numpy can assign to a (3, error_size) slice.
+        Blocks may override it with a cheaper closed form.
         """
-        return np.dot(np.array(G).reshape(3, 3), self.input_jacobian(xb, u))
+        return np.dot(np.array(G).reshape(3, 3), self.input_jacobian(xb, u)).ravel().tolist()
 
 
 class GyroBiasBlock(InputBlock):
@@ -167,7 +167,7 @@ class GyroBiasBlock(InputBlock):
 
     def chain(self, G: tuple[float, ...], xb: list[float], u: Vec3):
         g0, g1, g2, g3, g4, g5, g6, g7, g8 = G  # G (-I) = -G
-        return ((-g0, -g1, -g2), (-g3, -g4, -g5), (-g6, -g7, -g8))
+        return (-g0, -g1, -g2, -g3, -g4, -g5, -g6, -g7, -g8)
 
 
 class YawOffsetBlock(StateBlock):
@@ -252,7 +252,12 @@ class StateLayout:
         xl = x.tolist()
         dl = dx.tolist()
         if self._additive_tail:
-            self.blocks[0].boxplus(xl, dl, 0, 0)
+            # PoseBlock.boxplus at offset 0 (p += dp, q = Exp(dtheta) q), then the additive blocks
+            # after the quaternion's extra slot: x_i += dx_(i-1)
+            xl[0] += dl[0]
+            xl[1] += dl[1]
+            xl[2] += dl[2]
+            xl[3:7] = rot.turn(dl[3], dl[4], dl[5], xl[3:7])
             for i in range(7, len(xl)):
                 xl[i] += dl[i - 1]
         else:
