@@ -23,7 +23,7 @@ from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...estimator import rotation as rot
 from ...estimator.geodesy import EnuFrame
 from ...samples import GpsSample, ImuSample, OdomSample
-from ..updates.imu import G_UNITS_BAND, GRAVITY
+from ..sensors.imu import G_UNITS_BAND, GRAVITY
 
 BIN_S = 0.2  # series resolution: 5 Hz
 REORDER_S = 1.0  # samples are integrated in stamp order once they are this much older than the newest
