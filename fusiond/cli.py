@@ -80,8 +80,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
             print(f"report      {index}")
     if not args.quiet:
         print(summary(result))
-    if result.final is None:
-        return 1
+    if result.final is None or result.poses == 0:
+        return 1  # nothing fused, or nothing published (the summary says why)
     return 0
 
 

@@ -125,7 +125,7 @@ class ImuSensor(_Sensor, tag="imu"):
     gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics
     # absolute yaw, as navsat_transform: yaw in ENU = reading + yaw_offset + magnetic_declination (rad)
     yaw_offset: float = 0.0  # e.g. pi/2 for an IMU that reads 0 facing north
-    magnetic_declination: float = 0.0  # for a magnetometer's yaw (magnetic north), rad
+    magnetic_declination: float = 0.0  # for a magnetometer's yaw (magnetic north), rad, west-positive (minus NOAA's)
     # beside a gps or absolute pose: what is left of the offset is estimated, with this prior (rad)
     # and random walk (rad/sqrt(s)); yaw_offset_sigma = 0 takes the corrected yaw as the heading
     yaw_offset_sigma: float = 0.5

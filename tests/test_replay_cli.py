@@ -153,6 +153,19 @@ def test_other_absent_topics_are_a_warning_before_the_replay(jackal_bag, tmp_pat
     assert "warning" in proc.stderr and "/imu/nope" in proc.stderr and "/imu/data" in proc.stderr
 
 
+def test_a_gps_topic_absent_from_the_bag_is_an_error_not_an_empty_run(jackal_bag, tmp_path):
+    """A GPS defines the world frame and nothing is published before its first fix: with its topic
+    absent the run would fuse every message and publish nothing (exit 0 and an empty TUM before)."""
+    cfg = _config_with_keys(tmp_path, "jackal_velocity_controller/odom", "imu/data")
+    cfg.write_text(cfg.read_text() + '\n[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "fix"\n')
+    tum = tmp_path / "out.tum"
+    proc = fusiond("replay", str(jackal_bag), "--config", str(cfg), "--tum", str(tum))
+    assert proc.returncode == 2
+    err = proc.stderr.strip()
+    assert len(err.splitlines()) == 1 and "/fix" in err and "world frame" in err and "/imu/data" in err
+    assert not tum.exists()
+
+
 def _file(d: Path, name: str) -> Path:
     (d / name).write_text("x")
     return d / name

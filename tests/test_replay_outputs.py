@@ -53,3 +53,27 @@ def test_a_replay_without_the_doctor_writes_the_same_files_and_says_it_has_no_ve
     assert full.verdicts() and lean.doctor is None
     with pytest.raises(ReplayError, match="without the doctor"):
         lean.verdicts()
+
+
+def test_a_run_that_publishes_nothing_says_why_instead_of_a_final_pose() -> None:
+    """A GPS that never gives a fix (all dropped, or a topic the live robot never publishes):
+    everything is fused but no pose is published. The summary must not print a "final pose" that
+    was never published; it says what the filter waits for."""
+    from fusiond.replay.run import run_samples, summary
+    from fusiond.samples import ImuSample, OdomSample
+
+    from .configs import robot_config
+
+    cov6 = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
+    cov3 = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
+    samples = []
+    for k in range(100):
+        t = 10.0 + 0.02 * k
+        samples.append(OdomSample("wheel", t, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), cov6))
+        samples.append(ImuSample("imu", t + 0.001, (0.0, 0.0, 0.0, 1.0), cov3, (0.0, 0.0, 0.0), cov3))
+    result = run_samples(samples, robot_config(gps="datum = [48.137, 11.575, 520.0]"))
+    assert result.poses == 0 and result.final is not None  # fused, not published
+    text = summary(result)
+    assert "final pose" not in text
+    assert "no pose published: waiting for the first GPS fix from 'gps'" in text
+    assert "estimated   wheel_scale=1.0000" in text  # on by default beside a GPS, nothing learned yet

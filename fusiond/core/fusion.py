@@ -145,6 +145,7 @@ class FusionCore:
         self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max)
         self.resets = 0
         self.covariance_resets = 0
+        self.glitches = 0  # bursts of far stamps dropped as a clock glitch
 
     # -- public API ---------------------------------------------------------
     def ingest(self, sample: Sample) -> Step:
@@ -249,8 +250,10 @@ class FusionCore:
             return
         for stamp, idx, _ in samples:
             self._drop(idx, self._far_reason(stamp), stamp)
-        log.warning("time_glitch_dropped", samples=len(samples), first_stamp=samples[0][0],
-                    filter_time=self.state.t if self.state is not None else None)
+        self.glitches += 1
+        if self.glitches == 1 or self.glitches % 100 == 0:  # a sensor whose clock is offset makes one a message
+            log.warning("time_glitch_dropped", samples=len(samples), first_stamp=samples[0][0],
+                        filter_time=self.state.t if self.state is not None else None, glitches=self.glitches)
 
     def _far_reason(self, stamp: float) -> str:
         t = self.state.t if self.state is not None else None
@@ -346,6 +349,13 @@ class FusionCore:
         if not self.initialised or not self.has_bias:
             return None
         return self.state.ekf.x[self.layout.nominal["gyro_bias"]].copy()
+
+    @property
+    def yaw_offset(self) -> float | None:
+        """The estimated offset of an absolute IMU yaw from the heading (rad), when it is in the state."""
+        if not self.initialised or not self.layout.has("yaw_offset"):
+            return None
+        return float(self.state.ekf.x[self.layout.nominal["yaw_offset"].start])
 
     def held(self) -> list[int]:
         """Per sensor: samples held while a far-off time jump is unconfirmed (later applied or dropped)."""

@@ -16,6 +16,7 @@ from typing import IO, Callable
 import msgspec
 
 from ..config import Config, OdomSensor
+from ..core.layout import absolute_sensor
 from ..errors import ReplayError
 from ..core.doctor import Doctor, Verdict, format_verdicts
 from ..core.fusion import FusionCore
@@ -74,14 +75,23 @@ def _variances(core: FusionCore) -> tuple[float, float]:
 
 
 def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | None) -> None:
-    """Before anything is fused: the odometry drives the prediction, so a config whose odometry
-    topic is not in the bag would only produce an empty run; that is an error naming it. Other
-    absent topics are a warning (a replay without the GPS is still a replay)."""
+    """Before anything is fused: the odometry drives the prediction, and a GPS or absolute pose
+    defines the world frame (nothing is published before it), so a config whose odometry topic,
+    or every one of whose frame-defining topics, is not in the bag would only produce an empty
+    run; that is an error naming them. Other absent topics are a warning (a replay without a
+    second pose sensor is still a replay)."""
     have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items())) or "none"
     for s in cfg.sensors:
         if s.name in bag.missing and isinstance(s, OdomSensor):
             raise BagError(f"the odometry topic /{s.key} (sensor {s.name!r}, which drives the prediction) is not "
                            f"in the bag; the bag has: {have}")
+    # Nothing is published before a GPS or absolute pose has defined the world frame: without any
+    # of them in the bag the run would fuse everything and publish nothing.
+    frame = [s for s in cfg.sensors if absolute_sensor(s)]
+    if frame and all(s.name in bag.missing for s in frame):
+        names = " or ".join(f"/{s.key} (sensor {s.name!r})" for s in frame)
+        raise BagError(f"the topic {names} that defines the world frame is not in the bag: nothing would be "
+                       f"published; the bag has: {have}")
     if bag.missing and warn is not None:
         for name in bag.missing:
             s = cfg.sensor(name)
@@ -262,6 +272,8 @@ def summary(result: ReplayResult) -> str:
     final = result.final
     if final is None:
         out.append("no sample was fused: check the sensor keys against the bag's topics")
+    elif result.poses == 0:
+        out.append(f"no pose published: {core.not_ready_reason or 'no odometry message was fused'}")
     else:
         t, x, y, z, qx, qy, qz, qw = final
         r, p, yaw = to_rpy((qx, qy, qz, qw))
@@ -281,6 +293,11 @@ def summary(result: ReplayResult) -> str:
     bias = core.gyro_bias
     if bias is not None:
         out.append("gyro bias   [" + ", ".join(f"{b:+.5f}" for b in bias) + "] rad/s")
+    learned = dict(core.scales)
+    if core.yaw_offset is not None:
+        learned["yaw_offset"] = core.yaw_offset
+    if learned:
+        out.append("estimated   " + "  ".join(f"{k}={v:.4f}" for k, v in learned.items()))
     for name, c in result.doctor.channel_summaries().items():
         mean = "n/a" if c["nis_mean"] is None else f"{c['nis_mean']:.3f}"
         bounds = "" if not c["nis_bounds"] else f" bounds [{c['nis_bounds'][0]:.2f}, {c['nis_bounds'][1]:.2f}]"
