@@ -68,6 +68,9 @@ class Step:
     late: bool = False
     publish: bool = False  # an odometry sample: the daemon publishes the newest estimate now
     records: list[DiagnosticsRecord] = field(default_factory=list)
+    # Samples held for a time jump and applied at once: (stamp, [x y z qx qy qz qw]) of the estimate
+    # after each odometry sample among them, in order (a replay writes one pose per odometry message).
+    poses: list[tuple[float, np.ndarray]] | None = None
 
 
 @dataclass(slots=True)
@@ -237,10 +240,14 @@ class FusionCore:
             # timeouts, covariance inflated); the history before the jump stays, so a sensor
             # lagging the jump is still applied at its stamp.
             log.warning("time_jump_forward", stamp=cluster.first, filter_time=t, held=len(cluster.samples))
-        steps = [self._place(i, inp, stamp) for stamp, i, inp in cluster.in_order()]
+        steps, poses = [], []
+        for stamp, i, inp in cluster.in_order():
+            steps.append(self._place(i, inp, stamp))
+            if steps[-1].publish:
+                poses.append((self.state.t, self.state.ekf.x[0:7].copy()))
         last = steps[-1]
         return Step(last.sensor, last.accepted, last.reason, late=any(s.late for s in steps),
-                    publish=any(s.publish for s in steps), records=[r for s in steps for r in s.records])
+                    publish=bool(poses), records=[r for s in steps for r in s.records], poses=poses)
 
     def _abandon_jump(self) -> None:
         self._drop_held(self._held.abandon())

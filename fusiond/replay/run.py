@@ -220,11 +220,16 @@ class Runner:
         step = core.ingest(sample)
         if doctor is not None:
             doctor.add_sample(sample)
+        if step.poses:  # samples held for a time jump, applied at once: one pose per odometry message
+            for t_held, x_held in step.poses:
+                self.trajectory.append(t_held)
+                self.trajectory.extend(x_held.tolist())
         if step.publish:
             t, x = core.pose()
             p = x.tolist()  # one conversion for the trajectory, the doctor and the trace
-            self.trajectory.append(t)
-            self.trajectory.extend(p)
+            if not step.poses:
+                self.trajectory.append(t)
+                self.trajectory.extend(p)
             if doctor is not None:
                 q = (p[3], p[4], p[5], p[6])
                 roll, pitch, _ = to_rpy(q)
