@@ -11,18 +11,20 @@ import time
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Callable
+from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
 
 from ..config import Config, OdomSensor
 from ..core.layout import absolute_sensor
 from ..errors import ReplayError
-from ..core.doctor import Doctor, Verdict, format_verdicts
 from ..core.fusion import FusionCore
 from ..estimator.rotation import to_rpy
 from ..samples import OdomSample
 from .bag import BagError, BagSamples, open_bag_samples
+
+if TYPE_CHECKING:  # the doctor is imported only by a replay that runs it (not by --quiet)
+    from ..core.doctor import Doctor, Verdict
 
 
 @dataclass
@@ -207,7 +209,12 @@ class Runner:
 
     def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True) -> None:
         self.core = FusionCore(cfg)
-        self.doctor = Doctor(cfg) if doctor else None
+        if doctor:
+            from ..core.doctor import Doctor
+
+            self.doctor: Doctor | None = Doctor(cfg)
+        else:
+            self.doctor = None
         self.trace = Trace()
         self.keep_trace = keep_trace
         self.trajectory = array("d")  # t x y z qx qy qz qw of every published pose (64 bytes each)
@@ -319,5 +326,7 @@ def summary(result: ReplayResult) -> str:
         out.append(f"time jumps  {core.resets} filter reset(s) on a backwards time jump")
     if core.covariance_resets:
         out.append(f"covariance  {core.covariance_resets} reset(s) after a non-finite value")
+    from ..core.doctor import format_verdicts
+
     out.append(format_verdicts(result.verdicts()))
     return "\n".join(out)
