@@ -43,7 +43,7 @@ def _context(layout: StateLayout, timeout: float = 1.0) -> SensorContext:
     return SensorContext(layout, cfg.filter, two_d=False, absolute_yaw=False, odom_index=0,
                          track_acceleration=False, tilt_mask=tilt,
                          position_mask=position, delta_mask=None, timeout=lambda idx, s: timeout,
-                         inputs_at=lambda s: MotionInput())
+                         inputs_at=lambda s: MotionInput(), forward_accel=lambda s: 0.0)
 
 
 def _fresh(layout: StateLayout, models: list[SensorModel]) -> FilterState:

@@ -130,7 +130,7 @@ class FusionCore:
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
             track_acceleration=any(isinstance(sc, ImuSensor) and sc.tilt_from_gravity for sc in self.sensors),
             tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
-            timeout=self.inputs.timeout, inputs_at=self.inputs.at)
+            timeout=self.inputs.timeout, inputs_at=self.inputs.at, forward_accel=self._forward_accel)
         self.models = build_models(self.sensors, self.context)
         self._predicting = [m for m in self.models if m.predicts]  # on_predict hooks (GPS track, pose anchors)
         if self.two_d:
@@ -507,6 +507,12 @@ class FusionCore:
             s.ekf.cap_covariance(self.caps)
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
+
+    def _forward_accel(self, s: FilterState) -> float:
+        """The odometry's forward acceleration (``OdomModel.forward_accel``), 0.0 when none is tracked."""
+        if not self.context.track_acceleration or self.odom_index < 0:
+            return 0.0
+        return self.models[self.odom_index].forward_accel(s)
 
     def _unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float]) -> tuple[float, float]:
         """Variance of the motion a logging gap hides: (horizontal position per axis m^2, yaw rad^2).

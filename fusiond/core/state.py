@@ -24,7 +24,7 @@ class FilterState:
         "t", "ekf", "last", "period",
         "linear", "linear_cov", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
-        "still_since", "linear_accel", "attitude_ready", "tilt_seen",
+        "still_since", "attitude_ready", "tilt_seen",
         "frame_ready", "frame_epoch", "enu", "heading_ready",
         "own",
     )
@@ -44,7 +44,6 @@ class FilterState:
         s.wheel_yaw_measured = False
         s.gyro = s.gyro_cov = s.gyro_last = None
         s.still_since = None  # the odometry has read zero since this stamp
-        s.linear_accel = 0.0  # forward acceleration from the odometry's speed, m/s^2 (for gravity tilt)
         s.attitude_ready = False  # roll/pitch (and yaw) taken from a first orientation
         s.tilt_seen = None  # stamp of the newest roll/pitch information fused (set at the first stamp)
         s.frame_ready = False  # the world frame: defined by the first absolute sample
@@ -71,7 +70,6 @@ class FilterState:
         c.wheel_yaw_measured = self.wheel_yaw_measured
         c.gyro, c.gyro_cov, c.gyro_last = self.gyro, self.gyro_cov, self.gyro_last
         c.still_since = self.still_since
-        c.linear_accel = self.linear_accel
         c.tilt_seen = self.tilt_seen
         c.attitude_ready = self.attitude_ready
         # world frame: flags and immutable values (EnuFrame) only, so sharing is safe

@@ -6,8 +6,8 @@ policy: floors, overrides, "not measured" rules) and says what an applied input 
 the filter state (``apply``): updates through the EKF's own methods, the held motion
 inputs, and its own slice of per-sensor state (``s.own[index]``: small and immutable, so
 a history snapshot copies a reference). It never sees the core itself: the context holds
-the state layout, the masks an update may need, a few flags, and two queries (a sensor's
-timeout, the motion inputs held now). Time, ordering, late data, counters and the
+the state layout, the masks an update may need, a few flags, and three queries (a sensor's
+timeout, the motion inputs held now, the forward acceleration). Time, ordering, late data, counters and the
 consistency windows stay with the core.
 """
 
@@ -28,16 +28,18 @@ if TYPE_CHECKING:
 
 class SensorContext:
     """What a sensor model may know of the core: the layout, masks and flags fixed at start-up,
-    and two queries about held inputs. ``tilt_reference`` is set once every model exists (it
+    and three queries about held inputs. ``tilt_reference`` is set once every model exists (it
     asks the models whether they give roll/pitch)."""
 
     __slots__ = ("layout", "filter", "two_d", "tilt_reference", "absolute_yaw", "odom_index", "track_acceleration",
-                 "tilt_mask", "position_mask", "delta_mask", "timeout", "inputs_at")
+                 "tilt_mask", "position_mask", "delta_mask", "timeout", "inputs_at", "forward_accel")
 
     def __init__(self, layout: "StateLayout", filter_cfg: FilterConfig, *, two_d: bool, absolute_yaw: bool,
-                 odom_index: int, track_acceleration: bool, tilt_mask: np.ndarray, position_mask: np.ndarray, delta_mask: np.ndarray | None,
+                 odom_index: int, track_acceleration: bool, tilt_mask: np.ndarray, position_mask: np.ndarray,
+                 delta_mask: np.ndarray | None,
                  timeout: Callable[[int, "FilterState"], float],
-                 inputs_at: Callable[["FilterState"], "MotionInput"]) -> None:
+                 inputs_at: Callable[["FilterState"], "MotionInput"],
+                 forward_accel: Callable[["FilterState"], float]) -> None:
         self.layout = layout
         self.filter = filter_cfg
         self.two_d = two_d
@@ -55,6 +57,8 @@ class SensorContext:
         self.delta_mask = delta_mask
         self.timeout = timeout  # (sensor index, state) -> how long that sensor's input is held
         self.inputs_at = inputs_at  # state -> the motion inputs held at its time
+        # state -> the forward acceleration now (m/s^2; NaN while it changes too fast to know, 0.0 untracked)
+        self.forward_accel = forward_accel
 
 
 class SensorModel:

@@ -267,7 +267,8 @@ class ImuModel(SensorModel):
         integrate the gyro's x/y bias: tens of degrees and metres of z on a flat floor.
         """
         u = self.ctx.inputs_at(s)
-        if not u.world_frame and s.linear_accel != s.linear_accel:
+        forward = 0.0 if u.world_frame else self.ctx.forward_accel(s)
+        if forward != forward:
             return []  # the acceleration is changing: not known well enough to separate from gravity
         wx, wy, wz = u.angular
         vx, vy, vz = u.linear
@@ -276,7 +277,7 @@ class ImuModel(SensorModel):
         n = math.sqrt(accel[0] ** 2 + accel[1] ** 2 + accel[2] ** 2)
         if G_UNITS_BAND[0] < n < G_UNITS_BAND[1]:  # a driver that reports in g, not m/s^2
             accel = (accel[0] * GRAVITY, accel[1] * GRAVITY, accel[2] * GRAVITY)
-        ax = accel[0] - (wy * vz - wz * vy) - (0.0 if u.world_frame else s.linear_accel)  # forward acceleration too
+        ax = accel[0] - (wy * vz - wz * vy) - forward
         ay = accel[1] - (wz * vx - wx * vz)
         az = accel[2] - (wx * vy - wy * vx)
         if abs(math.sqrt(ax * ax + ay * ay + az * az) - GRAVITY) > GRAVITY_DYNAMIC_GATE:

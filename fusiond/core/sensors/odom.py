@@ -124,7 +124,7 @@ class OdomModel(SensorModel):
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         if self.ctx.track_acceleration:
-            self._track_acceleration(s, inp.linear[0], inp.linear_cov[0], stamp)
+            self._remember_speed(s, inp.linear[0], inp.linear_cov[0], stamp)
         s.linear, s.linear_cov = inp.linear, inp.linear_cov
         s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
         s.wheel_yaw_measured = inp.yaw_rate_measured
@@ -156,33 +156,44 @@ class OdomModel(SensorModel):
         slip = abs(r) > self.cfg.slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
         return [self.record(stamp, ["yaw_rate"], [r], [var], r * r / var, 1, slip, "yaw_rate", late)]
 
-    def _track_acceleration(self, s: "FilterState", speed: float, linear_var: float, stamp: float) -> None:
+    def _remember_speed(self, s: "FilterState", speed: float, linear_var: float, stamp: float) -> None:
+        """Keep the last ACCEL_WINDOW_S of forward speeds (and the newest speed variance) in this
+        sensor's slice, for ``forward_accel``: only the expired ones dropped from the front."""
+        own = s.own[self.index]
+        window = own[0] if own is not None else ()
+        k = 0
+        while k < len(window) and stamp - window[k][0] >= ACCEL_WINDOW_S:
+            k += 1
+        s.own[self.index] = (window[k:] + ((stamp, speed),), linear_var)
+
+    def forward_accel(self, s: "FilterState") -> float:
         """The forward acceleration, for an IMU that takes roll/pitch from gravity: braking or
         accelerating at a reads as a pitch of a/g (0.7 deg at 0.125 m/s^2), which on a car at
         30 m/s climbs metres of z. It is the least-squares slope of the odometry's forward speed
         over the last ACCEL_WINDOW_S (a two-point difference of 0.02 m/s noise at 50 Hz would be
-        1.4 m/s^2 of noise; the slope over 25 points of 0.5 s is ~0.03 m/s^2). The speeds live in
-        this sensor's slice; the result in ``s.linear_accel``, which the IMU reads.
+        1.4 m/s^2 of noise; the slope over 25 points of 0.5 s is ~0.03 m/s^2), computed when the
+        IMU asks (an IMU with orientation never does).
 
         A line fits the speeds only while the acceleration is steady: where it changes (a robot
         starting off, the brakes coming on) the slope lags by half the window. There the fit's
         residual exceeds the speed noise, and the acceleration is "unknown" (NaN): the IMU skips
         those samples rather than read the lag as tilt."""
-        window = s.own[self.index] or ()
-        window = tuple(p for p in window if stamp - p[0] < ACCEL_WINDOW_S) + ((stamp, speed),)
-        s.own[self.index] = window
+        own = s.own[self.index]
+        if own is None:
+            return 0.0
+        window, linear_var = own
         n = len(window)
         if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
             # too few speeds for a slope: known only when they are all alike (at rest, cruising)
-            s.linear_accel = 0.0 if all(p[1] == speed for p in window) else math.nan
-            return
+            last = window[-1][1]
+            return 0.0 if all(p[1] == last for p in window) else math.nan
         tm = sum(p[0] for p in window) / n
         vm = sum(p[1] for p in window) / n
         stt = sum((p[0] - tm) ** 2 for p in window)
         slope = sum((p[0] - tm) * (p[1] - vm) for p in window) / stt
-        misfit = math.sqrt(sum((p[1] - vm - slope * (p[0] - tm)) ** 2 for p in window) / (n - 2)) if n > 2 else 0.0
+        misfit = math.sqrt(sum((p[1] - vm - slope * (p[0] - tm)) ** 2 for p in window) / (n - 2))
         noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
-        s.linear_accel = slope if misfit <= noise else math.nan
+        return slope if misfit <= noise else math.nan
 
 
 __all__ = ["OdomInput", "OdomModel", "OdomPolicy"]
