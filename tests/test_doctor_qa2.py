@@ -98,6 +98,16 @@ def test_wandering_gps_error_names_error_tau_and_sigma_not_position_noise():
     assert v.evidence["white_sigma_m"] == pytest.approx(0.6, rel=0.4)
 
 
+def test_a_modelled_wander_is_not_named_again():
+    """With the receiver's wander modelled as it is (error_tau_s 60, error_sigma 1.2) and the white part
+    stated as it is (0.6 m), the filter is consistent: no new error_tau_s is asked for (the filter follows
+    the modelled wander, so the innovations' correlation time would only shrink replay after replay)."""
+    samples = sim_gps.simulate(sim_gps.World(gps_error_tau=60.0, gps_error_sigma=1.2, **WANDER))
+    modelled = "position_noise = [0.6, 0.6, 0.6]\nerror_tau_s = 60.0\nerror_sigma = [1.2, 1.2, 1.2]"
+    v = one(verdicts_of(robot_config(gps=modelled), samples), "gps", "position")
+    assert v.level == "ok" and "autocorrelated" not in v.message, v
+
+
 @pytest.mark.parametrize("stated", ["", STATED_HDOP])
 def test_white_gps_noise_is_not_called_a_wander(stated):
     """White fixes: the innovations' lag-1 autocorrelation is ~N(0, 1/750) (0.04), far below the 0.3 of

@@ -226,11 +226,17 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             v = absolute_verdict(name, channel, ch, t0)
             if culprit is not None and v.level != "ok" and ch.verdict() != "nis_low":
                 v = _explained(v, culprit, ch, t0)
-            elif culprit is None and channel == "position" and isinstance(s, GpsSensor) and ch.verdict() in (
-                    "ok", "nis_low") and "gated" not in v.message:
-                # a wandering receiver error reads as NIS low (the filter follows it): not "lower position_noise"
+            elif channel == "position" and isinstance(s, GpsSensor) and "gated" not in v.message and (
+                    ch.verdict() == "nis_low" or (culprit is None and ch.verdict() == "ok")):
+                # a wandering receiver error reads as NIS low (the filter follows it): not "lower position_noise".
+                # With another source wrong (a culprit) its errors may be what the innovations carry: an ok
+                # channel is then left alone, a NIS-low one gets the wander verdict with that caveat
                 head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)}): "
-                v = gps_wander_verdict(s, ch, head) or v
+                wander = gps_wander_verdict(s, ch, head)
+                if wander is not None and culprit is not None:
+                    wander.message += (f"; {culprit.sensor}/{culprit.channel} is wrong too (see it) and may carry "
+                                       "part of this: fix it first, then replay to confirm")
+                v = wander or v
             found[(name, channel)].append(v)
         else:
             verdict = ch.verdict()

@@ -49,7 +49,14 @@ def autocorrelation(y: np.ndarray, max_lag: int) -> np.ndarray:
 
 
 def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "") -> Verdict | None:
-    """A verdict when the channel's innovations are strongly autocorrelated (module doc), else None."""
+    """A verdict when the channel's innovations are strongly autocorrelated (module doc), else None.
+
+    None when the wander is already modelled (``error_tau_s`` set): the filter then follows the
+    modelled wander even more closely, so the innovations' correlation time says nothing more about
+    the receiver's (it would only shrink replay after replay); a NIS low is then the white part's
+    position_noise overstated, which the NIS verdict says."""
+    if gps.error_tau_s > 0.0:
+        return None
     rows = [(t, y) for t, y, rej in zip(ch.stamps, ch.innovations, ch.rejected_flags) if not rej and len(y) >= 2]
     if len(rows) < MIN_FIXES:
         return None
@@ -81,11 +88,9 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "") -> Verd
     evidence = {"innovation_lag1_correlation": share, "error_tau_s": tau, "error_sigma_east_m": sigma[0],
                 "error_sigma_north_m": sigma[1], "white_sigma_m": max(white), "fixes": float(n),
                 "fix_interval_s": dt}
-    configured = (f" (error_tau_s = {gps.error_tau_s:g} is configured, yet the innovations still wander)"
-                  if gps.error_tau_s > 0.0 else "")
     msg = head + (f"the innovations are strongly autocorrelated from fix to fix ({100 * share:.0f}% of their variance "
            f"persists to the next fix, correlation time ~{tau:.0f} s over {n} fixes): the receiver's error wanders "
-           f"(multipath, atmosphere), it is not white noise{configured}. The filter follows the wander, so its "
+           f"(multipath, atmosphere), it is not white noise. The filter follows the wander, so its "
            "NIS reads low and its covariance is overconfident: do not lower position_noise; model the wander "
            f"(error_tau_s, error_sigma), leaving position_noise ~{max(white):.2f} m for the white part. Estimated "
            "from the innovations, which the filter already smooths: lower bounds")
