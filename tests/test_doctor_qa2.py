@@ -69,6 +69,34 @@ def test_a_disturbed_imu_yaw_is_still_named_across_a_logging_gap():
     assert v.evidence["imu_vs_gyro_wander_rad"] == pytest.approx(0.3 / math.sqrt(2), rel=0.25)
 
 
+def test_imu_yaw_scale_against_the_gyro_is_fitted_per_stretch_between_gaps():
+    """Wheels (2.3x the turn) driving heading without the gyro: the doctor checks the IMU's own yaw against
+    the gyro (scale 1: both measure the turn, the IMU yaw to 0.002 rad over turns of ~1 rad). Across the
+    gap the gyro misses a 1.12 rad turn that the IMU yaw keeps: one line over the run read it as a scale
+    of 0.74; each stretch gets its own offset, and the scale stays within WHEEL_SCALE_TOLERANCE of 1."""
+    from fusiond.core.doctor.heading import WHEEL_SCALE_TOLERANCE
+
+    samples = drop_span(simulate(SimConfig(duration=90.0, standstill=2.0, wheel_yaw_scale=2.3)),
+                        T0 + GAP[0], T0 + GAP[1])
+    v = one(verdicts_of(make_config(orientation="absolute", gyro=False), samples), "wheel", "heading")
+    assert v.key == "sensors.imu.angular_velocity", v
+    assert v.evidence["imu_vs_gyro_yaw_scale"] == pytest.approx(1.0, abs=WHEEL_SCALE_TOLERANCE)
+    assert "the IMU's own yaw agrees with the gyro" in v.message
+
+
+def test_wheel_scale_chords_do_not_span_a_logging_gap():
+    """The wheels read the true speed. GPS 0.3 m white on chords of 10 m: each chord's ratio scatters by
+    sqrt(2) x 0.3 / 10 = 4.2 %, over the ~9 chords of 120 s at 1 m/s the scale is known to ~1.4 %: its
+    standard error stays below 2 % and the scale within 3 of them of 1. A chord across the 10 s gap
+    compared 10 m of GPS travel more than of wheel travel (the wheels were not logged): it read 1.108
+    +- 0.078 before such chords were left out."""
+    samples = drop_span(sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0)), T0 + 60.0, T0 + 70.0)
+    v = one(verdicts_of(robot_config(gps="", odom="scale_estimation = false"), samples), "wheel", "speed")
+    se = v.evidence["wheel_scale_se"]
+    assert v.level == "ok" and se < 0.02, v
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(1.0, abs=3 * se)
+
+
 # -- 2. a wandering GPS error is named as such, not "lower position_noise" ----------------------------------
 # The QA receiver: white 0.6 m plus a Gauss-Markov wander of 1.2 m (tau 60 s), 2 Hz, stating 2.2 m (HDOP).
 # 400 s is ~7 correlation times: the wander decorrelates within the lags the doctor looks at (a quarter

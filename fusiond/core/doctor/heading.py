@@ -210,17 +210,25 @@ MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
 WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
 
 
-def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray) -> float:
-    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns."""
+def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
+    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns. Each stretch
+    between breaks (a heading not integrated across a gap) gets its own a: the turn made in a gap is
+    missing from h_ref only, not a scale."""
     m = (t >= t_ref[0]) & (t <= t_ref[-1])
     if m.sum() < 10:
         return math.nan
     ref = np.interp(t[m], t_ref, h_ref)
     if np.ptp(ref) < MIN_TURN_RAD:
         return math.nan
-    A = np.vstack([np.ones(m.sum()), ref, t[m] - t[m][0]]).T
+    tm = t[m]
+    offsets = []
+    for idx in segments(tm, breaks):
+        col = np.zeros(len(tm))
+        col[idx] = 1.0
+        offsets.append(col)
+    A = np.vstack([*offsets, ref, tm - tm[0]]).T
     coef, *_ = np.linalg.lstsq(A, h[m], rcond=None)
-    return float(coef[1])
+    return float(coef[len(offsets)])
 
 
 def rate_fit_text(k: float, offset: float) -> str:
@@ -265,7 +273,8 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
     ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
     ok = np.isfinite(yi)
-    k_imu = _yaw_scale(ti[ok], yi[ok], tg, hg) if ok.sum() >= 10 else math.nan
+    k_imu = (_yaw_scale(ti[ok], yi[ok], tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if ok.sum() >= 10
+             else math.nan)
     if math.isfinite(k_imu):
         evidence["imu_vs_gyro_yaw_scale"] = k_imu
     if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
