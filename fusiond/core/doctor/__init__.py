@@ -18,17 +18,19 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 
-from ...config import Config, ImuSensor, OdomSensor
+from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from .attitude import TiltStats, lean_verdict, mount_verdict
+from .clock import ClockOffsets, clock_verdicts
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
+from .gps_wander import gps_wander_verdict
 from .gyro import bias_check
 from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
 from .mounting import MountYaw, mount_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
 from .series import Series, SeriesCollector
 from .speed import speed_check
-from .twist import TwistStats, slip_verdict, twist_frame_verdict, unmeasured_yaw_rate
+from .twist import TwistStats, slip_verdict, twist_frame_verdict, unmeasured_yaw_rate, yaw_rate_not_measured
 from .verdict import LEVELS, Verdict, filter_key, format_verdicts, sensor_key
 
 __all__ = ["Doctor", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
@@ -36,6 +38,9 @@ __all__ = ["Doctor", "Verdict", "Series", "SeriesCollector", "ChannelStats", "di
 
 MIN_UPDATES = 50  # twist-frame and lean checks need this many samples (not NIS: that uses what there is)
 ABSOLUTE_CHANNELS = ("position", "position_unaligned", "pose", "pose_delta")
+# channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
+# GPS innovations whose autocorrelation tells a wandering receiver error from white noise
+KEPT_CHANNELS = ("gyro_bias", "position")
 
 
 class Doctor:
@@ -52,6 +57,7 @@ class Doctor:
         self.twist = TwistStats()
         self.tilt = TiltStats()
         self.collector = SeriesCollector(self.cfg) if self.known else None
+        self.clocks = ClockOffsets()
         self.t0: float | None = None
 
     # -- feeding ---------------------------------------------------------------
@@ -60,7 +66,7 @@ class Doctor:
         ch = self.channels.get(key)
         if ch is None:
             ch = self.channels[key] = ChannelStats(list(record.components), self.window, self.confidence,
-                                                   keep=record.channel == "gyro_bias")
+                                                   keep=record.channel in KEPT_CHANNELS)
         ch.add(record)
         if self.t0 is None or record.stamp < self.t0:
             self.t0 = record.stamp
@@ -76,7 +82,8 @@ class Doctor:
         self.tilt.add(roll, pitch)
 
     def add_sample(self, sample) -> None:
-        """A raw sample, as the sensor sent it (for the cross-source series)."""
+        """A raw sample, as the sensor sent it (for the cross-source series), in arrival order."""
+        self.clocks.add(sample.sensor, sample.stamp)
         if self.collector is not None:
             self.collector.add_sample(sample)
             if self.t0 is None or sample.stamp < self.t0:
@@ -101,7 +108,7 @@ class Doctor:
                  scales: dict[str, float] | None = None) -> list[Verdict]:
         """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
         return diagnose(self.cfg if self.known else None, self.series(), self.channels, self.twist, self.tilt,
-                        stats, at_cap, covariance_resets, scales, self.t0)
+                        stats, at_cap, covariance_resets, scales, self.t0, self.clocks)
 
 
 def _explained(v: Verdict, culprit: Verdict, ch: ChannelStats, t0: float | None) -> Verdict:
@@ -150,8 +157,9 @@ def _merge(candidates: list[Verdict]) -> Verdict:
 def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str], ChannelStats],
              twist: TwistStats, tilt: TiltStats, stats: dict[str, dict] | None = None, at_cap: bool = False,
              covariance_resets: int = 0, scales: dict[str, float] | None = None,
-             t0: float | None = None) -> list[Verdict]:
-    """Every check, merged into one verdict per (sensor, channel)."""
+             t0: float | None = None, clocks: ClockOffsets | None = None) -> list[Verdict]:
+    """Every check, merged into one verdict per (sensor, channel). ``clocks``: the sensors' stamp offsets
+    measured at arrival (the replay has them), to explain samples dropped as far from filter time."""
     known = cfg is not None
     cfg = cfg if cfg is not None else Config()
     sensors = {s.name: s for s in cfg.sensors}
@@ -168,10 +176,14 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         heading = _mount_explains_offset(heading, mount, imu)
     speed = speed_check(series, cfg, scales) if known else None
     unmeasured = unmeasured_yaw_rate(series, odom) if known and odom is not None else None
-    wheel_heading = wheel_heading_check(series, cfg) if known and unmeasured is None else None
+    no_yaw_rate = yaw_rate_not_measured(series, odom, imu, gyro_fused) if known and odom is not None else None
+    wheel_heading = (wheel_heading_check(series, cfg) if known and unmeasured is None and no_yaw_rate is None
+                     else None)
     culprit = next((v for v in (heading, wheel_heading, speed) if v is not None and v.level != "ok"), None)
     if wheel_heading is not None:
         found[(wheel_heading.sensor, wheel_heading.channel)].append(wheel_heading)
+    if no_yaw_rate is not None:
+        found[(no_yaw_rate.sensor, no_yaw_rate.channel)].append(no_yaw_rate)
     if heading is not None:
         found[(heading.sensor, heading.channel)].append(heading)
     if speed is not None:
@@ -214,6 +226,17 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             v = absolute_verdict(name, channel, ch, t0)
             if culprit is not None and v.level != "ok" and ch.verdict() != "nis_low":
                 v = _explained(v, culprit, ch, t0)
+            elif channel == "position" and isinstance(s, GpsSensor) and "gated" not in v.message and (
+                    ch.verdict() == "nis_low" or (culprit is None and ch.verdict() == "ok")):
+                # a wandering receiver error reads as NIS low (the filter follows it): not "lower position_noise".
+                # With another source wrong (a culprit) its errors may be what the innovations carry: an ok
+                # channel is then left alone, a NIS-low one gets the wander verdict with that caveat
+                head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)}): "
+                wander = gps_wander_verdict(s, ch, head)
+                if wander is not None and culprit is not None:
+                    wander.message += (f"; {culprit.sensor}/{culprit.channel} is wrong too (see it) and may carry "
+                                       "part of this: fix it first, then replay to confirm")
+                v = wander or v
             found[(name, channel)].append(v)
         else:
             verdict = ch.verdict()
@@ -238,7 +261,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         if v is not None:
             found[("filter", "covariance")].append(v)
     if stats:
-        for v in _drops(stats):
+        for v in _drops(stats) + (clock_verdicts(stats, clocks) if clocks is not None else []):
             found[(v.sensor, v.channel)].append(v)
     if covariance_resets:
         found[("filter", "covariance")].append(

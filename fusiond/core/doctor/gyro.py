@@ -17,12 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor, PoseSensor
-from ..sensors.gyro_bias import quiet_bound
+from ..sensors.gyro_bias import _turning, quiet_bound
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
 
 MIN_REJECTED_FRACTION = 0.1
+OVERSTATED_RATIO = 3.0  # a stated gyro noise this many times the measured one at rest is overstated
 DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
 
 
@@ -72,6 +73,19 @@ def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
     return out
 
 
+def turning_by_own_scatter(e: Episode, bias_sigma: float, min_sigma: float) -> bool:
+    """Does the episode's mean rate exceed the quiet bound of its readings' OWN scatter? The core's test
+    of a closed standstill window (``core/sensors/gyro_bias._turning``, called here on the episode's z
+    axis as a window): a driver overstating its gyro noise (razor_imu_9dof states 0.14 rad/s for a
+    0.004 rad/s gyro) makes a slow turn with the drive at zero pass for rest by the stated noise."""
+    n = e.samples
+    if n < 2 or not (math.isfinite(e.gyro_mean) and math.isfinite(e.gyro_sigma)):
+        return False
+    sq = (e.gyro_sigma**2 * (n - 1) / n + e.gyro_mean**2) * n  # sum of squares with this mean and scatter
+    window = (e.t0, n, 0.0, 0.0, e.gyro_mean * n, 0.0, 0.0, 0.0, 0.0, 0.0, sq)
+    return _turning(window, bias_sigma, min_sigma)
+
+
 def _count_updates(episodes: list[Episode], ch: ChannelStats | None) -> None:
     if ch is None:
         return
@@ -97,8 +111,13 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     # bias on the quiet ones only, and say what the others are.
     stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0
     bound = quiet_bound(stated, fc.gyro_bias_sigma)
-    turning = [e for e in episodes if abs(e.gyro_mean) > bound]
-    episodes = [e for e in episodes if abs(e.gyro_mean) <= bound]
+    # ... and, as the core does for a closed window, beyond the quiet bound of the readings' own scatter
+    # (the stated noise may be overstated tenfold): those are turning too, and their scatter (the turn
+    # rate changing) must not enter the measured noise at rest
+    turns = [abs(e.gyro_mean) > bound or turning_by_own_scatter(e, fc.gyro_bias_sigma, imu.gyro_min_sigma)
+             for e in episodes]
+    turning = [e for e, f in zip(episodes, turns) if f]
+    episodes = [e for e, f in zip(episodes, turns) if not f]
     if turning and (ch is None or ch.n == 0 or not episodes):
         t_start = series.odom_t[0]
         worst = max(turning, key=lambda e: abs(e.gyro_mean))
@@ -159,6 +178,15 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     stated = series.gyro_stated_sigma
     if math.isfinite(stated):
         evidence["gyro_sigma_stated_rad_s"] = stated
+    if math.isfinite(measured) and math.isfinite(stated) and stated > OVERSTATED_RATIO * measured:
+        # a gyro stated far noisier than it is weighs every standstill window (and, fused, every turn)
+        # too little: the filter learns its bias slowly and the NIS of what it does learn reads low
+        rejected = (f"; {100 * frac:.0f}% of the standstill bias updates were rejected" if frac > MIN_REJECTED_FRACTION
+                    else "")
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       f"the gyro noise is overstated: it measures {measured:.5f} rad/s at rest (median of "
+                       f"{len(sig)} standstills), {stated:.5f} is stated ({stated / measured:.0f}x){rejected}. "
+                       "State the measured noise", sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
     if frac > MIN_REJECTED_FRACTION:
         moving = [e for e in episodes if e.rejected and math.isfinite(measured) and e.gyro_sigma > 3.0 * measured]
         if moving:
@@ -185,8 +213,8 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         evidence["bias_moved"] = 1.0
         return Verdict(imu.name, "gyro_bias", "warn",
                        f"{100 * frac:.0f}% of standstill bias updates rejected although the gyro is quiet at rest "
-                       f"({measured:.5f} rad/s, as stated) and reads {ref:+.5f} rad/s there: the filter's bias "
-                       f"estimate ({est:+.5f}) was moved by another source, and the standstills now contradict it",
+                       f"({measured:.5f} rad/s, {stated:.5f} stated) and reads {ref:+.5f} rad/s there: the filter's "
+                       f"bias estimate ({est:+.5f}) was moved by another source, and the standstills now contradict it",
                        evidence=evidence)
     v = ch.verdict()
     if v == "nis_high":

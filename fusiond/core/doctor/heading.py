@@ -32,25 +32,39 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
-def detrended_rms(t: np.ndarray, d: np.ndarray, shape: np.ndarray | None) -> tuple[float, float]:
-    """rms of d after fitting a + b t (+ c shape) over windows of WINDOW_S; and the mean slope b."""
+def segments(t: np.ndarray, breaks) -> list[np.ndarray]:
+    """Index ranges of t (sorted) between the breaks: data on both sides of a break is never fitted together."""
+    cuts = np.searchsorted(t, np.asarray(sorted(set(breaks)), dtype=float), side="left")
+    edges = [0, *[int(c) for c in cuts if 0 < c < len(t)], len(t)]
+    return [np.arange(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def detrended_rms(t: np.ndarray, d: np.ndarray, shape: np.ndarray | None, breaks=()) -> tuple[float, float]:
+    """rms of d after fitting a + b t (+ c shape) over windows of WINDOW_S; and the median slope b.
+
+    A window never spans a break (a silence across which one of the compared headings was not
+    integrated): the turn made in the silence is missing from one side only, and a window spanning
+    it would read that step as wander. The windows restart after each break."""
     if len(t) < 10:
         return math.nan, math.nan
     resid, slopes = [], []
-    start = t[0]
-    while start < t[-1]:
-        m = (t >= start) & (t < start + WINDOW_S)
-        if m.sum() >= 10 and t[m][-1] - t[m][0] >= MIN_SPAN_S:
-            cols = [np.ones(m.sum()), t[m] - t[m][0]]
-            if shape is not None:
-                s = shape[m] - shape[m][0]
-                if np.ptp(s) > 0.05:  # the turn is large enough to tell a scale from an offset
-                    cols.append(s)
-            A = np.vstack(cols).T
-            coef, *_ = np.linalg.lstsq(A, d[m], rcond=None)
-            resid.append(d[m] - A @ coef)
-            slopes.append(coef[1])
-        start += WINDOW_S / 2.0 if t[-1] - start > WINDOW_S else WINDOW_S
+    for idx in segments(t, breaks):
+        ts, ds = t[idx], d[idx]
+        sh = shape[idx] if shape is not None else None
+        start = ts[0]
+        while start < ts[-1]:
+            m = (ts >= start) & (ts < start + WINDOW_S)
+            if m.sum() >= 10 and ts[m][-1] - ts[m][0] >= MIN_SPAN_S:
+                cols = [np.ones(m.sum()), ts[m] - ts[m][0]]
+                if sh is not None:
+                    s = sh[m] - sh[m][0]
+                    if np.ptp(s) > 0.05:  # the turn is large enough to tell a scale from an offset
+                        cols.append(s)
+                A = np.vstack(cols).T
+                coef, *_ = np.linalg.lstsq(A, ds[m], rcond=None)
+                resid.append(ds[m] - A @ coef)
+                slopes.append(coef[1])
+            start += WINDOW_S / 2.0 if ts[-1] - start > WINDOW_S else WINDOW_S
     if not resid:
         return math.nan, math.nan
     r = np.concatenate(resid)
@@ -107,7 +121,8 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
         m = (ti >= tg[0]) & (ti <= tg[-1])
         if m.sum() >= 10:
             gyro_at = np.interp(ti[m], tg, hg)
-            wander, drift = detrended_rms(ti[m], yi[m] - gyro_at, gyro_at)
+            imu_gyro_breaks = [*series.gyro_breaks, *series.imu_breaks]
+            wander, drift = detrended_rms(ti[m], yi[m] - gyro_at, gyro_at, imu_gyro_breaks)
             evidence["imu_vs_gyro_wander_rad"] = wander
             if math.isfinite(drift):
                 evidence["imu_vs_gyro_drift_rad_s"] = drift
@@ -116,9 +131,9 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                 mo = (to >= tg[0]) & (to <= tg[-1])
                 if mo.sum() >= 10:
                     g = np.interp(to[mo], tg, hg)
-                    wheel_vs_gyro, _ = detrended_rms(to[mo], ho[mo] - g, g)
+                    wheel_vs_gyro, _ = detrended_rms(to[mo], ho[mo] - g, g, [*series.odom_breaks, *series.gyro_breaks])
                     wi = np.interp(to[mo], ti, yi)
-                    wheel_vs_imu, _ = detrended_rms(to[mo], ho[mo] - wi, wi)
+                    wheel_vs_imu, _ = detrended_rms(to[mo], ho[mo] - wi, wi, [*series.odom_breaks, *series.imu_breaks])
                     evidence["wheel_vs_gyro_wander_rad"] = wheel_vs_gyro
                     if math.isfinite(wheel_vs_gyro) and wheel_vs_gyro < WANDER_RAD:
                         notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
@@ -195,17 +210,30 @@ MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
 WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
 
 
-def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray) -> float:
-    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns."""
+def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
+    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns. Each stretch
+    between breaks (a heading not integrated across a gap) gets its own a: the turn made in a gap is
+    missing from h_ref only, not a scale."""
     m = (t >= t_ref[0]) & (t <= t_ref[-1])
     if m.sum() < 10:
         return math.nan
     ref = np.interp(t[m], t_ref, h_ref)
     if np.ptp(ref) < MIN_TURN_RAD:
         return math.nan
-    A = np.vstack([np.ones(m.sum()), ref, t[m] - t[m][0]]).T
+    tm = t[m]
+    offsets = []
+    for idx in segments(tm, breaks):
+        col = np.zeros(len(tm))
+        col[idx] = 1.0
+        offsets.append(col)
+    A = np.vstack([*offsets, ref, tm - tm[0]]).T
     coef, *_ = np.linalg.lstsq(A, h[m], rcond=None)
-    return float(coef[1])
+    return float(coef[len(offsets)])
+
+
+def rate_fit_text(k: float, offset: float) -> str:
+    """'0.70 x gyro - 0.002 rad/s': the scale and the offset of a rate fit, printed apart."""
+    return f"{k:.2f} x gyro {'-' if offset < 0 else '+'} {abs(offset):.3f} rad/s"
 
 
 def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
@@ -245,7 +273,8 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
     ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
     ok = np.isfinite(yi)
-    k_imu = _yaw_scale(ti[ok], yi[ok], tg, hg) if ok.sum() >= 10 else math.nan
+    k_imu = (_yaw_scale(ti[ok], yi[ok], tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if ok.sum() >= 10
+             else math.nan)
     if math.isfinite(k_imu):
         evidence["imu_vs_gyro_yaw_scale"] = k_imu
     if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
@@ -255,7 +284,7 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     imu = imus[0] if imus else None
     agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
              if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
-    msg = (f"the wheels' yaw rate reads {k:.2f} x the gyro's rate {offset:+.3f} rad/s{agree}: skid-steer slip "
+    msg = (f"the wheels' yaw rate = {rate_fit_text(k, offset)}{agree}: skid-steer slip "
            "or a driver scale. The gyro "
            "is not fused, so this wheel yaw rate drives the predicted heading and every heading update fights it")
     if imu is None:

@@ -91,6 +91,8 @@ class ChannelStats:
             self.rejected_flags.append(bool(r.rejected))
             self.innovations.append(list(r.innovation))
         if getattr(r, "learning", False):
+            if not self.n_nis and r.dof > 0:
+                self.dof = r.dof  # the summary's dof of a channel that has only learned so far
             return  # the prior's test, not the sensor's: counted, kept as an episode, not judged
         if math.isfinite(r.nis) and r.dof > 0 and not r.rejected:
             self.n_nis_kept += 1
@@ -169,8 +171,19 @@ class ChannelStats:
         since = self.now_since - (t0 if t0 is not None else self.first_stamp or 0.0)
         return f"now: {self.now_verdict} since {since:.0f} s"
 
+    @property
+    def learning_only(self) -> bool:
+        """Every update so far learned the state (e.g. the GPS heading search): none is judged."""
+        return self.n > 0 and self.n_nis == 0
+
     def summary(self, t0: float | None = None) -> dict:
+        """The channel's row of the summary table. A channel whose updates were all learning ones reads
+        "learning ... not judged", never "no_updates" beside its update count."""
         b = self.bounds()
+        if self.learning_only:
+            return {"updates": self.n, "rejected": self.rejected, "dof": self.dof, "nis_mean": None,
+                    "nis_bounds": None, "verdict": "learning", "now": "learning",
+                    "now_note": "not judged: every update learned the state"}
         return {"updates": self.n, "rejected": self.rejected, "dof": self.dof, "nis_mean": self.nis_mean,
                 "nis_bounds": list(b) if b else None, "verdict": self.verdict(),
                 "now": self.now_verdict, "now_note": self.now_note(t0)}

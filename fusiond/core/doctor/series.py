@@ -42,15 +42,24 @@ class Series(msgspec.Struct):
     odom_heading: list[float] = []  # integrated wheel yaw rate, rad (unwrapped, starts at 0)
     odom_zero_wz: list[int] = []  # samples reporting a yaw rate of exactly 0 with variance 0
     odom_n: list[int] = []
+    # samples whose yaw rate the core takes as "not measured" (declared so in twist_measured, or a variance
+    # at or above twist_max_sigma^2, NaN or inf: the 1e6 of a driver that has none), so not used
+    odom_wz_unmeasured: list[int] = []
     odom_rest: list[bool] = []  # every sample of the bin exactly at rest
     odom_gaps: list[tuple[float, float]] = []  # (stamp, length s) of silences longer than gap_s
+    # Where an integrated heading was NOT integrated (a step longer than MAX_STEP_S): the stamp of the
+    # first sample after the silence. A comparison of integrated headings must not span one (the turn
+    # made in the silence is missing from one side only and would look like wander).
+    odom_breaks: list[float] = []
     imu_t: list[float] = []
     imu_yaw: list[float] = []  # the IMU's own yaw in base_link (unwrapped), NaN when not measured
+    imu_breaks: list[float] = []  # silences of the IMU yaw longer than MAX_STEP_S (its unwrap may skip a turn)
     gyro_t: list[float] = []
     gyro_z: list[float] = []  # mean base-frame gyro z, rad/s
     gyro_var: list[float] = []  # its variance within the bin
     gyro_n: list[int] = []
     gyro_heading: list[float] = []  # integrated raw gyro z (no bias removed), rad
+    gyro_breaks: list[float] = []  # silences of the gyro longer than MAX_STEP_S: not integrated across
     gyro_stated_sigma: float = float("nan")  # the noise the filter assumes for the gyro z, rad/s (mean)
     acc_t: list[float] = []
     acc_x: list[float] = []  # accelerometer specific force minus gravity, base_link x through the configured
@@ -110,6 +119,7 @@ class SeriesCollector:
         self._gyro_heading = 0.0
         self._yaw_prev: float | None = None
         self._yaw_unwrapped = 0.0
+        self._yaw_stamp = -math.inf
         self._enu: EnuFrame | None = EnuFrame(*gps[0].datum) if gps and gps[0].datum is not None else None
         self._bins: dict[str, _Bin | None] = {"odom": None, "imu": None, "gyro": None, "acc": None}
         self._rest = True
@@ -186,6 +196,7 @@ class SeriesCollector:
             s.odom_wz.append(b.sums[1] / n)
             s.odom_heading.append(self._wheel_heading)
             s.odom_zero_wz.append(b.extra)
+            s.odom_wz_unmeasured.append(b.sums[2])
             s.odom_n.append(n)
             s.odom_rest.append(self._rest)
             self._rest = True
@@ -218,15 +229,29 @@ class SeriesCollector:
                 self.series.odom_gaps.append((last[0], dt))
             if 0.0 < dt <= MAX_STEP_S:
                 self._wheel_heading += last[1] * dt
+            elif dt > MAX_STEP_S:
+                self.series.odom_breaks.append(s.stamp)
         self._odom_last = (s.stamp, wz)
-        b = self._bin("odom", s.stamp, 2)
+        b = self._bin("odom", s.stamp, 3)
         b.n += 1
         b.sums[0] += vx
         b.sums[1] += wz
+        b.sums[2] += self._wz_unmeasured(s.sensor, cov)
         if wz == 0.0 and len(cov) == 36 and cov[35] <= 0.0:
             b.extra += 1
         if self._rest and (s.linear != _ZERO3 or s.angular != _ZERO3):
             self._rest = False
+
+    def _wz_unmeasured(self, name: str, cov) -> int:
+        """1 when the core's odometry model takes this sample's yaw rate as not measured (see
+        core/sensors/odom.py: declared so, or without a twist_noise override a variance >= twist_max_sigma^2)."""
+        cfg = self._odom_cfg[name]
+        if not cfg.twist_measured[5]:
+            return 1
+        if cfg.twist_noise is not None or len(cov) != 36:
+            return 0
+        d = cov[35]
+        return int(d != d or d >= cfg.twist_max_sigma[1] ** 2)
 
     def _imu(self, s: ImuSample) -> None:
         name = s.sensor
@@ -249,7 +274,10 @@ class SeriesCollector:
                         self._yaw_unwrapped = y
                     else:
                         self._yaw_unwrapped += rot.wrap(y - self._yaw_prev)
+                        if s.stamp - self._yaw_stamp > MAX_STEP_S:
+                            self.series.imu_breaks.append(s.stamp)
                     self._yaw_prev = y
+                    self._yaw_stamp = s.stamp
                     b = self._bin("imu", s.stamp, 1)
                     b.n += 1
                     b.sums[0] += self._yaw_unwrapped
@@ -261,6 +289,8 @@ class SeriesCollector:
             last = self._gyro_last
             if last is not None and 0.0 < s.stamp - last[0] <= MAX_STEP_S:
                 self._gyro_heading += last[1] * (s.stamp - last[0])
+            elif last is not None and s.stamp - last[0] > MAX_STEP_S:
+                self.series.gyro_breaks.append(s.stamp)
             self._gyro_last = (s.stamp, wz)
             stated = cfg.gyro_noise if cfg.gyro_noise is not None else math.sqrt(max(gc[8], cfg.gyro_min_sigma ** 2))
             self._stated[0] += stated

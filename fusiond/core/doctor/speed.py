@@ -127,8 +127,13 @@ def wheel_scale_fit(series: Series, cfg: Config) -> ScaleFit | None:
     x = _cumulative(to, v * np.cos(heading))
     y = _cumulative(to, v * np.sin(heading))
     g, d, dt, ta, tb, u = [], [], [], [], [], []
+    # a chord across a logging gap: the wheels' travel (and the gyro's turn) in the gap is missing from
+    # the dead reckoning, not from the GPS: that chord is no evidence of a scale
+    breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
     for i, j in chord_ends(series, to, _cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * sigma_w)):
         t0, t1 = series.gps_t[i], series.gps_t[j]
+        if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
+            continue
         de, dn = series.gps_e[j] - series.gps_e[i], series.gps_n[j] - series.gps_n[i]
         wheel = math.hypot(np.interp(t1, to, x) - np.interp(t0, to, x), np.interp(t1, to, y) - np.interp(t0, to, y))
         if wheel > 0.0:

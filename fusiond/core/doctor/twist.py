@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import OdomSensor
+from ...config import ImuSensor, OdomSensor
 from .nis import ChannelStats
 from .series import Series
-from .heading import WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE
+from .heading import WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, rate_fit_text
 from .verdict import Verdict, sensor_key
 
 TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noise and bias)
@@ -57,6 +57,28 @@ def unmeasured_yaw_rate(series: Series, odom: OdomSensor) -> Verdict | None:
                    {"zero_fraction_in_turns": float(frac), "turning_samples": float(n)})
 
 
+def yaw_rate_not_measured(series: Series, odom: OdomSensor, imu: ImuSensor | None,
+                          gyro_fused: bool) -> Verdict | None:
+    """Nothing measures the turn rate: the odometry marks its yaw rate "not measured" (a driver sending
+    covariance 1e6, or twist_measured) and no gyro is fused. The heading then only changes through the
+    absolute updates (IMU yaw, GPS), lagging every turn; against the gyro it looks like a wheel yaw rate
+    of 0 x the gyro, but it is neither slip nor a scale: fuse the gyro."""
+    if gyro_fused or not series.odom_n:
+        return None
+    n = int(np.sum(series.odom_n))
+    unmeasured = int(np.sum(series.odom_wz_unmeasured))
+    if n == 0 or unmeasured < UNMEASURED_FRACTION * n:
+        return None
+    msg = (f"the odometry does not measure yaw rate ({unmeasured} of {n} samples state it not measured: "
+           "variance >= twist_max_sigma^2, or twist_measured) and the gyro is not fused: nothing measures the "
+           "turn rate, so the heading only follows the absolute updates, lagging every turn (not skid-steer slip)")
+    ev = {"yaw_rate_unmeasured_fraction": unmeasured / n}
+    if imu is None:
+        return Verdict(odom.name, "heading", "problem", msg + "; add an IMU and fuse its gyro", evidence=ev)
+    return Verdict(odom.name, "heading", "problem", msg + "; fuse the gyro: angular_velocity = true",
+                   sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", ev)
+
+
 def slip_verdict(odom: OdomSensor, ch: ChannelStats, fit: tuple[float, float] | None = None) -> Verdict:
     """The wheels' yaw rate checked against the gyro (the gyro drives heading).
 
@@ -70,7 +92,7 @@ def slip_verdict(odom: OdomSensor, ch: ChannelStats, fit: tuple[float, float] | 
     if fit is not None and (abs(fit[0] - 1.0) > WHEEL_SCALE_TOLERANCE or abs(fit[1]) > WHEEL_OFFSET_RAD_S):
         k, offset = fit
         return Verdict(odom.name, "yaw_rate", "warn",
-                       f"the wheels' yaw rate reads {k:.2f} x the gyro's {offset:+.3f} rad/s (rms residual {rms:.3f} "
+                       f"the wheels' yaw rate = {rate_fit_text(k, offset)} (rms residual {rms:.3f} "
                        f"rad/s, {100 * frac:.0f}% flagged as slip): skid-steer slip or a driver scale/offset. The "
                        "gyro drives heading, so this is only reported; do not state more wheel yaw-rate noise for it",
                        key, evidence={"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset,

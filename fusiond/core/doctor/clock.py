@@ -1,0 +1,68 @@
+"""A sensor whose clock is offset from the others: its samples dropped as "far from filter time".
+
+A driver stamping in GPS time (18 s ahead of UTC since 2017) or in its own boot time
+has every sample held and then dropped as ``future_stamp``/``stale_stamp``: the core
+only says "a clock glitch", N times. The doctor sees every sample as it arrives, so
+it measures the offset: each sample's stamp against the newest stamp of the OTHER
+sensors when it arrives (what the filter's time follows). The median over the run is
+that sensor's clock offset (plus its transport lag, milliseconds), and a sensor whose
+samples are mostly dropped that way gets one plain verdict with it.
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+
+import numpy as np
+
+from ... import reasons
+from .verdict import Verdict
+
+MAX_KEPT = 20_000  # offsets kept per sensor (the median of that many is settled; bounded memory)
+MOSTLY = 0.5  # this share of a sensor's samples dropped as far from filter time: its clock, not a glitch
+CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
+
+
+class ClockOffsets:
+    """Per sensor, its samples' stamps minus the newest stamp of the other sensors at arrival."""
+
+    def __init__(self) -> None:
+        self._newest: dict[str, float] = {}
+        self._offsets: dict[str, array] = {}
+
+    def add(self, sensor: str, stamp: float) -> None:
+        if not math.isfinite(stamp):
+            return
+        others = [t for name, t in self._newest.items() if name != sensor]
+        if others:
+            kept = self._offsets.setdefault(sensor, array("d"))
+            if len(kept) < MAX_KEPT:
+                kept.append(stamp - max(others))
+        if stamp > self._newest.get(sensor, -math.inf):
+            self._newest[sensor] = stamp
+
+    def offset(self, sensor: str) -> float | None:
+        """Median offset of the sensor's stamps from the others' (s), None without another sensor."""
+        kept = self._offsets.get(sensor)
+        return float(np.median(np.frombuffer(kept, dtype=float))) if kept else None
+
+
+def clock_verdicts(stats: dict[str, dict], clocks: ClockOffsets) -> list[Verdict]:
+    """A verdict for each sensor whose samples were mostly dropped as far from filter time."""
+    out = []
+    for name, st in stats.items():
+        received = st.get("received", 0)
+        far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
+        if received <= 0 or far < MOSTLY * received:
+            continue
+        offset = clocks.offset(name)
+        if offset is None:
+            continue
+        side = "ahead of" if offset > 0 else "behind"
+        out.append(Verdict(name, "time", "problem",
+                           f"{far} of {received} samples stamped ~{abs(offset):.1f} s {side} the other sensors: its "
+                           "clock is offset (GPS time vs UTC?), so they were dropped as far from filter time. Stamp "
+                           "them with the same clock as the other sensors (the driver's time source)",
+                           evidence={"clock_offset_s": offset, "dropped_far": float(far), "received": float(received)}))
+    return out
