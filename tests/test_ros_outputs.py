@@ -130,10 +130,16 @@ def test_tf_once_per_new_pose_stamp_strictly_increasing_and_equal_to_the_pose(da
     pose_stamps = [stamp_of(p.header) for p in poses]
     advancing = [s for i, s in enumerate(pose_stamps) if i == 0 or s > max(pose_stamps[:i])]
     assert len(advancing) == 60 < len(pose_stamps)  # the late ones repeated a stamp
-    wait_until(lambda: len(out["t/tf"]) >= len(advancing), 10, "the TF frames")
-    time.sleep(0.2)  # a surplus TF would arrive in this time: none may
-    tfs = [TYPESTORE.deserialize_cdr(raw, TF_MESSAGE) for raw in out["t/tf"]]
-    assert len(tfs) == len(advancing) == daemon.tf_published
+    # A sentinel instead of a sleep: one more odometry message with a new stamp. The daemon publishes
+    # the TF key in order and Zenoh delivers one key in order, so once the sentinel's TF is here every
+    # TF published before it is too: a surplus one would be counted below.
+    sentinel = 100.0 + 0.02 * 60
+    pub.put(odom(sentinel))
+    wait_until(lambda: out["t/tf"] and stamp_of(TYPESTORE.deserialize_cdr(out["t/tf"][-1], TF_MESSAGE)
+                                                 .transforms[0].header) == sentinel, 10, "the sentinel's TF")
+    tfs = [TYPESTORE.deserialize_cdr(raw, TF_MESSAGE) for raw in out["t/tf"]][:-1]
+    poses = [decode_pose_cdr(raw) for raw in out["t/pose"]][: len(stamps)]
+    assert len(tfs) == len(advancing) == daemon.tf_published - 1  # (the sentinel's own TF aside)
     tf_stamps = [stamp_of(m.transforms[0].header) for m in tfs]
     assert all(b > a for a, b in zip(tf_stamps, tf_stamps[1:])), "TF stamps must strictly increase"
     assert tf_stamps == advancing
@@ -160,8 +166,8 @@ def test_publish_tf_false_publishes_nothing_on_tf(daemon_factory):
     for k in range(30):
         pub.put(odom(100.0 + 0.02 * k))
     wait_until(lambda: len(out["t/pose"]) == 30, 10, "30 poses")
-    time.sleep(0.2)  # TFs published with those poses would have arrived by now
-    assert out["t/tf"] == [] and daemon.tf_published == 0
+    # The worker counts a TF when it puts one, in the same step as the pose: 30 poses out, none counted.
+    assert daemon.tf_published == 0 and out["t/tf"] == []
 
 
 # --------------------------------------------------------------------------- ROS diagnostics
@@ -342,12 +348,13 @@ def test_a_bad_set_pose_gets_an_error_naming_the_problem_and_changes_nothing(dae
     assert ok == [] and len(errors) == 1 and problem in errors[0], errors
     after = health(client)
     assert daemon.set_poses == 0 and after.filter.time == before.filter.time and after.published == before.published
-    time.sleep(0.2)  # a pose published by a wrongly applied set_pose would be here by now
-    assert len(out["t/pose"]) == 11
-    # and the filter goes on from where it was
+    # and the filter goes on from where it was. The next odometry message is the sentinel: the pose key
+    # is delivered in order, so a pose published by a wrongly applied set_pose would come before its
+    # pose, as the 12th.
     pub.put(odom(100.0 + 0.02 * 11))
-    wait_until(lambda: len(out["t/pose"]) == 12, 5, "the next pose")
-    assert decode_pose_cdr(out["t/pose"][-1]).pose.pose.position.x == pytest.approx(V * 0.22, abs=1e-9)
+    wait_until(lambda: len(out["t/pose"]) >= 12, 5, "the next pose")
+    assert decode_pose_cdr(out["t/pose"][11]).pose.pose.position.x == pytest.approx(V * 0.22, abs=1e-9)
+    assert decode_pose_cdr(out["t/pose"][11]).header.stamp.sec == 100
 
 
 def test_set_pose_request_type_is_msgspec_json():
