@@ -31,3 +31,25 @@ angular_velocity = {"true" if gyro else "false"}
     if pose is not None:
         text += f'[[sensors]]\nname = "pose"\nkind = "pose"\nkey = "pose"\n{pose}\n'
     return loads(text)
+
+
+def loopback_daemon_config(output: str = "", imu: str = "", extra: str = "") -> Config:
+    """The in-process daemon tests' config: outputs on "t/..." keys (plus the ``output`` lines), odometry
+    on t/odom and an IMU on t/imu (plus the ``imu`` lines), then ``extra`` tables (another sensor)."""
+    return loads(f"""
+[output]
+pose_key = "t/pose"
+odometry_key = "t/odometry"
+diagnostics_key = "t/diagnostics"
+health_key = "t/health"
+{output}
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "t/odom"
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "t/imu"
+{imu}
+{extra}""")

@@ -17,6 +17,8 @@ from fusiond.codecs import decode_pose_cdr, encode_odom_sample
 from fusiond.transport.daemon import Daemon, alive_key
 from fusiond.transport.session import build_config, open_session, query_health
 
+from .configs import loopback_daemon_config
+
 
 def free_port() -> int:
     with socket.socket() as s:
@@ -24,21 +26,6 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-CONFIG = """
-[output]
-pose_key = "t/pose"
-odometry_key = "t/odometry"
-diagnostics_key = "t/diagnostics"
-health_key = "t/health"
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "t/odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "t/imu"
-"""
 
 
 def wait_until(cond, timeout: float, what: str):
@@ -75,7 +62,7 @@ def report(session: zenoh.Session):
 
 def test_full_queue_drops_are_counted_and_garbage_is_counted_per_reason(sessions):
     dsession, client = sessions
-    daemon = Daemon(loads(CONFIG), dsession, queue_size=8, monitor=False)
+    daemon = Daemon(loopback_daemon_config(), dsession, queue_size=8, monitor=False)
     daemon.start()
     try:
         pub_o = client.declare_publisher("t/odom", congestion_control=zenoh.CongestionControl.BLOCK)
@@ -108,7 +95,7 @@ def test_full_queue_drops_are_counted_and_garbage_is_counted_per_reason(sessions
 
 def test_liveliness_token_and_a_clean_stop(sessions):
     dsession, client = sessions
-    daemon = Daemon(loads(CONFIG), dsession, monitor=False)
+    daemon = Daemon(loopback_daemon_config(), dsession, monitor=False)
     events: list[tuple[str, str]] = []
     sub = client.liveliness().declare_subscriber("**/health/alive", lambda s: events.append((str(s.kind),
                                                                                              str(s.key_expr))))
@@ -191,8 +178,8 @@ def test_fused_position_is_published_as_navsatfix(sessions):
     from fusiond.samples import GpsSample, ImuSample
     from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_gps_sample, encode_imu_sample
 
-    cfg = loads(CONFIG.replace('health_key = "t/health"', 'health_key = "t/health"\nnavsat_key = "t/fix_filtered"')
-                + '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n')
+    cfg = loopback_daemon_config(output='navsat_key = "t/fix_filtered"',
+                                 extra='[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n')
     dsession, client = sessions
     fixes: list[bytes] = []
     sub = client.declare_subscriber("t/fix_filtered", lambda s: fixes.append(s.payload.to_bytes()))

@@ -15,7 +15,6 @@ import msgspec
 import pytest
 import zenoh
 
-from fusiond.config import loads
 from fusiond.codecs import encode_imu_sample, encode_odom_sample, make_decoder
 from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.core.fusion import FusionCore
@@ -23,26 +22,9 @@ from fusiond.monitor import Monitor, decode_diagnostics
 from fusiond.samples import ImuSample, OdomSample
 from fusiond.transport.daemon import Daemon, sensor_kind
 
+from .configs import loopback_daemon_config
 from .test_daemon_inproc import sessions, wait_until  # noqa: F401  (fixture)
 
-CONFIG = """
-[output]
-pose_key = "t/pose"
-odometry_key = "t/odometry"
-diagnostics_key = "t/diagnostics"
-health_key = "t/health"
-diagnostics_batch_s = {batch}
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "t/odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "t/imu"
-orientation = "roll_pitch"
-angular_velocity = true
-"""
 
 IMU_HZ, ODOM_EVERY, N_IMU = 1000.0, 10, 1500  # 1.5 s of 1 kHz IMU and 100 Hz odometry
 W = 0.2  # rad/s: driving a circle at 0.5 m/s
@@ -81,7 +63,8 @@ def expected_records(cfg, messages: list[tuple[str, bytes]]) -> Counter:
 @pytest.mark.parametrize("batch", [0.05, 0.0])
 def test_every_record_arrives_exactly_once_including_those_flushed_at_stop(sessions, batch):  # noqa: F811
     dsession, client = sessions
-    cfg = loads(CONFIG.format(batch=batch), "<test>")
+    cfg = loopback_daemon_config(output=f"diagnostics_batch_s = {batch}",
+                                 imu='orientation = "roll_pitch"\nangular_velocity = true')
     messages = stream()
     expected = expected_records(cfg, messages)
     assert sum(expected.values()) >= N_IMU  # every IMU sample updates at least its roll/pitch channel

@@ -27,28 +27,15 @@ from fusiond.samples import ImuSample, OdomSample
 from fusiond.transport.daemon import Daemon
 from fusiond.transport.session import query_health, request_set_pose
 
+from .configs import loopback_daemon_config
 from .test_daemon_inproc import sessions, wait_until  # noqa: F401  (fixture)
 
-CONFIG = """
-[output]
-pose_key = "t/pose"
-odometry_key = "t/odometry"
-diagnostics_key = "t/diagnostics"
-health_key = "t/health"
-tf_key = "t/tf"
+ROS_OUTPUTS = """tf_key = "t/tf"
 ros_diagnostics_key = "t/ros_diagnostics"
 ros_diagnostics_period_s = 0.1
 set_pose_key = "t/set_pose"
-{extra}
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "t/odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "t/imu"
 """
+
 
 V = 0.5  # m/s forward, no turn: dead reckoning is a straight line
 TWIST_COV = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
@@ -92,7 +79,7 @@ def daemon_factory(sessions) -> Iterator:
     started: list[Daemon] = []
 
     def make(extra: str = "") -> tuple[Daemon, zenoh.Session]:
-        d = Daemon(loads(CONFIG.format(extra=extra)), dsession, monitor=False)
+        d = Daemon(loopback_daemon_config(output=ROS_OUTPUTS + extra), dsession, monitor=False)
         started.append(d)
         return d, client
 
