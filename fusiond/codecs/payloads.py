@@ -228,20 +228,30 @@ def _fast_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> tu
         return None
 
 
-def _fast_odom(buf: Payload, sensor: str) -> OdomSample | None:
-    got = _fast_block(buf, True, _ODOM_BLOCK)
+def _odom_from_block(got: tuple[float, tuple[float, ...]] | None, sensor: str) -> OdomSample | None:
+    """An OdomSample from (stamp, float64 block) as the CDR and ROS 1 readers return it: pose position,
+    orientation, covariance (0:43), then twist linear, angular, covariance (43:85)."""
     if got is None:
         return None
     stamp, d = got
     return OdomSample(sensor, stamp, d[43:46], d[46:49], d[49:85], d[0:3], d[3:7])
 
 
-def _fast_imu(buf: Payload, sensor: str) -> ImuSample | None:
-    got = _fast_block(buf, False, _IMU_BLOCK)
+def _imu_from_block(got: tuple[float, tuple[float, ...]] | None, sensor: str) -> ImuSample | None:
+    """An ImuSample from (stamp, float64 block): orientation and its covariance, angular velocity and its
+    covariance, linear acceleration and its covariance."""
     if got is None:
         return None
     stamp, d = got
     return ImuSample(sensor, stamp, d[0:4], d[4:13], d[13:16], d[16:25], d[25:28], d[28:37])
+
+
+def _fast_odom(buf: Payload, sensor: str) -> OdomSample | None:
+    return _odom_from_block(_fast_block(buf, True, _ODOM_BLOCK), sensor)
+
+
+def _fast_imu(buf: Payload, sensor: str) -> ImuSample | None:
+    return _imu_from_block(_fast_block(buf, False, _IMU_BLOCK), sensor)
 
 
 # --------------------------------------------------------------------------- bag fast paths
@@ -280,19 +290,11 @@ def _ros1_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> tu
 
 
 def _fast_odom_ros1(buf: Payload, sensor: str) -> OdomSample | None:
-    got = _ros1_block(buf, True, _ODOM_BLOCK)
-    if got is None:
-        return None
-    stamp, d = got
-    return OdomSample(sensor, stamp, d[43:46], d[46:49], d[49:85], d[0:3], d[3:7])
+    return _odom_from_block(_ros1_block(buf, True, _ODOM_BLOCK), sensor)
 
 
 def _fast_imu_ros1(buf: Payload, sensor: str) -> ImuSample | None:
-    got = _ros1_block(buf, False, _IMU_BLOCK)
-    if got is None:
-        return None
-    stamp, d = got
-    return ImuSample(sensor, stamp, d[0:4], d[4:13], d[13:16], d[16:25], d[25:28], d[28:37])
+    return _imu_from_block(_ros1_block(buf, False, _IMU_BLOCK), sensor)
 
 
 _HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id

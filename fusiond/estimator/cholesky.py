@@ -13,6 +13,28 @@ from __future__ import annotations
 import math
 
 
+def _inverse_root(s: float) -> float | None:
+    """L^-1 of the 1x1 S = [s], None unless s is positive and finite."""
+    if not s > 0.0 or s == math.inf:
+        return None
+    return 1.0 / math.sqrt(s)
+
+
+def _inverse_factor_2x2(a: float, b: float, c: float) -> tuple[float, float, float] | None:
+    """(i00, i10, i11), the entries of L^-1 for S = [[a, b], [b, c]] = L L^T in closed form, None when
+    S is not positive definite."""
+    if not a > 0.0 or a == math.inf:
+        return None
+    l00 = math.sqrt(a)
+    l10 = b / l00
+    d = c - l10 * l10
+    if not d > 0.0 or d == math.inf:
+        return None
+    l11 = math.sqrt(d)
+    i00, i11 = 1.0 / l00, 1.0 / l11
+    return i00, -l10 * i00 * i11, i11
+
+
 def whiten(S: list[list[float]], y: list[float]) -> tuple[list[list[float]], list[float]] | None:
     """(L^-1, L^-1 y) for S = L L^T, or None when S is not positive definite.
 
@@ -20,23 +42,15 @@ def whiten(S: list[list[float]], y: list[float]) -> tuple[list[list[float]], lis
     """
     m = len(S)
     if m == 1:
-        s = S[0][0]
-        if not s > 0.0 or s == math.inf:
+        r = _inverse_root(S[0][0])
+        if r is None:
             return None
-        r = 1.0 / math.sqrt(s)
         return [[r]], [y[0] * r]
     if m == 2:
-        a, b, c = S[0][0], S[1][0], S[1][1]
-        if not a > 0.0 or a == math.inf:
+        inv = _inverse_factor_2x2(S[0][0], S[1][0], S[1][1])
+        if inv is None:
             return None
-        l00 = math.sqrt(a)
-        l10 = b / l00
-        d = c - l10 * l10
-        if not d > 0.0 or d == math.inf:
-            return None
-        l11 = math.sqrt(d)
-        i00, i11 = 1.0 / l00, 1.0 / l11
-        i10 = -l10 * i00 * i11
+        i00, i10, i11 = inv
         return [[i00, 0.0], [i10, i11]], [i00 * y[0], i10 * y[0] + i11 * y[1]]
     L = factor(S)
     if L is None:
@@ -55,24 +69,16 @@ def gain_rows(S: list[list[float]], y: list[float]) -> tuple[list[float], list[f
     """
     m = len(S)
     if m == 1:
-        s = S[0][0]
-        if not s > 0.0 or s == math.inf:
+        r = _inverse_root(S[0][0])
+        if r is None:
             return None
-        r = 1.0 / math.sqrt(s)
         z0 = y[0] * r
         return [z0], [r, z0 * r]
     if m == 2:
-        a, b, c = S[0][0], S[1][0], S[1][1]
-        if not a > 0.0 or a == math.inf:
+        inv = _inverse_factor_2x2(S[0][0], S[1][0], S[1][1])
+        if inv is None:
             return None
-        l00 = math.sqrt(a)
-        l10 = b / l00
-        d = c - l10 * l10
-        if not d > 0.0 or d == math.inf:
-            return None
-        l11 = math.sqrt(d)
-        i00, i11 = 1.0 / l00, 1.0 / l11
-        i10 = -l10 * i00 * i11
+        i00, i10, i11 = inv
         z0, z1 = i00 * y[0], i10 * y[0] + i11 * y[1]
         return [z0, z1], [i00, 0.0, i10, i11, z0 * i00 + z1 * i10, z1 * i11]
     white = whiten(S, y)

@@ -23,14 +23,7 @@ def sandwich(A: Mat3, S: Mat3, scale: float = 1.0) -> tuple:
     m6 = a6 * s0 + a7 * s3 + a8 * s6
     m7 = a6 * s1 + a7 * s4 + a8 * s7
     m8 = a6 * s2 + a7 * s5 + a8 * s8
-    # M A^T (symmetric when S is)
-    c00 = (m0 * a0 + m1 * a1 + m2 * a2) * scale
-    c01 = (m0 * a3 + m1 * a4 + m2 * a5) * scale
-    c02 = (m0 * a6 + m1 * a7 + m2 * a8) * scale
-    c11 = (m3 * a3 + m4 * a4 + m5 * a5) * scale
-    c12 = (m3 * a6 + m4 * a7 + m5 * a8) * scale
-    c22 = (m6 * a6 + m7 * a7 + m8 * a8) * scale
-    return ((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))
+    return _times_transposed((m0, m1, m2, m3, m4, m5, m6, m7, m8), A, scale)
 
 
 def sandwich_diag(A: Mat3, s0: float, s4: float, s8: float, scale: float = 1.0) -> tuple:
@@ -43,6 +36,14 @@ def sandwich_diag(A: Mat3, s0: float, s4: float, s8: float, scale: float = 1.0) 
     m0, m1, m2 = a0 * s0, a1 * s4, a2 * s8
     m3, m4, m5 = a3 * s0, a4 * s4, a5 * s8
     m6, m7, m8 = a6 * s0, a7 * s4, a8 * s8
+    return _times_transposed((m0, m1, m2, m3, m4, m5, m6, m7, m8), A, scale)
+
+
+def _times_transposed(M: Mat3, A: Mat3, scale: float) -> tuple:
+    """scale * M A^T as nested tuples, its upper triangle mirrored: M = A S with S symmetric makes
+    it symmetric (the second half of ``sandwich`` and ``sandwich_diag``)."""
+    m0, m1, m2, m3, m4, m5, m6, m7, m8 = M
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = A
     c00 = (m0 * a0 + m1 * a1 + m2 * a2) * scale
     c01 = (m0 * a3 + m1 * a4 + m2 * a5) * scale
     c02 = (m0 * a6 + m1 * a7 + m2 * a8) * scale

@@ -58,16 +58,10 @@ def exp(vx: float, vy: float, vz: float) -> Quat:
     return (vx * s, vy * s, vz * s, math.cos(0.5 * angle))
 
 
-def advance(q: Quat, vx: float, vy: float, vz: float) -> Quat:
-    """normalize(mul(q, exp(v))): q moved by the body-frame rotation vector v (attitude
-    propagation), in one call: the same float expressions as the three."""
-    angle = math.sqrt(vx * vx + vy * vy + vz * vz)
-    if angle < 1e-8:
-        bx, by, bz, bw = normalize((0.5 * vx, 0.5 * vy, 0.5 * vz, 1.0 - angle * angle / 8.0))
-    else:
-        s = math.sin(0.5 * angle) / angle
-        bx, by, bz, bw = vx * s, vy * s, vz * s, math.cos(0.5 * angle)
-    ax, ay, az, aw = q
+def _mul_unit(a: Quat, b: Quat) -> Quat:
+    """normalize(mul(a, b)) in one call: the same float expressions as the two."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
     x = aw * bx + ax * bw + ay * bz - az * by
     y = aw * by - ax * bz + ay * bw + az * bx
     z = aw * bz + ax * by - ay * bx + az * bw
@@ -76,27 +70,17 @@ def advance(q: Quat, vx: float, vy: float, vz: float) -> Quat:
     if not n > 0.0 or not math.isfinite(n):
         raise EstimatorError("quaternion has zero or non-finite norm")
     return (x / n, y / n, z / n, w / n)
+
+
+def advance(q: Quat, vx: float, vy: float, vz: float) -> Quat:
+    """normalize(mul(q, exp(v))): q moved by the body-frame rotation vector v (attitude propagation)."""
+    return _mul_unit(q, exp(vx, vy, vz))
 
 
 def turn(vx: float, vy: float, vz: float, q: Quat) -> Quat:
-    """normalize(mul(exp(v), q)): q turned by the world-frame rotation vector v (the global
-    attitude boxplus), in one call: the same float expressions as the three, which cost more
-    in calls than in arithmetic on this path."""
-    angle = math.sqrt(vx * vx + vy * vy + vz * vz)
-    if angle < 1e-8:
-        ax, ay, az, aw = normalize((0.5 * vx, 0.5 * vy, 0.5 * vz, 1.0 - angle * angle / 8.0))
-    else:
-        s = math.sin(0.5 * angle) / angle
-        ax, ay, az, aw = vx * s, vy * s, vz * s, math.cos(0.5 * angle)
-    bx, by, bz, bw = q
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    w = aw * bw - ax * bx - ay * by - az * bz
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    if not n > 0.0 or not math.isfinite(n):
-        raise EstimatorError("quaternion has zero or non-finite norm")
-    return (x / n, y / n, z / n, w / n)
+    """normalize(mul(exp(v), q)): q turned by the world-frame rotation vector v (the global attitude
+    boxplus)."""
+    return _mul_unit(exp(vx, vy, vz), q)
 
 
 def log(q: Quat) -> tuple[float, float, float]:
