@@ -11,7 +11,7 @@ import pytest
 from fusiond import bench
 from fusiond.config import load
 from fusiond.core.fusion import FusionCore
-from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+from fusiond.estimator import predict
 from fusiond.estimator import observations as obs
 from fusiond.replay.bag import open_bag_samples
 
@@ -26,23 +26,14 @@ def test_tight_step_runs_the_estimators_model():
     dt^2 per step) into attitude, so P's pose diagonal agrees to well within 1e-3 relative, the
     pose to within 1e-6 m / 1e-6 rad over 1.5 m of travel."""
     step = bench.tight_step()
-    layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5)])
-    ekf = ErrorStateEKF(layout)
-    u = MotionInput()
-    u.linear, u.angular = (0.5, 0.0, 0.0), (0.01, -0.02, 0.2)
-    u.linear_cov = (1e-3, 0, 0, 0, 1e-3, 0, 0, 0, 1e-3)
-    u.angular_cov = (2.5e-5, 0, 0, 0, 2.5e-5, 0, 0, 0, 2.5e-5)
-    u.linear_period = u.angular_period = 0.02
-    u.from_gyro = True
-    noise = layout.noise_density(np.full(6, 4e-6))
-    mask = np.ones(9, dtype=bool)
-    mask[[0, 1, 2, 5, 8]] = False
+    m = bench.estimator_model()
+    layout, ekf = m.layout, m.ekf
     for _ in range(300):
         step()
-        x, F, Q = predict(layout, ekf.x, u, 0.01, noise)
+        x, F, Q = predict(layout, ekf.x, m.u, 0.01, m.noise, m.ws)
         ekf.propagate(x, F, Q)
-        y, H, R = obs.orientation(layout, ekf.x, (0.001, -0.002, 0.0), (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6), (0, 1))
-        ekf.update(y, H, R, mask=mask)
+        y, H, R = obs.orientation(layout, ekf.x, (0.001, -0.002, 0.0), m.cov, (0, 1))
+        ekf.update(y, H, R, mask=m.mask)
     st = dict(zip(step.__code__.co_freevars, (c.cell_contents for c in step.__closure__)))["st"]
     assert math.dist(st["p"], ekf.x[0:3]) < 1e-6
     assert abs(abs(float(np.dot(st["q"], ekf.x[3:7]))) - 1.0) < 1e-12  # cos(angle/2): angle < 3e-6 rad
