@@ -296,7 +296,7 @@ class GpsModel(SensorModel):
         dr = (track.base[0] + t[0], track.base[1] + t[1])
         if lla == track.last_lla:
             return math.hypot(dr[0] - track.last_dr[0], dr[1] - track.last_dr[1]) > FROZEN_MIN_TRAVEL
-        s.own[self.index] = GpsOwn(replace(track, last_lla=lla, last_dr=dr), t, own.rejected)
+        s.own[self.index] = msgspec.structs.replace(own, track=replace(track, last_lla=lla, last_dr=dr))
         return False
 
     def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float) -> None:
@@ -312,14 +312,14 @@ class GpsModel(SensorModel):
             points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
         extent = max(track.extent, math.hypot(z[0] - track.first[0], z[1] - track.first[1]))
         track = replace(track, points=points, extent=extent)
-        s.own[self.index] = GpsOwn(track, t)
+        s.own[self.index] = msgspec.structs.replace(own, track=track)
         if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
             return
         d0 = points[0]
         if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * math.hypot(z[0] - d0[0], z[1] - d0[1]):
             # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
-            s.own[self.index] = GpsOwn(replace(track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]),
-                                               extent=0.0, t0=stamp), t)
+            s.own[self.index] = msgspec.structs.replace(own, track=replace(
+                track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]), extent=0.0, t0=stamp))
             return
         fit = fit_rigid(list(points))
         if fit is None:
