@@ -124,7 +124,7 @@ class FusionCore:
             error_zero += [eb, eb + 1]
         self._planar_nominal = tuple(nominal_zero)
         self._planar_error = np.array(error_zero)
-        self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d)
+        self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d, self.layout)
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
@@ -477,7 +477,7 @@ class FusionCore:
         without it (zero twist, no rotation), so a logging gap of any length moves the pose
         by at most speed x timeout and cannot integrate the last gyro rate into a tumble. The
         covariance grows for the rest of the gap by the gap inflation (added once per step) and
-        by the motion the held inputs no longer describe (``_unheld_motion_var``).
+        by the motion the held inputs no longer describe (``HeldInputs.unheld_motion_var``).
         """
         t0 = s.t
         t_end = t0 + dt
@@ -493,7 +493,7 @@ class FusionCore:
                 m.on_predict(s, s.ekf.x, x)
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
-                pos_var, yaw_var = self._unheld_motion_var(s, t_end, timeouts)
+                pos_var, yaw_var = held.unheld_motion_var(s, t_end, timeouts)
                 Q[0, 0] += pos_var
                 Q[1, 1] += pos_var
                 Q[5, 5] += yaw_var
@@ -513,35 +513,6 @@ class FusionCore:
         if not self.context.track_acceleration or self.odom_index < 0:
             return 0.0
         return self.models[self.odom_index].forward_accel(s)
-
-    def _unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float]) -> tuple[float, float]:
-        """Variance of the motion a logging gap hides: (horizontal position per axis m^2, yaw rad^2).
-
-        Past its sensor's timeout the prediction holds no input (the robot may have stopped),
-        but a vehicle that was moving may as well have kept going: at its last speed v for the
-        T seconds not covered by any twist it is anywhere within v T of where the filter put
-        it, and with its last turn rate w its heading within w T. Taken as one standard
-        deviation each: a car at 30 m/s after a 20 s gap is ~600 m uncertain, so the first GPS
-        fix after it is believed instead of gated out, and its jump is not explained as a wheel
-        scale. A robot that stood still before the gap gets only the gap inflation.
-        """
-        odom = self.odom_index
-        if odom < 0 or s.last[odom] is None:
-            return 0.0, 0.0
-        odom_expiry = s.last[odom] + timeouts[0]
-        unheld_linear = t_end - max(s.t, odom_expiry)
-        if unheld_linear <= 0.0:
-            return 0.0, 0.0
-        v = math.hypot(s.linear[0], s.linear[1])
-        if self.layout.has("wheel_scale"):
-            v *= abs(float(s.ekf.x[self.layout.nominal["wheel_scale"].start]))
-        rate_expiry = odom_expiry
-        w = abs(s.wheel_angular[2])
-        if s.gyro is not None:
-            rate_expiry = max(rate_expiry, s.gyro_last[1] + timeouts[1])
-            w = abs(s.gyro[2] - (float(s.ekf.x[self.layout.nominal["gyro_bias"].start + 2]) if self.has_bias else 0.0))
-        unheld_angular = max(t_end - max(s.t, rate_expiry), 0.0)
-        return (v * unheld_linear) ** 2, (w * unheld_angular) ** 2
 
     def _covariance_reset(self, n: int) -> None:
         """Count resets (propagate's and update's) by the EKF's own counter, which snapshots carry:

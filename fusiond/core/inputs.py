@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 from ..config import OdomSensor
-from ..estimator import MotionInput, mat3
+from ..estimator import MotionInput, StateLayout, mat3
 from .state import FilterState
 
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
@@ -24,8 +24,11 @@ _ZERO3 = (0.0, 0.0, 0.0)
 class HeldInputs:
     """Which inputs hold at a time t in a state s, as one reused ``MotionInput``."""
 
-    def __init__(self, sensors: list, odom_index: int, two_d: bool) -> None:
+    def __init__(self, sensors: list, odom_index: int, two_d: bool, layout: StateLayout) -> None:
         self.odom_index = odom_index
+        # nominal-state indices that correct the last inputs (-1: not in the state)
+        self._wheel_scale = layout.nominal["wheel_scale"].start if layout.has("wheel_scale") else -1
+        self._bias_z = layout.nominal["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
         self.two_d = two_d
         self.tilt_reference = True  # set by the core once the sensor models say whether any gives tilt
         self._timeout_base = [sc.timeout_s for sc in sensors]
@@ -89,19 +92,45 @@ class HeldInputs:
             s.tilt_seen is not None and t - s.tilt_seen > TILT_STALE_S)
         return u
 
+    def expiries(self, s: FilterState, timeouts: tuple[float, float]) -> tuple[float, float]:
+        """(odometry, gyro): when each held input's sensor times out (-inf where there is no such input)."""
+        odom = self.odom_index
+        odom_expiry = s.last[odom] + timeouts[0] if odom >= 0 and s.last[odom] is not None else -math.inf
+        gyro_expiry = s.gyro_last[1] + timeouts[1] if s.gyro_last is not None else -math.inf
+        return odom_expiry, gyro_expiry
+
     def next_expiry(self, s: FilterState, t: float, timeouts: tuple[float, float]) -> float:
         """The first moment after t at which a held input's sensor times out (inf if none)."""
         nxt = math.inf
-        odom = self.odom_index
-        if odom >= 0 and s.last[odom] is not None:
-            e = s.last[odom] + timeouts[0]
-            if t < e < nxt:
-                nxt = e
-        if s.gyro_last is not None:
-            e = s.gyro_last[1] + timeouts[1]
+        for e in self.expiries(s, timeouts):
             if t < e < nxt:
                 nxt = e
         return nxt
+
+    def unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float]) -> tuple[float, float]:
+        """Variance of the motion a logging gap hides: (horizontal position per axis m^2, yaw rad^2).
+
+        Past its sensor's timeout the prediction holds no input (the robot may have stopped),
+        but a vehicle that was moving may as well have kept going: at its last speed v for the
+        T seconds not covered by any twist it is anywhere within v T of where the filter put
+        it, and with its last turn rate w its heading within w T. Taken as one standard
+        deviation each: a car at 30 m/s after a 20 s gap is ~600 m uncertain, so the first GPS
+        fix after it is believed instead of gated out, and its jump is not explained as a wheel
+        scale. A robot that stood still before the gap gets only the gap inflation.
+        """
+        odom_expiry, gyro_expiry = self.expiries(s, timeouts)
+        unheld_linear = t_end - max(s.t, odom_expiry)
+        if odom_expiry == -math.inf or unheld_linear <= 0.0:
+            return 0.0, 0.0
+        x = s.ekf.x
+        v = math.hypot(s.linear[0], s.linear[1])
+        if self._wheel_scale >= 0:
+            v *= abs(float(x[self._wheel_scale]))
+        w = abs(s.wheel_angular[2])
+        if s.gyro is not None:
+            w = abs(s.gyro[2] - (float(x[self._bias_z]) if self._bias_z >= 0 else 0.0))
+        unheld_angular = max(t_end - max(s.t, odom_expiry, gyro_expiry), 0.0)
+        return (v * unheld_linear) ** 2, (w * unheld_angular) ** 2
 
 
 def note_period(s: FilterState, idx: int, stamp: float) -> None:
