@@ -1,14 +1,42 @@
-"""structlog set-up: human lines on a terminal, JSON lines otherwise (journald, Docker, CI)."""
+"""structlog set-up: human lines on a terminal, JSON lines otherwise (journald, Docker, CI).
+
+structlog is imported at the first event, not at start-up. Importing it costs ~0.1 s
+(``structlog.dev`` pulls in rich and asyncio when they are installed, and they are: rich
+draws the monitor), a tenth of a whole replay of a small bag, and a replay that goes
+well logs nothing. So the modules log through ``get_logger``, whose proxy imports
+structlog and applies ``configure``'s settings when it is first used.
+"""
 
 from __future__ import annotations
 
-import logging
 import sys
+from typing import Any
 
-import structlog
+__all__ = ["configure", "get_logger"]
+
+# configure()'s settings, waiting for structlog's import (None: nothing asked, structlog's defaults)
+_pending: tuple[str, bool | None] | None = None
 
 
 def configure(level: str = "info", json: bool | None = None) -> None:
+    """Render events as JSON lines (``json``; default: when stderr is not a terminal) at ``level``
+    and above. Applied now if structlog is already imported, else at the first event."""
+    global _pending
+    _pending = (level, json)
+    if "structlog" in sys.modules:
+        _apply()
+
+
+def _apply() -> None:
+    global _pending
+    if _pending is None:
+        return
+    level, json = _pending
+    _pending = None
+    import logging
+
+    import structlog
+
     if json is None:
         json = not sys.stderr.isatty()
     renderer = structlog.processors.JSONRenderer() if json else structlog.dev.ConsoleRenderer(colors=False)
@@ -22,3 +50,28 @@ def configure(level: str = "info", json: bool | None = None) -> None:
         logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
         cache_logger_on_first_use=True,
     )
+
+
+class _LazyLogger:
+    """Stands for ``structlog.get_logger(name)`` until an event is logged through it."""
+
+    def __init__(self, name: str) -> None:
+        self._name = name
+        self._logger: Any = None
+
+    def __getattr__(self, method: str) -> Any:
+        logger = self._logger
+        if logger is None:
+            import structlog
+
+            # A configuration made since (a test's ``structlog.testing.capture_logs``) wins
+            # over the pending one, which would otherwise replace it.
+            if not structlog.is_configured():
+                _apply()
+            logger = self._logger = structlog.get_logger(self._name)
+        return getattr(logger, method)
+
+
+def get_logger(name: str) -> Any:
+    """A logger named ``name`` (structlog's bound-logger API: ``log.info("event", key=value)``)."""
+    return _LazyLogger(name)

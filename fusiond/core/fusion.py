@@ -26,13 +26,13 @@ from dataclasses import dataclass, field
 
 import msgspec
 import numpy as np
-import structlog
 
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import ErrorStateEKF, PredictWorkspace, predict
 from ..estimator.geodesy import enu_to_geodetic
+from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
@@ -42,7 +42,7 @@ from .time_jumps import HeldTimeline
 from .sensors import Rejected, SensorContext, build_models
 from .state import FilterState
 
-log = structlog.get_logger("fusiond.core")
+log = get_logger("fusiond.core")
 
 
 

@@ -30,7 +30,6 @@ from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
-import structlog
 
 from ... import reasons
 from ...config import GpsSensor
@@ -38,6 +37,7 @@ from ...estimator import mat3
 from ...estimator import observations as obs
 from ...estimator.geodesy import EnuFrame
 from ...estimator.rigid_fit import RigidFit, fit_rigid
+from ...logs import get_logger
 from ...samples import GpsSample
 from ..diagnostics import DiagnosticsRecord
 from .base import SensorContext, SensorModel
@@ -47,7 +47,7 @@ from .frame import lever, new_frame, set_position
 if TYPE_CHECKING:
     from ..state import FilterState
 
-log = structlog.get_logger("fusiond.core")
+log = get_logger("fusiond.core")
 
 HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipping or GPS wander, start over
 HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad

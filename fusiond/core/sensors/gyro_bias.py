@@ -18,16 +18,16 @@ import math
 from typing import TYPE_CHECKING
 
 import msgspec
-import structlog
 
 from ...estimator import observations as obs
+from ...logs import get_logger
 from ..diagnostics import DiagnosticsRecord
 
 if TYPE_CHECKING:
     from ..state import FilterState
     from .imu import ImuInput, ImuModel
 
-log = structlog.get_logger("fusiond.core")
+log = get_logger("fusiond.core")
 
 ZERO_RATE_GATE = 5.0  # sqrt(NIS) gate of a standstill bias update: a hand-turned robot is not at rest
 GYRO_COMPONENTS = ("gyro_x", "gyro_y", "gyro_z")
