@@ -154,3 +154,63 @@ def test_a_new_kind_is_one_model_class():
     s = _fresh(layout, [m])
     m.apply(s, m.convert(OdomSample("w", 10.0, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), COV6)), 10.0, True, False)
     assert s.linear == (1.0, 0.0, 0.0) and s.own == [None]
+
+
+# -- covariance memo: a driver's constant covariance is resolved once, a changed one anew ----------------------------
+
+def _imu_sample(stamp: float, oc, gc, q=(0.0, 0.0, 0.0, 1.0)) -> ImuSample:
+    return ImuSample("imu", stamp, q, oc, (0.0, 0.0, 0.1), gc)
+
+
+def test_imu_policy_resolves_each_new_covariance_and_never_reuses_a_stale_one():
+    from fusiond.config import ImuSensor
+    from fusiond.core.sensors.checks import Rejected
+    from fusiond.core.sensors.imu import ImuPolicy
+
+    # a 90 deg yaw mount: the base-frame covariance is the IMU's turned, so a stale one would show
+    policy = ImuPolicy(ImuSensor(name="imu", key="imu", orientation="absolute", angular_velocity=True,
+                                 extrinsic_rpy=(0.0, 0.0, math.pi / 2)))
+    a = (1e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 9e-4)
+    g = (1e-6, 0.0, 0.0, 0.0, 4e-6, 0.0, 0.0, 0.0, 9e-6)
+    first = policy.convert(_imu_sample(1.0, a, g))
+    assert first.rpy_cov[0] == pytest.approx(4e-4) and first.rpy_cov[4] == pytest.approx(1e-4)
+    assert first.gyro_cov[0] == pytest.approx(4e-6) and first.gyro_cov[4] == pytest.approx(1e-6)
+    again = policy.convert(_imu_sample(1.1, tuple(a), tuple(g)))  # equal values, new tuples
+    assert again.rpy_cov == first.rpy_cov and again.gyro_cov == first.gyro_cov and again.rows == (0, 1, 2)
+    # the yaw row reported unmeasured (huge variance): the rows change with the covariance
+    b = (1e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e6)
+    changed = policy.convert(_imu_sample(1.2, b, (2e-6,) + g[1:]))
+    assert changed.rows == (0, 1) and changed.gyro_cov[4] == pytest.approx(2e-6)
+    # a bad covariance after good ones is refused whatever was seen before
+    with pytest.raises(Rejected) as r:
+        policy.convert(_imu_sample(1.3, (math.nan,) + a[1:], g))
+    assert r.value.reason == "non_finite"
+    with pytest.raises(Rejected) as r:
+        policy.convert(_imu_sample(1.4, a, (-1e-6,) + g[1:]))
+    assert r.value.reason == "negative_covariance"
+    # a list (mutable) is resolved each time: changing it in place changes the next result
+    mutable = list(a)
+    policy.convert(_imu_sample(1.5, mutable, g))
+    mutable[0] = 1.0e-2
+    assert policy.convert(_imu_sample(1.6, mutable, g)).rpy_cov[4] == pytest.approx(1e-2)
+
+
+def test_odom_policy_resolves_each_new_covariance_and_zeroes_unmeasured_components():
+    from fusiond.core.sensors.checks import Rejected
+
+    policy = OdomPolicy(OdomSensor(name="wheel", key="odom"))
+    cov = list(COV6)
+    first = policy.convert(OdomSample("wheel", 1.0, (1.0, 0.2, 0.0), (0.0, 0.0, 0.5), tuple(cov)))
+    assert first.linear == (1.0, 0.2, 0.0) and first.angular == (0.0, 0.0, 0.5) and first.yaw_rate_measured
+    assert first.linear_cov[0] == pytest.approx(1e-4)
+    cov[35] = 1e9  # the yaw rate reported unmeasured: its value is not used
+    cov[0] = 4e-4
+    second = policy.convert(OdomSample("wheel", 1.1, (1.0, 0.2, 0.0), (0.0, 0.0, 0.5), tuple(cov)))
+    assert second.angular == (0.0, 0.0, 0.0) and not second.yaw_rate_measured
+    assert second.linear_cov[0] == pytest.approx(4e-4) and second.linear == (1.0, 0.2, 0.0)
+    third = policy.convert(OdomSample("wheel", 1.2, (1.0, 0.2, 0.0), (0.0, 0.0, 0.5), COV6))
+    assert third.angular == (0.0, 0.0, 0.5) and third.linear_cov == first.linear_cov
+    cov[0] = -1.0
+    with pytest.raises(Rejected) as r:
+        policy.convert(OdomSample("wheel", 1.3, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), tuple(cov)))
+    assert r.value.reason == "negative_covariance"

@@ -79,6 +79,13 @@ class ImuPolicy:
         self._gyro_floor = cfg.gyro_min_sigma**2
         self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
         self._gravity_tilt = cfg.tilt_from_gravity
+        # The last covariance tuple of each kind and what it resolved to: a driver sends the same
+        # covariance in every message, so its checks, floors and rotation into base_link are done
+        # once per distinct value (a tuple compares equal only if finite: NaN != NaN).
+        self._ori_seen: tuple | None = None
+        self._ori_resolved: tuple[tuple[int, ...], tuple[float, ...]] = ((), ())
+        self._gyro_seen: tuple | None = None
+        self._gyro_resolved: tuple[float, ...] = ()
 
     @property
     def gives_tilt(self) -> bool:
@@ -89,6 +96,7 @@ class ImuPolicy:
         """Two-D mode: roll and pitch are held at 0, so only a yaw row can be fused."""
         self._rows = tuple(r for r in self._rows if r == 2)
         self._gravity_tilt = False
+        self._ori_seen = None  # its rows were resolved for the old mode
 
     def _rotate_cov(self, diag: list[float]) -> mat3.Mat3:
         C = mat3.diag(diag[0], diag[1], diag[2])
@@ -96,25 +104,46 @@ class ImuPolicy:
             return C
         return mat3.flat(mat3.sandwich(self.R_ext, C))
 
+    def _orientation_noise(self, oc) -> tuple[tuple[int, ...], tuple[float, ...]]:
+        """(rows to fuse, base-frame covariance) of a finite orientation covariance not seen just before."""
+        if self._ori_override is not None:
+            var, measured = list(self._ori_override), [True, True, True]
+        else:
+            diag = [oc[0], oc[4], oc[8]]
+            if any(d < 0.0 for d in diag):
+                raise Rejected(reasons.NEGATIVE_COVARIANCE, "orientation")
+            var, measured = resolve_variances(diag, self._ori_floor, self._ori_unmeasured, 1.0)
+        resolved = (tuple(i for i in self._rows if measured[i]), self._rotate_cov(var))
+        if type(oc) is tuple:  # kept only if immutable
+            self._ori_seen, self._ori_resolved = oc, resolved
+        return resolved
+
+    def _gyro_noise(self, gc) -> tuple[float, ...]:
+        """Base-frame gyro covariance of a finite angular-velocity covariance not seen just before."""
+        if self._gyro_override is not None:
+            var = [self._gyro_override] * 3
+        else:
+            diag = [gc[0], gc[4], gc[8]]
+            if any(d < 0.0 for d in diag):
+                raise Rejected(reasons.NEGATIVE_COVARIANCE, "angular_velocity")
+            var = [max(d, self._gyro_floor) for d in diag]
+        cov = self._rotate_cov(var)
+        if type(gc) is tuple:
+            self._gyro_seen, self._gyro_resolved = gc, cov
+        return cov
+
     def convert(self, s: ImuSample) -> ImuInput:
         rpy = rpy_cov = None
         rows: tuple[int, ...] = ()
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
-            if not (finite(s.orientation) and finite(s.orientation_covariance)):
+            oc = s.orientation_covariance
+            known = oc == self._ori_seen
+            if not (finite(s.orientation) and (known or finite(oc))):
                 raise Rejected(reasons.NON_FINITE, "orientation")
             q_imu = unit_quaternion(s.orientation)
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
             rpy = rot.to_rpy(q_base)
-            if self._ori_override is not None:
-                var, measured = list(self._ori_override), [True, True, True]
-            else:
-                oc = s.orientation_covariance
-                diag = [oc[0], oc[4], oc[8]]
-                if any(d < 0.0 for d in diag):
-                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "orientation")
-                var, measured = resolve_variances(diag, self._ori_floor, self._ori_unmeasured, 1.0)
-            rows = tuple(i for i in self._rows if measured[i])
-            rpy_cov = self._rotate_cov(var)
+            rows, rpy_cov = self._ori_resolved if known else self._orientation_noise(oc)
         elif len(s.orientation_covariance) != 9:
             raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
@@ -122,20 +151,14 @@ class ImuPolicy:
         if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
             gc = s.angular_velocity_covariance
             if gc[0] != -1.0:
-                if not (finite(s.angular_velocity) and finite(gc)):
+                known = gc == self._gyro_seen
+                if not (finite(s.angular_velocity) and (known or finite(gc))):
                     raise Rejected(reasons.NON_FINITE, "angular_velocity")
                 if not plausible(s.angular_velocity, MAX_RATE):
                     raise Rejected(reasons.IMPLAUSIBLE_VALUE, "angular velocity beyond 100 rad/s")
-                if self._gyro_override is not None:
-                    var = [self._gyro_override] * 3
-                else:
-                    diag = [gc[0], gc[4], gc[8]]
-                    if any(d < 0.0 for d in diag):
-                        raise Rejected(reasons.NEGATIVE_COVARIANCE, "angular_velocity")
-                    var = [max(d, self._gyro_floor) for d in diag]
+                gyro_cov = self._gyro_resolved if known else self._gyro_noise(gc)
                 w = s.angular_velocity
                 gyro = w if self._identity else mat3.apply(self.R_ext, w)
-                gyro_cov = self._rotate_cov(var)
         elif self.cfg.angular_velocity:
             raise Rejected(reasons.BAD_COVARIANCE, "angular velocity covariance must have 9 entries")
         accel = None

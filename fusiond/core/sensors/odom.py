@@ -41,6 +41,9 @@ class OdomInput:
     stationary: bool
 
 
+_ALL_MEASURED = (True,) * 6
+
+
 class OdomPolicy:
     STATIONARY_LINEAR = 1e-3  # m/s
     STATIONARY_ANGULAR = 1e-3  # rad/s
@@ -58,6 +61,38 @@ class OdomPolicy:
         # whatever its covariance says (a lost yaw rate reads 0 with covariance 0)
         self._declared = tuple(cfg.twist_measured)
         self._all_measured = all(self._declared)
+        self._seen: tuple | None = None  # the last twist covariance and its ``_twist_noise``
+        self._resolved: tuple = ((), (), ())
+
+    def _twist_noise(self, cov) -> tuple[mat3.Mat3, mat3.Mat3, tuple[bool, ...]]:
+        """(linear, angular covariance, measured per component vx vy vz wx wy wz) of a covariance not seen
+        just before: the user's noise for the components declared measured, else the driver's
+        (floored; huge, non-finite or undeclared: "not measured", default noise, value unused)."""
+        if self._override is not None and self._all_measured:
+            var, measured = list(self._override), [True] * 6
+        else:
+            var, measured = [], []
+            for i in range(6):
+                if self._override is not None:  # the user's noise, for the components declared measured
+                    measured.append(self._declared[i])
+                    var.append(self._override[i] if self._declared[i] else self._default[i])
+                    continue
+                d = cov[7 * i]
+                if d < 0.0:
+                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "twist")
+                if not self._declared[i] or d >= self._unmeasured[i] or d != d or d == math.inf:
+                    var.append(self._default[i])  # "not measured": not used, default noise
+                    measured.append(False)
+                else:
+                    var.append(d if d > self._floor[i] else self._floor[i])
+                    measured.append(True)
+        # the covariances as the motion model takes them, the same tuples while the covariance
+        # repeats (the prediction recognises a tuple it has seen and reuses its factorisation)
+        resolved = (mat3.diag(var[0], var[1], var[2]), mat3.diag(var[3], var[4], var[5]),
+                    _ALL_MEASURED if all(measured) else tuple(measured))
+        if type(cov) is tuple:  # the same covariance in every message: resolved once (kept only if immutable)
+            self._seen, self._resolved = cov, resolved
+        return resolved
 
     def convert(self, s: OdomSample) -> OdomInput:
         if not (finite(s.linear) and finite(s.angular)):
@@ -67,30 +102,9 @@ class OdomPolicy:
         cov = s.twist_covariance
         if len(cov) != 36:
             raise Rejected(reasons.BAD_COVARIANCE, "twist covariance must have 36 entries")
+        linear_cov, angular_cov, measured = self._resolved if cov == self._seen else self._twist_noise(cov)
         twist = (*s.linear, *s.angular)
-        if self._override is not None and self._all_measured:
-            var = self._override
-            values = twist
-            measured = (True,) * 6
-        else:
-            var, values, measured = [], [], []
-            for i in range(6):
-                if self._override is not None:  # the user's noise, for the components declared measured
-                    measured.append(self._declared[i])
-                    var.append(self._override[i] if self._declared[i] else self._default[i])
-                    values.append(twist[i] if self._declared[i] else 0.0)
-                    continue
-                d = cov[7 * i]
-                if d < 0.0:
-                    raise Rejected(reasons.NEGATIVE_COVARIANCE, "twist")
-                if not self._declared[i] or d >= self._unmeasured[i] or d != d or d == math.inf:
-                    var.append(self._default[i])  # "not measured": not used, default noise
-                    values.append(0.0)
-                    measured.append(False)
-                else:
-                    var.append(d if d > self._floor[i] else self._floor[i])
-                    values.append(twist[i])
-                    measured.append(True)
+        values = twist if measured is _ALL_MEASURED else tuple(v if m else 0.0 for v, m in zip(twist, measured))
         lin, ang = self.STATIONARY_LINEAR, self.STATIONARY_ANGULAR
         v0, v1, v2, w0, w1, w2 = values
         stationary = (
@@ -99,9 +113,9 @@ class OdomPolicy:
         )
         return OdomInput(
             (v0, v1, v2),
-            mat3.diag(var[0], var[1], var[2]),
+            linear_cov,
             (w0, w1, w2),
-            mat3.diag(var[3], var[4], var[5]),
+            angular_cov,
             measured[5],
             stationary,
         )
