@@ -200,6 +200,35 @@ def test_masked_update_equals_joseph_form_with_zeroed_gain_rows():
     assert np.abs(dx[~mask]).max() < 1e-15
 
 
+@settings(max_examples=40, deadline=None)
+@given(r=tilts, p=tilts, y=angles)
+def test_a_tilt_update_holding_heading_keeps_the_yaw_exactly_and_roll_pitch_as_updated(r, p, y):
+    """A masked roll/pitch update of a tilted body moves its Euler yaw (second order); with
+    hold_heading the yaw stays (to rounding), and roll/pitch stay what the update made them
+    (the turn back is about world z, which the roll/pitch of a yaw-free rotation ignore)."""
+    layout = _layout()
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(9, 9))
+    P = A @ A.T * 1e-2 + np.eye(9) * 1e-3
+    mask = np.ones(9, dtype=bool)
+    mask[[0, 1, 2, 5, 8]] = False
+    cov = (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3)
+    results = []
+    for hold in (False, True):
+        ekf = ErrorStateEKF(layout, x=_state(layout, (r, p, y)), P=P.copy())
+        yaw0 = rot.yaw(tuple(ekf.x[3:7].tolist()))
+        yv, H, R = obs.orientation(layout, ekf.x, (r + 0.1, p - 0.08, 0.0), cov, (0, 1))
+        assert not ekf.update(yv, H, R, mask=mask, hold_heading=hold).rejected
+        results.append((yaw0, rot.to_rpy(tuple(ekf.x[3:7].tolist())), ekf.x.copy(), ekf.P.copy()))
+    (yaw0, free, x_free, P_free), (_, held, x_held, P_held) = results
+    assert abs(rot.wrap(held[2] - yaw0)) < 1e-12
+    np.testing.assert_allclose(held[0:2], free[0:2], atol=1e-9)
+    np.testing.assert_array_equal(x_held[[0, 1, 2, 7, 8, 9]], x_free[[0, 1, 2, 7, 8, 9]])
+    np.testing.assert_array_equal(P_held, P_free)  # the covariance update does not depend on it
+    if abs(r) > 0.3 and abs(p) > 0.3:  # tilted enough for the free update to have turned the yaw
+        assert abs(rot.wrap(free[2] - yaw0)) > 1e-4
+
+
 @settings(max_examples=50, deadline=None)
 @given(m=st.integers(1, 5), seed=st.integers(0, 10_000))
 def test_cholesky_whitening_matches_numpy(m, seed):

@@ -4,6 +4,8 @@ full, and a recycled snapshot never shares an array with the live state or anoth
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fusiond.core.fusion import FusionCore
 
@@ -51,3 +53,29 @@ def test_no_snapshot_shares_an_array_with_the_live_state_or_another():
         for b in arrays[i + 1:]:
             assert not np.shares_memory(a, b)
     assert live._spare is None or not np.shares_memory(live._spare, live.P)
+
+
+@settings(max_examples=200, deadline=None)
+@given(stamps=st.lists(st.floats(0.0, 10.0), min_size=1, max_size=60), history_s=st.floats(0.0, 5.0),
+       history_max=st.integers(1, 80))
+def test_trim_keeps_exactly_the_samples_within_the_window_and_the_count(stamps, history_s, history_max):
+    """What trim keeps, against its definition: the newest ``history_max`` samples, none stamped
+    more than ``history_s`` before the newest; the last one dropped becomes the base."""
+    from fusiond.core.history import History
+    from fusiond.core.state import FilterState
+
+    h = History(None)
+    keys = sorted((t, i % 3) for i, t in enumerate(stamps))
+    states = []
+    for pos, key in enumerate(keys):
+        s = FilterState.__new__(FilterState)
+        states.append(s)
+        h.keys.insert(pos, key)
+        h.events.insert(pos, (key[1], None, key[0]))
+        h.after.insert(pos, s)
+    h.trim(history_s, history_max)
+    newest = keys[-1][0]
+    expected = [k for k in keys[-history_max:] if k[0] >= newest - history_s]
+    assert h.keys == expected and len(h.after) == len(expected) == len(h.events)
+    dropped = len(keys) - len(expected)
+    assert h.base is (states[dropped - 1] if dropped else None)

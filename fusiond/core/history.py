@@ -62,11 +62,13 @@ class History:
             state.copy(into=after[j])
 
     def trim(self, history_s: float, history_max: int) -> None:
+        """Drop the samples older than ``history_s`` before the newest, and beyond ``history_max``."""
         keys = self.keys
         horizon = keys[-1][0] - history_s
-        n = 0
-        while len(keys) - n > history_max or (n < len(keys) and keys[n][0] < horizon):
-            n += 1
+        if keys[0][0] >= horizon and len(keys) <= history_max:
+            return
+        # keys are sorted: the first one stamped at or after the horizon ((t,) sorts before any (t, i))
+        n = max(bisect.bisect_left(keys, (horizon,)), len(keys) - history_max)
         if n:
             if self.base is not None:
                 self._free.append(self.base)

@@ -80,14 +80,17 @@ class ErrorStateEKF:
 
     # -- correction --------------------------------------------------------
     def update(
-        self, y: np.ndarray, H: np.ndarray, R: np.ndarray, threshold: float = math.inf, mask: np.ndarray | None = None
+        self, y: np.ndarray, H: np.ndarray, R: np.ndarray, threshold: float = math.inf, mask: np.ndarray | None = None,
+        hold_heading: bool = False,
     ) -> UpdateResult:
         """Kalman update with a Mahalanobis gate on sqrt(NIS).
 
         ``mask`` (bool per error component) limits what the update may change: the
         gain rows of the others are zeroed (a Schmidt "consider" update) and the
         Joseph form keeps P right for that sub-optimal gain. A roll/pitch update
-        uses it so that correlations in P cannot leak it into heading or position.
+        uses it so that correlations in P cannot leak it into heading or position, and
+        ``hold_heading`` so that its correction about world x/y of a tilted body leaves the
+        yaw exactly where it was (``state.hold_heading_of``).
         """
         P = self.P
         HP = H.dot(P)  # H P = (P H^T)^T: P is symmetric
@@ -130,7 +133,7 @@ class ErrorStateEKF:
             dx *= self._keep
             C *= self._joseph
         np.subtract(P, C, out=P_new)
-        self.layout.boxplus(self.x, dx)
+        self.layout.boxplus(self.x, dx, hold_heading)
         reset = not self._store(P_new)
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
 

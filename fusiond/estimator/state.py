@@ -195,6 +195,16 @@ class YawOffsetBlock(StateBlock):
         return [self.walk]
 
 
+def hold_heading_of(q: rot.Quat, heading: float) -> rot.Quat:
+    """q turned about world z back to ``heading``, its roll and pitch unchanged.
+
+    A roll/pitch-only update corrects the attitude about world x/y; with the body tilted that
+    still turns its Euler yaw a little (second order). The update holds heading by
+    construction (its gain's yaw row is masked), so this puts the yaw back exactly.
+    """
+    return rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q)
+
+
 class StateLayout:
     """Offsets of each block in the nominal vector and in the error vector."""
 
@@ -247,10 +257,15 @@ class StateLayout:
         sig = np.concatenate([np.asarray(b.initial_sigma(), float) for b in self.blocks])
         return np.diag(sig**2)
 
-    def boxplus(self, x: np.ndarray, dx: np.ndarray) -> None:
-        """x [+]= dx, in place."""
+    def boxplus(self, x: np.ndarray, dx: np.ndarray, hold_heading: bool = False) -> None:
+        """x [+]= dx, in place.
+
+        ``hold_heading``: the attitude keeps its yaw exactly (see ``hold_heading``).
+        """
         xl = x.tolist()
         dl = dx.tolist()
+        if hold_heading:
+            heading = rot.yaw(tuple(xl[3:7]))
         if self._additive_tail:
             # PoseBlock.boxplus at offset 0 (p += dp, q = Exp(dtheta) q), then the additive blocks
             # after the quaternion's extra slot: x_i += dx_(i-1)
@@ -263,6 +278,8 @@ class StateLayout:
         else:
             for b, n0, e0 in self._offsets:
                 b.boxplus(xl, dl, n0, e0)
+        if hold_heading:
+            xl[3:7] = hold_heading_of(tuple(xl[3:7]), heading)
         x[:] = xl
 
     def boxminus(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:

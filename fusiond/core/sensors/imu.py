@@ -238,12 +238,8 @@ class ImuModel(SensorModel):
         own: ImuOwn = s.own[self.index]
         scale = own.adaptive[0] if cfg.adaptive else 1.0
         tilt_only = 2 not in rows
-        if tilt_only:
-            heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
         res = s.ekf.update(y, H, R * scale if scale != 1.0 else R, cfg.mahalanobis_threshold,
-                           self.ctx.tilt_mask if tilt_only else None)
-        if tilt_only and not res.rejected:
-            restore_heading(s, heading)
+                           self.ctx.tilt_mask if tilt_only else None, hold_heading=tilt_only)
         if not res.rejected and (0 in rows or 1 in rows):
             s.tilt_seen = stamp
         if self.offset and not tilt_only:
@@ -312,23 +308,13 @@ class ImuModel(SensorModel):
         var = self.cfg.gravity_tilt_noise**2
         y, H, R = obs.orientation(self.ctx.layout, s.ekf.x, (roll, pitch, 0.0),
                                   (var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var), (0, 1))
-        heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
-        res = s.ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.tilt_mask)
+        res = s.ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.tilt_mask, hold_heading=True)
         if not res.rejected:
-            restore_heading(s, heading)
             s.tilt_seen = stamp
         if not emit:
             return []
         return [self.record(stamp, ["roll", "pitch"], y.tolist(), res.innovation_var, res.nis, 2, res.rejected,
                             "gravity", late)]
-
-
-def restore_heading(s: "FilterState", heading: float) -> None:
-    """After a roll/pitch-only update: a world-x/y correction of a tilted body still turns
-    its Euler yaw a little (second order); a rotation about world z puts the heading back
-    exactly and leaves roll and pitch as the update set them."""
-    q = tuple(s.ekf.x[3:7].tolist())
-    s.ekf.set_attitude(rot.mul(rot.exp(0.0, 0.0, rot.wrap(heading - rot.yaw(q))), q))
 
 
 def initialise_attitude(s: "FilterState", rpy: tuple[float, float, float], with_yaw: bool) -> None:
