@@ -62,3 +62,18 @@ def test_a_capture_made_before_the_first_event_is_not_replaced_by_the_pending_se
     """)
     assert out.stdout.strip() == "['captured_event']"
     assert out.stderr == ""
+
+
+def test_every_module_logs_through_fusiond_logs():
+    """A module that imported structlog itself would log with structlog's defaults (rendered to
+    stdout) whenever configure() ran before structlog's import, which is every command."""
+    from pathlib import Path
+
+    import fusiond
+
+    root = Path(fusiond.__file__).parent
+    direct = [str(p.relative_to(root)) for p in root.rglob("*.py")
+              if p.name != "logs.py" and any(line.strip().startswith(("import structlog", "from structlog"))
+                                             for line in p.read_text().splitlines())]
+    assert direct == []
+

@@ -58,7 +58,6 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-import structlog
 import zenoh
 
 from ..codecs import (
@@ -70,10 +69,11 @@ from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
+from ..logs import get_logger
 from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
 
-log = structlog.get_logger("fusiond.daemon")
+log = get_logger("fusiond.daemon")
 
 QUEUE_SIZE = 1024  # ~1 s of 1 kHz IMU + 100 Hz odometry: as long as the core's default history
 HEALTH_LOG_S = 5.0  # period of the `health` log event

@@ -22,16 +22,16 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-import structlog
 import zenoh
 
 from ..codecs import encode_sample, make_decoder
 from ..config import Config
 from ..errors import PlaybackError
+from ..logs import get_logger
 from .daemon import sensor_kind
 from .session import query_health
 
-log = structlog.get_logger("fusiond.play")
+log = get_logger("fusiond.play")
 
 LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
 

@@ -45,14 +45,14 @@ import time
 from collections.abc import Callable
 from typing import Any, Final
 
-import structlog
 import xxhash
 import zenoh
 from zenoh.ext import Int64, z_serialize
 
 from ..codecs import dds_type_name, type_hash
+from ..logs import get_logger
 
-log = structlog.get_logger("fusiond.rmw_zenoh")
+log = get_logger("fusiond.rmw_zenoh")
 
 ADMIN_SPACE: Final = "@ros2_lv"
 NODE: Final = "NN"
