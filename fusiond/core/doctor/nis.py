@@ -19,6 +19,7 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 from functools import lru_cache
+from itertools import chain
 from typing import Sequence
 
 import numpy as np
@@ -116,8 +117,8 @@ class ChannelStats:
         # a learning update tests the prior, not the sensor: counted, kept as an episode, not judged
         learning_flags = [bool(getattr(r, "learning", False)) for r in records]
         learning = np.array(learning_flags, dtype=bool)
-        nis = np.array([r.nis for r in records], dtype=float)
-        dof = np.array([r.dof for r in records], dtype=np.int64)
+        nis = np.fromiter((r.nis for r in records), dtype=float, count=len(records))
+        dof = np.fromiter((r.dof for r in records), dtype=np.int64, count=len(records))
         judged = ~learning & np.isfinite(nis) & (dof > 0)
         self._count_dof(learning, judged, dof)
         kept = judged & ~np.array(rejected, dtype=bool)
@@ -187,8 +188,9 @@ class ChannelStats:
             self.sums, self.variances = [0.0] * k, [0.0] * k
             self.outer = [[0.0] * k for _ in range(k)]
         self.n_comp += len(records)
-        y = np.array([r.innovation for r in records], dtype=float).reshape(-1, k)
-        v = np.array([r.innovation_var for r in records], dtype=float).reshape(-1, k)
+        n = len(records)
+        y = np.fromiter(chain.from_iterable(r.innovation for r in records), dtype=float, count=n * k).reshape(n, k)
+        v = np.fromiter(chain.from_iterable(r.innovation_var for r in records), dtype=float, count=n * k).reshape(n, k)
         self.sums = _running_sum(np.array(self.sums), y).tolist()
         self.variances = _running_sum(np.array(self.variances), v).tolist()
         self.outer = _running_sum(np.array(self.outer), y[:, :, None] * y[:, None, :]).tolist()

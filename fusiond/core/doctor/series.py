@@ -119,7 +119,7 @@ class SeriesCollector:
         self._enu: EnuFrame | None = EnuFrame(*gps[0].datum) if gps and gps[0].datum is not None else None
         self._pending: list = []  # samples not integrated yet, in arrival order
         self._due = CHUNK  # integrate when this many are pending
-        self._newest = -math.inf  # newest stamp of the samples integrated or released so far
+        self._newest = -math.inf  # newest stamp of the samples taken into the reorder buffer so far
         self._est_next = -math.inf
 
     # -- feeding --------------------------------------------------------------
