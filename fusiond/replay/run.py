@@ -239,8 +239,7 @@ class Runner:
                 self.trajectory.extend(p)
             if doctor is not None:
                 q = (p[3], p[4], p[5], p[6])
-                roll, pitch, _ = to_rpy(q)
-                doctor.add_attitude(roll, pitch)
+                doctor.add_orientation(q)
                 if doctor.wants_estimate(t):
                     pos_var, att_var = _variances(core)
                     bias = core.gyro_bias

@@ -41,6 +41,7 @@ ABSOLUTE_CHANNELS = ("position", "position_unaligned", "pose", "pose_delta")
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
 KEPT_CHANNELS = ("gyro_bias", "position")
+CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)
 
 
 class Doctor:
@@ -53,41 +54,43 @@ class Doctor:
         self.cfg = cfg if cfg is not None else Config()
         self.window = window or self.cfg.filter.nis_window
         self.confidence = confidence or self.cfg.filter.nis_confidence
-        self.channels: dict[tuple[str, str], ChannelStats] = {}
+        self._channels: dict[tuple[str, str], ChannelStats] = {}
         self.twist = TwistStats()
         self.tilt = TiltStats()
         self.collector = SeriesCollector(self.cfg) if self.known else None
-        self.clocks = ClockOffsets()
+        self._clocks = ClockOffsets()
         self.t0: float | None = None
+        # Fed for every message of a replay, the doctor only notes what it is given; the records and the
+        # samples are folded into the statistics a chunk at a time, and before anything is read.
+        self._records: list = []
+        self._samples: list = []
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:
-        key = (record.sensor, record.channel)
-        ch = self.channels.get(key)
-        if ch is None:
-            ch = self.channels[key] = ChannelStats(list(record.components), self.window, self.confidence,
-                                                   keep=record.channel in KEPT_CHANNELS)
-        ch.add(record)
+        """A diagnostics record."""
+        records = self._records
+        records.append(record)
         if self.t0 is None or record.stamp < self.t0:
             self.t0 = record.stamp
+        if len(records) >= CHUNK:
+            self._settle_records()
 
     def add_twist(self, linear: tuple[float, float, float], angular: tuple[float, float, float]) -> None:
-        t = self.twist
-        t.n += 1
-        t.abs_vx += abs(linear[0])
-        t.abs_vy += abs(linear[1])
-        t.abs_wz += abs(angular[2])
+        """The twist of an accepted odometry message."""
+        self.twist.add(linear, angular)
 
-    def add_attitude(self, roll: float, pitch: float) -> None:
-        self.tilt.add(roll, pitch)
+    def add_orientation(self, q: tuple[float, float, float, float]) -> None:
+        """The estimate's attitude (x, y, z, w) at a published pose."""
+        self.tilt.add_orientation(q)
 
     def add_sample(self, sample) -> None:
         """A raw sample, as the sensor sent it (for the cross-source series), in arrival order."""
-        self.clocks.add(sample.sensor, sample.stamp)
-        if self.collector is not None:
-            self.collector.add_sample(sample)
-            if self.t0 is None or sample.stamp < self.t0:
-                self.t0 = sample.stamp
+        samples = self._samples
+        samples.append(sample)
+        if self.collector is not None and (self.t0 is None or sample.stamp < self.t0):
+            self.t0 = sample.stamp
+        if len(samples) >= CHUNK:
+            self._settle_samples()
 
     def add_estimate(self, t: float, q, pos_var: float, att_var: float, bias_z: float) -> None:
         if self.collector is not None:
@@ -96,8 +99,45 @@ class Doctor:
     def wants_estimate(self, t: float) -> bool:
         return self.collector is not None and self.collector.wants_estimate(t)
 
+    @property
+    def channels(self) -> dict[tuple[str, str], ChannelStats]:
+        """Per (sensor, channel), the whole run's statistics (every record fed so far)."""
+        self._settle_records()
+        return self._channels
+
+    @property
+    def clocks(self) -> ClockOffsets:
+        """The sensors' stamp offsets at arrival (every sample fed so far)."""
+        self._settle_samples()
+        return self._clocks
+
+    def _settle_records(self) -> None:
+        if not self._records:
+            return
+        by_channel: dict[tuple[str, str], list] = {}
+        for r in self._records:
+            by_channel.setdefault((r.sensor, r.channel), []).append(r)
+        self._records = []
+        for key, records in by_channel.items():
+            ch = self._channels.get(key)
+            if ch is None:
+                first = records[0]
+                ch = self._channels[key] = ChannelStats(list(first.components), self.window, self.confidence,
+                                                        keep=first.channel in KEPT_CHANNELS)
+            ch.extend(records)
+
+    def _settle_samples(self) -> None:
+        samples = self._samples
+        if not samples:
+            return
+        self._samples = []
+        self._clocks.extend([s.sensor for s in samples], [s.stamp for s in samples])
+        if self.collector is not None:
+            self.collector.extend(samples)
+
     # -- results ------------------------------------------------------------------
     def series(self) -> Series:
+        self._settle_samples()
         return self.collector.finish() if self.collector is not None else Series()
 
     def channel_summaries(self) -> dict[str, dict]:

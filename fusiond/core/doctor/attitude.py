@@ -17,7 +17,7 @@ the configured one composed) as one ready-to-paste value.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from itertools import chain
 
 import numpy as np
 
@@ -28,22 +28,58 @@ from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
 
 LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
+CHUNK = 4096  # poses noted before their angles are computed (bounded memory)
 AXES = ("roll", "pitch", "yaw")
 
 
-@dataclass
 class TiltStats:
-    """Estimated roll/pitch over the run: a steady lean on level ground is a mounting error."""
+    """Estimated roll/pitch over the run: a steady lean on level ground is a mounting error.
 
-    n: int = 0
-    sums: list[float] = field(default_factory=lambda: [0.0, 0.0])
-    squares: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    Fed the estimate's quaternion at every published pose, so it only notes it; roll, pitch and their
+    sums are computed a chunk at a time (the sums by ``np.cumsum``, which adds in order: the same floats
+    as adding one pose at a time; the angles by ``math``, as ``rotation.to_rpy`` computes them)."""
 
-    def add(self, roll: float, pitch: float) -> None:
-        self.n += 1
-        for i, a in enumerate((roll, pitch)):
-            self.sums[i] += a
-            self.squares[i] += a * a
+    def __init__(self) -> None:
+        self._pending: list[tuple[float, float, float, float]] = []
+        self._n = 0
+        self._sums = [0.0, 0.0]
+        self._squares = [0.0, 0.0]
+
+    def add_orientation(self, q: tuple[float, float, float, float]) -> None:
+        """The estimate's attitude (x, y, z, w)."""
+        self._pending.append(q)
+        if len(self._pending) >= CHUNK:
+            self._settle()
+
+    @property
+    def n(self) -> int:
+        self._settle()
+        return self._n
+
+    @property
+    def sums(self) -> list[float]:
+        self._settle()
+        return self._sums
+
+    @property
+    def squares(self) -> list[float]:
+        self._settle()
+        return self._squares
+
+    def _settle(self) -> None:
+        pending, n = self._pending, len(self._pending)
+        if not n:
+            return
+        self._pending = []
+        x, y, z, w = np.fromiter(chain.from_iterable(pending), dtype=float, count=4 * n).reshape(n, 4).T
+        roll = np.fromiter(map(math.atan2, (2.0 * (w * x + y * z)).tolist(), (1.0 - 2.0 * (x * x + y * y)).tolist()),
+                           dtype=float, count=n)
+        sin_pitch = np.fmax(-1.0, np.fmin(1.0, 2.0 * (w * y - z * x)))  # max(-1, min(1, .)), NaN as Python's
+        pitch = np.fromiter(map(math.asin, sin_pitch.tolist()), dtype=float, count=n)
+        angles = np.column_stack((roll, pitch))
+        self._n += n
+        self._sums = np.cumsum(np.concatenate(([self._sums], angles)), axis=0)[-1].tolist()
+        self._squares = np.cumsum(np.concatenate(([self._squares], angles * angles)), axis=0)[-1].tolist()
 
 
 def imu_axis_sigmas(ch: ChannelStats, imu: ImuSensor) -> tuple[list[float], list[str]]:

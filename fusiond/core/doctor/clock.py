@@ -25,22 +25,45 @@ CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
 
 
 class ClockOffsets:
-    """Per sensor, its samples' stamps minus the newest stamp of the other sensors at arrival."""
+    """Per sensor, its samples' stamps minus the newest stamp of the other sensors at arrival.
+
+    The replay has one for every message, so they are computed in bulk (:meth:`extend`, a chunk of
+    arrivals at a time): for each sensor, a running maximum of the other sensors' stamps."""
 
     def __init__(self) -> None:
-        self._newest: dict[str, float] = {}
+        self._ids: dict[str, int] = {}
+        self._newest: list[float] = []  # per sensor id: its newest stamp so far
         self._offsets: dict[str, array] = {}
 
     def add(self, sensor: str, stamp: float) -> None:
-        if not math.isfinite(stamp):
-            return
-        others = [t for name, t in self._newest.items() if name != sensor]
-        if others:
-            kept = self._offsets.setdefault(sensor, array("d"))
-            if len(kept) < MAX_KEPT:
-                kept.append(stamp - max(others))
-        if stamp > self._newest.get(sensor, -math.inf):
-            self._newest[sensor] = stamp
+        self.extend([sensor], [stamp])
+
+    def extend(self, sensors: list[str], stamps: list[float]) -> None:
+        """Samples' sensors and stamps, in arrival order (non-finite stamps are no evidence: skipped)."""
+        ids = self._ids
+        for name in dict.fromkeys(sensors):
+            if name not in ids:
+                ids[name] = len(ids)
+                self._newest.append(-math.inf)
+        idx = np.array([ids[name] for name in sensors], dtype=np.intp)
+        t = np.array(stamps, dtype=float)
+        finite = np.isfinite(t)
+        idx, t = idx[finite], t[finite]
+        for name, i in ids.items():
+            mine = idx == i
+            if not mine.any():
+                continue
+            before = max((newest for j, newest in enumerate(self._newest) if j != i), default=-math.inf)
+            others = np.maximum.accumulate(np.concatenate(([before], np.where(mine, -math.inf, t))))[1:]
+            seen = mine & (others > -math.inf)  # another sensor has spoken: an offset
+            if seen.any():
+                kept = self._offsets.setdefault(name, array("d"))
+                if len(kept) < MAX_KEPT:
+                    kept.extend((t[seen] - others[seen])[: MAX_KEPT - len(kept)].tolist())
+        for name, i in ids.items():
+            mine = t[idx == i]
+            if len(mine):
+                self._newest[i] = max(self._newest[i], float(mine.max()))
 
     def offset(self, sensor: str) -> float | None:
         """Median offset of the sensor's stamps from the others' (s), None without another sensor."""

@@ -19,11 +19,16 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 from functools import lru_cache
+from itertools import chain
+from typing import Sequence
+
+import numpy as np
 
 from ..diagnostics import DiagnosticsRecord, chi2_ppf
 
 NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): noise understated
 NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
+VERDICTS = ("ok", "nis_high", "nis_low", "no_updates")  # what judge_nis returns
 
 
 @lru_cache(maxsize=4096)
@@ -44,9 +49,17 @@ def judge_nis(mean: float | None, n: int, dof: float, confidence: float) -> str:
     return "nis_high" if mean > hi else "nis_low" if mean < lo else "ok"
 
 
+def _running_sum(start, values: np.ndarray):
+    """start + values[0] + values[1] + ..., added in that order (np.cumsum does; np.sum would pair them)."""
+    return np.cumsum(np.concatenate((np.asarray(start, dtype=float)[None], values)), axis=0)[-1]
+
+
 @dataclass
 class ChannelStats:
-    """Whole-run innovation statistics of one sensor channel, plus its latest window."""
+    """Whole-run innovation statistics of one sensor channel, plus its latest window.
+
+    Fed in bulk (:meth:`extend`; the replay's doctor hands it a chunk of records at a time), with the
+    figures a one-record-at-a-time loop would give, to the last bit."""
 
     components: list[str]
     window: int = 50
@@ -79,54 +92,108 @@ class ChannelStats:
         self.recent = deque(maxlen=self.window)
 
     def add(self, r: DiagnosticsRecord) -> None:
+        self.extend((r,))
+
+    def extend(self, records: Sequence[DiagnosticsRecord]) -> None:
         """Every record counts (and is judged: NIS over its own dof); the per-component figures keep the
-        channel's first shape (a message without its yaw row, a per-axis update, do not mix columns)."""
-        self.n += 1
-        self.rejected += r.rejected
-        if self.first_stamp is None:
-            self.first_stamp = r.stamp
-        self.last_stamp = r.stamp if self.last_stamp is None else max(self.last_stamp, r.stamp)
-        if self.keep:
-            self.stamps.append(r.stamp)
-            self.rejected_flags.append(bool(r.rejected))
-            self.innovations.append(list(r.innovation))
-        if getattr(r, "learning", False):
-            if not self.n_nis and r.dof > 0:
-                self.dof = r.dof  # the summary's dof of a channel that has only learned so far
-            return  # the prior's test, not the sensor's: counted, kept as an episode, not judged
-        if math.isfinite(r.nis) and r.dof > 0 and not r.rejected:
-            self.n_nis_kept += 1
-            self.nis_sum_kept += r.nis
-        if math.isfinite(r.nis) and r.dof > 0:
-            self.n_nis += 1
-            self.nis_sum += r.nis
-            self.dof_sum += r.dof
-            self.dof = r.dof
-            if len(self.recent) == self.recent.maxlen:
-                old_nis, old_dof = self.recent[0]
-                self.recent_sum -= old_nis
-                self.recent_dof -= old_dof
-            self.recent.append((r.nis, r.dof))
-            self.recent_sum += r.nis
-            self.recent_dof += r.dof
-            m = len(self.recent)
-            verdict = judge_nis(self.recent_sum / m, m, self.recent_dof / m, self.confidence)
-            if verdict != self.now_verdict:
-                self.now_verdict, self.now_since = verdict, r.stamp
-        if r.components != self.components:
+        channel's first shape (a message without its yaw row, a per-axis update, do not mix columns).
+
+        In bulk (the doctor hands a chunk at a time): the running sums are ``np.cumsum`` continued from
+        the sums so far, which adds in record order, so every figure is the float a one-record-at-a-time
+        loop would give."""
+        if not records:
             return
+        stamps = [r.stamp for r in records]
+        self.n += len(records)
+        rejected = [bool(r.rejected) for r in records]
+        self.rejected += sum(rejected)
+        if self.first_stamp is None:
+            self.first_stamp = stamps[0]
+        self.last_stamp = max(stamps) if self.last_stamp is None else max([self.last_stamp, *stamps])
+        if self.keep:
+            self.stamps.extend(stamps)
+            self.rejected_flags.extend(rejected)
+            self.innovations.extend(list(r.innovation) for r in records)
+        # a learning update tests the prior, not the sensor: counted, kept as an episode, not judged
+        learning_flags = [bool(getattr(r, "learning", False)) for r in records]
+        learning = np.array(learning_flags, dtype=bool)
+        nis = np.fromiter((r.nis for r in records), dtype=float, count=len(records))
+        dof = np.fromiter((r.dof for r in records), dtype=np.int64, count=len(records))
+        judged = ~learning & np.isfinite(nis) & (dof > 0)
+        self._count_dof(learning, judged, dof)
+        kept = judged & ~np.array(rejected, dtype=bool)
+        if kept.any():
+            self.n_nis_kept += int(kept.sum())
+            self.nis_sum_kept = float(_running_sum(self.nis_sum_kept, nis[kept]))
+        if judged.any():
+            self.n_nis += int(judged.sum())
+            self.nis_sum = float(_running_sum(self.nis_sum, nis[judged]))
+            self.dof_sum += int(dof[judged].sum())
+            self._window(nis[judged].tolist(), dof[judged].tolist(), np.array(stamps)[judged])
+        components = self.components
+        same = [r for r, lf in zip(records, learning_flags) if not lf and r.components == components]
+        if same:
+            self._component_sums(same)
+
+    def _count_dof(self, learning: np.ndarray, judged: np.ndarray, dof: np.ndarray) -> None:
+        """The channel's dof: the latest judged record's, or a learning one's while none was judged yet."""
+        before = np.cumsum(judged) - judged + self.n_nis  # judged records before each one
+        sets = judged | (learning & (dof > 0) & (before == 0))
+        if sets.any():
+            self.dof = int(dof[np.flatnonzero(sets)[-1]])
+
+    def _window(self, nis: list[float], dof: list[int], stamps: np.ndarray) -> None:
+        """The latest window's verdict after each judged record, and the stamp at which it last changed.
+
+        The window's NIS sum is a running one (the oldest value subtracted, the newest added), so that a
+        long run's sum does not grow into the window's rounding; the loop below is that recurrence and
+        nothing else (the dof sums are integers: numpy)."""
+        recent, size = self.recent, self.recent.maxlen
+        history = [v for v, _ in recent] + nis
+        dof_history = np.array([d for _, d in recent] + dof, dtype=np.int64)
+        first = len(recent)  # history index of the first new record
+        index = np.arange(first, len(history))
+        # the value that leaves the window as each new record enters (0.0 while the window fills)
+        leaving = [history[i] if i >= 0 else 0.0 for i in (index - size).tolist()]
+        total, sums = self.recent_sum, []
+        append = sums.append
+        for old, new in zip(leaving, nis):
+            total = total - old + new
+            append(total)
+        dof_cum = np.concatenate(([0], np.cumsum(dof_history)))
+        dof_sums = dof_cum[index + 1] - dof_cum[np.maximum(index + 1 - size, 0)]
+        counts = np.minimum(index + 1, size)
+        self.recent.extend(zip(nis, dof))
+        self.recent_sum, self.recent_dof = total, int(dof_sums[-1])
+        verdicts = self._judge_windows(np.array(sums), dof_sums, counts)
+        changed = np.flatnonzero(verdicts != np.concatenate(([VERDICTS.index(self.now_verdict)], verdicts[:-1])))
+        if len(changed):
+            self.now_verdict, self.now_since = VERDICTS[verdicts[-1]], float(stamps[changed[-1]])
+
+    def _judge_windows(self, sums: np.ndarray, dof_sums: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """judge_nis of each window state, as indices into VERDICTS: the bounds once per distinct
+        (count, dof sum), the comparisons in bulk."""
+        base = int(counts.max()) + 1  # (count, dof sum) packed into one integer key
+        keys, inverse = np.unique(dof_sums * base + counts, return_inverse=True)
+        bounds = np.array([nis_bounds(m, d / m, self.confidence) for d, m in (divmod(int(k), base) for k in keys)])
+        lo, hi = bounds[inverse.ravel()].T
+        mean = sums / counts
+        out = np.where(mean > hi, VERDICTS.index("nis_high"), np.where(mean < lo, VERDICTS.index("nis_low"),
+                                                                       VERDICTS.index("ok")))
+        return np.where(np.isfinite(mean), out, VERDICTS.index("no_updates"))
+
+    def _component_sums(self, records: list[DiagnosticsRecord]) -> None:
         k = len(self.components)
         if not self.sums:
             self.sums, self.variances = [0.0] * k, [0.0] * k
             self.outer = [[0.0] * k for _ in range(k)]
-        self.n_comp += 1
-        y, v = r.innovation, r.innovation_var
-        for i in range(k):
-            self.sums[i] += y[i]
-            self.variances[i] += v[i]
-            row = self.outer[i]
-            for j in range(k):
-                row[j] += y[i] * y[j]
+        self.n_comp += len(records)
+        n = len(records)
+        y = np.fromiter(chain.from_iterable(r.innovation for r in records), dtype=float, count=n * k).reshape(n, k)
+        v = np.fromiter(chain.from_iterable(r.innovation_var for r in records), dtype=float, count=n * k).reshape(n, k)
+        self.sums = _running_sum(np.array(self.sums), y).tolist()
+        self.variances = _running_sum(np.array(self.variances), v).tolist()
+        self.outer = _running_sum(np.array(self.outer), y[:, :, None] * y[:, None, :]).tolist()
 
     @property
     def mean_dof(self) -> float:

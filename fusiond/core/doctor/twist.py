@@ -9,7 +9,7 @@ measured", declared with ``twist_measured``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 
@@ -22,14 +22,57 @@ from .verdict import Verdict, sensor_key
 TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noise and bias)
 UNMEASURED_FRACTION = 0.5  # in turns, this share of exact zeros is a component the driver does not measure
 SLIP_FRACTION = 0.2
+CHUNK = 4096  # twists noted before they are summed (bounded memory)
 
 
-@dataclass
 class TwistStats:
-    n: int = 0
-    abs_vx: float = 0.0
-    abs_vy: float = 0.0
-    abs_wz: float = 0.0
+    """Whole-run sums of |vx|, |vy| and |wz| of the accepted odometry (is the twist in the body frame?).
+
+    Fed one twist per accepted odometry message, so it only notes it; the sums are taken a chunk at a
+    time by ``np.cumsum`` (adds in order: the same floats as adding one message at a time)."""
+
+    def __init__(self) -> None:
+        self._linear: list[tuple[float, float, float]] = []  # the samples' own tuples: nothing allocated
+        self._angular: list[tuple[float, float, float]] = []
+        self._n = 0
+        self._sums = [0.0, 0.0, 0.0]
+
+    def add(self, linear: tuple[float, float, float], angular: tuple[float, float, float]) -> None:
+        self._linear.append(linear)
+        self._angular.append(angular)
+        if len(self._linear) >= CHUNK:
+            self._settle()
+
+    @property
+    def n(self) -> int:
+        self._settle()
+        return self._n
+
+    @property
+    def abs_vx(self) -> float:
+        self._settle()
+        return self._sums[0]
+
+    @property
+    def abs_vy(self) -> float:
+        self._settle()
+        return self._sums[1]
+
+    @property
+    def abs_wz(self) -> float:
+        self._settle()
+        return self._sums[2]
+
+    def _settle(self) -> None:
+        n = len(self._linear)
+        if not n:
+            return
+        linear = np.fromiter(chain.from_iterable(self._linear), dtype=float, count=3 * n).reshape(n, 3)
+        angular = np.fromiter(chain.from_iterable(self._angular), dtype=float, count=3 * n).reshape(n, 3)
+        self._linear, self._angular = [], []
+        rows = np.abs(np.column_stack((linear[:, 0], linear[:, 1], angular[:, 2])))
+        self._n += n
+        self._sums = np.cumsum(np.concatenate(([self._sums], rows)), axis=0)[-1].tolist()
 
 
 def unmeasured_yaw_rate(series: Series, odom: OdomSensor) -> Verdict | None:
