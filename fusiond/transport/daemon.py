@@ -87,6 +87,7 @@ from ..health import Health, HealthReport, core_counters, encode_report, ros_sta
 from .drain_schedule import DrainSchedule
 from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
+from .thread_state import with_kept_thread_state
 
 log = structlog.get_logger("fusiond.daemon")
 
@@ -121,9 +122,10 @@ def sensor_kind(sensor: Any) -> str:
 
 
 def direct(callback: Callable[[Any], None]) -> Any:
-    """Run a non-blocking callback on Zenoh's receive thread (unstable zenoh-python option; else as is)."""
+    """Run a non-blocking callback on Zenoh's receive thread (unstable zenoh-python option; else as is),
+    keeping that thread's Python thread state between calls (`thread_state.py`)."""
     try:
-        return zenoh.handlers.Callback(callback, indirect=False)
+        return zenoh.handlers.Callback(with_kept_thread_state(callback), indirect=False)
     except (AttributeError, TypeError):
         return callback
 
