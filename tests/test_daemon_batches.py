@@ -14,7 +14,7 @@ import zenoh
 from fusiond.codecs import encode_imu_sample
 from fusiond.monitor import decode_diagnostics
 from fusiond.samples import ImuSample
-from fusiond.transport.daemon import Daemon
+from fusiond.transport.daemon import HOLD_S, Daemon
 
 from .configs import loopback_daemon_config
 from .test_daemon_inproc import sessions, wait_until  # noqa: F401  (fixture)
@@ -89,3 +89,13 @@ def test_paced_batches_fuse_in_arrival_order_and_answer_every_odometry_sample(se
         sub.undeclare()
     records = [r for p in payloads for r in decode_diagnostics(p)]
     assert Counter(identity(r) for r in records) == expected
+
+
+def test_the_hold_is_at_most_a_quarter_of_the_shortest_sensor_timeout(sessions):  # noqa: F811
+    """Health ages a sensor from its samples' arrival but learns of them when they are fused: a hold
+    of a quarter of the timeout keeps a sensor that sends on time alive however the batches fall."""
+    dsession = sessions[0]
+    assert Daemon(loopback_daemon_config(), dsession, monitor=False).hold_s == HOLD_S  # default timeouts 0.2 s
+    fast = Daemon(loopback_daemon_config(imu="timeout_s = 0.02"), dsession, monitor=False)
+    assert fast.hold_s == pytest.approx(0.005)
+    assert Daemon(loopback_daemon_config(), dsession, hold_s=0.0, monitor=False).hold_s == 0.0

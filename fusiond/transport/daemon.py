@@ -19,7 +19,8 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   through a `SimpleQueue` of wake tokens; other samples (a 1 kHz IMU) wait in the
   inbox and are fused in one batch, either when the window before the next
   expected odometry sample opens (so that sample finds the inbox empty and its
-  pose is not delayed by a backlog) or after at most `hold_s` (`HOLD_S`). The
+  pose is not delayed by a backlog) or after at most `hold_s` (`HOLD_S`, at most a
+  quarter of the shortest sensor timeout). The
   batches keep the arrival order, so the core sees the same sequence, and
   publishes the same poses and records, as with a wake-up per message. At 1 kHz
   IMU + 100 Hz odometry this is ~0.3 wake-ups a message instead of 1: fewer
@@ -62,6 +63,7 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 
 from __future__ import annotations
 
+import math
 import queue
 import signal
 import threading
@@ -93,6 +95,7 @@ log = structlog.get_logger("fusiond.daemon")
 
 QUEUE_SIZE = 1024  # ~1 s of 1 kHz IMU + 100 Hz odometry: as long as the core's default history
 HOLD_S = 0.01  # longest a sample that publishes nothing waits in the inbox for the worker's next batch
+HOLD_OF_TIMEOUT = 0.25  # ... and at most this fraction of the shortest sensor timeout
 HEALTH_LOG_S = 5.0  # period of the `health` log event
 HEALTH_POLL_S = 0.1  # how often status changes are looked for (`health_changed`)
 CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while busy
@@ -178,7 +181,9 @@ class Daemon:
         self.inbox: deque[Any] = deque()
         self._wake: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._sleeping = False  # the worker waits without a hold deadline: any arrival must wake it
-        self._hold_s = hold_s
+        # A sample never waits in the inbox for more than a quarter of the shortest sensor timeout, so
+        # batching cannot make a live sensor look silent to health (which ages it from its arrival).
+        self.hold_s = min(hold_s, min((s.timeout_s for s in cfg.sensors), default=math.inf) * HOLD_OF_TIMEOUT)
         self._prompt = [sensor_kind(s) == "odom" for s in cfg.sensors]  # samples that publish: fused at once
         self.capacity = queue_size
         self.health = Health([(s.name, s.timeout_s) for s in cfg.sensors], clock=clock,
@@ -365,7 +370,7 @@ class Daemon:
         prompt = self._prompt
         monotonic = time.monotonic
         clock = self._clock  # the arrivals' clock
-        schedule = DrainSchedule(self._hold_s)
+        schedule = DrainSchedule(self.hold_s)
         batch_s = self._batch_s
         next_refresh = 0.0
         next_flush = monotonic() + batch_s
