@@ -4,8 +4,9 @@ Runs `fusiond bench-latency`'s benchmark (daemon, bare zenoh-python subscriber a
 generator in their own processes, 1 kHz IMU + 100 Hz odometry, live stamps) twice per round,
 alternating: once with the real daemon, once with its core stubbed out (each sample is decoded and
 accepted by health, and each odometry sample answered with a pose at its own stamp, without
-`core.ingest`). The stubbed run is the daemon's transport floor: subscribers, queue, worker
-wake-ups, decoding, health, a pose put per odometry message, the Zenoh session. Its ratio to the bare subscriber is the best the daemon's
+`core.ingest`). The stubbed run is the daemon's transport floor: subscribers, inbox, worker
+wake-ups (batched: see `fusiond/transport/drain_schedule.py`), decoding, health, a pose put per
+odometry message, the Zenoh session. Its ratio to the bare subscriber is the best the daemon's
 ratio could be with a free core; the difference to the real run is the core's share.
 
     .venv/bin/python scripts/daemon_transport_floor.py [--rounds 3] [--seconds 8]
@@ -48,7 +49,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=8.0)
     args = ap.parse_args()
     real_child = bench_latency._daemon_child
-    rows: dict[str, list[tuple[float, float, float, float]]] = {"daemon": [], "transport floor": []}
+    rows: dict[str, list[tuple[float, ...]]] = {"daemon": [], "transport floor": []}
     for _ in range(args.rounds):
         for label, child in (("daemon", real_child), ("transport floor", _floor_child)):
             bench_latency._daemon_child = child  # run_bench spawns whatever this name holds
@@ -59,11 +60,13 @@ def main() -> None:
             drops = r.queue_drops + r.core_drops
             if drops or r.daemon_received != r.sent_total:
                 raise SystemExit(f"{label}: {drops} drops, {r.daemon_received}/{r.sent_total} received")
-            rows[label].append((r.cpu_daemon_pct, r.cpu_bare_pct, r.cpu_ratio, r.cpu_worker_pct))
-    print(f"{'run':<16}{'daemon %':>10}{'bare %':>9}{'ratio':>8}{'worker %':>10}   (medians of {args.rounds} rounds)")
+            rows[label].append((r.cpu_daemon_pct, r.cpu_bare_pct, r.cpu_ratio, r.cpu_worker_pct,
+                                r.worker_batches / max(r.messages_in_window, 1)))
+    print(f"{'run':<16}{'daemon %':>10}{'bare %':>9}{'ratio':>8}{'worker %':>10}{'wake/msg':>10}"
+          f"   (medians of {args.rounds} rounds)")
     for label, values in rows.items():
-        cols = [statistics.median(v[i] for v in values) for i in range(4)]
-        print(f"{label:<16}{cols[0]:>10.1f}{cols[1]:>9.1f}{cols[2]:>8.2f}{cols[3]:>10.1f}")
+        cols = [statistics.median(v[i] for v in values) for i in range(5)]
+        print(f"{label:<16}{cols[0]:>10.1f}{cols[1]:>9.1f}{cols[2]:>8.2f}{cols[3]:>10.1f}{cols[4]:>10.2f}")
 
 
 if __name__ == "__main__":
