@@ -38,6 +38,7 @@ times cheaper than numpy calls on 3-vectors); numpy only sees the n x n blocks.
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 
@@ -112,7 +113,7 @@ class PredictWorkspace:
     there is nothing to put back. The arrays belong to the workspace: valid until its next use.
     """
 
-    __slots__ = ("F", "Q", "_flat", "_index", "_q_entries", "_zero_columns", "_cov_seen", "_cov_diagonal")
+    __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_q_entries", "_zero_columns", "_cov_seen", "_cov_diagonal")
 
     def __init__(self, layout: StateLayout) -> None:
         n = layout.error_dim
@@ -134,6 +135,10 @@ class PredictWorkspace:
             for a, b in ((k, k + 1), (k, k + 2), (k + 1, k + 2)):
                 q += [a * n + b, b * n + a]
         self._index = np.array(f + [n * n + i for i in q], dtype=np.intp)
+        # the step's values as packed doubles: a fancy assignment from a list converts it element
+        # by element (~2 us for ~40 floats); packing them with struct and viewing the bytes costs
+        # a third of that, the same doubles
+        self._pack = struct.Struct(f"{len(self._index)}d").pack
         self._q_entries = len(q)
         # an input block's columns while it does not apply (row-major, 3 x error_size)
         self._zero_columns = [[0.0] * (3 * blk.error_size) for blk, _, _, _ in layout.input_blocks]
@@ -280,5 +285,5 @@ def predict(
     else:
         qd = [0.0] * ws._q_entries
     f_values += qd
-    ws._flat[ws._index] = f_values  # F's entries, then Q's
+    ws._flat[ws._index] = np.frombuffer(ws._pack(*f_values))  # F's entries, then Q's
     return x_new, ws.F, ws.Q
