@@ -369,6 +369,43 @@ def test_imu_mounted_yawed_is_named_without_orientation_in_g_units_and_with_a_bi
     assert vector(v.suggestion) == pytest.approx([0.0, 0.0, -math.pi / 2], abs=MOUNT_TOLERANCE_RAD)
 
 
+@pytest.mark.parametrize("true_mount, orientation", [
+    ((math.pi, 0.0, 0.0), "roll_pitch"),  # z down, the IMU's attitude fused
+    ((math.pi, 0.0, 0.0), "off"),  # z down, roll/pitch from its gravity
+    ((0.0, math.pi, 0.0), "roll_pitch"),  # flipped about y: the same z down, x backwards
+])
+def test_imu_mounted_upside_down_is_named_and_its_yaw_rate_not_called_slip(true_mount, orientation):
+    """An IMU with its z axis down and extrinsic_rpy at 0: the filter believes the robot is upside down
+    (roll near +-pi, wrapping from pose to pose, so the mean of the angles shows no lean) yet its position
+    is right (the inverted z rate about the inverted body z turns the right way), and the wheels' yaw rate
+    fits -1 x gyro. Named as the mount from the mean up vector; the orientation noise of 0.002 rad averaged
+    over ~3000 poses leaves the mount known far better than MOUNT_TOLERANCE_RAD. Pasting it clears both."""
+    from fusiond.estimator import rotation as rot
+
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    samples = simulate_mount(MountWorld(duration=60.0, imu_mount_rpy=true_mount))
+    verdicts = verdicts_of(robot_config(orientation=orientation), samples)
+    v = one(verdicts, "imu", "attitude")
+    assert v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy" and "upside down" in v.message, v
+    named = rot.from_rpy(*vector(v.suggestion))
+    truth = rot.from_rpy(*true_mount)
+    assert 2.0 * math.acos(min(1.0, abs(sum(a * b for a, b in zip(named, truth))))) < MOUNT_TOLERANCE_RAD
+    slip = one(verdicts, "wheel", "yaw_rate")
+    assert slip.key == "sensors.imu.extrinsic_rpy" and "upside down" in slip.message, slip
+    fixed = verdicts_of(robot_config(orientation=orientation, imu=v.suggestion), samples)
+    assert [x for x in fixed if x.level != "ok" and x.channel in ("attitude", "yaw_rate")] == [], fixed
+
+
+def test_a_robot_on_a_slope_is_not_called_upside_down():
+    """A lean well inside +-pi/2 keeps the lean verdict's own wording (the mean up vector points up)."""
+    from .sim_mount import MountWorld, simulate as simulate_mount
+
+    samples = simulate_mount(MountWorld(duration=60.0, imu_mount_rpy=(0.3, -0.2, 0.0)))
+    v = one(verdicts_of(robot_config(), samples), "imu", "attitude")
+    assert "upside down" not in v.message and v.key == "sensors.imu.extrinsic_rpy", v
+
+
 def test_mirrored_accelerometer_axis_is_not_read_as_a_mounting_yaw():
     """A driver that flips the sign of the accelerometer's y: no turn about z makes (e_x, -e_y) from
     (e_x, e_y). The best turn then fits with |(c, s)| = |E e_x^2 - E e_y^2| / (E e_x^2 + E e_y^2), about

@@ -18,8 +18,10 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 
+import msgspec
+
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor
-from .attitude import TiltStats, lean_verdict, mount_verdict
+from .attitude import TiltStats, inverted_lean, lean_verdict, mount_verdict
 from .clock import ClockOffsets, clock_verdicts
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
@@ -292,6 +294,14 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mount_verdict(imu, mount, tilt, MIN_UPDATES)):
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
+        if (imu is not None and odom is not None and (odom.name, "yaw_rate") in found and tilt.n >= MIN_UPDATES
+                and inverted_lean(tilt) is not None):
+            # an upside-down IMU's z rate reads against the wheels' yaw rate: not slip
+            found[(odom.name, "yaw_rate")] = [
+                msgspec.structs.replace(v, message=v.message + f"; explained by {imu.name}/attitude: the IMU is mounted "
+                                        "upside down, so its z rate reads against the wheels' (see it)",
+                                        key=sensor_key(imu.name, "extrinsic_rpy"), suggestion="")
+                if v.level != "ok" else v for v in found[(odom.name, "yaw_rate")]]
         if odom is not None:
             v = twist_frame_verdict(odom, twist, MIN_UPDATES)
             if v is not None:

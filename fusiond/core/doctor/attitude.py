@@ -44,6 +44,7 @@ class TiltStats:
         self._n = 0
         self._sums = [0.0, 0.0]
         self._squares = [0.0, 0.0]
+        self._up = [0.0, 0.0, 0.0]  # sum of world up seen in the body, R^T e_z (see ``inverted_lean``)
 
     def add_orientation(self, q: tuple[float, float, float, float]) -> None:
         """The estimate's attitude (x, y, z, w)."""
@@ -66,6 +67,11 @@ class TiltStats:
         self._settle()
         return self._squares
 
+    @property
+    def up(self) -> list[float]:
+        self._settle()
+        return self._up
+
     def _settle(self) -> None:
         pending, n = self._pending, len(self._pending)
         if not n:
@@ -80,6 +86,8 @@ class TiltStats:
         self._n += n
         self._sums = np.cumsum(np.concatenate(([self._sums], angles)), axis=0)[-1].tolist()
         self._squares = np.cumsum(np.concatenate(([self._squares], angles * angles)), axis=0)[-1].tolist()
+        up = np.column_stack((2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)))
+        self._up = (np.array(self._up) + up.sum(axis=0)).tolist()
 
 
 def imu_axis_sigmas(ch: ChannelStats, imu: ImuSensor) -> tuple[list[float], list[str]]:
@@ -130,10 +138,34 @@ def paste_mount(rpy: tuple[float, ...]) -> str:
     return "extrinsic_rpy = [" + ", ".join(f"{v:.4f}" for v in rpy) + "]"
 
 
+def inverted_lean(tilt: TiltStats) -> tuple[list[float], list[float], list[int]] | None:
+    """The lean of an estimate that is upside down on average, None otherwise.
+
+    An IMU mounted upside down (its z axis down, ``extrinsic_rpy`` left at 0) makes the filter
+    believe the robot is: roll near +-pi, wrapping between the two from pose to pose, so the
+    angles' mean is near 0 and their spread near pi and the lean check above sees nothing (the
+    position is still right: the gyro's inverted z rate about the inverted body z is the right
+    turn about world z). The mean of world up seen in the body (R^T e_z) does not wrap: pointing
+    down on average, its roll/pitch are the mount, and its length (1 when it never moves) gives
+    the spread as the circular standard deviation sqrt(-2 ln |mean|)."""
+    n = tilt.n
+    ux, uy, uz = (v / n for v in tilt.up)
+    if not uz < 0.0:
+        return None
+    length = math.sqrt(ux * ux + uy * uy + uz * uz)
+    roll, pitch = math.atan2(uy, uz), math.asin(max(-1.0, min(1.0, -ux / length)))
+    spread = math.sqrt(-2.0 * math.log(min(length, 1.0))) if length > 0.0 else math.inf
+    return [roll, pitch], [spread, spread], [k for k, a in enumerate((roll, pitch)) if abs(a) > LEAN_RAD
+                                                 and spread < 0.5 * abs(a)]
+
+
 def lean_of(tilt: TiltStats, min_updates: int = 50) -> tuple[list[float], list[float], list[int]]:
     """Mean and std of the estimated roll and pitch, and the axes that lean steadily."""
     if tilt.n < min_updates:
         return [], [], []
+    inverted = inverted_lean(tilt)
+    if inverted is not None:
+        return inverted
     means, stds = [], []
     for k in range(2):
         m = tilt.sums[k] / tilt.n
@@ -152,6 +184,14 @@ def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50,
         return None
     rpy = full_mount(imu, (means[0], means[1]), mount.delta if mount is not None and mount.named else 0.0)
     what = " and ".join(f"{('roll', 'pitch')[k]} {means[k]:+.3f} rad (std {stds[k]:.3f})" for k in leaning)
+    if inverted_lean(tilt) is not None:
+        return Verdict(imu.name, "attitude", "problem",
+                       f"the estimate is upside down ({what} on average): the IMU is mounted upside down (its z axis "
+                       "points down) and extrinsic_rpy does not say so. The pose published is upside down, and the "
+                       "gyro's z rate reads against the wheels' yaw rate (a wheel yaw-rate fit of -1 x gyro is this, "
+                       "not slip). The full mount is below",
+                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(rpy),
+                       {"lean_roll_rad": means[0], "lean_pitch_rad": means[1], "inverted": 1.0})
     return Verdict(imu.name, "attitude", "warn",
                    f"the robot leans by {what} on average: on level ground that is an IMU mounting rotation "
                    "missing from, or wrong in, extrinsic_rpy (the body-frame twist then climbs or sinks). The full "
