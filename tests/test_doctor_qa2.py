@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from fusiond.core.doctor.heading import WANDER_RAD, WHEEL_OFFSET_RAD_S
+from fusiond.estimator import rotation as rot
 from fusiond.replay.run import run_samples, summary
 
 from . import sim_gps
@@ -57,6 +58,43 @@ def test_a_logging_gap_does_not_make_a_correct_imu_yaw_look_disturbed(gap):
 
     checked = heading_check(result.doctor.series(), result.doctor.cfg)
     assert checked is not None and checked.evidence["imu_vs_gyro_wander_rad"] < WANDER_RAD / 2, checked
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_a_turn_hidden_by_a_logging_gap_names_relative_orientation_when_nothing_else_gives_heading(gap):
+    """No GPS, no pose, the IMU's yaw not fused (roll_pitch): after the gap the filter holds its old heading
+    (turning only by the held gyro rate, <= 0.3 rad/s x 0.2 s timeout = 0.06 rad) while the robot turned by
+    missed_turn (1.12 rad), which the IMU's own yaw kept. The check's allowance over a 5 s gap is
+    TURN_RAD + DRIFT_RATE x 5 = 0.25 rad: four times below the turn. Without the gap both headings follow the
+    gyro: nothing is named. The suggestion (relative) brings the heading back: the final heading error
+    falls from ~missed_turn to the IMU's yaw noise."""
+    from fusiond.core.doctor.gap_heading import DRIFT_RATE, TURN_RAD
+
+    cfg = SimConfig(duration=90.0, standstill=2.0)
+    samples = simulate(cfg)
+    turn = missed_turn(cfg)
+    assert abs(turn) > 4 * (TURN_RAD + DRIFT_RATE * (GAP[1] - GAP[0]))
+    if gap:
+        samples = drop_span(samples, T0 + GAP[0], T0 + GAP[1])
+    result = run_samples(samples, make_config(orientation="roll_pitch", gyro=True))
+    named = [v for v in result.verdicts() if v.channel == "heading_across_gaps"]
+    if not gap:
+        assert named == []
+        return
+    (v,) = named
+    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "relative"', v
+    assert abs(v.evidence["largest_missed_turn_rad"] - turn) < 0.1, v.evidence
+
+    def final_heading_error(orientation: str) -> float:
+        r = run_samples(samples, make_config(orientation=orientation, gyro=True))
+        t, x, y, z, qx, qy, qz, qw = r.final
+        truth = min(cfg.truth, key=lambda row: abs(row[0] - t))[3]
+        return abs(rot.wrap(rot.yaw((qx, qy, qz, qw)) - truth))
+
+    assert final_heading_error("roll_pitch") > 0.8 * abs(turn)
+    assert final_heading_error("relative") < 0.05
+    assert not [x for x in run_samples(samples, make_config(orientation="relative", gyro=True)).verdicts()
+                if x.channel == "heading_across_gaps"]
 
 
 def test_a_disturbed_imu_yaw_is_still_named_across_a_logging_gap():

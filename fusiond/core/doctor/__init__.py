@@ -25,6 +25,7 @@ from .attitude import TiltStats, inverted_lean, lean_verdict, mount_verdict
 from .clock import ClockOffsets, clock_verdicts
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
+from .gap_heading import gap_heading_verdict
 from .gps_wander import gps_wander_verdict
 from .gyro import bias_check
 from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
@@ -302,6 +303,9 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
                                         "upside down, so its z rate reads against the wheels' (see it)",
                                         key=sensor_key(imu.name, "extrinsic_rpy"), suggestion="")
                 if v.level != "ok" else v for v in found[(odom.name, "yaw_rate")]]
+        v = gap_heading_verdict(series, cfg, imu, t0)
+        if v is not None:
+            found[(v.sensor, v.channel)].append(v)
         if odom is not None:
             v = twist_frame_verdict(odom, twist, MIN_UPDATES)
             if v is not None:

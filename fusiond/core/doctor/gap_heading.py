@@ -1,0 +1,100 @@
+"""Heading across logging gaps: the IMU's own yaw saw a turn the filter could not.
+
+In a logging gap nothing reaches the filter: its inputs end at their sensors' timeouts
+and it holds the heading it had. The vehicle may have turned meanwhile, and without an
+absolute heading (a GPS track, a pose sensor, an absolute IMU yaw) nothing ever tells
+the filter: every metre after the gap is driven along the wrong heading (a race car
+that turned 160 degrees in a 25 s gap). An IMU that integrates its own yaw kept it
+through the gap (the device ran; only the log stopped), so its yaw change across the
+gap shows the turn. With the IMU's yaw not fused (``orientation = "roll_pitch"`` or
+``"off"``), ``"relative"`` fuses it against the yaw the filter had at the IMU's first
+message, which carries the heading across gaps.
+
+A gap counts when the IMU's yaw change across it differs from the estimate's by more
+than the IMU's own yaw could drift in that time: TURN_RAD (several times the yaw noise
+of one 0.2 s bin, ~0.01-0.05 rad) plus DRIFT_RATE x the gap (an uncorrected consumer
+gyro bias, <= 0.01 rad/s, integrated by the IMU through the gap).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ...estimator import rotation as rot
+from .bins import BIN_S
+from .series import Series
+from .verdict import Verdict, sensor_key
+
+MIN_GAP_S = 1.0  # shorter silences: the held inputs cover most of them
+TURN_RAD = 0.2
+DRIFT_RATE = 0.01  # rad/s
+EDGE_S = 2.0  # the estimates compared lie this close to the gap's ends (a time jump holds poses ~1 s), or it is not judged
+
+
+def _around(t: np.ndarray, start: float, end: float) -> tuple[int, int] | None:
+    """Indices of the bins just before start and just after end, None if none is near."""
+    i0 = int(np.searchsorted(t, start, side="right")) - 1
+    i1 = int(np.searchsorted(t, end, side="left"))
+    if i0 < 0 or i1 >= len(t) or start - t[i0] > EDGE_S or t[i1] - end > EDGE_S:
+        return None
+    return i0, i1
+
+
+def _at(t: np.ndarray, y: np.ndarray, when: float) -> float | None:
+    """The binned value nearest ``when``, None if no bin is within BIN_S."""
+    i = int(np.clip(np.searchsorted(t, when), 1, len(t) - 1)) if len(t) > 1 else 0
+    if len(t) == 0:
+        return None
+    k = i if abs(t[i] - when) < abs(t[i - 1] - when) else i - 1
+    return float(y[k]) if abs(t[k] - when) <= BIN_S else None
+
+
+def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: float | None = None) -> Verdict | None:
+    """A verdict when the IMU's unfused yaw turned across logging gaps more than the estimate did. ``t0``: the
+    run's first stamp (the gap is then placed in seconds from it)."""
+    if imu is None or imu.orientation in ("absolute", "relative"):
+        return None
+    if any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors):
+        return None  # an absolute position/pose finds the heading again
+    ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
+    ok = np.isfinite(yi)
+    ti, yi = ti[ok], yi[ok]
+    te, ye = np.array(series.est_t), np.array(series.est_yaw)
+    missed = []
+    for start, length in series.odom_gaps:
+        if length < MIN_GAP_S:
+            continue
+        # the estimate's heading change over the gap and the IMU's over the same interval (outside the gap
+        # the filter's heading follows the gyro, and so does the IMU's yaw: only the gap differs)
+        around = _around(te, start, start + length)
+        if around is None:
+            continue
+        e0, e1 = around
+        before, after = _at(ti, yi, float(te[e0])), _at(ti, yi, float(te[e1]))
+        if before is None or after is None:
+            continue
+        imu_turn = rot.wrap(after - before)
+        est_turn = rot.wrap(float(ye[e1]) - float(ye[e0]))
+        miss = rot.wrap(imu_turn - est_turn)
+        if abs(miss) > TURN_RAD + DRIFT_RATE * length:
+            missed.append((start, length, imu_turn, est_turn))
+    if not missed:
+        return None
+    worst = max(missed, key=lambda m: abs(rot.wrap(m[2] - m[3])))
+    start, length, imu_turn, est_turn = worst
+    return Verdict(
+        imu.name, "heading_across_gaps", "warn",
+        f"across {len(missed)} logging gap(s) the IMU's own yaw turned by more than the estimate (the largest: "
+        f"{length:.1f} s from {start - (t0 or 0.0):.1f} s{' into the run' if t0 is not None else ''}, the IMU turned {math.degrees(imu_turn):+.0f} deg, the estimate "
+        f"{math.degrees(est_turn):+.0f} deg): nothing else tells the filter the heading after a gap (no GPS or "
+        "pose, the IMU's yaw not fused), so it drives on along the heading it had. The IMU kept its yaw through "
+        "the gap: fuse it relative to its first reading",
+        sensor_key(imu.name, "orientation"), 'orientation = "relative"',
+        {"gaps_with_missed_turn": float(len(missed)), "largest_missed_turn_rad": rot.wrap(imu_turn - est_turn),
+         "gap_s": length})
+
+
+__all__ = ["gap_heading_verdict"]
