@@ -22,6 +22,10 @@ def configure(level: str = "info", json: bool | None = None) -> None:
     """Render events as JSON lines (``json``; default: when stderr is not a terminal) at ``level``
     and above. Applied now if structlog is already imported, else at the first event."""
     global _pending
+    import logging
+
+    if level.upper() not in logging.getLevelNamesMapping():  # said now, not at the first event
+        raise ValueError(f"unknown log level {level!r}")
     _pending = (level, json)
     if "structlog" in sys.modules:
         _apply()

@@ -97,6 +97,21 @@ def test_a_turn_hidden_by_a_logging_gap_names_relative_orientation_when_nothing_
                 if x.channel == "heading_across_gaps"]
 
 
+def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():
+    """The bins compared must lie within BIN_S of the estimate's times (the IMU) and EDGE_S of the gap (the
+    estimate): a series that stops before the gap, or one with a single bin, gives no comparison."""
+    from fusiond.core.doctor.gap_heading import BIN_S, EDGE_S, _around, _at
+
+    t = np.array([0.0, 0.2, 0.4, 10.4, 10.6])
+    y = np.array([0.0, 0.1, 0.2, 1.2, 1.3])
+    assert _at(t, y, 0.45) == 0.2 and _at(t, y, 10.35) == 1.2
+    assert _at(t, y, 5.0) is None  # nothing within BIN_S
+    assert _at(np.array([]), np.array([]), 0.0) is None and _at(np.array([1.0]), np.array([7.0]), 1.1) == 7.0
+    assert _around(t, 0.5, 10.3) == (2, 3)
+    assert _around(t, 0.5 + EDGE_S + BIN_S, 10.3) is None  # the last bin before is too far from the gap
+    assert _around(t, 0.5, 10.7) is None  # no bin after the gap
+
+
 def test_a_disturbed_imu_yaw_is_still_named_across_a_logging_gap():
     """The same gap with a real disturbance (0.3 rad sine, rms 0.21 rad, 16 s period): the windows on
     either side of the gap still see it, well above WANDER_RAD."""

@@ -77,3 +77,12 @@ def test_every_module_logs_through_fusiond_logs():
                                              for line in p.read_text().splitlines())]
     assert direct == []
 
+
+
+def test_an_unknown_level_is_refused_by_configure_not_at_the_first_event():
+    import pytest
+
+    from fusiond.logs import configure
+
+    with pytest.raises(ValueError, match="verbose"):
+        configure("verbose")

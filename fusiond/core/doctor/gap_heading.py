@@ -45,10 +45,10 @@ def _around(t: np.ndarray, start: float, end: float) -> tuple[int, int] | None:
 
 def _at(t: np.ndarray, y: np.ndarray, when: float) -> float | None:
     """The binned value nearest ``when``, None if no bin is within BIN_S."""
-    i = int(np.clip(np.searchsorted(t, when), 1, len(t) - 1)) if len(t) > 1 else 0
-    if len(t) == 0:
+    if not len(t):
         return None
-    k = i if abs(t[i] - when) < abs(t[i - 1] - when) else i - 1
+    i = int(np.searchsorted(t, when))
+    k = min((j for j in (i - 1, i) if 0 <= j < len(t)), key=lambda j: abs(t[j] - when))
     return float(y[k]) if abs(t[k] - when) <= BIN_S else None
 
 
