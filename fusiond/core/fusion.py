@@ -30,7 +30,7 @@ import numpy as np
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor
 from .. import reasons
 from ..errors import CoreError
-from ..estimator import ErrorStateEKF, PredictWorkspace, predict
+from ..estimator import ErrorStateEKF, PredictWorkspace, corrected_inputs, predict
 from ..estimator.geodesy import enu_to_geodetic
 from ..logs import get_logger
 from ..samples import Sample
@@ -43,7 +43,6 @@ from .sensors import Rejected, SensorContext, build_models
 from .state import FilterState
 
 log = get_logger("fusiond.core")
-
 
 
 class Estimate(msgspec.Struct, gc=False):
@@ -311,15 +310,7 @@ class FusionCore:
             raise CoreError("no sample has been fused yet")
         x, P = s.ekf.x, s.ekf.P
         u = self.inputs.at(s)
-        linear, angular = u.linear, u.angular
-        if self.layout.input_blocks:
-            xl = x.tolist()
-            for blk, n0, n1, _ in self.layout.input_blocks:
-                if blk.applies(u.from_gyro):
-                    if blk.corrects == "linear":
-                        linear = blk.correct(xl[n0:n1], linear)
-                    else:
-                        angular = blk.correct(xl[n0:n1], angular)
+        linear, angular = corrected_inputs(self.layout, x, u.linear, u.angular, u.from_gyro)
         if u.planar:
             angular = (0.0, 0.0, angular[2])
         twist_cov = np.zeros((6, 6))

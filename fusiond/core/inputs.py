@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 from ..config import OdomSensor
-from ..estimator import MotionInput, StateLayout, mat3
+from ..estimator import MotionInput, StateLayout, corrected_inputs, mat3
 from .state import FilterState
 
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
@@ -26,9 +26,7 @@ class HeldInputs:
 
     def __init__(self, sensors: list, odom_index: int, two_d: bool, layout: StateLayout) -> None:
         self.odom_index = odom_index
-        # nominal-state indices that correct the last inputs (-1: not in the state)
-        self._wheel_scale = layout.nominal["wheel_scale"].start if layout.has("wheel_scale") else -1
-        self._bias_z = layout.nominal["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
+        self._layout = layout  # its input blocks correct the last inputs (``unheld_motion_var``)
         self.two_d = two_d
         self.tilt_reference = True  # set by the core once the sensor models say whether any gives tilt
         self._timeout_base = [sc.timeout_s for sc in sensors]
@@ -122,13 +120,12 @@ class HeldInputs:
         unheld_linear = t_end - max(s.t, odom_expiry)
         if odom_expiry == -math.inf or unheld_linear <= 0.0:
             return 0.0, 0.0
-        x = s.ekf.x
-        v = math.hypot(s.linear[0], s.linear[1])
-        if self._wheel_scale >= 0:
-            v *= abs(float(x[self._wheel_scale]))
-        w = abs(s.wheel_angular[2])
-        if s.gyro is not None:
-            w = abs(s.gyro[2] - (float(x[self._bias_z]) if self._bias_z >= 0 else 0.0))
+        # the last inputs as the prediction used them (bias and scales applied)
+        from_gyro = s.gyro is not None
+        linear, angular = corrected_inputs(self._layout, s.ekf.x, s.linear, s.gyro if from_gyro else s.wheel_angular,
+                                           from_gyro)
+        v = math.hypot(linear[0], linear[1])
+        w = abs(angular[2])
         unheld_angular = max(t_end - max(s.t, odom_expiry, gyro_expiry), 0.0)
         return (v * unheld_linear) ** 2, (w * unheld_angular) ** 2
 

@@ -2,12 +2,12 @@
 
 from .ekf import ErrorStateEKF, UpdateResult
 from .gps_error import GpsErrorBlock
-from .motion import MotionInput, PredictWorkspace, predict
+from .motion import MotionInput, PredictWorkspace, corrected_inputs, predict
 from .scale import GyroScaleBlock, WheelScaleBlock
 from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout, YawOffsetBlock
 
 __all__ = [
-    "ErrorStateEKF", "UpdateResult", "MotionInput", "PredictWorkspace", "predict",
+    "ErrorStateEKF", "UpdateResult", "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
     "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "WheelScaleBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
     "YawOffsetBlock",
 ]

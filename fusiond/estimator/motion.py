@@ -180,6 +180,23 @@ def _input_noise(ws: PredictWorkspace, j: int, qd: list[float], G: mat3.Mat3, co
     return (c01, c01, c02, c02, c12, c12)
 
 
+def corrected_inputs(layout: StateLayout, x: np.ndarray, linear: Vec3, angular: Vec3,
+                     from_gyro: bool) -> tuple[Vec3, Vec3]:
+    """(linear, angular) as the motion model drives the pose with them: each input block (gyro bias,
+    gyro and wheel scales) applied in layout order, as ``predict`` applies them (which also keeps
+    the intermediate inputs, for the chain rule)."""
+    if not layout.input_blocks:
+        return linear, angular
+    xl = x.tolist()
+    for blk, n0, n1, _ in layout.input_blocks:
+        if blk.applies(from_gyro):
+            if blk.corrects == "linear":
+                linear = blk.correct(xl[n0:n1], linear)
+            else:
+                angular = blk.correct(xl[n0:n1], angular)
+    return linear, angular
+
+
 def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float) -> np.ndarray:
     """f(x, u, dt): the exact function the filter runs (used by numeric Jacobian tests)."""
     return predict(layout, x, u, dt, np.zeros(layout.error_dim))[0]
