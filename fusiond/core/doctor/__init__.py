@@ -21,7 +21,7 @@ from collections import defaultdict
 import msgspec
 
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor
-from .attitude import TiltStats, inverted_lean, lean_verdict, mount_verdict
+from .attitude import TiltStats, lean_verdict, mount_verdict
 from .clock import ClockOffsets, clock_verdicts
 from .channels import absolute_verdict, figures, orientation_verdicts
 from .covariance import cap_verdict
@@ -295,8 +295,8 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mount_verdict(imu, mount, tilt, MIN_UPDATES)):
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
-        if (imu is not None and odom is not None and (odom.name, "yaw_rate") in found and tilt.n >= MIN_UPDATES
-                and inverted_lean(tilt) is not None):
+        if (imu is not None and odom is not None and (odom.name, "yaw_rate") in found
+                and any(v.evidence.get("inverted") for v in found.get((imu.name, "attitude"), []))):
             # an upside-down IMU's z rate reads against the wheels' yaw rate: not slip
             found[(odom.name, "yaw_rate")] = [
                 msgspec.structs.replace(v, message=v.message + f"; explained by {imu.name}/attitude: the IMU is mounted "
