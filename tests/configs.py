@@ -7,7 +7,7 @@ from fusiond.config import Config, loads
 
 
 def robot_config(gps: str | None = None, pose: str | None = None, odom: str = "", imu: str = "",
-                 filt: str = "", orientation: str = "roll_pitch", gyro: bool = True) -> Config:
+                 filt: str = "", orientation: str = "roll_pitch", gyro: bool = True, imu_key: str = "imu") -> Config:
     """``gps``/``pose``: None for no such sensor, else the extra lines of its table; ``gyro``: whether
     the IMU's angular velocity is fused."""
     text = f"""
@@ -21,7 +21,7 @@ key = "odom"
 [[sensors]]
 name = "imu"
 kind = "imu"
-key = "imu"
+key = "{imu_key}"
 orientation = "{orientation}"
 angular_velocity = {"true" if gyro else "false"}
 {imu}

@@ -7,32 +7,19 @@ import math
 import numpy as np
 import pytest
 
-from fusiond.config import loads
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
 from fusiond.samples import ImuSample, OdomSample
 
+from .configs import robot_config
 from .sim import SimConfig, arrival_order, simulate
 
 
 def make_config(orientation: str = "roll_pitch", gyro: bool = True, extra_imu: str = "", extra_filter: str = "",
                 extra_odom: str = ""):
-    return loads(f"""
-[filter]
-{extra_filter}
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-{extra_odom}
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-orientation = "{orientation}"
-angular_velocity = {"true" if gyro else "false"}
-{extra_imu}
-""")
+    """``robot_config`` with the IMU on key "imu/data", as the core tests have always used it."""
+    return robot_config(odom=extra_odom, imu=extra_imu, filt=extra_filter, orientation=orientation, gyro=gyro,
+                        imu_key="imu/data")
 
 
 def odom(t, v=0.0, w=0.0, var=1e-4, sensor="wheel"):
