@@ -121,8 +121,6 @@ class OdomPolicy:
         )
 
 
-
-
 class OdomModel(SensorModel):
     config_type = OdomSensor
     sample_type = OdomSample
