@@ -82,3 +82,8 @@ def flat(nested: tuple) -> Mat3:
 
 def diag(a: float, b: float, c: float) -> Mat3:
     return (a, 0.0, 0.0, 0.0, b, 0.0, 0.0, 0.0, c)
+
+
+def add_diag(A: Mat3, d: float) -> Mat3:
+    """A + d I."""
+    return (A[0] + d, A[1], A[2], A[3], A[4] + d, A[5], A[6], A[7], A[8] + d)

@@ -4,6 +4,21 @@ Once the gyro drives heading the wheels' yaw rate is not fused; it only checks
 the gyro (channel ``yaw_rate``), so that skid-steer slip and hand-turning show.
 It also tells the IMU when the robot stands still (for the gyro bias), through
 ``still_since`` in the state.
+
+Some drives read exactly zero while the vehicle still moves: a speed controller whose
+reading stops when its drive is off, while the car coasts on through a turn. A real stop
+does not look like that: from a speed v to exactly zero between two messages dt apart is a
+deceleration v / dt, and beyond ``STOP_DECEL_LIMIT`` (1.5 g: more than tyres can grip) no
+wheel stopped that fast. Such a drop starts a coast: the last speed is held
+(the constant-velocity prior every tracking filter uses when a speed goes unmeasured), its
+variance growing as (coast_decel t)^2, and only for as long as that uncertainty is still
+smaller than the speed itself, t <= |v| / coast_decel: beyond it the speed is unknown and
+zero is as good a guess. The hold ends at once when the drive reads motion again. Not a
+coast: a skid-steer turning on the spot (its wheels read the turn), a stop over several
+messages. The gyro cannot decide it: the coast may start on a straight, where a coasting
+and a stopped vehicle's gyros both read zero. A driver that reports its commanded speed
+and drops it to zero at once is taken for a coast: its pose runs on for |v|^2 / coast_decel
+at most (0.25 m from 0.5 m/s); ``coast_decel = 0`` turns the hold off.
 """
 
 from __future__ import annotations
@@ -12,6 +27,8 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import msgspec
+
 from ... import reasons
 from ...config import OdomSensor
 from ...estimator import mat3
@@ -19,6 +36,7 @@ from ...samples import OdomSample
 from ..diagnostics import DiagnosticsRecord
 from .base import SensorContext, SensorModel
 from .checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
+from ...logs import get_logger
 from .gyro_bias import quiet_bound
 
 if TYPE_CHECKING:
@@ -27,6 +45,23 @@ if TYPE_CHECKING:
 ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
 ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
 ACCEL_FIT_FLOOR = 0.02  # ... or within this many m/s (encoders quantise; drivers understate the noise)
+STOP_DECEL_LIMIT = 15.0  # m/s^2 (1.5 g): a drop to exactly zero faster than this is the drive, not a stop
+
+
+class OdomOwn(msgspec.Struct, frozen=True, gc=False):
+    """The odometry's own slice of the state: what its next message is judged against."""
+
+    window: tuple = ()  # (stamp, forward speed) of the last ACCEL_WINDOW_S (``forward_accel``), when tracked
+    previous: tuple[float, float, float] | None = None  # the previous message's linear twist ...
+    previous_cov: tuple = (0.0,) * 9  # ... its covariance (row-major 3x3; [0]: ``forward_accel``'s noise) ...
+    previous_stamp: float = 0.0  # ... its stamp ...
+    previous_moving: bool = False  # ... and whether it read motion (not stationary)
+    coast: tuple | None = None  # (since, held linear twist, its covariance) while a coast is held
+
+
+_NO_OWN = OdomOwn()
+
+log = get_logger("fusiond.core")
 
 
 @dataclass(slots=True)
@@ -133,33 +168,38 @@ class OdomModel(SensorModel):
         self._bias_z = layout.nominal["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
         self._bias_z_error = layout.error["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
         self._gyro_scale = layout.nominal["gyro_scale"].start if layout.has("gyro_scale") else -1
+        self._coast_decel = cfg.coast_decel
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
-        if self.ctx.track_acceleration:
-            self._remember_speed(s, inp.linear[0], inp.linear_cov[0], stamp)
-        s.linear, s.linear_cov = inp.linear, inp.linear_cov
+        own = s.own[self.index] or _NO_OWN
+        window = self._speeds(own.window, inp.linear[0], stamp) if self.ctx.track_acceleration else ()
+        coast = self._coast(s, own, inp, stamp)
+        s.own[self.index] = OdomOwn(window, inp.linear, inp.linear_cov, stamp, not inp.stationary, coast)
+        if coast is None:
+            s.linear, s.linear_cov = inp.linear, inp.linear_cov
+        else:
+            since, held, held_cov = coast
+            grown = (self._coast_decel * (stamp - since)) ** 2
+            s.linear, s.linear_cov = held, mat3.add_diag(held_cov, grown)
+            if emit and since == stamp:
+                log.info("coast_held", sensor=self.cfg.name, stamp=stamp, speed=math.hypot(*held),
+                         hold_s=math.hypot(*held) / self._coast_decel)
         s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
         s.wheel_yaw_measured = inp.yaw_rate_measured
-        if inp.stationary:
+        if inp.stationary and coast is None:
             if s.still_since is None:
                 s.still_since = stamp
         else:
             s.still_since = None
-        if not emit or s.gyro is None or not inp.yaw_rate_measured:
+        if not emit or not inp.yaw_rate_measured:
             return []
-        if stamp - s.gyro_last[1] > self.ctx.timeout(s.gyro_last[0], s):
+        gyro = self._gyro_yaw_rate(s, stamp)
+        if gyro is None:
             return []
         # The wheels' yaw rate is not fused once the gyro drives heading; it only
         # checks the gyro, so that skid and hand-turning show up as slip.
-        x = s.ekf.x
-        gyro_z = s.gyro[2]
-        var = inp.angular_cov[8] + s.gyro_cov[8]
-        if self._bias_z >= 0:
-            gyro_z -= float(x[self._bias_z])
-            e = self._bias_z_error
-            var += float(s.ekf.P[e, e])
-        if self._gyro_scale >= 0:
-            gyro_z *= float(x[self._gyro_scale])
+        gyro_z, var = gyro
+        var += inp.angular_cov[8]
         r = inp.angular[2] - gyro_z
         # Flagged: a wheel rate that misses the gyro's by more than slip_threshold, or wheels reading
         # exactly zero while the gyro turns beyond the standstill quiet bound (the vehicle coasting or
@@ -168,15 +208,47 @@ class OdomModel(SensorModel):
         slip = abs(r) > self.cfg.slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
         return [self.record(stamp, ["yaw_rate"], [r], [var], r * r / var, 1, slip, "yaw_rate", late)]
 
-    def _remember_speed(self, s: "FilterState", speed: float, linear_var: float, stamp: float) -> None:
-        """Keep the last ACCEL_WINDOW_S of forward speeds (and the newest speed variance) in this
-        sensor's slice, for ``forward_accel``: only the expired ones dropped from the front."""
-        own = s.own[self.index]
-        window = own[0] if own is not None else ()
+    @staticmethod
+    def _speeds(window: tuple, speed: float, stamp: float) -> tuple:
+        """The last ACCEL_WINDOW_S of forward speeds with this one, for ``forward_accel``: only the
+        expired ones dropped from the front."""
         k = 0
         while k < len(window) and stamp - window[k][0] >= ACCEL_WINDOW_S:
             k += 1
-        s.own[self.index] = (window[k:] + ((stamp, speed),), linear_var)
+        return window[k:] + ((stamp, speed),)
+
+    def _coast(self, s: "FilterState", own: OdomOwn, inp: OdomInput, stamp: float) -> tuple | None:
+        """The coast (since, held linear twist, its covariance) this message is part of, or None (module doc).
+
+        Only a twist of exactly zero in every measured component, yaw rate included, can be one.
+        The drop's time is bounded from below by the odometry's typical interval (stamps can bunch)."""
+        decel = self._coast_decel
+        if decel <= 0.0 or not (inp.stationary and inp.yaw_rate_measured):
+            return None
+        coast = own.coast
+        if coast is not None:
+            return coast if stamp - coast[0] <= math.hypot(*coast[1]) / decel else None
+        if not own.previous_moving or stamp <= own.previous_stamp:
+            return None
+        if math.hypot(*own.previous) <= STOP_DECEL_LIMIT * max(stamp - own.previous_stamp, s.period[self.index]):
+            return None  # a stop a vehicle can make
+        return (stamp, own.previous, own.previous_cov)
+
+    def _gyro_yaw_rate(self, s: "FilterState", stamp: float) -> tuple[float, float] | None:
+        """The newest gyro z rate as the filter corrects it (bias, scale) with its variance (the
+        gyro's and the bias estimate's), or None when no gyro is fused or it has gone silent."""
+        if s.gyro is None or stamp - s.gyro_last[1] > self.ctx.timeout(s.gyro_last[0], s):
+            return None
+        x = s.ekf.x
+        gyro_z = s.gyro[2]
+        var = s.gyro_cov[8]
+        if self._bias_z >= 0:
+            gyro_z -= float(x[self._bias_z])
+            e = self._bias_z_error
+            var += float(s.ekf.P[e, e])
+        if self._gyro_scale >= 0:
+            gyro_z *= float(x[self._gyro_scale])
+        return gyro_z, var
 
     def forward_accel(self, s: "FilterState") -> float:
         """The forward acceleration, for an IMU that takes roll/pitch from gravity: braking or
@@ -191,9 +263,9 @@ class OdomModel(SensorModel):
         residual exceeds the speed noise, and the acceleration is "unknown" (NaN): the IMU skips
         those samples rather than read the lag as tilt."""
         own = s.own[self.index]
-        if own is None:
+        if own is None or not own.window:
             return 0.0
-        window, linear_var = own
+        window, linear_var = own.window, own.previous_cov[0]
         n = len(window)
         if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
             # too few speeds for a slope: known only when they are all alike (at rest, cruising)
@@ -208,4 +280,4 @@ class OdomModel(SensorModel):
         return slope if misfit <= noise else math.nan
 
 
-__all__ = ["OdomInput", "OdomModel", "OdomPolicy"]
+__all__ = ["OdomInput", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT"]

@@ -1,0 +1,139 @@
+"""A drive that drops to exactly zero while the vehicle coasts on (``core/sensors/odom.py``).
+
+The worlds are ``sim_rest``'s: a car driving a circle of radius R = v / w, its odometry at
+50 Hz reading the true twist plus noise (sigma 0.01), or exactly zero in a segment marked
+``odom_reads_zero`` while the car keeps its speed (it coasts without losing speed: the held
+speed is then the true one, so what is left of the error is noise). Speed changes ramp over
+0.5 s (4 m/s^2 from 2 m/s: a vehicle can do that; the coast's drop from 2 m/s to zero in one
+20 ms message is 100 m/s^2, which none can).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fusiond.core.fusion import FusionCore
+from fusiond.core.sensors.odom import STOP_DECEL_LIMIT
+from fusiond.samples import OdomSample
+
+from .configs import robot_config
+from .sim import arrival_order
+from .sim_rest import T0, RestWorld, Segment, simulate
+
+V, W = 2.0, 0.3  # m/s, rad/s: a circle of radius 6.7 m
+RAMP_S = 0.5
+
+
+def _fuse(samples, coast_decel: float = 1.0) -> tuple[FusionCore, list[tuple[float, float, float]]]:
+    """The core and its pose (t, x, y) after every odometry sample."""
+    core = FusionCore(robot_config(odom=f"coast_decel = {coast_decel}"))
+    track = []
+    for s in samples:
+        step = core.ingest(s)
+        if step.accepted and isinstance(s, OdomSample):
+            t, x = core.pose()
+            track.append((t, float(x[0]), float(x[1])))
+    return core, track
+
+
+def _at(track, t: float) -> np.ndarray:
+    return np.array(min(track, key=lambda p: abs(p[0] - t))[1:])
+
+
+def _truth_at(world: RestWorld, t: float) -> np.ndarray:
+    return np.array(min(world.truth, key=lambda p: abs(p[0] - t))[1:3])
+
+
+def _path(track, t0: float, t1: float) -> float:
+    """Length of the estimated track between t0 and t1."""
+    pts = np.array([p[1:] for p in track if t0 <= p[0] <= t1])
+    return float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
+
+
+def _coasting_world(coast_s: float) -> RestWorld:
+    return RestWorld([Segment(4.0, speed=V, yaw_rate=W), Segment(coast_s, speed=V, yaw_rate=W, odom_reads_zero=True),
+                      Segment(2.0, speed=V, yaw_rate=W)], ramp_s=RAMP_S)
+
+
+def test_a_drop_no_vehicle_could_make_holds_the_last_speed_through_the_coast():
+    """A coast of 1.5 s, shorter than the hold (|v| / coast_decel = 2 s). Held, the position at its
+    end is off by the noise only: the speed's (0.01 m/s x 1.5 s) and the track's before it, well
+    under 10 % of the 3 m the car coasted. Read as a stop (``coast_decel = 0``) the pose waits where
+    the drive went quiet: off by the chord of the coasted arc, 2 R sin(w T / 2) = 2.98 m."""
+    coast_s = 1.5
+    world = _coasting_world(coast_s)
+    samples = simulate(world)
+    end = T0 + 4.0 + coast_s
+    chord = 2.0 * (V / W) * math.sin(W * coast_s / 2.0)
+    held = {decel: _fuse(samples, decel)[1] for decel in (1.0, 0.0)}
+    err_held = np.linalg.norm(_at(held[1.0], end) - _truth_at(world, end))
+    err_stop = np.linalg.norm(_at(held[0.0], end) - _truth_at(world, end))
+    assert err_held < 0.1 * V * coast_s
+    assert err_stop > 0.9 * chord
+    # ... and after the coast the drive reads again: both go on from where they were
+    assert np.linalg.norm(_at(held[1.0], end + 2.0) - _truth_at(world, end + 2.0)) < 0.1 * V * coast_s
+
+
+def test_the_hold_ends_when_its_uncertainty_reaches_the_speed():
+    """A coast of 4 s: the speed is held for |v| / coast_decel = 2 s, so the estimate travels
+    v^2 / coast_decel = 4 m of the 8 m coasted (within 10 %), then stands."""
+    coast_s = 4.0
+    world = _coasting_world(coast_s)
+    _, track = _fuse(simulate(world))
+    start = T0 + 4.0
+    hold_s = V / 1.0
+    assert _path(track, start, start + coast_s) == pytest.approx(V * hold_s, rel=0.1)
+    assert _path(track, start + hold_s + 0.1, start + coast_s - 0.05) < 0.01  # nothing moves it after
+
+
+def test_the_held_speed_grows_uncertain_at_coast_decel():
+    """The held twist's variance is the last measured one plus (coast_decel t)^2: 1 s into the coast,
+    1 m^2/s^2 more than before it."""
+    world = _coasting_world(1.5)
+    samples = simulate(world)
+    core = FusionCore(robot_config())
+    before = None
+    for s in samples:
+        core.ingest(s)
+        if isinstance(s, OdomSample) and s.stamp < T0 + 4.0:
+            before = core.state.linear_cov[0]
+        if isinstance(s, OdomSample) and s.stamp >= T0 + 5.0:
+            break
+    coast = core.state.own[core.odom_index].coast
+    assert coast is not None and core.state.linear[0] == pytest.approx(V, abs=0.05)
+    assert core.state.linear_cov[0] == pytest.approx(before + (core.state.t - coast[0]) ** 2, rel=1e-9)
+    assert core.state.still_since is None  # a coast is no standstill: no gyro bias learned in it
+
+
+def test_a_stop_a_vehicle_can_make_is_a_stop():
+    """Braking at 4 m/s^2 (under STOP_DECEL_LIMIT): no coast, and the pose stands from the stop on,
+    while the standstill starts counting for the gyro bias."""
+    assert 2.0 * V / 1.0 < STOP_DECEL_LIMIT * 1.0  # the ramp's deceleration, 4 m/s^2, is far below the limit
+    world = RestWorld([Segment(4.0, speed=V, yaw_rate=W), Segment(3.0)], ramp_s=RAMP_S)
+    core, track = _fuse(simulate(world))
+    stop = T0 + 4.0 + RAMP_S
+    assert _path(track, stop + 0.05, stop + 2.9) < 0.01
+    assert core.state.own[core.odom_index].coast is None
+    assert core.state.still_since is not None and core.state.still_since <= stop + 0.05
+
+
+def test_a_skid_steer_turning_on_the_spot_is_not_a_coast():
+    """From 1 m/s to turning on the spot in one message (no ramp: the drop in speed alone is 50 m/s^2):
+    the wheels read the turn, so the twist is not zero and nothing is held. The pose stays put while
+    it spins (its wheel noise, 0.01 m/s x 2 s, at most)."""
+    world = RestWorld([Segment(3.0, speed=1.0), Segment(2.0, yaw_rate=1.0)])
+    core, track = _fuse(simulate(world))
+    assert _path(track, T0 + 3.05, T0 + 4.95) < 0.05
+    assert core.state.own[core.odom_index].coast is None
+
+
+def test_the_coast_is_the_same_whatever_the_arrival_order():
+    """The coast lives in the odometry's slice of the state, which the late-data history snapshots:
+    samples arriving late (IMU 30 ms behind, jittered) give the same final pose."""
+    samples = simulate(_coasting_world(1.5))
+    core_a, _ = _fuse(samples)
+    core_b, _ = _fuse(arrival_order(samples, {"imu": 0.03}, jitter=0.01, seed=3))
+    assert np.allclose(core_a.pose()[1], core_b.pose()[1], atol=1e-9)
