@@ -137,3 +137,20 @@ def test_the_coast_is_the_same_whatever_the_arrival_order():
     core_a, _ = _fuse(samples)
     core_b, _ = _fuse(arrival_order(samples, {"imu": 0.03}, jitter=0.01, seed=3))
     assert np.allclose(core_a.pose()[1], core_b.pose()[1], atol=1e-9)
+
+
+@pytest.mark.parametrize("coast_decel", [1.0, 0.0])
+def test_the_doctor_says_what_the_position_did_while_the_drive_read_zero(coast_decel: float):
+    """No real standstill, one coast through a turn (0.3 rad/s, far beyond the quiet bound
+    3 x (0.002 + 0.01) = 0.036 rad/s): the gyro bias verdict names the stretch and says, by
+    ``coast_decel``, whether the position ran on at the last speed or waited."""
+    from .test_doctor import one, verdicts_of
+
+    samples = simulate(_coasting_world(1.5))
+    v = one(verdicts_of(robot_config(odom=f"coast_decel = {coast_decel}"), samples), "imu", "gyro_bias")
+    assert v.evidence["turning_at_rest"] == 1.0, v
+    assert "sensors.wheel.coast_decel" in v.message
+    if coast_decel > 0.0:
+        assert f"ran on at the last speed v for at most v / {coast_decel:g} s" in v.message
+    else:
+        assert "does not advance while the wheels read zero (sensors.wheel.coast_decel = 0" in v.message

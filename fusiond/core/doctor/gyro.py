@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ...config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..sensors.gyro_bias import _turning, quiet_bound
 from .nis import ChannelStats
 from .series import Series
@@ -99,6 +99,17 @@ def _count_updates(episodes: list[Episode], ch: ChannelStats | None) -> None:
                 episodes[i].accepted += 1
 
 
+def _coast_note(cfg: Config) -> str:
+    """What the position does while the drive reads zero and the vehicle moves (core/sensors/odom.py)."""
+    odom = next(s for s in cfg.sensors if isinstance(s, OdomSensor))
+    if odom.coast_decel <= 0.0:
+        return (f"The position does not advance while the wheels read zero ({sensor_key(odom.name, 'coast_decel')} "
+                "= 0: a coast is not held)")
+    return (f"Where the drive dropped to zero faster than a vehicle can stop, the position ran on at the last "
+            f"speed v for at most v / {odom.coast_decel:g} s ({sensor_key(odom.name, 'coast_decel')}); otherwise, "
+            "and after that, it does not advance while the wheels read zero")
+
+
 def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool) -> Verdict | None:
     imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
     if imu is None or not gyro_fused:
@@ -125,7 +136,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        f"the wheels read exactly zero in {len(turning)} stretch(es) while the gyro turned (up to "
                        f"{worst.gyro_mean:+.3f} rad/s at {worst.t0 - t_start:.1f} s): the vehicle coasted or turned "
                        "with its drive reporting zero. Those are rightly not taken as standstills (the gyro bias is "
-                       "not learned there), and the position does not advance while the wheels read zero",
+                       f"not learned there). {_coast_note(cfg)}",
                        evidence={"turning_at_rest": float(len(turning)), "turning_rate_rad_s": worst.gyro_mean})
     heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
         isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
