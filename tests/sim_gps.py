@@ -69,13 +69,19 @@ class World:
     fixes: list[tuple[float, float, float]] = field(default_factory=list)  # t east north of every valid fix
 
 
+HAND_STOP_S = 0.5  # s: a robot about to be turned by hand brakes to rest first (not in one message)
+
+
 def commanded(rel: float, w: World) -> tuple[float, float, bool]:
     """(v, yaw rate, wheels see it)."""
     if w.hand_turn is not None and w.hand_turn[0] <= rel < w.hand_turn[1]:
         return 0.0, w.hand_turn[2], False
     if rel < w.standstill:
         return 0.0, 0.0, True
-    return w.speed, 0.25 * math.sin(0.3 * (rel - w.standstill)) + 0.05, True
+    v = w.speed
+    if w.hand_turn is not None and w.hand_turn[0] - HAND_STOP_S <= rel < w.hand_turn[0]:
+        v *= (w.hand_turn[0] - rel) / HAND_STOP_S  # the robot stops before it is picked up
+    return v, 0.25 * math.sin(0.3 * (rel - w.standstill)) + 0.05, True
 
 
 def simulate(w: World) -> list:
