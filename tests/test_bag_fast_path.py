@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import msgspec
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -81,7 +82,8 @@ def test_mutated_ros1_messages_read_as_rosbags_or_not_at_all(jackal_raw) -> None
         got = bag_fast_path(store, msgtype, ros1=True)(data, "s")
         expected = _reference(store, msgtype, data, ros1=True)
         if got is not None:
-            assert got == expected
+            # the same values; a mutated double can be NaN, equal to the other path's only bit for bit
+            assert got == expected or msgspec.msgpack.encode(got) == msgspec.msgpack.encode(expected)
         if expected is None:
             assert got is None
 
