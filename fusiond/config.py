@@ -106,9 +106,9 @@ class OdomSensor(_Sensor, tag="odom"):
     # makes it observable; false: an explicit opt-out
     scale_estimation: bool | None = None
     twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
-    # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: its last speed is
-    # held for |v| / coast_decel s, uncertain by coast_decel * t (core/sensors/odom.py); 0: off
-    coast_decel: float = 1.0
+    # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
+    # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom.py); 0: off
+    coast_decel: float = 0.5
 
 
 class ImuSensor(_Sensor, tag="imu"):

@@ -27,6 +27,7 @@ class Segment:
     speed: float = 0.0
     yaw_rate: float = 0.0
     odom_reads_zero: bool = False  # the drive reports exactly zero although the vehicle moves
+    ramp_s: float | None = None  # this segment's speed is reached over this long (None: the world's ramp_s)
 
 
 @dataclass
@@ -67,8 +68,9 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
         t_seg, t_end = t, t + seg.duration
         while t < t_end - 1e-9:
             # speed now, and the forward acceleration: steps, or ramps of ramp_s into each segment
-            ramping = w.ramp_s > 0.0 and t - t_seg < w.ramp_s
-            accel = (seg.speed - v_prev) / w.ramp_s if ramping else 0.0
+            ramp_s = w.ramp_s if seg.ramp_s is None else seg.ramp_s
+            ramping = ramp_s > 0.0 and t - t_seg < ramp_s
+            accel = (seg.speed - v_prev) / ramp_s if ramping else 0.0
             speed = v_prev + accel * (t - t_seg) if ramping else seg.speed
             if t >= next_odom:
                 moving = (speed != 0.0 or seg.yaw_rate != 0.0) and not seg.odom_reads_zero

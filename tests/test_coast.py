@@ -2,10 +2,10 @@
 
 The worlds are ``sim_rest``'s: a car driving a circle of radius R = v / w, its odometry at
 50 Hz reading the true twist plus noise (sigma 0.01), or exactly zero in a segment marked
-``odom_reads_zero`` while the car keeps its speed (it coasts without losing speed: the held
-speed is then the true one, so what is left of the error is noise). Speed changes ramp over
-0.5 s (4 m/s^2 from 2 m/s: a vehicle can do that; the coast's drop from 2 m/s to zero in one
-20 ms message is 100 m/s^2, which none can).
+``odom_reads_zero`` while the car coasts, slowing steadily. Speed changes ramp over 0.5 s
+(4 m/s^2 from 2 m/s: a vehicle can do that; the coast's drop from 2 m/s to zero in one 20 ms
+message is 100 m/s^2, which none can). The filter takes the coasting car to slow at
+coast_decel = 1 m/s^2 (the default); the simulated one slows at DECEL.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from .sim_rest import T0, RestWorld, Segment, simulate
 
 V, W = 2.0, 0.3  # m/s, rad/s: a circle of radius 6.7 m
 RAMP_S = 0.5
+DECEL = 0.75  # m/s^2: the simulated car's coasting deceleration
 
 
 def _fuse(samples, coast_decel: float = 1.0) -> tuple[FusionCore, list[tuple[float, float, float]]]:
@@ -54,57 +55,64 @@ def _path(track, t0: float, t1: float) -> float:
 
 
 def _coasting_world(coast_s: float) -> RestWorld:
-    return RestWorld([Segment(4.0, speed=V, yaw_rate=W), Segment(coast_s, speed=V, yaw_rate=W, odom_reads_zero=True),
-                      Segment(2.0, speed=V, yaw_rate=W)], ramp_s=RAMP_S)
+    """Driving the circle for 4 s, coasting for coast_s (slowing at DECEL, still turning), driving again."""
+    v_end = V - DECEL * coast_s
+    return RestWorld([Segment(4.0, speed=V, yaw_rate=W),
+                      Segment(coast_s, speed=v_end, yaw_rate=W, odom_reads_zero=True, ramp_s=coast_s),
+                      Segment(2.0, speed=v_end, yaw_rate=W)], ramp_s=RAMP_S)
 
 
-def test_a_drop_no_vehicle_could_make_holds_the_last_speed_through_the_coast():
-    """A coast of 1.5 s, shorter than the hold (|v| / coast_decel = 2 s). Held, the position at its
-    end is off by the noise only: the speed's (0.01 m/s x 1.5 s) and the track's before it, well
-    under 10 % of the 3 m the car coasted. Read as a stop (``coast_decel = 0``) the pose waits where
-    the drive went quiet: off by the chord of the coasted arc, 2 R sin(w T / 2) = 2.98 m."""
-    coast_s = 1.5
+def test_a_drop_no_vehicle_could_make_is_a_coast():
+    """A coast of 2 s, the car slowing from 2 to 0.5 m/s: it covers V T - DECEL T^2 / 2 = 2.5 m. The
+    filter, slowing at 1 m/s^2, covers 2 m: 0.5 m short along the arc (the decelerations' difference
+    x T^2 / 2), plus the noise (0.01 m/s x 6 s of travel); under 0.6 m. Read as a stop
+    (``coast_decel = 0``) the pose waits where the drive went quiet: off by the chord of the coasted
+    arc, 2 R sin(w T / 2), 2.48 m."""
+    coast_s = 2.0
     world = _coasting_world(coast_s)
     samples = simulate(world)
     end = T0 + 4.0 + coast_s
-    chord = 2.0 * (V / W) * math.sin(W * coast_s / 2.0)
-    held = {decel: _fuse(samples, decel)[1] for decel in (1.0, 0.0)}
-    err_held = np.linalg.norm(_at(held[1.0], end) - _truth_at(world, end))
-    err_stop = np.linalg.norm(_at(held[0.0], end) - _truth_at(world, end))
-    assert err_held < 0.1 * V * coast_s
+    covered = V * coast_s - DECEL * coast_s**2 / 2
+    chord = 2.0 * (V / W) * math.sin(W * coast_s / 2.0) * covered / (V * coast_s)  # arc of `covered` m
+    tracks = {decel: _fuse(samples, decel)[1] for decel in (1.0, 0.0)}
+    err_coast = np.linalg.norm(_at(tracks[1.0], end) - _truth_at(world, end))
+    err_stop = np.linalg.norm(_at(tracks[0.0], end) - _truth_at(world, end))
+    assert err_coast < (1.0 - DECEL) * coast_s**2 / 2 + 0.1
     assert err_stop > 0.9 * chord
-    # ... and after the coast the drive reads again: both go on from where they were
-    assert np.linalg.norm(_at(held[1.0], end + 2.0) - _truth_at(world, end + 2.0)) < 0.1 * V * coast_s
+    assert _path(tracks[1.0], end - coast_s, end) == pytest.approx(V * coast_s - coast_s**2 / 2, rel=0.05)
 
 
-def test_the_hold_ends_when_its_uncertainty_reaches_the_speed():
-    """A coast of 4 s: the speed is held for |v| / coast_decel = 2 s, so the estimate travels
-    v^2 / coast_decel = 4 m of the 8 m coasted (within 10 %), then stands."""
+def test_the_coast_ends_when_the_speed_has_run_down():
+    """A coast of 4 s: slowing at 1 m/s^2 from 2 m/s, the estimate stops after |v| / coast_decel = 2 s,
+    having covered v^2 / (2 coast_decel) = 2 m (within 5 %), and stands for the rest of it."""
     coast_s = 4.0
-    world = _coasting_world(coast_s)
+    world = RestWorld([Segment(4.0, speed=V, yaw_rate=W),
+                       Segment(coast_s, speed=V, yaw_rate=W, odom_reads_zero=True), Segment(1.0, speed=V)],
+                      ramp_s=RAMP_S)
     _, track = _fuse(simulate(world))
     start = T0 + 4.0
-    hold_s = V / 1.0
-    assert _path(track, start, start + coast_s) == pytest.approx(V * hold_s, rel=0.1)
-    assert _path(track, start + hold_s + 0.1, start + coast_s - 0.05) < 0.01  # nothing moves it after
+    stop_s = V / 1.0
+    assert _path(track, start, start + coast_s) == pytest.approx(V**2 / 2.0, rel=0.05)
+    assert _path(track, start + stop_s + 0.05, start + coast_s - 0.05) < 0.01  # nothing moves it after
 
 
-def test_the_held_speed_grows_uncertain_at_coast_decel():
-    """The held twist's variance is the last measured one plus (coast_decel t)^2: 1 s into the coast,
-    1 m^2/s^2 more than before it."""
-    world = _coasting_world(1.5)
-    samples = simulate(world)
-    core = FusionCore(robot_config())
+def test_the_coasting_speed_slows_and_grows_uncertain_at_coast_decel():
+    """1 s into the coast: the speed is the last measured one less 1 m/s, its variance the last
+    measured one plus (coast_decel t)^2 = 1 m^2/s^2."""
+    world = _coasting_world(2.0)
+    core = FusionCore(robot_config(odom="coast_decel = 1.0"))
     before = None
-    for s in samples:
+    for s in simulate(world):
         core.ingest(s)
         if isinstance(s, OdomSample) and s.stamp < T0 + 4.0:
-            before = core.state.linear_cov[0]
+            before = (s.linear[0], core.state.linear_cov[0])
         if isinstance(s, OdomSample) and s.stamp >= T0 + 5.0:
             break
     coast = core.state.own[core.odom_index].coast
-    assert coast is not None and core.state.linear[0] == pytest.approx(V, abs=0.05)
-    assert core.state.linear_cov[0] == pytest.approx(before + (core.state.t - coast[0]) ** 2, rel=1e-9)
+    age = core.state.t - coast[0]
+    assert age == pytest.approx(1.0, abs=0.02)
+    assert core.state.linear[0] == pytest.approx(before[0] - 1.0 * age, rel=1e-9)
+    assert core.state.linear_cov[0] == pytest.approx(before[1] + age**2, rel=1e-9)
     assert core.state.still_since is None  # a coast is no standstill: no gyro bias learned in it
 
 
@@ -133,7 +141,7 @@ def test_a_skid_steer_turning_on_the_spot_is_not_a_coast():
 def test_the_coast_is_the_same_whatever_the_arrival_order():
     """The coast lives in the odometry's slice of the state, which the late-data history snapshots:
     samples arriving late (IMU 30 ms behind, jittered) give the same final pose."""
-    samples = simulate(_coasting_world(1.5))
+    samples = simulate(_coasting_world(2.0))
     core_a, _ = _fuse(samples)
     core_b, _ = _fuse(arrival_order(samples, {"imu": 0.03}, jitter=0.01, seed=3))
     assert np.allclose(core_a.pose()[1], core_b.pose()[1], atol=1e-9)
@@ -143,14 +151,14 @@ def test_the_coast_is_the_same_whatever_the_arrival_order():
 def test_the_doctor_says_what_the_position_did_while_the_drive_read_zero(coast_decel: float):
     """No real standstill, one coast through a turn (0.3 rad/s, far beyond the quiet bound
     3 x (0.002 + 0.01) = 0.036 rad/s): the gyro bias verdict names the stretch and says, by
-    ``coast_decel``, whether the position ran on at the last speed or waited."""
+    ``coast_decel``, whether the position ran on or waited."""
     from .test_doctor import one, verdicts_of
 
-    samples = simulate(_coasting_world(1.5))
+    samples = simulate(_coasting_world(2.0))
     v = one(verdicts_of(robot_config(odom=f"coast_decel = {coast_decel}"), samples), "imu", "gyro_bias")
     assert v.evidence["turning_at_rest"] == 1.0, v
     assert "sensors.wheel.coast_decel" in v.message
     if coast_decel > 0.0:
-        assert f"ran on at the last speed v for at most v / {coast_decel:g} s" in v.message
+        assert f"ran on from the last speed, slowing at {coast_decel:g} m/s^2 until it stopped" in v.message
     else:
         assert "does not advance while the wheels read zero (sensors.wheel.coast_decel = 0" in v.message

@@ -105,9 +105,9 @@ def _coast_note(cfg: Config) -> str:
     if odom.coast_decel <= 0.0:
         return (f"The position does not advance while the wheels read zero ({sensor_key(odom.name, 'coast_decel')} "
                 "= 0: a coast is not held)")
-    return (f"Where the drive dropped to zero faster than a vehicle can stop, the position ran on at the last "
-            f"speed v for at most v / {odom.coast_decel:g} s ({sensor_key(odom.name, 'coast_decel')}); otherwise, "
-            "and after that, it does not advance while the wheels read zero")
+    return (f"Where the drive dropped to zero faster than a vehicle can stop, the position ran on from the last "
+            f"speed, slowing at {odom.coast_decel:g} m/s^2 until it stopped ({sensor_key(odom.name, 'coast_decel')}); "
+            "otherwise, and after that, it does not advance while the wheels read zero")
 
 
 def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool) -> Verdict | None:

@@ -9,16 +9,19 @@ Some drives read exactly zero while the vehicle still moves: a speed controller 
 reading stops when its drive is off, while the car coasts on through a turn. A real stop
 does not look like that: from a speed v to exactly zero between two messages dt apart is a
 deceleration v / dt, and beyond ``STOP_DECEL_LIMIT`` (1.5 g: more than tyres can grip) no
-wheel stopped that fast. Such a drop starts a coast: the last speed is held
-(the constant-velocity prior every tracking filter uses when a speed goes unmeasured), its
-variance growing as (coast_decel t)^2, and only for as long as that uncertainty is still
-smaller than the speed itself, t <= |v| / coast_decel: beyond it the speed is unknown and
-zero is as good a guess. The hold ends at once when the drive reads motion again. Not a
-coast: a skid-steer turning on the spot (its wheels read the turn), a stop over several
-messages. The gyro cannot decide it: the coast may start on a straight, where a coasting
-and a stopped vehicle's gyros both read zero. A driver that reports its commanded speed
-and drops it to zero at once is taken for a coast: its pose runs on for |v|^2 / coast_decel
-at most (0.25 m from 0.5 m/s); ``coast_decel = 0`` turns the hold off.
+wheel stopped that fast. Such a drop starts a coast: the vehicle rolls on, slowing as a
+coasting vehicle does, taken as ``coast_decel`` (0.5 m/s^2 by default: the coast-down of a
+car or a small robot, rolling resistance and drag, is 0.3-0.6 m/s^2):
+the speed v0 (x 1 - coast_decel t / |v0|, same direction) until it reaches zero at
+t = |v0| / coast_decel, having covered |v0|^2 / (2 coast_decel). Its variance grows as
+(coast_decel t)^2: anything from no slowing to twice the assumed. The coast ends at once
+when the drive reads motion again. Not a coast: a skid-steer turning on the spot (its
+wheels read the turn), a stop over several messages. The gyro cannot decide it: the coast
+may start on a straight, where a coasting and a stopped vehicle's gyros both read zero.
+What a wrong coast costs is bounded by |v0|^2 / (2 coast_decel): a wheel-speed sensor that
+cuts off at 2 m/s while the car brakes at 2 m/s^2 runs on 4 m instead of 1; a driver that
+reports its commanded speed and drops it to zero at once, 0.25 m from 0.5 m/s.
+``coast_decel = 0`` turns it off; a larger value shortens the coast.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ class OdomOwn(msgspec.Struct, frozen=True, gc=False):
     previous_cov: tuple = (0.0,) * 9  # ... its covariance (row-major 3x3; [0]: ``forward_accel``'s noise) ...
     previous_stamp: float = 0.0  # ... its stamp ...
     previous_moving: bool = False  # ... and whether it read motion (not stationary)
-    coast: tuple | None = None  # (since, held linear twist, its covariance) while a coast is held
+    coast: tuple | None = None  # (since, linear twist and covariance when the drive went quiet) while coasting
 
 
 _NO_OWN = OdomOwn()
@@ -178,12 +181,13 @@ class OdomModel(SensorModel):
         if coast is None:
             s.linear, s.linear_cov = inp.linear, inp.linear_cov
         else:
-            since, held, held_cov = coast
-            grown = (self._coast_decel * (stamp - since)) ** 2
-            s.linear, s.linear_cov = held, mat3.add_diag(held_cov, grown)
+            since, v0, v0_cov = coast
+            slowed = self._coast_decel * (stamp - since)  # m/s lost since the drive went quiet
+            k = 1.0 - slowed / math.hypot(*v0)
+            s.linear, s.linear_cov = (k * v0[0], k * v0[1], k * v0[2]), mat3.add_diag(v0_cov, slowed * slowed)
             if emit and since == stamp:
-                log.info("coast_held", sensor=self.cfg.name, stamp=stamp, speed=math.hypot(*held),
-                         hold_s=math.hypot(*held) / self._coast_decel)
+                log.info("coast_started", sensor=self.cfg.name, stamp=stamp, speed=math.hypot(*v0),
+                         coast_s=math.hypot(*v0) / self._coast_decel)
         s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
         s.wheel_yaw_measured = inp.yaw_rate_measured
         if inp.stationary and coast is None:
@@ -218,7 +222,8 @@ class OdomModel(SensorModel):
         return window[k:] + ((stamp, speed),)
 
     def _coast(self, s: "FilterState", own: OdomOwn, inp: OdomInput, stamp: float) -> tuple | None:
-        """The coast (since, held linear twist, its covariance) this message is part of, or None (module doc).
+        """The coast (since, the twist and its covariance before the drop) this message is part of, or None
+        (module doc): it lasts while the slowing speed is above zero.
 
         Only a twist of exactly zero in every measured component, yaw rate included, can be one.
         The drop's time is bounded from below by the odometry's typical interval (stamps can bunch)."""
@@ -227,7 +232,7 @@ class OdomModel(SensorModel):
             return None
         coast = own.coast
         if coast is not None:
-            return coast if stamp - coast[0] <= math.hypot(*coast[1]) / decel else None
+            return coast if stamp - coast[0] < math.hypot(*coast[1]) / decel else None
         if not own.previous_moving or stamp <= own.previous_stamp:
             return None
         if math.hypot(*own.previous) <= STOP_DECEL_LIMIT * max(stamp - own.previous_stamp, s.period[self.index]):
