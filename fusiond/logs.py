@@ -14,6 +14,10 @@ from typing import Any
 
 __all__ = ["configure", "get_logger"]
 
+# logging's level names (``logging.getLevelNamesMapping()``), spelled out: importing logging to check
+# a name costs ~10 ms of a replay that logs nothing (a test holds the two equal)
+LEVELS = ("CRITICAL", "FATAL", "ERROR", "WARN", "WARNING", "INFO", "DEBUG", "NOTSET")
+
 # configure()'s settings, waiting for structlog's import (None: nothing asked, structlog's defaults)
 _pending: tuple[str, bool | None] | None = None
 
@@ -22,9 +26,7 @@ def configure(level: str = "info", json: bool | None = None) -> None:
     """Render events as JSON lines (``json``; default: when stderr is not a terminal) at ``level``
     and above. Applied now if structlog is already imported, else at the first event."""
     global _pending
-    import logging
-
-    if level.upper() not in logging.getLevelNamesMapping():  # said now, not at the first event
+    if level.upper() not in LEVELS:  # said now, not at the first event
         raise ValueError(f"unknown log level {level!r}")
     _pending = (level, json)
     if "structlog" in sys.modules:

@@ -86,3 +86,24 @@ def test_an_unknown_level_is_refused_by_configure_not_at_the_first_event():
 
     with pytest.raises(ValueError, match="verbose"):
         configure("verbose")
+
+
+def test_the_level_names_are_loggings():
+    """configure() checks a level against its own list, so that a replay does not import logging: the
+    list must be logging's."""
+    import logging
+
+    from fusiond.logs import LEVELS
+
+    assert set(LEVELS) == set(logging.getLevelNamesMapping())
+
+
+def test_a_replay_that_logs_nothing_imports_neither_structlog_nor_logging():
+    out = _run("""
+        import sys
+        from fusiond.logs import configure
+        from fusiond.replay.run import replay
+        configure("warning")
+        print("structlog" in sys.modules, "logging" in sys.modules)
+    """)
+    assert out.stdout.split() == ["False", "False"], out.stdout
