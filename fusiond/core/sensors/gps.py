@@ -89,9 +89,10 @@ class GpsInput:
 
 
 class GpsPolicy:
-    """NavSatFix: skip fixes without a fix (status < 0), take the noise from the message
-    covariance (floored), the config's ``position_noise``, or a conservative default
-    when the receiver says its covariance is unknown."""
+    """NavSatFix: skip fixes without a fix (status < 0, or latitude and longitude both exactly 0:
+    a driver's placeholder), take the noise from the message covariance (floored), the config's
+    ``position_noise``, or a conservative default when the receiver says its covariance is
+    unknown or states none (all zeros: no receiver is exact, so the zeros are not a statement)."""
 
     def __init__(self, cfg: GpsSensor) -> None:
         self.cfg = cfg
@@ -107,6 +108,9 @@ class GpsPolicy:
             raise Rejected(reasons.NON_FINITE, "latitude/longitude/altitude")
         if not (-90.0 <= s.latitude <= 90.0 and -180.0 <= s.longitude <= 180.0 and -1e5 < s.altitude < 1e6):
             raise Rejected(reasons.IMPLAUSIBLE_VALUE, "latitude/longitude/altitude out of range")
+        if s.latitude == 0.0 and s.longitude == 0.0:
+            # a driver's placeholder for "no fix" under a fix status: no receiver reads exactly 0/0
+            raise Rejected(reasons.NO_FIX, "latitude and longitude exactly 0")
         if self._override is not None:
             return GpsInput(lla, self._override)
         if s.covariance_type == 0:
@@ -116,6 +120,10 @@ class GpsPolicy:
             raise Rejected(reasons.BAD_COVARIANCE, "position covariance must be 9 finite numbers")
         if c[0] < 0.0 or c[4] < 0.0 or c[8] < 0.0:
             raise Rejected(reasons.NEGATIVE_COVARIANCE, "position")
+        if c[0] == 0.0 and c[4] == 0.0 and c[8] == 0.0:
+            # no receiver is exact on every axis: a driver that did not fill the covariance in (or
+            # lost the fix and says so with zeros) states nothing, as covariance_type UNKNOWN
+            return GpsInput(lla, self._unknown)
         if s.covariance_type == 2:  # COVARIANCE_TYPE_DIAGONAL_KNOWN: off-diagonals are not meaningful
             c = mat3.diag(c[0], c[4], c[8])
         f = self._floor
