@@ -146,7 +146,10 @@ class GpsSensor(_Sensor, tag="gps"):
     """sensor_msgs/msg/NavSatFix; with one configured, the world frame is ENU at the datum."""
 
     timeout_s: float = 2.0
-    mahalanobis_threshold: float = math.inf
+    # gate on sqrt(NIS) once the heading is known: multipath bursts and placeholder fixes, not the
+    # receiver's ordinary noise (a consistent filter rejects ~1 fix in 10^5); a run of agreeing
+    # rejected fixes re-acquires (core/sensors/gps.py), so the gate cannot lock the filter out
+    mahalanobis_threshold: float = 5.0
     datum: Vec3 | None = None  # [lat deg, lon deg, alt m]; default: the first valid fix
     position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
     position_min_sigma: float = 0.01  # floor, m

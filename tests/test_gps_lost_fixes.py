@@ -83,3 +83,40 @@ def test_placeholder_fixes_are_dropped_and_counted_and_change_nothing_else():
     tx, ty, _ = truth_at(w, t)
     # where the robot is (within 3 sigma of one 0.3 m fix), not off the coast of Africa
     assert math.hypot(x[0] - tx, x[1] - ty) < 3 * w.gps_sigma
+
+
+def _with_burst(samples: list, t0: float, n: int, north_m: float) -> list:
+    """``n`` consecutive fixes from stamp ``t0`` on moved ``north_m`` north (multipath off a building)."""
+    out, k = [], 0
+    for s in samples:
+        if isinstance(s, GpsSample) and s.stamp >= t0 and k < n:
+            k += 1
+            s = msgspec.structs.replace(s, latitude=s.latitude + north_m / 111_320.0)
+        out.append(s)
+    return out
+
+
+def _max_error(core_samples: list, w: World, t0: float, t1: float, cfg) -> tuple[float, int]:
+    """(largest position error published in [t0, t1], GPS fixes rejected in it)."""
+    core, worst, rejected = FusionCore(cfg), 0.0, 0
+    for s in core_samples:
+        step = core.ingest(s)
+        rejected += sum(1 for r in step.records if r.sensor == "gps" and r.rejected and t0 <= r.stamp <= t1)
+        if step.publish and t0 <= core.pose()[0] <= t1:
+            t, x = core.pose()
+            tx, ty, _ = truth_at(w, t)
+            worst = max(worst, math.hypot(x[0] - tx, x[1] - ty))
+    return worst, rejected
+
+
+def test_a_multipath_burst_is_gated_out_by_default():
+    """Five fixes (1 s at 5 Hz) 25 m off, 60 s into the run. By default the gate (sqrt(NIS) 5, where a
+    good fix is within ~3) rejects all five and the pose stays within 3 sigma of a 0.3 m fix; without
+    a gate each fix pulls the pose toward the burst by its gain, metres at the first fix already."""
+    w = _gps_world()
+    samples = _with_burst(simulate(w), 1060.0, 5, 25.0)
+    default, rejected = _max_error(samples, w, 1059.0, 1063.0, _gps_config())
+    ungated, _ = _max_error(samples, w, 1059.0, 1063.0, _gps_config("mahalanobis_threshold = inf"))
+    assert rejected == 5
+    assert default < 3 * w.gps_sigma
+    assert ungated > 1.0

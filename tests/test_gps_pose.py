@@ -581,6 +581,18 @@ def test_doctor_flags_an_understated_gps_noise():
             doctor.add(r)
     verdicts = [v for v in doctor.verdicts() if v.sensor == "gps" and v.channel == "position"]
     assert verdicts and verdicts[0].level == "problem" and verdicts[0].key == "sensors.gps.position_noise"
+    # The default gate (sqrt(NIS) 5) rejects most of those fixes: the doctor names the noise, not the gate,
+    # with the innovations' rms, an upper bound of the receiver's 0.3 m. Pasted, the channel is consistent.
+    line = verdicts[0].suggestion
+    suggested = [float(v) for v in line.split("[")[1].rstrip("]").split(",")]
+    assert line.startswith("position_noise = [") and min(suggested[:2]) >= w.gps_sigma
+    cfg = _gps_config(line)
+    core, doctor = FusionCore(cfg), Doctor(cfg)
+    for s in simulate(w):
+        for r in core.ingest(s).records:
+            doctor.add(r)
+    again = [v for v in doctor.verdicts() if v.sensor == "gps" and v.channel == "position"]
+    assert again[0].level != "problem" and again[0].evidence["gated_fraction"] < 0.1, again
 
 
 # -- Gauss-Markov GPS error state -------------------------------------------------------------------------------

@@ -16,7 +16,8 @@ from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
 
 OFFSET_RAD = 0.01  # a mean roll/pitch innovation this large is a mounting error, not noise
-GATED_FRACTION = 0.1
+GATED_FRACTION = 0.1  # gated beyond this: the sensor jumps (or its noise is understated) ...
+MOST_GATED = 0.5  # ... and beyond this: its noise is understated (jumps are the exception, not the rule)
 
 
 def figures(ch: ChannelStats, t0: float | None) -> str:
@@ -69,6 +70,15 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> 
     return out
 
 
+def _measured_noise(ch: ChannelStats) -> str:
+    """``position_noise = [...]`` from the innovations' rms per axis (east north up), when the channel
+    has the three: the sensor's noise plus the filter's own uncertainty, so an upper bound."""
+    rms = [ch.component(i)[1] for i in range(len(ch.components))]
+    if len(rms) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rms):
+        return ""
+    return "position_noise = [" + ", ".join(f"{r:.2g}" for r in rms) + "]"
+
+
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise."""
     frac = ch.rejected / ch.n if ch.n else 0.0
@@ -78,6 +88,15 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     ev = {"nis_per_dof": ch.nis_per_dof, "gated_fraction": frac}
     if ch.n and not ch.n_nis:
         return Verdict(name, channel, "ok", figures(ch, t0), evidence=ev)
+    if frac > MOST_GATED:
+        # Jumps (multipath, relocalisation) come in bursts among good fixes; a gate that rejects most
+        # of them is cutting into the ordinary noise, which is then larger than stated.
+        line = _measured_noise(ch)
+        return Verdict(name, channel, "problem",
+                       f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): too many for jumps, "
+                       "which come in bursts among good fixes: the stated noise is too small, and the innovations "
+                       "(an upper bound: they include the filter's own uncertainty) suggest the value below",
+                       key, line, evidence=ev)
     if frac > GATED_FRACTION:
         return Verdict(name, channel, "warn",
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): the sensor jumps "
@@ -86,10 +105,12 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     if verdict == "nis_high":
         return Verdict(name, channel, "problem",
                        f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "
-                       "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation)",
-                       key, evidence=ev)
+                       "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation); "
+                       "if it is the noise, the innovations (an upper bound) suggest the value below",
+                       key, _measured_noise(ch), evidence=ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
-                       f"NIS low ({figures(ch, t0)}; {detail}): the stated noise is larger than the innovations show",
-                       key, evidence=ev)
+                       f"NIS low ({figures(ch, t0)}; {detail}): the stated noise is larger than the innovations show "
+                       "(the value below: their rms, an upper bound of the sensor's own noise)",
+                       key, _measured_noise(ch), evidence=ev)
     return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)
