@@ -89,6 +89,15 @@ def test_unreadable_bag(tmp_path: Path) -> None:
         open_bag_samples([tmp_path / "junk.bag", tmp_path], SENSORS)
 
 
+def test_a_ros1_bag_cut_short_is_refused_with_how_to_repair_it(jackal_bag: Path, tmp_path: Path) -> None:
+    """A recording cut short (the recorder killed) has its chunks but not the index ROS 1 writes last."""
+    cut = tmp_path / "cut.bag"
+    data = jackal_bag.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(BagError, match="rosbag reindex"):
+        open_bag_samples([cut], [WHEEL])
+
+
 def test_several_ros1_bags_merge(jackal_bag: Path) -> None:
     with open_bag_samples([jackal_bag, jackal_bag], [WHEEL]) as bag:
         assert bag.total == 2 * 3060

@@ -134,8 +134,17 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
         # contains no type definitions. Instantiate AnyReader with a default_typestore argument."
         if "default_typestore" not in str(err):
             names = ", ".join(str(p) for p in paths)
-            raise BagError(f"{names}: cannot read bag: {err}") from None
+            raise BagError(f"{names}: cannot read bag: {err}{_repair_hint(paths, err)}") from None
     return _opened(paths, typestore())  # the standard (Humble) definitions
+
+
+def _repair_hint(paths: Sequence[Path], err: Exception) -> str:
+    """How to repair a ROS 1 bag whose index is damaged (a recording cut short: the recorder killed,
+    the disk full): ROS 1 keeps the index at the end of the file, and ``rosbag reindex`` rebuilds it."""
+    if any(p.suffix == ".bag" for p in paths) and "index" in str(err).lower():
+        return ("; a ROS 1 recording cut short (recorder killed, disk full) has no index at its end: "
+                "`rosbag reindex FILE.bag` rebuilds it (ROS 1 tools), then replay the repaired file")
+    return ""
 
 
 def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
