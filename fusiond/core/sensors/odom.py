@@ -175,9 +175,7 @@ class OdomModel(SensorModel):
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN
-        window = self._speeds(own.window, inp.linear[0], stamp) if self.ctx.track_acceleration else ()
         coast = self._coast(s, own, inp, stamp)
-        s.own[self.index] = OdomOwn(window, inp.linear, inp.linear_cov, stamp, not inp.stationary, coast)
         if coast is None:
             s.linear, s.linear_cov = inp.linear, inp.linear_cov
         else:
@@ -188,6 +186,9 @@ class OdomModel(SensorModel):
             if emit and since == stamp:
                 log.info("coast_started", sensor=self.cfg.name, stamp=stamp, speed=math.hypot(*v0),
                          coast_s=math.hypot(*v0) / self._coast_decel)
+        # the forward speeds for ``forward_accel``: in a coast, the coasting speed, not the drive's zero
+        window = self._speeds(own.window, s.linear[0], stamp) if self.ctx.track_acceleration else ()
+        s.own[self.index] = OdomOwn(window, inp.linear, inp.linear_cov, stamp, not inp.stationary, coast)
         s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
         s.wheel_yaw_measured = inp.yaw_rate_measured
         if inp.stationary and coast is None:
