@@ -29,6 +29,7 @@ from .gap_heading import gap_heading_verdict
 from .gps_wander import gps_wander_verdict
 from .gyro import bias_check
 from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
+from .lost import LostSamples
 from .mounting import MountYaw, mount_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
 from .series import Series, SeriesCollector
@@ -67,6 +68,7 @@ class Doctor:
         # samples are folded into the statistics a chunk at a time, and before anything is read.
         self._records: list = []
         self._samples: list = []
+        self.lost = LostSamples()  # lost samples left out of the series (``add_sample``)
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:
@@ -87,7 +89,12 @@ class Doctor:
         self.tilt.add_orientation(q)
 
     def add_sample(self, sample) -> None:
-        """A raw sample, as the sensor sent it (for the cross-source series), in arrival order."""
+        """A raw sample, as the sensor sent it (for the cross-source series), in arrival order; a lost
+        one (``lost.LostSamples``) is left out."""
+        for s in self.lost.admit(sample):
+            self._note_sample(s)
+
+    def _note_sample(self, sample) -> None:
         samples = self._samples
         samples.append(sample)
         if self.collector is not None and (self.t0 is None or sample.stamp < self.t0):
@@ -140,6 +147,8 @@ class Doctor:
 
     # -- results ------------------------------------------------------------------
     def series(self) -> Series:
+        for s in self.lost.flush():
+            self._note_sample(s)
         self._settle_samples()
         return self.collector.finish() if self.collector is not None else Series()
 

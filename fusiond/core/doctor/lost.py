@@ -1,0 +1,81 @@
+"""Samples a driver sent for measurements it lost, kept out of the doctor's series.
+
+The brief's "lost measurements reported as perfect": a value of 0 with covariance 0. Two
+shapes are unmistakable, and each bends the fits it enters (a 0.2 s bin of 25 m/s wheel
+speed with one lost frame reads 10 % slow, a jump of 12 m/s^2 in dv/dt; a lost IMU sample
+is 0 g in the mounting fit):
+
+- an IMU sample with no orientation whose rates and specific force are all exactly zero
+  (at rest an accelerometer reads gravity);
+- one odometry frame of exactly zero twist between two moving ones, the drop to it faster
+  than a vehicle can stop (``STOP_DECEL_LIMIT``). A zero that lasts (a stop, a drive that
+  reads zero while the vehicle coasts on) is kept: the gyro bias check reads those.
+
+The odometry case needs the next frame: a zero frame after such a drop waits for it.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ...samples import ImuSample, OdomSample
+from ..sensors.odom import STOP_DECEL_LIMIT
+
+__all__ = ["LostSamples"]
+
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+class LostSamples:
+    """Admits samples in arrival order, holding back at most one zero odometry frame per sensor."""
+
+    def __init__(self) -> None:
+        self.imu = 0  # lost IMU samples left out
+        self.odom = 0  # lost odometry frames left out
+        self._last: dict[str, tuple[float, float]] = {}  # odometry sensor -> (stamp, speed) of its newest frame
+        self._period: dict[str, float] = {}  # odometry sensor -> typical interval between its moving frames
+        self._waiting: dict[str, OdomSample] = {}  # a zero frame after an impossible drop, until the next one
+
+    def admit(self, sample) -> list:
+        """The samples to pass on now (none, this one, or a held zero frame and this one)."""
+        kind = type(sample)
+        if kind is ImuSample:
+            if (sample.angular_velocity == _ZERO3 and sample.linear_acceleration == _ZERO3
+                    and (not any(sample.orientation) or sample.orientation_covariance[0] == -1.0)):
+                self.imu += 1
+                return []
+            return [sample]
+        if kind is not OdomSample:
+            return [sample]
+        name = sample.sensor
+        zero = sample.linear == _ZERO3 and sample.angular == _ZERO3
+        out = []
+        held = self._waiting.pop(name, None)
+        if held is not None:
+            if zero:
+                out.append(held)  # the zero lasts: a stop or a coast, not a lost frame
+            else:
+                self.odom += 1
+        last = self._last.get(name)
+        speed = math.hypot(*sample.linear)
+        if last is not None and not zero and sample.stamp > last[0] and last[1] > 0.0:
+            gap = min(sample.stamp - last[0], 1.0)  # as the core's note_period: an EMA of the intervals
+            period = self._period.get(name)
+            self._period[name] = gap if period is None else period + 0.1 * (gap - period)
+        if zero and held is None and last is not None and sample.stamp > last[0]:
+            dt = max(sample.stamp - last[0], self._period.get(name, 0.0))
+            if last[1] > STOP_DECEL_LIMIT * dt:
+                self._waiting[name] = sample
+                self._last[name] = (sample.stamp, 0.0)
+                return out
+        self._last[name] = (sample.stamp, speed)
+        out.append(sample)
+        return out
+
+    def flush(self) -> list:
+        """The end of the stream: a zero frame still waiting is the last one, after a drop no vehicle
+        makes and with nothing after it to make it a coast: lost. Returns what is still to pass on
+        (nothing: the method exists so that a caller need not know that)."""
+        self.odom += len(self._waiting)
+        self._waiting.clear()
+        return []
