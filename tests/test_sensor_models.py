@@ -214,3 +214,26 @@ def test_odom_policy_resolves_each_new_covariance_and_zeroes_unmeasured_componen
     with pytest.raises(Rejected) as r:
         policy.convert(OdomSample("wheel", 1.3, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), tuple(cov)))
     assert r.value.reason == "negative_covariance"
+
+
+def test_an_imu_sample_of_zeros_without_orientation_is_dropped_as_lost():
+    """A driver that lost a sample and sent zeros: rates and specific force exactly 0 (at rest the
+    accelerometer reads gravity, so no real sample is all zeros). Fused, its gyro would stop the turn
+    for a sample; dropped, the previous rate stays held and the drop is counted."""
+    from fusiond import reasons
+
+    core = FusionCore(robot_config(orientation="off"))
+    no_orientation = (-1.0,) + (0.0,) * 8
+    turning = ImuSample("imu", 10.0, (0.0, 0.0, 0.0, 1.0), no_orientation, (0.0, 0.0, 0.3), GYRO_COV,
+                        (0.0, 0.0, 9.81), COV3)
+    lost = ImuSample("imu", 10.01, (0.0, 0.0, 0.0, 1.0), no_orientation, (0.0, 0.0, 0.0), (0.0,) * 9,
+                     (0.0, 0.0, 0.0), (0.0,) * 9)
+    assert core.ingest(turning).accepted
+    step = core.ingest(lost)
+    assert not step.accepted and step.reason == reasons.NOTHING_TO_FUSE
+    assert core.state.gyro == (0.0, 0.0, 0.3)
+    # with its orientation fused, a sample of zero rates is a measurement (an IMU at rest, accelerometer unset)
+    core = FusionCore(robot_config(orientation="roll_pitch"))
+    core.ingest(turning)
+    at_rest = ImuSample("imu", 10.01, (0.0, 0.0, 0.0, 1.0), COV3, (0.0, 0.0, 0.0), GYRO_COV)
+    assert core.ingest(at_rest).accepted and core.state.gyro == (0.0, 0.0, 0.0)

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from ..state import FilterState
 
 GRAVITY = 9.80665  # m/s^2, standard gravity
+_ZERO3 = (0.0, 0.0, 0.0)
 G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer reports in g
 GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
@@ -147,6 +148,10 @@ class ImuPolicy:
         elif len(s.orientation_covariance) != 9:
             raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
+        if rpy is None and s.angular_velocity == _ZERO3 and s.linear_acceleration == _ZERO3:
+            # rates and specific force all exactly zero (at rest an accelerometer reads gravity): a
+            # driver's placeholder for a lost sample, not a measurement of zero rate
+            raise Rejected(reasons.NOTHING_TO_FUSE, "rates and acceleration all exactly zero: a lost sample")
         gyro = gyro_cov = None
         if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
             gc = s.angular_velocity_covariance
