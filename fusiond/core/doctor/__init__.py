@@ -324,7 +324,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         if v is not None:
             found[("filter", "covariance")].append(v)
     if stats:
-        for v in _drops(stats) + (clock_verdicts(stats, clocks) if clocks is not None else []):
+        for v in _drops(stats, clocks) + (clock_verdicts(stats, clocks) if clocks is not None else []):
             found[(v.sensor, v.channel)].append(v)
     if covariance_resets:
         found[("filter", "covariance")].append(
@@ -344,16 +344,24 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
     return [_merge(found[k]) for k in keys]
 
 
-def _drops(stats: dict[str, dict]) -> list[Verdict]:
+def _drops(stats: dict[str, dict], clocks: ClockOffsets | None = None) -> list[Verdict]:
     out = []
     for name, st in stats.items():
         received = max(st.get("received", 0), 1)
         dropped = st.get("dropped", {})
         old = dropped.get("too_old", 0)
         if old / received > 0.01:
-            out.append(Verdict(name, "time", "warn",
-                               f"{old} samples ({100 * old / received:.1f}%) arrived older than the history: "
-                               "their sensor's stamps lag more than filter.history_s", filter_key("history_s")))
+            msg = (f"{old} samples ({100 * old / received:.1f}%) arrived older than the history: "
+                   "their sensor's stamps lag more than filter.history_s")
+            line = ""
+            lag = clocks.lag(name) if clocks is not None else None
+            if lag is not None and lag > 0.0:
+                # the history must reach back over the lag of 99 % of the samples, with a fifth to spare
+                line = f"history_s = {math.ceil(12.0 * lag) / 10.0:g}"
+                msg += (f" (99% of them arrive within {lag:.2f} s of the other sensors' newest stamp). Each such "
+                        "sample re-applies that much history; a lag this steady may be the sensor's clock (a stamp "
+                        "set late or early), which a longer history only hides: check its driver's stamping")
+            out.append(Verdict(name, "time", "warn", msg, filter_key("history_s"), line))
         bad = {k: v for k, v in dropped.items() if k != "too_old"}
         if bad:
             reasons = ", ".join(f"{k}={v}" for k, v in sorted(bad.items()))

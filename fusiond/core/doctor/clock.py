@@ -65,6 +65,14 @@ class ClockOffsets:
             if len(mine):
                 self._newest[i] = max(self._newest[i], float(mine.max()))
 
+    def lag(self, sensor: str, share: float = 0.99) -> float | None:
+        """How far behind the others' newest stamp this sensor's samples arrive, at most, for ``share``
+        of them (s, >= 0); None without another sensor."""
+        kept = self._offsets.get(sensor)
+        if not kept:
+            return None
+        return max(0.0, -float(np.quantile(np.frombuffer(kept, dtype=float), 1.0 - share)))
+
     def offset(self, sensor: str) -> float | None:
         """Median offset of the sensor's stamps from the others' (s), None without another sensor."""
         kept = self._offsets.get(sensor)
