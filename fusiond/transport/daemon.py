@@ -29,6 +29,8 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   An idle worker sleeps long and the first arrival of any sensor wakes it.
 - ONE worker drains the inbox: decode (`DecodeError` counted per reason),
   `core.ingest`, then publish. The core's history absorbs the arrival order.
+  Bookkeeping that can wait for the end of a pass does (health learns a pass's
+  accepted samples under one lock), so the per-message path is decode, fuse, publish.
 - Outputs are declared once: pose (PoseWithCovarianceStamped CDR) and odometry
   (nav_msgs/Odometry CDR) on every odometry sample, the JSON diagnostics records
   (one per update), a health queryable, and a liveliness token `<health_key>/alive`
