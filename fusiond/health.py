@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, Literal
 
 import msgspec
@@ -138,6 +138,17 @@ class _Tracker:
         return max(self.timeout_s, TIMEOUT_PERIODS * self.period)
 
 
+def _accept(s: _Tracker, arrival: float) -> None:
+    """A sample of `s` received at wall time `arrival` was used: its newest arrival and period EMA (lock held)."""
+    last = s.last
+    if last is not None:
+        if arrival <= last:
+            return
+        d = min(arrival - last, MAX_INTERVAL)
+        s.period = d if s.period <= 0.0 else s.period + PERIOD_SMOOTHING * (d - s.period)
+    s.last = arrival
+
+
 class Health:
     """Thread-safe health state; `report()` is the queryable's answer."""
 
@@ -177,13 +188,19 @@ class Health:
     def on_accepted(self, idx: int, arrival: float) -> None:
         """A sample the filter used, received at wall time `arrival` (the subscriber's clock)."""
         with self._lock:
-            s = self._sensors[idx]
-            if s.last is not None:
-                if arrival <= s.last:
-                    return
-                d = min(arrival - s.last, MAX_INTERVAL)
-                s.period = d if s.period <= 0.0 else s.period + PERIOD_SMOOTHING * (d - s.period)
-            s.last = arrival
+            _accept(self._sensors[idx], arrival)
+
+    def on_accepted_many(self, accepted: Iterable[tuple[int, float, bool]]) -> None:
+        """(sensor index, arrival, floored) of the samples the filter used, in the order it used them:
+        `on_accepted` of each (and `on_floored` of those flagged) under one lock. The daemon's worker
+        hands over what one pass fused at once instead of taking the lock per message."""
+        with self._lock:
+            sensors = self._sensors
+            for idx, arrival, floored in accepted:
+                s = sensors[idx]
+                if floored:
+                    s.floored += 1
+                _accept(s, arrival)
 
     def set_core(self, counters: CoreCounters) -> None:
         with self._lock:

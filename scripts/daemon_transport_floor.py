@@ -3,7 +3,7 @@
 Runs `fusiond bench-latency`'s benchmark (daemon, bare zenoh-python subscriber and load
 generator in their own processes, 1 kHz IMU + 100 Hz odometry, live stamps) twice per round,
 alternating: once with the real daemon, once with its core stubbed out (each sample is decoded and
-accepted by health, and each odometry sample answered with a pose at its own stamp, without
+accepted, and each odometry sample answered with a pose at its own stamp, without the real
 `core.ingest`). The stubbed run is the daemon's transport floor: subscribers, inbox, worker
 wake-ups (batched: see `fusiond/transport/drain_schedule.py`), decoding, health, a pose put per
 odometry message, the Zenoh session. Its ratio to the bare subscriber is the best the daemon's
@@ -22,24 +22,33 @@ from fusiond.transport import bench_latency
 
 
 def _floor_child(conn: Any, config_text: str, express: bool) -> None:
-    """The benchmark's daemon child with `_handle` cut after decoding (spawned: runs in the child)."""
-    from fusiond.codecs import DecodeError, encode_pose_cdr
+    """The benchmark's daemon child with the fusion core cut out (spawned: runs in the child): every
+    decoded sample is accepted, and each odometry sample answered with a pose at its own stamp."""
+    from fusiond.codecs import encode_pose_cdr
+    from fusiond.core.fusion import Step
     from fusiond.samples import OdomSample
     from fusiond.transport.daemon import Daemon
 
     zero_cov = (0.0,) * 36
+    real_start = Daemon.start
 
-    def decode_only(self: Daemon, idx: int, payload: bytes, arrival: float) -> None:
-        try:
-            sample = self._decoders[idx](payload)
-        except DecodeError as err:
-            self.health.on_dropped(idx, err.reason)
-            return
-        self.health.on_accepted(idx, arrival)
-        if isinstance(sample, OdomSample):  # the generator matches poses to its puts by stamp
-            self._pose_pub.put(encode_pose_cdr(sample.stamp, "odom", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), zero_cov))
+    def start_without_core(self: Daemon) -> None:
+        last = [0.0]  # stamp of the newest odometry sample: the generator matches poses to its puts by it
 
-    Daemon._handle = decode_only  # type: ignore[method-assign]
+        def ingest(sample: Any) -> Step:
+            if isinstance(sample, OdomSample):
+                last[0] = sample.stamp
+                return Step(sample.sensor, True, publish=True)
+            return Step(sample.sensor, True)
+
+        def publish() -> None:
+            self._pose_pub.put(encode_pose_cdr(last[0], "odom", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), zero_cov))
+
+        self.core.ingest = ingest  # type: ignore[method-assign]
+        self._publish_estimate = publish  # type: ignore[method-assign]
+        real_start(self)
+
+    Daemon.start = start_without_core  # type: ignore[method-assign]
     bench_latency._daemon_child(conn, config_text, express)
 
 

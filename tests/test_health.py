@@ -156,6 +156,32 @@ def test_out_of_order_arrival_times_are_ignored():
     assert rep.sensors["imu"].age_s == pytest.approx(0.09) and rep.sensors["imu"].rate_hz == pytest.approx(100.0)
 
 
+def test_a_pass_handed_over_at_once_reads_as_the_same_samples_one_by_one():
+    """The worker hands health the samples of one pass at once (`on_accepted_many`): the report is
+    the one the same arrivals, floored flags and an out-of-order arrival give one call at a time."""
+    arrivals = [(0, 100.0, False), (1, 100.001, True), (1, 100.011, False), (0, 100.02, True),
+                (1, 100.005, True), (0, 100.04, False), (1, 100.021, False)]  # (sensor, arrival, floored)
+    healths = []
+    for at_once in (False, True):
+        clock = Clock(100.0)
+        h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)
+        if at_once:
+            h.on_accepted_many(arrivals[:3])
+            h.on_accepted_many(arrivals[3:])
+        else:
+            for idx, arrival, floored in arrivals:
+                h.on_accepted(idx, arrival)
+                if floored:
+                    h.on_floored(idx)
+        clock.t = 100.05
+        healths.append(h)
+    one_by_one, at_once = (encode_report(h.report()) for h in healths)
+    assert one_by_one == at_once
+    rep = healths[1].report()
+    assert rep.sensors["imu"].zero_covariance_floored == 2 and rep.sensors["wheel"].zero_covariance_floored == 1
+    assert rep.sensors["wheel"].rate_hz == pytest.approx(1 / 0.02)  # 20 ms apart, twice (100.0, 100.02, 100.04)
+
+
 def test_health_says_when_the_world_frame_is_not_defined_yet():
     """A GPS-referenced core publishes nothing before its first fix: health names the reason."""
     from fusiond.config import loads

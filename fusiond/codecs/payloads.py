@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable, Sequence
-from functools import cache
+from functools import cache, lru_cache
 from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
 import msgspec
@@ -209,23 +209,68 @@ def _skip_string(buf: Payload, pos: int) -> int:
     return end
 
 
-def _fast_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> tuple[float, tuple[float, ...]] | None:
+def _block_offset(buf: Payload, has_child_frame: bool, block: struct.Struct) -> int:
+    """Offset in `buf` of the float64 block after the header (and child frame id), -1 where rosbags
+    would reject the payload (or it is not little-endian CDR: then rosbags decides)."""
     if len(buf) < 16 or buf[:2] != _CDR_LE:
-        return None
+        return -1
     try:
-        sec, nanosec = _STAMP(buf, 4)
         pos = _skip_string(buf, 8)
         if pos >= 0 and has_child_frame:
             pos = _skip_string(buf, (pos + 3) & -4)
-        if pos < 0:
-            return None
-        pos = (pos + 7) & -8
-        end = pos + block.size
-        if end + 4 > len(buf) or len(buf) - 4 - end > 3:  # rosbags tolerates up to 3 padding bytes
-            return None
-        return sec + nanosec * 1e-9, block.unpack_from(buf, pos + 4)
     except (struct.error, UnicodeDecodeError):
+        return -1
+    if pos < 0:
+        return -1
+    pos = (pos + 7) & -8
+    end = pos + block.size
+    if end + 4 > len(buf) or len(buf) - 4 - end > 3:  # rosbags tolerates up to 3 padding bytes
+        return -1
+    return pos + 4
+
+
+def _fast_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> tuple[float, tuple[float, ...]] | None:
+    at = _block_offset(buf, has_child_frame, block)
+    if at < 0:
         return None
+    sec, nanosec = _STAMP(buf, 4)
+    return sec + nanosec * 1e-9, block.unpack_from(buf, at)
+
+
+class _RepeatedLayout:
+    """The struct fast path for one sensor's stream, skipping what repeats from message to message.
+
+    A sensor sends the same frame ids in every message, so its payloads have the same length
+    and the same bytes from the end of header.stamp (offset 12) to the float64 block: the
+    string lengths, the strings, their terminators and the padding. Only the stamp and the
+    floats change. `decode` remembers the length and those bytes of the last payload
+    `_block_offset` accepted; a payload that has both (and the little-endian CDR identifier)
+    has its block at the same offset and passes every check `_block_offset` would make on
+    it, byte for byte the same, so it is unpacked at once, without looking at its strings
+    again: at 1 kHz that is most of the decoder's Python calls. Anything else (another
+    length, another frame id, garbage) takes `_block_offset`'s full checks, exactly as
+    before, and becomes the remembered layout if it passes.
+    """
+
+    __slots__ = ("has_child_frame", "block", "length", "middle", "at")
+
+    def __init__(self, has_child_frame: bool, block: struct.Struct) -> None:
+        self.has_child_frame = has_child_frame
+        self.block = block
+        self.length = -1  # length of the remembered payload (-1: none yet)
+        self.middle = b""  # its bytes [12, at)
+        self.at = 0  # offset of its float64 block
+
+    def decode(self, buf: Payload) -> tuple[float, tuple[float, ...]] | None:
+        """(stamp, floats) as `_fast_block` returns them, None where it returns None."""
+        at = self.at
+        if len(buf) != self.length or buf[12:at] != self.middle or buf[:2] != _CDR_LE:
+            at = _block_offset(buf, self.has_child_frame, self.block)
+            if at < 0:
+                return None
+            self.length, self.middle, self.at = len(buf), bytes(buf[12:at]), at
+        sec, nanosec = _STAMP(buf, 4)
+        return sec + nanosec * 1e-9, self.block.unpack_from(buf, at)
 
 
 def _odom_from_block(got: tuple[float, tuple[float, ...]] | None, sensor: str) -> OdomSample | None:
@@ -472,6 +517,12 @@ _KINDS: Final = {
 }
 
 
+_REPEATED: Final = {  # kind -> (child frame id?, float64 block, sample builder) of `_RepeatedLayout`
+    "odom": (True, _ODOM_BLOCK, _odom_from_block),
+    "imu": (False, _IMU_BLOCK, _imu_from_block),
+}
+
+
 def ros_msgtype(kind: str, msgtype: str | None = None) -> str:
     """The ROS 2 message type of a sensor kind (a pose sensor's own `msgtype` when given)."""
     if kind not in _KINDS:
@@ -526,6 +577,21 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
 
     if encoding == "ros2-cdr":
         _warm(msgtype)
+        repeated = _REPEATED.get(kind)
+        if repeated is not None:  # odometry and IMU: the hot path of the daemon
+            has_child_frame, block, from_block = repeated
+            layout = _RepeatedLayout(has_child_frame, block)
+            unpack = layout.decode
+
+            def decode_repeated(payload: Payload) -> Sample:
+                if len(payload) != layout.length:  # the remembered length passed the size checks
+                    _check_size(payload)
+                sample = from_block(unpack(payload), sensor)
+                if sample is not None:
+                    return sample
+                return from_ros(_deserialize(payload, msgtype), sensor)
+
+            return decode_repeated
 
         def decode_cdr(payload: Payload) -> Sample:
             _check_size(payload)
@@ -744,14 +810,13 @@ def encode_sample(sample: Sample, encoding: str, msgtype: str | None = None) -> 
 
 
 # The published outputs are encoded with struct, byte for byte what rosbags serialises
-# (tests compare both on many inputs) at a fifth of the cost: they are on the daemon's
-# latency path for every odometry sample.
+# (tests compare both on many inputs): they are on the daemon's latency path for every
+# odometry sample. All but the stamp and the floats is fixed by the frame ids, so each
+# message is one precompiled struct call (`_output_layout`, built once per frame ids).
 
 _CDR_HEADER: Final = b"\x00\x01\x00\x00"
 _STAMP_PACK = struct.Struct("<iI").pack
 _U32_PACK = struct.Struct("<I").pack
-_POSE_BLOCK = struct.Struct("<43d")  # pose (7) + covariance (36)
-_ODOMETRY_BLOCK = struct.Struct("<85d")  # pose (7) + covariance (36) + twist (6) + covariance (36)
 
 
 def _cdr_prefix(stamp: float, strings: Sequence[str], head: bytes = _CDR_HEADER) -> bytearray:
@@ -773,6 +838,17 @@ def _cdr_prefix(stamp: float, strings: Sequence[str], head: bytes = _CDR_HEADER)
     return buf
 
 
+@lru_cache(maxsize=64)
+def _output_layout(head: bytes, strings: tuple[str, ...], floats: int) -> tuple[Callable[..., bytes], bytes, bytes]:
+    """(pack, head, middle) of an output message whose every byte but the stamp and the float64 block
+    is fixed by its frame ids: `pack(head, sec, nanosec, middle, *floats)` is the whole message in
+    one precompiled struct call, the same bytes as `_cdr_prefix` + the block (the middle is
+    `_cdr_prefix`'s own output after the stamp: string lengths, strings, terminators, padding)."""
+    prefix = bytes(_cdr_prefix(0.0, strings, head))
+    middle = prefix[len(head) + 8:]
+    return struct.Struct(f"<{len(head)}siI{len(middle)}s{floats}d").pack, head, middle
+
+
 def _floats(values: Sequence[float] | np.ndarray, n: int) -> Sequence[float]:
     if isinstance(values, (list, tuple)) and len(values) == n:
         return values
@@ -789,9 +865,9 @@ def encode_pose_cdr(
     """The fused pose as geometry_msgs/msg/PoseWithCovarianceStamped (covariance over x y z roll pitch yaw)."""
     x, y, z = position
     qx, qy, qz, qw = quat_xyzw
-    buf = _cdr_prefix(stamp, (frame_id,))
-    buf += _POSE_BLOCK.pack(x, y, z, qx, qy, qz, qw, *_floats(cov36, 36))
-    return bytes(buf)
+    pack, head, middle = _output_layout(_CDR_HEADER, (frame_id,), 43)
+    sec, nanosec = stamp_to_ros(stamp)
+    return pack(head, sec, nanosec, middle, x, y, z, qx, qy, qz, qw, *_floats(cov36, 36))
 
 
 def encode_odometry_cdr(
@@ -810,7 +886,7 @@ def encode_odometry_cdr(
     qx, qy, qz, qw = quat_xyzw
     vx, vy, vz = linear
     wx, wy, wz = angular
-    buf = _cdr_prefix(stamp, (frame_id, child_frame_id))
-    buf += _ODOMETRY_BLOCK.pack(x, y, z, qx, qy, qz, qw, *_floats(pose_cov36, 36), vx, vy, vz, wx, wy, wz,
-                                *_floats(twist_cov36, 36))
-    return bytes(buf)
+    pack, head, middle = _output_layout(_CDR_HEADER, (frame_id, child_frame_id), 85)
+    sec, nanosec = stamp_to_ros(stamp)
+    return pack(head, sec, nanosec, middle, x, y, z, qx, qy, qz, qw, *_floats(pose_cov36, 36), vx, vy, vz, wx, wy, wz,
+                *_floats(twist_cov36, 36))

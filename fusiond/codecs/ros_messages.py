@@ -24,7 +24,7 @@ import msgspec
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from .payloads import (POSE_COV_STAMPED, DecodeError, Payload, _cdr_prefix, _check_size, _deserialize, _types,
+from .payloads import (POSE_COV_STAMPED, DecodeError, Payload, _check_size, _deserialize, _output_layout, _types,
                        stamp_to_ros, typestore)
 
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
@@ -46,7 +46,6 @@ def _serialize(msg: Any, msgtype: str) -> bytes:
 
 
 _TF_HEAD: Final = b"\x00\x01\x00\x00" + struct.pack("<I", 1)  # encapsulation, then a sequence of 1 transform
-_TRANSFORM_BLOCK = struct.Struct("<7d")  # translation (3) + rotation (4)
 
 
 def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Sequence[float],
@@ -56,11 +55,11 @@ def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Se
     Packed with struct, byte for byte what rosbags serialises (a test compares both on many
     inputs; `tests/cdr_reference.py` holds the rosbags version): it is sent with every pose.
     """
-    buf = _cdr_prefix(stamp, (frame_id, child_frame_id), _TF_HEAD)
     x, y, z = position
     qx, qy, qz, qw = quat_xyzw
-    buf += _TRANSFORM_BLOCK.pack(x, y, z, qx, qy, qz, qw)
-    return bytes(buf)
+    pack, head, middle = _output_layout(_TF_HEAD, (frame_id, child_frame_id), 7)  # translation (3) + rotation (4)
+    sec, nanosec = stamp_to_ros(stamp)
+    return pack(head, sec, nanosec, middle, x, y, z, qx, qy, qz, qw)
 
 
 # --------------------------------------------------------------------------- diagnostics
