@@ -241,7 +241,10 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         if channel == "orientation":
             imu = s if isinstance(s, ImuSensor) else ImuSensor(
                 name=name, key=name, orientation="absolute" if "yaw" in ch.components else "roll_pitch")
-            vs = orientation_verdicts(imu, ch, t0)
+            # the heading cross-check found this IMU's yaw following the gyro: its NIS is not a disturbance
+            agrees = (heading.evidence.get("imu_vs_gyro_wander_rad")
+                      if heading is not None and heading.sensor == name and heading.level == "ok" else None)
+            vs = orientation_verdicts(imu, ch, t0, agrees if agrees is not None and math.isfinite(agrees) else None)
             if heading is not None and heading.sensor == name and heading.level != "ok":
                 # the IMU yaw is contradicted by the other sources: no advice to trust it more, and its
                 # NIS (the filter follows it) is evidence of nothing

@@ -26,7 +26,12 @@ def figures(ch: ChannelStats, t0: float | None) -> str:
     return f"{ch.nis_per_dof:.2f} per dof over {ch.n} updates" + (f"; {now}" if now else "")
 
 
-def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> list[Verdict]:
+def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None,
+                         yaw_vs_gyro: float | None = None) -> list[Verdict]:
+    """``yaw_vs_gyro``: the rms wander of the IMU's yaw against the integrated gyro that the heading
+    cross-check measured and found below its threshold (None when it did not). A yaw NIS high beside it
+    is not a disturbed yaw, whose wander the gyro would show: the innovations are the yaw's own noise,
+    stated too small (an AHRS reporting a zero covariance reads as the orientation_min_sigma floor)."""
     out = []
     comps = ch.components
     verdict = ch.verdict()
@@ -40,7 +45,7 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> 
             comp_nis.append((rms / pred) ** 2 if pred > 0 else math.nan)
         yaw_dominates = "yaw" in comps and comp_nis[comps.index("yaw")] > 3.0 * max(
             [v for c, v in zip(comps, comp_nis) if c != "yaw"] or [0.0])
-        if yaw_dominates and imu.orientation in ("absolute", "relative"):
+        if yaw_dominates and imu.orientation in ("absolute", "relative") and yaw_vs_gyro is None:
             out.append(Verdict(imu.name, "orientation", "problem",
                                f"NIS high ({figures(ch, t0)}; {detail}). The IMU yaw disagrees with the predicted "
                                "heading: a magnetometer-disturbed IMU yaw, or (without the gyro) wheels whose yaw "
@@ -48,9 +53,12 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> 
                                'orientation = "roll_pitch" and angular_velocity = true'))
         else:
             line, note = noise_suggestion(ch, imu)
+            agrees = (f"; the yaw agrees with the integrated gyro to {yaw_vs_gyro:.3f} rad rms once a bias and "
+                      "scale are removed, so it is not a disturbed yaw" if yaw_dominates and yaw_vs_gyro is not None
+                      else "")
             out.append(Verdict(imu.name, "orientation", "problem",
                                f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small or the IMU "
-                               f"lies; the measured innovations, {note}, suggest the value below", key, line))
+                               f"lies{agrees}; the measured innovations, {note}, suggest the value below", key, line))
     elif verdict == "nis_low":
         line, note = noise_suggestion(ch, imu)
         out.append(Verdict(imu.name, "orientation", "warn",
