@@ -77,6 +77,29 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None,
     return out
 
 
+def applied_verdict(ch: ChannelStats) -> str:
+    """The channel's whole-run NIS verdict, judged on the applied updates when it is high only through the
+    ones the gate rejected. Those were not fused, so they say nothing of the stated noise: a receiver that
+    reported three fixes at 0, 0 (a NIS of 1e14 each) among thousands of good ones would otherwise read as
+    noise stated too small, and advising a larger one would only blunt the gate. The applied ones are
+    truncated by the gate, which lowers their mean only where the gate cuts into the distribution, where
+    the gated fraction (GATED_FRACTION, judged first) speaks instead."""
+    verdict = ch.verdict()
+    if verdict == "nis_high" and ch.rejected and ch.kept_verdict() != "nis_high":
+        return ch.kept_verdict()
+    return verdict
+
+
+def nis_head(ch: ChannelStats, t0: float | None) -> str:
+    """'NIS high (figures)', and when the applied updates are judged apart, what the gate took out."""
+    head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)})"
+    if applied_verdict(ch) == ch.verdict():
+        return head
+    frac = ch.rejected / ch.n if ch.n else 0.0
+    return (f"{head} only because of the {ch.rejected} update(s) the gate rejected ({100 * frac:.1f}%, not fused): "
+            f"the {ch.n_nis_kept} applied ones read {ch.kept_nis_per_dof:.2f} per dof")
+
+
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise."""
     frac = ch.rejected / ch.n if ch.n else 0.0
@@ -91,6 +114,15 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): the sensor jumps "
                        "(multipath, relocalisation) or its noise is understated",
                        sensor_key(name, "mahalanobis_threshold"), evidence=ev)
+    applied = applied_verdict(ch)
+    if applied != verdict:
+        ev["applied_nis_per_dof"] = ch.kept_nis_per_dof
+        if applied == "nis_low":
+            return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, below their bounds: the stated noise is "
+                           "larger than the applied updates show", key, evidence=ev)
+        return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, consistent with the stated noise; the rejected "
+                       "ones are outliers the gate kept out (mahalanobis_threshold), nothing to change in the noise",
+                       evidence=ev)
     if verdict == "nis_high":
         return Verdict(name, channel, "problem",
                        f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "
