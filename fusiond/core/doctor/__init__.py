@@ -23,7 +23,7 @@ import msgspec
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from .attitude import TiltStats, lean_verdict, mount_verdict
 from .clock import ClockOffsets, clock_verdicts
-from .channels import absolute_verdict, figures, orientation_verdicts
+from .channels import absolute_verdict, applied_verdict, figures, nis_head, orientation_verdicts
 from .covariance import cap_verdict
 from .gap_heading import gap_heading_verdict
 from .gps_wander import gps_wander_verdict
@@ -250,7 +250,10 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         if channel == "orientation":
             imu = s if isinstance(s, ImuSensor) else ImuSensor(
                 name=name, key=name, orientation="absolute" if "yaw" in ch.components else "roll_pitch")
-            vs = orientation_verdicts(imu, ch, t0)
+            # the heading cross-check found this IMU's yaw following the gyro: its NIS is not a disturbance
+            agrees = (heading.evidence.get("imu_vs_gyro_wander_rad")
+                      if heading is not None and heading.sensor == name and heading.level == "ok" else None)
+            vs = orientation_verdicts(imu, ch, t0, agrees if agrees is not None and math.isfinite(agrees) else None)
             if heading is not None and heading.sensor == name and heading.level != "ok":
                 # the IMU yaw is contradicted by the other sources: no advice to trust it more, and its
                 # NIS (the filter follows it) is evidence of nothing
@@ -276,14 +279,15 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             found[(name, channel)].append(v)
         elif channel in ABSOLUTE_CHANNELS:
             v = absolute_verdict(name, channel, ch, t0)
-            if culprit is not None and v.level != "ok" and ch.verdict() != "nis_low":
+            judged = applied_verdict(ch)  # the whole run's, or the applied updates' (module channels)
+            if culprit is not None and v.level != "ok" and judged != "nis_low":
                 v = _explained(v, culprit, ch, t0)
             elif channel == "position" and isinstance(s, GpsSensor) and "gated" not in v.message and (
-                    ch.verdict() == "nis_low" or (culprit is None and ch.verdict() == "ok")):
+                    judged == "nis_low" or (culprit is None and judged == "ok")):
                 # a wandering receiver error reads as NIS low (the filter follows it): not "lower position_noise".
                 # With another source wrong (a culprit) its errors may be what the innovations carry: an ok
                 # channel is then left alone, a NIS-low one gets the wander verdict with that caveat
-                head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)}): "
+                head = f"{nis_head(ch, t0)}: "
                 wander = gps_wander_verdict(s, ch, head)
                 if wander is not None and culprit is not None:
                     wander.message += (f"; {culprit.sensor}/{culprit.channel} is wrong too (see it) and may carry "

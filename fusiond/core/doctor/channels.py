@@ -27,7 +27,12 @@ def figures(ch: ChannelStats, t0: float | None) -> str:
     return f"{ch.nis_per_dof:.2f} per dof over {ch.n} updates" + (f"; {now}" if now else "")
 
 
-def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> list[Verdict]:
+def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None,
+                         yaw_vs_gyro: float | None = None) -> list[Verdict]:
+    """``yaw_vs_gyro``: the rms wander of the IMU's yaw against the integrated gyro that the heading
+    cross-check measured and found below its threshold (None when it did not). A yaw NIS high beside it
+    is not a disturbed yaw, whose wander the gyro would show: the innovations are the yaw's own noise,
+    stated too small (an AHRS reporting a zero covariance reads as the orientation_min_sigma floor)."""
     out = []
     comps = ch.components
     verdict = ch.verdict()
@@ -41,7 +46,7 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> 
             comp_nis.append((rms / pred) ** 2 if pred > 0 else math.nan)
         yaw_dominates = "yaw" in comps and comp_nis[comps.index("yaw")] > 3.0 * max(
             [v for c, v in zip(comps, comp_nis) if c != "yaw"] or [0.0])
-        if yaw_dominates and imu.orientation in ("absolute", "relative"):
+        if yaw_dominates and imu.orientation in ("absolute", "relative") and yaw_vs_gyro is None:
             out.append(Verdict(imu.name, "orientation", "problem",
                                f"NIS high ({figures(ch, t0)}; {detail}). The IMU yaw disagrees with the predicted "
                                "heading: a magnetometer-disturbed IMU yaw, or (without the gyro) wheels whose yaw "
@@ -49,9 +54,12 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None) -> 
                                'orientation = "roll_pitch" and angular_velocity = true'))
         else:
             line, note = noise_suggestion(ch, imu)
+            agrees = (f"; the yaw agrees with the integrated gyro to {yaw_vs_gyro:.3f} rad rms once a bias and "
+                      "scale are removed, so it is not a disturbed yaw" if yaw_dominates and yaw_vs_gyro is not None
+                      else "")
             out.append(Verdict(imu.name, "orientation", "problem",
                                f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small or the IMU "
-                               f"lies; the measured innovations, {note}, suggest the value below", key, line))
+                               f"lies{agrees}; the measured innovations, {note}, suggest the value below", key, line))
     elif verdict == "nis_low":
         line, note = noise_suggestion(ch, imu)
         out.append(Verdict(imu.name, "orientation", "warn",
@@ -79,6 +87,29 @@ def _measured_noise(ch: ChannelStats) -> str:
     return "position_noise = [" + ", ".join(f"{r:.2g}" for r in rms) + "]"
 
 
+def applied_verdict(ch: ChannelStats) -> str:
+    """The channel's whole-run NIS verdict, judged on the applied updates when it is high only through the
+    ones the gate rejected. Those were not fused, so they say nothing of the stated noise: a receiver that
+    reported three fixes at 0, 0 (a NIS of 1e14 each) among thousands of good ones would otherwise read as
+    noise stated too small, and advising a larger one would only blunt the gate. The applied ones are
+    truncated by the gate, which lowers their mean only where the gate cuts into the distribution, where
+    the gated fraction (GATED_FRACTION, judged first) speaks instead."""
+    verdict = ch.verdict()
+    if verdict == "nis_high" and ch.rejected and ch.kept_verdict() != "nis_high":
+        return ch.kept_verdict()
+    return verdict
+
+
+def nis_head(ch: ChannelStats, t0: float | None) -> str:
+    """'NIS high (figures)', and when the applied updates are judged apart, what the gate took out."""
+    head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)})"
+    if applied_verdict(ch) == ch.verdict():
+        return head
+    frac = ch.rejected / ch.n if ch.n else 0.0
+    return (f"{head} only because of the {ch.rejected} update(s) the gate rejected ({100 * frac:.1f}%, not fused): "
+            f"the {ch.n_nis_kept} applied ones read {ch.kept_nis_per_dof:.2f} per dof")
+
+
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise."""
     frac = ch.rejected / ch.n if ch.n else 0.0
@@ -102,6 +133,15 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): the sensor jumps "
                        "(multipath, relocalisation) or its noise is understated",
                        sensor_key(name, "mahalanobis_threshold"), evidence=ev)
+    applied = applied_verdict(ch)
+    if applied != verdict:
+        ev["applied_nis_per_dof"] = ch.kept_nis_per_dof
+        if applied == "nis_low":
+            return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, below their bounds: the stated noise is "
+                           "larger than the applied updates show", key, evidence=ev)
+        return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, consistent with the stated noise; the rejected "
+                       "ones are outliers the gate kept out (mahalanobis_threshold), nothing to change in the noise",
+                       evidence=ev)
     if verdict == "nis_high":
         return Verdict(name, channel, "problem",
                        f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "

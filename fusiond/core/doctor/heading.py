@@ -32,6 +32,20 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def timed(at: list[float], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """A heading series at the instants it holds at (finite values only, in time order, for np.interp).
+
+    Two sources' headings are compared at the same instants, whatever their bins do: the IMU's yaw is a
+    mean over its bin and holds at its samples' mean stamp, an integrated heading is the one reached when
+    its bin closed and holds about the bin's end (Series.*_heading_at). Paired by bin instead, an agile
+    vehicle turning at w shows a false difference of w x BIN_S / 2 (a race car at 1 rad/s: 0.1 rad)."""
+    t, v = np.asarray(at, dtype=float), np.asarray(values, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(v)
+    t, v = t[ok], v[ok]
+    order = np.argsort(t, kind="stable")
+    return t[order], v[order]
+
+
 def segments(t: np.ndarray, breaks) -> list[np.ndarray]:
     """Index ranges of t (sorted) between the breaks: data on both sides of a break is never fitted together."""
     cuts = np.searchsorted(t, np.asarray(sorted(set(breaks)), dtype=float), side="left")
@@ -107,17 +121,15 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
     if imu is None or len(series.imu_t) < 10:
         return None
     gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
-    ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
-    ok = np.isfinite(yi)
-    ti, yi = ti[ok], yi[ok]
+    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
     if len(ti) < 10:
         return None
     evidence: dict[str, float] = {}
     notes: list[str] = []
     wander = math.nan
     culprit_gyro = False
-    if len(series.gyro_t) >= 10:
-        tg, hg = np.array(series.gyro_t), np.array(series.gyro_heading)
+    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
+    if len(tg) >= 10:
         m = (ti >= tg[0]) & (ti <= tg[-1])
         if m.sum() >= 10:
             gyro_at = np.interp(ti[m], tg, hg)
@@ -127,7 +139,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
             if math.isfinite(drift):
                 evidence["imu_vs_gyro_drift_rad_s"] = drift
             if len(series.odom_t) >= 10 and np.ptp(series.odom_heading) > 0.0:
-                to, ho = np.array(series.odom_t), np.array(series.odom_heading)
+                to, ho = timed(series.odom_heading_at, series.odom_heading)
                 mo = (to >= tg[0]) & (to <= tg[-1])
                 if mo.sum() >= 10:
                     g = np.interp(to[mo], tg, hg)
@@ -269,11 +281,10 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     if fit is None:
         return None
     k, offset = fit
-    tg, hg = np.array(series.gyro_t), np.array(series.gyro_heading)
+    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
     evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
-    ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
-    ok = np.isfinite(yi)
-    k_imu = (_yaw_scale(ti[ok], yi[ok], tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if ok.sum() >= 10
+    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
+    k_imu = (_yaw_scale(ti, yi, tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if len(ti) >= 10 and len(tg)
              else math.nan)
     if math.isfinite(k_imu):
         evidence["imu_vs_gyro_yaw_scale"] = k_imu

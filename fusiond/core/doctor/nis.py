@@ -70,6 +70,7 @@ class ChannelStats:
     nis_sum: float = 0.0
     n_nis_kept: int = 0  # the same over the updates that were not rejected (gated, or flagged as slip)
     nis_sum_kept: float = 0.0
+    dof_sum_kept: int = 0
     dof_sum: int = 0
     dof: int = 0  # of the latest record
     n_comp: int = 0  # records of the channel's first shape (per-component figures)
@@ -125,6 +126,7 @@ class ChannelStats:
         if kept.any():
             self.n_nis_kept += int(kept.sum())
             self.nis_sum_kept = float(_running_sum(self.nis_sum_kept, nis[kept]))
+            self.dof_sum_kept += int(dof[kept].sum())
         if judged.any():
             self.n_nis += int(judged.sum())
             self.nis_sum = float(_running_sum(self.nis_sum, nis[judged]))
@@ -207,10 +209,19 @@ class ChannelStats:
     def nis_per_dof(self) -> float:
         return self.nis_sum / self.dof_sum if self.dof_sum else math.nan
 
+    @property
+    def kept_nis_per_dof(self) -> float:
+        """NIS per dof of the updates that were not rejected (NaN before any)."""
+        return self.nis_sum_kept / self.dof_sum_kept if self.dof_sum_kept else math.nan
+
     def kept_verdict(self) -> str:
-        """The whole-run NIS verdict of the updates that were not rejected."""
+        """The whole-run NIS verdict of the updates that were not rejected (gated out, or flagged as slip):
+        what the filter fused, so what says whether the stated noise is right. A rejected update's NIS is
+        the gate's business: one fix 7000 km off (a receiver reporting 0, 0) has a NIS of 1e14 and would
+        make the mean of thousands of good ones read as noise stated too small."""
         mean = self.nis_sum_kept / self.n_nis_kept if self.n_nis_kept else None
-        return judge_nis(mean, self.n_nis_kept, self.dof, self.confidence)
+        dof = self.dof_sum_kept / self.n_nis_kept if self.n_nis_kept else 0.0
+        return judge_nis(mean, self.n_nis_kept, dof, self.confidence)
 
     def verdict(self) -> str:
         """The whole-run NIS verdict."""

@@ -40,6 +40,10 @@ class Series(msgspec.Struct):
     odom_v: list[float] = []  # mean forward speed, m/s
     odom_wz: list[float] = []  # mean wheel yaw rate, rad/s
     odom_heading: list[float] = []  # integrated wheel yaw rate, rad (unwrapped, starts at 0)
+    # The instant each odom_heading holds at: about the bin's END (the heading reached when the bin closed),
+    # not odom_t (the middle, where the bin's means hold). A heading compared with another source is
+    # interpolated at these instants (see streams._closing_headings).
+    odom_heading_at: list[float] = []
     odom_zero_wz: list[int] = []  # samples reporting a yaw rate of exactly 0 with variance 0
     odom_n: list[int] = []
     # samples whose yaw rate the core takes as "not measured" (declared so in twist_measured, or a variance
@@ -53,12 +57,14 @@ class Series(msgspec.Struct):
     odom_breaks: list[float] = []
     imu_t: list[float] = []
     imu_yaw: list[float] = []  # the IMU's own yaw in base_link (unwrapped), NaN when not measured
+    imu_yaw_at: list[float] = []  # the instant each imu_yaw (a mean over the bin) holds at: its samples' mean stamp
     imu_breaks: list[float] = []  # silences of the IMU yaw longer than MAX_STEP_S (its unwrap may skip a turn)
     gyro_t: list[float] = []
     gyro_z: list[float] = []  # mean base-frame gyro z, rad/s
     gyro_var: list[float] = []  # its variance within the bin
     gyro_n: list[int] = []
     gyro_heading: list[float] = []  # integrated raw gyro z (no bias removed), rad
+    gyro_heading_at: list[float] = []  # the instant each gyro_heading holds at (about the bin's end, as odom's)
     gyro_breaks: list[float] = []  # silences of the gyro longer than MAX_STEP_S: not integrated across
     gyro_stated_sigma: float = float("nan")  # the noise the filter assumes for the gyro z, rad/s (mean)
     acc_t: list[float] = []

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import Config, GpsSensor, OdomSensor
-from .heading import gps_sigma
+from .heading import gps_sigma, timed
 from .series import Series
 from .verdict import Verdict, sensor_key
 
@@ -118,10 +118,12 @@ def wheel_scale_fit(series: Series, cfg: Config) -> ScaleFit | None:
     sigma_w = gps_sigma(series, gps)
     sigma_m, tau = wander(gps, sigma_w)
     to = np.array(series.odom_t)
-    if len(series.gyro_t) >= 10:
-        heading = np.interp(to, np.array(series.gyro_t), np.array(series.gyro_heading))
-    else:
-        heading = np.array(series.odom_heading)
+    # the heading at the instants the bins' mean speeds hold at (their middles), not the one each bin
+    # closed with (its end: BIN_S / 2 later, a turn's worth of heading on an agile vehicle)
+    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
+    if len(tg) < 10:
+        tg, hg = timed(series.odom_heading_at, series.odom_heading)
+    heading = np.interp(to, tg, hg)
     v = np.array(series.odom_v)
     # dead-reckon the wheels with the (short-term exact) integrated gyro: chords compare, curves or not
     x = _cumulative(to, v * np.cos(heading))

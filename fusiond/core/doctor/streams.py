@@ -62,34 +62,58 @@ def _sensor_index(rows: list, index: dict[str, int]) -> np.ndarray:
 class _Rate:
     """A rate integrated over a stream's own stamps (wheel yaw rate, gyro z): each step adds the previous
     sample's rate times the step, except across a silence longer than MAX_STEP_S (a break: the turn made
-    in it is unknown)."""
+    in it is unknown).
+
+    Each heading also gets the instant at which it is the vehicle's heading. Holding the previous sample's
+    rate over a step integrates the rate as it was half a step earlier, so the heading reached at a sample
+    is the heading of half a step before its stamp. A step that adds nothing (a break, a repeated or older
+    stamp) leaves the heading, and its instant, as they were: the heading that closes the bin before a gap
+    is the one reached before the gap, not one stamped after it."""
 
     def __init__(self) -> None:
         self.last_t: float | None = None
         self.last_rate = 0.0
         self.heading = 0.0
+        self.at: float | None = None  # the instant of ``heading``
 
-    def step(self, t: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(heading after each row, step before each row (NaN for the very first), previous stamp)."""
+    def step(self, t: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(heading after each row, its instant, step before each row (NaN for the very first), previous
+        stamp)."""
         n = len(t)
         if n == 0:
-            return np.empty(0), np.empty(0), np.empty(0)
+            return np.empty(0), np.empty(0), np.empty(0), np.empty(0)
         prev_t = np.concatenate(([self.last_t if self.last_t is not None else math.nan], t[:-1]))
         prev_rate = np.concatenate(([self.last_rate], rate[:-1]))
         dt = t - prev_t
-        inc = np.where((dt > 0.0) & (dt <= MAX_STEP_S), prev_rate * dt, 0.0)
+        stepped = (dt > 0.0) & (dt <= MAX_STEP_S)
+        inc = np.where(stepped, prev_rate * dt, 0.0)
         heading = np.cumsum(np.concatenate(([self.heading], inc)))[1:]
+        # the instant: half a step before the stamp where the row stepped, else the previous row's (forward
+        # filled; the very first heading, 0 before any step, is the heading at its own stamp)
+        at = np.where(stepped, t - 0.5 * dt, math.nan)
+        filled = np.maximum.accumulate(np.where(stepped, np.arange(n), -1))
+        before = self.at if self.at is not None else float(t[0])
+        at = np.where(filled >= 0, at[np.maximum(filled, 0)], before)
         self.last_t, self.last_rate, self.heading = float(t[-1]), float(rate[-1]), float(heading[-1])
-        return heading, dt, prev_t
+        self.at = float(at[-1])
+        return heading, at, dt, prev_t
 
 
-def _closing_headings(binned: Binned, heading: np.ndarray, carried_heading: float, final: bool) -> list[float]:
-    """The heading each complete bin reports: the one reached when it closed (after the increment of the
-    sample that opened the next bin), or, for the bin flushed at the end, the last one reached."""
-    out = heading[binned.opener[1:]].tolist()
+def _closing_headings(binned: Binned, heading: np.ndarray, at: np.ndarray, carried: tuple[float, float | None],
+                      final: bool) -> tuple[list[float], list[float]]:
+    """The heading each complete bin reports and the instant it holds at: the one reached when the bin
+    closed (after the increment of the sample that opened the next bin), or, for the bin flushed at the
+    end, the last one reached. ``carried``: the heading and instant before these rows.
+
+    The instant is not the bin's middle (where the series stamps the bin's means): it is about the bin's
+    end. A comparison with a mean over the bin (the IMU's yaw) must interpolate to the same instant, or a
+    vehicle turning at w shows a false difference of w x BIN_S / 2."""
+    closing = binned.opener[1:]
+    out, instants = heading[closing].tolist(), at[closing].tolist()
     if final and len(binned.n):
-        out.append(float(heading[-1]) if len(heading) else carried_heading)
-    return out
+        out.append(float(heading[-1]) if len(heading) else carried[0])
+        instants.append(float(at[-1]) if len(at) else (carried[1] if carried[1] is not None else math.nan))
+    return out, instants
 
 
 class OdomStream:
@@ -122,8 +146,8 @@ class OdomStream:
             self.overridden[idx] | ~has36, 0.0, ((c35 != c35) | (c35 >= self.max_var[idx])).astype(float)))
         zero_wz = ((wz == 0.0) & has36 & (c35 <= 0.0)).astype(float)
 
-        carried_heading = self.rate.heading
-        heading, dt, prev_t = self.rate.step(t, wz)
+        carried = (self.rate.heading, self.rate.at)
+        heading, at, dt, prev_t = self.rate.step(t, wz)
         gap = dt > self.gap_s
         series.odom_gaps.extend(zip(prev_t[gap].tolist(), dt[gap].tolist()))
         series.odom_breaks.extend(t[dt > MAX_STEP_S].tolist())
@@ -134,7 +158,9 @@ class OdomStream:
         series.odom_t.extend(binned.mids(k))
         series.odom_v.extend((sums[:, 0] / n).tolist())
         series.odom_wz.extend((sums[:, 1] / n).tolist())
-        series.odom_heading.extend(_closing_headings(binned, heading, carried_heading, final))
+        closing, instants = _closing_headings(binned, heading, at, carried, final)
+        series.odom_heading.extend(closing)
+        series.odom_heading_at.extend(instants)
         series.odom_zero_wz.extend(sums[:, 3].astype(int).tolist())
         series.odom_wz_unmeasured.extend(sums[:, 2].tolist())
         series.odom_n.extend(n.tolist())
@@ -166,6 +192,7 @@ class ImuStream:
         self.yaw_prev: float | None = None
         self.yaw_unwrapped = 0.0
         self.yaw_stamp = -math.inf
+        self.yaw_ref: float | None = None  # the first yaw's stamp: the bins sum stamps from it
         self.gyro = _Rate()
         self.stated_sum = 0.0
         self.stated_n = 0
@@ -226,17 +253,23 @@ class ImuStream:
             self.yaw_prev, self.yaw_unwrapped, self.yaw_stamp = float(yaw[-1]), float(unwrapped[-1]), float(t[-1])
         else:
             unwrapped = np.empty(0)
-        binned = bin_rows(t, unwrapped[:, None], self.open["imu"])
+        # the bin's mean yaw is the yaw at the mean stamp of its samples (to within the turn's curvature):
+        # summed from a fixed reference, so that the sums keep the stamps' precision
+        if self.yaw_ref is None and len(t):
+            self.yaw_ref = float(t[0])
+        ref = self.yaw_ref if self.yaw_ref is not None else 0.0
+        binned = bin_rows(t, np.column_stack((unwrapped, t - ref)), self.open["imu"])
         k = binned.done(final)
         series.imu_t.extend(binned.mids(k))
         series.imu_yaw.extend((binned.sums[:k, 0] / binned.n[:k]).tolist())
+        series.imu_yaw_at.extend((ref + binned.sums[:k, 1] / binned.n[:k]).tolist())
         self.open["imu"] = None if final else binned.last_open()
 
     def _gyro(self, t, idx, w, gc8, series, final: bool) -> None:
         r = self.R[idx, 2]  # base z row of IMU -> base
         wz = r[:, 0] * w[:, 0] + r[:, 1] * w[:, 1] + r[:, 2] * w[:, 2]
-        carried_heading = self.gyro.heading
-        heading, dt, _ = self.gyro.step(t, wz)
+        carried = (self.gyro.heading, self.gyro.at)
+        heading, at, dt, _ = self.gyro.step(t, wz)
         series.gyro_breaks.extend(t[dt > MAX_STEP_S].tolist())
         noise = self.gyro_noise[idx]
         with np.errstate(invalid="ignore"):
@@ -253,7 +286,9 @@ class ImuStream:
         # the sample variance within the bin, as max(sq / n - m * m, 0.0) * n / max(n - 1, 1)
         series.gyro_var.extend((np.maximum(sq / n - m * m, 0.0) * n / np.maximum(n - 1, 1)).tolist())
         series.gyro_n.extend(n.tolist())
-        series.gyro_heading.extend(_closing_headings(binned, heading, carried_heading, final))
+        closing, instants = _closing_headings(binned, heading, at, carried, final)
+        series.gyro_heading.extend(closing)
+        series.gyro_heading_at.extend(instants)
         self.open["gyro"] = None if final else binned.last_open()
         if final and self.stated_n:
             series.gyro_stated_sigma = self.stated_sum / self.stated_n
