@@ -82,14 +82,14 @@ def test_a_gps_with_gated_outlier_fixes_end_to_end():
     """A clean GPS robot (sigma 0.3 m stated and true, 1 Hz for 120 s) with every 40th fix 220 m off: three
     fixes, NIS ~ (220 / 0.3)^2 = 5e5 each, so the whole-run mean is ~1.3e4 per dof. With the gate at 5 they
     are rejected (sqrt(NIS) ~ 700 >> 5) and the other ~115 fixes are the clean run's (NIS ~1 per dof):
-    no "noise too small". Without a gate they are fused: the doctor's NIS verdict then has them as evidence
+    no "noise too small". Without a gate (``inf``; 5 is the default) they are fused: the doctor's NIS verdict then has them as evidence
     and names the stated noise (as before)."""
     samples = outliers(sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0)), 40, 0.002)
     gated = one(verdicts_of(robot_config(gps=f"mahalanobis_threshold = {GATE}"), samples), "gps", "position")
     assert "only because of the 3 update(s) the gate rejected" in gated.message, gated
     assert gated.key != "sensors.gps.position_noise" and "too small" not in gated.message, gated
     assert gated.evidence["applied_nis_per_dof"] < NIS_HIGH, gated
-    fused = one(verdicts_of(robot_config(gps=""), samples), "gps", "position")
+    fused = one(verdicts_of(robot_config(gps="mahalanobis_threshold = inf"), samples), "gps", "position")
     assert "gate rejected" not in fused.message and fused.level != "ok", fused
 
 
