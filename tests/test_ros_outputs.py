@@ -330,6 +330,8 @@ def test_a_bad_set_pose_gets_an_error_naming_the_problem_and_changes_nothing(dae
     for k in range(11):
         pub.put(odom(100.0 + 0.02 * k))
     wait_until(lambda: len(out["t/pose"]) == 11, 10, "11 poses")
+    # health's core figures are refreshed every CORE_REFRESH_S: wait for them to count the 11 poses
+    wait_until(lambda: health(client).published == 11, 10, "health to count the 11 poses")
     before = health(client)
     ok, errors = request_set_pose(client, "t/set_pose", payload, 5.0)
     assert ok == [] and len(errors) == 1 and problem in errors[0], errors
