@@ -130,14 +130,19 @@ class HeldInputs:
         return (v * unheld_linear) ** 2, (w * unheld_angular) ** 2
 
 
+def smoothed_period(period: float, interval: float) -> float:
+    """A typical message period (0: none yet) after one more interval between messages: an EMA of the
+    intervals, each capped at 1 s so that a gap does not make the sensor's timeout long."""
+    d = min(interval, 1.0)
+    return d if period <= 0.0 else period + PERIOD_SMOOTHING * (d - period)
+
+
 def note_period(s: FilterState, idx: int, stamp: float) -> None:
-    """Sensor idx's newest stamp and its typical message period (an EMA of the intervals, each capped
-    at 1 s so that a gap does not make the sensor's timeout long)."""
+    """Sensor idx's newest stamp and its typical message period (``smoothed_period``)."""
     last = s.last[idx]
     if last is not None and stamp > last:
-        d = min(stamp - last, 1.0)
-        s.period[idx] = d if s.period[idx] <= 0.0 else s.period[idx] + PERIOD_SMOOTHING * (d - s.period[idx])
+        s.period[idx] = smoothed_period(s.period[idx], stamp - last)
     s.last[idx] = stamp if last is None else max(last, stamp)
 
 
-__all__ = ["HeldInputs", "note_period", "TIMEOUT_PERIODS", "TILT_STALE_S"]
+__all__ = ["HeldInputs", "note_period", "smoothed_period", "TIMEOUT_PERIODS", "TILT_STALE_S"]

@@ -147,8 +147,7 @@ class Doctor:
 
     # -- results ------------------------------------------------------------------
     def series(self) -> Series:
-        for s in self.lost.flush():
-            self._note_sample(s)
+        self.lost.flush()
         self._settle_samples()
         return self.collector.finish() if self.collector is not None else Series()
 

@@ -8,8 +8,9 @@ is 0 g in the mounting fit):
 - an IMU sample with no orientation whose rates and specific force are all exactly zero
   (at rest an accelerometer reads gravity);
 - one odometry frame of exactly zero twist between two moving ones, the drop to it faster
-  than a vehicle can stop (``STOP_DECEL_LIMIT``). A zero that lasts (a stop, a drive that
-  reads zero while the vehicle coasts on) is kept: the gyro bias check reads those.
+  than a vehicle can stop (``impossible_stop``, the core's coast test). A zero that lasts
+  (a stop, a drive that reads zero while the vehicle coasts on) is kept: the gyro bias
+  check reads those.
 
 The odometry case needs the next frame: a zero frame after such a drop waits for it.
 """
@@ -19,7 +20,8 @@ from __future__ import annotations
 import math
 
 from ...samples import ImuSample, OdomSample
-from ..sensors.odom import STOP_DECEL_LIMIT
+from ..inputs import smoothed_period
+from ..sensors.odom import impossible_stop
 
 __all__ = ["LostSamples"]
 
@@ -59,12 +61,9 @@ class LostSamples:
         last = self._last.get(name)
         speed = math.hypot(*sample.linear)
         if last is not None and not zero and sample.stamp > last[0] and last[1] > 0.0:
-            gap = min(sample.stamp - last[0], 1.0)  # as the core's note_period: an EMA of the intervals
-            period = self._period.get(name)
-            self._period[name] = gap if period is None else period + 0.1 * (gap - period)
+            self._period[name] = smoothed_period(self._period.get(name, 0.0), sample.stamp - last[0])
         if zero and held is None and last is not None and sample.stamp > last[0]:
-            dt = max(sample.stamp - last[0], self._period.get(name, 0.0))
-            if last[1] > STOP_DECEL_LIMIT * dt:
+            if impossible_stop(last[1], sample.stamp - last[0], self._period.get(name, 0.0)):
                 self._waiting[name] = sample
                 self._last[name] = (sample.stamp, 0.0)
                 return out
@@ -72,10 +71,8 @@ class LostSamples:
         out.append(sample)
         return out
 
-    def flush(self) -> list:
+    def flush(self) -> None:
         """The end of the stream: a zero frame still waiting is the last one, after a drop no vehicle
-        makes and with nothing after it to make it a coast: lost. Returns what is still to pass on
-        (nothing: the method exists so that a caller need not know that)."""
+        makes and with nothing after it to make it a coast: lost."""
         self.odom += len(self._waiting)
         self._waiting.clear()
-        return []

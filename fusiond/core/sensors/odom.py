@@ -35,11 +35,11 @@ import msgspec
 from ... import reasons
 from ...config import OdomSensor
 from ...estimator import mat3
+from ...logs import get_logger
 from ...samples import OdomSample
 from ..diagnostics import DiagnosticsRecord
 from .base import SensorContext, SensorModel
 from .checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
-from ...logs import get_logger
 from .gyro_bias import quiet_bound
 
 if TYPE_CHECKING:
@@ -49,6 +49,12 @@ ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward accelerat
 ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
 ACCEL_FIT_FLOOR = 0.02  # ... or within this many m/s (encoders quantise; drivers understate the noise)
 STOP_DECEL_LIMIT = 15.0  # m/s^2 (1.5 g): a drop to exactly zero faster than this is the drive, not a stop
+
+
+def impossible_stop(speed: float, interval: float, period: float) -> bool:
+    """Is a drop from ``speed`` to exactly zero over ``interval`` faster than a vehicle can stop? The
+    interval is taken as at least the sensor's typical ``period`` (stamps can bunch)."""
+    return speed > STOP_DECEL_LIMIT * max(interval, period)
 
 
 class OdomOwn(msgspec.Struct, frozen=True, gc=False):
@@ -180,12 +186,13 @@ class OdomModel(SensorModel):
             s.linear, s.linear_cov = inp.linear, inp.linear_cov
         else:
             since, v0, v0_cov = coast
+            speed = math.hypot(*v0)
             slowed = self._coast_decel * (stamp - since)  # m/s lost since the drive went quiet
-            k = 1.0 - slowed / math.hypot(*v0)
+            k = 1.0 - slowed / speed
             s.linear, s.linear_cov = (k * v0[0], k * v0[1], k * v0[2]), mat3.add_diag(v0_cov, slowed * slowed)
             if emit and since == stamp:
-                log.info("coast_started", sensor=self.cfg.name, stamp=stamp, speed=math.hypot(*v0),
-                         coast_s=math.hypot(*v0) / self._coast_decel)
+                log.info("coast_started", sensor=self.cfg.name, stamp=stamp, speed=speed,
+                         coast_s=speed / self._coast_decel)
         # the forward speeds for ``forward_accel``: in a coast, the coasting speed, not the drive's zero
         window = self._speeds(own.window, s.linear[0], stamp) if self.ctx.track_acceleration else ()
         s.own[self.index] = OdomOwn(window, inp.linear, inp.linear_cov, stamp, not inp.stationary, coast)
@@ -226,8 +233,7 @@ class OdomModel(SensorModel):
         """The coast (since, the twist and its covariance before the drop) this message is part of, or None
         (module doc): it lasts while the slowing speed is above zero.
 
-        Only a twist of exactly zero in every measured component, yaw rate included, can be one.
-        The drop's time is bounded from below by the odometry's typical interval (stamps can bunch)."""
+        Only a twist of exactly zero in every measured component, yaw rate included, can be one."""
         decel = self._coast_decel
         if decel <= 0.0 or not (inp.stationary and inp.yaw_rate_measured):
             return None
@@ -236,7 +242,7 @@ class OdomModel(SensorModel):
             return coast if stamp - coast[0] < math.hypot(*coast[1]) / decel else None
         if not own.previous_moving or stamp <= own.previous_stamp:
             return None
-        if math.hypot(*own.previous) <= STOP_DECEL_LIMIT * max(stamp - own.previous_stamp, s.period[self.index]):
+        if not impossible_stop(math.hypot(*own.previous), stamp - own.previous_stamp, s.period[self.index]):
             return None  # a stop a vehicle can make
         return (stamp, own.previous, own.previous_cov)
 
@@ -286,4 +292,4 @@ class OdomModel(SensorModel):
         return slope if misfit <= noise else math.nan
 
 
-__all__ = ["OdomInput", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT"]
+__all__ = ["OdomInput", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT", "impossible_stop"]
