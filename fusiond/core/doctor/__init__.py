@@ -29,6 +29,7 @@ from .gap_heading import gap_heading_verdict
 from .gps_wander import gps_wander_verdict
 from .gyro import bias_check
 from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
+from .late_bias import late_bias_verdict
 from .lost import LostSamples
 from .mounting import MountYaw, mount_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
@@ -316,6 +317,9 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
                                         key=sensor_key(imu.name, "extrinsic_rpy"), suggestion="")
                 if v.level != "ok" else v for v in found[(odom.name, "yaw_rate")]]
         v = gap_heading_verdict(series, cfg, imu, t0)
+        if v is not None:
+            found[(v.sensor, v.channel)].append(v)
+        v = late_bias_verdict(series, cfg, gyro_fused, gb)
         if v is not None:
             found[(v.sensor, v.channel)].append(v)
         if odom is not None:

@@ -110,25 +110,29 @@ def _coast_note(cfg: Config) -> str:
             "otherwise, and after that, it does not advance while the wheels read zero")
 
 
+def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Episode], list[Episode]]:
+    """(standstills, stretches that only look like one): the wheels' runs exactly at rest, split by the gyro.
+
+    The core confirms a standstill only while the gyro is quiet (each axis within quiet_bound: its noise
+    plus the prior bias range, core/sensors/gyro_bias.py): an episode whose gyro turns is the vehicle
+    coasting or turning with its wheels reading zero, not a standstill. So is one beyond the quiet bound
+    of the readings' own scatter (the stated noise may be overstated tenfold), as the core judges a closed
+    window; their scatter (the turn rate changing) must not enter the measured noise at rest."""
+    fc = cfg.filter
+    episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
+    stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0
+    bound = quiet_bound(stated, fc.gyro_bias_sigma)
+    turns = [abs(e.gyro_mean) > bound or turning_by_own_scatter(e, fc.gyro_bias_sigma, imu.gyro_min_sigma)
+             for e in episodes]
+    return [e for e, f in zip(episodes, turns) if not f], [e for e, f in zip(episodes, turns) if f]
+
+
 def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool) -> Verdict | None:
     imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
     if imu is None or not gyro_fused:
         return None
     fc = cfg.filter
-    episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
-    # The core confirms a standstill only while the gyro is quiet (each axis within quiet_bound:
-    # its noise plus the prior bias range, core/sensors/gyro_bias.py): an episode whose gyro turns is
-    # the vehicle coasting or turning with its wheels reading zero, not a standstill. Judge the
-    # bias on the quiet ones only, and say what the others are.
-    stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0
-    bound = quiet_bound(stated, fc.gyro_bias_sigma)
-    # ... and, as the core does for a closed window, beyond the quiet bound of the readings' own scatter
-    # (the stated noise may be overstated tenfold): those are turning too, and their scatter (the turn
-    # rate changing) must not enter the measured noise at rest
-    turns = [abs(e.gyro_mean) > bound or turning_by_own_scatter(e, fc.gyro_bias_sigma, imu.gyro_min_sigma)
-             for e in episodes]
-    turning = [e for e, f in zip(episodes, turns) if f]
-    episodes = [e for e, f in zip(episodes, turns) if not f]
+    episodes, turning = quiet_episodes(series, cfg, imu)
     if turning and (ch is None or ch.n == 0 or not episodes):
         t_start = series.odom_t[0]
         worst = max(turning, key=lambda e: abs(e.gyro_mean))
