@@ -46,6 +46,7 @@ class RestWorld:
     orientation_absent: bool = False  # orientation_covariance[0] = -1: the IMU gives no orientation
     accel_scale: float = 1.0  # 1 / 9.80665: a driver reporting in g
     accel_gravity_removed: bool = False  # a driver publishing linear acceleration without gravity
+    accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2, added to the specific force
     seed: int = 11
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
@@ -88,8 +89,9 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 if w.accel_sigma is not None:  # flat ground: gravity up, centripetal v w to the left
                     sa = w.accel_sigma
                     g = 0.0 if w.accel_gravity_removed else GRAVITY
-                    acc = tuple(w.accel_scale * a for a in (accel + rng.normal(0, sa), speed * seg.yaw_rate
-                                                            + rng.normal(0, sa), g + rng.normal(0, sa)))
+                    ab = w.accel_bias
+                    acc = tuple(w.accel_scale * a for a in (accel + ab[0] + rng.normal(0, sa), speed * seg.yaw_rate
+                                                            + ab[1] + rng.normal(0, sa), g + ab[2] + rng.normal(0, sa)))
                     acov = (sa**2, 0, 0, 0, sa**2, 0, 0, 0, sa**2)
                 sv = (gs if w.gyro_stated_sigma is None else w.gyro_stated_sigma) ** 2
                 out.append(ImuSample("imu", T0 + t, q, ocov, gyro, (sv, 0, 0, 0, sv, 0, 0, 0, sv), acc, acov))

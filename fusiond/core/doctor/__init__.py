@@ -22,12 +22,13 @@ import msgspec
 
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from .attitude import TiltStats, lean_verdict, mount_verdict
-from .clock import ClockOffsets, clock_verdicts
 from .channels import absolute_verdict, applied_verdict, figures, nis_head, orientation_verdicts
+from .clock import ClockOffsets, clock_verdicts
+from .coast import coast_verdict
 from .covariance import cap_verdict
 from .gap_heading import gap_heading_verdict
 from .gps_wander import gps_wander_verdict
-from .gyro import bias_check
+from .gyro import bias_check, quiet_episodes
 from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
 from .late_bias import late_bias_verdict
 from .lost import LostSamples
@@ -322,6 +323,11 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         v = late_bias_verdict(series, cfg, gyro_fused, gb)
         if v is not None:
             found[(v.sensor, v.channel)].append(v)
+        if imu is not None:
+            standstills, turning = quiet_episodes(series, cfg, imu)
+            v = coast_verdict(series, cfg, mount, turning, standstills)
+            if v is not None:
+                found[(v.sensor, v.channel)].append(v)
         if odom is not None:
             v = twist_frame_verdict(odom, twist, MIN_UPDATES)
             if v is not None:

@@ -58,6 +58,7 @@ class MountYaw:
     samples: int
     expected_rms: float  # m/s^2: how much horizontal acceleration the driving gave to fit against
     residual_rms: float
+    bias_x: float = 0.0  # m/s^2: b on base x (accelerometer bias, gravity leaking through a tilt), for coast.py
 
     @property
     def named(self) -> bool:
@@ -103,6 +104,11 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     bad = np.zeros(len(to), dtype=bool)
     bad[:-1] |= gaps
     bad[1:] |= gaps
+    # ... and beside a bin exactly at rest: a drive dropping to zero at speed (a coast, a lost frame) is no
+    # deceleration (a real stop passes through speeds below MIN_SPEED first, which are not fitted anyway)
+    rest = np.asarray(series.odom_rest, dtype=bool)
+    bad[:-1] |= rest[1:]
+    bad[1:] |= rest[:-1]
     dvdt[bad] = np.nan
     if len(series.gyro_t) >= 10:  # the gyro's z: a turn about z leaves it unchanged, and it is not skid-steer-scaled
         tw, ww = np.asarray(series.gyro_t), np.asarray(series.gyro_z)
@@ -142,4 +148,4 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     # delta = atan2(s, c): gradient (-s, c) / r2
     var = (s * s * cov[0, 0] + c * c * cov[1, 1] - 2.0 * c * s * cov[0, 1]) / (r2 * r2)
     return MountYaw(math.atan2(s, c), math.sqrt(max(var, 0.0)), math.sqrt(r2), n, expected_rms,
-                    math.sqrt(sigma2))
+                    math.sqrt(sigma2), float(coef[2]))
