@@ -54,8 +54,8 @@ def heading(s: float) -> float:
 
 
 def weaving_car(yaw_drift: float = 0.0, rest_at: float = REST_AT, rest_s: float = REST_S,
-                seed: int = 5) -> list[OdomSample | ImuSample]:
-    """Odometry at 50 Hz, IMU at 100 Hz with its AHRS yaw, in stamp order."""
+                seed: int = 5, gap: tuple[float, float] | None = None) -> list[OdomSample | ImuSample]:
+    """Odometry at 50 Hz, IMU at 100 Hz with its AHRS yaw, in stamp order; nothing logged within ``gap``."""
     rng = np.random.default_rng(seed)
     out: list[OdomSample | ImuSample] = []
     wcov = tuple(WHEEL_SIGMA**2 if i % 7 == 0 else 0.0 for i in range(36))
@@ -63,6 +63,8 @@ def weaving_car(yaw_drift: float = 0.0, rest_at: float = REST_AT, rest_s: float 
     gcov = (GYRO_SIGMA**2, 0.0, 0.0, 0.0, GYRO_SIGMA**2, 0.0, 0.0, 0.0, GYRO_SIGMA**2)
     for k in range(int(DURATION * 100)):
         rel = k / 100.0
+        if gap is not None and gap[0] <= rel < gap[1]:
+            continue
         s, moving = phase(rel, rest_at, rest_s)
         w = W * math.sin(2.0 * math.pi * s / PERIOD) if moving else 0.0
         if k % 2 == 0:
@@ -138,3 +140,16 @@ def test_a_vehicle_that_starts_at_rest_learns_its_bias_in_time():
     assert GYRO_BIAS * STANDSTILL_S < LATE_DRIFT_RAD / 10
     result = run_samples(weaving_car(rest_at=0.0), make_config(orientation="roll_pitch", gyro=True))
     assert not [v for v in result.verdicts() if v.channel == "heading"]
+
+
+def test_across_logging_gaps_the_imu_yaw_decides():
+    """The drifting AHRS of the test above, and a 6 s logging gap at 20 s in which the car turns (the weave's
+    half period is 10 s: up to ~1 rad). The gap verdict advises the relative yaw (it alone says how far the car
+    turned); the late bias verdict, whose drift alone would not advise it, points there instead of leaving
+    the user two contradicting answers."""
+    samples = weaving_car(yaw_drift=0.003, gap=(20.0, 26.0))
+    verdicts = run_samples(samples, make_config(orientation="roll_pitch", gyro=True)).verdicts()
+    gaps = one(verdicts, "imu", "heading_across_gaps")
+    assert gaps.suggestion.startswith('orientation = "relative"'), gaps
+    v = one(verdicts, "imu", "heading")
+    assert not v.suggestion and v.message.endswith("see imu/heading_across_gaps"), v

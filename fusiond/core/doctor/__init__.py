@@ -322,6 +322,10 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             found[(v.sensor, v.channel)].append(v)
         v = late_bias_verdict(series, cfg, gyro_fused, gb)
         if v is not None:
+            gap = next((g for g in found.get((v.sensor, "heading_across_gaps"), []) if g.suggestion), None)
+            if gap is not None and not v.suggestion:  # its drift alone was not worth it; the gaps decide
+                v = msgspec.structs.replace(v, message=v.message + f"; but across the logging gaps the IMU's yaw is "
+                                            f"what holds the heading: see {v.sensor}/heading_across_gaps")
             found[(v.sensor, v.channel)].append(v)
         if imu is not None:
             standstills, turning = quiet_episodes(series, cfg, imu)
