@@ -21,6 +21,7 @@ from ...config import ImuSensor
 from ...estimator import mat3
 from ...estimator import observations as obs
 from ...estimator import rotation as rot
+from ...logs import get_logger
 from ...samples import ImuSample
 from ..diagnostics import DiagnosticsRecord
 from .base import SensorContext, SensorModel
@@ -29,6 +30,8 @@ from .gyro_bias import BiasLearning, learn_bias_at_rest
 
 if TYPE_CHECKING:
     from ..state import FilterState
+
+log = get_logger("fusiond.core")
 
 GRAVITY = 9.80665  # m/s^2, standard gravity
 _ZERO3 = (0.0, 0.0, 0.0)
@@ -87,6 +90,7 @@ class ImuPolicy:
         self._ori_resolved: tuple[tuple[int, ...], tuple[float, ...]] = ((), ())
         self._gyro_seen: tuple | None = None
         self._gyro_resolved: tuple[float, ...] = ()
+        self._gyro_unknown_said = False  # the gyro_covariance_unknown warning was logged
 
     @property
     def gives_tilt(self) -> bool:
@@ -155,7 +159,9 @@ class ImuPolicy:
         gyro = gyro_cov = None
         if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
             gc = s.angular_velocity_covariance
-            if gc[0] != -1.0:
+            # [0] == -1: "no angular velocity" (sensor_msgs/Imu), unless the user states the gyro's noise: some
+            # drivers mark the covariance unknown that way while publishing the rates; the override says fuse them
+            if gc[0] != -1.0 or self._gyro_override is not None:
                 known = gc == self._gyro_seen
                 if not (finite(s.angular_velocity) and (known or finite(gc))):
                     raise Rejected(reasons.NON_FINITE, "angular_velocity")
@@ -164,6 +170,11 @@ class ImuPolicy:
                 gyro_cov = self._gyro_resolved if known else self._gyro_noise(gc)
                 w = s.angular_velocity
                 gyro = w if self._identity else mat3.apply(self.R_ext, w)
+            elif not self._gyro_unknown_said:
+                self._gyro_unknown_said = True  # said once: it is the driver's constant, not one message's
+                log.warning("gyro_covariance_unknown", sensor=self.cfg.name,
+                            hint="angular_velocity_covariance[0] is -1 (no angular velocity): the rates are not "
+                                 "fused; if the driver publishes them, state their noise with gyro_noise")
         elif self.cfg.angular_velocity:
             raise Rejected(reasons.BAD_COVARIANCE, "angular velocity covariance must have 9 entries")
         accel = None
