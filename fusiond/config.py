@@ -91,6 +91,9 @@ class _Sensor(_Table, tag_field="kind"):
     key: str
     encoding: Literal["ros2-cdr", "json", "msgpack"] = "ros2-cdr"
     timeout_s: float = 0.2
+    # s added to every header stamp of this sensor before it is fused: a receiver's latency (a GPS fix
+    # stamped on arrival, 0.1-0.3 s after its epoch: negative), or a clock offset (GPS time vs UTC: -18)
+    stamp_offset_s: float = 0.0
 
 
 class OdomSensor(_Sensor, tag="odom"):
@@ -208,7 +211,8 @@ def _check_struct(obj: msgspec.Struct, where: str) -> None:
         for v in numbers:
             if isinstance(v, float) and math.isnan(v):
                 raise ConfigError(f"{path}: NaN is not a valid value")
-        if field.endswith(("_s", "_sigma", "_noise", "_window", "_max", "_confirm")) and value is not None:
+        signed = field == "stamp_offset_s"  # an offset: either way
+        if field.endswith(("_s", "_sigma", "_noise", "_window", "_max", "_confirm")) and value is not None and not signed:
             if any(isinstance(v, (int, float)) and v < 0 for v in numbers):
                 raise ConfigError(f"{path}: must not be negative")
 
@@ -251,6 +255,8 @@ def validate(cfg: Config) -> Config:
             raise ConfigError(f"{where}.key: must be a Zenoh key without leading '/', got {s.key!r}")
         if s.timeout_s <= 0:
             raise ConfigError(f"{where}.timeout_s: must be positive")
+        if not math.isfinite(s.stamp_offset_s):
+            raise ConfigError(f"{where}.stamp_offset_s: must be finite")
         names.add(s.name)
         keys.add(s.key)
     odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]

@@ -92,6 +92,7 @@ class FusionCore:
         fc = cfg.filter
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
+        self._stamp_offset = [s.stamp_offset_s for s in self.sensors]  # added to each sensor's header stamps
         self.odom_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, OdomSensor)), -1)
         self.layout = state_layout(cfg)
         self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
@@ -156,7 +157,7 @@ class FusionCore:
             return Step(sample.sensor, False, reasons.UNKNOWN_SENSOR)
         st = self.stats[idx]
         st.received += 1
-        stamp = sample.stamp
+        stamp = sample.stamp + self._stamp_offset[idx]  # the sensor's stamp_offset_s (0.0: the same float)
         if not (math.isfinite(stamp) and stamp > 0.0):
             return self._drop(idx, reasons.INVALID_STAMP, stamp)
         model = self.models[idx]

@@ -71,6 +71,7 @@ class Doctor:
         self._records: list = []
         self._samples: list = []
         self.lost = LostSamples()  # lost samples left out of the series (``add_sample``)
+        self._stamp_offset = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:
@@ -92,7 +93,11 @@ class Doctor:
 
     def add_sample(self, sample) -> None:
         """A raw sample, as the sensor sent it (for the cross-source series), in arrival order; a lost
-        one (``lost.LostSamples``) is left out."""
+        one (``lost.LostSamples``) is left out. Its stamp is shifted by the sensor's ``stamp_offset_s``, as
+        the core shifts it: the sources are compared at the instants the filter takes them for."""
+        offset = self._stamp_offset.get(sample.sensor)
+        if offset:
+            sample = msgspec.structs.replace(sample, stamp=sample.stamp + offset)
         for s in self.lost.admit(sample):
             self._note_sample(s)
 
@@ -341,7 +346,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         if v is not None:
             found[("filter", "covariance")].append(v)
     if stats:
-        for v in _drops(stats, clocks) + (clock_verdicts(stats, clocks) if clocks is not None else []):
+        for v in _drops(stats, clocks) + (clock_verdicts(stats, clocks, sensors) if clocks is not None else []):
             found[(v.sensor, v.channel)].append(v)
     if covariance_resets:
         found[("filter", "covariance")].append(
