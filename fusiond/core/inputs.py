@@ -36,7 +36,6 @@ class HeldInputs:
         self.default_linear_cov = mat3.diag(*[unmeasured[0] ** 2] * 3)
         self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
         self._u = MotionInput()
-        self._u.world_frame = isinstance(odom, OdomSensor) and odom.twist_frame == "world"
         self._u.twist_correlation = odom.twist_correlation_s if isinstance(odom, OdomSensor) else 0.0
 
     def timeout(self, idx: int, s: FilterState | None) -> float:
@@ -68,8 +67,10 @@ class HeldInputs:
         odom_fresh = odom >= 0 and s.last[odom] is not None and t - s.last[odom] <= odom_timeout
         if odom_fresh:
             u.linear, u.linear_cov, u.linear_period = s.linear, s.linear_cov, s.period[odom]
+            u.world_frame = s.linear_world
         else:
             u.linear, u.linear_cov, u.linear_period = _ZERO3, self.default_linear_cov, 0.0
+            u.world_frame = False
         gyro_fresh = s.gyro is not None and t - s.gyro_last[1] <= gyro_timeout
         if gyro_fresh:
             u.angular, u.angular_cov, u.angular_period = s.gyro, s.gyro_cov, s.period[s.gyro_last[0]]

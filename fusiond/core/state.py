@@ -22,7 +22,7 @@ class FilterState:
 
     __slots__ = (
         "t", "ekf", "last", "period",
-        "linear", "linear_cov", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
+        "linear", "linear_cov", "linear_world", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
         "still_since", "attitude_ready", "tilt_seen",
         "frame_ready", "frame_epoch", "enu", "heading_ready",
@@ -41,6 +41,7 @@ class FilterState:
         s.period = [0.0] * sensors
         s.linear, s.linear_cov = _ZERO3, linear_cov
         s.wheel_angular, s.wheel_angular_cov = _ZERO3, angular_cov
+        s.linear_world = False  # the held linear twist is in the world frame (twist_frame = "world", no pose)
         s.wheel_yaw_measured = False
         s.gyro = s.gyro_cov = s.gyro_last = None
         s.still_since = None  # the odometry has read zero since this stamp
@@ -68,6 +69,7 @@ class FilterState:
         c.linear, c.linear_cov = self.linear, self.linear_cov
         c.wheel_angular, c.wheel_angular_cov = self.wheel_angular, self.wheel_angular_cov
         c.wheel_yaw_measured = self.wheel_yaw_measured
+        c.linear_world = self.linear_world
         c.gyro, c.gyro_cov, c.gyro_last = self.gyro, self.gyro_cov, self.gyro_last
         c.still_since = self.still_since
         c.tilt_seen = self.tilt_seen

@@ -21,6 +21,8 @@ from collections import defaultdict
 import msgspec
 
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor
+from ...samples import OdomSample
+from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
 from .channels import absolute_verdict, applied_verdict, figures, nis_head, orientation_verdicts
 from .clock import ClockOffsets, clock_verdicts
@@ -72,6 +74,7 @@ class Doctor:
         self._samples: list = []
         self.lost = LostSamples()  # lost samples left out of the series (``add_sample``)
         self._stamp_offset = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
+        self._world_twist = {s.name for s in self.cfg.sensors if isinstance(s, OdomSensor) and s.twist_frame == "world"}
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:
@@ -98,6 +101,10 @@ class Doctor:
         offset = self._stamp_offset.get(sample.sensor)
         if offset:
             sample = msgspec.structs.replace(sample, stamp=sample.stamp + offset)
+        if sample.sensor in self._world_twist and type(sample) is OdomSample:
+            body = body_twist(sample)  # the twist as the core takes it: turned into the body by the message's pose
+            if body is not None:
+                sample = msgspec.structs.replace(sample, linear=body[0], angular=body[1])
         for s in self.lost.admit(sample):
             self._note_sample(s)
 
