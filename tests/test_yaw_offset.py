@@ -84,3 +84,24 @@ def test_the_offset_state_exists_only_beside_an_absolute_sensor_and_no_tilt_or_d
     core = FusionCore(_config("absolute"))
     e = core.layout.error["yaw_offset"]
     assert not core.tilt_mask[e].any() and not core.position_mask[e].any() and not core.delta_mask[e].any()
+
+
+def test_the_doctor_says_what_the_yaw_jumps_were():
+    """The four step edges of the world above, gated (every yaw_jump record is a reading the gate kept out):
+    the channel's NIS is not judged (it is beyond the gate by construction) and the verdict counts them, a
+    share of the IMU's readings far below JUMP_NOTE_SHARE: ok, a disturbance switching on now and then."""
+    from fusiond.core.doctor.channels import JUMP_NOTE_SHARE
+    from fusiond.replay.run import run_samples
+
+    from .test_doctor import agree, one
+
+    w = World(duration=300.0, speed=1.0, gps_rate=1.0, gps_sigma=1.5, start=(0.0, 0.0, 2.0), gyro_bias=0.002,
+              imu_yaw_offset=1.5, imu_yaw_disturbance=(0.5, 20.0),
+              imu_yaw_steps=((100.0, 110.0, 0.6), (200.0, 260.0, -0.5)), seed=5)
+    result = run_samples(simulate(w), _config("absolute"))
+    verdicts = result.verdicts()
+    agree(result.doctor, verdicts)
+    assert result.doctor.channel_summaries()["imu/yaw_jump"]["verdict"] == "not_judged"
+    v = one(verdicts, "imu", "yaw_jump")
+    assert v.level == "ok" and v.evidence["yaw_jumps"] == 4.0 and v.evidence["yaw_jump_share"] < JUMP_NOTE_SHARE, v
+    assert "jumped against the gyro-carried heading" in v.message and "nis" not in v.message.lower(), v

@@ -24,7 +24,7 @@ from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...samples import OdomSample
 from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
-from .channels import absolute_verdict, applied_verdict, figures, nis_head, orientation_verdicts
+from .channels import absolute_verdict, applied_verdict, figures, nis_head, orientation_verdicts, yaw_jump_verdict
 from .clock import ClockOffsets, clock_verdicts
 from .coast import coast_verdict
 from .covariance import cap_verdict
@@ -49,6 +49,7 @@ ABSOLUTE_CHANNELS = ("position", "position_unaligned", "pose", "pose_delta")
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
 KEPT_CHANNELS = ("gyro_bias", "position")
+GATE_CHANNELS = ("yaw_jump",)  # every record is a reading its gate kept out: no NIS test (ChannelStats.judged)
 CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)
 
 
@@ -147,7 +148,8 @@ class Doctor:
             if ch is None:
                 first = records[0]
                 ch = self._channels[key] = ChannelStats(list(first.components), self.window, self.confidence,
-                                                        keep=first.channel in KEPT_CHANNELS)
+                                                        keep=first.channel in KEPT_CHANNELS,
+                                                        judged=first.channel not in GATE_CHANNELS)
             ch.extend(records)
 
     def _settle_samples(self) -> None:
@@ -290,6 +292,8 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
                 v = Verdict(v.sensor, v.channel, v.level, v.message + f": explained by {culprit.sensor}/"
                             f"{culprit.channel} (see it)", culprit.key, evidence=v.evidence)
             found[(name, channel)].append(v)
+        elif channel == "yaw_jump":
+            found[(name, channel)].append(yaw_jump_verdict(name, ch, channels.get((name, "orientation"))))
         elif channel in ABSOLUTE_CHANNELS:
             v = absolute_verdict(name, channel, ch, t0)
             judged = applied_verdict(ch)  # the whole run's, or the applied updates' (module channels)

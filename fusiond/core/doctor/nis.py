@@ -85,6 +85,7 @@ class ChannelStats:
     now_verdict: str = "no_updates"
     now_since: float | None = None  # stamp at which the window's verdict became now_verdict
     keep: bool = False  # keep every update's stamp, rejected flag and innovation (standstill episodes)
+    judged: bool = True  # False: a gate's channel (yaw_jump), every record beyond the gate: its NIS is no test
     stamps: list[float] = field(default_factory=list)
     rejected_flags: list[bool] = field(default_factory=list)
     innovations: list[list[float]] = field(default_factory=list)
@@ -225,6 +226,8 @@ class ChannelStats:
 
     def verdict(self) -> str:
         """The whole-run NIS verdict."""
+        if not self.judged:
+            return "not_judged"
         return judge_nis(self.nis_mean, self.n_nis, self.mean_dof, self.confidence)
 
     def bounds(self) -> tuple[float, float] | None:
@@ -258,6 +261,10 @@ class ChannelStats:
         """The channel's row of the summary table. A channel whose updates were all learning ones reads
         "learning ... not judged", never "no_updates" beside its update count."""
         b = self.bounds()
+        if not self.judged:
+            return {"updates": self.n, "rejected": self.rejected, "dof": self.dof, "nis_mean": None,
+                    "nis_bounds": None, "verdict": "not_judged", "now": "not_judged",
+                    "now_note": "not judged: every record is a reading the gate kept out"}
         if self.learning_only:
             return {"updates": self.n, "rejected": self.rejected, "dof": self.dof, "nis_mean": None,
                     "nis_bounds": None, "verdict": "learning", "now": "learning",
