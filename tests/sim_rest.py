@@ -36,6 +36,7 @@ class RestWorld:
     odom_rate: float = 50.0
     imu_rate: float = 100.0
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_bias_drift: float = 0.0  # rad/s per s: the z bias drifts steadily (temperature)
     gyro_sigma: float = 0.002
     gyro_stated_sigma: float | None = None  # the covariance the driver states (None: the true sigma)
     ramp_s: float = 0.0  # > 0: each segment's speed is reached over this long (the accelerometer feels it)
@@ -83,6 +84,8 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
             if t >= next_imu:
                 q = rot.from_rpy(w.roll_drift * t + rng.normal(0, os_), rng.normal(0, os_), yaw + rng.normal(0, os_))
                 b = w.gyro_bias
+                if w.gyro_bias_drift:
+                    b = (b[0], b[1], b[2] + w.gyro_bias_drift * t)
                 gyro = (b[0] + rng.normal(0, gs), b[1] + rng.normal(0, gs), seg.yaw_rate + b[2] + rng.normal(0, gs))
                 ocov = (-1.0,) + (0.0,) * 8 if w.orientation_absent else (os_**2, 0, 0, 0, os_**2, 0, 0, 0, os_**2)
                 acc, acov = (0.0, 0.0, 0.0), (-1.0,) + (0.0,) * 8

@@ -110,6 +110,38 @@ def _coast_note(cfg: Config) -> str:
             "otherwise, and after that, it does not advance while the wheels read zero")
 
 
+MIN_DRIFT_EPISODES = 3  # a drift is told from one odd standstill by its trend, which takes three points
+DRIFT_WALK_MARGIN = 2.0  # a drift is named when the walk it shows exceeds the configured one by this factor
+
+
+def bias_drift(episodes: list[Episode], walk: float) -> tuple[tuple[float, float], tuple[float, float], float] | None:
+    """A gyro bias that drifts steadily across the standstills: ((t, b) first, (t, b) last, the random walk
+    that drift shows, |change| / sqrt(span)), or None.
+
+    One odd standstill (the vehicle coasting while its wheels read zero) sits off a line through the others;
+    a bias drifting with temperature puts every standstill on one smooth line. So: a line b = a + r t fitted
+    through MIN_DRIFT_EPISODES or more standstills' gyro means leaves each within max(5 x its standard error,
+    DISAGREE_RAD_S / 3), and its change over the span exceeds DISAGREE_RAD_S and what the configured walk
+    allows (DRIFT_WALK_MARGIN x walk x sqrt(span))."""
+    if len(episodes) < MIN_DRIFT_EPISODES:
+        return None
+    t = np.array([e.t0 for e in episodes])
+    b = np.array([e.gyro_mean for e in episodes])
+    if not np.all(np.isfinite(b)) or np.ptp(t) <= 0.0:
+        return None
+    slope, intercept = np.polyfit(t, b, 1)
+    resid = b - (intercept + slope * t)
+    tol = np.array([max(5.0 * e.spread, DISAGREE_RAD_S / 3.0) for e in episodes])
+    span = float(t[-1] - t[0])
+    change = float(slope * span)
+    if np.any(np.abs(resid) > tol) or abs(change) <= DISAGREE_RAD_S:
+        return None
+    shown = abs(change) / math.sqrt(span)
+    if shown <= DRIFT_WALK_MARGIN * walk:
+        return None
+    return (float(t[0]), float(b[0])), (float(t[-1]), float(b[-1])), shown
+
+
 def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Episode], list[Episode]]:
     """(standstills, stretches that only look like one): the wheels' runs exactly at rest, split by the gyro.
 
@@ -159,6 +191,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     evidence: dict[str, float] = {"standstills": float(len(episodes))}
     if turning:
         evidence["turning_at_rest"] = float(len(turning))
+    drift = bias_drift(episodes, fc.gyro_bias_walk)
     if len(episodes) >= 2:
         ref = float(np.median([e.gyro_mean for e in episodes]))
         evidence["gyro_at_rest_rad_s"] = ref
@@ -168,7 +201,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
 
         suspects = [e for e in episodes if odd(e) and e.accepted > 0]
         later_rejected = [e for e in episodes if not odd(e) and e.rejected > e.accepted]
-        if suspects and later_rejected and later_rejected[-1].t0 > suspects[0].t0:
+        if suspects and later_rejected and later_rejected[-1].t0 > suspects[0].t0 and drift is None:
             s = suspects[0]
             t_start = series.odom_t[0]
             evidence.update({"suspect_t_s": s.t0 - t_start, "suspect_gyro_rad_s": s.gyro_mean})
@@ -177,7 +210,10 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                            f"{s.gyro_mean:+.4f} rad/s there, while the other {len(episodes) - len(suspects)} "
                            f"standstills read {ref:+.4f} rad/s: the wheels read zero while the vehicle still turned "
                            f"or coasted, and that update set the bias; the {len(later_rejected)} genuine standstills "
-                           "after it were then rejected against the wrong bias. Confirm standstills for longer",
+                           "after it were then rejected against the wrong bias. Confirm standstills for longer"
+                           + ("" if len(episodes) >= MIN_DRIFT_EPISODES else
+                              " (or, with two standstills only, the bias drifted between them, e.g. with temperature: "
+                              "then raise gyro_bias_walk instead)"),
                            filter_key("standstill_s"), f"standstill_s = {max(2.0 * fc.standstill_s, 1.0):g}",
                            evidence)
     if episodes and series.est_bias_z:
@@ -214,6 +250,17 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                            f"{100 * frac:.0f}% of standstill bias updates rejected: the gyro noise is understated "
                            f"(it measures {measured:.5f} rad/s at rest, {stated:.5f} is stated)",
                            sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+        if drift is not None:  # a steady trend across the standstills, not one odd one
+            (t_a, b_a), (t_b, b_b), walk = drift
+            t_start = series.odom_t[0]
+            evidence.update({"bias_drift_rad_s": b_b - b_a, "bias_drift_over_s": t_b - t_a})
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"the gyro's bias drifts: at rest it reads {b_a:+.4f} rad/s at {t_a - t_start:.0f} s and "
+                           f"{b_b:+.4f} at {t_b - t_start:.0f} s, steadily across the {len(episodes)} standstills "
+                           f"(temperature), faster than gyro_bias_walk ({fc.gyro_bias_walk:g} rad/s/sqrt(s)) lets the "
+                           "filter follow: standstill updates are rejected against the old bias, and the heading turns "
+                           "with the difference meanwhile. State the walk the drift shows",
+                           filter_key("gyro_bias_walk"), f"gyro_bias_walk = {walk:.2g}", evidence)
         est = evidence.get("bias_estimate_rad_s", math.nan)
         ref = evidence.get("gyro_at_rest_rad_s", episodes[-1].gyro_mean if episodes else math.nan)
         if math.isfinite(est) and math.isfinite(ref) and abs(est - ref) <= max(DISAGREE_RAD_S / 3.0, 3.0 * (
