@@ -37,6 +37,7 @@ GRAVITY = 9.80665  # m/s^2, standard gravity
 _ZERO3 = (0.0, 0.0, 0.0)
 G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer reports in g
 GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
+GRAVITY_AVERAGE_S = 0.1  # s of specific force averaged into one gravity roll/pitch update
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
 YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
 
@@ -49,6 +50,7 @@ class ImuOwn(msgspec.Struct, frozen=True, gc=False):
     yaw_stamp: float | None = None  # ... and its stamp (the yaw-jump gate)
     adaptive: tuple[float, float, int] = (1.0, 0.0, 0)  # R scale of the orientation, window NIS/dof sum, count
     bias: BiasLearning = BiasLearning()  # the standstill windows of the gyro-bias learning
+    gravity: tuple | None = None  # (start stamp, samples, sums of x, y, z) of the specific force being averaged
 
 
 @dataclass(slots=True)
@@ -315,13 +317,29 @@ class ImuModel(SensorModel):
         ax = accel[0] - (wy * vz - wz * vy) - forward
         ay = accel[1] - (wz * vx - wx * vz)
         az = accel[2] - (wx * vy - wy * vx)
+        # Averaged over GRAVITY_AVERAGE_S before the tilt is taken: vibration (an engine's 30 Hz, several m/s^2)
+        # is zero-mean in the specific force, but not in atan2 of it, nor in which samples pass the magnitude
+        # gate: sample by sample it read as a steady tilt of tenths of a degree (QA4's car: 30 m of z). The
+        # mean's gate and angles are unbiased; its update carries the information of its n samples.
+        own: ImuOwn = s.own[self.index]
+        w = own.gravity
+        if w is None:
+            w = (stamp, 1, ax, ay, az)
+        else:
+            w = (w[0], w[1] + 1, w[2] + ax, w[3] + ay, w[4] + az)
+        if stamp - w[0] < GRAVITY_AVERAGE_S:
+            s.own[self.index] = msgspec.structs.replace(own, gravity=w)
+            return []
+        s.own[self.index] = msgspec.structs.replace(own, gravity=None)
+        n = w[1]
+        ax, ay, az = w[2] / n, w[3] / n, w[4] / n
         if abs(math.sqrt(ax * ax + ay * ay + az * az) - GRAVITY) > GRAVITY_DYNAMIC_GATE:
             return []
         roll = math.atan2(ay, az)
         pitch = math.atan2(-ax, math.hypot(ay, az))
         if not s.attitude_ready:
             initialise_attitude(s, (roll, pitch, 0.0), False)
-        var = self.cfg.gravity_tilt_noise**2
+        var = self.cfg.gravity_tilt_noise**2 / n
         y, H, R = obs.orientation(self.ctx.layout, s.ekf.x, (roll, pitch, 0.0),
                                   (var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var), (0, 1))
         res = s.ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.tilt_mask, hold_heading=True)
