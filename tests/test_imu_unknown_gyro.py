@@ -36,3 +36,20 @@ def test_gyro_noise_fuses_rates_whose_covariance_says_unknown():
     of integration, to a step); without it the rates are not fused and the straight wheels hold yaw at 0."""
     assert _turn("gyro_noise = 0.005") == pytest.approx(RATE * 2.0, abs=0.01)
     assert math.isclose(_turn(""), 0.0, abs_tol=1e-9)
+
+
+def test_the_doctor_takes_the_same_rates():
+    """The doctor's series takes the rates the core fuses: with gyro_noise stated, the gyro's z mean over the
+    run is the 0.5 rad/s it read (to its noise), and its stated noise is gyro_noise, not the -1."""
+    from fusiond.replay.run import run_samples
+
+    samples = []
+    wcov = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
+    for k in range(201):
+        t = 100.0 + k * 0.01
+        samples.append(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), UNKNOWN, (0.0, 0.0, RATE), UNKNOWN))
+        if k % 2 == 0:
+            samples.append(OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), wcov))
+    series = run_samples(samples, robot_config(imu="gyro_noise = 0.005", orientation="off")).doctor.series()
+    assert series.gyro_z and all(z == pytest.approx(RATE) for z in series.gyro_z)
+    assert series.gyro_stated_sigma == pytest.approx(0.005)

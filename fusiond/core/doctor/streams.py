@@ -210,7 +210,8 @@ class ImuStream:
 
         qn, level = self._attitude(q, oc_ok)
         self._yaw(t[level], idx[level], qn[level], oc8[level], series, final)
-        ok = gc_ok & np.isfinite(w).all(axis=1)
+        # a covariance marked absent (-1) with the user's gyro_noise stated: the core fuses those rates too
+        ok = (gc_ok | (self.gyro_noise[idx] == self.gyro_noise[idx])) & np.isfinite(w).all(axis=1)
         self._gyro(t[ok], idx[ok], w[ok], gc8[ok], series, final)
         ok = (idx == self.acc_index) & ac_ok & ~(a == 0.0).all(axis=1) & np.isfinite(a).all(axis=1)
         self._accel(t[ok], a[ok], qn[ok], level[ok], series, final)
