@@ -37,6 +37,7 @@ class RestWorld:
     imu_rate: float = 100.0
     gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gyro_bias_drift: float = 0.0  # rad/s per s: the z bias drifts steadily (temperature)
+    wheel_yaw_lost: bool = False  # the driver sends its yaw rate as exactly 0 with variance 0 (it has none)
     gyro_sigma: float = 0.002
     gyro_stated_sigma: float | None = None  # the covariance the driver states (None: the true sigma)
     ramp_s: float = 0.0  # > 0: each segment's speed is reached over this long (the accelerometer feels it)
@@ -62,7 +63,7 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
     x = y = yaw = 0.0
     out: list[OdomSample | ImuSample] = []
     ws, gs, os_ = w.wheel_sigma, w.gyro_sigma, w.orientation_sigma
-    odom_cov = tuple(ws**2 if i % 7 == 0 else 0.0 for i in range(36))
+    odom_cov = tuple(ws**2 if i % 7 == 0 and not (w.wheel_yaw_lost and i == 35) else 0.0 for i in range(36))
     next_odom = next_imu = 0.0
     t = 0.0
     v_prev = 0.0  # speed at the end of the previous segment
@@ -78,6 +79,8 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 moving = (speed != 0.0 or seg.yaw_rate != 0.0) and not seg.odom_reads_zero
                 v = speed + rng.normal(0, ws) if moving else 0.0
                 wz = seg.yaw_rate + rng.normal(0, ws) if moving else 0.0
+                if w.wheel_yaw_lost:
+                    wz = 0.0
                 out.append(OdomSample("wheel", T0 + t, (v, 0.0, 0.0), (0.0, 0.0, wz), odom_cov))
                 w.truth.append((T0 + t, x, y, yaw))
                 next_odom += 1.0 / w.odom_rate

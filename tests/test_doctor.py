@@ -133,6 +133,25 @@ def test_lost_yaw_rate_is_not_measured_rather_than_slip():
     assert all(v.level == "ok" for v in result.verdicts()), result.verdicts()
 
 
+def test_a_lost_yaw_rate_on_gentle_curves_is_not_measured_either():
+    """A car on long gentle curves (0.03 rad/s, under TURNING_RAD_S: QA4's highway) whose driver sends the
+    yaw rate as exactly 0 with variance 0: no turn is sharp enough for the in-turns test, but every moving
+    sample is an exact zero over a run whose gyro heading spans 0.03 x 40 s = 1.2 rad (over MIN_TURNED_RAD):
+    the same verdict, not 'state more noise'. With the yaw rate measured, nothing of the kind."""
+    from fusiond.core.doctor.twist import MIN_TURNED_RAD, TURNING_RAD_S
+
+    from .sim_rest import RestWorld, Segment
+    from .sim_rest import simulate as simulate_rest
+
+    assert 0.03 < TURNING_RAD_S and 0.03 * 40.0 > MIN_TURNED_RAD
+    segments = [Segment(2.0), Segment(40.0, speed=20.0, yaw_rate=0.03), Segment(40.0, speed=20.0, yaw_rate=-0.03)]
+    v = one(verdicts_of(make_config(), simulate_rest(RestWorld(segments, ramp_s=2.0, wheel_yaw_lost=True))),
+            "wheel", "yaw_rate")
+    assert v.level == "problem" and v.suggestion == "twist_measured = [true, true, true, true, true, false]", v
+    v = one(verdicts_of(make_config(), simulate_rest(RestWorld(segments, ramp_s=2.0))), "wheel", "yaw_rate")
+    assert v.key != "sensors.wheel.twist_measured", v
+
+
 def test_twist_measured_takes_the_not_measured_path_even_with_zero_covariance():
     cfg = make_config(extra_odom="twist_measured = [true, true, true, true, true, false]").sensors[0]
     inp = OdomPolicy(cfg).convert(OdomSample("wheel", 1.0, (1.0, 0.0, 0.0), (0.0, 0.0, 0.7), (0.0,) * 36))

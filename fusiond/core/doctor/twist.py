@@ -21,6 +21,8 @@ from .verdict import Verdict, sensor_key
 
 TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noise and bias)
 UNMEASURED_FRACTION = 0.5  # in turns, this share of exact zeros is a component the driver does not measure
+ALL_ZEROS_FRACTION = 0.99  # ... and in gentle turns only: (nearly) every moving sample an exact zero
+MIN_TURNED_RAD = 1.0  # ... over a run whose heading the gyro turned by at least this much
 SLIP_FRACTION = 0.2
 CHUNK = 4096  # twists noted before they are summed (bounded memory)
 
@@ -84,18 +86,26 @@ def unmeasured_yaw_rate(series: Series, odom: OdomSensor) -> Verdict | None:
     gyro_at = np.interp(to, tg, z) - bias
     turning = np.abs(gyro_at) > TURNING_RAD_S
     n = np.array(series.odom_n)[turning].sum()
-    if n < 20:
-        return None
     zeros = np.array(series.odom_zero_wz)[turning].sum()
+    where = f"where the gyro turns faster than {TURNING_RAD_S} rad/s"
+    if n < 20 or zeros / n < UNMEASURED_FRACTION:
+        # A vehicle that only turns gently (a highway's curves, under TURNING_RAD_S) never shows that. But no
+        # real yaw rate reads exactly 0 with variance 0 in every moving sample of a run whose heading the gyro
+        # turns by radians: that is a driver filling in a component it does not measure.
+        moving = ~np.array(series.odom_rest, dtype=bool)
+        n = np.array(series.odom_n)[moving].sum()
+        zeros = np.array(series.odom_zero_wz)[moving].sum()
+        turned = float(np.ptp(series.gyro_heading)) if len(series.gyro_heading) else 0.0
+        if n < 20 or zeros < ALL_ZEROS_FRACTION * n or turned < MIN_TURNED_RAD:
+            return None
+        where = f"while moving, over a run the gyro turned through {turned:.1f} rad"
     frac = zeros / n
-    if frac < UNMEASURED_FRACTION:
-        return None
     measured = ["true"] * 6
     measured[5] = "false"
     return Verdict(odom.name, "yaw_rate", "problem",
                    f"the wheel yaw rate reads exactly 0 with variance 0 in {100 * frac:.0f}% of the {int(n)} samples "
-                   f"where the gyro turns faster than {TURNING_RAD_S} rad/s: the driver does not measure it (not "
-                   "slip). Declare it not measured, so it is neither used nor checked",
+                   f"{where}: the driver does not measure it (not slip). Declare it not measured, so it is neither "
+                   "used nor checked",
                    sensor_key(odom.name, "twist_measured"), f"twist_measured = [{', '.join(measured)}]",
                    {"zero_fraction_in_turns": float(frac), "turning_samples": float(n)})
 
