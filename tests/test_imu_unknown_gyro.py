@@ -19,15 +19,23 @@ RATE = 0.5  # rad/s: the gyro's turn; the wheels say straight (yaw rate 0), so o
 UNKNOWN = (-1.0,) + (0.0,) * 8
 
 
-def _turn(cfg_imu: str) -> float:
-    """Yaw after 2 s of the IMU reading RATE about z with covariance -1, the wheels driving straight."""
-    core = FusionCore(robot_config(imu=cfg_imu, orientation="off"))
+def _samples() -> list:
+    """2 s of the IMU reading RATE about z with covariance -1 (100 Hz), the wheels driving straight (50 Hz)."""
     wcov = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
+    out = []
     for k in range(201):
         t = 100.0 + k * 0.01
-        core.ingest(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), UNKNOWN, (0.0, 0.0, RATE), UNKNOWN))
+        out.append(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), UNKNOWN, (0.0, 0.0, RATE), UNKNOWN))
         if k % 2 == 0:
-            core.ingest(OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), wcov))
+            out.append(OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), wcov))
+    return out
+
+
+def _turn(cfg_imu: str) -> float:
+    """Yaw after ``_samples``."""
+    core = FusionCore(robot_config(imu=cfg_imu, orientation="off"))
+    for s in _samples():
+        core.ingest(s)
     return rot.yaw(tuple(core.pose()[1][3:7].tolist()))
 
 
@@ -43,13 +51,6 @@ def test_the_doctor_takes_the_same_rates():
     run is the 0.5 rad/s it read (to its noise), and its stated noise is gyro_noise, not the -1."""
     from fusiond.replay.run import run_samples
 
-    samples = []
-    wcov = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
-    for k in range(201):
-        t = 100.0 + k * 0.01
-        samples.append(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), UNKNOWN, (0.0, 0.0, RATE), UNKNOWN))
-        if k % 2 == 0:
-            samples.append(OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0), wcov))
-    series = run_samples(samples, robot_config(imu="gyro_noise = 0.005", orientation="off")).doctor.series()
+    series = run_samples(_samples(), robot_config(imu="gyro_noise = 0.005", orientation="off")).doctor.series()
     assert series.gyro_z and all(z == pytest.approx(RATE) for z in series.gyro_z)
     assert series.gyro_stated_sigma == pytest.approx(0.005)

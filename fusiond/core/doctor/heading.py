@@ -46,6 +46,22 @@ def timed(at: list[float], values: list[float]) -> tuple[np.ndarray, np.ndarray]
     return t[order], v[order]
 
 
+def imu_vs_gyro(series: Series) -> tuple[float, float] | None:
+    """(wander, drift) of the IMU's own yaw against the integrated raw gyro (``detrended_rms`` of their
+    difference, the gyro heading as the scale shape, never across either's silences), compared at the
+    instants each holds at; None when they overlap in fewer than 10 bins. The drift is the yaw's own less
+    the gyro's bias: yaw - gyro heading drifts at r - b."""
+    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
+    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
+    if len(ti) < 10 or len(tg) < 10:
+        return None
+    m = (ti >= tg[0]) & (ti <= tg[-1])
+    if m.sum() < 10:
+        return None
+    gyro_at = np.interp(ti[m], tg, hg)
+    return detrended_rms(ti[m], yi[m] - gyro_at, gyro_at, [*series.gyro_breaks, *series.imu_breaks])
+
+
 def segments(t: np.ndarray, breaks) -> list[np.ndarray]:
     """Index ranges of t (sorted) between the breaks: data on both sides of a break is never fitted together."""
     cuts = np.searchsorted(t, np.asarray(sorted(set(breaks)), dtype=float), side="left")
@@ -128,29 +144,26 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
     notes: list[str] = []
     wander = math.nan
     culprit_gyro = False
-    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-    if len(tg) >= 10:
-        m = (ti >= tg[0]) & (ti <= tg[-1])
-        if m.sum() >= 10:
-            gyro_at = np.interp(ti[m], tg, hg)
-            imu_gyro_breaks = [*series.gyro_breaks, *series.imu_breaks]
-            wander, drift = detrended_rms(ti[m], yi[m] - gyro_at, gyro_at, imu_gyro_breaks)
-            evidence["imu_vs_gyro_wander_rad"] = wander
-            if math.isfinite(drift):
-                evidence["imu_vs_gyro_drift_rad_s"] = drift
-            if len(series.odom_t) >= 10 and np.ptp(series.odom_heading) > 0.0:
-                to, ho = timed(series.odom_heading_at, series.odom_heading)
-                mo = (to >= tg[0]) & (to <= tg[-1])
-                if mo.sum() >= 10:
-                    g = np.interp(to[mo], tg, hg)
-                    wheel_vs_gyro, _ = detrended_rms(to[mo], ho[mo] - g, g, [*series.odom_breaks, *series.gyro_breaks])
-                    wi = np.interp(to[mo], ti, yi)
-                    wheel_vs_imu, _ = detrended_rms(to[mo], ho[mo] - wi, wi, [*series.odom_breaks, *series.imu_breaks])
-                    evidence["wheel_vs_gyro_wander_rad"] = wheel_vs_gyro
-                    if math.isfinite(wheel_vs_gyro) and wheel_vs_gyro < WANDER_RAD:
-                        notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
-                    elif math.isfinite(wheel_vs_imu) and wheel_vs_imu < WANDER_RAD <= wander:
-                        culprit_gyro = True
+    compared = imu_vs_gyro(series)
+    if compared is not None:
+        wander, drift = compared
+        evidence["imu_vs_gyro_wander_rad"] = wander
+        if math.isfinite(drift):
+            evidence["imu_vs_gyro_drift_rad_s"] = drift
+        if len(series.odom_t) >= 10 and np.ptp(series.odom_heading) > 0.0:
+            tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
+            to, ho = timed(series.odom_heading_at, series.odom_heading)
+            mo = (to >= tg[0]) & (to <= tg[-1])
+            if mo.sum() >= 10:
+                g = np.interp(to[mo], tg, hg)
+                wheel_vs_gyro, _ = detrended_rms(to[mo], ho[mo] - g, g, [*series.odom_breaks, *series.gyro_breaks])
+                wi = np.interp(to[mo], ti, yi)
+                wheel_vs_imu, _ = detrended_rms(to[mo], ho[mo] - wi, wi, [*series.odom_breaks, *series.imu_breaks])
+                evidence["wheel_vs_gyro_wander_rad"] = wheel_vs_gyro
+                if math.isfinite(wheel_vs_gyro) and wheel_vs_gyro < WANDER_RAD:
+                    notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
+                elif math.isfinite(wheel_vs_imu) and wheel_vs_imu < WANDER_RAD <= wander:
+                    culprit_gyro = True
     offset = math.nan
     track_wander = math.nan
     if gps is not None and len(series.gps_t) >= 5:

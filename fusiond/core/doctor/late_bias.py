@@ -23,11 +23,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ...config import Config, GpsSensor, ImuSensor, PoseSensor
 from .gyro import quiet_episodes
-from .heading import WANDER_RAD, detrended_rms, timed
+from .heading import WANDER_RAD, imu_vs_gyro
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, sensor_key
@@ -69,32 +67,26 @@ def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: Channel
            "track with it; nothing configured holds the heading (no GPS or pose, the IMU's yaw not fused). The "
            "bias update turns the heading back as far as the filter's correlations allow; the track driven "
            "meanwhile stays bent")
-    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-    if len(ti) >= 10 and len(tg) >= 10:
-        m = (ti >= tg[0]) & (ti <= tg[-1])
-        if m.sum() >= 10:
-            gyro_at = np.interp(ti[m], tg, hg)
-            wander, slope = detrended_rms(ti[m], yi[m] - gyro_at, gyro_at, [*series.gyro_breaks, *series.imu_breaks])
-            if math.isfinite(wander) and math.isfinite(slope):
-                # yaw - raw gyro heading drifts at r - b: the IMU's own drift against the bias-corrected gyro is r
-                rate = slope + b
-                run = t_end - t_start
-                late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured
-                relative_cost = abs(rate) * run / 2.0  # ... with the IMU's yaw fused as relative
-                evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
-                                 "mean_heading_error_rad": late_cost, "relative_mean_heading_error_rad": relative_cost})
-                if wander < WANDER_RAD and relative_cost < RELATIVE_MARGIN * late_cost:
-                    return Verdict(imu.name, "heading", "warn",
-                                   msg + f". The IMU's own yaw follows the bias-corrected gyro to {wander:.3f} rad rms "
-                                   f"and drifts {rate:+.5f} rad/s: fused as a relative yaw it holds the heading from "
-                                   f"the start, off by ~{relative_cost:.3f} rad on average over the run against "
-                                   f"~{late_cost:.3f} now", sensor_key(imu.name, "orientation"),
-                                   'orientation = "relative"', evidence)
-                msg += (". The IMU's own yaw would not do better: it "
-                        + (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD
-                           else f"drifts {rate:+.5f} rad/s, ~{relative_cost:.3f} rad off on average over the run "
-                           f"against ~{late_cost:.3f} now"))
+    wander, slope = imu_vs_gyro(series) or (math.nan, math.nan)
+    if math.isfinite(wander) and math.isfinite(slope):
+        # yaw - raw gyro heading drifts at r - b: the IMU's own drift against the bias-corrected gyro is r
+        rate = slope + b
+        run = t_end - t_start
+        late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured
+        relative_cost = abs(rate) * run / 2.0  # ... with the IMU's yaw fused as relative
+        evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
+                         "mean_heading_error_rad": late_cost, "relative_mean_heading_error_rad": relative_cost})
+        if wander < WANDER_RAD and relative_cost < RELATIVE_MARGIN * late_cost:
+            return Verdict(imu.name, "heading", "warn",
+                           msg + f". The IMU's own yaw follows the bias-corrected gyro to {wander:.3f} rad rms "
+                           f"and drifts {rate:+.5f} rad/s: fused as a relative yaw it holds the heading from "
+                           f"the start, off by ~{relative_cost:.3f} rad on average over the run against "
+                           f"~{late_cost:.3f} now", sensor_key(imu.name, "orientation"),
+                           'orientation = "relative"', evidence)
+        msg += (". The IMU's own yaw would not do better: it "
+                + (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD
+                   else f"drifts {rate:+.5f} rad/s, ~{relative_cost:.3f} rad off on average over the run "
+                   f"against ~{late_cost:.3f} now"))
     return Verdict(imu.name, "heading", "warn", msg + ". Start recordings with the vehicle at rest for at least "
                    f"standstill_s ({cfg.filter.standstill_s:g} s) so that the bias is learned before it drives",
                    evidence=evidence)
