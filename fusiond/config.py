@@ -126,6 +126,8 @@ class ImuSensor(_Sensor, tag="imu"):
     orientation_min_sigma: float = 0.001  # floor, rad
     orientation_max_sigma: float = 3.0  # above: "not measured"
     gyro_min_sigma: float = 0.0005  # floor, rad/s
+    # highest rate (Hz) at which the orientation is fused (the gyro is taken at every sample); 0: every sample
+    orientation_rate_hz: float = 100.0
     gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
     tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer
     gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics
@@ -273,6 +275,8 @@ def validate(cfg: Config) -> Config:
     for i, s in enumerate(cfg.sensors):
         if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
             raise ConfigError(f"sensors[{i}].gyro_scale_estimation: needs angular_velocity = true")
+        if isinstance(s, ImuSensor) and not (0.0 <= s.orientation_rate_hz < math.inf):
+            raise ConfigError(f"sensors[{i}].orientation_rate_hz: must be >= 0 and finite (0: every sample)")
         if isinstance(s, GpsSensor):
             if s.datum is not None and not (-90.0 <= s.datum[0] <= 90.0 and -180.0 <= s.datum[1] <= 180.0):
                 raise ConfigError(f"sensors[{i}].datum: latitude must be in [-90, 90] and longitude in [-180, 180]")

@@ -64,7 +64,8 @@ def expected_records(cfg, messages: list[tuple[str, bytes]]) -> Counter:
 def test_every_record_arrives_exactly_once_including_those_flushed_at_stop(sessions, batch):  # noqa: F811
     dsession, client = sessions
     cfg = loopback_daemon_config(output=f"diagnostics_batch_s = {batch}",
-                                 imu='orientation = "roll_pitch"\nangular_velocity = true')
+                                 imu='orientation = "roll_pitch"\nangular_velocity = true\n'
+                                     'orientation_rate_hz = 0')  # a record per sample: many to batch
     messages = stream()
     expected = expected_records(cfg, messages)
     assert sum(expected.values()) >= N_IMU  # every IMU sample updates at least its roll/pitch channel

@@ -301,6 +301,11 @@ def summary(result: ReplayResult) -> str:
             f"sensor {s.name:<10} received={st.received} applied={st.applied} late={st.late} "
             f"rejected={st.rejected} dropped: {dropped}"
         )
+    for s, model in zip(core.sensors, core.models):
+        thinned = getattr(model, "thinned", 0)
+        if thinned:
+            out.append(f"sensor {s.name:<10} orientation of {thinned} sample(s) not fused: above "
+                       f"orientation_rate_hz = {s.orientation_rate_hz:g} (their gyro was)")
     bias = core.gyro_bias
     if bias is not None:
         out.append("gyro bias   [" + ", ".join(f"{b:+.5f}" for b in bias) + "] rad/s")

@@ -39,6 +39,7 @@ G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer re
 GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
 GRAVITY_AVERAGE_S = 0.1  # s of specific force averaged into one gravity roll/pitch update
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
+ORIENTATION_BURST = 3.0  # samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``)
 YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
 
 
@@ -51,6 +52,7 @@ class ImuOwn(msgspec.Struct, frozen=True, gc=False):
     adaptive: tuple[float, float, int] = (1.0, 0.0, 0)  # R scale of the orientation, window NIS/dof sum, count
     bias: BiasLearning = BiasLearning()  # the standstill windows of the gyro-bias learning
     gravity: tuple | None = None  # (start stamp, samples, sums of x, y, z) of the specific force being averaged
+    orientation_credit: tuple[float, float] | None = None  # (credit, stamp): ``orientation_rate_hz``'s bucket
 
 
 @dataclass(slots=True)
@@ -205,6 +207,8 @@ class ImuModel(SensorModel):
         self._offset_index = ctx.layout.nominal["yaw_offset"].start if self.offset else -1
         self.learns_bias = cfg.angular_velocity and ctx.layout.has("gyro_bias")
         self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
+        self._period = 1.0 / cfg.orientation_rate_hz if cfg.orientation_rate_hz > 0.0 else 0.0
+        self.thinned = 0  # orientations not fused for ``orientation_rate_hz`` (the gyro of the sample is)
 
     @property
     def gives_tilt(self) -> bool:
@@ -222,7 +226,7 @@ class ImuModel(SensorModel):
             s.gyro, s.gyro_cov, s.gyro_last = inp.gyro, inp.gyro_cov, (self.index, stamp)
             if self.learns_bias:
                 records.extend(learn_bias_at_rest(self, s, inp, stamp, emit, late))
-        if inp.rpy is not None and inp.rows:
+        if inp.rpy is not None and inp.rows and self._orientation_due(s, stamp, emit):
             rpy, rows = inp.rpy, inp.rows
             if self.absolute and self._fixed_yaw:
                 rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] + self._fixed_yaw))
@@ -247,6 +251,35 @@ class ImuModel(SensorModel):
         if inp.accel is not None:
             records.extend(self._tilt_from_gravity(s, inp.accel, stamp, emit, late))
         return records
+
+    def _orientation_due(self, s: "FilterState", stamp: float, emit: bool) -> bool:
+        """Is this sample's orientation fused, at most ``orientation_rate_hz`` (f) on average?
+
+        An AHRS's orientation at hundreds of Hz is the output of one filter: its errors are alike from
+        sample to sample, so fusing each as an independent measurement makes the filter sure of roll,
+        pitch (and yaw) far beyond what the sensor knows, and costs an update each (at 1 kHz most of
+        the core's time). A token bucket: credit accrues at f, up to ORIENTATION_BURST samples' worth,
+        and a sample finding one credit is fused and spends it. So a faster IMU is fused at f on
+        average; an IMU at f loses no sample however its stamps jitter (short of reordering them,
+        its credit stays within one sample of where it settled, never empty nor overflowing); after
+        a pause up to ORIENTATION_BURST samples are fused at once. The bucket lives in the IMU's state
+        slice, so a late sample re-applied from the history thins exactly as the first time.
+        """
+        if self._period == 0.0 or not s.attitude_ready:
+            return True
+        own: ImuOwn = s.own[self.index]
+        bucket = own.orientation_credit
+        credit = ORIENTATION_BURST if bucket is None else min(
+            ORIENTATION_BURST, bucket[0] + max(stamp - bucket[1], 0.0) * self.cfg.orientation_rate_hz)
+        due = credit >= 1.0
+        s.own[self.index] = msgspec.structs.replace(own, orientation_credit=(credit - 1.0 if due else credit, stamp))
+        if not due and emit:
+            self.thinned += 1
+            if self.thinned == 1:
+                log.info("orientation_thinned", sensor=self.cfg.name, rate_hz=self.cfg.orientation_rate_hz,
+                         hint="the IMU is faster than orientation_rate_hz: its orientation is fused at that "
+                              "rate, its gyro at every sample (orientation_rate_hz = 0 fuses every sample)")
+        return due
 
     def _fuse_orientation(self, s: "FilterState", rpy, cov, rows: tuple[int, ...], stamp: float, emit: bool,
                           late: bool) -> list[DiagnosticsRecord]:
