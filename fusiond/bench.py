@@ -1,7 +1,8 @@
 """`fusiond bench`: the numbers the closing notes report, measured the same way each time.
 
 - estimator: predict + roll/pitch update of the gyro-bias model, us per step
-  (min over repeats: the machine's quietest moment, not its average);
+  (min over repeats: the machine's quietest moment, not its average), with the compiled
+  kernels when built and, beside it, on the numpy reference path;
 - sensors: us per update of each issue-7 sensor (GPS position, absolute pose,
   pose delta), as estimator calls and as FusionCore.ingest on a synthetic
   odom/IMU/GPS/pose stream, and the core's us per message with and without them;
@@ -81,7 +82,17 @@ def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
     def best(fn) -> float:
         return _best_us(fn, number, repeat)
 
-    return {"predict_us": best(predict_only), "update_us": best(update_only), "predict_update_us": best(step)}
+    from .estimator import kernels
+
+    out = {"kernels_compiled": float(kernels.active() is not None), "predict_us": best(predict_only),
+           "update_us": best(update_only), "predict_update_us": best(step)}
+    if kernels.active() is not None:  # the numpy reference path of the same step, for the before/after
+        kernels.use("numpy")
+        try:
+            out["predict_update_numpy_us"] = best(step)
+        finally:
+            kernels.use("auto")
+    return out
 
 
 def tight_step(dt: float = 0.01) -> Callable[[], None]:

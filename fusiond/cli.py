@@ -7,6 +7,7 @@ nor `run` for matplotlib.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -459,6 +460,19 @@ def main(argv: list[str] | None = None) -> int:
     from .logs import configure
 
     configure(args.log_level or getattr(args, "default_log_level", "warning"))
+    # The estimator's linear algebra: compiled when built (the default, "auto"), or the numpy
+    # reference path (FUSIOND_KERNELS=numpy; estimator/kernels.py). Read here, not in the estimator
+    # (no I/O there), and only when set: the commands that do not fuse need not import numpy.
+    choice = os.environ.get("FUSIOND_KERNELS")
+    if choice:
+        from .errors import EstimatorError
+        from .estimator import kernels
+
+        try:
+            kernels.use(choice)
+        except EstimatorError as e:
+            print(f"fusiond: FUSIOND_KERNELS={choice}: {e}", file=sys.stderr)
+            return 2
     return args.func(args)
 
 

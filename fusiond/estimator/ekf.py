@@ -18,6 +18,11 @@ negative variance clipped.
 Symmetrising is hygiene against rounding, not correctness (the gain uses P H^T
 only): ``cap_covariance``, called once per second of message time by the core, does
 it with the caps.
+
+Compiled kernels. When ``fusiond.estimator._kernels`` is built (``kernels.py``), propagate and
+update each run as one C call: the same maths on the same arrays, P written into the spare
+buffer, the update's boxplus done in the same call for the usual layout. The numpy code below
+is the reference path and runs otherwise; tests hold the two to the same estimates.
 """
 
 from __future__ import annotations
@@ -26,8 +31,10 @@ import math
 
 import msgspec
 import numpy as np
+from . import kernels
 from . import rotation as rot
 from .cholesky import gain_rows
+from ..errors import EstimatorError
 from .state import StateLayout
 
 
@@ -58,11 +65,31 @@ class ErrorStateEKF:
         self._joseph: np.ndarray | None = None
         self._spare: np.ndarray | None = None  # the next P's buffer (never self.P); allocated on first use
         self._ws = _Workspace(layout.error_dim)  # scratch shared with copies (single-threaded use per core)
+        # the compiled kernels take layouts up to their fixed size; boxplus mode 1 (in the kernel) for
+        # the usual layout, whose blocks after the pose are all additive, 0 (dx back to Python) otherwise
+        self._fits = layout.error_dim <= _MAX_N
+        self._boxplus_mode = 1 if layout._additive_tail else 0
 
     # -- propagation -------------------------------------------------------
     def propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
         """Accept a propagated state; False if the covariance had to be reset."""
         self.x = x_new
+        k = kernels.active()
+        if k is not None and self._fits:
+            P_new = self._spare
+            if P_new is None:
+                P_new = self._spare = np.empty(self.P.shape)
+            try:
+                finite = k.propagate(F, self.P, Q, P_new)
+            except BufferError:  # an array not C-contiguous float64: the numpy path takes it
+                pass
+            else:
+                if not finite:
+                    self.P = self.layout.initial_covariance()
+                    self.resets += 1
+                    return False
+                self._spare, self.P = self.P, P_new
+                return True
         # Two fresh products: measured faster than np.dot(..., out=) into the workspace at these
         # sizes (the out= path's checks cost more than a 9x9 allocation). ndarray.dot is np.dot
         # without its Python-level dispatch (~0.2 us a call here), so the products use the method.
@@ -92,6 +119,12 @@ class ErrorStateEKF:
         ``hold_heading`` so that its correction about world x/y of a tilted body leaves the
         yaw exactly where it was (``state.hold_heading_of``).
         """
+        k = kernels.active()
+        if k is not None and self._fits and len(y) <= _MAX_M:
+            try:
+                return self._update_compiled(k, y, H, R, threshold, mask, hold_heading)
+            except BufferError:  # an array not C-contiguous float64: the numpy path takes it
+                pass
         P = self.P
         HP = H.dot(P)  # H P = (P H^T)^T: P is symmetric
         S = HP.dot(H.T)
@@ -136,6 +169,37 @@ class ErrorStateEKF:
         self.layout.boxplus(self.x, dx, hold_heading)
         reset = not self._store(P_new)
         return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
+
+    def _update_compiled(self, k, y: np.ndarray, H: np.ndarray, R: np.ndarray, threshold: float,
+                         mask: np.ndarray | None, hold_heading: bool) -> UpdateResult:
+        """``update`` as one call of the compiled kernel (the same maths, see _kernels.c)."""
+        P_new = self._spare
+        if P_new is None:
+            P_new = self._spare = np.empty(self.P.shape)
+        keep = joseph = None
+        if mask is not None:
+            if mask is not self._mask:
+                self._set_mask(mask)
+            keep, joseph = self._keep, self._joseph
+        mode = self._boxplus_mode
+        target = self.x if mode else self._ws.dx()
+        if mode and hold_heading:
+            mode = 2
+        try:
+            status, nis, s_diag = k.update(self.P, H, R, y, threshold * threshold, keep, joseph, P_new, target, mode)
+        except ArithmeticError:
+            raise EstimatorError("quaternion has zero or non-finite norm") from None
+        if status == _GATED:
+            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
+        if status == _SINGULAR:
+            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
+        if not mode:
+            self.layout.boxplus(self.x, target, hold_heading)
+        if status == _NEEDS_CHECK:  # a negative or non-finite variance: the reference path's checks
+            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False,
+                                covariance_reset=not self._store(P_new))
+        self._spare, self.P = self.P, P_new
+        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False)
 
     def _set_mask(self, mask: np.ndarray) -> None:
         """The mask as floats and the Joseph weights J, made once per mask array: the core holds one
@@ -301,6 +365,7 @@ class ErrorStateEKF:
             np.copyto(c.x, self.x)
             np.copyto(c.P, self.P)
         c.layout = self.layout
+        c._fits, c._boxplus_mode = self._fits, self._boxplus_mode
         c.resets = self.resets
         c._mask, c._keep, c._joseph = self._mask, self._keep, self._joseph
         c._ws = self._ws
@@ -311,19 +376,28 @@ class ErrorStateEKF:
 
 
 _MASKS_KEPT = 8  # distinct masks held by a workspace (the core uses at most three)
+# the compiled kernels' fixed sizes and status codes (_kernels.c)
+_MAX_N, _MAX_M, _GATED, _SINGULAR, _NEEDS_CHECK = 48, 12, 1, 2, 3
 
 
 class _Workspace:
     """Per-dimension scratch for the products of one step (never holds state between calls)."""
 
-    __slots__ = ("n", "_gains", "masks")
+    __slots__ = ("n", "_gains", "masks", "_dx")
 
     def __init__(self, n: int) -> None:
         self.n = n
         self._gains: dict[int, _GainRows] = {}
+        self._dx: np.ndarray | None = None
         # id(mask) -> (mask, its floats, its Joseph weights); the mask itself is kept so that its id
         # cannot be reused by another array while the entry lives
         self.masks: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def dx(self) -> np.ndarray:
+        """The compiled update's correction, for layouts whose boxplus runs in Python."""
+        if self._dx is None:
+            self._dx = np.empty(self.n)
+        return self._dx
 
     def gain(self, m: int) -> "_GainRows":
         g = self._gains.get(m)

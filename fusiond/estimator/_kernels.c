@@ -1,0 +1,486 @@
+/*
+ * fusiond.estimator._kernels: the error-state EKF's fixed-size linear algebra, compiled.
+ *
+ * Why C and not numba (issue 13). At the 9-15 dimensional states fusiond runs, a numpy call
+ * costs more in dispatch than in arithmetic, so the propagation P' = F P F^T + Q and the masked
+ * Kalman update were ~20 us of Python and numpy calls per step. numba compiles the same loops,
+ * but importing it and loading its cache costs 0.4 s + ~0.85 s per process (measured on this
+ * project's 2-core machine), more than a whole `fusiond replay` of the Jackal bag takes. This
+ * module imports in well under a millisecond and needs nothing but the C compiler that
+ * `pip install` already uses; the build is optional (setup.py), and without it the estimator
+ * runs the numpy reference path in ekf.py, which tests hold equal to this one.
+ *
+ * What is here is linear algebra only, with no model in it: the models (motion, measurements)
+ * stay in Python. The maths is exactly that of ErrorStateEKF.propagate / update (ekf.py, whose
+ * docstrings derive it) and of StateLayout.boxplus for the layout where every block after the
+ * pose is additive:
+ *
+ *   propagate:  P' = (F P) F^T + Q, finite iff its diagonal sums to a finite number.
+ *   update:     HP = H P, S = HP H^T + R = L L^T (Cholesky), z = L^-1 y, NIS = z.z,
+ *               W = L^-1 HP, dx = HP^T L^-T z, P' = P - W^T W; with a mask (Schmidt update),
+ *               dx *= keep and W^T W *= J elementwise (the Joseph form's closed form); then
+ *               x [+]= dx: p += dp, q = normalize(Exp(dtheta) q), x_i += dx_(i-1) after the
+ *               quaternion, and with hold_heading the yaw put back (state.hold_heading_of).
+ *
+ * The scalar expressions of the quaternion code are written in the same order as rotation.py's
+ * (and compiled with -ffp-contract=off, setup.py), so they give the same doubles; the matrix
+ * products differ from OpenBLAS's only in summation order (a few ulps).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#define MAX_N 48 /* error dimension handled here; larger layouts take the numpy path */
+#define MAX_M 12 /* measurement rows */
+
+/* Status codes of update(), mirrored in ekf.py. */
+enum { APPLIED = 0, GATED = 1, SINGULAR = 2, NEEDS_CHECK = 3 };
+
+/* -- buffers --------------------------------------------------------------------------------- */
+
+/* A C-contiguous float64 buffer of exactly `count` items (or any count when count < 0). An array
+ * that cannot be read so (another dtype or order) is a BufferError, which ekf.py answers with its
+ * numpy path; a wrong size is a ValueError (a caller's bug). */
+static int get_doubles(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t count, const char *what) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_BufferError, "%s must be a C-contiguous%s float64 array", what,
+                     writable ? " writable" : "");
+        return -1;
+    }
+    if (view->itemsize != 8 || view->format == NULL || strcmp(view->format, "d") != 0) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_BufferError, "%s must be a C-contiguous float64 array", what);
+        return -1;
+    }
+    if (count >= 0 && view->len != count * 8) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_ValueError, "%s has %zd values, expected %zd", what, view->len / 8, count);
+        return -1;
+    }
+    return 0;
+}
+
+/* -- quaternions (rotation.py, same expressions) ------------------------------------------------ */
+
+static int normalize4(double *q) {
+    double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (!(n > 0.0) || !isfinite(n)) {
+        return -1;
+    }
+    q[0] = q[0] / n;
+    q[1] = q[1] / n;
+    q[2] = q[2] / n;
+    q[3] = q[3] / n;
+    return 0;
+}
+
+/* rotation.exp */
+static int quat_exp(double vx, double vy, double vz, double *out) {
+    double angle = sqrt(vx * vx + vy * vy + vz * vz);
+    if (angle < 1e-8) {
+        out[0] = 0.5 * vx;
+        out[1] = 0.5 * vy;
+        out[2] = 0.5 * vz;
+        out[3] = 1.0 - angle * angle / 8.0;
+        return normalize4(out);
+    }
+    double s = sin(0.5 * angle) / angle;
+    out[0] = vx * s;
+    out[1] = vy * s;
+    out[2] = vz * s;
+    out[3] = cos(0.5 * angle);
+    return 0;
+}
+
+/* rotation.mul */
+static void quat_mul(const double *a, const double *b, double *out) {
+    double ax = a[0], ay = a[1], az = a[2], aw = a[3];
+    double bx = b[0], by = b[1], bz = b[2], bw = b[3];
+    out[0] = aw * bx + ax * bw + ay * bz - az * by;
+    out[1] = aw * by - ax * bz + ay * bw + az * bx;
+    out[2] = aw * bz + ax * by - ay * bx + az * bw;
+    out[3] = aw * bw - ax * bx - ay * by - az * bz;
+}
+
+/* rotation._mul_unit: normalize(mul(a, b)) */
+static int mul_unit(const double *a, const double *b, double *out) {
+    quat_mul(a, b, out);
+    return normalize4(out);
+}
+
+static double quat_yaw(const double *q) {
+    double x = q[0], y = q[1], z = q[2], w = q[3];
+    return atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z));
+}
+
+/* rotation.wrap: (angle + pi) % 2pi - pi with Python's float modulo (the sign of the divisor) */
+static double wrap_angle(double angle) {
+    const double two_pi = 2.0 * M_PI;
+    double a = angle + M_PI;
+    double mod = fmod(a, two_pi);
+    if (mod != 0.0) {
+        if (mod < 0.0) {
+            mod += two_pi;
+        }
+    } else {
+        mod = copysign(0.0, two_pi);
+    }
+    return mod - M_PI;
+}
+
+/* StateLayout.boxplus with an additive tail; hold_heading as state.hold_heading_of. x is written only
+ * once everything is computed, so a failure (a zero quaternion) leaves it as it was, as in Python. */
+static int boxplus(double *x, Py_ssize_t nx, const double *dx, int hold_heading) {
+    double heading = 0.0, turned[4], dq[4];
+    if (hold_heading) {
+        heading = quat_yaw(x + 3);
+    }
+    if (quat_exp(dx[3], dx[4], dx[5], dq) < 0 || mul_unit(dq, x + 3, turned) < 0) {
+        return -1;
+    }
+    if (hold_heading) {
+        double back[4]; /* hold_heading_of: mul(exp(0, 0, wrap(heading - yaw(q))), q), not renormalised */
+        if (quat_exp(0.0, 0.0, wrap_angle(heading - quat_yaw(turned)), dq) < 0) {
+            return -1;
+        }
+        quat_mul(dq, turned, back);
+        memcpy(turned, back, sizeof(back));
+    }
+    x[0] += dx[0];
+    x[1] += dx[1];
+    x[2] += dx[2];
+    memcpy(x + 3, turned, sizeof(turned));
+    for (Py_ssize_t i = 7; i < nx; i++) {
+        x[i] += dx[i - 1];
+    }
+    return 0;
+}
+
+/* -- propagate ------------------------------------------------------------------------------- */
+
+PyDoc_STRVAR(propagate_doc,
+"propagate(F, P, Q, out) -> bool\n\n"
+"out = F P F^T + Q for n x n float64 arrays (out must not be P); True iff its diagonal is finite.");
+
+static PyObject *propagate(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "propagate(F, P, Q, out) takes 4 arguments");
+        return NULL;
+    }
+    Py_buffer vf, vp, vq, vo;
+    if (get_doubles(args[1], &vp, 0, -1, "P") < 0) {
+        return NULL;
+    }
+    Py_ssize_t nn = vp.len / 8, n = (Py_ssize_t)(sqrt((double)nn) + 0.5);
+    if (n * n != nn || n > MAX_N) {
+        PyBuffer_Release(&vp);
+        PyErr_Format(PyExc_ValueError, "P must be square with at most %d rows", MAX_N);
+        return NULL;
+    }
+    if (get_doubles(args[0], &vf, 0, nn, "F") < 0) {
+        PyBuffer_Release(&vp);
+        return NULL;
+    }
+    if (get_doubles(args[2], &vq, 0, nn, "Q") < 0) {
+        PyBuffer_Release(&vp);
+        PyBuffer_Release(&vf);
+        return NULL;
+    }
+    if (get_doubles(args[3], &vo, 1, nn, "out") < 0) {
+        PyBuffer_Release(&vp);
+        PyBuffer_Release(&vf);
+        PyBuffer_Release(&vq);
+        return NULL;
+    }
+    const double *F = vf.buf, *P = vp.buf, *Q = vq.buf;
+    double *out = vo.buf;
+    double FP[MAX_N * MAX_N];
+    /* FP = F P, skipping F's zeros (F is the identity but for a few blocks) */
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double *row = FP + i * n;
+        memset(row, 0, (size_t)n * sizeof(double));
+        for (Py_ssize_t k = 0; k < n; k++) {
+            double f = F[i * n + k];
+            if (f == 0.0) {
+                continue;
+            }
+            const double *pk = P + k * n;
+            for (Py_ssize_t j = 0; j < n; j++) {
+                row[j] += f * pk[j];
+            }
+        }
+    }
+    /* out = FP F^T + Q: out_ij = sum_k FP_ik F_jk */
+    double trace = 0.0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double *fpi = FP + i * n;
+        for (Py_ssize_t j = 0; j < n; j++) {
+            const double *fj = F + j * n;
+            double acc = 0.0;
+            for (Py_ssize_t k = 0; k < n; k++) {
+                acc += fpi[k] * fj[k];
+            }
+            out[i * n + j] = acc + Q[i * n + j];
+        }
+        trace += out[i * n + i];
+    }
+    PyBuffer_Release(&vf);
+    PyBuffer_Release(&vp);
+    PyBuffer_Release(&vq);
+    PyBuffer_Release(&vo);
+    return PyBool_FromLong(isfinite(trace));
+}
+
+/* -- update ---------------------------------------------------------------------------------- */
+
+PyDoc_STRVAR(update_doc,
+"update(P, H, R, y, threshold2, keep, joseph, out, x, boxplus) -> (status, nis, innovation_var)\n\n"
+"The Kalman update of ErrorStateEKF.update: P (n x n), H (m x n), R (m x m), y (m). threshold2 is\n"
+"the squared Mahalanobis gate; keep (n) and joseph (n x n) the mask's weights, or None. P - K S K^T\n"
+"is written into out; x (the nominal state) is moved by dx in place when boxplus is 1 (2: also\n"
+"holding the heading), and dx itself written into x when boxplus is 0. status: 0 applied with a\n"
+"non-negative finite diagonal, 1 gated, 2 S not positive definite (or NIS not finite), 3 applied\n"
+"but the diagonal needs ekf.py's checks. innovation_var is the diagonal of S as a list.");
+
+static PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError, "update takes 10 arguments");
+        return NULL;
+    }
+    double threshold2 = PyFloat_AsDouble(args[4]);
+    long mode = PyLong_AsLong(args[9]);
+    if ((threshold2 == -1.0 || mode == -1) && PyErr_Occurred()) {
+        return NULL;
+    }
+    int masked = args[5] != Py_None;
+    /* every buffer is acquired (and checked) before anything is written */
+    enum { BP, BY, BH, BR, BK, BJ, BO, BX, NBUF };
+    Py_buffer view[NBUF];
+    int got[NBUF] = {0};
+    PyObject *result = NULL, *s_diag = NULL;
+    Py_ssize_t n = 0, m = 0;
+#define ACQUIRE(slot, obj, writable, count, what)                                  \
+    do {                                                                           \
+        if (get_doubles((obj), &view[slot], (writable), (count), (what)) < 0) {    \
+            goto done;                                                             \
+        }                                                                          \
+        got[slot] = 1;                                                             \
+    } while (0)
+
+    ACQUIRE(BP, args[0], 0, -1, "P");
+    n = (Py_ssize_t)(sqrt((double)(view[BP].len / 8)) + 0.5);
+    if (n * n * 8 != view[BP].len || n > MAX_N) {
+        PyErr_Format(PyExc_ValueError, "P must be square with at most %d rows", MAX_N);
+        goto done;
+    }
+    ACQUIRE(BY, args[3], 0, -1, "y");
+    m = view[BY].len / 8;
+    if (m < 1 || m > MAX_M) {
+        PyErr_Format(PyExc_ValueError, "y must have 1 to %d rows", MAX_M);
+        goto done;
+    }
+    ACQUIRE(BH, args[1], 0, m * n, "H");
+    ACQUIRE(BR, args[2], 0, m * m, "R");
+    if (masked) {
+        ACQUIRE(BK, args[5], 0, n, "keep");
+        ACQUIRE(BJ, args[6], 0, n * n, "joseph");
+    }
+    ACQUIRE(BO, args[7], 1, n * n, "out");
+    ACQUIRE(BX, args[8], 1, mode == 0 ? n : n + 1, "x");
+#undef ACQUIRE
+    {
+        const double *P = view[BP].buf, *H = view[BH].buf, *R = view[BR].buf, *y = view[BY].buf;
+        const double *keep = masked ? view[BK].buf : NULL, *J = masked ? view[BJ].buf : NULL;
+        double *out = view[BO].buf, *x = view[BX].buf;
+        double HP[MAX_M * MAX_N], S[MAX_M * MAX_M], L[MAX_M * MAX_M], Li[MAX_M * MAX_M];
+        double z[MAX_M], v[MAX_M], W[MAX_M * MAX_N], dx[MAX_N];
+
+        /* HP = H P, skipping H's zeros (H touches a few columns) */
+        for (Py_ssize_t r = 0; r < m; r++) {
+            double *row = HP + r * n;
+            memset(row, 0, (size_t)n * sizeof(double));
+            for (Py_ssize_t k = 0; k < n; k++) {
+                double h = H[r * n + k];
+                if (h == 0.0) {
+                    continue;
+                }
+                const double *pk = P + k * n;
+                for (Py_ssize_t j = 0; j < n; j++) {
+                    row[j] += h * pk[j];
+                }
+            }
+        }
+        /* S = HP H^T + R */
+        for (Py_ssize_t a = 0; a < m; a++) {
+            for (Py_ssize_t b = 0; b < m; b++) {
+                double acc = 0.0;
+                for (Py_ssize_t k = 0; k < n; k++) {
+                    acc += HP[a * n + k] * H[b * n + k];
+                }
+                S[a * m + b] = acc + R[a * m + b];
+            }
+        }
+        s_diag = PyList_New(m);
+        if (s_diag == NULL) {
+            goto done;
+        }
+        for (Py_ssize_t a = 0; a < m; a++) {
+            PyObject *f = PyFloat_FromDouble(S[a * m + a]);
+            if (f == NULL) {
+                goto done;
+            }
+            PyList_SET_ITEM(s_diag, a, f);
+        }
+        /* Cholesky S = L L^T (cholesky.factor: the lower triangle, row by row) */
+        int status = APPLIED;
+        memset(L, 0, sizeof(double) * (size_t)(m * m));
+        for (Py_ssize_t i = 0; i < m && status == APPLIED; i++) {
+            for (Py_ssize_t j = 0; j <= i; j++) {
+                double acc = S[i * m + j];
+                for (Py_ssize_t k = 0; k < j; k++) {
+                    acc -= L[i * m + k] * L[j * m + k];
+                }
+                if (i == j) {
+                    if (!(acc > 0.0) || !isfinite(acc)) {
+                        status = SINGULAR;
+                        break;
+                    }
+                    L[i * m + i] = sqrt(acc);
+                } else {
+                    L[i * m + j] = acc / L[j * m + j];
+                }
+            }
+        }
+        double nis = NAN;
+        if (status == APPLIED) {
+            /* L^-1 by forward substitution (cholesky.inverse_lower; for 2 x 2 its closed form,
+             * cholesky._inverse_factor_2x2), z = L^-1 y, NIS = z.z */
+            memset(Li, 0, sizeof(double) * (size_t)(m * m));
+            if (m == 2) {
+                Li[0] = 1.0 / L[0];
+                Li[3] = 1.0 / L[3];
+                Li[2] = -L[2] * Li[0] * Li[3];
+            } else {
+                for (Py_ssize_t c = 0; c < m; c++) {
+                    for (Py_ssize_t i = c; i < m; i++) {
+                        double acc = (i == c) ? 1.0 : 0.0;
+                        for (Py_ssize_t k = c; k < i; k++) {
+                            acc -= L[i * m + k] * Li[k * m + c];
+                        }
+                        Li[i * m + c] = acc / L[i * m + i];
+                    }
+                }
+            }
+            nis = 0.0;
+            for (Py_ssize_t i = 0; i < m; i++) {
+                double acc = Li[i * m] * y[0];
+                for (Py_ssize_t k = 1; k <= i; k++) {
+                    acc += Li[i * m + k] * y[k];
+                }
+                z[i] = acc;
+                nis += acc * acc;
+            }
+            if (!isfinite(nis)) {
+                status = SINGULAR;
+            } else if (nis > threshold2) {
+                status = GATED;
+            }
+        }
+        if (status == APPLIED) {
+            /* v = L^-T z; dx = HP^T v (= K y); W = L^-1 HP */
+            for (Py_ssize_t j = 0; j < m; j++) {
+                double acc = z[j] * Li[j * m + j];
+                for (Py_ssize_t i = j + 1; i < m; i++) {
+                    acc += z[i] * Li[i * m + j];
+                }
+                v[j] = acc;
+            }
+            for (Py_ssize_t k = 0; k < n; k++) {
+                double acc = 0.0;
+                for (Py_ssize_t a = 0; a < m; a++) {
+                    acc += v[a] * HP[a * n + k];
+                }
+                dx[k] = acc;
+            }
+            for (Py_ssize_t a = 0; a < m; a++) {
+                for (Py_ssize_t k = 0; k < n; k++) {
+                    double acc = 0.0;
+                    for (Py_ssize_t b = 0; b <= a; b++) {
+                        acc += Li[a * m + b] * HP[b * n + k];
+                    }
+                    W[a * n + k] = acc;
+                }
+            }
+            /* out = P - (W^T W) .* J, its diagonal checked as it is written */
+            int diagonal_ok = 1;
+            for (Py_ssize_t i = 0; i < n; i++) {
+                for (Py_ssize_t j = 0; j < n; j++) {
+                    double c = 0.0;
+                    for (Py_ssize_t a = 0; a < m; a++) {
+                        c += W[a * n + i] * W[a * n + j];
+                    }
+                    if (J != NULL) {
+                        c *= J[i * n + j];
+                    }
+                    out[i * n + j] = P[i * n + j] - c;
+                }
+                double d = out[i * n + i];
+                if (!(d >= 0.0) || !isfinite(d)) {
+                    diagonal_ok = 0;
+                }
+            }
+            if (keep != NULL) {
+                for (Py_ssize_t k = 0; k < n; k++) {
+                    dx[k] *= keep[k];
+                }
+            }
+            if (mode == 0) {
+                memcpy(x, dx, sizeof(double) * (size_t)n);
+            } else if (boxplus(x, n + 1, dx, mode == 2) < 0) {
+                PyErr_SetString(PyExc_ArithmeticError, "quaternion has zero or non-finite norm");
+                goto done;
+            }
+            if (!diagonal_ok) {
+                status = NEEDS_CHECK;
+            }
+        }
+        result = Py_BuildValue("(idO)", status, nis, s_diag);
+    }
+done:
+    Py_XDECREF(s_diag);
+    for (int i = 0; i < NBUF; i++) {
+        if (got[i]) {
+            PyBuffer_Release(&view[i]);
+        }
+    }
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"propagate", (PyCFunction)(void (*)(void))propagate, METH_FASTCALL, propagate_doc},
+    {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_kernels",
+    "The error-state EKF's fixed-size linear algebra in C (see the source's header).", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__kernels(void) {
+    PyObject *mod = PyModule_Create(&module);
+    if (mod == NULL) {
+        return NULL;
+    }
+    if (PyModule_AddIntConstant(mod, "MAX_N", MAX_N) < 0 || PyModule_AddIntConstant(mod, "MAX_M", MAX_M) < 0 ||
+        PyModule_AddIntConstant(mod, "APPLIED", APPLIED) < 0 || PyModule_AddIntConstant(mod, "GATED", GATED) < 0 ||
+        PyModule_AddIntConstant(mod, "SINGULAR", SINGULAR) < 0 ||
+        PyModule_AddIntConstant(mod, "NEEDS_CHECK", NEEDS_CHECK) < 0) {
+        Py_DECREF(mod);
+        return NULL;
+    }
+    return mod;
+}

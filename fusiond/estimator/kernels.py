@@ -1,0 +1,50 @@
+"""Which implementation runs the EKF's fixed-size linear algebra: compiled C or numpy.
+
+``fusiond.estimator._kernels`` (C, built by ``pip install`` when a compiler is there; see its
+source for why C rather than numba) does the propagation F P F^T + Q and the whole masked Kalman
+update in one call each. The numpy code in ``ekf.py`` is the reference: the same maths, and the
+only path where the extension was not built. Tests run both and hold them to the same estimates
+(tests/test_kernels.py, the trajectory pin).
+
+``use("numpy")`` selects the reference path for the whole process (``fusiond`` reads the
+``FUSIOND_KERNELS`` environment variable for it: ``numpy`` or ``auto``, the default).
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+from ..errors import EstimatorError
+
+try:
+    from . import _kernels as _compiled
+except ImportError:  # built without a C compiler: the numpy reference path runs
+    _compiled = None
+
+__all__ = ["CHOICES", "active", "available", "use"]
+
+CHOICES = ("auto", "compiled", "numpy")
+_active: ModuleType | None = _compiled
+
+
+def available() -> bool:
+    """Was the compiled module built for this interpreter?"""
+    return _compiled is not None
+
+
+def active() -> ModuleType | None:
+    """The compiled module when it runs, None when the numpy path does."""
+    return _active
+
+
+def use(name: str) -> str:
+    """Select the implementation: "auto" (compiled when built), "compiled" (an error when it was
+    not built) or "numpy". Returns the name of the one now running."""
+    global _active
+    if name not in CHOICES:
+        raise EstimatorError(f"kernels must be one of {', '.join(CHOICES)}, got {name!r}")
+    if name == "compiled" and _compiled is None:
+        raise EstimatorError("the compiled kernels (fusiond.estimator._kernels) were not built: "
+                             "no C compiler at install time")
+    _active = None if name == "numpy" else _compiled
+    return "compiled" if _active is not None else "numpy"

@@ -1,0 +1,255 @@
+"""The compiled kernels (estimator/_kernels.c) compute what the numpy reference path computes.
+
+Each test runs the same EKF step twice, once through the C kernel and once through ekf.py's
+numpy code (``kernels.use("numpy")``), and compares. The tolerances are rounding, not modelling:
+the two differ only in the order of the products' sums (OpenBLAS against plain loops), a few ulps
+of values of order one, so 1e-12 relative holds with margin; a wrong index or a missed mask
+weight moves a result by its own size. On the Jackal bag the two trajectories must agree to the
+pin's 1e-9 m / 1e-9 rad.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fusiond.errors import EstimatorError
+from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, PoseBlock, StateBlock, StateLayout, WheelScaleBlock
+from fusiond.estimator import ekf as ekf_module
+from fusiond.estimator import kernels
+
+pytestmark = pytest.mark.skipif(not kernels.available(),
+                                reason="fusiond.estimator._kernels not built (no C compiler at install)")
+
+RTOL = 1e-12
+
+
+@pytest.fixture(autouse=True)
+def _restore_kernels():
+    yield
+    kernels.use("auto")
+
+
+class _LoggedOffset(StateBlock):
+    """A non-additive block (its boxplus is not plain addition): the kernel hands dx back to Python."""
+
+    name = "logged_offset"
+    nominal_size = error_size = 1
+    additive = False
+
+    def initial_sigma(self) -> list[float]:
+        return [0.3]
+
+    def boxplus(self, x, dx, n0, e0) -> None:
+        x[n0] += 0.5 * dx[e0]
+
+
+LAYOUTS = {
+    "pose": StateLayout([PoseBlock(0.1, 0.1)]),
+    "bias_scale": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), WheelScaleBlock(0.05, 1e-4)]),
+    "non_additive": StateLayout([PoseBlock(0.1, 0.1), _LoggedOffset()]),
+}
+
+
+def _random_filter(layout: StateLayout, rng: np.random.Generator) -> ErrorStateEKF:
+    n = layout.error_dim
+    A = rng.normal(size=(n, n)) * rng.uniform(0.01, 1.0)
+    x = layout.initial_state()
+    q = rng.normal(size=4)
+    x[3:7] = q / np.linalg.norm(q)
+    x[0:3] = rng.normal(size=3) * 10.0
+    return ErrorStateEKF(layout, x, A @ A.T + np.eye(n) * 1e-4)
+
+
+def _both(layout: StateLayout, seed: int, step) -> tuple:
+    """(result, x, P, resets) of ``step(ekf)`` on the same random filter, compiled then numpy."""
+    out = []
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        ekf = _random_filter(layout, np.random.default_rng(seed))
+        res = step(ekf)
+        out.append((res, ekf.x.copy(), ekf.P.copy(), ekf.resets))
+    return out[0], out[1]
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> None:
+    scale = max(float(np.max(np.abs(b))), 1.0)
+    np.testing.assert_allclose(a, b, rtol=0.0, atol=RTOL * scale)
+
+
+@settings(max_examples=80, deadline=None)
+@given(layout=st.sampled_from(sorted(LAYOUTS)), seed=st.integers(0, 100_000), m=st.integers(1, 6),
+       masked=st.booleans(), hold=st.booleans(), gate=st.sampled_from([math.inf, 3.0, 0.5]))
+def test_update_matches_the_numpy_path(layout, seed, m, masked, hold, gate):
+    lay = LAYOUTS[layout]
+    n = lay.error_dim
+    rng = np.random.default_rng(seed + 1)
+    H = np.zeros((m, n))
+    for r in range(m):  # a few columns per row, as the measurement models make
+        cols = rng.choice(n, size=min(n, 3), replace=False)
+        H[r, cols] = rng.normal(size=cols.size)
+    B = rng.normal(size=(m, m)) * 0.1
+    R = B @ B.T + np.eye(m) * 1e-3
+    y = rng.normal(size=m) * 0.5
+    mask = rng.random(n) < 0.6 if masked else None
+
+    def step(ekf):
+        return ekf.update(y, H, R, gate, mask=mask, hold_heading=hold and lay is not LAYOUTS["non_additive"])
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, seed, step)
+    assert (rc.rejected, rc.singular, rc.covariance_reset) == (rn.rejected, rn.singular, rn.covariance_reset)
+    assert rc.nis == pytest.approx(rn.nis, rel=1e-11)
+    np.testing.assert_allclose(rc.innovation_var, rn.innovation_var, rtol=1e-11)
+    _close(Pc, Pn)
+    _close(xc, xn)
+    assert abs(np.linalg.norm(xc[3:7]) - 1.0) < 1e-12
+
+
+@settings(max_examples=60, deadline=None)
+@given(layout=st.sampled_from(sorted(LAYOUTS)), seed=st.integers(0, 100_000))
+def test_propagate_matches_the_numpy_path(layout, seed):
+    lay = LAYOUTS[layout]
+    n = lay.error_dim
+    rng = np.random.default_rng(seed + 2)
+    F = np.eye(n)
+    F[rng.random((n, n)) < 0.2] = rng.normal()  # identity plus a few blocks, as the motion model's
+    Qh = rng.normal(size=(n, n)) * 0.01
+    Q = Qh @ Qh.T
+    x_new = lay.initial_state()
+    (ok_c, _, Pc, _), (ok_n, _, Pn, _) = _both(lay, seed, lambda ekf: ekf.propagate(x_new.copy(), F, Q))
+    assert ok_c is ok_n is True
+    _close(Pc, Pn)
+
+
+def test_a_non_finite_propagation_resets_alike():
+    lay = LAYOUTS["bias_scale"]
+    F = np.eye(lay.error_dim)
+    F[0, 4] = math.nan
+    Q = np.zeros_like(F)
+    (ok_c, _, Pc, rc), (ok_n, _, Pn, rn) = _both(lay, 7, lambda ekf: ekf.propagate(lay.initial_state(), F, Q))
+    assert ok_c is ok_n is False
+    assert rc == rn == 1
+    np.testing.assert_array_equal(Pc, lay.initial_covariance())
+    np.testing.assert_array_equal(Pn, lay.initial_covariance())
+
+
+def test_a_negative_variance_takes_the_reference_checks():
+    """P with a negative variance (not PSD) and an update that keeps S positive: the kernel reports
+    the diagonal and the reference path's clipping (an eigendecomposition) makes the same P."""
+    lay = LAYOUTS["pose"]
+    n = lay.error_dim
+
+    def step(ekf):
+        ekf.P = np.eye(n) * 0.5
+        ekf.P[0, 0] = -0.2
+        H = np.zeros((1, n))
+        H[0, 0] = 1.0
+        return ekf.update(np.array([0.1]), H, np.array([[1.0]]))
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, 3, step)
+    assert not rc.rejected and not rn.rejected
+    assert np.diagonal(Pc).min() >= 0.0
+    _close(Pc, Pn)
+    _close(xc, xn)
+
+
+def test_a_singular_innovation_covariance_is_refused_alike():
+    lay = LAYOUTS["pose"]
+    H = np.zeros((2, lay.error_dim))  # observes nothing, with no noise: S = 0
+
+    def step(ekf):
+        return ekf.update(np.array([0.1, 0.2]), H, np.zeros((2, 2)))
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, 4, step)
+    assert rc.singular and rn.singular and rc.rejected and rn.rejected
+    assert math.isnan(rc.nis) and math.isnan(rn.nis)
+    np.testing.assert_array_equal(xc, xn)
+    np.testing.assert_array_equal(Pc, Pn)
+
+
+def test_arrays_the_kernel_cannot_read_take_the_numpy_path():
+    """An int or Fortran-ordered array is not refused: the update falls back to numpy and agrees."""
+    lay = LAYOUTS["pose"]
+    n = lay.error_dim
+    H = np.zeros((3, n))
+    H[0, 0] = H[1, 1] = H[2, 5] = 1.0
+
+    def step(ekf):
+        ekf.P = np.asfortranarray(ekf.P)
+        return ekf.update(np.array([1, 2, 0]), np.asfortranarray(H), np.eye(3, dtype=int))
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, 5, step)
+    assert rc.nis == rn.nis
+    np.testing.assert_array_equal(xc, xn)
+    np.testing.assert_array_equal(Pc, Pn)
+
+
+def test_kernel_refuses_wrong_shapes_with_a_clear_error():
+    k = kernels.active()
+    P = np.eye(4)
+    with pytest.raises(ValueError, match="F has 9 values, expected 16"):
+        k.propagate(np.eye(3), P, np.zeros((4, 4)), np.empty((4, 4)))
+    with pytest.raises(BufferError, match="C-contiguous float64"):
+        k.propagate(np.eye(4, dtype=np.float32), P, np.zeros((4, 4)), np.empty((4, 4)))
+    with pytest.raises(ValueError, match="at most 48 rows"):
+        k.propagate(np.eye(49), np.eye(49), np.eye(49), np.empty((49, 49)))
+
+
+def test_a_zero_quaternion_is_an_estimator_error_and_leaves_x():
+    lay = LAYOUTS["pose"]
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        ekf = ErrorStateEKF(lay)
+        ekf.x[3:7] = 0.0
+        before = ekf.x.copy()
+        H = np.zeros((1, lay.error_dim))
+        H[0, 3] = 1.0
+        with pytest.raises(EstimatorError, match="quaternion"):
+            ekf.update(np.array([0.1]), H, np.array([[0.01]]))
+        np.testing.assert_array_equal(ekf.x, before)
+
+
+def test_layouts_beyond_the_kernel_size_use_numpy():
+    """The kernels have fixed-size scratch: a layout with more error states than MAX_N runs numpy."""
+
+    class Wide(StateBlock):
+        name = "wide"
+        nominal_size = error_size = 50
+
+    ekf = ErrorStateEKF(StateLayout([PoseBlock(0.1, 0.1), Wide()]))
+    assert not ekf._fits
+    F, Q = np.eye(56), np.eye(56) * 1e-3
+    assert ekf.propagate(ekf.x.copy(), F, Q)
+    np.testing.assert_allclose(np.diagonal(ekf.P)[:6], 0.01 + 1e-3)
+
+
+def test_the_constants_mirror_the_c_module():
+    k = kernels.active()
+    assert (ekf_module._MAX_N, ekf_module._MAX_M) == (k.MAX_N, k.MAX_M)
+    assert (ekf_module._GATED, ekf_module._SINGULAR, ekf_module._NEEDS_CHECK) == (k.GATED, k.SINGULAR, k.NEEDS_CHECK)
+
+
+def test_use_names_the_choices():
+    assert kernels.use("numpy") == "numpy" and kernels.active() is None
+    assert kernels.use("auto") == "compiled" and kernels.active() is not None
+    with pytest.raises(EstimatorError, match="auto, compiled, numpy"):
+        kernels.use("fast")
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("config", ["examples/jackal_rl.toml", "examples/jackal.toml"])
+def test_jackal_trajectory_is_the_same_on_both_paths(jackal_bag, config):
+    from tests.jackal_pin import trajectory
+
+    kernels.use("numpy")
+    ref = trajectory(jackal_bag, config)
+    kernels.use("compiled")
+    now = trajectory(jackal_bag, config)
+    assert now["counters"] == ref["counters"]
+    assert now["published"] == ref["published"]
+    worst = max(abs(a - b) for pa, pb in zip(now["poses"], ref["poses"]) for a, b in zip(pa, pb))
+    assert worst <= 1e-9
