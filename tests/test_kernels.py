@@ -18,7 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusiond.errors import EstimatorError
-from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, PoseBlock, StateBlock, StateLayout, WheelScaleBlock
+from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock,
+                               PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
 from fusiond.estimator import ekf as ekf_module
 from fusiond.estimator import kernels
 
@@ -123,6 +124,49 @@ def test_propagate_matches_the_numpy_path(layout, seed):
     (ok_c, _, Pc, _), (ok_n, _, Pn, _) = _both(lay, seed, lambda ekf: ekf.propagate(x_new.copy(), F, Q))
     assert ok_c is ok_n is True
     _close(Pc, Pn)
+
+
+PREDICT_LAYOUTS = {
+    "pose": StateLayout([PoseBlock(0.1, 0.1)]),
+    "inputs": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GyroScaleBlock(0.05, 1e-5),
+                           WheelScaleBlock(0.05, 1e-4)]),
+    "gps_error": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
+}
+finite = st.floats(-3.0, 3.0)
+cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple of a silent input
+    st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)).map(
+        lambda d: (d[0], 0.0, 0.0, 0.0, d[1], 0.0, 0.0, 0.0, d[2])),
+    st.lists(st.floats(-0.1, 1.0), min_size=9, max_size=9).map(tuple))
+
+
+@settings(max_examples=150, deadline=None)
+@given(layout=st.sampled_from(sorted(PREDICT_LAYOUTS)), seed=st.integers(0, 10_000),
+       v=st.tuples(finite, finite, finite), w=st.tuples(finite, finite, finite), lin_cov=cov9, ang_cov=cov9,
+       periods=st.tuples(st.sampled_from([0.0, 0.01, 0.2]), st.sampled_from([0.0, 0.005, 0.1])),
+       flags=st.tuples(st.booleans(), st.booleans(), st.booleans()), tau=st.sampled_from([0.0, 0.05]),
+       dt=st.sampled_from([0.0, 0.001, 0.02, 0.7]))
+def test_input_noise_writes_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau, dt):
+    """The motion model's Q from kernels.input_noise is the Python path's, to the bit (the same
+    expressions in C, compiled without FMA contraction), and so are x' and F."""
+    lay = PREDICT_LAYOUTS[layout]
+    u = MotionInput()
+    u.linear, u.angular, u.linear_cov, u.angular_cov = v, w, lin_cov, ang_cov
+    u.linear_period, u.angular_period = periods
+    u.from_gyro, u.world_frame, u.planar = flags
+    u.twist_correlation = tau
+    ekf = _random_filter(lay, np.random.default_rng(seed))
+    density = np.random.default_rng(seed).uniform(0.0, 1e-3, lay.error_dim)
+    out = []
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        ws = PredictWorkspace(lay)
+        predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
+        x, F, Q = predict(lay, ekf.x, u, dt, density, ws)
+        out.append((x.copy(), F.copy(), Q.copy()))
+    (xc, Fc, Qc), (xn, Fn, Qn) = out
+    np.testing.assert_array_equal(xc, xn)
+    np.testing.assert_array_equal(Fc, Fn)
+    np.testing.assert_array_equal(Qc, Qn)
 
 
 def test_a_non_finite_propagation_resets_alike():

@@ -15,6 +15,8 @@
  * docstrings derive it) and of StateLayout.boxplus for the layout where every block after the
  * pose is additive:
  *
+ *   input_noise: Q's diagonal (noise density * dt) and the input-noise blocks scale * G S G^T of
+ *               the odometry twist and the gyro rate (motion.py's _input_noise, same expressions).
  *   propagate:  P' = (F P) F^T + Q, finite iff its diagonal sums to a finite number.
  *   update:     HP = H P, S = HP H^T + R = L L^T (Cholesky), z = L^-1 y, NIS = z.z,
  *               W = L^-1 HP, dx = HP^T L^-T z, P' = P - W^T W; with a mask (Schmidt update),
@@ -157,6 +159,139 @@ static int boxplus(double *x, Py_ssize_t nx, const double *dx, int hold_heading)
         x[i] += dx[i - 1];
     }
     return 0;
+}
+
+/* -- input noise ------------------------------------------------------------------------------ */
+
+/* Nine doubles from a 9-sequence of floats (a row-major 3x3 as the motion model keeps them). */
+static int nine(PyObject *seq, double *out, const char *what) {
+    PyObject *fast = PySequence_Fast(seq, what);
+    if (fast == NULL) {
+        return -1;
+    }
+    if (PySequence_Fast_GET_SIZE(fast) != 9) {
+        Py_DECREF(fast);
+        PyErr_Format(PyExc_ValueError, "%s must have 9 entries", what);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(fast);
+    for (int i = 0; i < 9; i++) {
+        out[i] = PyFloat_AsDouble(items[i]);
+        if (out[i] == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+/* motion._input_noise for one input: scale * G S G^T (mat3.sandwich, or mat3.sandwich_diag for a
+ * diagonal S: the same expressions, so the same doubles), its diagonal added into q[k..k+2]
+ * (c + q, in that order), its off-diagonals written at (k, k+1), (k, k+2), (k+1, k+2) and mirrors. */
+static void input_block(double *Q, Py_ssize_t n, double *q, int k, const double *a, const double *s, double scale) {
+    double m[9];
+    if (s[1] == 0.0 && s[2] == 0.0 && s[3] == 0.0 && s[5] == 0.0 && s[6] == 0.0 && s[7] == 0.0) {
+        m[0] = a[0] * s[0], m[1] = a[1] * s[4], m[2] = a[2] * s[8];
+        m[3] = a[3] * s[0], m[4] = a[4] * s[4], m[5] = a[5] * s[8];
+        m[6] = a[6] * s[0], m[7] = a[7] * s[4], m[8] = a[8] * s[8];
+    } else {
+        for (int r = 0; r < 3; r++) {
+            for (int c = 0; c < 3; c++) {
+                m[3 * r + c] = a[3 * r] * s[c] + a[3 * r + 1] * s[3 + c] + a[3 * r + 2] * s[6 + c];
+            }
+        }
+    }
+    double c00 = (m[0] * a[0] + m[1] * a[1] + m[2] * a[2]) * scale;
+    double c01 = (m[0] * a[3] + m[1] * a[4] + m[2] * a[5]) * scale;
+    double c02 = (m[0] * a[6] + m[1] * a[7] + m[2] * a[8]) * scale;
+    double c11 = (m[3] * a[3] + m[4] * a[4] + m[5] * a[5]) * scale;
+    double c12 = (m[3] * a[6] + m[4] * a[7] + m[5] * a[8]) * scale;
+    double c22 = (m[6] * a[6] + m[7] * a[7] + m[8] * a[8]) * scale;
+    q[k] = c00 + q[k];
+    q[k + 1] = c11 + q[k + 1];
+    q[k + 2] = c22 + q[k + 2];
+    Q[k * n + k + 1] = Q[(k + 1) * n + k] = c01;
+    Q[k * n + k + 2] = Q[(k + 2) * n + k] = c02;
+    Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = c12;
+}
+
+PyDoc_STRVAR(input_noise_doc,
+"input_noise(Q, density, dt, extra, G_lin, cov_lin, scale_lin, G_ang, cov_ang, scale_ang) -> None\n\n"
+"Q's entries that the motion model writes (motion.PredictWorkspace): the diagonal density * dt\n"
+"(+ extra, the dynamic blocks' own noise, or None), then each input's scale * G cov G^T into the\n"
+"position (linear) and attitude (angular) blocks; G and cov are row-major 9-sequences, G None for\n"
+"an input that is silent (its block's off-diagonals 0). Q's other entries are not touched.");
+
+static PyObject *input_noise(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError, "input_noise takes 10 arguments");
+        return NULL;
+    }
+    double dt = PyFloat_AsDouble(args[2]);
+    if (dt == -1.0 && PyErr_Occurred()) {
+        return NULL;
+    }
+    double g[2][9], c[2][9], scale[2] = {0.0, 0.0};
+    int on[2] = {0, 0};
+    for (int j = 0; j < 2; j++) {
+        PyObject *G = args[4 + 3 * j];
+        if (G == Py_None) {
+            continue;
+        }
+        on[j] = 1;
+        scale[j] = PyFloat_AsDouble(args[6 + 3 * j]);
+        if ((scale[j] == -1.0 && PyErr_Occurred()) || nine(G, g[j], "G") < 0 || nine(args[5 + 3 * j], c[j], "cov") < 0) {
+            return NULL;
+        }
+    }
+    Py_buffer vq, vd, ve;
+    int extra = args[3] != Py_None;
+    if (get_doubles(args[0], &vq, 1, -1, "Q") < 0) {
+        return NULL;
+    }
+    Py_ssize_t n = (Py_ssize_t)(sqrt((double)(vq.len / 8)) + 0.5);
+    if (n * n * 8 != vq.len || n > MAX_N || n < 6) {
+        PyBuffer_Release(&vq);
+        PyErr_Format(PyExc_ValueError, "Q must be square with 6 to %d rows", MAX_N);
+        return NULL;
+    }
+    if (get_doubles(args[1], &vd, 0, n, "density") < 0) {
+        PyBuffer_Release(&vq);
+        return NULL;
+    }
+    if (extra && get_doubles(args[3], &ve, 0, n, "extra") < 0) {
+        PyBuffer_Release(&vq);
+        PyBuffer_Release(&vd);
+        return NULL;
+    }
+    double *Q = vq.buf, q[MAX_N];
+    const double *d = vd.buf;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        q[i] = d[i] * dt;
+        if (extra) {
+            q[i] += ((const double *)ve.buf)[i];
+        }
+    }
+    for (int j = 0; j < 2; j++) {
+        int k = 3 * j;
+        if (on[j]) {
+            input_block(Q, n, q, k, g[j], c[j], scale[j]);
+        } else {
+            Q[k * n + k + 1] = Q[(k + 1) * n + k] = 0.0;
+            Q[k * n + k + 2] = Q[(k + 2) * n + k] = 0.0;
+            Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = 0.0;
+        }
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        Q[i * n + i] = q[i];
+    }
+    PyBuffer_Release(&vq);
+    PyBuffer_Release(&vd);
+    if (extra) {
+        PyBuffer_Release(&ve);
+    }
+    Py_RETURN_NONE;
 }
 
 /* -- propagate ------------------------------------------------------------------------------- */
@@ -462,12 +597,14 @@ done:
 static PyMethodDef methods[] = {
     {"propagate", (PyCFunction)(void (*)(void))propagate, METH_FASTCALL, propagate_doc},
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
+    {"input_noise", (PyCFunction)(void (*)(void))input_noise, METH_FASTCALL, input_noise_doc},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_kernels",
     "The error-state EKF's fixed-size linear algebra in C (see the source's header).", -1, methods,
+    NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__kernels(void) {

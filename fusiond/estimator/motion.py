@@ -42,7 +42,7 @@ import struct
 
 import numpy as np
 
-from . import mat3
+from . import kernels, mat3
 from . import rotation as rot
 from .state import StateLayout, Vec3
 
@@ -113,7 +113,8 @@ class PredictWorkspace:
     there is nothing to put back. The arrays belong to the workspace: valid until its next use.
     """
 
-    __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_q_entries", "_zero_columns", "_cov_seen", "_cov_diagonal")
+    __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_index_f", "_pack_f", "_q_entries", "_zero_columns",
+                 "_cov_seen", "_cov_diagonal")
 
     def __init__(self, layout: StateLayout) -> None:
         n = layout.error_dim
@@ -139,6 +140,9 @@ class PredictWorkspace:
         # by element (~2 us for ~40 floats); packing them with struct and viewing the bytes costs
         # a third of that, the same doubles
         self._pack = struct.Struct(f"{len(self._index)}d").pack
+        # F's entries alone, for the compiled path (kernels.input_noise writes Q's itself)
+        self._index_f = np.array(f, dtype=np.intp)
+        self._pack_f = struct.Struct(f"{len(f)}d").pack
         self._q_entries = len(q)
         # an input block's columns while it does not apply (row-major, 3 x error_size)
         self._zero_columns = [[0.0] * (3 * blk.error_size) for blk, _, _, _ in layout.input_blocks]
@@ -151,6 +155,7 @@ class PredictWorkspace:
 _CROSS_ENTRIES = ((0, 4), (0, 5), (1, 3), (1, 5), (2, 3), (2, 4))
 _NO_CROSS = (0.0,) * 6
 _NO_NOISE = (0.0,) * 6
+_SILENT = (None, None, 0.0)  # kernels.input_noise's (G, cov, scale) of an input that is not held
 
 
 def _input_noise(ws: PredictWorkspace, j: int, qd: list[float], G: mat3.Mat3, cov, scale: float) -> tuple:
@@ -284,6 +289,27 @@ def predict(
     # G_lin/G_ang now map the measured inputs, whose noise the covariances describe. Q's
     # diagonal is assembled in floats (input noise + density * dt + the blocks' own noise,
     # summed in that order), then the input blocks' off-diagonals; all written at once.
+    # With the compiled kernels, one call writes Q's entries (the same expressions, in C).
+    k = kernels.active() if dt > 0.0 else None
+    if k is not None:
+        extra = None
+        if dynamic:
+            extra = np.zeros(len(noise_density))
+            for blk, n0, e0 in dynamic:
+                for i, q in enumerate(blk.process_noise(dt)):
+                    extra[e0 + i] += q
+        lin = ang = _SILENT
+        if u.linear_period > 0.0:
+            lin = (G_lin, u.linear_cov, max(u.linear_period, 2.0 * u.twist_correlation) / dt)
+        if u.angular_period > 0.0:
+            ang = (G_ang, u.angular_cov, u.angular_period / dt)
+        try:
+            k.input_noise(ws.Q, noise_density, dt, extra, *lin, *ang)
+        except BufferError:  # a density array not C-contiguous float64: the Python path below
+            pass
+        else:
+            ws._flat[ws._index_f] = np.frombuffer(ws._pack_f(*f_values))
+            return x_new, ws.F, ws.Q
     if dt > 0.0:
         qd = [d * dt for d in noise_density.tolist()]
         if dynamic:
