@@ -57,14 +57,23 @@ class ImuOwn(msgspec.Struct, frozen=True, gc=False):
 
 @dataclass(slots=True)
 class ImuInput:
-    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate; 9-tuple covariances."""
+    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate; 9-tuple covariances.
 
-    rpy: tuple[float, float, float] | None
+    The attitude is kept as the base-frame quaternion and turned into roll/pitch/yaw (``rpy``) only
+    when the model fuses it: an IMU faster than ``orientation_rate_hz`` has most of its orientations
+    thinned, and their angles would be computed for nothing."""
+
+    attitude: tuple[float, float, float, float] | None
     rpy_cov: tuple[float, ...] | None
     rows: tuple[int, ...]
     gyro: tuple[float, float, float] | None
     gyro_cov: tuple[float, ...] | None
     accel: tuple[float, float, float] | None = None  # base-frame specific force, when gravity gives the tilt
+
+    @property
+    def rpy(self) -> tuple[float, float, float] | None:
+        """Fixed-axis roll, pitch, yaw of ``attitude`` (None without one)."""
+        return None if self.attitude is None else rot.to_rpy(self.attitude)
 
 
 class ImuPolicy:
@@ -142,7 +151,7 @@ class ImuPolicy:
         return cov
 
     def convert(self, s: ImuSample) -> ImuInput:
-        rpy = rpy_cov = None
+        q_base = rpy_cov = None
         rows: tuple[int, ...] = ()
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             oc = s.orientation_covariance
@@ -151,12 +160,11 @@ class ImuPolicy:
                 raise Rejected(reasons.NON_FINITE, "orientation")
             q_imu = unit_quaternion(s.orientation)
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
-            rpy = rot.to_rpy(q_base)
             rows, rpy_cov = self._ori_resolved if known else self._orientation_noise(oc)
         elif len(s.orientation_covariance) != 9:
             raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
-        if rpy is None and s.angular_velocity == _ZERO3 and s.linear_acceleration == _ZERO3:
+        if q_base is None and s.angular_velocity == _ZERO3 and s.linear_acceleration == _ZERO3:
             # rates and specific force all exactly zero (at rest an accelerometer reads gravity): a
             # driver's placeholder for a lost sample, not a measurement of zero rate
             raise Rejected(reasons.NOTHING_TO_FUSE, "rates and acceleration all exactly zero: a lost sample")
@@ -188,9 +196,9 @@ class ImuPolicy:
             # [0] == -1: no accelerometer (sensor_msgs/Imu); an all-zero vector: not filled in
             if len(ac) == 9 and ac[0] != -1.0 and finite(a) and a != (0.0, 0.0, 0.0):
                 accel = a if self._identity else mat3.apply(self.R_ext, a)
-        if rpy is None and gyro is None and accel is None:
+        if q_base is None and gyro is None and accel is None:
             raise Rejected(reasons.NOTHING_TO_FUSE, "no orientation, angular velocity or acceleration in the message")
-        return ImuInput(rpy, rpy_cov, rows, gyro, gyro_cov, accel)
+        return ImuInput(q_base, rpy_cov, rows, gyro, gyro_cov, accel)
 
 
 class ImuModel(SensorModel):
@@ -226,7 +234,7 @@ class ImuModel(SensorModel):
             s.gyro, s.gyro_cov, s.gyro_last = inp.gyro, inp.gyro_cov, (self.index, stamp)
             if self.learns_bias:
                 records.extend(learn_bias_at_rest(self, s, inp, stamp, emit, late))
-        if inp.rpy is not None and inp.rows and self._orientation_due(s, stamp, emit):
+        if inp.attitude is not None and inp.rows and self._orientation_due(s, stamp, emit):
             rpy, rows = inp.rpy, inp.rows
             if self.absolute and self._fixed_yaw:
                 rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] + self._fixed_yaw))
