@@ -463,15 +463,14 @@ def main(argv: list[str] | None = None) -> int:
     # The estimator's linear algebra: compiled when built (the default, "auto"), or the numpy
     # reference path (FUSIOND_KERNELS=numpy; estimator/kernels.py). Read here, not in the estimator
     # (no I/O there), and only when set: the commands that do not fuse need not import numpy.
-    choice = os.environ.get("FUSIOND_KERNELS")
-    if choice:
+    if os.environ.get("FUSIOND_KERNELS"):
         from .errors import EstimatorError
         from .estimator import kernels
 
         try:
-            kernels.use(choice)
+            kernels.use_environment(os.environ)
         except EstimatorError as e:
-            print(f"fusiond: FUSIOND_KERNELS={choice}: {e}", file=sys.stderr)
+            print(f"fusiond: {e}", file=sys.stderr)
             return 2
     return args.func(args)
 

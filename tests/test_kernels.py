@@ -11,6 +11,7 @@ pin's 1e-9 m / 1e-9 rad.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -282,6 +283,34 @@ def test_use_names_the_choices():
     assert kernels.use("auto") == "compiled" and kernels.active() is not None
     with pytest.raises(EstimatorError, match="auto, compiled, numpy"):
         kernels.use("fast")
+
+
+def test_the_environment_selects_the_path():
+    assert kernels.use_environment({"FUSIOND_KERNELS": "numpy"}) == "numpy" and kernels.active() is None
+    assert kernels.use_environment({}) == "compiled"
+    with pytest.raises(EstimatorError, match="FUSIOND_KERNELS=fast: kernels must be one of"):
+        kernels.use_environment({"FUSIOND_KERNELS": "fast"})
+
+
+@pytest.mark.e2e
+def test_fusiond_replay_gives_the_same_tum_on_both_paths(jackal_bag, tmp_path):
+    """The command line's FUSIOND_KERNELS: the numpy path and the compiled one write the same TUM
+    (9 decimals), and an unknown name is refused before anything runs."""
+    import os
+    import subprocess
+    import sys
+
+    out = {}
+    for name in ("numpy", "compiled", "bogus"):
+        tum = tmp_path / f"{name}.tum"
+        proc = subprocess.run([sys.executable, "-m", "fusiond", "replay", str(jackal_bag), "--config",
+                               "examples/jackal.toml", "--tum", str(tum), "--quiet"],
+                              env={**os.environ, "FUSIOND_KERNELS": name}, capture_output=True, text=True,
+                              timeout=120, cwd=Path(__file__).resolve().parents[1])
+        out[name] = (proc.returncode, tum.read_text() if tum.exists() else "", proc.stderr)
+    assert out["numpy"][0] == out["compiled"][0] == 0
+    assert out["numpy"][1] == out["compiled"][1] and out["numpy"][1].count("\n") > 3000
+    assert out["bogus"][0] == 2 and "FUSIOND_KERNELS=bogus" in out["bogus"][2] and not out["bogus"][1]
 
 
 @pytest.mark.e2e

@@ -6,12 +6,15 @@ update in one call each. The numpy code in ``ekf.py`` is the reference: the same
 only path where the extension was not built. Tests run both and hold them to the same estimates
 (tests/test_kernels.py, the trajectory pin).
 
-``use("numpy")`` selects the reference path for the whole process (``fusiond`` reads the
-``FUSIOND_KERNELS`` environment variable for it: ``numpy`` or ``auto``, the default).
+``use("numpy")`` selects the reference path for the whole process. The ``FUSIOND_KERNELS``
+environment variable (``auto``, the default, ``compiled`` or ``numpy``) is applied by the
+processes that fuse (``fusiond``'s command line, the latency bench's daemon) through
+``use_environment``: the estimator itself reads no environment.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from types import ModuleType
 
 from ..errors import EstimatorError
@@ -21,9 +24,10 @@ try:
 except ImportError:  # built without a C compiler: the numpy reference path runs
     _compiled = None
 
-__all__ = ["CHOICES", "active", "available", "use"]
+__all__ = ["CHOICES", "ENVIRONMENT", "active", "available", "use", "use_environment"]
 
 CHOICES = ("auto", "compiled", "numpy")
+ENVIRONMENT = "FUSIOND_KERNELS"
 _active: ModuleType | None = _compiled
 
 
@@ -48,3 +52,13 @@ def use(name: str) -> str:
                              "no C compiler at install time")
     _active = None if name == "numpy" else _compiled
     return "compiled" if _active is not None else "numpy"
+
+
+def use_environment(environ: Mapping[str, str]) -> str:
+    """``use`` the choice that ``environ`` (the caller's os.environ) names in FUSIOND_KERNELS, "auto"
+    when it names none; an unknown name is an EstimatorError that says so."""
+    choice = environ.get(ENVIRONMENT) or "auto"
+    try:
+        return use(choice)
+    except EstimatorError as e:
+        raise EstimatorError(f"{ENVIRONMENT}={choice}: {e}") from None

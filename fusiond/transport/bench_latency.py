@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import socket
 import struct
 import threading
@@ -47,6 +48,7 @@ import zenoh
 from ..codecs import encode_imu_sample, encode_odom_sample
 from ..config import ZenohConfig, loads
 from ..errors import TransportError
+from ..estimator import kernels
 from ..samples import ImuSample, OdomSample
 from ..health import decode_report, encode_report
 from ..logs import configure
@@ -207,6 +209,7 @@ def _take(values: list[float]) -> list[float]:
 def _daemon_child(conn: Any, config_text: str, express: bool) -> None:
     """Child process: the daemon (as `fusiond run` builds it) plus the echo; answers the parent's commands."""
     configure("warning")  # a spawned child starts unconfigured: logs on stderr, stdout stays the table/JSON
+    kernels.use_environment(os.environ)  # as `fusiond run` would (FUSIOND_KERNELS)
     cfg = loads(config_text, "<bench>")
     session = open_session(build_config(cfg.zenoh))
     daemon = Daemon(cfg, session, express=express, monitor=False)
