@@ -35,10 +35,51 @@ def test_window_warms_up_and_restarts_on_dof_change():
     for _ in range(9):
         w.add(1.0, 1, False)
     assert w.verdict() == "warming_up"
-    w.add(1.0, 1, True)
-    assert w.verdict() == "ok" and w.rejected == 1
+    w.add(1e14, 1, True)  # rejected: counted, but not a value of the window
+    assert w.verdict() == "warming_up" and w.rejected == 1 and w.mean == 1.0
+    w.add(1.0, 1, False)
+    assert w.verdict() == "ok"
     w.add(2.0, 2, False)
     assert w.verdict() == "warming_up"
+
+
+def _consistent(rng, dof: int) -> float:
+    y = rng.normal(0.0, 1.0, dof)
+    return float(y @ y)
+
+
+def test_a_rare_gated_outlier_does_not_read_as_understated_noise():
+    """A consistent GPS (NIS ~ chi2(3)) with one fix in 50 thousands of km off, gated out. Below
+    REJECTED_SHARE the outliers change nothing: every verdict is the one of a window fed the applied
+    fixes alone. Counted as values, each outlier's NIS of 1e14 reads "nis_high" for a whole window."""
+    rng = np.random.default_rng(7)
+    w, applied_only, as_values = (NisWindow(window=50, confidence=0.95) for _ in range(3))
+    high_after_outliers = 0
+    for k in range(500):
+        gated = k % 50 == 25
+        nis = 1e14 if gated else _consistent(rng, 3)
+        verdict = w.add(nis, 3, gated)
+        if not gated:
+            assert verdict == applied_only.add(nis, 3, False)
+        if as_values.add(nis, 3, False) == "nis_high":
+            high_after_outliers += 1
+    assert w.rejected == 10 and w.recent_rejected == 1
+    # the old window: full from the 50th update on (k = 49), and from then on always holding an outlier
+    assert high_after_outliers == 500 - 49
+@pytest.mark.parametrize("share, verdict", [(0.06, "ok"), (0.3, "nis_high"), (1.0, "nis_high")])
+def test_a_sensor_the_gate_keeps_out_often_reads_high(share, verdict):
+    """Applied updates consistent, a share of them gated out: up to REJECTED_SHARE it is the gate's
+    work, beyond it the stated noise does not describe the sensor; all gated is not "warming_up"."""
+    rng = np.random.default_rng(3)
+    w = NisWindow(window=50, confidence=0.95)
+    every = round(1.0 / share)
+    for k in range(200):
+        gated = k % every == 0
+        w.add(1e3 if gated else _consistent(rng, 2), 2, gated)
+    lo, hi = w.bounds(2)
+    if share < 1.0:
+        assert lo < w.mean < hi  # the applied ones are consistent either way
+    assert w.verdict() == verdict
 
 
 class _Reference:

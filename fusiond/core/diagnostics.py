@@ -27,7 +27,7 @@ class DiagnosticsRecord(msgspec.Struct, gc=False):
     rejected: bool
     channel: str = ""
     late: bool = False  # applied at its own stamp from the history
-    consistency: str = "warming_up"  # ok | nis_high | nis_low | warming_up
+    consistency: str = "warming_up"  # ok | nis_high | nis_low | warming_up (NisWindow.verdict)
     # The update is dominated by the state's prior (e.g. the first standstill window learning the
     # gyro bias from gyro_bias_sigma): its NIS tests the prior, not the sensor's noise, so the
     # consistency tests leave it out.
@@ -42,8 +42,23 @@ def chi2_ppf(p: float, dof: float) -> float:
     return dof * max(1.0 - h + z * h**0.5, 0.0) ** 3
 
 
+# More of a window's updates rejected (gated out, or flagged as slip) than this share: the stated noise
+# does not describe the sensor, whatever the NIS of the applied ones. A consistent sensor behind a
+# gate of g sigma is rejected with probability P(chi2_dof > g^2): 2.9 % for dof 3 at g = 3, far less
+# at the 5-sigma defaults, so more than 5 of 50 (binomial tail 1.8 % at 2.9 %) is not chance.
+REJECTED_SHARE = 0.1
+
+
 class NisWindow:
     """Sliding window of NIS values for one sensor channel.
+
+    The window holds the NIS of the updates the filter applied. A rejected update's NIS is the
+    gate's business, not evidence about the stated noise: one GPS fix 7000 km off has a NIS of
+    1e14 and would read as "nis_high" for the next ``window`` updates of thousands of good ones (the
+    doctor judges its whole-run verdicts the same way, ``ChannelStats.kept_verdict``). Rejections
+    are judged by their share instead: more than ``REJECTED_SHARE`` of the last ``window`` updates
+    rejected reads "nis_high" (a sensor the gate keeps out that often is lying or its noise is
+    stated too small), so a sensor whose every update is gated out does not stay "warming_up".
 
     The window's mean is read on every update (the verdict), so it keeps a running sum of
     the finite values (plus a count of infinite ones, which would poison a running sum:
@@ -55,6 +70,8 @@ class NisWindow:
         self.window = window
         self.confidence = confidence
         self.values: deque[float] = deque(maxlen=window)
+        self.flags: deque[bool] = deque(maxlen=window)  # rejected or not, of the last ``window`` updates
+        self.recent_rejected = 0  # True in ``flags``
         self.dof = 0
         self._bounds: dict[int, tuple[float, float]] = {}
         self.total = 0
@@ -75,13 +92,20 @@ class NisWindow:
 
     def add(self, nis: float, dof: int, rejected: bool) -> str:
         self.total += 1
-        if rejected:
-            self.rejected += 1
-        values = self.values
+        values, flags = self.values, self.flags
         if dof != self.dof:
             values.clear()
+            flags.clear()
             self.dof = dof
             self._sum, self._infinite, self._since_exact = 0.0, 0, 0
+            self.recent_rejected = 0
+        if len(flags) == self.window and flags[0]:
+            self.recent_rejected -= 1
+        flags.append(rejected)
+        if rejected:
+            self.rejected += 1
+            self.recent_rejected += 1
+            return self.verdict()
         if nis == nis:  # NaN from a singular S is not evidence either way
             if len(values) == self.window:
                 old = values[0]
@@ -108,6 +132,8 @@ class NisWindow:
         return math.inf if self._infinite else self._sum / n
 
     def verdict(self) -> str:
+        if len(self.flags) == self.window and self.recent_rejected > REJECTED_SHARE * self.window:
+            return "nis_high"
         n = len(self.values)
         if n < self.window:
             return "warming_up"
@@ -120,6 +146,7 @@ class NisWindow:
         return {
             "updates": self.total,
             "rejected": self.rejected,
+            "recent_rejected": self.recent_rejected,  # of the last ``window`` updates
             "dof": self.dof,
             "nis_mean": self.mean,
             "nis_bounds": list(lo_hi) if lo_hi else None,
