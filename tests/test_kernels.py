@@ -240,8 +240,23 @@ def test_kernel_refuses_wrong_shapes_with_a_clear_error():
         k.propagate(np.eye(3), P, np.zeros((4, 4)), np.empty((4, 4)))
     with pytest.raises(BufferError, match="C-contiguous float64"):
         k.propagate(np.eye(4, dtype=np.float32), P, np.zeros((4, 4)), np.empty((4, 4)))
-    with pytest.raises(ValueError, match="at most 48 rows"):
+    with pytest.raises(ValueError, match="square with 1 to 48 rows"):
         k.propagate(np.eye(49), np.eye(49), np.eye(49), np.empty((49, 49)))
+    y, H, R, out, x = np.zeros(2), np.zeros((2, 4)), np.eye(2), np.empty((4, 4)), np.zeros(5)
+    with pytest.raises(ValueError, match="H has 6 values, expected 8"):
+        k.update(P, np.zeros((2, 3)), R, y, 1.0, None, None, out, x, 1)
+    with pytest.raises(ValueError, match="y must have 1 to 12 rows"):
+        k.update(P, H, R, np.zeros(0), 1.0, None, None, out, x, 1)
+    with pytest.raises(ValueError, match="x has 5 values, expected 4"):
+        k.update(P, H, R, y, 1.0, None, None, out, x, 0)  # mode 0 writes dx: n values
+    frozen = np.empty((4, 4))
+    frozen.flags.writeable = False
+    with pytest.raises(BufferError, match="out must be a C-contiguous writable"):
+        k.update(P, H, R, y, 1.0, None, None, frozen, x, 1)
+    with pytest.raises(ValueError, match="Q must be square with 6 to 48 rows"):
+        k.input_noise(np.zeros((4, 4)), np.zeros(4), 0.1, None, None, None, 0.0, None, None, 0.0)
+    with pytest.raises(ValueError, match="G must have 9 entries"):
+        k.input_noise(np.zeros((6, 6)), np.zeros(6), 0.1, None, (1.0,) * 8, (0.0,) * 9, 1.0, None, None, 0.0)
 
 
 def test_a_zero_quaternion_is_an_estimator_error_and_leaves_x():

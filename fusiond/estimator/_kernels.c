@@ -65,6 +65,44 @@ static int get_doubles(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t 
     return 0;
 }
 
+/* The buffers one call holds, acquired in turn and released together: a call checks every array
+ * before it writes anything, and leaves by one exit that releases what it got. */
+typedef struct {
+    Py_buffer view[8];
+    int count;
+} Held;
+
+/* The data of `obj` as get_doubles checks it, kept in `held`; NULL with the exception set. */
+static double *hold(Held *held, PyObject *obj, int writable, Py_ssize_t count, const char *what) {
+    Py_buffer *v = &held->view[held->count];
+    if (get_doubles(obj, v, writable, count, what) < 0) {
+        return NULL;
+    }
+    held->count++;
+    return v->buf;
+}
+
+/* Items of the buffer held last. */
+static Py_ssize_t last_items(const Held *held) {
+    return held->view[held->count - 1].len / 8;
+}
+
+static void release(Held *held) {
+    while (held->count > 0) {
+        PyBuffer_Release(&held->view[--held->count]);
+    }
+}
+
+/* n for an n x n matrix of `items` values with min_n <= n <= MAX_N, else -1 with a ValueError naming it. */
+static Py_ssize_t square_side(Py_ssize_t items, Py_ssize_t min_n, const char *what) {
+    Py_ssize_t n = (Py_ssize_t)(sqrt((double)items) + 0.5);
+    if (n * n != items || n < min_n || n > MAX_N) {
+        PyErr_Format(PyExc_ValueError, "%s must be square with %zd to %d rows", what, min_n, MAX_N);
+        return -1;
+    }
+    return n;
+}
+
 /* -- quaternions (rotation.py, same expressions) ------------------------------------------------ */
 
 static int normalize4(double *q) {
@@ -245,32 +283,20 @@ static PyObject *input_noise(PyObject *self, PyObject *const *args, Py_ssize_t n
             return NULL;
         }
     }
-    Py_buffer vq, vd, ve;
-    int extra = args[3] != Py_None;
-    if (get_doubles(args[0], &vq, 1, -1, "Q") < 0) {
+    Held held = {.count = 0};
+    const double *d = NULL, *extra = NULL;
+    double *Q = hold(&held, args[0], 1, -1, "Q");
+    Py_ssize_t n = Q == NULL ? -1 : square_side(last_items(&held), 6, "Q");
+    if (n < 0 || (d = hold(&held, args[1], 0, n, "density")) == NULL ||
+        (args[3] != Py_None && (extra = hold(&held, args[3], 0, n, "extra")) == NULL)) {
+        release(&held);
         return NULL;
     }
-    Py_ssize_t n = (Py_ssize_t)(sqrt((double)(vq.len / 8)) + 0.5);
-    if (n * n * 8 != vq.len || n > MAX_N || n < 6) {
-        PyBuffer_Release(&vq);
-        PyErr_Format(PyExc_ValueError, "Q must be square with 6 to %d rows", MAX_N);
-        return NULL;
-    }
-    if (get_doubles(args[1], &vd, 0, n, "density") < 0) {
-        PyBuffer_Release(&vq);
-        return NULL;
-    }
-    if (extra && get_doubles(args[3], &ve, 0, n, "extra") < 0) {
-        PyBuffer_Release(&vq);
-        PyBuffer_Release(&vd);
-        return NULL;
-    }
-    double *Q = vq.buf, q[MAX_N];
-    const double *d = vd.buf;
+    double q[MAX_N];
     for (Py_ssize_t i = 0; i < n; i++) {
         q[i] = d[i] * dt;
-        if (extra) {
-            q[i] += ((const double *)ve.buf)[i];
+        if (extra != NULL) {
+            q[i] += extra[i];
         }
     }
     for (int j = 0; j < 2; j++) {
@@ -286,11 +312,7 @@ static PyObject *input_noise(PyObject *self, PyObject *const *args, Py_ssize_t n
     for (Py_ssize_t i = 0; i < n; i++) {
         Q[i * n + i] = q[i];
     }
-    PyBuffer_Release(&vq);
-    PyBuffer_Release(&vd);
-    if (extra) {
-        PyBuffer_Release(&ve);
-    }
+    release(&held);
     Py_RETURN_NONE;
 }
 
@@ -305,33 +327,16 @@ static PyObject *propagate(PyObject *self, PyObject *const *args, Py_ssize_t nar
         PyErr_SetString(PyExc_TypeError, "propagate(F, P, Q, out) takes 4 arguments");
         return NULL;
     }
-    Py_buffer vf, vp, vq, vo;
-    if (get_doubles(args[1], &vp, 0, -1, "P") < 0) {
+    Held held = {.count = 0};
+    const double *F = NULL, *Q = NULL;
+    double *out = NULL;
+    const double *P = hold(&held, args[1], 0, -1, "P");
+    Py_ssize_t n = P == NULL ? -1 : square_side(last_items(&held), 1, "P");
+    if (n < 0 || (F = hold(&held, args[0], 0, n * n, "F")) == NULL || (Q = hold(&held, args[2], 0, n * n, "Q")) == NULL ||
+        (out = hold(&held, args[3], 1, n * n, "out")) == NULL) {
+        release(&held);
         return NULL;
     }
-    Py_ssize_t nn = vp.len / 8, n = (Py_ssize_t)(sqrt((double)nn) + 0.5);
-    if (n * n != nn || n > MAX_N) {
-        PyBuffer_Release(&vp);
-        PyErr_Format(PyExc_ValueError, "P must be square with at most %d rows", MAX_N);
-        return NULL;
-    }
-    if (get_doubles(args[0], &vf, 0, nn, "F") < 0) {
-        PyBuffer_Release(&vp);
-        return NULL;
-    }
-    if (get_doubles(args[2], &vq, 0, nn, "Q") < 0) {
-        PyBuffer_Release(&vp);
-        PyBuffer_Release(&vf);
-        return NULL;
-    }
-    if (get_doubles(args[3], &vo, 1, nn, "out") < 0) {
-        PyBuffer_Release(&vp);
-        PyBuffer_Release(&vf);
-        PyBuffer_Release(&vq);
-        return NULL;
-    }
-    const double *F = vf.buf, *P = vp.buf, *Q = vq.buf;
-    double *out = vo.buf;
     double FP[MAX_N * MAX_N];
     /* FP = F P, skipping F's zeros (F is the identity but for a few blocks) */
     for (Py_ssize_t i = 0; i < n; i++) {
@@ -362,10 +367,7 @@ static PyObject *propagate(PyObject *self, PyObject *const *args, Py_ssize_t nar
         }
         trace += out[i * n + i];
     }
-    PyBuffer_Release(&vf);
-    PyBuffer_Release(&vp);
-    PyBuffer_Release(&vq);
-    PyBuffer_Release(&vo);
+    release(&held);
     return PyBool_FromLong(isfinite(trace));
 }
 
@@ -391,45 +393,30 @@ static PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         return NULL;
     }
     int masked = args[5] != Py_None;
-    /* every buffer is acquired (and checked) before anything is written */
-    enum { BP, BY, BH, BR, BK, BJ, BO, BX, NBUF };
-    Py_buffer view[NBUF];
-    int got[NBUF] = {0};
+    Held held = {.count = 0};
     PyObject *result = NULL, *s_diag = NULL;
-    Py_ssize_t n = 0, m = 0;
-#define ACQUIRE(slot, obj, writable, count, what)                                  \
-    do {                                                                           \
-        if (get_doubles((obj), &view[slot], (writable), (count), (what)) < 0) {    \
-            goto done;                                                             \
-        }                                                                          \
-        got[slot] = 1;                                                             \
-    } while (0)
-
-    ACQUIRE(BP, args[0], 0, -1, "P");
-    n = (Py_ssize_t)(sqrt((double)(view[BP].len / 8)) + 0.5);
-    if (n * n * 8 != view[BP].len || n > MAX_N) {
-        PyErr_Format(PyExc_ValueError, "P must be square with at most %d rows", MAX_N);
+    const double *P, *H = NULL, *R = NULL, *y = NULL, *keep = NULL, *J = NULL;
+    double *out = NULL, *x = NULL;
+    Py_ssize_t n = -1, m = 0;
+    if ((P = hold(&held, args[0], 0, -1, "P")) != NULL) {
+        n = square_side(last_items(&held), 1, "P");
+    }
+    if (n < 0 || (y = hold(&held, args[3], 0, -1, "y")) == NULL) {
         goto done;
     }
-    ACQUIRE(BY, args[3], 0, -1, "y");
-    m = view[BY].len / 8;
+    m = last_items(&held);
     if (m < 1 || m > MAX_M) {
         PyErr_Format(PyExc_ValueError, "y must have 1 to %d rows", MAX_M);
         goto done;
     }
-    ACQUIRE(BH, args[1], 0, m * n, "H");
-    ACQUIRE(BR, args[2], 0, m * m, "R");
-    if (masked) {
-        ACQUIRE(BK, args[5], 0, n, "keep");
-        ACQUIRE(BJ, args[6], 0, n * n, "joseph");
+    if ((H = hold(&held, args[1], 0, m * n, "H")) == NULL || (R = hold(&held, args[2], 0, m * m, "R")) == NULL ||
+        (masked && ((keep = hold(&held, args[5], 0, n, "keep")) == NULL ||
+                    (J = hold(&held, args[6], 0, n * n, "joseph")) == NULL)) ||
+        (out = hold(&held, args[7], 1, n * n, "out")) == NULL ||
+        (x = hold(&held, args[8], 1, mode == 0 ? n : n + 1, "x")) == NULL) {
+        goto done;
     }
-    ACQUIRE(BO, args[7], 1, n * n, "out");
-    ACQUIRE(BX, args[8], 1, mode == 0 ? n : n + 1, "x");
-#undef ACQUIRE
     {
-        const double *P = view[BP].buf, *H = view[BH].buf, *R = view[BR].buf, *y = view[BY].buf;
-        const double *keep = masked ? view[BK].buf : NULL, *J = masked ? view[BJ].buf : NULL;
-        double *out = view[BO].buf, *x = view[BX].buf;
         double HP[MAX_M * MAX_N], S[MAX_M * MAX_M], L[MAX_M * MAX_M], Li[MAX_M * MAX_M];
         double z[MAX_M], v[MAX_M], W[MAX_M * MAX_N], dx[MAX_N];
 
@@ -586,11 +573,7 @@ static PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
 done:
     Py_XDECREF(s_diag);
-    for (int i = 0; i < NBUF; i++) {
-        if (got[i]) {
-            PyBuffer_Release(&view[i]);
-        }
-    }
+    release(&held);
     return result;
 }
 
