@@ -293,6 +293,11 @@ gyro_scale_estimation = true
 
 
 def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
+    """In-process replay (bag reading, decoding, the core and the doctor: `replay.run.replay`) beside
+    rosbags' own reading and deserialising of the same bag, and the core alone on pre-decoded samples.
+    The replay and rosbags are timed in turn, a repeat of each, so that a load spike on this shared
+    machine slows both sides alike; ``replay_vs_rosbags`` is the ratio of the best rates,
+    ``replay_vs_rosbags_median`` the median of the per-repeat ratios."""
     from rosbags.highlevel import AnyReader
 
     from .core.fusion import FusionCore
@@ -315,7 +320,6 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
         out = fn()
         return CLOCK() - t0, out
 
-    rosbags_s, n = min(timed(rosbags_decode) for _ in range(repeat))
     with open_bag_samples([bag], cfg.sensors) as b:
         samples = list(b)
 
@@ -326,13 +330,21 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
                 core.pose()
 
     core_s = min(timed(fuse)[0] for _ in range(repeat))
-    replay_s = min(timed(lambda: replay([bag], cfg, keep_trace=False, progress=False))[0] for _ in range(repeat))
+    pairs = []
+    n = 0
+    for _ in range(max(repeat, 1)):
+        rosbags_s, n = timed(rosbags_decode)
+        replay_s = timed(lambda: replay([bag], cfg, keep_trace=False, progress=False))[0]
+        pairs.append((rosbags_s, replay_s))
+    rosbags_best = min(r for r, _ in pairs)
+    replay_best = min(p for _, p in pairs)
     return {
         "messages": float(n),
-        "rosbags_decode_msg_s": n / rosbags_s,
+        "rosbags_decode_msg_s": n / rosbags_best,
         "core_us_per_msg": core_s / len(samples) * 1e6,
-        "replay_in_process_msg_s": len(samples) / replay_s,
-        "replay_vs_rosbags": (len(samples) / replay_s) / (n / rosbags_s),
+        "replay_in_process_msg_s": len(samples) / replay_best,
+        "replay_vs_rosbags": (len(samples) / replay_best) / (n / rosbags_best),
+        "replay_vs_rosbags_median": statistics.median((len(samples) / p) / (n / r) for r, p in pairs),
     }
 
 
@@ -433,6 +445,8 @@ def targets(result: dict[str, dict[str, float]]) -> dict[str, float]:
     rep = result.get("replay", {})
     if rep:
         out["replay_in_process_vs_rosbags_decode (>=0.5)"] = rep["replay_vs_rosbags"]
+        if "replay_vs_rosbags_median" in rep:
+            out["replay_in_process_vs_rosbags_decode_median_of_pairs (>=0.5)"] = rep["replay_vs_rosbags_median"]
     proc = result.get("process", {})
     for sfx in ("", "_synthetic"):
         f, b = proc.get(f"fusiond_replay{sfx}_s"), proc.get(f"bare_numpy_script{sfx}_s")
