@@ -14,6 +14,16 @@ A gap counts when the IMU's yaw change across it differs from the estimate's by 
 than the IMU's own yaw could drift in that time: TURN_RAD (several times the yaw noise
 of one 0.2 s bin, ~0.01-0.05 rad) plus DRIFT_RATE x the gap (an uncorrected consumer
 gyro bias, <= 0.01 rad/s, integrated by the IMU through the gap).
+
+Fused as ``relative``, though, the IMU's yaw holds the heading for the whole run, and its
+own drift with it: a 6-axis IMU integrating its uncorrected gyro bias (0.004 rad/s) turns
+the heading by 1.9 rad over 8 minutes, and drags the filter's bias estimate towards its
+own (QA5's race car: 0.5 -> 6 m RMS between gaps with the advice). So, as
+``late_bias`` does for a bias learned late, the advice weighs the two: the mean heading
+error the missed turns leave as configured (each gap's miss, summed over the gaps so
+far, held until the next gap or the end) against ~|r| T / 2 for a yaw drifting at r
+against the bias-corrected gyro over a run of T seconds, and is given only when the
+relative yaw clearly costs less (RELATIVE_MARGIN) and does not wander.
 """
 
 from __future__ import annotations
@@ -25,7 +35,9 @@ import numpy as np
 from ...config import Config, GpsSensor, ImuSensor, PoseSensor
 from ...estimator import rotation as rot
 from .bins import BIN_S
-from .heading import timed
+from .gyro import quiet_episodes
+from .heading import WANDER_RAD, imu_vs_gyro, timed
+from .late_bias import RELATIVE_MARGIN
 from .series import Series
 from .verdict import Verdict, sensor_key
 
@@ -69,7 +81,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         return None  # an absolute position/pose finds the heading again
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
     te, ye = np.array(series.est_t), np.array(series.est_yaw)
-    missed = []
+    missed, misses = [], []
     for start, length in series.odom_gaps:
         if length < MIN_GAP_S:
             continue
@@ -85,22 +97,69 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         imu_turn = rot.wrap(after - before)
         est_turn = rot.wrap(float(ye[e1]) - float(ye[e0]))
         miss = rot.wrap(imu_turn - est_turn)
+        misses.append((start + length, miss))
         if abs(miss) > TURN_RAD + DRIFT_RATE * length:
             missed.append((start, length, imu_turn, est_turn))
     if not missed:
         return None
     worst = max(missed, key=lambda m: abs(rot.wrap(m[2] - m[3])))
     start, length, imu_turn, est_turn = worst
-    return Verdict(
-        imu.name, "heading_across_gaps", "warn",
-        f"across {len(missed)} logging gap(s) the IMU's own yaw turned by more than the estimate (the largest: "
-        f"{length:.1f} s from {start - (t0 or 0.0):.1f} s{' into the run' if t0 is not None else ''}, the IMU turned {math.degrees(imu_turn):+.0f} deg, the estimate "
-        f"{math.degrees(est_turn):+.0f} deg): nothing else tells the filter the heading after a gap (no GPS or "
-        "pose, the IMU's yaw not fused), so it drives on along the heading it had. The IMU kept its yaw through "
-        "the gap: fuse it relative to its first reading",
-        sensor_key(imu.name, "orientation"), 'orientation = "relative"',
-        {"gaps_with_missed_turn": float(len(missed)), "largest_missed_turn_rad": rot.wrap(imu_turn - est_turn),
-         "gap_s": length})
+    evidence = {"gaps_with_missed_turn": float(len(missed)), "largest_missed_turn_rad": rot.wrap(imu_turn - est_turn),
+                "gap_s": length}
+    msg = (f"across {len(missed)} logging gap(s) the IMU's own yaw turned by more than the estimate (the largest: "
+           f"{length:.1f} s from {start - (t0 or 0.0):.1f} s{' into the run' if t0 is not None else ''}, the IMU "
+           f"turned {math.degrees(imu_turn):+.0f} deg, the estimate {math.degrees(est_turn):+.0f} deg): nothing "
+           "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused), so it drives "
+           "on along the heading it had")
+    drift = _relative_drift(series, cfg, imu)
+    if drift is not None:
+        wander, rate = drift
+        run = series.odom_t[-1] - series.odom_t[0]
+        gap_cost = _missed_cost(misses, series.odom_t[0], series.odom_t[-1])
+        relative_cost = abs(rate) * run / 2.0
+        evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
+                         "mean_heading_error_rad": gap_cost, "relative_mean_heading_error_rad": relative_cost})
+        if not (wander < WANDER_RAD and relative_cost < RELATIVE_MARGIN * gap_cost):
+            why = (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD else
+                   f"drifts {rate:+.5f} rad/s against the bias-corrected gyro, ~{relative_cost:.2f} rad off on "
+                   f"average over the run against ~{gap_cost:.2f} from the missed turns")
+            return Verdict(imu.name, "heading_across_gaps", "warn",
+                           msg + f". Fusing the IMU's yaw as relative would not do better: it {why}. Log without "
+                           "gaps, or add an absolute heading (GPS, pose)", evidence=evidence)
+        msg += (f". The IMU kept its yaw through the gap, and it drifts only {rate:+.5f} rad/s against the "
+                f"bias-corrected gyro (~{relative_cost:.2f} rad off on average over the run, against ~{gap_cost:.2f} "
+                "from the missed turns)")
+    return Verdict(imu.name, "heading_across_gaps", "warn", msg + ": fuse it relative to its first reading",
+                   sensor_key(imu.name, "orientation"), 'orientation = "relative"', evidence)
+
+
+def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, float] | None:
+    """(wander, drift rate) of the IMU's yaw against the bias-corrected gyro: ``heading.imu_vs_gyro``'s slope
+    is r - b, b the gyro's z bias, read at the first standstill (0 without one: then r - b is all that can be
+    told, and it is the drift a relative yaw adds to the gyro's). None without a gyro to compare with."""
+    compared = imu_vs_gyro(series)
+    if compared is None or not all(math.isfinite(v) for v in compared):
+        return None
+    wander, slope = compared
+    b = 0.0
+    if imu.angular_velocity:
+        standstills, _ = quiet_episodes(series, cfg, imu)
+        if standstills and math.isfinite(standstills[0].gyro_mean):
+            b = standstills[0].gyro_mean
+    return wander, slope + b
+
+
+def _missed_cost(misses: list[tuple[float, float]], t_start: float, t_end: float) -> float:
+    """Mean heading error over [t_start, t_end] as configured: after each gap (its end, signed miss) the misses
+    so far add up, and stay until the next gap or the end of the run."""
+    if t_end <= t_start or not misses:
+        return 0.0
+    total = held = 0.0
+    ends = [t for t, _ in misses[1:]] + [t_end]
+    for (t, miss), until in zip(misses, ends):
+        held += miss
+        total += abs(held) * max(min(until, t_end) - t, 0.0)
+    return total / (t_end - t_start)
 
 
 __all__ = ["gap_heading_verdict"]
