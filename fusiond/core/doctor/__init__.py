@@ -281,7 +281,9 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         elif channel == "yaw_rate":
             if unmeasured is None:
                 o = s if isinstance(s, OdomSensor) else OdomSensor(name=name, key=name)
-                found[(name, channel)].append(slip_verdict(o, ch, wheel_yaw_fit(series) if known else None))
+                floored = (series.odom_wz_floored, series.odom_wz_floored_sigma_sum / series.odom_wz_floored
+                           if series.odom_wz_floored else math.nan)
+                found[(name, channel)].append(slip_verdict(o, ch, wheel_yaw_fit(series) if known else None, floored))
         elif channel == "gyro_bias":
             v = bias_check(series, cfg, ch, gyro_fused) if known else None
             if v is None:

@@ -49,6 +49,10 @@ class Series(msgspec.Struct):
     # samples whose yaw rate the core takes as "not measured" (declared so in twist_measured, or a variance
     # at or above twist_max_sigma^2, NaN or inf: the 1e6 of a driver that has none), so not used
     odom_wz_unmeasured: list[int] = []
+    # samples whose stated yaw-rate variance lay below twist_min_sigma's floor (the core used the floor),
+    # and the sum of their stated sigmas
+    odom_wz_floored: int = 0
+    odom_wz_floored_sigma_sum: float = 0.0
     odom_rest: list[bool] = []  # every sample of the bin exactly at rest
     odom_gaps: list[tuple[float, float]] = []  # (stamp, length s) of silences longer than gap_s
     # Where an integrated heading was NOT integrated (a step longer than MAX_STEP_S): the stamp of the

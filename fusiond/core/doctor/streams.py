@@ -125,6 +125,7 @@ class OdomStream:
         self.declared_unmeasured = np.array([not s.twist_measured[5] for s in sensors], dtype=bool)
         self.overridden = np.array([s.twist_noise is not None for s in sensors], dtype=bool)
         self.max_var = np.array([s.twist_max_sigma[1] ** 2 for s in sensors])
+        self.min_var = np.array([s.twist_min_sigma[1] ** 2 for s in sensors])
         self.gap_s = gap_s
         self.rate = _Rate()
         self.open: OpenBin | None = None
@@ -145,6 +146,12 @@ class OdomStream:
         unmeasured = np.where(self.declared_unmeasured[idx], 1.0, np.where(
             self.overridden[idx] | ~has36, 0.0, ((c35 != c35) | (c35 >= self.max_var[idx])).astype(float)))
         zero_wz = ((wz == 0.0) & has36 & (c35 <= 0.0)).astype(float)
+        # a stated, measured yaw rate whose variance the core raised to the floor (a zero is a lost measurement
+        # or "not stated", not a noise: left out)
+        floored = (~self.overridden[idx] & has36 & (unmeasured == 0.0) & (c35 > 0.0) & (c35 < self.min_var[idx]))
+        if floored.any():
+            series.odom_wz_floored += int(floored.sum())
+            series.odom_wz_floored_sigma_sum += float(np.sqrt(c35[floored]).sum())
 
         carried = (self.rate.heading, self.rate.at)
         heading, at, dt, prev_t = self.rate.step(t, wz)

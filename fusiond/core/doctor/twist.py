@@ -9,6 +9,7 @@ measured", declared with ``twist_measured``.
 
 from __future__ import annotations
 
+import math
 from itertools import chain
 
 import numpy as np
@@ -132,12 +133,16 @@ def yaw_rate_not_measured(series: Series, odom: OdomSensor, imu: ImuSensor | Non
                    sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", ev)
 
 
-def slip_verdict(odom: OdomSensor, ch: ChannelStats, fit: tuple[float, float] | None = None) -> Verdict:
+def slip_verdict(odom: OdomSensor, ch: ChannelStats, fit: tuple[float, float] | None = None,
+                 floored: tuple[int, float] = (0, math.nan)) -> Verdict:
     """The wheels' yaw rate checked against the gyro (the gyro drives heading).
 
     ``fit`` is (scale, offset) of the wheel yaw rate against the gyro's over the run: a
     systematic scale (skid-steer) is named as such, never as understated noise; and a NIS
     made high by the samples flagged as slip alone says nothing about the stated noise.
+    ``floored``: (samples, their mean stated sigma) of the yaw rates whose stated noise lay below
+    ``twist_min_sigma``'s floor, which the core used instead: a NIS low over mostly such samples is
+    the floor's, and the value to paste is the floor's.
     """
     frac = ch.rejected / ch.n
     mean, rms, _ = ch.component(0)
@@ -168,6 +173,21 @@ def slip_verdict(odom: OdomSensor, ch: ChannelStats, fit: tuple[float, float] | 
         return Verdict(odom.name, "yaw_rate", "warn",
                        f"wheel yaw rate offset of {mean:+.3f} rad/s against the gyro: a driver offset or "
                        "uncorrected gyro bias", key, evidence={"mean_rad_s": mean})
+    _, _, predicted = ch.component(0)
+    floor = odom.twist_min_sigma[1]
+    rest = max(predicted * predicted - floor * floor, 0.0)  # S less the floor's variance: gyro, bias estimate
+    if verdict == "nis_low" and floored[0] > 0.5 * ch.n and math.isfinite(floored[1]) and floor * floor > rest:
+        # the floor is most of S (not, say, a bias prior no standstill has narrowed): the residuals' rms^2
+        # less the rest is the wheels' own variance, the floor to paste, never below what the driver states
+        wheel = max(math.sqrt(max(rms * rms - rest, 0.0)), floored[1])
+        return Verdict(odom.name, "yaw_rate", "warn",
+                       f"wheel yaw rate against the gyro: NIS low ({ch.nis_per_dof:.2f} per dof over {ch.n}, rms "
+                       f"{rms:.3f} rad/s): in {floored[0]} samples the driver states {floored[1]:.4f} rad/s, below "
+                       f"the twist_min_sigma floor ({floor:g}) the filter uses instead; the residuals show "
+                       f"~{wheel:.4f} for the wheels: lower the floor", sensor_key(odom.name, "twist_min_sigma"),
+                       f"twist_min_sigma = [{odom.twist_min_sigma[0]:g}, {wheel:.4f}]",
+                       evidence={"nis_per_dof": ch.nis_per_dof, "rms_rad_s": rms, "floored_samples": float(floored[0]),
+                                 "stated_sigma_rad_s": floored[1], "wheel_sigma_rad_s": wheel})
     if verdict != "ok":
         more = "smaller" if verdict == "nis_high" else "larger"
         return Verdict(odom.name, "yaw_rate", "warn",
