@@ -39,6 +39,9 @@ class World:
     gyro_bias: float = 0.0  # z, rad/s
     gyro_sigma: float = 0.002
     hand_turn: tuple[float, float, float] | None = None  # (t0, t1, rate): wheels at rest, robot turned
+    # (t0, t1, rate) relative: when given, the robot drives straight but for these arcs of constant yaw
+    # rate (instead of the weave below): curvature that starts and stops, as a skid-steer's turns
+    arcs: tuple[tuple[float, float, float], ...] = ()
     # GPS
     gps_rate: float = 0.0  # 0: no GPS
     gps_sigma: float = 0.3
@@ -81,6 +84,8 @@ def commanded(rel: float, w: World) -> tuple[float, float, bool]:
     v = w.speed
     if w.hand_turn is not None and w.hand_turn[0] - HAND_STOP_S <= rel < w.hand_turn[0]:
         v *= (w.hand_turn[0] - rel) / HAND_STOP_S  # the robot stops before it is picked up
+    if w.arcs:
+        return v, next((rate for a, b, rate in w.arcs if a <= rel < b), 0.0), True
     return v, 0.25 * math.sin(0.3 * (rel - w.standstill)) + 0.05, True
 
 

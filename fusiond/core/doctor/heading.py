@@ -121,6 +121,23 @@ def track_segments(series: Series, min_length: float, max_s: float = 30.0) -> li
     return out
 
 
+def yaw_along(series: Series, ti: np.ndarray, yi: np.ndarray, t0: float, t1: float) -> float:
+    """The direction the IMU's yaw says the vehicle moved in from t0 to t1: that of the sum of the
+    odometry's speed along the yaw, sum v (cos yaw, sin yaw), over the bins between (a GPS chord is
+    exactly that displacement, whatever the curvature, and an offset of the yaw turns it by itself).
+    The yaw at the chord's middle instant is that direction only on an arc of constant curvature: a
+    chord that runs straight, then turns, reads the turn's direction, a bias with the sense of the turns
+    (QA5's skid-steer: a -0.13 rad "offset" of a correct magnetometer). Without two moving bins inside,
+    the middle instant's yaw."""
+    to, vo = np.asarray(series.odom_t), np.asarray(series.odom_v)
+    lo, hi = np.searchsorted(to, t0, side="left"), np.searchsorted(to, t1, side="right")
+    v = vo[lo:hi]
+    if hi - lo < 2 or not np.any(v != 0.0):
+        return float(np.interp(0.5 * (t0 + t1), ti, yi))
+    yaw = np.interp(to[lo:hi], ti, yi)
+    return math.atan2(float(np.sum(v * np.sin(yaw))), float(np.sum(v * np.cos(yaw))))
+
+
 def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
     if gps is not None and gps.position_noise is not None:
         return float(max(gps.position_noise[0], gps.position_noise[1]))
@@ -176,7 +193,8 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
             if m.sum() >= 5:
                 tracks = np.array([s[2] for s in segs])[m]
                 chords = np.array([s[3] for s in segs])[m]
-                d = _wrap(np.interp(mids[m], ti, yi) - tracks)
+                d = _wrap(np.array([yaw_along(series, ti, yi, a, b) for a, b, _, _ in
+                                    (seg for seg, keep in zip(segs, m) if keep)]) - tracks)
                 offset = float(math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
                 r = _wrap(d - offset)
                 track_var = np.mean(2.0 * sigma**2 / chords**2)
