@@ -203,6 +203,30 @@ def test_white_gps_noise_is_not_called_a_wander(stated):
         assert v.level == "ok", v
 
 
+# The highway car of QA5: 10 Hz fixes at 25 m/s. The filter, fed ten fixes a second, follows much of the
+# wander: the persisting share left in the innovations was 0.18-0.25, under the 0.3 threshold of before
+# (the advice was then "lower position_noise"); white fixes at the same rate and speed leave <= 0.04.
+HIGHWAY = dict(duration=400.0, gps_rate=10.0, gps_sigma=0.6, speed=25.0)
+STATED_HIGHWAY = "position_noise = [1.3, 1.3, 2.6]"  # the wander and the white part together, as a datasheet
+
+
+@pytest.mark.parametrize("wander", [True, False])
+def test_a_wander_under_10_hz_fixes_on_a_highway_is_named_and_white_fixes_are_not(wander):
+    from fusiond.core.doctor.gps_wander import PERSISTING_SHARE
+
+    world = sim_gps.World(**HIGHWAY, **(dict(gps_error_tau=60.0, gps_error_sigma=1.2) if wander else {}))
+    v = one(verdicts_of(robot_config(gps=STATED_HIGHWAY), sim_gps.simulate(world)), "gps", "position")
+    if not wander:
+        assert "error_tau_s" not in v.key and "autocorrelated" not in v.message, v
+        return
+    assert v.key == "sensors.gps.error_tau_s" and "error_sigma = [" in v.suggestion, v
+    assert v.evidence["innovation_lag1_correlation"] > PERSISTING_SHARE
+    # lower bounds (the filter follows part of the wander): below the truth by the run's sampling error
+    # (~7 correlation times: +-40 %), the white part near the receiver's 0.6 m
+    assert v.evidence["error_tau_s"] <= 1.4 * 60.0 and v.evidence["error_sigma_east_m"] <= 1.4 * 1.2, v
+    assert v.evidence["white_sigma_m"] == pytest.approx(0.6, rel=0.4)
+
+
 # -- 3. a gyro noise stated 35x the real one is named, measured on genuine standstills only ---------------
 GYRO_SIGMA = 0.004  # the race car's gyro: 0.004 rad/s, stated 0.02 rad^2/s^2 (0.141 rad/s)
 RAZOR_VARIANCE = 0.02
