@@ -24,6 +24,9 @@ from .verdict import Verdict, filter_key, sensor_key
 
 MIN_REJECTED_FRACTION = 0.1
 OVERSTATED_RATIO = 3.0  # a stated gyro noise this many times the measured one at rest is overstated
+# the gyro's noise at rest measured beyond this factor of the stated (either way) explains a NIS high or low;
+# within it, the noise is as stated
+NOISE_RATIO = 1.5
 DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
 
 
@@ -245,7 +248,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                            f"{100 * frac:.0f}% of standstill bias updates rejected: the robot turned while its wheels "
                            "read zero (pushed or carried); those updates are rightly refused",
                            filter_key("standstill_s"), evidence=evidence)
-        if math.isfinite(measured) and math.isfinite(stated) and measured > 1.5 * stated:
+        if math.isfinite(measured) and math.isfinite(stated) and measured > NOISE_RATIO * stated:
             return Verdict(imu.name, "gyro_bias", "warn",
                            f"{100 * frac:.0f}% of standstill bias updates rejected: the gyro noise is understated "
                            f"(it measures {measured:.5f} rad/s at rest, {stated:.5f} is stated)",
@@ -279,8 +282,8 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        f"bias estimate ({est:+.5f}) was moved by another source, and the standstills now contradict it",
                        evidence=evidence)
     v = ch.verdict()
-    if v == "nis_high" and math.isfinite(measured) and math.isfinite(stated) and measured <= 1.5 * stated:
-        # the noise at rest is what is stated (the same 1.5 as "understated" above): what the standstills
+    if v == "nis_high" and math.isfinite(measured) and math.isfinite(stated) and measured <= NOISE_RATIO * stated:
+        # the noise at rest is what is stated (within NOISE_RATIO, as "understated" above): what the standstills
         # disagree with is the bias estimate, moved between them by something else; pasting the measured
         # noise would change nothing (QA5's race car was told to paste the gyro_noise it had)
         yaw = imu.orientation in ("absolute", "relative")
@@ -304,7 +307,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     # Each standstill window makes one update per axis; the first ones are judged against the wide
     # bias prior, so a low NIS alone says the prior was wide, not that the noise is overstated:
     # only the measured spread at rest can say that.
-    if v == "nis_low" and math.isfinite(measured) and math.isfinite(stated) and measured < stated / 1.5:
+    if v == "nis_low" and math.isfinite(measured) and math.isfinite(stated) and measured < stated / NOISE_RATIO:
         return Verdict(imu.name, "gyro_bias", "warn",
                        f"standstill gyro NIS low ({ch.nis_per_dof:.2f} per dof over {ch.n} updates): the gyro noise "
                        "is overstated" + (f"; it measures {measured:.5f} rad/s at rest" if noise_hint else ""),
