@@ -60,3 +60,20 @@ def test_a_floor_that_is_not_most_of_s_is_not_blamed():
     samples = simulate(SimConfig(duration=60.0, wheel_sigma=WHEEL_SIGMA, gyro_sigma=GYRO_SIGMA, seed=11))
     v = one(verdicts_of(robot_config(), samples), "wheel", "yaw_rate")
     assert v.key != "sensors.wheel.twist_min_sigma" and "floor" not in v.message, v
+
+
+def test_an_empty_covariance_on_noisier_wheels_names_the_floor_to_raise():
+    """A driver leaving the twist covariance at 0 (QA5's race car): the core floors it to twist_min_sigma
+    (0.01 rad/s) while its wheels' yaw rate scatters by 0.03: NIS ~(0.03^2 + 0.002^2) / (0.01^2 + 0.002^2)
+    = 8.7 per dof, high. Its value to paste is the wheels' noise from the residuals, 0.03 within the
+    sampling error of ~3000 samples (asserted within 15 %); pasted, the check is consistent."""
+    noisy = 0.03
+    samples = simulate(SimConfig(duration=60.0, standstill=5.0, wheel_sigma=noisy, gyro_sigma=GYRO_SIGMA, seed=11))
+    empty = [s if type(s).__name__ != "OdomSample" else type(s)(s.sensor, s.stamp, s.linear, s.angular, (0.0,) * 36)
+             for s in samples]
+    v = one(verdicts_of(robot_config(), empty), "wheel", "yaw_rate")
+    assert v.level == "warn" and v.key == "sensors.wheel.twist_min_sigma" and "raise the floor" in v.message, v
+    value = float(re.search(r"twist_min_sigma = \[0.01, ([0-9.]+)\]", v.suggestion).group(1))
+    assert value == pytest.approx(noisy, rel=0.15), v.suggestion
+    pasted = one(verdicts_of(robot_config(odom=v.suggestion), empty), "wheel", "yaw_rate")
+    assert pasted.level == "ok", pasted

@@ -146,9 +146,11 @@ class OdomStream:
         unmeasured = np.where(self.declared_unmeasured[idx], 1.0, np.where(
             self.overridden[idx] | ~has36, 0.0, ((c35 != c35) | (c35 >= self.max_var[idx])).astype(float)))
         zero_wz = ((wz == 0.0) & has36 & (c35 <= 0.0)).astype(float)
-        # a stated, measured yaw rate whose variance the core raised to the floor (a zero is a lost measurement
-        # or "not stated", not a noise: left out)
-        floored = (~self.overridden[idx] & has36 & (unmeasured == 0.0) & (c35 > 0.0) & (c35 < self.min_var[idx]))
+        # a measured yaw rate whose stated variance the core raised to the floor: stated below it, or stated
+        # 0 (a driver leaving its covariance empty), except a rate of exactly 0 with variance 0 (zero_wz: a lost
+        # measurement, not a noise)
+        floored = (~self.overridden[idx] & has36 & (unmeasured == 0.0) & (c35 >= 0.0) & (c35 < self.min_var[idx])
+                   & (zero_wz == 0.0))
         if floored.any():
             series.odom_wz_floored += int(floored.sum())
             series.odom_wz_floored_sigma_sum += float(np.sqrt(c35[floored]).sum())

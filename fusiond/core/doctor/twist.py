@@ -176,15 +176,21 @@ def slip_verdict(odom: OdomSensor, ch: ChannelStats, fit: tuple[float, float] | 
     _, _, predicted = ch.component(0)
     floor = odom.twist_min_sigma[1]
     rest = max(predicted * predicted - floor * floor, 0.0)  # S less the floor's variance: gyro, bias estimate
-    if verdict == "nis_low" and floored[0] > 0.5 * ch.n and math.isfinite(floored[1]) and floor * floor > rest:
-        # the floor is most of S (not, say, a bias prior no standstill has narrowed): the residuals' rms^2
-        # less the rest is the wheels' own variance, the floor to paste, never below what the driver states
+    mostly_floored = floored[0] > 0.5 * ch.n and math.isfinite(floored[1])
+    if mostly_floored and ((verdict == "nis_low" and floor * floor > rest) or verdict == "nis_high"):
+        # the filter used the floor for the wheels: NIS low where the floor is most of S (not, say, a bias
+        # prior no standstill has narrowed), NIS high where the wheels are noisier than it. The residuals'
+        # rms^2 less the rest of S is the wheels' own variance: the floor to paste, never below what the
+        # driver states
         wheel = max(math.sqrt(max(rms * rms - rest, 0.0)), floored[1])
+        move = "lower" if verdict == "nis_low" else "raise"
+        stated = (f"the driver states {floored[1]:.4f} rad/s" if floored[1] > 0.0
+                  else "the driver states no yaw-rate variance (0)")
         return Verdict(odom.name, "yaw_rate", "warn",
-                       f"wheel yaw rate against the gyro: NIS low ({ch.nis_per_dof:.2f} per dof over {ch.n}, rms "
-                       f"{rms:.3f} rad/s): in {floored[0]} samples the driver states {floored[1]:.4f} rad/s, below "
-                       f"the twist_min_sigma floor ({floor:g}) the filter uses instead; the residuals show "
-                       f"~{wheel:.4f} for the wheels: lower the floor", sensor_key(odom.name, "twist_min_sigma"),
+                       f"wheel yaw rate against the gyro: NIS {verdict.removeprefix('nis_')} ({ch.nis_per_dof:.2f} per "
+                       f"dof over {ch.n}, rms {rms:.3f} rad/s): in {floored[0]} samples {stated}, below the "
+                       f"twist_min_sigma floor ({floor:g}) the filter uses instead; the residuals show ~{wheel:.4f} "
+                       f"for the wheels: {move} the floor", sensor_key(odom.name, "twist_min_sigma"),
                        f"twist_min_sigma = [{odom.twist_min_sigma[0]:g}, {wheel:.4f}]",
                        evidence={"nis_per_dof": ch.nis_per_dof, "rms_rad_s": rms, "floored_samples": float(floored[0]),
                                  "stated_sigma_rad_s": floored[1], "wheel_sigma_rad_s": wheel})
