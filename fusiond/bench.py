@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import math
 import statistics
 import subprocess
 import sys
@@ -118,7 +119,6 @@ def tight_step(dt: float = 0.01) -> Callable[[], None]:
     with H on the two attitude columns and a closed-form 2x2 Cholesky. The yardstick of
     `bench_estimator`: the same maths, none of the generality (layouts, input blocks, gating,
     diagnostics, covariance checks)."""
-    import math
 
     from .estimator import rotation as rot
 
@@ -185,7 +185,6 @@ def tight_step(dt: float = 0.01) -> Callable[[], None]:
 
 def bench_sensors(repeat: int = 5, number: int = 2000, seconds: float = 20.0) -> dict[str, float]:
     """us per update of the GPS and pose sensors (estimator level, then through the core)."""
-    import math
 
     from .config import loads
     from .core.fusion import FusionCore
@@ -294,10 +293,14 @@ gyro_scale_estimation = true
 
 def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
     """In-process replay (bag reading, decoding, the core and the doctor: `replay.run.replay`) beside
-    rosbags' own reading and deserialising of the same bag, and the core alone on pre-decoded samples.
-    The replay and rosbags are timed in turn, a repeat of each, so that a load spike on this shared
-    machine slows both sides alike; ``replay_vs_rosbags`` is the ratio of the best rates,
-    ``replay_vs_rosbags_median`` the median of the per-repeat ratios."""
+    rosbags' own reading and deserialising of the same bag, and where the replay's time goes.
+    Each side is timed in turn, a repeat of each, so that a load spike on this shared machine
+    slows all alike; ``replay_vs_rosbags`` is the ratio of the best rates, ``replay_vs_rosbags_median``
+    the median of the per-repeat ratios. The split, per message: ``read_decode_us`` (the bag read
+    into samples, `open_bag_samples`), ``core_us`` (those samples through `FusionCore` alone),
+    ``no_doctor_us`` (the replay a ``--quiet`` run makes: no doctor) and ``replay_us``; the replay's
+    rate with a core that cost nothing, ``replay_vs_rosbags_core_free``, bounds what a faster core
+    alone can reach."""
     from rosbags.highlevel import AnyReader
 
     from .core.fusion import FusionCore
@@ -315,13 +318,16 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
                 n += 1
         return n
 
+    def read() -> list:
+        with open_bag_samples([bag], cfg.sensors) as b:
+            return list(b)
+
     def timed(fn) -> tuple[float, object]:
         t0 = CLOCK()
         out = fn()
         return CLOCK() - t0, out
 
-    with open_bag_samples([bag], cfg.sensors) as b:
-        samples = list(b)
+    samples = read()
 
     def fuse() -> None:
         core = FusionCore(cfg)
@@ -329,22 +335,40 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
             if core.ingest(s).publish:
                 core.pose()
 
-    core_s = min(timed(fuse)[0] for _ in range(repeat))
-    pairs = []
+    sides = {
+        "rosbags": rosbags_decode,
+        "read_decode": read,
+        "core": fuse,
+        "no_doctor": lambda: replay([bag], cfg, keep_trace=False, progress=False, doctor=False),
+        "replay": lambda: replay([bag], cfg, keep_trace=False, progress=False),
+    }
+    runs: dict[str, list[float]] = {k: [] for k in sides}
     n = 0
     for _ in range(max(repeat, 1)):
-        rosbags_s, n = timed(rosbags_decode)
-        replay_s = timed(lambda: replay([bag], cfg, keep_trace=False, progress=False))[0]
-        pairs.append((rosbags_s, replay_s))
-    rosbags_best = min(r for r, _ in pairs)
-    replay_best = min(p for _, p in pairs)
+        for name, fn in sides.items():
+            seconds, out = timed(fn)
+            runs[name].append(seconds)
+            if name == "rosbags":
+                n = int(out)
+    m = len(samples)
+    best = {k: min(v) for k, v in runs.items()}
+    rate = m / best["replay"]
+    rosbags_rate = n / best["rosbags"]
+    free = best["replay"] - best["core"]  # the replay's other work: reading, decoding, the doctor
     return {
         "messages": float(n),
-        "rosbags_decode_msg_s": n / rosbags_best,
-        "core_us_per_msg": core_s / len(samples) * 1e6,
-        "replay_in_process_msg_s": len(samples) / replay_best,
-        "replay_vs_rosbags": (len(samples) / replay_best) / (n / rosbags_best),
-        "replay_vs_rosbags_median": statistics.median((len(samples) / p) / (n / r) for r, p in pairs),
+        "rosbags_decode_msg_s": rosbags_rate,
+        "rosbags_us_per_msg": best["rosbags"] / n * 1e6,
+        "read_decode_us_per_msg": best["read_decode"] / m * 1e6,
+        "core_us_per_msg": best["core"] / m * 1e6,
+        "no_doctor_us_per_msg": best["no_doctor"] / m * 1e6,
+        "replay_us_per_msg": best["replay"] / m * 1e6,
+        "replay_in_process_msg_s": rate,
+        "replay_vs_rosbags": rate / rosbags_rate,
+        "replay_vs_rosbags_median": statistics.median(
+            (m / p) / (n / r) for r, p in zip(runs["rosbags"], runs["replay"])),
+        "replay_no_doctor_vs_rosbags": (m / best["no_doctor"]) / rosbags_rate,
+        "replay_vs_rosbags_core_free": (m / free) / rosbags_rate if free > 0 else math.inf,
     }
 
 
@@ -403,7 +427,6 @@ def bench_process(bag: Path, config: Path, topics: tuple[str, str], repeat: int 
 def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: int = 15_000) -> Path:
     """A ROS 2 bag of a robot driving a circle: odometry 50 Hz, IMU 100 Hz (5 ms behind), ``messages``
     in all, through the codecs' own CDR encoders (what a live publisher puts on the wire)."""
-    import math
 
     from rosbags.rosbag2 import Writer
 

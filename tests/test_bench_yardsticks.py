@@ -87,3 +87,17 @@ def test_process_benchmark_runs_fusiond_byte_compiled_as_installed():
         stat = src.stat()
         assert int.from_bytes(header[:4], "little") == int(stat.st_mtime) & 0xFFFFFFFF
         assert int.from_bytes(header[4:], "little") == stat.st_size & 0xFFFFFFFF
+
+
+def test_replay_split_adds_up_and_counts_the_same_messages(jackal_bag):
+    """The in-process split is of one bag: rosbags decodes the configured topics' messages, the
+    replay fuses the same number; the core-free bound is the replay's rate without the core's share."""
+    cfg = load(ROOT / "examples" / "jackal.toml")
+    r = bench.bench_replay(jackal_bag, cfg, repeat=1)
+    with open_bag_samples([jackal_bag], cfg.sensors) as b:
+        assert r["messages"] == sum(1 for _ in b)
+    assert r["replay_vs_rosbags"] == pytest.approx(r["rosbags_us_per_msg"] / r["replay_us_per_msg"])
+    free = r["replay_us_per_msg"] - r["core_us_per_msg"]
+    if free > 0:
+        assert r["replay_vs_rosbags_core_free"] == pytest.approx(r["rosbags_us_per_msg"] / free)
+    assert r["replay_no_doctor_vs_rosbags"] == pytest.approx(r["rosbags_us_per_msg"] / r["no_doctor_us_per_msg"])

@@ -8,7 +8,7 @@ sample older than that is too old to place.
 
 Snapshots are recycled: the ones ``trim`` drops go to a free list, and the next
 insert overwrites one of them in place (``FilterState.copy(into=...)``, x and P by
-np.copyto) instead of allocating a state, an EKF and two arrays per message and
+in-place writes) instead of allocating a state, an EKF and two arrays per message and
 freeing as many. Once the history has filled, a steady stream allocates no
 snapshots at all; the free list never holds more than one trim's worth.
 """

@@ -55,7 +55,7 @@ class FilterState:
 
     def copy(self, into: "FilterState | None" = None) -> "FilterState":
         """A snapshot; ``into`` (a snapshot the history no longer needs) is overwritten instead of
-        allocating a new one, its x and P by np.copyto."""
+        allocating a new one, its x and P by in-place writes."""
         if into is None:
             c = FilterState.__new__(FilterState)
             c.ekf = self.ekf.copy()

@@ -354,7 +354,8 @@ class ErrorStateEKF:
         self.P = J @ self.P @ J.T
 
     def copy(self, into: "ErrorStateEKF | None" = None) -> "ErrorStateEKF":
-        """A copy with its own x and P; ``into`` reuses an existing object's arrays (np.copyto)."""
+        """A copy with its own x and P; ``into`` reuses an existing object's arrays (written in place:
+        ``a[...] = b`` of equal shapes and dtype copies the bytes, at half np.copyto's call cost)."""
         c = into
         if c is None or c.P.shape != self.P.shape or c.x.shape != self.x.shape:
             c = ErrorStateEKF.__new__(ErrorStateEKF)
@@ -362,8 +363,8 @@ class ErrorStateEKF:
             c.P = self.P.copy()
             c._spare = None
         else:
-            np.copyto(c.x, self.x)
-            np.copyto(c.P, self.P)
+            c.x[...] = self.x
+            c.P[...] = self.P
         c.layout = self.layout
         c._fits, c._boxplus_mode = self._fits, self._boxplus_mode
         c.resets = self.resets
