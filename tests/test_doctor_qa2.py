@@ -61,13 +61,14 @@ def test_a_logging_gap_does_not_make_a_correct_imu_yaw_look_disturbed(gap):
 
 
 @pytest.mark.parametrize("gap", [False, True])
-def test_a_turn_hidden_by_a_logging_gap_names_relative_orientation_when_nothing_else_gives_heading(gap):
-    """No GPS, no pose, the IMU's yaw not fused (roll_pitch): after the gap the filter holds its old heading
-    (turning only by the held gyro rate, <= 0.3 rad/s x 0.2 s timeout = 0.06 rad) while the robot turned by
-    missed_turn (1.12 rad), which the IMU's own yaw kept. The check's allowance over a 5 s gap is
-    TURN_RAD + DRIFT_RATE x 5 = 0.25 rad: four times below the turn. Without the gap both headings follow the
-    gyro: nothing is named. The suggestion (relative) brings the heading back: the final heading error
-    falls from ~missed_turn to the IMU's yaw noise."""
+def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_it_is_not(gap):
+    """No GPS, no pose, the IMU's yaw not fused (roll_pitch): in the gap the robot turned by missed_turn
+    (1.12 rad), which the IMU's own yaw kept. With yaw_across_gaps (the default) the heading turns by it at
+    the first orientation after the gap: the final heading error is the IMU yaw's noise (0.05 asserted) and
+    nothing is named. Turned off, the filter holds its old heading (turning only by the held gyro rate,
+    <= 0.3 rad/s x 0.2 s timeout = 0.06 rad): the final heading error stays ~missed_turn, and the check names
+    it (its allowance over a 5 s gap, TURN_RAD + DRIFT_RATE x 5 = 0.25 rad, is four times below the turn)
+    with yaw_across_gaps = true to paste. Without the gap both headings follow the gyro: nothing is named."""
     from fusiond.core.doctor.gap_heading import DRIFT_RATE, TURN_RAD
 
     cfg = SimConfig(duration=90.0, standstill=2.0)
@@ -76,25 +77,26 @@ def test_a_turn_hidden_by_a_logging_gap_names_relative_orientation_when_nothing_
     assert abs(turn) > 4 * (TURN_RAD + DRIFT_RATE * (GAP[1] - GAP[0]))
     if gap:
         samples = drop_span(samples, T0 + GAP[0], T0 + GAP[1])
-    result = run_samples(samples, make_config(orientation="roll_pitch", gyro=True))
-    named = [v for v in result.verdicts() if v.channel == "heading_across_gaps"]
-    if not gap:
-        assert named == []
-        return
-    (v,) = named
-    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "relative"', v
-    assert abs(v.evidence["largest_missed_turn_rad"] - turn) < 0.1, v.evidence
 
-    def final_heading_error(orientation: str) -> float:
-        r = run_samples(samples, make_config(orientation=orientation, gyro=True))
+    def replayed(extra_imu: str = "", orientation: str = "roll_pitch"):
+        r = run_samples(samples, make_config(orientation=orientation, gyro=True, extra_imu=extra_imu))
         t, x, y, z, qx, qy, qz, qw = r.final
         truth = min(cfg.truth, key=lambda row: abs(row[0] - t))[3]
-        return abs(rot.wrap(rot.yaw((qx, qy, qz, qw)) - truth))
+        named = [v for v in r.verdicts() if v.channel == "heading_across_gaps"]
+        return named, abs(rot.wrap(rot.yaw((qx, qy, qz, qw)) - truth))
 
-    assert final_heading_error("roll_pitch") > 0.8 * abs(turn)
-    assert final_heading_error("relative") < 0.05
-    assert not [x for x in run_samples(samples, make_config(orientation="relative", gyro=True)).verdicts()
-                if x.channel == "heading_across_gaps"]
+    named, error = replayed()
+    assert named == [] and error < 0.05, (named, error)
+    if not gap:
+        return
+    named, error = replayed("yaw_across_gaps = false")
+    assert error > 0.8 * abs(turn)
+    (v,) = named
+    assert v.key == "sensors.imu.yaw_across_gaps" and v.suggestion == "yaw_across_gaps = true", v
+    assert abs(v.evidence["largest_missed_turn_rad"] - turn) < 0.1, v.evidence
+    named, error = replayed(orientation="off")  # nor is the yaw carried with roll/pitch not fused
+    (v,) = named
+    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "roll_pitch"', v
 
 
 def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():

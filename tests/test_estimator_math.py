@@ -389,3 +389,29 @@ def test_orientation_noise_is_shared_read_only_and_follows_the_covariance():
         Ra *= 2.0
     _, _, Ra2 = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
     np.testing.assert_array_equal(Ra2, [[1e-4, 0.0], [0.0, 2e-4]])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(-3.1, 3.1), st.floats(-3.1, 3.1), st.floats(0.0, 1.0))
+def test_turn_heading_turns_the_attitude_about_world_z_and_only_widens_the_yaw(r, p, y, angle, yaw_var):
+    """q' = Rz(angle) q: roll/pitch as seen in the world frame turn with it, the yaw moves by angle, the
+    position stays. The attitude error turns (dtheta' = Rz dtheta), so the yaw variance grows by exactly
+    yaw_var, the attitude block keeps its trace (plus yaw_var) and P stays positive definite."""
+    rng = np.random.default_rng(1)
+    layout = _layout()
+    ekf = ErrorStateEKF(layout)
+    ekf.set_attitude(rot.from_rpy(r, p, y))
+    ekf.x[0:3] = (1.0, -2.0, 0.5)
+    A = rng.normal(0, 0.1, (layout.error_dim, layout.error_dim))
+    ekf.P = A @ A.T + 1e-6 * np.eye(layout.error_dim)
+    q0, P0, p0 = tuple(ekf.x[3:7].tolist()), ekf.P.copy(), ekf.x[0:3].copy()
+    ekf.turn_heading(angle, yaw_var)
+    q1 = tuple(ekf.x[3:7].tolist())
+    assert abs(sum(c * c for c in q1) - 1.0) < 1e-12
+    np.testing.assert_array_equal(ekf.x[0:3], p0)
+    Rz = rot.matrix(rot.exp(0.0, 0.0, angle))
+    np.testing.assert_allclose(rot.matrix(q1), Rz @ rot.matrix(q0), atol=1e-12)
+    assert ekf.P[5, 5] == pytest.approx(P0[5, 5] + yaw_var, rel=1e-12, abs=1e-15)
+    assert np.trace(ekf.P[3:6, 3:6]) == pytest.approx(np.trace(P0[3:6, 3:6]) + yaw_var, rel=1e-12)
+    np.testing.assert_allclose(ekf.P[0:3, 0:3], P0[0:3, 0:3], rtol=0, atol=0)
+    assert np.linalg.eigvalsh(ekf.P).min() > 0.0

@@ -21,11 +21,11 @@ from .test_fusion_core import make_config
 GAP_START, GAP = 1010.0, 26.4  # sim stamps start at 1000 s
 
 
-@pytest.mark.parametrize("orientation", ["roll_pitch", "absolute"])
-def test_a_long_gap_moves_the_pose_by_at_most_speed_times_timeout(orientation):
+@pytest.mark.parametrize("orientation, carry", [("roll_pitch", False), ("roll_pitch", True), ("absolute", False)])
+def test_a_long_gap_moves_the_pose_by_at_most_speed_times_timeout(orientation, carry):
     sim = SimConfig(duration=40.0, odom_rate=50.0, imu_rate=100.0, gyro_bias=(0.02, -0.02, 0.0))
     samples = [s for s in simulate(sim) if not GAP_START <= s.stamp < GAP_START + GAP]
-    core = FusionCore(make_config(orientation))
+    core = FusionCore(make_config(orientation, extra_imu=f"yaw_across_gaps = {str(carry).lower()}"))
     before = [s for s in samples if s.stamp < GAP_START]
     after = [s for s in samples if s.stamp >= GAP_START]
     for s in before:
@@ -50,8 +50,13 @@ def test_a_long_gap_moves_the_pose_by_at_most_speed_times_timeout(orientation):
     # rate likewise; before the fix, 26.4 s of them tumbled the attitude by ~0.5 rad.
     r0, p0, y0 = rot.to_rpy(tuple(x0[3:7].tolist()))
     r1, p1, y1 = rot.to_rpy(tuple(x1[3:7].tolist()))
-    if orientation == "roll_pitch":
+    def yaw_true(t):
+        return min(sim.truth, key=lambda r: abs(r[0] - t))[3]
+
+    if orientation == "roll_pitch" and not carry:
         assert abs(rot.wrap(y1 - y0)) <= 0.3 * (timeout + post) + 0.05
+    elif carry:  # the IMU's own yaw kept the turn made in the gap: the heading turned by it
+        assert abs(rot.wrap((y1 - y0) - (yaw_true(t1) - yaw_true(t0)))) < 0.05
     else:  # the IMU's absolute yaw brings the heading back to the truth after the gap
         yaw_true = min(sim.truth, key=lambda r: abs(r[0] - t1))[3]
         assert abs(rot.wrap(y1 - yaw_true)) < 0.05

@@ -353,6 +353,25 @@ class ErrorStateEKF:
         J[3:6, 3:6] = Rz
         self.P = J @ self.P @ J.T
 
+    def turn_heading(self, angle: float, yaw_var: float) -> None:
+        """Turn the attitude about the world z axis by ``angle`` (q' = Rz q), the position where it is,
+        and widen the heading's variance by ``yaw_var`` (what is not known of the angle).
+
+        For a turn the filter did not see (made in a logging gap, shown by another sensor's own yaw).
+        The attitude error turns with it (dtheta' = Rz dtheta, as in ``rotate_yaw``): P' = J P J^T
+        with J = Rz on the attitude block, then P'[yaw, yaw] += yaw_var. The yaw error, the z component,
+        is unchanged by Rz, so its variance grows by exactly ``yaw_var``; P stays PSD.
+        """
+        c, s = math.cos(angle), math.sin(angle)
+        x = self.x
+        q = rot.mul(rot.exp(0.0, 0.0, angle), (float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+        x[3:7] = rot.normalize(q)
+        J = np.eye(self.layout.error_dim)
+        J[3:5, 3:5] = ((c, -s), (s, c))
+        P = J @ self.P @ J.T
+        P[5, 5] += max(yaw_var, 0.0)
+        self.P = P
+
     def copy(self, into: "ErrorStateEKF | None" = None) -> "ErrorStateEKF":
         """A copy with its own x and P; ``into`` reuses an existing object's arrays (written in place:
         ``a[...] = b`` of equal shapes and dtype copies the bytes, at half np.copyto's call cost)."""

@@ -6,24 +6,21 @@ absolute heading (a GPS track, a pose sensor, an absolute IMU yaw) nothing ever 
 the filter: every metre after the gap is driven along the wrong heading (a race car
 that turned 160 degrees in a 25 s gap). An IMU that integrates its own yaw kept it
 through the gap (the device ran; only the log stopped), so its yaw change across the
-gap shows the turn. With the IMU's yaw not fused (``orientation = "roll_pitch"`` or
-``"off"``), ``"relative"`` fuses it against the yaw the filter had at the IMU's first
-message, which carries the heading across gaps.
+gap shows the turn. With ``orientation = "roll_pitch"``, ``yaw_across_gaps`` (on by default)
+turns the heading by that change at the first orientation after a gap, so a turn still missed
+is named: with it turned off, or with ``"off"`` (roll/pitch not fused, so neither is the yaw
+across gaps), the advice is to let it turn the heading.
 
 A gap counts when the IMU's yaw change across it differs from the estimate's by more
 than the IMU's own yaw could drift in that time: TURN_RAD (several times the yaw noise
 of one 0.2 s bin, ~0.01-0.05 rad) plus DRIFT_RATE x the gap (an uncorrected consumer
 gyro bias, <= 0.01 rad/s, integrated by the IMU through the gap).
 
-Fused as ``relative``, though, the IMU's yaw holds the heading for the whole run, and its
-own drift with it: a 6-axis IMU integrating its uncorrected gyro bias (0.004 rad/s) turns
-the heading by 1.9 rad over 8 minutes, and drags the filter's bias estimate towards its
-own (QA5's race car: 0.5 -> 6 m RMS between gaps with the advice). So, as
-``late_bias`` does for a bias learned late, the advice weighs the two: the mean heading
-error the missed turns leave as configured (each gap's miss, summed over the gaps so
-far, held until the next gap or the end) against ~|r| T / 2 for a yaw drifting at r
-against the bias-corrected gyro over a run of T seconds, and is given only when the
-relative yaw clearly costs less (RELATIVE_MARGIN) and does not wander.
+Not ``relative``: fused so, the IMU's yaw holds the heading for the whole run, and its own
+drift with it: a 6-axis IMU integrating its uncorrected gyro bias (0.004 rad/s) turns the
+heading by 1.9 rad over 8 minutes, and drags the filter's bias estimate towards its own
+(QA5's race car: 0.5 -> 6 m RMS between gaps). Across gaps only, the yaw's drift costs
+|r| x the gap, once: the drift r (against the bias-corrected gyro) is quoted with the advice.
 """
 
 from __future__ import annotations
@@ -36,8 +33,7 @@ from ...config import Config, GpsSensor, ImuSensor, PoseSensor
 from ...estimator import rotation as rot
 from .bins import BIN_S
 from .gyro import quiet_episodes
-from .heading import WANDER_RAD, imu_vs_gyro, timed
-from .late_bias import RELATIVE_MARGIN
+from .heading import imu_vs_gyro, timed
 from .series import Series
 from .verdict import Verdict, sensor_key
 
@@ -81,13 +77,15 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         return None  # an absolute position/pose finds the heading again
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
     te, ye = np.array(series.est_t), np.array(series.est_yaw)
-    missed, misses = [], []
+    missed = []
     for start, length in series.odom_gaps:
         if length < MIN_GAP_S:
             continue
         # the estimate's heading change over the gap and the IMU's over the same interval (outside the gap
         # the filter's heading follows the gyro, and so does the IMU's yaw: only the gap differs)
-        around = _around(te, start, start + length)
+        # (a bin after the gap: the first pose after it is the odometry's, published before the IMU sample
+        # of the same instant turns the heading across the gap)
+        around = _around(te, start, start + length + BIN_S)
         if around is None:
             continue
         e0, e1 = around
@@ -97,7 +95,6 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         imu_turn = rot.wrap(after - before)
         est_turn = rot.wrap(float(ye[e1]) - float(ye[e0]))
         miss = rot.wrap(imu_turn - est_turn)
-        misses.append((start + length, miss))
         if abs(miss) > TURN_RAD + DRIFT_RATE * length:
             missed.append((start, length, imu_turn, est_turn))
     if not missed:
@@ -111,26 +108,27 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
            f"turned {math.degrees(imu_turn):+.0f} deg, the estimate {math.degrees(est_turn):+.0f} deg): nothing "
            "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused), so it drives "
            "on along the heading it had")
+    if imu.orientation == "roll_pitch" and imu.yaw_across_gaps:
+        # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
+        return Verdict(imu.name, "heading_across_gaps", "warn",
+                       msg + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
+                       "above orientation_max_sigma) or never moved. Log without gaps, or add an absolute heading "
+                       "(GPS, pose)", evidence=evidence)
     drift = _relative_drift(series, cfg, imu)
+    cost = ""
     if drift is not None:
         wander, rate = drift
-        run = series.odom_t[-1] - series.odom_t[0]
-        gap_cost = _missed_cost(misses, series.odom_t[0], series.odom_t[-1])
-        relative_cost = abs(rate) * run / 2.0
-        evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
-                         "mean_heading_error_rad": gap_cost, "relative_mean_heading_error_rad": relative_cost})
-        if not (wander < WANDER_RAD and relative_cost < RELATIVE_MARGIN * gap_cost):
-            why = (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD else
-                   f"drifts {rate:+.5f} rad/s against the bias-corrected gyro, ~{relative_cost:.2f} rad off on "
-                   f"average over the run against ~{gap_cost:.2f} from the missed turns")
-            return Verdict(imu.name, "heading_across_gaps", "warn",
-                           msg + f". Fusing the IMU's yaw as relative would not do better: it {why}. Log without "
-                           "gaps, or add an absolute heading (GPS, pose)", evidence=evidence)
-        msg += (f". The IMU kept its yaw through the gap, and it drifts only {rate:+.5f} rad/s against the "
-                f"bias-corrected gyro (~{relative_cost:.2f} rad off on average over the run, against ~{gap_cost:.2f} "
-                "from the missed turns)")
-    return Verdict(imu.name, "heading_across_gaps", "warn", msg + ": fuse it relative to its first reading",
-                   sensor_key(imu.name, "orientation"), 'orientation = "relative"', evidence)
+        evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate})
+        cost = (f"; it drifts {rate:+.5f} rad/s against the bias-corrected gyro, ~{abs(rate) * length:.3f} rad over "
+                f"the largest gap, counted over the gaps only (fused as relative, over the whole run)")
+    if imu.orientation == "roll_pitch":
+        return Verdict(imu.name, "heading_across_gaps", "warn",
+                       msg + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
+                       f"heading{cost}", sensor_key(imu.name, "yaw_across_gaps"), "yaw_across_gaps = true", evidence)
+    return Verdict(imu.name, "heading_across_gaps", "warn",
+                   msg + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, and with yaw_across_gaps (on by "
+                   f"default) its yaw change across a gap turns the heading{cost}", sensor_key(imu.name, "orientation"),
+                   'orientation = "roll_pitch"', evidence)
 
 
 def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, float] | None:
@@ -147,19 +145,6 @@ def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float,
         if standstills and math.isfinite(standstills[0].gyro_mean):
             b = standstills[0].gyro_mean
     return wander, slope + b
-
-
-def _missed_cost(misses: list[tuple[float, float]], t_start: float, t_end: float) -> float:
-    """Mean heading error over [t_start, t_end] as configured: after each gap (its end, signed miss) the misses
-    so far add up, and stay until the next gap or the end of the run."""
-    if t_end <= t_start or not misses:
-        return 0.0
-    total = held = 0.0
-    ends = [t for t, _ in misses[1:]] + [t_end]
-    for (t, miss), until in zip(misses, ends):
-        held += miss
-        total += abs(held) * max(min(until, t_end) - t, 0.0)
-    return total / (t_end - t_start)
 
 
 __all__ = ["gap_heading_verdict"]

@@ -6,6 +6,19 @@ orientation is an update of roll/pitch(/yaw) by mode: ``absolute`` yaw is ENU he
 (with an estimated offset beside GPS/pose), ``relative`` yaw is measured against the
 yaw the filter had at the IMU's first message, ``roll_pitch`` fuses tilt only. Without
 orientation, the accelerometer's gravity gives roll/pitch (``tilt_from_gravity``).
+
+Heading across logging gaps (``yaw_across_gaps``, ``roll_pitch`` mode). In a logging gap the
+filter holds the heading it had (its inputs end at their timeouts) while the vehicle may turn:
+a race car turned 147 degrees in a 12 s gap and drove on along the old heading. An IMU that
+integrates its own yaw ran on while the log stopped, so the change of its yaw across the gap
+is the turn. At the first orientation after the IMU was silent longer than the gap threshold,
+the heading is turned by that change minus the filter's own change over the same interval
+(the wheels may have turned it, if only the IMU was silent), and its variance widens by the
+IMU yaw's drift over the gap (GAP_YAW_DRIFT, an uncorrected consumer gyro bias) and its noise,
+twice. Outside gaps the yaw is not fused, so its drift over the run never reaches the heading
+(``relative`` would bring it). Only a yaw the IMU measures (covariance below
+orientation_max_sigma) and that has ever moved: a driver's constant placeholder quaternion
+would otherwise undo a turn the wheels saw.
 """
 
 from __future__ import annotations
@@ -24,6 +37,7 @@ from ...estimator import rotation as rot
 from ...logs import get_logger
 from ...samples import ImuSample
 from ..diagnostics import DiagnosticsRecord
+from ..inputs import smoothed_period
 from .base import SensorContext, SensorModel
 from .checks import MAX_RATE, Rejected, finite, plausible, resolve_variances, unit_quaternion
 from .gyro_bias import BiasLearning, learn_bias_at_rest
@@ -41,6 +55,9 @@ GRAVITY_AVERAGE_S = 0.1  # s of specific force averaged into one gravity roll/pi
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
 ORIENTATION_BURST = 3.0  # samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``)
 YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
+GAP_YAW_DRIFT = 0.01  # rad/s: how fast an IMU's own yaw may drift through a gap (an uncorrected consumer gyro bias)
+GAP_PERIODS = 5.0  # a silence counts as a gap beyond this many of the IMU's fused-orientation periods (and gap_s)
+YAW_MOVED = 1e-6  # rad: a yaw reading that changed by more than this between fused samples is live
 
 
 class ImuOwn(msgspec.Struct, frozen=True, gc=False):
@@ -53,6 +70,10 @@ class ImuOwn(msgspec.Struct, frozen=True, gc=False):
     bias: BiasLearning = BiasLearning()  # the standstill windows of the gyro-bias learning
     gravity: tuple | None = None  # (start stamp, samples, sums of x, y, z) of the specific force being averaged
     orientation_credit: tuple[float, float] | None = None  # (credit, stamp): ``orientation_rate_hz``'s bucket
+    # yaw_across_gaps: (stamp, the IMU's yaw, the filter's yaw, the fused orientations' period) at the last
+    # fused orientation, and whether the IMU's yaw has ever moved
+    yaw_mark: tuple[float, float, float, float] | None = None
+    yaw_live: bool = False
 
 
 @dataclass(slots=True)
@@ -69,6 +90,7 @@ class ImuInput:
     gyro: tuple[float, float, float] | None
     gyro_cov: tuple[float, ...] | None
     accel: tuple[float, float, float] | None = None  # base-frame specific force, when gravity gives the tilt
+    yaw_measured: bool = False  # the message's yaw is measured (its variance below orientation_max_sigma^2)
 
     @property
     def rpy(self) -> tuple[float, float, float] | None:
@@ -100,7 +122,7 @@ class ImuPolicy:
         # covariance in every message, so its checks, floors and rotation into base_link are done
         # once per distinct value (a tuple compares equal only if finite: NaN != NaN).
         self._ori_seen: tuple | None = None
-        self._ori_resolved: tuple[tuple[int, ...], tuple[float, ...]] = ((), ())
+        self._ori_resolved: tuple[tuple[int, ...], tuple[float, ...], bool] = ((), (), False)
         self._gyro_seen: tuple | None = None
         self._gyro_resolved: tuple[float, ...] = ()
         self._gyro_unknown_said = False  # the gyro_covariance_unknown warning was logged
@@ -122,8 +144,9 @@ class ImuPolicy:
             return C
         return mat3.flat(mat3.sandwich(self.R_ext, C))
 
-    def _orientation_noise(self, oc) -> tuple[tuple[int, ...], tuple[float, ...]]:
-        """(rows to fuse, base-frame covariance) of a finite orientation covariance not seen just before."""
+    def _orientation_noise(self, oc) -> tuple[tuple[int, ...], tuple[float, ...], bool]:
+        """(rows to fuse, base-frame covariance, the yaw is measured) of a finite orientation covariance not
+        seen just before."""
         if self._ori_override is not None:
             var, measured = list(self._ori_override), [True, True, True]
         else:
@@ -131,7 +154,7 @@ class ImuPolicy:
             if any(d < 0.0 for d in diag):
                 raise Rejected(reasons.NEGATIVE_COVARIANCE, "orientation")
             var, measured = resolve_variances(diag, self._ori_floor, self._ori_unmeasured, 1.0)
-        resolved = (tuple(i for i in self._rows if measured[i]), self._rotate_cov(var))
+        resolved = (tuple(i for i in self._rows if measured[i]), self._rotate_cov(var), measured[2])
         if type(oc) is tuple:  # kept only if immutable
             self._ori_seen, self._ori_resolved = oc, resolved
         return resolved
@@ -153,6 +176,7 @@ class ImuPolicy:
     def convert(self, s: ImuSample) -> ImuInput:
         q_base = rpy_cov = None
         rows: tuple[int, ...] = ()
+        yaw_measured = False
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             oc = s.orientation_covariance
             known = oc == self._ori_seen
@@ -160,7 +184,7 @@ class ImuPolicy:
                 raise Rejected(reasons.NON_FINITE, "orientation")
             q_imu = unit_quaternion(s.orientation)
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
-            rows, rpy_cov = self._ori_resolved if known else self._orientation_noise(oc)
+            rows, rpy_cov, yaw_measured = self._ori_resolved if known else self._orientation_noise(oc)
         elif len(s.orientation_covariance) != 9:
             raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
@@ -198,7 +222,7 @@ class ImuPolicy:
                 accel = a if self._identity else mat3.apply(self.R_ext, a)
         if q_base is None and gyro is None and accel is None:
             raise Rejected(reasons.NOTHING_TO_FUSE, "no orientation, angular velocity or acceleration in the message")
-        return ImuInput(q_base, rpy_cov, rows, gyro, gyro_cov, accel)
+        return ImuInput(q_base, rpy_cov, rows, gyro, gyro_cov, accel, yaw_measured)
 
 
 class ImuModel(SensorModel):
@@ -217,6 +241,9 @@ class ImuModel(SensorModel):
         self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
         self._period = 1.0 / cfg.orientation_rate_hz if cfg.orientation_rate_hz > 0.0 else 0.0
         self.thinned = 0  # orientations not fused for ``orientation_rate_hz`` (the gyro of the sample is)
+        self.carries_yaw = cfg.yaw_across_gaps and cfg.orientation == "roll_pitch" and not ctx.two_d
+        self._gap_s = ctx.filter.gap_s
+        self.gap_turns = 0  # headings turned across gaps (``_carry_yaw``)
 
     @property
     def gives_tilt(self) -> bool:
@@ -240,6 +267,8 @@ class ImuModel(SensorModel):
                 rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] + self._fixed_yaw))
             if not s.attitude_ready:
                 initialise_attitude(s, rpy, self.absolute)
+            if self.carries_yaw and inp.yaw_measured:
+                self._carry_yaw(s, rpy[2], inp.rpy_cov[8], stamp, emit)
             if self.relative:
                 own: ImuOwn = s.own[self.index]
                 off = own.yaw_offset
@@ -259,6 +288,31 @@ class ImuModel(SensorModel):
         if inp.accel is not None:
             records.extend(self._tilt_from_gravity(s, inp.accel, stamp, emit, late))
         return records
+
+    def _carry_yaw(self, s: "FilterState", yaw: float, var: float, stamp: float, emit: bool) -> None:
+        """Turn the heading across a gap by the IMU's own yaw change (module doc); mark this sample."""
+        own: ImuOwn = s.own[self.index]
+        heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
+        mark, live, period = own.yaw_mark, own.yaw_live, 0.0
+        if mark is not None:
+            t0, yaw0, heading0, period = mark
+            live = live or abs(rot.wrap(yaw - yaw0)) > YAW_MOVED
+            silent = stamp - t0
+            # the fused orientations' period: as they came (an EMA of the intervals, gaps left out), and at
+            # least orientation_rate_hz's (a bucket's burst of samples does not make it short); none yet, no gap
+            typical = max(period, self._period)
+            if typical > 0.0 and silent > max(self._gap_s, GAP_PERIODS * typical):
+                if live:
+                    turn = rot.wrap(rot.wrap(yaw - yaw0) - rot.wrap(heading - heading0))
+                    s.ekf.turn_heading(turn, (GAP_YAW_DRIFT * silent) ** 2 + 2.0 * var)
+                    heading = rot.wrap(heading + turn)
+                    if emit:
+                        self.gap_turns += 1
+                        log.info("heading_turned_across_gap", sensor=self.cfg.name, stamp=stamp, gap_s=silent,
+                                 turn_rad=turn, imu_turn_rad=rot.wrap(yaw - yaw0))
+            elif silent > 0.0:
+                period = smoothed_period(period, silent)
+        s.own[self.index] = msgspec.structs.replace(own, yaw_mark=(stamp, yaw, heading, period), yaw_live=live)
 
     def _orientation_due(self, s: "FilterState", stamp: float, emit: bool) -> bool:
         """Is this sample's orientation fused, at most ``orientation_rate_hz`` (f) on average?
