@@ -16,7 +16,7 @@ import pytest
 
 from fusiond.core.doctor.heading import WANDER_RAD, WHEEL_OFFSET_RAD_S
 from fusiond.estimator import rotation as rot
-from fusiond.replay.run import run_samples, summary
+from fusiond.replay.run import Runner, run_samples, summary
 
 from . import sim_gps
 from .configs import robot_config
@@ -328,3 +328,31 @@ def test_gps_on_the_same_clock_gets_no_clock_verdict():
     assert not [v for v in result.verdicts() if v.channel == "time"], result.verdicts()
     offset = result.doctor.clocks.offset("gps")
     assert offset is not None and abs(offset) < 0.05 and np.isfinite(offset)
+
+
+def test_the_wander_advice_keeps_the_altitude_error_state_it_replaces():
+    """QA6: the highway car's fixes wander horizontally (1.2 m, tau 60 s) and in altitude (5 m, tau 200 s).
+    The default vertical error state (vertical_error_sigma = 5 m) absorbs the altitude's wander: z stays
+    within centimetres. error_sigma's up replaces that state, and the innovations' persisting vertical part
+    is what it left (~0.6 m): pasted as such, the filter must put most of the 5 m wander into z (metres,
+    the trait: asserted > 3 m). The advice never states the up below vertical_error_sigma, and pasted, z
+    stays within a metre (0.42 m measured: the advised tau, shorter than the altitude's, lets it follow a
+    little more of it than the default's 0.07 m)."""
+    world = sim_gps.World(**{**HIGHWAY, "duration": 250.0}, gps_error_tau=60.0, gps_error_sigma=1.2,
+                          gps_alt_error_tau=200.0, gps_alt_error_sigma=5.0)
+    samples = sim_gps.simulate(world)
+    cfg = robot_config(gps=STATED_HIGHWAY)
+    v = one(verdicts_of(cfg, samples), "gps", "position")
+    assert v.key == "sensors.gps.error_tau_s", v
+    up = float(re.search(r"error_sigma = \[[0-9.]+, [0-9.]+, ([0-9.]+)\]", v.suggestion).group(1))
+    assert up >= cfg.sensors[2].vertical_error_sigma
+
+    def z_max(suggestion: str) -> float:
+        runner = Runner(robot_config(gps=STATED_HIGHWAY + "\n" + suggestion.replace(" and ", "\n")),
+                        keep_trace=False, doctor=False)
+        for s in samples:
+            runner.feed(s)
+        return float(np.abs(np.asarray(runner.trajectory).reshape(-1, 8)[:, 3]).max())
+
+    assert z_max(v.suggestion) < 1.0
+    assert z_max(re.sub(r", [0-9.]+\]$", ", 0.6]", v.suggestion)) > 3.0

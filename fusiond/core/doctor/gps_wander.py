@@ -85,8 +85,12 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "") -> Verd
     rms = np.sqrt(np.mean(yc * yc, axis=0))
     sigma_h = [float(math.sqrt(share) * r) for r in rms]
     white = [float(math.sqrt(1.0 - share) * r) for r in rms]
+    # The vertical: with error_tau_s set, error_sigma's up replaces the altitude's own error state
+    # (vertical_error_sigma over vertical_error_tau_s), whose innovations are what is left after it
+    # absorbed the altitude's wander: their persisting part is far below it (QA6: 0.6 m suggested against
+    # the 5 m state; pasted, z wandered 0.18 -> 5 m). So never below vertical_error_sigma.
     up = _up_sigma([r[1] for r in rows])
-    sigma = [*sigma_h, up if up is not None else gps.vertical_error_sigma]
+    sigma = [*sigma_h, max(up if up is not None else 0.0, gps.vertical_error_sigma)]
     evidence = {"innovation_lag1_correlation": share, "error_tau_s": tau, "error_sigma_east_m": sigma[0],
                 "error_sigma_north_m": sigma[1], "white_sigma_m": max(white), "fixes": float(n),
                 "fix_interval_s": dt}
