@@ -33,6 +33,7 @@ from .gps_wander import gps_wander_verdict
 from .gyro import bias_check, quiet_episodes
 from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
 from .late_bias import late_bias_verdict
+from .lever import lever_verdict
 from .lost import LostSamples
 from .mounting import MountYaw, mount_yaw_fit
 from .nis import ChannelStats, judge_nis, nis_bounds
@@ -247,6 +248,9 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
     wheel_heading = (wheel_heading_check(series, cfg) if known and unmeasured is None and no_yaw_rate is None
                      else None)
     culprit = next((v for v in (heading, wheel_heading, speed) if v is not None and v.level != "ok"), None)
+    lever = lever_verdict(series, cfg) if known else None
+    if lever is not None:
+        found[(lever.sensor, lever.channel)].append(lever)
     if wheel_heading is not None:
         found[(wheel_heading.sensor, wheel_heading.channel)].append(wheel_heading)
     if no_yaw_rate is not None:
@@ -299,7 +303,11 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         elif channel in ABSOLUTE_CHANNELS:
             v = absolute_verdict(name, channel, ch, t0)
             judged = applied_verdict(ch)  # the whole run's, or the applied updates' (module channels)
-            if culprit is not None and v.level != "ok" and judged != "nis_low":
+            if lever is not None and lever.level != "ok" and lever.sensor == name and channel == "position":
+                # an unstated lever swings the fixes as the vehicle turns: what the NIS (or a wander) shows
+                if v.level != "ok":
+                    v = _explained(v, lever, ch, t0)
+            elif culprit is not None and v.level != "ok" and judged != "nis_low":
                 v = _explained(v, culprit, ch, t0)
             elif channel == "position" and isinstance(s, GpsSensor) and "gated" not in v.message and (
                     judged == "nis_low" or (culprit is None and judged == "ok")):
