@@ -12,7 +12,7 @@ import re
 import tomllib
 import typing
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 import msgspec
 
@@ -280,6 +280,7 @@ def validate(cfg: Config) -> Config:
             raise ConfigError(f"sensors[{i}].gyro_scale_estimation: needs angular_velocity = true")
         if isinstance(s, ImuSensor) and not (0.0 <= s.orientation_rate_hz < math.inf):
             raise ConfigError(f"sensors[{i}].orientation_rate_hz: must be >= 0 and finite (0: every sample)")
+        _check_radians(s, i)
         if isinstance(s, GpsSensor):
             if s.datum is not None and not (-90.0 <= s.datum[0] <= 90.0 and -180.0 <= s.datum[1] <= 180.0):
                 raise ConfigError(f"sensors[{i}].datum: latitude must be in [-90, 90] and longitude in [-180, 180]")
@@ -290,6 +291,21 @@ def validate(cfg: Config) -> Config:
             if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s <= 0.0:
                 raise ConfigError(f"sensors[{i}].vertical_error_tau_s: must be positive when vertical_error_sigma > 0")
     return cfg
+
+
+# Angles are radians. Beyond these bounds a value is degrees typed as radians (yaw_offset = 20 meant
+# 20 deg; as rad it turned the heading by 1.15 rad): never needed, since the angles wrap at 2 pi and a
+# declination lies within pi.
+_ANGLE_BOUNDS: Final = {"yaw_offset": 2.0 * math.pi, "magnetic_declination": math.pi, "extrinsic_rpy": 2.0 * math.pi}
+
+
+def _check_radians(s: object, i: int) -> None:
+    for name, bound in _ANGLE_BOUNDS.items():
+        value = getattr(s, name, None)
+        values = value if isinstance(value, tuple) else (value,) if value is not None else ()
+        if any(not abs(v) <= bound for v in values):
+            raise ConfigError(f"sensors[{i}].{name}: {list(values) if isinstance(value, tuple) else value} is "
+                              f"beyond {bound:.2f}: angles are in radians (degrees x pi / 180)")
 
 
 def _check_ros(cfg: Config) -> None:

@@ -92,6 +92,9 @@ def test_replay_with_arrival_order_scrambled_gives_the_same_answer(jackal_bag):
     assert a.pose()[1].tolist() == b.pose()[1].tolist()
 
 
+ODOM_IMU = '[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\n[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\n'
+
+
 @pytest.mark.parametrize("toml, needle", [
     ('[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\nbogus=1\n', "sensors[0]: Object contains unknown field `bogus`"),
     ('[[sensors]]\nname="w"\nkind="lidar"\nkey="odom"\n', "sensors[0].kind: Invalid value 'lidar'"),
@@ -101,6 +104,10 @@ def test_replay_with_arrival_order_scrambled_gives_the_same_answer(jackal_bag):
     ('[zenoh]\nmode="mesh"\n', "zenoh.mode"),
     ('[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\nextrinsic_rpy=[0.0, 1.0]\n', "sensors[0].extrinsic_rpy"),
     ('[[sensors]]\nname="w"\nkind="odom"\nkey="/odom"\n', "sensors[0].key"),
+    # degrees typed as radians (QA6: yaw_offset = 20 ran, the heading 1.15 rad off)
+    (ODOM_IMU + 'yaw_offset=20\n', "sensors[1].yaw_offset: 20.0 is beyond 6.28"),
+    (ODOM_IMU + 'magnetic_declination=-4.0\n', "angles are in radians"),
+    (ODOM_IMU + 'extrinsic_rpy=[0.0, 0.0, 90.0]\n', "sensors[1].extrinsic_rpy: [0.0, 0.0, 90.0] is beyond"),
 ])
 def test_bad_config_is_one_line_naming_the_key_and_exit_2(tmp_path, toml, needle):
     cfg = tmp_path / "bad.toml"

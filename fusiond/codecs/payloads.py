@@ -529,7 +529,8 @@ def ros_msgtype(kind: str, msgtype: str | None = None) -> str:
         raise ValueError(f"unknown sensor kind {kind!r}, expected one of {sorted(_KINDS)}")
     if msgtype is not None:
         if kind != "pose" or msgtype not in POSE_TYPES:
-            raise ValueError(f"msgtype {msgtype!r} is not valid for a {kind} sensor")
+            article = "an" if kind[0] in "aeiou" else "a"
+            raise ValueError(f"msgtype {msgtype!r} is not valid for {article} {kind} sensor")
         return msgtype
     return _KINDS[kind][0]
 

@@ -180,7 +180,7 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
             hint = " (set its msgtype)" if kind == "pose" else ""
             raise BagError(
                 f"topic {topic} (sensor {sensor.name!r}) has type {', '.join(sorted(found))}, "
-                f"expected {want} for a {kind} sensor{hint}"
+                f"expected {want} for {'an' if kind[0] in 'aeiou' else 'a'} {kind} sensor{hint}"
             )
         selected[topic] = (sensor, list(topics[topic].connections))
     if not selected:
