@@ -63,12 +63,13 @@ def test_a_logging_gap_does_not_make_a_correct_imu_yaw_look_disturbed(gap):
 @pytest.mark.parametrize("gap", [False, True])
 def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_it_is_not(gap):
     """No GPS, no pose, the IMU's yaw not fused (roll_pitch): in the gap the robot turned by missed_turn
-    (1.12 rad), which the IMU's own yaw kept. With yaw_across_gaps (the default) the heading turns by it at
-    the first orientation after the gap: the final heading error is the IMU yaw's noise (0.05 asserted) and
-    nothing is named. Turned off, the filter holds its old heading (turning only by the held gyro rate,
-    <= 0.3 rad/s x 0.2 s timeout = 0.06 rad): the final heading error stays ~missed_turn, and the check names
-    it (its allowance over a 5 s gap, TURN_RAD + DRIFT_RATE x 5 = 0.25 rad, is four times below the turn)
-    with yaw_across_gaps = true to paste. Without the gap both headings follow the gyro: nothing is named."""
+    (1.12 rad), which the IMU's own yaw kept. As configured (yaw_across_gaps off, the default) the filter
+    holds its old heading (turning only by the held gyro rate, <= 0.3 rad/s x 0.2 s timeout = 0.06 rad): the
+    final heading error stays ~missed_turn, and the check names it (its allowance over a 5 s gap, TURN_RAD +
+    DRIFT_RATE x 5 = 0.25 rad, is four times below the turn; this IMU's yaw does not drift) with
+    yaw_across_gaps = true to paste. Pasted, the heading turns by it at the first orientation after the gap:
+    the final heading error is the IMU yaw's noise (0.05 asserted) and nothing is named. Without the gap
+    both headings follow the gyro: nothing is named."""
     from fusiond.core.doctor.gap_heading import DRIFT_RATE, TURN_RAD
 
     cfg = SimConfig(duration=90.0, standstill=2.0)
@@ -85,18 +86,19 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
         named = [v for v in r.verdicts() if v.channel == "heading_across_gaps"]
         return named, abs(rot.wrap(rot.yaw((qx, qy, qz, qw)) - truth))
 
-    named, error = replayed()
+    named, error = replayed("yaw_across_gaps = true")
     assert named == [] and error < 0.05, (named, error)
+    named, error = replayed()
     if not gap:
+        assert named == []
         return
-    named, error = replayed("yaw_across_gaps = false")
     assert error > 0.8 * abs(turn)
     (v,) = named
     assert v.key == "sensors.imu.yaw_across_gaps" and v.suggestion == "yaw_across_gaps = true", v
     assert abs(v.evidence["largest_missed_turn_rad"] - turn) < 0.1, v.evidence
     named, error = replayed(orientation="off")  # nor is the yaw carried with roll/pitch not fused
     (v,) = named
-    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "roll_pitch"', v
+    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "roll_pitch" and yaw_across_gaps = true', v
 
 
 def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():

@@ -28,6 +28,9 @@ def truth_turn(a: float, b: float) -> float:
 
 
 def run(samples, extra_imu: str = "", extra_odom: str = ""):
+    """The samples through a core with yaw_across_gaps on (off by default) unless ``extra_imu`` says."""
+    if "yaw_across_gaps" not in extra_imu:
+        extra_imu += "\nyaw_across_gaps = true"
     core = FusionCore(make_config("roll_pitch", extra_imu=extra_imu, extra_odom=extra_odom))
     poses = []
     for s in samples:
@@ -122,6 +125,31 @@ def test_thinned_or_slow_orientations_are_not_gaps(imu_rate, orientation_rate):
     core, on = run(samples, extra)
     assert imu_model(core).gap_turns == 0
     _, off = run(samples, extra + "\nyaw_across_gaps = false")
+    assert on == off
+
+
+def test_off_by_default_and_an_imu_restarted_in_the_gap_turns_nothing():
+    """Off by default (a drifting yaw parked through a gap would be turned in, QA7). On, an IMU that reads 0
+    after the gap, having read 0.85 rad before it, restarted in the gap (its yaw now counts from its power-on
+    heading): the heading is left as it was, the run exactly the one with the feature off."""
+    gap = (4.0, 12.0)
+    samples = [s for s in simulate(SimConfig(duration=20.0)) if not T0 + gap[0] <= s.stamp < T0 + gap[1]]
+    core = FusionCore(make_config("roll_pitch"))
+    for s in samples:
+        core.ingest(s)
+    assert imu_model(core).gap_turns == 0 and not core.cfg.sensors[1].yaw_across_gaps
+    after = [s for s in samples if isinstance(s, ImuSample) and s.stamp >= T0 + gap[1]]
+    y0 = rot.yaw(after[0].orientation)
+    rebooted = []
+    for s in samples:
+        if isinstance(s, ImuSample) and s.stamp >= T0 + gap[1]:
+            r, p, y = rot.to_rpy(s.orientation)
+            s = ImuSample(s.sensor, s.stamp, rot.from_rpy(r, p, y - y0), s.orientation_covariance,
+                          s.angular_velocity, s.angular_velocity_covariance)
+        rebooted.append(s)
+    core, on = run(rebooted)
+    assert imu_model(core).gap_turns == 0
+    _, off = run(rebooted, "yaw_across_gaps = false")
     assert on == off
 
 
