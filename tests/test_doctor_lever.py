@@ -68,6 +68,7 @@ def test_a_stated_or_absent_lever_reads_ok():
         v, _ = lever_of(sim_gps.simulate(sim_gps.World(**WORLD, gps_lever=antenna)), gps)
         assert v is not None and v.level == "ok", v
         assert math.hypot(v.evidence["lever_dx_m"], v.evidence["lever_dy_m"]) < LEVER_TOL, v
+        assert "not worth a change" in v.message, v
 
 
 def test_a_vehicle_that_hardly_turns_cannot_tell_a_lever():
