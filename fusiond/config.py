@@ -303,10 +303,12 @@ _ANGLE_BOUNDS: Final = {"yaw_offset": 2.0 * math.pi, "magnetic_declination": mat
 def _check_radians(s: object, i: int) -> None:
     for name, bound in _ANGLE_BOUNDS.items():
         value = getattr(s, name, None)
-        values = value if isinstance(value, tuple) else (value,) if value is not None else ()
-        if any(not abs(v) <= bound for v in values):
-            raise ConfigError(f"sensors[{i}].{name}: {list(values) if isinstance(value, tuple) else value} is "
-                              f"beyond {bound:.2f}: angles are in radians (degrees x pi / 180)")
+        if value is None:
+            continue
+        if any(not abs(v) <= bound for v in (value if isinstance(value, tuple) else (value,))):
+            shown = list(value) if isinstance(value, tuple) else value
+            raise ConfigError(f"sensors[{i}].{name}: {shown} is beyond {bound:.2f}: angles are in radians "
+                              "(degrees x pi / 180)")
 
 
 def _check_ros(cfg: Config) -> None:

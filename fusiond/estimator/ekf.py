@@ -342,15 +342,11 @@ class ErrorStateEKF:
         J = diag(Rz, Rz, I): orthogonal, P stays what it was, seen in the turned frame.
         """
         c, s = math.cos(angle), math.sin(angle)
-        Rz = np.array(((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)))
         x = self.x
         dx, dy = float(x[0]) - center[0], float(x[1]) - center[1]
         x[0], x[1] = center[0] + c * dx - s * dy, center[1] + s * dx + c * dy
-        q = rot.mul(rot.exp(0.0, 0.0, angle), (float(x[3]), float(x[4]), float(x[5]), float(x[6])))
-        x[3:7] = rot.normalize(q)
-        J = np.eye(self.layout.error_dim)
-        J[0:3, 0:3] = Rz
-        J[3:6, 3:6] = Rz
+        J = self._turn_attitude(angle)
+        J[0:2, 0:2] = J[3:5, 3:5]
         self.P = J @ self.P @ J.T
 
     def turn_heading(self, angle: float, yaw_var: float) -> None:
@@ -362,15 +358,21 @@ class ErrorStateEKF:
         with J = Rz on the attitude block, then P'[yaw, yaw] += yaw_var. The yaw error, the z component,
         is unchanged by Rz, so its variance grows by exactly ``yaw_var``; P stays PSD.
         """
+        J = self._turn_attitude(angle)
+        P = J @ self.P @ J.T
+        P[5, 5] += max(yaw_var, 0.0)
+        self.P = P
+
+    def _turn_attitude(self, angle: float) -> np.ndarray:
+        """q' = Rz(angle) q; returns J, the identity but for Rz on the attitude block (dtheta' = Rz dtheta),
+        for the caller to complete and apply as P' = J P J^T."""
         c, s = math.cos(angle), math.sin(angle)
         x = self.x
         q = rot.mul(rot.exp(0.0, 0.0, angle), (float(x[3]), float(x[4]), float(x[5]), float(x[6])))
         x[3:7] = rot.normalize(q)
         J = np.eye(self.layout.error_dim)
         J[3:5, 3:5] = ((c, -s), (s, c))
-        P = J @ self.P @ J.T
-        P[5, 5] += max(yaw_var, 0.0)
-        self.P = P
+        return J
 
     def copy(self, into: "ErrorStateEKF | None" = None) -> "ErrorStateEKF":
         """A copy with its own x and P; ``into`` reuses an existing object's arrays (written in place:

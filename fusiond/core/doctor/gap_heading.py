@@ -78,6 +78,9 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         return None
     if any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors):
         return None  # an absolute position/pose finds the heading again
+    gaps = [(start, length) for start, length in series.odom_gaps if length >= MIN_GAP_S]
+    if not gaps:
+        return None
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
     if len(yi) < 2 or float(np.ptp(yi)) < 1e-6:
         return None  # a constant yaw (a driver's placeholder): it shows no turn, in a gap or out of one
@@ -88,9 +91,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
     drift = _relative_drift(series, cfg, imu)
     rate = drift[1] if drift is not None and math.isfinite(drift[1]) else 0.0
     missed = []
-    for start, length in series.odom_gaps:
-        if length < MIN_GAP_S:
-            continue
+    for start, length in gaps:
         # the estimate's heading change over the gap and the IMU's over the same interval (outside the gap
         # the filter's heading follows the gyro, and so does the IMU's yaw: only the gap differs)
         # (a bin after the gap: the first pose after it is the odometry's, published before the IMU sample

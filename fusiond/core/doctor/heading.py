@@ -52,29 +52,29 @@ def imu_vs_gyro(series: Series) -> tuple[float, float] | None:
     instants each holds at; None when they overlap in fewer than 10 bins. The drift is the yaw's own less
     the gyro's bias: yaw - gyro heading drifts at r - b."""
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-    if len(ti) < 10 or len(tg) < 10:
-        return None
-    m = (ti >= tg[0]) & (ti <= tg[-1])
-    if m.sum() < 10:
-        return None
-    gyro_at = np.interp(ti[m], tg, hg)
-    return detrended_rms(ti[m], yi[m] - gyro_at, gyro_at, [*series.gyro_breaks, *series.imu_breaks])
+    return _vs_gyro(series, ti, yi, series.imu_breaks)
 
 
 def estimate_vs_gyro(series: Series) -> float:
     """How far the filter's own heading wanders against the integrated raw gyro (as ``imu_vs_gyro``: a bias
     and a scale removed per window): what of a disturbed IMU yaw reached the estimate. NaN when they
     overlap in fewer than 10 bins."""
-    te, ye = np.asarray(series.est_t), np.unwrap(np.asarray(series.est_yaw)) if series.est_yaw else np.empty(0)
+    ye = np.unwrap(np.asarray(series.est_yaw)) if series.est_yaw else np.empty(0)
+    compared = _vs_gyro(series, np.asarray(series.est_t), ye, series.odom_breaks)
+    return compared[0] if compared is not None else math.nan
+
+
+def _vs_gyro(series: Series, t: np.ndarray, y: np.ndarray, breaks: list[float]) -> tuple[float, float] | None:
+    """``detrended_rms`` of a heading (y at instants t) less the integrated raw gyro at those instants, never
+    across the gyro's silences or ``breaks``; None when they overlap in fewer than 10 bins."""
     tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-    if len(te) < 10 or len(tg) < 10:
-        return math.nan
-    m = (te >= tg[0]) & (te <= tg[-1])
+    if len(t) < 10 or len(tg) < 10:
+        return None
+    m = (t >= tg[0]) & (t <= tg[-1])
     if m.sum() < 10:
-        return math.nan
-    gyro_at = np.interp(te[m], tg, hg)
-    return detrended_rms(te[m], ye[m] - gyro_at, gyro_at, [*series.gyro_breaks, *series.odom_breaks])[0]
+        return None
+    gyro_at = np.interp(t[m], tg, hg)
+    return detrended_rms(t[m], y[m] - gyro_at, gyro_at, [*series.gyro_breaks, *breaks])
 
 
 def segments(t: np.ndarray, breaks) -> list[np.ndarray]:

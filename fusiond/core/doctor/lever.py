@@ -68,8 +68,7 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
     ve, vn, h = v * np.cos(yaw_o), v * np.sin(yaw_o), np.diff(to)
     pe = np.concatenate(([0.0], np.cumsum(0.5 * (ve[1:] + ve[:-1]) * h)))
     pn = np.concatenate(([0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * h)))
-    t_end = to
-    inside = (tf >= t_end[0]) & (tf <= t_end[-1]) & (tf >= te[0]) & (tf <= te[-1])
+    inside = (tf >= to[0]) & (tf <= to[-1]) & (tf >= te[0]) & (tf <= te[-1])
     tf, fe, fn = tf[inside], fe[inside], fn[inside]
     if len(tf) < MIN_PAIRS + 1:
         return None
@@ -80,7 +79,7 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
     tf, fe, fn = tf[::k], fe[::k], fn[::k]
     if len(tf) < MIN_PAIRS + 1:
         return None
-    de_p, dn_p = np.diff(np.interp(tf, t_end, pe)), np.diff(np.interp(tf, t_end, pn))
+    de_p, dn_p = np.diff(np.interp(tf, to, pe)), np.diff(np.interp(tf, to, pn))
     yaw_f = np.interp(tf, te, ye)
     dt = np.diff(tf)
     # a pair is usable when its fixes are PAIR_S apart (none missing) and the wheels reported across it
