@@ -129,9 +129,9 @@ class ImuSensor(_Sensor, tag="imu"):
     # highest rate (Hz) at which the orientation is fused (the gyro is taken at every sample); 0: every sample
     orientation_rate_hz: float = 100.0
     # orientation = "roll_pitch": after a silence of the IMU longer than filter.gap_s (a logging gap), turn
-    # the heading by what the IMU's own yaw turned across it beyond what the filter did (core/sensors/imu.py);
-    # off by default: an IMU whose yaw drifts, parked through the gap, or rebooted in it turns it wrongly
-    yaw_across_gaps: bool = False
+    # the heading by what the IMU's own yaw turned across it, less the yaw's measured drift, weighed against
+    # what the (rescaled) wheels turned meanwhile (core/sensors/imu.py)
+    yaw_across_gaps: bool = True
     gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
     tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer
     gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics

@@ -163,9 +163,9 @@ def test_across_logging_gaps_a_drifting_imu_yaw_carries_the_heading_at_its_drift
     heading(97.4) - heading(98.6) = 0.56 rad (driving time: the 3 s rest comes first). Fused as relative,
     the yaw's drift runs for the whole run: ~0.004 x 300 / 2 = 0.6 rad off on average, worse than the miss
     (~0.56 x 198 / 300 = 0.37 rad held from the gap on). Across the gap only (yaw_across_gaps, the default)
-    it costs 0.004 x 1.2 = 0.005 rad, once: with yaw_across_gaps on, after the gap the heading error is the
-    filter's own (asserted below a tenth of the miss), and no gap verdict is given. As configured (off) the
-    miss, beyond the yaw's drift over the gap, is named with yaw_across_gaps = true to paste; with roll/pitch
+    it costs 0.004 x 1.2 = 0.005 rad, once (less the drift it measured): with yaw_across_gaps on, after the gap
+    the heading error is the filter's own (asserted below a tenth of the miss), and no gap verdict is given.
+    Turned off, the miss, beyond the yaw's drift over the gap, is named with yaw_across_gaps = true to paste; with roll/pitch
     not fused (orientation = "off"), with roll_pitch and it, quoting the drift it measured (the IMU's within
     the fit's ~1e-4 rad/s, 0.0005 allowed); relative is the worst of the three."""
     gap = (100.4, 101.6)
@@ -175,7 +175,7 @@ def test_across_logging_gaps_a_drifting_imu_yaw_carries_the_heading_at_its_drift
     result, err, rel = replay(samples, "roll_pitch", "yaw_across_gaps = true")
     assert not [v for v in result.verdicts() if v.channel == "heading_across_gaps"]
     assert err[rel > gap[1] + 0.5].mean() < 0.1 * abs(missed)
-    v = one(replay(samples, "roll_pitch")[0].verdicts(), "imu", "heading_across_gaps")
+    v = one(replay(samples, "roll_pitch", "yaw_across_gaps = false")[0].verdicts(), "imu", "heading_across_gaps")
     assert v.suggestion == "yaw_across_gaps = true", v
     result_off, err_off, _ = replay(samples, "off")
     assert err_off[rel > gap[1] + 0.5].mean() > 0.5 * abs(missed)  # held along the old heading
@@ -206,10 +206,17 @@ def test_a_car_parked_through_a_gap_is_not_told_its_drifting_imu_turned():
     """QA7: a 6-axis AHRS whose yaw drifts 0.03 rad/s, the car parked from 100 s to 130 s with a 25 s logging
     gap inside the stop: the IMU's yaw moved 0.75 rad across the gap, beyond the allowance (TURN_RAD +
     DRIFT_RATE x 25 = 0.45 rad), though the car never turned. Its drift, measured against the bias-corrected
-    gyro over the run, explains it all: no turn is named, and yaw_across_gaps is not advised."""
+    gyro over the run, explains it all: no turn is named, and yaw_across_gaps is not advised. Nor does the
+    core (yaw_across_gaps on, the default) turn the heading: the car stood still before and after the gap.
+    Turned anyway, the heading would be off by the 0.75 rad from the gap on; asserted: the run is exactly
+    the one with the feature off."""
     from fusiond.core.doctor.gap_heading import DRIFT_RATE, TURN_RAD
 
     assert 0.03 * 25.0 > TURN_RAD + DRIFT_RATE * 25.0  # the simulation has the trait
     samples = weaving_car(yaw_drift=0.03, rest_at=100.0, rest_s=30.0, gap=(103.0, 128.0), duration=200.0)
-    result, _, _ = replay(samples, "roll_pitch")
+    result, err, rel = replay(samples, "roll_pitch")
     assert not [v for v in result.verdicts() if v.channel == "heading_across_gaps"]
+    assert result.core.models[result.core.index["imu"]].gap_turns == 0
+    _, err_off, rel_off = replay(samples, "roll_pitch", "yaw_across_gaps = false")
+    np.testing.assert_array_equal(rel, rel_off)
+    np.testing.assert_array_equal(err, err_off)

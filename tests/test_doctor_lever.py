@@ -50,6 +50,8 @@ def test_an_antenna_off_base_link_and_not_stated_is_found_and_pasting_it_helps(a
     samples = sim_gps.simulate(w)
     v, verdicts = lever_of(samples)
     assert v is not None and v.level == "warn" and v.key == "sensors.gps.extrinsic_xyz", v
+    # behind and mostly along the vehicle, a lever is also what a GPS latency looks like: the message says so
+    assert ("stamp_offset_s" in v.message) == (antenna[0] < 0 and abs(antenna[0]) > 2 * abs(antenna[1])), v.message
     se = v.evidence["lever_se_m"]
     assert abs(v.evidence["lever_x_m"] - antenna[0]) < 3 * se and abs(v.evidence["lever_y_m"] - antenna[1]) < 3 * se, v
     # the GPS position channel is explained by it, not sent after its noise or a wander

@@ -63,7 +63,7 @@ def test_a_logging_gap_does_not_make_a_correct_imu_yaw_look_disturbed(gap):
 @pytest.mark.parametrize("gap", [False, True])
 def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_it_is_not(gap):
     """No GPS, no pose, the IMU's yaw not fused (roll_pitch): in the gap the robot turned by missed_turn
-    (1.12 rad), which the IMU's own yaw kept. As configured (yaw_across_gaps off, the default) the filter
+    (1.12 rad), which the IMU's own yaw kept. With yaw_across_gaps off (on by default) the filter
     holds its old heading (turning only by the held gyro rate, <= 0.3 rad/s x 0.2 s timeout = 0.06 rad): the
     final heading error stays ~missed_turn, and the check names it (its allowance over a 5 s gap, TURN_RAD +
     DRIFT_RATE x 5 = 0.25 rad, is four times below the turn; this IMU's yaw does not drift) with
@@ -86,9 +86,9 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
         named = [v for v in r.verdicts() if v.channel == "heading_across_gaps"]
         return named, abs(rot.wrap(rot.yaw((qx, qy, qz, qw)) - truth))
 
-    named, error = replayed("yaw_across_gaps = true")
+    named, error = replayed()  # on by default
     assert named == [] and error < 0.05, (named, error)
-    named, error = replayed()
+    named, error = replayed("yaw_across_gaps = false")
     if not gap:
         assert named == []
         return

@@ -392,11 +392,13 @@ def test_orientation_noise_is_shared_read_only_and_follows_the_covariance():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(-3.1, 3.1), st.floats(-3.1, 3.1), st.floats(0.0, 1.0))
-def test_turn_heading_turns_the_attitude_about_world_z_and_only_widens_the_yaw(r, p, y, angle, yaw_var):
+@given(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5), st.floats(-3.1, 3.1), st.floats(-3.1, 3.1), st.floats(0.0, 3.0))
+def test_turn_heading_turns_the_attitude_about_world_z_and_sets_the_yaw_variance(r, p, y, angle, ratio):
     """q' = Rz(angle) q: roll/pitch as seen in the world frame turn with it, the yaw moves by angle, the
-    position stays. The attitude error turns (dtheta' = Rz dtheta), so the yaw variance grows by exactly
-    yaw_var, the attitude block keeps its trace (plus yaw_var) and P stays positive definite."""
+    position stays. The attitude error turns (dtheta' = Rz dtheta); the yaw variance becomes exactly the
+    one asked (here ratio x what it was): widened, only that entry grows (the attitude block's trace by
+    the difference); narrowed, the yaw row and column scale, so every correlation coefficient with the yaw
+    stays and the rest of P is untouched. P stays positive definite either way."""
     rng = np.random.default_rng(1)
     layout = _layout()
     ekf = ErrorStateEKF(layout)
@@ -404,14 +406,28 @@ def test_turn_heading_turns_the_attitude_about_world_z_and_only_widens_the_yaw(r
     ekf.x[0:3] = (1.0, -2.0, 0.5)
     A = rng.normal(0, 0.1, (layout.error_dim, layout.error_dim))
     ekf.P = A @ A.T + 1e-6 * np.eye(layout.error_dim)
-    q0, P0, p0 = tuple(ekf.x[3:7].tolist()), ekf.P.copy(), ekf.x[0:3].copy()
-    ekf.turn_heading(angle, yaw_var)
+    q0, p0 = tuple(ekf.x[3:7].tolist()), ekf.x[0:3].copy()
+    J = np.eye(layout.error_dim)
+    c, s_ = math.cos(angle), math.sin(angle)
+    J[3:5, 3:5] = ((c, -s_), (s_, c))
+    turned = J @ ekf.P @ J.T  # the attitude error turned, the variance not yet set
+    target = ratio * turned[5, 5]
+    ekf.turn_heading(angle, target)
     q1 = tuple(ekf.x[3:7].tolist())
     assert abs(sum(c * c for c in q1) - 1.0) < 1e-12
     np.testing.assert_array_equal(ekf.x[0:3], p0)
     Rz = rot.matrix(rot.exp(0.0, 0.0, angle))
     np.testing.assert_allclose(rot.matrix(q1), Rz @ rot.matrix(q0), atol=1e-12)
-    assert ekf.P[5, 5] == pytest.approx(P0[5, 5] + yaw_var, rel=1e-12, abs=1e-15)
-    assert np.trace(ekf.P[3:6, 3:6]) == pytest.approx(np.trace(P0[3:6, 3:6]) + yaw_var, rel=1e-12)
-    np.testing.assert_allclose(ekf.P[0:3, 0:3], P0[0:3, 0:3], rtol=0, atol=0)
-    assert np.linalg.eigvalsh(ekf.P).min() > 0.0
+    P = ekf.P
+    assert P[5, 5] == pytest.approx(target, rel=1e-12, abs=1e-15)
+    others = [i for i in range(layout.error_dim) if i != 5]
+    np.testing.assert_allclose(P[np.ix_(others, others)], turned[np.ix_(others, others)], rtol=1e-12, atol=1e-15)
+    if ratio >= 1.0:
+        np.testing.assert_allclose(P[5, others], turned[5, others], rtol=1e-12, atol=1e-15)
+    elif ratio > 0.0:
+        d, d0 = np.sqrt(np.diag(P)), np.sqrt(np.diag(turned))
+        np.testing.assert_allclose(P[5, others] / (d[5] * d[others]), turned[5, others] / (d0[5] * d0[others]),
+                                   rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(P, P.T, rtol=0, atol=1e-15)
+    # scaled towards 0 the yaw's variance takes the smallest eigenvalue with it, to rounding
+    assert np.linalg.eigvalsh(P).min() > (0.0 if ratio > 0.01 else -1e-15)

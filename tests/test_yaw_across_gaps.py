@@ -28,7 +28,7 @@ def truth_turn(a: float, b: float) -> float:
 
 
 def run(samples, extra_imu: str = "", extra_odom: str = ""):
-    """The samples through a core with yaw_across_gaps on (off by default) unless ``extra_imu`` says."""
+    """The samples through a core with yaw_across_gaps on (the default) unless ``extra_imu`` says."""
     if "yaw_across_gaps" not in extra_imu:
         extra_imu += "\nyaw_across_gaps = true"
     core = FusionCore(make_config("roll_pitch", extra_imu=extra_imu, extra_odom=extra_odom))
@@ -128,16 +128,16 @@ def test_thinned_or_slow_orientations_are_not_gaps(imu_rate, orientation_rate):
     assert on == off
 
 
-def test_off_by_default_and_an_imu_restarted_in_the_gap_turns_nothing():
-    """Off by default (a drifting yaw parked through a gap would be turned in, QA7). On, an IMU that reads 0
-    after the gap, having read 0.85 rad before it, restarted in the gap (its yaw now counts from its power-on
-    heading): the heading is left as it was, the run exactly the one with the feature off."""
+def test_on_by_default_and_an_imu_restarted_in_the_gap_turns_nothing():
+    """On by default with roll_pitch: the logging gap's turn is taken. An IMU that reads 0 after the gap,
+    having read 0.85 rad before it, restarted in the gap (its yaw now counts from its power-on heading): the
+    heading is left as it was, the run exactly the one with the feature off."""
     gap = (4.0, 12.0)
     samples = [s for s in simulate(SimConfig(duration=20.0)) if not T0 + gap[0] <= s.stamp < T0 + gap[1]]
     core = FusionCore(make_config("roll_pitch"))
     for s in samples:
         core.ingest(s)
-    assert imu_model(core).gap_turns == 0 and not core.cfg.sensors[1].yaw_across_gaps
+    assert imu_model(core).gap_turns == 1 and core.cfg.sensors[1].yaw_across_gaps
     after = [s for s in samples if isinstance(s, ImuSample) and s.stamp >= T0 + gap[1]]
     y0 = rot.yaw(after[0].orientation)
     rebooted = []
@@ -169,3 +169,92 @@ def test_the_turn_does_not_depend_on_arrival_order():
     ordered = final(samples)
     for lag in (0.03, 0.1):
         assert final(arrival_order(samples, {"imu": lag})) == ordered
+
+
+def _drifting(samples, rate: float):
+    """The IMU's yaw drifting at ``rate`` rad/s from the start (a 6-axis AHRS integrating its gyro's bias)."""
+    out = []
+    for s in samples:
+        if isinstance(s, ImuSample):
+            r, p, y = rot.to_rpy(s.orientation)
+            s = ImuSample(s.sensor, s.stamp, rot.from_rpy(r, p, rot.wrap(y + rate * (s.stamp - T0))),
+                          s.orientation_covariance, s.angular_velocity, s.angular_velocity_covariance)
+        out.append(s)
+    return out
+
+
+DRIFT = 0.02  # rad/s: QA7's drifting AHRS
+
+
+def test_a_drifting_imu_yaw_turns_the_heading_by_the_turn_not_by_its_drift():
+    """The AHRS yaw drifts 0.02 rad/s; every sensor silent from 60 s to 70 s, in which the robot turns by
+    truth_turn(60, 70). Outside gaps the drift is measured in 5 s blocks: the slope of one block scatters by
+    the yaw noise at its ends, 0.002 x sqrt(2) / 5 s = 6e-4 rad/s, and ~11 blocks by 60 s average that to
+    ~2e-4 rad/s, 0.002 rad over the gap; with the yaw noise at both ends, 0.02 rad asserted. Taken as the
+    turn, the IMU's change would carry the drift's 0.2 rad, ten times that."""
+    gap = (60.0, 70.0)
+    clean = [s for s in simulate(SimConfig(duration=80.0)) if not T0 + gap[0] <= s.stamp < T0 + gap[1]]
+    samples = _drifting(clean, DRIFT)
+    turned = truth_turn(59.0, 71.0)
+    assert abs(truth_turn(*gap)) > 0.5 and DRIFT * (gap[1] - gap[0]) >= 10 * 0.02  # the traits
+    core, poses = run(samples)
+    assert imu_model(core).gap_turns == 1
+    carried = rot.wrap(yaw_at(poses, T0 + 71.0) - yaw_at(poses, T0 + 59.0))
+    assert abs(rot.wrap(carried - turned)) < 0.02, (carried, turned)
+
+
+def test_an_imu_dropout_beside_good_wheels_keeps_their_turn_not_the_imu_drift():
+    """QA7: only the IMU silent from 60 s to 75 s, the wheels (true scale, 0.01 rad/s noise at 50 Hz) driving
+    the heading meanwhile, the AHRS yaw drifting 0.02 rad/s. The wheels' heading wanders by 0.01 x sqrt(15 s /
+    50 Hz) = 0.005 rad; the IMU's turn, less its measured drift, is as good (~2e-4 rad/s x 15 s): weighed
+    together, 0.03 asserted. The IMU's change taken whole (the drift turned in) would be 0.3 rad off."""
+    drop = (60.0, 75.0)
+    samples = [s for s in _drifting(simulate(SimConfig(duration=85.0)), DRIFT)
+               if not (isinstance(s, ImuSample) and T0 + drop[0] <= s.stamp < T0 + drop[1])]
+    turned = truth_turn(59.0, 76.0)
+    core, poses = run(samples)
+    assert imu_model(core).gap_turns == 1
+    fused = rot.wrap(yaw_at(poses, T0 + 76.0) - yaw_at(poses, T0 + 59.0))
+    assert abs(rot.wrap(fused - turned)) < 0.03, (fused, turned)
+
+
+def test_the_drift_average_leaves_out_a_heading_correction_and_follows_a_changed_drift():
+    """_learn_drift on a noiseless difference drifting 0.01 rad/s: after a few blocks the rate is 0.01 with the
+    floor's standard error; a 0.5 rad jump of the heading (a GPS fit) makes one block an outlier, left out;
+    the drift turning to -0.01 rad/s is taken up after DRIFT_REOPEN blocks in a row disagree."""
+    from fusiond.core.sensors.imu import (DRIFT_BLOCK_S, DRIFT_FLOOR, DRIFT_MIN_BLOCKS, DRIFT_REOPEN,
+                                          _learn_drift, drift_rate)
+
+    assert drift_rate(None)[0] == 0.0
+    drift, t = None, 0.0
+    for k in range(int(60 / 0.1)):
+        t = k * 0.1
+        drift = _learn_drift(drift, t, rot.wrap(0.01 * t))
+    rate, var = drift_rate(drift)
+    assert drift[3] >= DRIFT_MIN_BLOCKS and rate == pytest.approx(0.01, abs=1e-9) and var <= DRIFT_FLOOR**2
+    for k in range(1, int(2 * DRIFT_BLOCK_S / 0.1)):  # the heading jumps by 0.5 rad at once
+        drift = _learn_drift(drift, t + k * 0.1, rot.wrap(0.01 * (t + k * 0.1) - 0.5))
+    assert drift_rate(drift)[0] == pytest.approx(0.01, abs=1e-9)
+    t0, r0 = t + 2 * DRIFT_BLOCK_S, 0.01 * (t + 2 * DRIFT_BLOCK_S) - 0.5
+    for k in range(int((DRIFT_REOPEN + 2) * DRIFT_BLOCK_S / 0.1) + 1):
+        drift = _learn_drift(drift, t0 + k * 0.1, rot.wrap(r0 - 0.01 * k * 0.1))
+    assert drift_rate(drift)[0] == pytest.approx(-0.01, abs=1e-9)
+
+
+def test_the_wheels_yaw_scale_is_their_rate_over_the_gyro_s():
+    """wheel_yaw_scale on pairs w = 0.7 g + noise (sd 0.01) over gyro rates of +-0.3 rad/s: k within three of
+    its standard errors of 0.7, that error near 0.01 / sqrt(sum g^2); (1, 0) before enough turning samples."""
+    import numpy as np
+
+    from fusiond.core.sensors.imu import WHEEL_YAW_MIN_SAMPLES, _learn_wheel_yaw, wheel_yaw_scale
+
+    rng = np.random.default_rng(5)
+    sums = None
+    g = 0.3 * np.sin(np.arange(500) * 0.05)
+    for k, gk in enumerate(g):
+        sums = _learn_wheel_yaw(sums, k * 0.01, float(gk), float(0.7 * gk + rng.normal(0, 0.01)))
+        if k + 1 < WHEEL_YAW_MIN_SAMPLES:
+            assert wheel_yaw_scale(sums) == (1.0, 0.0)
+    scale, var = wheel_yaw_scale(sums)
+    se = 0.01 / math.sqrt(float((g**2).sum()))
+    assert abs(scale - 0.7) < 3 * math.sqrt(var) and 0.5 * se < math.sqrt(var) < 2 * se, (scale, var, se)

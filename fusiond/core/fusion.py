@@ -481,6 +481,8 @@ class FusionCore:
             seg = t1 - t0
             u = held.at(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
             x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
+            if not u.from_gyro and u.angular_period > 0.0:  # the wheels' yaw rate turns the heading
+                s.wheel_turn += u.angular[2] * seg
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
                 m.on_predict(s, s.ekf.x, x)
             if gap and t1 >= t_end:
@@ -489,6 +491,8 @@ class FusionCore:
                 Q[0, 0] += pos_var
                 Q[1, 1] += pos_var
                 Q[5, 5] += yaw_var
+                if u.angular_period == 0.0:  # no yaw rate held at the gap's end: its turn was not seen
+                    s.turn_unseen = t_end
             s.ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it
             if t1 >= t_end:
                 break

@@ -24,7 +24,7 @@ class FilterState:
         "t", "ekf", "last", "period",
         "linear", "linear_cov", "linear_world", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
-        "still_since", "attitude_ready", "tilt_seen",
+        "still_since", "attitude_ready", "tilt_seen", "turn_unseen", "wheel_turn",
         "frame_ready", "frame_epoch", "enu", "heading_ready",
         "own",
     )
@@ -47,6 +47,8 @@ class FilterState:
         s.still_since = None  # the odometry has read zero since this stamp
         s.attitude_ready = False  # roll/pitch (and yaw) taken from a first orientation
         s.tilt_seen = None  # stamp of the newest roll/pitch information fused (set at the first stamp)
+        s.turn_unseen = None  # end of the newest prediction across a gap that no yaw-rate input covered
+        s.wheel_turn = 0.0  # rad the predictions have turned by the odometry's yaw rate (no gyro), all told
         s.frame_ready = False  # the world frame: defined by the first absolute sample
         s.frame_epoch = 0  # counts the frame being defined or turned (differential sensors restart)
         s.enu, s.heading_ready = None, False
@@ -73,6 +75,7 @@ class FilterState:
         c.gyro, c.gyro_cov, c.gyro_last = self.gyro, self.gyro_cov, self.gyro_last
         c.still_since = self.still_since
         c.tilt_seen = self.tilt_seen
+        c.turn_unseen, c.wheel_turn = self.turn_unseen, self.wheel_turn
         c.attitude_ready = self.attitude_ready
         # world frame: flags and immutable values (EnuFrame) only, so sharing is safe
         c.frame_ready, c.frame_epoch, c.enu, c.heading_ready = (self.frame_ready, self.frame_epoch, self.enu,

@@ -351,16 +351,25 @@ class ErrorStateEKF:
 
     def turn_heading(self, angle: float, yaw_var: float) -> None:
         """Turn the attitude about the world z axis by ``angle`` (q' = Rz q), the position where it is,
-        and widen the heading's variance by ``yaw_var`` (what is not known of the angle).
+        and make the heading's variance ``yaw_var`` (what is known of it after the turn).
 
         For a turn the filter did not see (made in a logging gap, shown by another sensor's own yaw).
         The attitude error turns with it (dtheta' = Rz dtheta, as in ``rotate_yaw``): P' = J P J^T
-        with J = Rz on the attitude block, then P'[yaw, yaw] += yaw_var. The yaw error, the z component,
-        is unchanged by Rz, so its variance grows by exactly ``yaw_var``; P stays PSD.
+        with J = Rz on the attitude block. The yaw error, the z component, is unchanged by Rz. Then
+        P'[yaw, yaw] becomes ``yaw_var``: widened by adding the difference (an error independent of
+        the rest), narrowed by scaling the yaw row and column (a change of variables, dtheta_z' =
+        f dtheta_z, whose correlations shrink with it). Either way P stays PSD.
         """
         J = self._turn_attitude(angle)
         P = J @ self.P @ J.T
-        P[5, 5] += max(yaw_var, 0.0)
+        now = float(P[5, 5])
+        target = max(yaw_var, 0.0)
+        if target >= now:
+            P[5, 5] = target
+        elif now > 0.0:
+            f = math.sqrt(target / now)
+            P[5, :] *= f
+            P[:, 5] *= f
         self.P = P
 
     def _turn_attitude(self, angle: float) -> np.ndarray:

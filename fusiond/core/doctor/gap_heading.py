@@ -6,9 +6,9 @@ absolute heading (a GPS track, a pose sensor, an absolute IMU yaw) nothing ever 
 the filter: every metre after the gap is driven along the wrong heading (a race car
 that turned 160 degrees in a 25 s gap). An IMU that integrates its own yaw kept it
 through the gap (the device ran; only the log stopped), so its yaw change across the
-gap shows the turn. With ``orientation = "roll_pitch"``, ``yaw_across_gaps`` (off by default)
+gap shows the turn. With ``orientation = "roll_pitch"``, ``yaw_across_gaps`` (on by default)
 turns the heading by that change at the first orientation after a gap, so a turn missed is
-named with it to turn on (with ``"off"``: roll/pitch fused, and it). The IMU's yaw drifts by
+named with it to turn on where it is off (with ``"off"``: roll/pitch fused, and it). The IMU's yaw drifts by
 itself (a 6-axis AHRS integrating its gyro's bias): the drift measured against the
 bias-corrected gyro over the run, times the gap, is taken off its change first, so a car
 parked through a gap shows no turn (QA7: 0.5 rad over 25 s at 0.02 rad/s, advised, made it
@@ -124,8 +124,9 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
         return Verdict(imu.name, "heading_across_gaps", "warn",
                        msg + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
-                       "above orientation_max_sigma) or never moved. Log without gaps, or add an absolute heading "
-                       "(GPS, pose)", evidence=evidence)
+                       "above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the vehicle "
+                       "stood still before and after the gap (see the heading_not_turned_across_gap log lines). "
+                       "Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)
     cost = ""
     if drift is not None:
         wander, rate = drift

@@ -41,6 +41,7 @@ __all__ = ["LEVER_TOL", "MAX_SE", "lever_verdict"]
 LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change
 MAX_SE = 0.1  # m: "as stated" needs the fit this precise (half LEVER_TOL)
 MAX_SE_NAMED = 0.3  # m: a lever is named only from a fit this precise (a fifth of a 1.5 m mast's offset)
+LATENCY_ALONG = 2.0  # a misfit behind base_link this many times longer than it is wide: also says latency
 Z_SIGMAS = 5.0
 OUTLIER_SIGMAS = 4.0
 MIN_PAIRS = 30
@@ -152,10 +153,16 @@ def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
         return Verdict(gps.name, "lever_arm", "ok",
                        where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, {off:.2f} m from "
                        f"extrinsic_xyz's ({stated[0]:+.2f}, {stated[1]:+.2f}): {why}", evidence=evidence)
+    latency = ""
+    if dl[0] < 0.0 and abs(dl[0]) > LATENCY_ALONG * abs(dl[1]):
+        # QA7: fixes stamped late trail the vehicle by speed x latency, a lever behind it at one speed
+        latency = (". Behind and along the vehicle, it can also be fixes stamped late (a latency tau trails them "
+                   "by speed x tau): if the antenna is not there, see the GPS's clock verdict and stamp_offset_s")
     return Verdict(gps.name, "lever_arm", "warn",
                    where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, {math.hypot(*dl):.2f} m "
                    f"from where extrinsic_xyz puts it ({stated[0]:+.2f}, {stated[1]:+.2f}): its fixes swing by that as "
                    "the vehicle turns, which the filter takes for the base moving (and partly follows, so the NIS "
-                   "need not show it). State the antenna's position (the height is kept: only the tilt shows it)",
+                   "need not show it). State the antenna's position (the height is kept: only the tilt shows it)"
+                   + latency,
                    sensor_key(gps.name, "extrinsic_xyz"),
                    f"extrinsic_xyz = [{lever[0]:.2f}, {lever[1]:.2f}, {lever[2]:.2f}]", evidence)
