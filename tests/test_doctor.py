@@ -99,7 +99,11 @@ def test_magnetometer_offset_and_disturbance_with_gps_blames_the_imu_not_the_gps
                          imu_yaw_disturbance=(0.3, 2 * math.pi / 0.4))
     verdicts = verdicts_of(robot_config(gps="", orientation="absolute"), sim_gps.simulate(w))
     v = one(verdicts, "imu", "orientation")
-    assert v.level == "problem" and v.key == "sensors.imu.orientation" and "roll_pitch" in v.suggestion
+    # The disturbance (0.3 rad at 2.5 Hz) is named; once the GPS has given the heading the estimate did not
+    # follow it (the offset state and the jump gate absorb it: heading rms after 30 s 0.0049 rad, roll_pitch's
+    # 0.0048), so the yaw is kept absolute and its offset named, within the chords' ~0.01 rad standard error
+    assert v.level == "warn" and "magnetometer-disturbed" in v.message and "keep the yaw absolute" in v.message, v
+    assert v.key == "sensors.imu.yaw_offset" and float(v.suggestion.split("=")[1]) == pytest.approx(-0.4, abs=0.05), v
     # with the yaw-offset state the filter keeps the GPS consistent (its NIS is fine); if it were not,
     # the GPS verdict would have to blame the IMU, never ask for more GPS noise
     gps = one(verdicts, "gps", "position")

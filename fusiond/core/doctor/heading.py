@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor
+from ..sensors.gps import HEADING_READY_SIGMA
 from .series import Series
 from .verdict import Verdict, sensor_key
 
@@ -57,10 +58,17 @@ def imu_vs_gyro(series: Series) -> tuple[float, float] | None:
 
 def estimate_vs_gyro(series: Series) -> float:
     """How far the filter's own heading wanders against the integrated raw gyro (as ``imu_vs_gyro``: a bias
-    and a scale removed per window): what of a disturbed IMU yaw reached the estimate. NaN when they
-    overlap in fewer than 10 bins."""
+    and a scale removed per window): what of a disturbed IMU yaw reached the estimate, once its heading is
+    known (attitude variance within HEADING_READY_SIGMA^2; QA7: a magnetometer disturbed at start-up is
+    followed while nothing else gives the heading, and only then). NaN when they overlap in fewer than 10
+    bins, or the heading never became known."""
     ye = np.unwrap(np.asarray(series.est_yaw)) if series.est_yaw else np.empty(0)
-    compared = _vs_gyro(series, np.asarray(series.est_t), ye, series.odom_breaks)
+    te = np.asarray(series.est_t)
+    known = np.asarray(series.est_att_var) <= HEADING_READY_SIGMA**2
+    if len(known) != len(te) or not known.any():
+        return math.nan
+    first = int(np.argmax(known))
+    compared = _vs_gyro(series, te[first:], ye[first:], series.odom_breaks)
     return compared[0] if compared is not None else math.nan
 
 
