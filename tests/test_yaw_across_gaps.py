@@ -44,6 +44,18 @@ def yaw_at(poses, t: float) -> float:
     return min(poses, key=lambda p: abs(p[0] - t))[1]
 
 
+def _imu_yaw(samples, yaw_of):
+    """The samples with each IMU orientation's yaw replaced by yaw_of(stamp, yaw) (roll/pitch kept)."""
+    out = []
+    for s in samples:
+        if isinstance(s, ImuSample):
+            r, p, y = rot.to_rpy(s.orientation)
+            s = ImuSample(s.sensor, s.stamp, rot.from_rpy(r, p, yaw_of(s.stamp, y)), s.orientation_covariance,
+                          s.angular_velocity, s.angular_velocity_covariance)
+        out.append(s)
+    return out
+
+
 def imu_model(core):
     return next(m for m in core.models if hasattr(m, "gap_turns"))
 
@@ -140,13 +152,7 @@ def test_on_by_default_and_an_imu_restarted_in_the_gap_turns_nothing():
     assert imu_model(core).gap_turns == 1 and core.cfg.sensors[1].yaw_across_gaps
     after = [s for s in samples if isinstance(s, ImuSample) and s.stamp >= T0 + gap[1]]
     y0 = rot.yaw(after[0].orientation)
-    rebooted = []
-    for s in samples:
-        if isinstance(s, ImuSample) and s.stamp >= T0 + gap[1]:
-            r, p, y = rot.to_rpy(s.orientation)
-            s = ImuSample(s.sensor, s.stamp, rot.from_rpy(r, p, y - y0), s.orientation_covariance,
-                          s.angular_velocity, s.angular_velocity_covariance)
-        rebooted.append(s)
+    rebooted = _imu_yaw(samples, lambda t, y: y - y0 if t >= T0 + gap[1] else y)
     core, on = run(rebooted)
     assert imu_model(core).gap_turns == 0
     _, off = run(rebooted, "yaw_across_gaps = false")
@@ -173,14 +179,7 @@ def test_the_turn_does_not_depend_on_arrival_order():
 
 def _drifting(samples, rate: float):
     """The IMU's yaw drifting at ``rate`` rad/s from the start (a 6-axis AHRS integrating its gyro's bias)."""
-    out = []
-    for s in samples:
-        if isinstance(s, ImuSample):
-            r, p, y = rot.to_rpy(s.orientation)
-            s = ImuSample(s.sensor, s.stamp, rot.from_rpy(r, p, rot.wrap(y + rate * (s.stamp - T0))),
-                          s.orientation_covariance, s.angular_velocity, s.angular_velocity_covariance)
-        out.append(s)
-    return out
+    return _imu_yaw(samples, lambda t, y: rot.wrap(y + rate * (t - T0)))
 
 
 DRIFT = 0.02  # rad/s: QA7's drifting AHRS
@@ -243,7 +242,9 @@ def test_the_drift_average_leaves_out_a_heading_correction_and_follows_a_changed
 
 def test_the_wheels_yaw_scale_is_their_rate_over_the_gyro_s():
     """wheel_yaw_scale on pairs w = 0.7 g + noise (sd 0.01) over gyro rates of +-0.3 rad/s: k within three of
-    its standard errors of 0.7, that error near 0.01 / sqrt(sum g^2); (1, 0) before enough turning samples."""
+    its standard errors (0.01 / sqrt(sum g^2)) of 0.7; the relative variance of a rescaled turn is the misfit
+    against what the fit explains, 0.01^2 / (0.7^2 mean g^2), within half of it; (1, 0) before enough
+    turning samples."""
     import numpy as np
 
     from fusiond.core.sensors.imu import WHEEL_YAW_MIN_SAMPLES, _learn_wheel_yaw, wheel_yaw_scale
@@ -255,6 +256,45 @@ def test_the_wheels_yaw_scale_is_their_rate_over_the_gyro_s():
         sums = _learn_wheel_yaw(sums, k * 0.01, float(gk), float(0.7 * gk + rng.normal(0, 0.01)))
         if k + 1 < WHEEL_YAW_MIN_SAMPLES:
             assert wheel_yaw_scale(sums) == (1.0, 0.0)
-    scale, var = wheel_yaw_scale(sums)
+    scale, relative = wheel_yaw_scale(sums)
     se = 0.01 / math.sqrt(float((g**2).sum()))
-    assert abs(scale - 0.7) < 3 * math.sqrt(var) and 0.5 * se < math.sqrt(var) < 2 * se, (scale, var, se)
+    expected = 0.01**2 / (0.7**2 * float((g**2).mean()))
+    assert abs(scale - 0.7) < 3 * se and 0.5 * expected < relative < 1.5 * expected, (scale, relative, expected)
+
+
+def _truth_yaw(cfg: SimConfig, t: float) -> float:
+    return min(cfg.truth, key=lambda row: abs(row[0] - t))[3]
+
+
+def test_an_imu_turn_far_from_the_good_wheels_is_not_fused():
+    """QA8: the AHRS reboots inside an IMU-only silence (2 s to 5 s) and integrates from there, so after it
+    its yaw sits 2 rad away and not at 0. The wheels (true scale) drove the heading through the silence; the
+    IMU's "turn" is ~2 rad beyond theirs, far past both turns' uncertainty (WHEELS_GATE sigma): nothing is
+    turned, and the run is exactly the one with the feature off."""
+    drop = (2.0, 5.0)
+    samples = [s for s in simulate(SimConfig(duration=10.0))
+               if not (isinstance(s, ImuSample) and T0 + drop[0] <= s.stamp < T0 + drop[1])]
+    rebooted = _imu_yaw(samples, lambda t, y: rot.wrap(y + 2.0) if t >= T0 + drop[1] else y)
+    core, on = run(rebooted)
+    assert imu_model(core).gap_turns == 0
+    _, off = run(rebooted, "yaw_across_gaps = false")
+    assert on == off
+
+
+def test_an_imu_dropout_while_the_drive_reads_zero_takes_the_imu_turn():
+    """The drive reads exactly zero from 2 s to 5.5 s while the robot turns at 0.3 rad/s (a false standstill),
+    and the IMU is silent from 2 s to 5 s: the wheels' zero is no measurement of the turn (the gyro reads the
+    turn when the IMU is back, so the vehicle is not parked), so the IMU's turn is taken whole. The heading's change over
+    1-6 s is the truth's to within the yaw noise and 1 s of gyro on either side (0.03 asserted); turned off,
+    the 0.9 rad made in the silence is missed (but for the held gyro rate's 0.2 s)."""
+    sim = SimConfig(duration=10.0, false_stops=((2.0, 5.5, 0.3),))
+    drop = (2.0, 5.0)
+    samples = [s for s in simulate(sim)
+               if not (isinstance(s, ImuSample) and T0 + drop[0] <= s.stamp < T0 + drop[1])]
+    turned = rot.wrap(_truth_yaw(sim, T0 + 6.0) - _truth_yaw(sim, T0 + 1.0))
+    core, poses = run(samples)
+    assert imu_model(core).gap_turns == 1
+    assert abs(rot.wrap(rot.wrap(yaw_at(poses, T0 + 6.0) - yaw_at(poses, T0 + 1.0)) - turned)) < 0.03
+    _, off = run(samples, "yaw_across_gaps = false")
+    missed = rot.wrap(rot.wrap(yaw_at(off, T0 + 6.0) - yaw_at(off, T0 + 1.0)) - turned)
+    assert abs(missed) > 0.9 - 0.3 * 0.2 - 0.1

@@ -119,6 +119,24 @@ def _heading_rms(samples, w: World, cfg) -> float:
     return math.sqrt(sum(e * e for e in err) / len(err))
 
 
+def _kept_absolute(steps):
+    """A magnetometer 0.35 rad off and disturbed by ``steps`` beside a 1.5 m GPS at 1 Hz: (world, samples,
+    the advised yaw_offset), the verdict asserted to find the disturbance (beyond 2 WANDER_RAD against the
+    gyro), the estimate not following it (within WANDER_RAD) and so to keep the yaw absolute."""
+    from fusiond.core.doctor.heading import WANDER_RAD
+    from fusiond.replay.run import run_samples
+
+    w = World(duration=300.0, speed=1.0, gps_rate=1.0, gps_sigma=1.5, gyro_bias=0.002,
+              imu_yaw_offset=0.35, imu_yaw_steps=steps, seed=5)
+    samples = simulate(w)
+    v = next(v for v in run_samples(samples, _config("absolute")).verdicts()
+             if v.sensor == "imu" and v.channel == "orientation")
+    assert v.evidence["imu_vs_gyro_wander_rad"] > 2 * WANDER_RAD, v  # the simulation has the trait
+    assert v.evidence["estimate_vs_gyro_wander_rad"] <= WANDER_RAD, v
+    assert v.level == "warn" and "keep the yaw absolute" in v.message and v.key == "sensors.imu.yaw_offset", v
+    return w, samples, float(v.suggestion.split("=")[1])
+
+
 def test_a_disturbed_magnetometer_the_filter_absorbs_is_kept_absolute_with_its_offset_corrected():
     """QA6's skid-steer: a magnetometer 0.35 rad off, disturbed near steel by steps of +0.6 rad for 15 s and
     -0.9 rad for 18 s; GPS 1.5 m at 1 Hz. The IMU's yaw wanders against the gyro far beyond WANDER_RAD, yet
@@ -127,18 +145,7 @@ def test_a_disturbed_magnetometer_the_filter_absorbs_is_kept_absolute_with_its_o
     made QA6's run worse: 0.077 -> 0.395 rad, the GPS heading searched from travel again). So the verdict
     keeps the yaw absolute and names the offset (within 0.1 rad: the chords' standard error is ~0.02, the
     disturbances' remainder the rest); pasted, the heading is no worse (5 % allowed)."""
-    from fusiond.core.doctor.heading import WANDER_RAD
-    from fusiond.replay.run import run_samples
-
-    w = World(duration=300.0, speed=1.0, gps_rate=1.0, gps_sigma=1.5, gyro_bias=0.002,
-              imu_yaw_offset=0.35, imu_yaw_steps=((100.0, 115.0, 0.6), (200.0, 218.0, -0.9)), seed=5)
-    samples = simulate(w)
-    v = next(v for v in run_samples(samples, _config("absolute")).verdicts()
-             if v.sensor == "imu" and v.channel == "orientation")
-    assert v.evidence["imu_vs_gyro_wander_rad"] > 2 * WANDER_RAD, v  # the simulation has the trait
-    assert v.evidence["estimate_vs_gyro_wander_rad"] <= WANDER_RAD, v
-    assert v.level == "warn" and "keep the yaw absolute" in v.message and v.key == "sensors.imu.yaw_offset", v
-    advised = float(v.suggestion.split("=")[1])
+    w, samples, advised = _kept_absolute(((100.0, 115.0, 0.6), (200.0, 218.0, -0.9)))
     assert advised == pytest.approx(-0.35, abs=0.1)
     absolute = _heading_rms(samples, w, _config("absolute"))
     assert absolute <= 1.05 * _heading_rms(samples, w, _config("roll_pitch"))
@@ -153,18 +160,7 @@ def test_a_magnetometer_disturbed_at_start_up_is_judged_once_the_gps_gives_the_h
     not follow: the yaw stays absolute and its offset is named. The advised offset carries the start's
     disturbance, 0.9 x 40 s over the run's ~250 s of track segments (~0.15 rad): asserted within 0.2 of the
     truth; pasted, the heading is no worse than as configured (5 % allowed)."""
-    from fusiond.core.doctor.heading import WANDER_RAD
-    from fusiond.replay.run import run_samples
-
-    w = World(duration=300.0, speed=1.0, gps_rate=1.0, gps_sigma=1.5, gyro_bias=0.002,
-              imu_yaw_offset=0.35, imu_yaw_steps=((0.0, 40.0, 0.9),), seed=5)
-    samples = simulate(w)
-    v = next(v for v in run_samples(samples, _config("absolute")).verdicts()
-             if v.sensor == "imu" and v.channel == "orientation")
-    assert v.evidence["imu_vs_gyro_wander_rad"] > 2 * WANDER_RAD, v  # the simulation has the trait
-    assert v.evidence["estimate_vs_gyro_wander_rad"] <= WANDER_RAD, v
-    assert v.level == "warn" and "keep the yaw absolute" in v.message and v.key == "sensors.imu.yaw_offset", v
-    advised = float(v.suggestion.split("=")[1])
+    w, samples, advised = _kept_absolute(((0.0, 40.0, 0.9),))
     assert advised == pytest.approx(-0.35, abs=0.2)
     absolute = _heading_rms(samples, w, _config("absolute"))
     pasted = _heading_rms(samples, w, _config("absolute", f"yaw_offset = {advised}"))

@@ -21,8 +21,11 @@ is the turn. At the first orientation after the IMU was silent longer than the g
   own change says nothing, the heading turns by the IMU's.
 - Only the IMU silent: the wheels' yaw rate drove the heading meanwhile. Their part of the turn
   (``FilterState.wheel_turn``) is rescaled by how they read the gyro's turns before
-  (``_learn_wheel_yaw``: a skid-steer reads short) and weighed against the IMU's by the two
-  variances (the wheels': what the heading's variance grew, and the scale's uncertainty).
+  (``_learn_wheel_yaw``: a skid-steer reads short; not beside a GPS or pose heading, whose
+  corrections the filter's turn already holds) and weighed against the IMU's by the two
+  variances (the wheels': what the heading's variance grew, and the scale fit's misfit). An IMU
+  turn beyond WHEELS_GATE sigma of theirs is not fused (an AHRS rebooted in the silence, QA8).
+  Wheels reading zero when the IMU is back, the gyro turning, saw nothing: the IMU's turn is taken.
 - The heading's variance becomes what the two leave (``ErrorStateEKF.turn_heading``).
 Nothing turns for a yaw the IMU does not measure (covariance above orientation_max_sigma), one
 that has never moved (a driver's constant placeholder quaternion would undo a turn the wheels
@@ -75,6 +78,7 @@ DRIFT_REOPEN = 3  # ... unless this many in a row are: then the drift itself cha
 DRIFT_FLOOR = 1e-4  # rad/s: the block slopes' scatter is taken as at least this (quantised, steady yaws)
 WHEEL_YAW_TAU_S = 120.0  # s of memory of the wheels' yaw rate against the gyro's (``_learn_wheel_yaw``)
 WHEEL_YAW_MIN_SAMPLES = 20.0  # turning samples (weighted) before the wheels' yaw-rate scale is used
+WHEELS_GATE = 5.0  # sigma: an IMU turn this far from the wheels' over an IMU-only silence is not fused
 DRIFT_CHANGE = 1e-3  # rad/s: how far the drift may move from its measured value across a gap (bias instability)
 GAP_PERIODS = 5.0  # a silence counts as a gap beyond this many of the IMU's fused-orientation periods (and gap_s)
 YAW_MOVED = 1e-6  # rad: a yaw reading that changed by more than this between fused samples is live
@@ -383,16 +387,30 @@ class ImuModel(SensorModel):
         # what is not known of the IMU's turn: its drift over the gap (the estimate's error and how much
         # the drift may change) and the yaw's noise at both ends; of the filter's: what its variance grew
         turn_var = (rate_var + DRIFT_CHANGE**2) * silent**2 + 2.0 * var
-        if s.turn_unseen is not None and s.turn_unseen > t0:
-            # a logging gap: the filter's inputs ended with it, so its own change says nothing of the turn
+        if (s.turn_unseen is not None and s.turn_unseen > t0) or s.still_since is not None:
+            # a logging gap: the filter's inputs ended with it, so its own change says nothing of the turn; or
+            # the wheels read zero while the gyro or the yaw says the vehicle turned (not parked, above): a
+            # drive at rest can lie (coasting, turned by hand), its zero is no measurement of the turn
             gain, wheels_turn, yaw_var = 1.0, filter_turn, var0 + turn_var
         else:
             # the wheels' yaw rate drove the heading through the IMU's silence: their turn, rescaled by how
-            # they read the gyro's turns before (a skid-steer's reads short), against the IMU's
-            scale, scale_var = wheel_yaw_scale(wheel)
-            by_wheels = s.wheel_turn - wheel0  # the part the wheels turned (a held gyro rate turned the rest)
-            wheels_turn = filter_turn + by_wheels * (1.0 / scale - 1.0)
-            wheels_var = max(float(s.ekf.P[5, 5]) - var0, 0.0) + by_wheels**2 * scale_var / scale**4
+            # they read the gyro's turns before (a skid-steer's reads short), against the IMU's. Beside a
+            # heading reference (GPS, pose) the filter's turn holds its corrections too: not rescaled then.
+            wheels_turn, wheels_var = filter_turn, max(float(s.ekf.P[5, 5]) - var0, 0.0)
+            if not s.heading_ready:
+                scale, relative_var = wheel_yaw_scale(wheel)
+                by_wheels = s.wheel_turn - wheel0  # the part the wheels turned (a held gyro rate turned the rest)
+                wheels_turn += by_wheels * (1.0 / scale - 1.0)
+                wheels_var += (by_wheels / scale) ** 2 * relative_var
+            innovation = rot.wrap(corrected - wheels_turn)
+            if innovation * innovation > WHEELS_GATE**2 * (wheels_var + turn_var):
+                # far beyond both turns' uncertainty: the IMU's yaw is no longer the one before the silence
+                # (QA8: an AHRS rebooted in it and integrating since, so not back at 0), keep the wheels'
+                if emit:
+                    log.warning("heading_not_turned_across_gap", sensor=self.cfg.name, stamp=stamp, gap_s=silent,
+                                reason="the IMU's turn disagrees with the wheels' beyond both their uncertainties",
+                                imu_turn_rad=corrected, wheels_turn_rad=wheels_turn)
+                return heading
             gain = wheels_var / (wheels_var + turn_var) if wheels_var + turn_var > 0.0 else 0.0
             yaw_var = var0 + wheels_var * (1.0 - gain)
         turn = rot.wrap(wheels_turn + gain * rot.wrap(corrected - wheels_turn) - filter_turn)
@@ -618,8 +636,12 @@ def _learn_wheel_yaw(sums: tuple | None, t: float, gyro_z: float, wheel_z: float
 
 
 def wheel_yaw_scale(sums: tuple | None) -> tuple[float, float]:
-    """(k, its variance): the wheels' yaw rate as k x the gyro's, least squares through the origin with
-    its standard error; (1, 0) before WHEEL_YAW_MIN_SAMPLES turning samples (weighted), or for a fit that is not a scale (k below 0.2 or above 5: wheels that do not see the turn)."""
+    """(k, the relative variance of a turn the wheels read, rescaled by 1/k): the wheels' yaw rate as k x the
+    gyro's, least squares through the origin. The relative variance is the fit's misfit against what it
+    explains (a skid-steer slips more on the spot than on an arc: one k fits neither exactly, QA8) plus k's
+    own; the misfit does not average down over a turn, the noise in it would. (1, 0) before
+    WHEEL_YAW_MIN_SAMPLES turning samples (weighted), or for a fit that is not a scale (k below 0.2 or
+    above 5: wheels that do not see the turn)."""
     if sums is None:
         return 1.0, 0.0
     _, n, gg, gw, ww = sums
@@ -628,5 +650,6 @@ def wheel_yaw_scale(sums: tuple | None) -> tuple[float, float]:
     k = gw / gg
     if not 0.2 <= k <= 5.0:
         return 1.0, 0.0
-    residual = max(ww - 2.0 * k * gw + k * k * gg, 0.0) / max(n - 1.0, 1.0)
-    return k, residual / gg
+    misfit = max(ww - 2.0 * k * gw + k * k * gg, 0.0)
+    k_var = misfit / max(n - 1.0, 1.0) / gg
+    return k, misfit / (k * k * gg) + k_var / (k * k)
