@@ -71,13 +71,11 @@ class History:
         # keys are sorted: the first one stamped at or after the horizon. A stream trims one or two a message:
         # found by stepping from the front (a bisection over a second of 1 kHz IMU cost more than the rest of
         # the trim); a longer run (after a pause) by bisection ((t,) sorts before any (t, i))
-        n = 1
+        n = 0
         while n < SCAN and n < len(keys) and keys[n][0] < horizon:
             n += 1
         if n == SCAN:
             n = bisect.bisect_left(keys, (horizon,))
-        elif keys[0][0] >= horizon:
-            n = 0  # nothing is too old: only history_max trims
         n = max(n, len(keys) - history_max)
         if n:
             if self.base is not None:

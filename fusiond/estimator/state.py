@@ -250,6 +250,12 @@ class StateLayout:
     def has(self, name: str) -> bool:
         return name in self.nominal
 
+    def index(self, name: str, component: int = 0, error: bool = False) -> int:
+        """Where a block's component sits in x (or, ``error``, in the error state); -1 without the block."""
+        if name not in self.nominal:
+            return -1
+        return (self.error if error else self.nominal)[name].start + component
+
     def initial_state(self) -> np.ndarray:
         return np.concatenate([np.asarray(b.initial(), float) for b in self.blocks])
 

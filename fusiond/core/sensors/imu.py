@@ -272,8 +272,7 @@ class ImuModel(SensorModel):
         self.carries_yaw = cfg.yaw_across_gaps and cfg.orientation == "roll_pitch" and not ctx.two_d
         self._gap_s = ctx.filter.gap_s
         self._bias_sigma = ctx.filter.gyro_bias_sigma
-        layout = ctx.layout
-        self._bias_z = layout.nominal["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
+        self._bias_z = ctx.layout.index("gyro_bias", 2)
         self.gap_turns = 0  # headings turned across gaps (``_carry_yaw``)
 
     @property
@@ -336,7 +335,7 @@ class ImuModel(SensorModel):
             # least orientation_rate_hz's (a bucket's burst of samples does not make it short); none yet, no gap
             typical = max(period, self._period)
             if typical > 0.0 and silent > max(self._gap_s, GAP_PERIODS * typical):
-                heading = self._turn_across_gap(s, yaw, var, stamp, emit, silent, mark, live,
+                heading = self._turn_across_gap(s, yaw, var, heading, stamp, emit, silent, mark, live,
                                                 still0 and quiet and s.still_since is not None, drift,
                                                 own.wheel_yaw)
                 drift = _restart_drift(drift, stamp, yaw - heading)  # the gap's own change is no drift
@@ -361,22 +360,21 @@ class ImuModel(SensorModel):
         return (last is not None and s.wheel_yaw_measured and s.still_since is None
                 and stamp - last <= self.ctx.timeout(odom, s))
 
-    def _turn_across_gap(self, s: "FilterState", yaw: float, var: float, stamp: float, emit: bool, silent: float,
-                         mark: tuple, live: bool, parked: bool, drift: tuple | None,
+    def _turn_across_gap(self, s: "FilterState", yaw: float, var: float, heading: float, stamp: float, emit: bool,
+                         silent: float, mark: tuple, live: bool, parked: bool, drift: tuple | None,
                          wheel: tuple | None) -> float:
-        """The heading after the gap (module doc): turned by the gain-weighted difference of the IMU's
-        drift-corrected turn and the filter's, or left as it is (and why, logged)."""
+        """The heading after the gap (module doc), from the filter's ``heading`` now: turned by the gain-weighted
+        difference of the IMU's drift-corrected turn and the filter's, or left as it is (and why, logged)."""
         t0, yaw0, heading0, _, var0, _, wheel0 = mark
-        heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
-        why = None
         if not live:
-            why = None  # a yaw that never moved (a placeholder): nothing to say, nothing turned
-        elif abs(yaw) < YAW_RESET_RAD < 10.0 * YAW_RESET_RAD < abs(yaw0):
+            return heading  # a yaw that never moved (a placeholder): nothing to say, nothing turned
+        why = None
+        if abs(yaw) < YAW_RESET_RAD < 10.0 * YAW_RESET_RAD < abs(yaw0):
             why = "the IMU's yaw reads 0 after the gap: restarted, not turned"
         elif parked:
             why = "stood still before and after the gap (odometry zero, gyro quiet): the IMU's change is its drift or a disturbance"
-        if why is not None or not live:
-            if why is not None and emit:
+        if why is not None:
+            if emit:
                 log.warning("heading_not_turned_across_gap", sensor=self.cfg.name, stamp=stamp, gap_s=silent,
                             reason=why)
             return heading

@@ -207,9 +207,9 @@ class OdomModel(SensorModel):
         super().__init__(cfg, index, ctx)
         layout = ctx.layout
         # the gyro's z rate as the filter corrects it (bias, scale): what the wheels' yaw rate checks
-        self._bias_z = layout.nominal["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
-        self._bias_z_error = layout.error["gyro_bias"].start + 2 if layout.has("gyro_bias") else -1
-        self._gyro_scale = layout.nominal["gyro_scale"].start if layout.has("gyro_scale") else -1
+        self._bias_z = layout.index("gyro_bias", 2)
+        self._bias_z_error = layout.index("gyro_bias", 2, error=True)
+        self._gyro_scale = layout.index("gyro_scale")
         self._coast_decel = cfg.coast_decel
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
