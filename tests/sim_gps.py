@@ -52,6 +52,7 @@ class World:
     gps_error_tau: float = 0.0  # > 0: a first-order Gauss-Markov error (per axis) on top of the white noise
     gps_error_sigma: float = 0.0  # its steady-state std dev, m
     gps_freeze: tuple[tuple[float, float], ...] = ()  # the receiver repeats its last fix in [t0, t1)
+    gps_freeze_jitter: float = 0.0  # m (std dev per axis) of noise on those repeats: republished with rounding noise
     gps_alt_error_tau: float = 0.0  # > 0: the altitude alone wanders (Gauss-Markov) beyond the stated sigma
     gps_alt_error_sigma: float = 0.0  # its steady-state std dev, m
     # an absolute IMU yaw (a magnetometer): off by default (yaw "not measured", as before)
@@ -102,6 +103,7 @@ def simulate(w: World) -> list:
     gm_t = 0.0
     yaw_rng = np.random.default_rng(w.seed + 3000)
     alt_rng = np.random.default_rng(w.seed + 2000)  # own stream: worlds without it draw as before
+    jitter_rng = np.random.default_rng(w.seed + 4000)  # own stream: worlds without it draw as before
     alt_err = alt_rng.normal(0, w.gps_alt_error_sigma) if w.gps_alt_error_tau > 0 else 0.0
     last_fix = None
     vo_err = [0.0, 0.0, 0.0, 0.0]  # accumulated visual-odometry error: x y z yaw
@@ -150,7 +152,11 @@ def simulate(w: World) -> list:
                 u += alt_err
             if any(f0 <= rel < f1 for f0, f1 in w.gps_freeze) and last_fix is not None:
                 e, n, u = last_fix  # a stuck receiver: same position, new stamp
-            last_fix = (e, n, u)
+                if w.gps_freeze_jitter > 0.0:  # ... republished with noise (the stuck position stays the same)
+                    de, dn, du = jitter_rng.normal(0, w.gps_freeze_jitter, 3)
+                    e, n, u = e + de, n + dn, u + du
+            else:
+                last_fix = (e, n, u)
             dropped = w.gps_dropout is not None and w.gps_dropout[0] <= rel < w.gps_dropout[1]
             var = w.gps_sigma**2
             if w.gps_bad_every and n_fix % w.gps_bad_every == 0:

@@ -107,3 +107,16 @@ def test_a_wandering_gps_with_gated_outliers_gets_the_wander_verdict():
     assert "only because of the 8 update(s) the gate rejected" in v.message, v
     assert v.key == "sensors.gps.error_tau_s" and "error_sigma = [" in v.suggestion, v
     assert "too small" not in v.message, v
+
+
+def test_a_receiver_that_lost_its_fix_and_republishes_it_is_named_as_the_fault():
+    """A receiver repeating its last fix with 3 mm of noise for 10 s while the robot drives on at 1 m/s
+    (10 m): the repeats are recognised as frozen and not fused (their NIS is 0: they say nothing of the
+    stated noise). The doctor names the receiver's fault, with no config key to change, instead of a bare
+    "NIS low"; the fixes that were fused read as consistent as the clean run's."""
+    w = sim_gps.World(duration=120.0, gps_rate=5.0, gps_freeze=((60.0, 70.0),), gps_freeze_jitter=0.003)
+    verdicts = verdicts_of(robot_config(gps=""), sim_gps.simulate(w))
+    frozen = one(verdicts, "gps", "position_frozen")
+    assert frozen.level == "warn" and "lost its fix" in frozen.message and not frozen.key, frozen
+    assert frozen.evidence["frozen_fixes"] >= 45, frozen  # ~50 repeats at 5 Hz, the first ones inside 0.5 m
+    assert one(verdicts, "gps", "position").level == "ok"

@@ -148,15 +148,17 @@ def test_ekf_rotate_yaw_turns_pose_and_covariance_together():
     assert np.allclose(ekf.x, x0) and np.allclose(ekf.P, P0)
 
 
-def test_a_frozen_receiver_repeating_its_fix_does_not_drag_the_car_back():
+@pytest.mark.parametrize("jitter", [0.0, 0.003])
+def test_a_frozen_receiver_repeating_its_fix_does_not_drag_the_car_back(jitter):
     """The receiver repeats its last fix with new stamps for 5 s and 4 s while the car drives on at
     10 m/s (sim_gps ``gps_freeze``): 50 m and 40 m of travel. Fused, every repeat would pull the
     estimate back toward the frozen point (the raw fixes' error reaches 50 m). Recognised (bit-identical
-    coordinates while the wheels moved), they are rejected (channel ``position_frozen``) and the car
+    coordinates while the wheels moved, or within FROZEN_JITTER of them: a receiver republishing its
+    fix with 3 mm of rounding noise, QA9), they are rejected (channel ``position_frozen``) and the car
     dead-reckons: 50 m with the learned scale (+-0.3 %: 0.15 m) and a heading known to ~0.01 rad
     (0.5 m) stays within 1.5 m of the truth."""
     freezes = ((40.0, 45.0), (80.0, 84.0))
-    w = _car(gps_rate=10.0, speed=10.0, gps_freeze=freezes)
+    w = _car(gps_rate=10.0, speed=10.0, gps_freeze=freezes, gps_freeze_jitter=jitter)
     samples = simulate(w)
     truth = {round(t, 6): (x, y) for t, x, y, _ in w.truth}
     core = FusionCore(_config())
@@ -172,3 +174,28 @@ def test_a_frozen_receiver_repeating_its_fix_does_not_drag_the_car_back():
                   and any(f0 <= s.stamp - 1000.0 < f1 for f0, f1 in freezes))
     assert abs(frozen - repeats) <= 2  # each freeze's first sample may straddle its edge
     assert max(during) < 1.5
+
+
+def test_a_stuck_receiver_whose_fixes_agree_is_not_taken_for_a_lockout():
+    """The receiver repeats its fix for 14 s with 5 cm of noise (beyond FROZEN_JITTER: not recognised as
+    frozen) while the car drives on at 10 m/s. The repeats are gated out, and after REACQUIRE_S their
+    innovations agree within REACQUIRE_AGREE of their growing mean (100 m and more): before, the filter
+    "re-acquired" the stuck point and jumped back 100 m (QA9: 330 m at 28 m/s). The fixes did not move
+    while the wheels moved 30 m: no evidence that the filter is wrong. It dead-reckons instead: 140 m
+    with the scale learned to +-0.3 % (0.4 m) and a heading known to ~0.01 rad (1.4 m), plus the pull
+    of the few repeats fused before the gate caught them: within 3 m of the truth throughout."""
+    freeze = (40.0, 54.0)
+    w = _car(gps_rate=10.0, speed=10.0, gps_freeze=(freeze,), gps_freeze_jitter=0.05)
+    samples = simulate(w)
+    truth = {round(t, 6): (x, y) for t, x, y, _ in w.truth}
+    core = FusionCore(_config())
+    channels, during = [], []
+    for s in samples:
+        step = core.ingest(s)
+        channels += [r.channel for r in step.records if r.sensor == "gps"]
+        if step.publish and freeze[0] <= s.stamp - 1000.0 < freeze[1] + 2.0:
+            t, x = core.pose()
+            tx, ty = truth[round(t, 6)]
+            during.append(math.hypot(x[0] - tx, x[1] - ty))
+    assert "position_reacquired" not in channels
+    assert max(during) < 3.0

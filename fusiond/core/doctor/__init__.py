@@ -24,7 +24,8 @@ from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...samples import OdomSample
 from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
-from .channels import absolute_verdict, applied_verdict, figures, nis_head, orientation_verdicts, yaw_jump_verdict
+from .channels import (absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head, orientation_verdicts,
+                       yaw_jump_verdict)
 from .clock import ClockOffsets, clock_verdicts
 from .coast import coast_verdict
 from .covariance import cap_verdict
@@ -300,6 +301,9 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             found[(name, channel)].append(v)
         elif channel == "yaw_jump":
             found[(name, channel)].append(yaw_jump_verdict(name, ch, channels.get((name, "orientation"))))
+        elif channel == "position_frozen":
+            found[(name, channel)].append(frozen_verdict(name, ch, sum(c.n for (n, _), c in channels.items()
+                                                                       if n == name)))
         elif channel in ABSOLUTE_CHANNELS:
             v = absolute_verdict(name, channel, ch, t0)
             judged = applied_verdict(ch)  # the whole run's, or the applied updates' (module channels)

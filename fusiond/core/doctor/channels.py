@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 from ...config import ImuSensor
+from ..sensors.gps import FROZEN_JITTER
 from ..sensors.imu import YAW_JUMP_GATE
 from .attitude import noise_suggestion
 from .nis import ChannelStats
@@ -182,3 +183,17 @@ def yaw_jump_verdict(name: str, ch: ChannelStats, orientation: ChannelStats | No
     return Verdict(name, "yaw_jump", "warn", head + ": too many for disturbances: the stated yaw noise is far below "
                    "the yaw's real sample-to-sample noise (state it), or the yaw is unusable (orientation = "
                    '"roll_pitch")', sensor_key(name, "orientation_noise"), evidence=evidence)
+
+
+def frozen_verdict(name: str, ch: ChannelStats, fixes: int) -> Verdict:
+    """The ``position_frozen`` channel (core/sensors/gps.py ``_frozen``): every record is a fix that repeated
+    an earlier one (bit for bit, or to FROZEN_JITTER) while the wheels moved on, and was not fused, so its
+    NIS says nothing. What it says is that the receiver lost its fix and kept publishing it as if it had
+    one: a fault of the receiver (or its driver), no key of the config's."""
+    share = ch.n / fixes if fixes else 0.0
+    return Verdict(name, "position_frozen", "warn",
+                   f"{ch.n} fixes ({100 * share:.1f}% of the GPS's) repeated an earlier fix while the wheels moved "
+                   f"on (to within {100 * FROZEN_JITTER:g} cm): the receiver lost its fix and kept publishing it, "
+                   "with a fix status. Not fused; the pose was dead-reckoned meanwhile. Nothing to change in the "
+                   "config: check the receiver's sky view and antenna, or have its driver publish status NO_FIX",
+                   evidence={"frozen_fixes": float(ch.n), "frozen_share": share})

@@ -59,6 +59,8 @@ REACQUIRE_FIXES = 5  # ... and at least this many, agreeing with each other: the
 REACQUIRE_AGREE = 0.1  # "agreeing": spread of their innovations within this fraction of the innovation ...
 REACQUIRE_SIGMAS = 3.0  # ... or within this many fix sigmas
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
+FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is that fix again, with rounding noise ...
+FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -78,6 +80,7 @@ class GpsTrack:
     t0: float = 0.0  # stamp of the first fix
     last_lla: tuple[float, float, float] | None = None  # the newest fix's coordinates, as received ...
     last_dr: tuple[float, float] = (0.0, 0.0)  # ... and the dead-reckoned base position when they first came
+    last_enu: tuple[float, float] | None = None  # ... and their east/north (the repeat-with-noise check)
 
 
 @dataclass(slots=True)
@@ -138,7 +141,8 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
 
     track: GpsTrack | None = None  # the fixes since the first one (heading search, frozen-receiver check)
     travel: tuple[float, float, float] = _ZERO3  # dead-reckoned base motion since the track's base
-    rejected: tuple[tuple[float, float, float, float], ...] = ()  # consecutive gated-out fixes: (t, de, dn, var)
+    # consecutive gated-out fixes: (t, innovation east, north, variance, fix east, north, dead-reckoned east, north)
+    rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
 
 
 class GpsModel(SensorModel):
@@ -194,7 +198,7 @@ class GpsModel(SensorModel):
             self._start_track(s, z, inp.lla, stamp)
             if not s.heading_ready:
                 self._heading(s, z, inp.cov, stamp)
-        if self._frozen(s, inp.lla):
+        if self._frozen(s, inp.lla, z):
             # A receiver repeating its last fix with a new stamp while the wheels moved: not a measurement.
             if not emit:
                 return []
@@ -209,7 +213,7 @@ class GpsModel(SensorModel):
             res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
             channel = "position"
             if res.rejected or s.own[self.index].rejected:
-                if self._locked_out(s, res.rejected, y, R, stamp):
+                if self._locked_out(s, res.rejected, y, R, z, stamp):
                     self._reacquire(s, z, inp, rows, stamp)
                     channel = "position_reacquired"
         else:
@@ -251,17 +255,23 @@ class GpsModel(SensorModel):
             ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             self._heading(s, z, inp.cov, stamp)
 
-    def _locked_out(self, s: "FilterState", rejected: bool, y: np.ndarray, R: np.ndarray, stamp: float) -> bool:
+    def _locked_out(self, s: "FilterState", rejected: bool, y: np.ndarray, R: np.ndarray, z, stamp: float) -> bool:
         """Is the filter locked out of the GPS? A gate protects against outliers, but once the
         estimate is far off (a gap longer than its covariance allows, a wrong heading) every fix
         is an "outlier" and the gate never lets the truth back in. Fixes rejected for
         REACQUIRE_S in a row (at least REACQUIRE_FIXES) whose innovations agree with each other
-        (a constant offset, not a multipath burst whose error jumps around) say so."""
+        (a constant offset, not a multipath burst whose error jumps around) and which moved with
+        the wheels say so. A receiver that lost its fix and repeats it with a little noise (its
+        covariance then as unknown, wide enough for the growing innovations to "agree") stays where
+        it was while the wheels drive on (QA9: a car at 28 m/s pulled back 330 m): no evidence that
+        the filter is wrong. Wheels spinning on the spot look the same until the robot moves again."""
         own: GpsOwn = s.own[self.index]
         if not rejected:
             s.own[self.index] = msgspec.structs.replace(own, rejected=())
             return False
-        run = own.rejected + ((stamp, float(y[0]), float(y[1]), float(max(R[0, 0], R[1, 1]))),)
+        t = own.travel
+        dr = (own.track.base[0] + t[0], own.track.base[1] + t[1])
+        run = own.rejected + ((stamp, float(y[0]), float(y[1]), float(max(R[0, 0], R[1, 1])), z[0], z[1], *dr),)
         s.own[self.index] = msgspec.structs.replace(own, rejected=run)
         if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < REACQUIRE_S:
             return False
@@ -269,8 +279,12 @@ class GpsModel(SensorModel):
         dn = [r[2] for r in run]
         me, mn = sum(de) / len(de), sum(dn) / len(dn)
         spread = math.sqrt(sum((a - me) ** 2 + (b - mn) ** 2 for a, b in zip(de, dn)) / len(run))
-        allowed = max(REACQUIRE_AGREE * math.hypot(me, mn), REACQUIRE_SIGMAS * math.sqrt(max(r[3] for r in run)))
-        if spread > allowed:
+        noise = REACQUIRE_SIGMAS * math.sqrt(max(r[3] for r in run))
+        allowed = max(REACQUIRE_AGREE * math.hypot(me, mn), noise)
+        first, last = run[0], run[-1]
+        wheels = math.hypot(last[6] - first[6], last[7] - first[7])
+        fixes = math.hypot(last[4] - first[4], last[5] - first[5])
+        if spread > allowed or (wheels > noise and fixes < HEADING_MIN_TRAVEL * wheels):
             s.own[self.index] = msgspec.structs.replace(own, rejected=run[1:])  # slide: keep looking
             return False
         return True
@@ -292,19 +306,27 @@ class GpsModel(SensorModel):
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
         x = s.ekf.x
         base = (float(x[0]), float(x[1]), float(x[2]))
-        s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2]))
+        s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
+                                                  last_enu=(z[0], z[1])))
 
-    def _frozen(self, s: "FilterState", lla: tuple[float, float, float]) -> bool:
-        """Is this fix a repeat of the previous one (bit for bit) although the robot has moved more than
-        FROZEN_MIN_TRAVEL since those coordinates first came? Independent fixes of a moving antenna are
-        never bit-identical; a robot at rest (odometry exactly zero: no dead-reckoned travel) may get
-        repeats and fuses them. Remembers the fix otherwise."""
+    def _frozen(self, s: "FilterState", lla: tuple[float, float, float], z) -> bool:
+        """Is this fix a repeat of the previous one although the robot has moved since those coordinates
+        first came: bit for bit after FROZEN_MIN_TRAVEL, or within FROZEN_JITTER after FROZEN_JITTER_TRAVEL
+        (a receiver that lost its fix and republishes it with rounding noise, QA9)? Independent fixes
+        of a moving antenna are never bit-identical, nor a centimetre apart after half a metre; a robot
+        at rest (odometry exactly zero: no dead-reckoned travel) may get repeats and fuses them.
+        Remembers the fix otherwise (a repeat keeps the fix it repeats)."""
         own: GpsOwn = s.own[self.index]
         track, t = own.track, own.travel
         dr = (track.base[0] + t[0], track.base[1] + t[1])
+        moved = math.hypot(dr[0] - track.last_dr[0], dr[1] - track.last_dr[1])
         if lla == track.last_lla:
-            return math.hypot(dr[0] - track.last_dr[0], dr[1] - track.last_dr[1]) > FROZEN_MIN_TRAVEL
-        s.own[self.index] = msgspec.structs.replace(own, track=replace(track, last_lla=lla, last_dr=dr))
+            return moved > FROZEN_MIN_TRAVEL
+        last = track.last_enu
+        if last is not None and math.hypot(z[0] - last[0], z[1] - last[1]) <= FROZEN_JITTER:
+            return moved > FROZEN_JITTER_TRAVEL
+        s.own[self.index] = msgspec.structs.replace(
+            own, track=replace(track, last_lla=lla, last_dr=dr, last_enu=(z[0], z[1])))
         return False
 
     def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float) -> None:
