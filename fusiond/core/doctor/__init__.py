@@ -24,8 +24,8 @@ from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...samples import OdomSample
 from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
-from .channels import (absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head, orientation_verdicts,
-                       yaw_jump_verdict)
+from .channels import (UNALIGNED_MIN_FIXES, absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head,
+                       orientation_verdicts, unaligned_verdict, yaw_jump_verdict)
 from .clock import ClockOffsets, clock_verdicts
 from .coast import coast_verdict
 from .covariance import cap_verdict
@@ -304,6 +304,10 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         elif channel == "position_frozen":
             found[(name, channel)].append(frozen_verdict(name, ch, sum(c.n for (n, _), c in channels.items()
                                                                        if n == name)))
+        elif (channel == "position_unaligned" and isinstance(s, GpsSensor) and ch.n >= UNALIGNED_MIN_FIXES
+              and not any(n == name and c in ("position", "position_reacquired") and c_.n
+                          for (n, c), c_ in channels.items())):
+            found[(name, channel)].append(unaligned_verdict(s, ch))
         elif channel in ABSOLUTE_CHANNELS:
             v = absolute_verdict(name, channel, ch, t0)
             judged = applied_verdict(ch)  # the whole run's, or the applied updates' (module channels)

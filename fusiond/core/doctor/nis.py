@@ -89,6 +89,10 @@ class ChannelStats:
     stamps: list[float] = field(default_factory=list)
     rejected_flags: list[bool] = field(default_factory=list)
     innovations: list[list[float]] = field(default_factory=list)
+    # the learning updates' own per-component sums of y^2 and of S's diagonal (``learning_component``)
+    n_learning_comp: int = 0
+    learning_squares: list[float] = field(default_factory=list)
+    learning_variances: list[float] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.recent = deque(maxlen=self.window)
@@ -137,6 +141,9 @@ class ChannelStats:
         same = [r for r, lf in zip(records, learning_flags) if not lf and r.components == components]
         if same:
             self._component_sums(same)
+        learned = [r for r, lf in zip(records, learning_flags) if lf and r.components == components]
+        if learned:
+            self._learning_sums(learned)
 
     def _count_dof(self, learning: np.ndarray, judged: np.ndarray, dof: np.ndarray) -> None:
         """The channel's dof: the latest judged record's, or a learning one's while none was judged yet."""
@@ -184,6 +191,25 @@ class ChannelStats:
         out = np.where(mean > hi, VERDICTS.index("nis_high"), np.where(mean < lo, VERDICTS.index("nis_low"),
                                                                        VERDICTS.index("ok")))
         return np.where(np.isfinite(mean), out, VERDICTS.index("no_updates"))
+
+    def _learning_sums(self, records: list[DiagnosticsRecord]) -> None:
+        k = len(self.components)
+        if not self.learning_squares:
+            self.learning_squares, self.learning_variances = [0.0] * k, [0.0] * k
+        n = len(records)
+        self.n_learning_comp += n
+        y = np.fromiter(chain.from_iterable(r.innovation for r in records), dtype=float, count=n * k).reshape(n, k)
+        v = np.fromiter(chain.from_iterable(r.innovation_var for r in records), dtype=float, count=n * k).reshape(n, k)
+        self.learning_squares = _running_sum(np.array(self.learning_squares), y * y).tolist()
+        self.learning_variances = _running_sum(np.array(self.learning_variances), v).tolist()
+
+    def learning_component(self, i: int) -> tuple[float, float]:
+        """(rms, rms predicted by S) of component i over the learning updates (NaN before any): what a
+        search that never ended (the GPS heading) saw of the sensor, though no update was judged."""
+        if not self.learning_squares:
+            return math.nan, math.nan
+        n = self.n_learning_comp
+        return math.sqrt(self.learning_squares[i] / n), math.sqrt(self.learning_variances[i] / n)
 
     def _component_sums(self, records: list[DiagnosticsRecord]) -> None:
         k = len(self.components)

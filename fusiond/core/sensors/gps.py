@@ -12,7 +12,11 @@ since the previous fix turns with the heading, P turns with both, and the headin
 variance is re-set to the fit's. The fit keeps being refined with every fix (the stored
 track turned with the state, so each new fit measures what is left) and re-applied until
 its uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixes become
-ordinary, gated updates (channel ``position``).
+ordinary, gated updates (channel ``position``). With a wandering receiver error modelled
+(``error_tau_s``) the fit's uncertainty carries what the wander can bend the track by, which
+more fixes do not average away on a small field (a mower's back-and-forth: QA9, the heading
+never found in 180 s, every fix unchecked); there the EKF, which models the wander, takes
+the heading over once the fit is within HEADING_WANDER_READY_SIGMA.
 
 Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
 1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
@@ -53,11 +57,15 @@ HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipp
 HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad
 HEADING_PROVISIONAL_SIGMA = 0.3  # rad: apply the rigid fit provisionally (fixes still move position only)
 HEADING_READY_SIGMA = 0.05  # rad: the heading is known, fixes become full (gated) updates
+HEADING_WANDER_READY_SIGMA = 0.15  # rad: the same beside a modelled receiver wander (module doc): the full
+# update's linearisation is still good (1 - cos 0.15 = 1 %), and the EKF refines the heading from there
 HEADING_MAX_FIXES = 400  # fixes kept for the fit; beyond, every other one is dropped (the extent stays)
 REACQUIRE_S = 3.0  # s of consecutive gated-out fixes ...
 REACQUIRE_FIXES = 5  # ... and at least this many, agreeing with each other: the filter is what is wrong
 REACQUIRE_AGREE = 0.1  # "agreeing": spread of their innovations within this fraction of the innovation ...
 REACQUIRE_SIGMAS = 3.0  # ... or within this many fix sigmas
+REACQUIRE_JUMP_S = 10.0  # s instead of REACQUIRE_S when the run began with a jump of the fixes (``_locked_out``)
+JUMP_AFTER_S = 1.0  # ... "a jump": its first fix within this of an accepted one, and most of its offset new
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is that fix again, with rounding noise ...
 FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
@@ -143,6 +151,7 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     travel: tuple[float, float, float] = _ZERO3  # dead-reckoned base motion since the track's base
     # consecutive gated-out fixes: (t, innovation east, north, variance, fix east, north, dead-reckoned east, north)
     rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
+    accepted: tuple[float, float, float] | None = None  # the newest fix the gate let in: (t, innovation east, north)
 
 
 class GpsModel(SensorModel):
@@ -178,7 +187,7 @@ class GpsModel(SensorModel):
         if own.track is not None:
             tr = own.travel
             s.own[self.index] = GpsOwn(own.track, (tr[0] + float(x1[0] - x0[0]), tr[1] + float(x1[1] - x0[1]),
-                                                   tr[2] + float(x1[2] - x0[2])), own.rejected)
+                                                   tr[2] + float(x1[2] - x0[2])), own.rejected, own.accepted)
 
     def apply(self, s: "FilterState", inp: GpsInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         cfg = self.cfg
@@ -212,10 +221,9 @@ class GpsModel(SensorModel):
         if s.heading_ready:
             res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
             channel = "position"
-            if res.rejected or s.own[self.index].rejected:
-                if self._locked_out(s, res.rejected, y, R, z, stamp):
-                    self._reacquire(s, z, inp, rows, stamp)
-                    channel = "position_reacquired"
+            if self._locked_out(s, res.rejected, y, R, z, stamp):
+                self._reacquire(s, z, inp, rows, stamp)
+                channel = "position_reacquired"
         else:
             # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
             # track along a wrong heading must not lock the filter out of the GPS). A Gauss-Markov
@@ -267,13 +275,13 @@ class GpsModel(SensorModel):
         the filter is wrong. Wheels spinning on the spot look the same until the robot moves again."""
         own: GpsOwn = s.own[self.index]
         if not rejected:
-            s.own[self.index] = msgspec.structs.replace(own, rejected=())
+            s.own[self.index] = msgspec.structs.replace(own, rejected=(), accepted=(stamp, float(y[0]), float(y[1])))
             return False
         t = own.travel
         dr = (own.track.base[0] + t[0], own.track.base[1] + t[1])
         run = own.rejected + ((stamp, float(y[0]), float(y[1]), float(max(R[0, 0], R[1, 1])), z[0], z[1], *dr),)
         s.own[self.index] = msgspec.structs.replace(own, rejected=run)
-        if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < REACQUIRE_S:
+        if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < self._reacquire_after(own, run[0]):
             return False
         de = [r[1] for r in run]
         dn = [r[2] for r in run]
@@ -288,6 +296,20 @@ class GpsModel(SensorModel):
             s.own[self.index] = msgspec.structs.replace(own, rejected=run[1:])  # slide: keep looking
             return False
         return True
+
+    @staticmethod
+    def _reacquire_after(own: GpsOwn, first: tuple) -> float:
+        """How long a run of gated-out fixes must last to say the filter is lost: REACQUIRE_S, or
+        REACQUIRE_JUMP_S when the fixes jumped (the run's first fix came within JUMP_AFTER_S of one the
+        gate let in, and most of its offset is new). A filter drifts off continuously (dead-reckoning
+        through a gap or a tunnel, a wrong heading); a receiver jumps: multipath (QA9: a 4 s burst 18 m
+        off was taken in after 3 s and left again 1 s later), a reset. Its new fixes may be right, but
+        they have to keep saying so for longer."""
+        last = own.accepted
+        if last is None or first[0] - last[0] > JUMP_AFTER_S:
+            return REACQUIRE_S
+        new_part = math.hypot(first[1] - last[1], first[2] - last[2])
+        return REACQUIRE_JUMP_S if new_part > 0.5 * math.hypot(first[1], first[2]) else REACQUIRE_S
 
     def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
         """Put the base where the fix says and look for the heading again (it may be as wrong as the
@@ -388,7 +410,7 @@ class GpsModel(SensorModel):
         bx, by = fit.apply(track.base[0] + t[0], track.base[1] + t[1])
         new_frame(s)  # the frame turned under the differential pose sensors: their deltas restart
         sigma = math.sqrt(fit.var_theta)
-        ready = sigma <= HEADING_READY_SIGMA
+        ready = sigma <= (HEADING_WANDER_READY_SIGMA if self.wander > 0.0 else HEADING_READY_SIGMA)
         s.heading_ready = ready
         s.own[self.index] = GpsOwn(replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
                                            applied=True, last_dr=fit.apply(*track.last_dr)))
