@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from fusiond.core.doctor.late_bias import LATE_DRIFT_RAD, RELATIVE_MARGIN
 from fusiond.estimator import rotation as rot
@@ -220,3 +221,23 @@ def test_a_car_parked_through_a_gap_is_not_told_its_drifting_imu_turned():
     _, err_off, rel_off = replay(samples, "roll_pitch", "yaw_across_gaps = false")
     np.testing.assert_array_equal(rel, rel_off)
     np.testing.assert_array_equal(err, err_off)
+
+
+@pytest.mark.parametrize("orientation", ["relative", "absolute"])
+def test_a_drifting_ahrs_yaw_fused_is_named_with_roll_pitch(orientation):
+    """The same drifting AHRS (0.003 rad/s, 10 deg a minute), its yaw fused (QA9's race car: heading 1.5 ->
+    26 deg, and the only advice was a smaller yaw noise). Its drift against the gyro less the bias the
+    gyro reads at rest (REST_AT) is the yaw's own: 0.003 within the fit's ~1e-4 rad/s (0.0005 allowed),
+    beyond DRIFT_RAD_S: no heading, take roll/pitch only. The fused yaw dragged the filter's bias estimate
+    to b - r (0.001), which is why the bias at rest, not the estimate, is what is subtracted. The AHRS
+    that does not drift gets no such verdict."""
+    from fusiond.core.doctor.heading import DRIFT_RAD_S
+
+    assert 0.003 - 0.0005 > DRIFT_RAD_S  # the whole tolerance band is beyond the threshold
+    result, _, _ = replay(weaving_car(yaw_drift=0.003), orientation)
+    v = one(result.verdicts(), "imu", "orientation")
+    assert v.level == "problem" and v.key == "sensors.imu.orientation" and "roll_pitch" in v.suggestion, v
+    assert abs(v.evidence["imu_yaw_drift_rad_s"] - 0.003) < 0.0005, v
+    steady, _, _ = replay(weaving_car(), orientation)
+    v = one(steady.verdicts(), "imu", "orientation")
+    assert "drifts" not in v.message and abs(v.evidence["imu_yaw_drift_rad_s"]) < 0.0005, v

@@ -20,12 +20,15 @@ import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor
 from ..sensors.gps import HEADING_READY_SIGMA
+from .gyro import quiet_episodes
 from .series import Series
 from .verdict import Verdict, sensor_key
 
 WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
 WANDER_RAD = 0.05  # rms yaw wander (after bias and scale are removed) that is a disturbance, not noise
 OFFSET_RAD = 0.05  # a mean IMU-vs-track offset this large is worth a yaw_offset
+DRIFT_RAD_S = 0.002  # the IMU yaw's own drift (against the gyro, its bias at rest removed) that is no heading:
+# 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)
 MIN_SPAN_S = 10.0
 
 
@@ -204,6 +207,19 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                     notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
                 elif math.isfinite(wheel_vs_imu) and wheel_vs_imu < WANDER_RAD <= wander:
                     culprit_gyro = True
+    own_drift = _own_drift(series, cfg, imu, compared)
+    if math.isfinite(own_drift):
+        evidence["imu_yaw_drift_rad_s"] = own_drift
+    if abs(own_drift) > DRIFT_RAD_S and not culprit_gyro:
+        # checked before the wander: a steady drift is what the detrending takes out
+        suggestion = 'orientation = "roll_pitch"' + ("" if imu.angular_velocity else " and angular_velocity = true")
+        return Verdict(imu.name, "orientation", "problem",
+                       f"the IMU's yaw drifts at {own_drift:+.4f} rad/s ({math.degrees(own_drift) * 60.0:+.1f} deg a "
+                       "minute) against the gyro, its bias at rest removed: an AHRS integrating its own gyro (a 6-axis "
+                       "IMU), not an absolute heading. Fused, it drags the heading and the gyro bias along. Take "
+                       "heading from the gyro and only roll/pitch from the IMU (yaw_across_gaps still carries its "
+                       "turns across logging gaps); do not state a smaller orientation_noise",
+                       sensor_key(imu.name, "orientation"), suggestion, evidence)
     offset = math.nan
     track_wander = math.nan
     if gps is not None and len(series.gps_t) >= 5:
@@ -285,6 +301,18 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
         return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources "
                        + ", ".join(f"{k} {v:.3f}" for k, v in evidence.items()), evidence=evidence)
     return None
+
+
+def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[float, float] | None) -> float:
+    """The IMU yaw's own drift rate, rad/s: the median slope of (yaw - integrated raw gyro), r - b, plus the
+    gyro's bias b as it reads at rest (the standstills' median). The filter's bias estimate will not do:
+    a fused drifting yaw drags it to b - r (QA9: "moved by another source"). NaN without standstills."""
+    if compared is None or not math.isfinite(compared[1]):
+        return math.nan
+    rest, _ = quiet_episodes(series, cfg, imu)
+    if not rest:
+        return math.nan
+    return compared[1] + float(np.median([e.gyro_mean for e in rest]))
 
 
 WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
