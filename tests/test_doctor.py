@@ -595,3 +595,22 @@ def test_gps_fixes_during_the_heading_search_are_not_judged_as_gps_noise():
     unaligned = [v for v in verdicts if v.channel == "position_unaligned"]
     assert unaligned and all(v.level == "ok" and v.key != "sensors.gps.position_noise" for v in unaligned), unaligned
     assert one(verdicts, "gps", "position").level == "ok"
+
+
+def test_wheels_reading_zero_in_turns_with_the_gyro_not_fused_are_told_to_fuse_it():
+    """The gyro is not fused and the drive reads exactly zero in two turns (1.5 s at 1 rad/s and 2 s at
+    -0.8 rad/s: 3.1 rad): outside them the wheels' yaw rate is the gyro's (scale 1), so the scale fit,
+    which rightly leaves those samples out, found nothing wrong, and the heading silently missed both
+    turns (QA9's race car: 75 -> 267 m). What the gyro turned while the wheels read zero is the turn
+    the prediction missed: 3.1 rad, less at most a doctor bin (BIN_S) at each of the four edges, where a
+    bin's mean wheel rate is not exactly zero (2 x 0.2 s x (1.0 + 0.8) = 0.72 rad): fuse the gyro. The
+    same drive without those turns gets no such verdict."""
+    from fusiond.core.doctor.bins import BIN_S
+
+    cfg = make_config(gyro=False)
+    turns = ((10.0, 11.5, 1.0), (20.0, 22.0, -0.8))
+    v = one(verdicts_of(cfg, simulate(SimConfig(duration=30.0, false_stops=turns))), "wheel", "heading")
+    assert v.level == "problem" and v.key == "sensors.imu.angular_velocity", v
+    assert 3.1 - 2 * BIN_S * (1.0 + 0.8) <= v.evidence["turn_missed_rad"] <= 3.1 + 0.01, v
+    clean = one(verdicts_of(cfg, simulate(SimConfig(duration=30.0))), "wheel", "heading")
+    assert clean.level == "ok", clean

@@ -318,6 +318,9 @@ def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[floa
 WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
 MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
 WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
+ZERO_TURNING_RAD_S = 0.05  # the gyro turning this fast while the wheels read exactly zero: not at rest
+MISSED_INTERVAL_S = 0.5  # s: an odometry interval counts for at most this much turn time (gaps count nothing)
+MISSED_TURN_RAD = 0.2  # rad (11 deg) of turn the wheels missed in all: worth fusing the gyro for
 
 
 def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
@@ -346,6 +349,21 @@ def rate_fit_text(k: float, offset: float) -> str:
     return f"{k:.2f} x gyro {'-' if offset < 0 else '+'} {abs(offset):.3f} rad/s"
 
 
+def _missed_turn(series: Series) -> tuple[float, float]:
+    """(rad, s): what the gyro turned while the wheels read exactly zero (|gyro| above ZERO_TURNING_RAD_S),
+    each odometry interval capped at MISSED_INTERVAL_S so a logging gap counts for nothing. These are the
+    samples ``wheel_yaw_fit`` leaves out of the scale: no scale information, but with the wheels driving
+    heading, turns the heading never made (QA9's race car: hairpins with the drive reading zero)."""
+    to, wz = np.array(series.odom_t), np.array(series.odom_wz)
+    tg, gz = np.array(series.gyro_t), np.array(series.gyro_z)
+    if len(to) < 2 or len(tg) < 2:
+        return 0.0, 0.0
+    g = np.interp(to, tg, gz)
+    zero = (wz == 0.0) & (np.abs(g) > ZERO_TURNING_RAD_S) & (to >= tg[0]) & (to <= tg[-1])
+    dt = np.minimum(np.diff(to, append=to[-1]), MISSED_INTERVAL_S)
+    return float(np.sum(np.abs(g[zero]) * dt[zero])), float(np.sum(dt[zero]))
+
+
 def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
     """(scale k, offset) in wheel yaw rate = offset + k gyro rate, least squares over the run; None
     when the robot hardly turns. Rates, not headings: a wheel yaw offset and a scale separate only
@@ -357,7 +375,7 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
     m = (to >= tg[0]) & (to <= tg[-1])
     # a wheel reading exactly zero while the gyro turns is the drive at rest while the vehicle
     # coasts (or a component not measured): no scale information, left out of the fit
-    m &= ~((wz == 0.0) & (np.abs(np.interp(to, tg, gz)) > 0.05))
+    m &= ~((wz == 0.0) & (np.abs(np.interp(to, tg, gz)) > ZERO_TURNING_RAD_S))
     g = np.interp(to[m], tg, gz)
     if m.sum() < 10 or np.ptp(hg) < MIN_TURN_RAD or np.std(g) < 0.02:
         return None
@@ -386,11 +404,20 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
              else math.nan)
     if math.isfinite(k_imu):
         evidence["imu_vs_gyro_yaw_scale"] = k_imu
+    imu = imus[0] if imus else None
+    missed, seconds = _missed_turn(series)
+    if missed > MISSED_TURN_RAD and imu is not None:
+        evidence.update({"turn_missed_rad": missed, "zero_while_turning_s": seconds})
+        return Verdict(odom.name, "heading", "problem",
+                       f"the wheels read exactly zero for {seconds:.1f} s in all while the gyro turned ({missed:.2f} "
+                       "rad of turn: the drive at rest while the vehicle turns, or its yaw rate lost). The gyro is "
+                       "not fused, so the predicted heading missed every one of those turns (outside them the wheels' "
+                       f"yaw rate = {rate_fit_text(k, offset)}); fuse the gyro so it drives heading",
+                       sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)
     if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
         return Verdict(odom.name, "heading", "ok",
                        f"wheel yaw rate agrees with the gyro (scale {k:.2f}, offset {offset:+.3f} rad/s)",
                        evidence=evidence)
-    imu = imus[0] if imus else None
     agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
              if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
     msg = (f"the wheels' yaw rate = {rate_fit_text(k, offset)}{agree}: skid-steer slip "
