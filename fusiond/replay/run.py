@@ -248,7 +248,7 @@ class Runner:
                 trace.fused.append((t, p[0], p[1], p[2]))
         if isinstance(sample, OdomSample) and step.accepted:
             if doctor is not None:
-                doctor.add_twist(sample.linear, sample.angular)
+                doctor.add_twist(sample.linear, sample.angular, sample.orientation)
             if keep_trace:
                 trace.raw_odom.append((sample.stamp, *sample.position))
         for r in step.records:

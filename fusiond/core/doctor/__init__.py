@@ -89,9 +89,10 @@ class Doctor:
         if len(records) >= CHUNK:
             self._settle_records()
 
-    def add_twist(self, linear: tuple[float, float, float], angular: tuple[float, float, float]) -> None:
-        """The twist of an accepted odometry message."""
-        self.twist.add(linear, angular)
+    def add_twist(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
+                  orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
+        """The twist of an accepted odometry message (and the message's own pose orientation)."""
+        self.twist.add(linear, angular, orientation)
 
     def add_orientation(self, q: tuple[float, float, float, float]) -> None:
         """The estimate's attitude (x, y, z, w) at a published pose."""
@@ -180,6 +181,15 @@ class Doctor:
                         stats, at_cap, covariance_resets, scales, self.t0, self.clocks)
 
 
+def _blamed(v: Verdict | None, culprit: Verdict) -> Verdict | None:
+    """A cross-source verdict that is not ok only because ``culprit`` is wrong: it says so, and names the
+    culprit's key instead of its own (pasting its own would write a second error into the config)."""
+    if v is None or v.level == "ok":
+        return v
+    return msgspec.structs.replace(v, level="warn", message=v.message + f"; explained by {culprit.sensor}/"
+                                   f"{culprit.channel} (see it): fix that first", key=culprit.key, suggestion="")
+
+
 def _explained(v: Verdict, culprit: Verdict, ch: ChannelStats, t0: float | None) -> Verdict:
     """A channel whose NIS is high because another source is wrong: point there, advise nothing here."""
     head = f"NIS {ch.verdict().removeprefix('nis_')} ({figures(ch, t0)})"
@@ -249,6 +259,12 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
     wheel_heading = (wheel_heading_check(series, cfg) if known and unmeasured is None and no_yaw_rate is None
                      else None)
     culprit = next((v for v in (heading, wheel_heading, speed) if v is not None and v.level != "ok"), None)
+    frame = twist_frame_verdict(odom, twist, MIN_UPDATES) if known and odom is not None else None
+    if frame is not None and frame.level == "problem":
+        # a body-frame twist read as a world one sends the dead reckoning sideways: every check that compares
+        # against the wheels' motion (their speed along the GPS track, the IMU's mounting yaw) reads it (QA9)
+        culprit = frame
+        speed = _blamed(speed, frame)
     lever = lever_verdict(series, cfg) if known else None
     if lever is not None:
         found[(lever.sensor, lever.channel)].append(lever)
@@ -340,7 +356,10 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             v = bias_check(series, cfg, None, gyro_fused)
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
-        for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mount_verdict(imu, mount, tilt, MIN_UPDATES)):
+        mounted = mount_verdict(imu, mount, tilt, MIN_UPDATES)
+        if frame is not None and frame.level == "problem":
+            mounted = _blamed(mounted, frame)
+        for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mounted):
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
         if (imu is not None and odom is not None and (odom.name, "yaw_rate") in found
@@ -366,10 +385,8 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             v = coast_verdict(series, cfg, mount, turning, standstills)
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
-        if odom is not None:
-            v = twist_frame_verdict(odom, twist, MIN_UPDATES)
-            if v is not None:
-                found[(v.sensor, v.channel)].append(v)
+        if frame is not None:
+            found[(frame.sensor, frame.channel)].append(frame)
         standstill_updates = sum(ch.n for (n, c), ch in channels.items() if c == "gyro_bias")
         v = cap_verdict(series, cfg, at_cap, gyro_fused, standstill_updates)
         if v is not None:
