@@ -104,12 +104,12 @@ def _car_with_gps(gate: float | None, filt: str = ""):
             gps_after += [r for r in step.records if r.sensor == "gps"]
     t, x = core.pose()
     tx, ty, _ = truth_at(w, t)
-    return core, gps_after, math.hypot(x[0] - tx, x[1] - ty)
+    return core, gps_after, math.hypot(x[0] - tx, x[1] - ty), samples
 
 
 @pytest.mark.parametrize("gate", [None, 5.0])
 def test_a_gap_in_a_fast_vehicle_widens_the_position_by_its_speed_and_the_gps_takes_it_back(gate):
-    core, gps_after, err = _car_with_gps(gate)
+    core, gps_after, err, _ = _car_with_gps(gate)
     # 20 s at 30 m/s: the car is ~600 m from where the held inputs left it (they stop at the
     # timeout). The position variance must cover that, or the first fixes are gated out (with a
     # gate) or explained as a wheel-scale error through the odometry's correlations.
@@ -128,7 +128,7 @@ def test_a_gps_locked_out_by_its_gate_is_reacquired():
     car: the fixes after it are gated out (5 sigma). They agree with each other (a constant offset,
     not a multipath burst), so after REACQUIRE_S of them the filter takes the GPS position again and
     searches the heading anew, instead of staying locked out for good (before: 805 m at the end)."""
-    core, gps_after, err = _car_with_gps(5.0, filt="covariance_cap = [100.0, 10.0]")
+    core, gps_after, err, samples = _car_with_gps(5.0, filt="covariance_cap = [100.0, 10.0]")
     channels = [r.channel for r in gps_after]
     assert channels[0] == "position" and gps_after[0].rejected  # locked out at first ...
     assert channels.count("position_reacquired") == 1  # ... re-acquired once ...
@@ -137,6 +137,11 @@ def test_a_gps_locked_out_by_its_gate_is_reacquired():
     assert gps_after[k].stamp - gps_after[0].stamp == pytest.approx(REACQUIRE_S, abs=0.15)  # ... after REACQUIRE_S
     assert not any(r.rejected for r in gps_after[k + 1:] if r.channel == "position")
     assert err < 2.0  # and back to GPS accuracy by the end, as without the cap
+    # the doctor says the filter lost the GPS once and why that happens, not a bare "no_updates"
+    from .test_doctor import one, verdicts_of
+
+    v = one(verdicts_of(core.cfg, samples), "gps", "position_reacquired")
+    assert v.level == "warn" and "lost this GPS 1 time" in v.message and v.evidence["reacquired"] == 1.0, v
 
 
 def test_after_a_long_gap_every_odometry_message_still_gets_its_pose():

@@ -25,7 +25,7 @@ from ...samples import OdomSample
 from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
 from .channels import (UNALIGNED_MIN_FIXES, absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head,
-                       orientation_verdicts, unaligned_verdict, yaw_jump_verdict)
+                       orientation_verdicts, reacquired_verdict, unaligned_verdict, yaw_jump_verdict)
 from .clock import ClockOffsets, clock_verdicts
 from .coast import coast_verdict
 from .covariance import cap_verdict
@@ -317,6 +317,8 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             found[(name, channel)].append(v)
         elif channel == "yaw_jump":
             found[(name, channel)].append(yaw_jump_verdict(name, ch, channels.get((name, "orientation"))))
+        elif channel == "position_reacquired" and isinstance(s, GpsSensor):
+            found[(name, channel)].append(reacquired_verdict(name, ch))
         elif channel == "position_frozen":
             found[(name, channel)].append(frozen_verdict(name, ch, sum(c.n for (n, _), c in channels.items()
                                                                        if n == name)))

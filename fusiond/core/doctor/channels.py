@@ -229,3 +229,17 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats) -> Verdict:
                    f"{head}: the fixes did not line up with the wheels' track. Check the odometry (twist_frame, "
                    "the wheels' scale) and that the vehicle drove at least heading_init_m in a line",
                    sensor_key(gps.name, "heading_init_m"), evidence=ev)
+
+
+def reacquired_verdict(name: str, ch: ChannelStats) -> Verdict:
+    """The ``position_reacquired`` channel (core/sensors/gps.py ``_locked_out``): each record is a fix that
+    ended a run of gated-out fixes which agreed with each other and moved with the wheels, the filter's
+    position having drifted beyond its gate; the position was taken from it and the heading searched
+    again. Its NIS tests the drift, not the receiver (learning): what it says is that the filter lost the
+    GPS, which a cross-source verdict (the wheels, the twist frame, the heading) usually explains."""
+    return Verdict(name, "position_reacquired", "warn",
+                   f"the filter lost this GPS {ch.n} time(s): its fixes were gated out for seconds while agreeing "
+                   "with each other and moving with the wheels, so the position was taken from the fix again and "
+                   "the heading searched anew. The estimate had drifted beyond its own uncertainty: a logging gap "
+                   "longer than the covariance allowed, or the motion model wrong (see the wheel and imu verdicts)",
+                   evidence={"reacquired": float(ch.n)})
