@@ -47,7 +47,7 @@ __all__ = ["Doctor", "Verdict", "Series", "SeriesCollector", "ChannelStats", "di
            "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 MIN_UPDATES = 50  # twist-frame and lean checks need this many samples (not NIS: that uses what there is)
-ABSOLUTE_CHANNELS = ("position", "position_unaligned", "pose", "pose_delta")
+ABSOLUTE_CHANNELS = ("position", "position_unaligned", "position_provisional", "pose", "pose_delta")
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
 KEPT_CHANNELS = ("gyro_bias", "position")
@@ -323,7 +323,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             found[(name, channel)].append(frozen_verdict(name, ch, sum(c.n for (n, _), c in channels.items()
                                                                        if n == name)))
         elif (channel == "position_unaligned" and isinstance(s, GpsSensor) and ch.n >= UNALIGNED_MIN_FIXES
-              and not any(n == name and c in ("position", "position_reacquired") and c_.n
+              and not any(n == name and c in ("position", "position_provisional", "position_reacquired") and c_.n
                           for (n, c), c_ in channels.items())):
             found[(name, channel)].append(unaligned_verdict(s, ch))
         elif channel in ABSOLUTE_CHANNELS:

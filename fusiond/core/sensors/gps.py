@@ -15,8 +15,10 @@ its uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixe
 ordinary, gated updates (channel ``position``). With a wandering receiver error modelled
 (``error_tau_s``) the fit's uncertainty carries what the wander can bend the track by, which
 more fixes do not average away on a small field (a mower's back-and-forth: QA9, the heading
-never found in 180 s, every fix unchecked); there the EKF, which models the wander, takes
-the heading over once the fit is within HEADING_WANDER_READY_SIGMA.
+never found in 180 s, every fix fused unchecked, a multipath burst with it). Once the fit is
+within HEADING_WANDER_READY_SIGMA there the fixes stay position-only updates but are gated
+(channel ``position_provisional``). Full updates there were tried and lost: they teach the
+wheel scale what a drive reading zero for seconds cost the dead-reckoning (QA9: 0.78 -> 2.39 m).
 
 Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
 1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
@@ -57,8 +59,9 @@ HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipp
 HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad
 HEADING_PROVISIONAL_SIGMA = 0.3  # rad: apply the rigid fit provisionally (fixes still move position only)
 HEADING_READY_SIGMA = 0.05  # rad: the heading is known, fixes become full (gated) updates
-HEADING_WANDER_READY_SIGMA = 0.15  # rad: the same beside a modelled receiver wander (module doc): the full
-# update's linearisation is still good (1 - cos 0.15 = 1 %), and the EKF refines the heading from there
+HEADING_WANDER_READY_SIGMA = 0.15  # rad: beside a modelled receiver wander (module doc), the position-only
+# fixes are gated from here: the dead-reckoning between fixes along a heading this good is off by 15 % of
+# a fix's travel at most, far inside the gate
 HEADING_MAX_FIXES = 400  # fixes kept for the fit; beyond, every other one is dropped (the extent stays)
 REACQUIRE_S = 3.0  # s of consecutive gated-out fixes ...
 REACQUIRE_FIXES = 5  # ... and at least this many, agreeing with each other: the filter is what is wrong
@@ -226,12 +229,18 @@ class GpsModel(SensorModel):
                 channel = "position_reacquired"
         else:
             # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
-            # track along a wrong heading must not lock the filter out of the GPS). A Gauss-Markov
-            # GPS error is a "consider" state here: its variance widens S (H has its columns) but
-            # the offset a wrong heading builds up must not be absorbed into it as GPS error.
-            res = ekf.update(y, H, R, math.inf, self.ctx.position_mask)
-            channel = "position_unaligned"
-            self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
+            # track along a wrong heading must not lock the filter out of the GPS), unless beside a
+            # modelled wander the fit is already within HEADING_WANDER_READY_SIGMA (module doc). A
+            # Gauss-Markov GPS error is a "consider" state here: its variance widens S (H has its
+            # columns) but the offset a wrong heading builds up must not be absorbed into it as GPS error.
+            gated = self.wander > 0.0 and float(ekf.P[5, 5]) <= HEADING_WANDER_READY_SIGMA**2
+            res = ekf.update(y, H, R, cfg.mahalanobis_threshold if gated else math.inf, self.ctx.position_mask)
+            channel = "position_provisional" if gated else "position_unaligned"
+            if gated and self._locked_out(s, res.rejected, y, R, z, stamp):
+                self._reacquire(s, z, inp, rows, stamp)
+                channel = "position_reacquired"
+            elif not res.rejected:
+                self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
         if not emit:
             return []
         # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
@@ -410,10 +419,11 @@ class GpsModel(SensorModel):
         bx, by = fit.apply(track.base[0] + t[0], track.base[1] + t[1])
         new_frame(s)  # the frame turned under the differential pose sensors: their deltas restart
         sigma = math.sqrt(fit.var_theta)
-        ready = sigma <= (HEADING_WANDER_READY_SIGMA if self.wander > 0.0 else HEADING_READY_SIGMA)
+        ready = sigma <= HEADING_READY_SIGMA
         s.heading_ready = ready
         s.own[self.index] = GpsOwn(replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
-                                           applied=True, last_dr=fit.apply(*track.last_dr)))
+                                           applied=True, last_dr=fit.apply(*track.last_dr)),
+                                   accepted=s.own[self.index].accepted)  # the jump check's reference stays
         if ready:
             log.info("gps_heading_initialised", sensor=self.name, yaw_correction=fit.theta, sigma=sigma,
                      fixes=len(points))
