@@ -260,11 +260,12 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
                      else None)
     culprit = next((v for v in (heading, wheel_heading, speed) if v is not None and v.level != "ok"), None)
     frame = twist_frame_verdict(odom, twist, MIN_UPDATES) if known and odom is not None else None
-    if frame is not None and frame.level == "problem":
-        # a body-frame twist read as a world one sends the dead reckoning sideways: every check that compares
-        # against the wheels' motion (their speed along the GPS track, the IMU's mounting yaw) reads it (QA9)
-        culprit = frame
-        speed = _blamed(speed, frame)
+    # a body-frame twist read as a world one sends the dead reckoning sideways: every check that compares
+    # against the wheels' motion (their speed along the GPS track, the IMU's mounting yaw) reads it (QA9)
+    wrong_frame = frame if frame is not None and frame.level == "problem" else None
+    if wrong_frame is not None:
+        culprit = wrong_frame
+        speed = _blamed(speed, wrong_frame)
     lever = lever_verdict(series, cfg) if known else None
     if lever is not None:
         found[(lever.sensor, lever.channel)].append(lever)
@@ -359,8 +360,8 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
         mounted = mount_verdict(imu, mount, tilt, MIN_UPDATES)
-        if frame is not None and frame.level == "problem":
-            mounted = _blamed(mounted, frame)
+        if wrong_frame is not None:
+            mounted = _blamed(mounted, wrong_frame)
         for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mounted):
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)

@@ -210,8 +210,8 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats) -> Verdict:
     (``position_noise``, or ``error_sigma``'s wander) far above the fixes' real scatter keeps it large
     forever (QA9: a mower's GPS stated 10x too noisy, its heading 4.7 -> 19.5 deg with every verdict ok).
     The innovations' rms against what S predicted shows it: far below, the statement is what is wrong."""
-    rms = [ch.learning_component(i)[0] for i in range(len(ch.components))]
-    pred = [ch.learning_component(i)[1] for i in range(len(ch.components))]
+    seen = [ch.learning_component(i) for i in range(len(ch.components))]
+    rms, pred = [r for r, _ in seen], [p for _, p in seen]
     horizontal = [(r, p) for c, r, p in zip(ch.components, rms, pred) if c in ("east", "north")]
     measured = math.sqrt(sum(r * r for r, _ in horizontal) / len(horizontal)) if horizontal else math.nan
     predicted = math.sqrt(sum(p * p for _, p in horizontal) / len(horizontal)) if horizontal else math.nan

@@ -349,17 +349,26 @@ def rate_fit_text(k: float, offset: float) -> str:
     return f"{k:.2f} x gyro {'-' if offset < 0 else '+'} {abs(offset):.3f} rad/s"
 
 
+def _zero_while_turning(to: np.ndarray, wz: np.ndarray, tg: np.ndarray,
+                        gz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the gyro's rate at the odometry bins, the bins whose wheels read exactly zero while it turned faster
+    than ZERO_TURNING_RAD_S): the drive at rest while the vehicle coasts or turns (or a component not
+    measured). ``wheel_yaw_fit`` leaves them out of the scale, ``_missed_turn`` sums what they missed."""
+    g = np.interp(to, tg, gz)
+    return g, (wz == 0.0) & (np.abs(g) > ZERO_TURNING_RAD_S)
+
+
 def _missed_turn(series: Series) -> tuple[float, float]:
-    """(rad, s): what the gyro turned while the wheels read exactly zero (|gyro| above ZERO_TURNING_RAD_S),
-    each odometry interval capped at MISSED_INTERVAL_S so a logging gap counts for nothing. These are the
-    samples ``wheel_yaw_fit`` leaves out of the scale: no scale information, but with the wheels driving
-    heading, turns the heading never made (QA9's race car: hairpins with the drive reading zero)."""
+    """(rad, s): what the gyro turned while the wheels read exactly zero (``_zero_while_turning``), each
+    odometry interval capped at MISSED_INTERVAL_S so a logging gap counts for nothing. No scale information,
+    but with the wheels driving heading, turns the heading never made (QA9's race car: hairpins with the
+    drive reading zero)."""
     to, wz = np.array(series.odom_t), np.array(series.odom_wz)
     tg, gz = np.array(series.gyro_t), np.array(series.gyro_z)
     if len(to) < 2 or len(tg) < 2:
         return 0.0, 0.0
-    g = np.interp(to, tg, gz)
-    zero = (wz == 0.0) & (np.abs(g) > ZERO_TURNING_RAD_S) & (to >= tg[0]) & (to <= tg[-1])
+    g, zero = _zero_while_turning(to, wz, tg, gz)
+    zero &= (to >= tg[0]) & (to <= tg[-1])
     dt = np.minimum(np.diff(to, append=to[-1]), MISSED_INTERVAL_S)
     return float(np.sum(np.abs(g[zero]) * dt[zero])), float(np.sum(dt[zero]))
 
@@ -373,10 +382,10 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
     to, wz = np.array(series.odom_t), np.array(series.odom_wz)
     tg, hg, gz = np.array(series.gyro_t), np.array(series.gyro_heading), np.array(series.gyro_z)
     m = (to >= tg[0]) & (to <= tg[-1])
-    # a wheel reading exactly zero while the gyro turns is the drive at rest while the vehicle
-    # coasts (or a component not measured): no scale information, left out of the fit
-    m &= ~((wz == 0.0) & (np.abs(np.interp(to, tg, gz)) > ZERO_TURNING_RAD_S))
-    g = np.interp(to[m], tg, gz)
+    # a wheel reading exactly zero while the gyro turns: no scale information, left out of the fit
+    g, zero = _zero_while_turning(to, wz, tg, gz)
+    m &= ~zero
+    g = g[m]
     if m.sum() < 10 or np.ptp(hg) < MIN_TURN_RAD or np.std(g) < 0.02:
         return None
     (offset, k), *_ = np.linalg.lstsq(np.vstack([np.ones_like(g), g]).T, wz[m], rcond=None)

@@ -36,7 +36,7 @@ MOVING_M_S = 0.1  # speed above which a twist has a direction
 class TwistStats:
     """Whole-run sums of |vx|, |vy| and |wz| of the accepted odometry (is the twist in the body frame?),
     and, over the moving messages whose own pose is turned beyond TURNED_RAD from the odom frame's x, how
-    many point their twist along x (a body-frame twist) and how many along that pose's heading (a world one).
+    many point their twist along x (a body-frame twist: a world one would point where that pose heads).
 
     Fed one twist per accepted odometry message, so it only notes it; the sums are taken a chunk at a
     time by ``np.cumsum`` (adds in order: the same floats as adding one message at a time)."""
@@ -49,7 +49,6 @@ class TwistStats:
         self._sums = [0.0, 0.0, 0.0]
         self.turned = 0  # moving messages whose pose yaw is beyond TURNED_RAD ...
         self.along_x = 0  # ... whose twist points along the odom frame's x (body-frame, or the robot heads x)
-        self.along_heading = 0  # ... whose twist points along the pose's heading
 
     def add(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
             orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
@@ -93,7 +92,6 @@ class TwistStats:
         turned = (np.hypot(linear[:, 0], linear[:, 1]) > MOVING_M_S) & (np.abs(np.sin(pose_yaw)) > math.sin(TURNED_RAD))
         self.turned += int(turned.sum())
         self.along_x += int((turned & (np.abs(np.sin(direction)) < ALONG_SIN)).sum())
-        self.along_heading += int((turned & (np.abs(np.sin(direction - pose_yaw)) < ALONG_SIN)).sum())
         rows = np.abs(np.column_stack((linear[:, 0], linear[:, 1], angular[:, 2])))
         self._n += n
         self._sums = np.cumsum(np.concatenate(([self._sums], rows)), axis=0)[-1].tolist()
