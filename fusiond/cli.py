@@ -51,9 +51,25 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if problem:
             print(f"fusiond: {problem}", file=sys.stderr)
             return EXIT_USAGE
-    from .replay.bag import BagError
+    from .errors import ReplayError
     from .replay.run import replay, summary
 
+    reference = getattr(args, "reference", None)
+    fuse_every = getattr(args, "fuse_every", 1)
+    recorder = None
+    if reference or fuse_every > 1:
+        from .replay.evaluate import Recorder
+
+        try:
+            recorder = Recorder(cfg, fuse_every)
+        except ReplayError as err:
+            print(f"fusiond: {err}", file=sys.stderr)
+            return EXIT_USAGE
+        if recorder.absolute is None and fuse_every > 1:
+            print("fusiond: --fuse-every needs a gps or absolute pose sensor in the config", file=sys.stderr)
+            return EXIT_USAGE
+        if not reference:  # score on the held-back messages of the absolute sensor themselves
+            reference = cfg.sensor(recorder.absolute).key
     try:
         result = replay(
             [Path(p) for p in args.bags],
@@ -64,10 +80,22 @@ def cmd_replay(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
             doctor=not args.quiet or bool(args.plot or args.report),  # --quiet: no summary to judge for
+            through=recorder.filter if recorder is not None else None,
         )
-    except BagError as err:
+        evaluation = None
+        if recorder is not None:
+            from .replay.evaluate import evaluate
+
+            evaluation = evaluate([Path(p) for p in args.bags], cfg, reference, result.trajectory, recorder,
+                                  segment_gap_s=args.segment_gap, rpe_s=args.rpe_s)
+    except ReplayError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE
+    if evaluation is not None and args.evaluation:
+        import msgspec
+
+        Path(args.evaluation).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.evaluation).write_bytes(msgspec.json.format(msgspec.json.encode(evaluation)))
     title = ", ".join(Path(b).name for b in args.bags)
     if args.plot:
         from .replay.plot import plot_replay
@@ -81,6 +109,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
             print(f"report      {index}")
     if not args.quiet:
         print(summary(result))
+    if evaluation is not None:
+        from .replay.evaluate import format_evaluation
+
+        print(format_evaluation(evaluation))
     if result.final is None or result.poses == 0:
         return 1  # nothing fused, or nothing published (the summary says why)
     return 0
@@ -363,6 +395,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--report", metavar="DIR", help="write an HTML report (plots, doctor's verdicts) into DIR")
     r.add_argument("--quiet", action="store_true",
                    help="no progress bar, no summary (and no doctor, unless --plot or --report reads it)")
+    r.add_argument("--reference", metavar="TOPIC",
+                   help="score the published trajectory against this bag topic (PoseStamped, "
+                        "PoseWithCovarianceStamped, Odometry or NavSatFix; never fused), beside plain baselines")
+    r.add_argument("--fuse-every", type=int, default=1, metavar="N",
+                   help="fuse only every Nth message of the gps / absolute pose sensor and score on the others "
+                        "(default 1: all; without --reference the held-back messages are the reference)")
+    r.add_argument("--segment-gap", type=float, default=1.0, metavar="S",
+                   help="a reference silent longer than S seconds splits the scoring into segments (default 1)")
+    r.add_argument("--rpe-s", type=float, default=1.0, metavar="S",
+                   help="relative pose error over S seconds (default 1)")
+    r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
     r.set_defaults(func=cmd_replay)
 
     m = sub.add_parser("monitor", help="live per-sensor innovation/NIS view of running daemons")

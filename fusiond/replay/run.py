@@ -11,6 +11,7 @@ import time
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Iterator
 from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
@@ -20,7 +21,7 @@ from ..core.layout import absolute_sensor
 from ..errors import ReplayError
 from ..core.fusion import FusionCore
 from ..estimator.rotation import to_rpy
-from ..samples import OdomSample
+from ..samples import OdomSample, Sample
 from .bag import BagError, BagSamples, open_bag_samples
 
 if TYPE_CHECKING:  # the doctor is imported only by a replay that runs it (not by --quiet)
@@ -48,6 +49,7 @@ class ReplayResult:
     seconds: float  # wall time of the fusion loop (bag decoding included)
     missing: list[str]
     decode_errors: int
+    trajectory: array = field(default_factory=lambda: array("d"))  # t x y z qx qy qz qw of every published pose
 
     def verdicts(self) -> list[Verdict]:
         if self.doctor is None:
@@ -145,8 +147,9 @@ class _JsonLines:
 class _Progress:
     """A one-line progress bar on a terminal; silent otherwise (CI logs, pipes)."""
 
-    def __init__(self, total: int, stream: IO[str] = sys.stderr) -> None:
+    def __init__(self, total: int, stream: IO[str] | None = None) -> None:
         self.total = max(total, 1)
+        stream = sys.stderr if stream is None else stream  # at call time: sys.stderr may have been replaced
         self.stream = stream
         self.enabled = stream.isatty() and total > 0
         self.next = 0
@@ -173,10 +176,13 @@ def replay(
     progress: bool = True,
     warn: Callable[[str], None] | None = None,
     doctor: bool = True,
+    through: Callable[[Iterator[Sample]], Iterator[Sample]] | None = None,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
-    its series); a replay whose only output is files (``--quiet`` without plot or report) skips it."""
+    its series); a replay whose only output is files (``--quiet`` without plot or report) skips it.
+    ``through``: the bag's samples pass through it on their way to the core (the evaluation's
+    recorder sees every one and holds back the fixes it scores on)."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
@@ -186,7 +192,7 @@ def replay(
             if diag_out is not None:
                 runner.on_record = diag_out.add
             bar = _Progress(bag.total if progress else 0)
-            for sample in bag:
+            for sample in (bag if through is None else through(iter(bag))):
                 runner.feed(sample)
                 if runner.messages % 256 == 0:
                     bar.update(runner.messages)
@@ -265,7 +271,7 @@ class Runner:
 
     def result(self, seconds: float = 0.0, missing: list[str] | None = None, decode_errors: int = 0) -> ReplayResult:
         return ReplayResult(self.core, self.doctor, self.trace, self.messages, len(self.trajectory) // 8, seconds,
-                            missing or [], decode_errors)
+                            missing or [], decode_errors, self.trajectory)
 
 
 def run_samples(samples, cfg: Config, keep_trace: bool = False) -> ReplayResult:
