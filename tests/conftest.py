@@ -6,14 +6,16 @@ import pytest
 
 # --- bag fixtures (codecs / replay.bag tests) ------------------------------------------
 
-JACKAL_BAG = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "jackal_test2.bag"
+# robot_localization's test bag 2 (BSD, data/LICENSE.robot_localization), shipped in the repo so
+# that the Jackal tests always run.
+JACKAL_BAG = Path(__file__).resolve().parents[1] / "data" / "jackal_test2.bag"
 
 
 @pytest.fixture(scope="session")
 def jackal_bag() -> Path:
-    """The real Jackal ROS 1 bag of DESIGN.md (dev data, kept beside the repo)."""
+    """The real Jackal ROS 1 bag (data/jackal_test2.bag in the repo)."""
     if not JACKAL_BAG.is_file():
-        pytest.skip(f"dev bag not found at {JACKAL_BAG}")
+        pytest.fail(f"the in-repo Jackal bag is missing: {JACKAL_BAG}")
     return JACKAL_BAG
 
 

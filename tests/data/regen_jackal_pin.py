@@ -1,7 +1,7 @@
 """Regenerate tests/data/jackal_pin.json after a deliberate behaviour change.
 
 Run from the repository root: `.venv/bin/python tests/data/regen_jackal_pin.py [BAG]`
-(BAG defaults to ../shared/data/jackal_test2.bag). Commit the new pin on its own,
+(BAG defaults to data/jackal_test2.bag). Commit the new pin on its own,
 saying in the message which change moved the estimates and why.
 """
 
