@@ -41,7 +41,7 @@ Status = Literal["ok", "degraded", "starting", "failed"]
 
 
 class SensorHealth(msgspec.Struct, kw_only=True):
-    """One sensor in the health answer (DESIGN.md fields first, extensions after)."""
+    """One sensor in the health answer (the documented fields that clients rely on first, extensions after)."""
 
     alive: bool
     age_s: float | None  # wall seconds since its newest accepted sample; null before the first

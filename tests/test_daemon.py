@@ -125,7 +125,7 @@ class Collector:
 
 
 class DiagnosticsSchema(msgspec.Struct):
-    """DESIGN.md's diagnostics record (extra fields allowed)."""
+    """The documented diagnostics record (README, "Diagnostics record"; extra fields allowed)."""
 
     stamp: float
     sensor: str

@@ -105,7 +105,7 @@ def test_every_record_arrives_exactly_once_including_those_flushed_at_stop(sessi
         # batches of many records; 1 put per 2 records would mean < 40 samples fused a second.
         assert len(payloads) <= len(records) // 2, (len(payloads), len(records))
     else:
-        assert all(isinstance(d, dict) for d in decoded)  # the old form: one record per put
+        assert all(isinstance(d, dict) for d in decoded)  # diagnostics_batch_s = 0: one record per put
         assert len(payloads) == len(records)
 
 

@@ -139,7 +139,7 @@ def test_lost_yaw_rate_is_not_measured_rather_than_slip():
 
 
 def test_a_lost_yaw_rate_on_gentle_curves_is_not_measured_either():
-    """A car on long gentle curves (0.03 rad/s, under TURNING_RAD_S: QA4's highway) whose driver sends the
+    """A car on long gentle curves (0.03 rad/s, under TURNING_RAD_S: a highway) whose driver sends the
     yaw rate as exactly 0 with variance 0: no turn is sharp enough for the in-turns test, but every moving
     sample is an exact zero over a run whose gyro heading spans 0.03 x 40 s = 1.2 rad (over MIN_TURNED_RAD):
     the same verdict, not 'state more noise'. With the yaw rate measured, nothing of the kind."""
@@ -602,7 +602,7 @@ def test_wheels_reading_zero_in_turns_with_the_gyro_not_fused_are_told_to_fuse_i
     """The gyro is not fused and the drive reads exactly zero in two turns (1.5 s at 1 rad/s and 2 s at
     -0.8 rad/s: 3.1 rad): outside them the wheels' yaw rate is the gyro's (scale 1), so the scale fit,
     which rightly leaves those samples out, found nothing wrong, and the heading silently missed both
-    turns (QA9's race car: 75 -> 267 m). What the gyro turned while the wheels read zero is the turn
+    turns (on a race car, 267 m of error instead of 75). What the gyro turned while the wheels read zero is the turn
     the prediction missed: 3.1 rad, less at most a doctor bin (BIN_S) at each of the four edges, where a
     bin's mean wheel rate is not exactly zero (2 x 0.2 s x (1.0 + 0.8) = 0.72 rad): fuse the gyro. The
     same drive without those turns gets no such verdict."""
@@ -620,8 +620,8 @@ def test_wheels_reading_zero_in_turns_with_the_gyro_not_fused_are_told_to_fuse_i
 def test_world_twist_setting_on_gentle_curves_is_found_from_the_message_pose():
     """A car on gentle curves (0.03 rad/s for 15 s: 0.45 rad, a highway's) whose driver publishes a body
     twist and its own integrated pose. Configured as a world twist, the body velocity is turned by that
-    pose into a sideways one and the track runs off (QA9's highway car: 37 m, blamed on the wheel scale and
-    a 6 deg IMU mounting, pasted to no effect). The turn rate never reaches the old rule's 0.05 rad/s; the
+    pose into a sideways one and the track runs off (a highway car: 37 m, blamed on the wheel scale and
+    a 6 deg IMU mounting, pasted to no effect). The turn rate never reaches the turn-rate rule's 0.05 rad/s; the
     twist pointing along x while the message's own pose is turned beyond TURNED_RAD says it: every such
     message does (none of a world twist would). The checks that compare against the wheels' motion are put
     down to it, not given their own keys. Configured as body, no verdict."""

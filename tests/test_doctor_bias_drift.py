@@ -1,4 +1,4 @@
-"""A gyro bias that drifts with temperature, told from one false standstill (QA4's skid-steer and race car).
+"""A gyro bias that drifts with temperature, told from one false standstill (a skid-steer and a race car).
 
 Both show as standstills that disagree and updates rejected. One odd standstill (the vehicle coasting while its
 wheels read zero) sits off the line through the others; a drifting bias puts every standstill on one line. The

@@ -5,7 +5,7 @@ that publish zeros. A good driver stating its true 0.004 rad/s is floored too, a
 then reads NIS low: S holds 0.01^2 + the gyro's 0.002^2 (+ the bias estimate's variance, small once a
 standstill has taught it) where the residuals show 0.004^2 + 0.002^2, a NIS of ~(16 + 4) / (100 + 4) = 0.19
 per dof, below the window's bounds. "State less twist_noise" (six values,
-none of them known to the doctor) was the old answer (QA5's highway car); the floor is what to change,
+none of them known to the doctor) is the wrong answer (a highway car); the floor is what to change,
 with the wheels' own noise from the residuals less the rest of S.
 """
 
@@ -63,7 +63,7 @@ def test_a_floor_that_is_not_most_of_s_is_not_blamed():
 
 
 def test_an_empty_covariance_on_noisier_wheels_names_the_floor_to_raise():
-    """A driver leaving the twist covariance at 0 (QA5's race car): the core floors it to twist_min_sigma
+    """A driver leaving the twist covariance at 0 (a race car): the core floors it to twist_min_sigma
     (0.01 rad/s) while its wheels' yaw rate scatters by 0.03: NIS ~(0.03^2 + 0.002^2) / (0.01^2 + 0.002^2)
     = 8.7 per dof, high. Its value to paste is the wheels' noise from the residuals, 0.03 within the
     sampling error of ~3000 samples (asserted within 15 %); pasted, the check is consistent."""

@@ -159,7 +159,7 @@ def test_across_logging_gaps_the_imu_yaw_decides():
 
 
 def test_across_logging_gaps_a_drifting_imu_yaw_carries_the_heading_at_its_drift_over_the_gap():
-    """QA5's race car: a 6-axis IMU whose yaw integrates its own uncorrected gyro bias (the gyro's 0.004
+    """A race car: a 6-axis IMU whose yaw integrates its own uncorrected gyro bias (the gyro's 0.004
     rad/s), over 300 s, with a 1.2 s logging gap at 100.4 s in which the weave turns the car by
     heading(97.4) - heading(98.6) = 0.56 rad (driving time: the 3 s rest comes first). Fused as relative,
     the yaw's drift runs for the whole run: ~0.004 x 300 / 2 = 0.6 rad off on average, worse than the miss
@@ -189,7 +189,7 @@ def test_across_logging_gaps_a_drifting_imu_yaw_carries_the_heading_at_its_drift
 
 
 def test_a_bias_moved_by_a_drifting_fused_yaw_is_not_put_down_to_the_gyro_noise():
-    """The drifting AHRS fused as relative (QA5's race car): its yaw, 0.004 rad/s off the bias-corrected
+    """The drifting AHRS fused as relative (the race car above): its yaw, 0.004 rad/s off the bias-corrected
     gyro, pulls the bias estimate towards 0 while the car drives, and the first standstill's windows (2 s
     at 30 s) find the gyro reading 0.004 at rest: NIS high. The gyro's noise at rest measures what is
     stated (GYRO_SIGMA, within its sampling error over ~200 samples a window: well inside 1.5x), so
@@ -204,7 +204,7 @@ def test_a_bias_moved_by_a_drifting_fused_yaw_is_not_put_down_to_the_gyro_noise(
 
 
 def test_a_car_parked_through_a_gap_is_not_told_its_drifting_imu_turned():
-    """QA7: a 6-axis AHRS whose yaw drifts 0.03 rad/s, the car parked from 100 s to 130 s with a 25 s logging
+    """A 6-axis AHRS whose yaw drifts 0.03 rad/s, the car parked from 100 s to 130 s with a 25 s logging
     gap inside the stop: the IMU's yaw moved 0.75 rad across the gap, beyond the allowance (TURN_RAD +
     DRIFT_RATE x 25 = 0.45 rad), though the car never turned. Its drift, measured against the bias-corrected
     gyro over the run, explains it all: no turn is named, and yaw_across_gaps is not advised. Nor does the
@@ -225,8 +225,8 @@ def test_a_car_parked_through_a_gap_is_not_told_its_drifting_imu_turned():
 
 @pytest.mark.parametrize("orientation", ["relative", "absolute"])
 def test_a_drifting_ahrs_yaw_fused_is_named_with_roll_pitch(orientation):
-    """The same drifting AHRS (0.003 rad/s, 10 deg a minute), its yaw fused (QA9's race car: heading 1.5 ->
-    26 deg, and the only advice was a smaller yaw noise). Its drift against the gyro less the bias the
+    """The same drifting AHRS (0.003 rad/s, 10 deg a minute), its yaw fused (on a race car: heading error
+    26 deg instead of 1.5, where a smaller yaw noise would be the NIS's only advice). Its drift against the gyro less the bias the
     gyro reads at rest (REST_AT) is the yaw's own: 0.003 within the fit's ~1e-4 rad/s (0.0005 allowed),
     beyond DRIFT_RAD_S: no heading, take roll/pitch only. The fused yaw dragged the filter's bias estimate
     to b - r (0.001), which is why the bias at rest, not the estimate, is what is subtracted. The AHRS

@@ -1,7 +1,7 @@
 """The GPS lever-arm verdict (core/doctor/lever.py) against the simulation's antenna (tests/sim_gps.py).
 
 The world: a robot weaving at 1 m/s (yaw rate 0.25 sin(0.3 t) + 0.05 rad/s) for 200 s, 1 Hz fixes of
-0.15 m white noise on top of a 0.3 m Gauss-Markov wander (tau 60 s), as QA6's skid-steer. The fit's
+0.15 m white noise on top of a 0.3 m Gauss-Markov wander (tau 60 s), as a skid-steer's. The fit's
 standard error is what it reports (~0.09 m here: the pairs' noise, sqrt(2) x 0.15 m plus the wheels',
 over the heading changes of 200 one-second intervals); its estimate is held to the simulated antenna
 within 3 of them.
@@ -43,7 +43,7 @@ def rms(samples, w: sim_gps.World, gps: str) -> float:
 
 @pytest.mark.parametrize("antenna", [(0.0, 1.5, 0.5), (-1.2, 0.5, 0.8)])
 def test_an_antenna_off_base_link_and_not_stated_is_found_and_pasting_it_helps(antenna):
-    """QA6: an antenna 1.5 m to the side (or 1.2 m back, 0.5 m left) with extrinsic_xyz left at 0 cost
+    """An antenna 1.5 m to the side (or 1.2 m back, 0.5 m left) with extrinsic_xyz left at 0 cost
     1.4x-3x the position error, while the GPS NIS read "consistent". The verdict names it with the fitted
     position; pasted, the RMS falls below the unstated run's and the verdict then reads ok."""
     w = sim_gps.World(**WORLD, gps_lever=antenna)

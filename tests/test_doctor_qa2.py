@@ -207,9 +207,9 @@ def test_white_gps_noise_is_not_called_a_wander(stated):
         assert v.level == "ok", v
 
 
-# The highway car of QA5: 10 Hz fixes at 25 m/s. The filter, fed ten fixes a second, follows much of the
-# wander: the persisting share left in the innovations was 0.18-0.25, under the 0.3 threshold of before
-# (the advice was then "lower position_noise"); white fixes at the same rate and speed leave <= 0.04.
+# A highway car: 10 Hz fixes at 25 m/s. The filter, fed ten fixes a second, follows much of the
+# wander: the persisting share left in the innovations is 0.18-0.25, under a threshold of 0.3 (which
+# would advise "lower position_noise"); white fixes at the same rate and speed leave <= 0.04.
 HIGHWAY = dict(duration=400.0, gps_rate=10.0, gps_sigma=0.6, speed=25.0)
 STATED_HIGHWAY = "position_noise = [1.3, 1.3, 2.6]"  # the wander and the white part together, as a datasheet
 
@@ -333,7 +333,7 @@ def test_gps_on_the_same_clock_gets_no_clock_verdict():
 
 
 def test_the_wander_advice_keeps_the_altitude_error_state_it_replaces():
-    """QA6: the highway car's fixes wander horizontally (1.2 m, tau 60 s) and in altitude (5 m, tau 200 s).
+    """The highway car's fixes wander horizontally (1.2 m, tau 60 s) and in altitude (5 m, tau 200 s).
     The default vertical error state (vertical_error_sigma = 5 m) absorbs the altitude's wander: z stays
     within centimetres. error_sigma's up replaces that state, and the innovations' persisting vertical part
     is what it left (~0.6 m): pasted as such, the filter must put most of the 5 m wander into z (metres,

@@ -2,10 +2,10 @@
 the direction of the GPS chords must read its offset, and a correct yaw none, whatever the turns.
 
 A GPS chord of 10 m at 1.5 m/s spans ~7 s. This robot drives straight but for left turns of 0.4 rad/s
-lasting 8 s every 30 s (QA5's skid-steer lap: curvature that starts and stops, turning one way), so
+lasting 8 s every 30 s (a skid-steer's lap: curvature that starts and stops, turning one way), so
 many chords run straight, then turn, or turn, then run straight. The chord is the displacement, sum v (cos yaw, sin yaw) dt: exact for any curvature, and an offset o of the yaw turns it
 by o. The yaw at the chord's middle instant equals its direction only on arcs of constant curvature;
-with the turns mostly to one side it read QA5's correct magnetometer as 0.13 rad (3 standard errors)
+with the turns mostly to one side it would read a correct magnetometer as 0.13 rad (3 standard errors)
 off, a PROBLEM with a yaw_offset to paste. The thresholds are the verdict's own: an offset is named
 beyond max(OFFSET_RAD, 3 standard errors), and the one measured must lie within 3 of them of the truth.
 """

@@ -156,7 +156,7 @@ def test_a_frozen_receiver_repeating_its_fix_does_not_drag_the_car_back(jitter):
     10 m/s (sim_gps ``gps_freeze``): 50 m and 40 m of travel. Fused, every repeat would pull the
     estimate back toward the frozen point (the raw fixes' error reaches 50 m). Recognised (bit-identical
     coordinates while the wheels moved, or within FROZEN_JITTER of them: a receiver republishing its
-    fix with 3 mm of rounding noise, QA9), they are rejected (channel ``position_frozen``) and the car
+    fix with 3 mm of rounding noise), they are rejected (channel ``position_frozen``) and the car
     dead-reckons: 50 m with the learned scale (+-0.3 %: 0.15 m) and a heading known to ~0.01 rad
     (0.5 m) stays within 1.5 m of the truth."""
     freezes = ((40.0, 45.0), (80.0, 84.0))
@@ -181,8 +181,8 @@ def test_a_frozen_receiver_repeating_its_fix_does_not_drag_the_car_back(jitter):
 def test_a_stuck_receiver_whose_fixes_agree_is_not_taken_for_a_lockout():
     """The receiver repeats its fix for 14 s with 5 cm of noise (beyond FROZEN_JITTER: not recognised as
     frozen) while the car drives on at 10 m/s. The repeats are gated out, and after REACQUIRE_S their
-    innovations agree within REACQUIRE_AGREE of their growing mean (100 m and more): before, the filter
-    "re-acquired" the stuck point and jumped back 100 m (QA9: 330 m at 28 m/s). The fixes did not move
+    innovations agree within REACQUIRE_AGREE of their growing mean (100 m and more): re-acquiring the stuck
+    point would jump the filter back 100 m (330 m at 28 m/s). The fixes did not move
     while the wheels moved 30 m: no evidence that the filter is wrong. It dead-reckons instead: 140 m
     with the scale learned to +-0.3 % (0.4 m) and a heading known to ~0.01 rad (1.4 m), plus the pull
     of the few repeats fused before the gate caught them: within 3 m of the truth throughout."""
@@ -221,10 +221,10 @@ def _mower_config(noise: float = 0.3):
 
 def test_a_wandering_receiver_on_a_small_field_gates_a_jump_though_its_heading_stays_provisional():
     """The wander can bend a 10 m track by sqrt(2) x 0.8 m, 0.11 rad of heading however many fixes there
-    are: the search's own threshold (HEADING_READY_SIGMA, 0.05 rad) is never reached, and before every
-    fix of the run was a position-only update, ungated (QA9's mower: all 899). Once the fit is within
+    are: the search's own threshold (HEADING_READY_SIGMA, 0.05 rad) is never reached, and, ungated, every
+    fix of the run would be a position-only update (all 899 on a mower). Once the fit is within
     HEADING_WANDER_READY_SIGMA the position-only updates are gated (channel position_provisional), so a
-    4 s multipath burst 18 m off is rejected whole, not fused (before: 15 m off) nor re-acquired after
+    4 s multipath burst 18 m off is rejected whole, not fused (it would pull the track 15 m off) nor re-acquired after
     REACQUIRE_S (it began with a jump: REACQUIRE_JUMP_S; with 3 s it was taken in and left, 17 m).
     Meanwhile the mower dead-reckons 4 m (0.1 rad of heading: 0.4 m) on top of the wander the filter
     cannot see (~1.1 m horizontal): within 3 m of the truth through the burst and 2 s after."""

@@ -1,5 +1,5 @@
 """An IMU driver that marks its angular-velocity covariance unknown (``[0] = -1``) while publishing the rates
-(QA4's race car). sensor_msgs/Imu reads that as "no angular velocity", and so does fusiond, unless the user
+(seen on a race car). sensor_msgs/Imu reads that as "no angular velocity", and so does fusiond, unless the user
 states the gyro's noise (``gyro_noise``, documented as replacing the message covariance): then the rates are
 fused. Without it the heading would come from the wheels alone."""
 

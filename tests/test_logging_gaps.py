@@ -116,10 +116,10 @@ def test_a_gap_in_a_fast_vehicle_widens_the_position_by_its_speed_and_the_gps_ta
     assert gps_after and not gps_after[0].rejected
     assert sum(r.rejected for r in gps_after) <= 0.05 * len(gps_after)  # ~ the gate's own false alarms
     # the wheel scale (truth 1.01) is not corrupted by the jump: within the ~1 % a 50 s GPS
-    # track of 2 m fixes over 1.5 km resolves (before: 1.195)
+    # track of 2 m fixes over 1.5 km resolves (the jump explained as a scale would read 1.195)
     assert core.scales["wheel_scale"] == pytest.approx(1.01, abs=0.01)
     # 30 s of 10 Hz fixes after the gap: back to GPS accuracy (fixes of 2 m per axis, averaged
-    # along the track by the odometry; before: tens to hundreds of metres)
+    # along the track by the odometry; an over-confident filter stays tens to hundreds of metres off)
     assert err < 2.0
 
 
@@ -127,7 +127,7 @@ def test_a_gps_locked_out_by_its_gate_is_reacquired():
     """A position cap of 10 m std dev (a user's setting) hides the ~600 m the gap may have moved the
     car: the fixes after it are gated out (5 sigma). They agree with each other (a constant offset,
     not a multipath burst), so after REACQUIRE_S of them the filter takes the GPS position again and
-    searches the heading anew, instead of staying locked out for good (before: 805 m at the end)."""
+    searches the heading anew, instead of staying locked out for good (805 m off at the end)."""
     core, gps_after, err, samples = _car_with_gps(5.0, filt="covariance_cap = [100.0, 10.0]")
     channels = [r.channel for r in gps_after]
     assert channels[0] == "position" and gps_after[0].rejected  # locked out at first ...

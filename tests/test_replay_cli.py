@@ -104,7 +104,7 @@ ODOM_IMU = '[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\n[[sensors]]\nname="i
     ('[zenoh]\nmode="mesh"\n', "zenoh.mode"),
     ('[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\nextrinsic_rpy=[0.0, 1.0]\n', "sensors[0].extrinsic_rpy"),
     ('[[sensors]]\nname="w"\nkind="odom"\nkey="/odom"\n', "sensors[0].key"),
-    # degrees typed as radians (QA6: yaw_offset = 20 ran, the heading 1.15 rad off)
+    # degrees typed as radians (yaw_offset = 20 would run with the heading 1.15 rad off)
     (ODOM_IMU + 'yaw_offset=20\n', "sensors[1].yaw_offset: 20.0 is beyond 6.28"),
     (ODOM_IMU + 'magnetic_declination=-4.0\n', "angles are in radians"),
     (ODOM_IMU + 'extrinsic_rpy=[0.0, 0.0, 90.0]\n', "sensors[1].extrinsic_rpy: [0.0, 0.0, 90.0] is beyond"),

@@ -1,4 +1,4 @@
-"""A sensor's stamps shifted by ``stamp_offset_s`` (QA4's highway car: a receiver that stamps each fix when it
+"""A sensor's stamps shifted by ``stamp_offset_s`` (a highway car: a receiver that stamps each fix when it
 arrives, LAG after the epoch it measured; and a GPS on GPS time, 18 s ahead of the others' UTC).
 
 A car at 20 m/s with 10 Hz fixes of 0.3 m: stamped LAG = 0.2 s late, each fix lies v LAG = 4 m behind where

@@ -121,7 +121,7 @@ def test_a_configured_tilt_reference_that_gives_nothing_falls_back_to_planar():
 
 def test_engine_vibration_is_not_read_as_a_tilt():
     """A car at 25 m/s on a level road, its accelerometer (400 Hz, no orientation) shaken by 4 m/s^2 at 33 Hz on
-    every axis in phase (QA4's engine). Sample by sample, atan2 and the magnitude gate turned that zero-mean
+    every axis in phase (an engine). Sample by sample, atan2 and the magnitude gate turn that zero-mean
     vibration into a steady ~0.2 deg of roll and pitch: 6 m of z over 1.5 km. Averaged over GRAVITY_AVERAGE_S
     first, a window holds 3.3 periods: what is left of the sinusoid in one is at most 4 x sin(0.3 pi) /
     (3.3 pi) = 0.31 m/s^2 (0.03 rad) with a phase that varies from window to window, so it averages away in

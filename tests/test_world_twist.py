@@ -1,4 +1,4 @@
-"""``twist_frame = "world"``: a driver that publishes its velocity in its own odometry frame (QA4's skid-steer).
+"""``twist_frame = "world"``: a driver that publishes its velocity in its own odometry frame (a skid-steer).
 
 Its frame's heading is the driver's own, dead-reckoned from skid-steer wheels that read 0.7 of the turn, so
 it drifts from the truth as the robot turns. The message states that heading as its pose orientation: turned

@@ -182,7 +182,7 @@ def _drifting(samples, rate: float):
     return _imu_yaw(samples, lambda t, y: rot.wrap(y + rate * (t - T0)))
 
 
-DRIFT = 0.02  # rad/s: QA7's drifting AHRS
+DRIFT = 0.02  # rad/s: a drifting 6-axis AHRS
 
 
 def test_a_drifting_imu_yaw_turns_the_heading_by_the_turn_not_by_its_drift():
@@ -203,7 +203,7 @@ def test_a_drifting_imu_yaw_turns_the_heading_by_the_turn_not_by_its_drift():
 
 
 def test_an_imu_dropout_beside_good_wheels_keeps_their_turn_not_the_imu_drift():
-    """QA7: only the IMU silent from 60 s to 75 s, the wheels (true scale, 0.01 rad/s noise at 50 Hz) driving
+    """Only the IMU silent from 60 s to 75 s, the wheels (true scale, 0.01 rad/s noise at 50 Hz) driving
     the heading meanwhile, the AHRS yaw drifting 0.02 rad/s. The wheels' heading wanders by 0.01 x sqrt(15 s /
     50 Hz) = 0.005 rad; the IMU's turn, less its measured drift, is as good (~2e-4 rad/s x 15 s): weighed
     together, 0.03 asserted. The IMU's change taken whole (the drift turned in) would be 0.3 rad off."""
@@ -267,7 +267,7 @@ def _truth_yaw(cfg: SimConfig, t: float) -> float:
 
 
 def test_an_imu_turn_far_from_the_good_wheels_is_not_fused():
-    """QA8: the AHRS reboots inside an IMU-only silence (2 s to 5 s) and integrates from there, so after it
+    """The AHRS reboots inside an IMU-only silence (2 s to 5 s) and integrates from there, so after it
     its yaw sits 2 rad away and not at 0. The wheels (true scale) drove the heading through the silence; the
     IMU's "turn" is ~2 rad beyond theirs, far past both turns' uncertainty (WHEELS_GATE sigma): nothing is
     turned, and the run is exactly the one with the feature off."""

@@ -138,11 +138,11 @@ def _kept_absolute(steps):
 
 
 def test_a_disturbed_magnetometer_the_filter_absorbs_is_kept_absolute_with_its_offset_corrected():
-    """QA6's skid-steer: a magnetometer 0.35 rad off, disturbed near steel by steps of +0.6 rad for 15 s and
+    """A skid-steer: a magnetometer 0.35 rad off, disturbed near steel by steps of +0.6 rad for 15 s and
     -0.9 rad for 18 s; GPS 1.5 m at 1 Hz. The IMU's yaw wanders against the gyro far beyond WANDER_RAD, yet
     the jump gate drops the steps' edges and the offset state takes the rest: the estimate's heading stays
-    within WANDER_RAD of the gyro's shape, and the run is no worse than roll_pitch's (advising roll_pitch
-    made QA6's run worse: 0.077 -> 0.395 rad, the GPS heading searched from travel again). So the verdict
+    within WANDER_RAD of the gyro's shape, and the run is no worse than roll_pitch's (roll_pitch would
+    make the run worse: 0.395 rad against 0.077, the GPS heading searched from travel again). So the verdict
     keeps the yaw absolute and names the offset (within 0.1 rad: the chords' standard error is ~0.02, the
     disturbances' remainder the rest); pasted, the heading is no worse (5 % allowed)."""
     w, samples, advised = _kept_absolute(((100.0, 115.0, 0.6), (200.0, 218.0, -0.9)))
@@ -153,10 +153,10 @@ def test_a_disturbed_magnetometer_the_filter_absorbs_is_kept_absolute_with_its_o
 
 
 def test_a_magnetometer_disturbed_at_start_up_is_judged_once_the_gps_gives_the_heading():
-    """QA7: the magnetometer (0.35 rad off) disturbed by +0.9 rad for the first 40 s, GPS 1.5 m at 1 Hz. Until
+    """The magnetometer (0.35 rad off) disturbed by +0.9 rad for the first 40 s, GPS 1.5 m at 1 Hz. Until
     travel has shown the GPS heading, the estimate can only follow the IMU's yaw, disturbance and all: judged
-    over the whole run it "followed" it, and roll_pitch was advised (QA7: 0.173 -> 0.416 m pasted, the
-    offset's 0.125). Judged once the heading is known (attitude variance within HEADING_READY_SIGMA^2), it did
+    over the whole run it "followed" it, and roll_pitch would be advised (pasted: 0.416 m, against 0.173
+    with the offset's 0.125). Judged once the heading is known (attitude variance within HEADING_READY_SIGMA^2), it did
     not follow: the yaw stays absolute and its offset is named. The advised offset carries the start's
     disturbance, 0.9 x 40 s over the run's ~250 s of track segments (~0.15 rad): asserted within 0.2 of the
     truth; pasted, the heading is no worse than as configured (5 % allowed)."""

@@ -521,7 +521,7 @@ class Daemon:
             self._diag_batch += records
             if len(self._diag_batch) >= MAX_BATCH:
                 self._flush_diagnostics()
-        else:  # the old form: one record per put
+        else:  # diagnostics_batch_s = 0: one record per put
             put, enc = self._diag_pub.put, _diag_encoder.encode
             for r in records:
                 put(enc(r))

@@ -261,7 +261,8 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
     culprit = next((v for v in (heading, wheel_heading, speed) if v is not None and v.level != "ok"), None)
     frame = twist_frame_verdict(odom, twist, MIN_UPDATES) if known and odom is not None else None
     # a body-frame twist read as a world one sends the dead reckoning sideways: every check that compares
-    # against the wheels' motion (their speed along the GPS track, the IMU's mounting yaw) reads it (QA9)
+    # against the wheels' motion (their speed along the GPS track, the IMU's mounting yaw) reads it, and
+    # would otherwise blame the wheel scale or the IMU's mounting
     wrong_frame = frame if frame is not None and frame.level == "problem" else None
     if wrong_frame is not None:
         culprit = wrong_frame

@@ -208,7 +208,7 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats) -> Verdict:
     as a position-only update, ungated, and none was judged against the stated noise. The search fits
     the fixes to the wheels' track and waits until the fit's heading uncertainty is small; a stated noise
     (``position_noise``, or ``error_sigma``'s wander) far above the fixes' real scatter keeps it large
-    forever (QA9: a mower's GPS stated 10x too noisy, its heading 4.7 -> 19.5 deg with every verdict ok).
+    forever (a mower's GPS stated 10x too noisy: heading error 19.5 deg instead of 4.7, every verdict ok).
     The innovations' rms against what S predicted shows it: far below, the statement is what is wrong."""
     seen = [ch.learning_component(i) for i in range(len(ch.components))]
     rms, pred = [r for r, _ in seen], [p for _, p in seen]

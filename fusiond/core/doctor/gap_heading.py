@@ -11,8 +11,8 @@ turns the heading by that change at the first orientation after a gap, so a turn
 named with it to turn on where it is off (with ``"off"``: roll/pitch fused, and it). The IMU's yaw drifts by
 itself (a 6-axis AHRS integrating its gyro's bias): the drift measured against the
 bias-corrected gyro over the run, times the gap, is taken off its change first, so a car
-parked through a gap shows no turn (QA7: 0.5 rad over 25 s at 0.02 rad/s, advised, made it
-6.9 -> 65 m); a constant yaw (a placeholder) shows nothing.
+parked through a gap shows no turn (a drift of 0.02 rad/s is 0.5 rad over a 25 s gap: taken as a
+turn, it sends a parked car's track tens of metres off); a constant yaw (a placeholder) shows nothing.
 
 A gap counts when the IMU's yaw change across it differs from the estimate's by more
 than the IMU's own yaw could drift in that time: TURN_RAD (several times the yaw noise
@@ -22,7 +22,7 @@ gyro bias, <= 0.01 rad/s, integrated by the IMU through the gap).
 Not ``relative``: fused so, the IMU's yaw holds the heading for the whole run, and its own
 drift with it: a 6-axis IMU integrating its uncorrected gyro bias (0.004 rad/s) turns the
 heading by 1.9 rad over 8 minutes, and drags the filter's bias estimate towards its own
-(QA5's race car: 0.5 -> 6 m RMS between gaps). Across gaps only, the yaw's drift costs
+(a race car's error between gaps grew from 0.5 to 6 m RMS so). Across gaps only, the yaw's drift costs
 |r| x the gap, once: the drift r (against the bias-corrected gyro) is quoted with the advice.
 """
 
@@ -86,7 +86,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         return None  # a constant yaw (a driver's placeholder): it shows no turn, in a gap or out of one
     te, ye = np.array(series.est_t), np.array(series.est_yaw)
     # the IMU yaw's own drift against the bias-corrected gyro, measured over the run: a 6-axis AHRS integrating
-    # its gyro's bias turns by r x the gap with the vehicle parked (QA7: 0.5 rad over 25 s at 0.02 rad/s); what
+    # its gyro's bias turns by r x the gap with the vehicle parked (0.5 rad over 25 s at 0.02 rad/s); what
     # it turned beyond that is the turn
     drift = _relative_drift(series, cfg, imu)
     rate = drift[1] if drift is not None and math.isfinite(drift[1]) else 0.0

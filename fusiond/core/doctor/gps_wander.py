@@ -35,7 +35,7 @@ from .verdict import Verdict, sensor_key
 # 4 / sqrt(n) of zero for short runs. A Gauss-Markov error of 1.2 m (tau 60 s) under 0.6 m of white noise
 # leaves 0.38 (stated honestly) to 0.54 (stated 2.2 m) at 2 Hz, where the filter follows the wander less
 # the more the fixes are distrusted; at 10 Hz on a car at 25 m/s it follows more of it and leaves 0.18-0.25
-# (QA5's highway car: 0.18; 0.3, the threshold before, missed it and "lower position_noise" was the advice).
+# (a highway car: 0.18; a threshold of 0.3 misses it, and the advice would be "lower position_noise").
 PERSISTING_SHARE = 0.15
 MIN_FIXES = 50
 MAX_LAG_FRACTION = 0.25  # autocorrelation lags up to this share of the run (beyond, too few pairs)
@@ -87,8 +87,8 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "") -> Verd
     white = [float(math.sqrt(1.0 - share) * r) for r in rms]
     # The vertical: with error_tau_s set, error_sigma's up replaces the altitude's own error state
     # (vertical_error_sigma over vertical_error_tau_s), whose innovations are what is left after it
-    # absorbed the altitude's wander: their persisting part is far below it (QA6: 0.6 m suggested against
-    # the 5 m state; pasted, z wandered 0.18 -> 5 m). So never below vertical_error_sigma.
+    # absorbed the altitude's wander: their persisting part is far below it (0.6 m against a 5 m state;
+    # pasted, z would wander 5 m instead of 0.18 m). So never below vertical_error_sigma.
     up = _up_sigma([r[1] for r in rows])
     sigma = [*sigma_h, max(up if up is not None else 0.0, gps.vertical_error_sigma)]
     evidence = {"innovation_lag1_correlation": share, "error_tau_s": tau, "error_sigma_east_m": sigma[0],

@@ -62,7 +62,7 @@ def imu_vs_gyro(series: Series) -> tuple[float, float] | None:
 def estimate_vs_gyro(series: Series) -> float:
     """How far the filter's own heading wanders against the integrated raw gyro (as ``imu_vs_gyro``: a bias
     and a scale removed per window): what of a disturbed IMU yaw reached the estimate, once its heading is
-    known (attitude variance within HEADING_READY_SIGMA^2; QA7: a magnetometer disturbed at start-up is
+    known (attitude variance within HEADING_READY_SIGMA^2: a magnetometer disturbed at start-up is
     followed while nothing else gives the heading, and only then). NaN when they overlap in fewer than 10
     bins, or the heading never became known."""
     ye = np.unwrap(np.asarray(series.est_yaw)) if series.est_yaw else np.empty(0)
@@ -153,7 +153,7 @@ def yaw_along(series: Series, ti: np.ndarray, yi: np.ndarray, t0: float, t1: flo
     exactly that displacement, whatever the curvature, and an offset of the yaw turns it by itself).
     The yaw at the chord's middle instant is that direction only on an arc of constant curvature: a
     chord that runs straight, then turns, reads the turn's direction, a bias with the sense of the turns
-    (QA5's skid-steer: a -0.13 rad "offset" of a correct magnetometer). Without two moving bins inside,
+    (on a skid-steer, a -0.13 rad "offset" of a correct magnetometer). Without two moving bins inside,
     the middle instant's yaw."""
     to, vo = np.asarray(series.odom_t), np.asarray(series.odom_v)
     lo, hi = np.searchsorted(to, t0, side="left"), np.searchsorted(to, t1, side="right")
@@ -270,8 +270,9 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
             evidence["estimate_vs_gyro_wander_rad"] = held
         if held <= WANDER_RAD:
             # Beside the GPS the filter estimates the yaw's offset and gates its jumps: its heading did not
-            # follow the disturbance, so roll_pitch would only lose the magnetometer's help (QA6's skid-steer:
-            # heading rms 0.077 -> 0.395 rad with it, the GPS heading found from travel again)
+            # follow the disturbance, so roll_pitch would only lose the magnetometer's help (a skid-steer's
+            # heading rms 0.395 rad with roll_pitch against 0.077 rad absolute: the GPS heading is then found
+            # from travel again)
             msg += (f"; the estimate's heading did not follow it ({held:.3f} rad rms against the gyro): the filter's "
                     "yaw-offset state and yaw-jump gate absorb it beside the GPS, keep the yaw absolute")
             if math.isfinite(offset):
@@ -306,7 +307,8 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
 def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[float, float] | None) -> float:
     """The IMU yaw's own drift rate, rad/s: the median slope of (yaw - integrated raw gyro), r - b, plus the
     gyro's bias b as it reads at rest (the standstills' median). The filter's bias estimate will not do:
-    a fused drifting yaw drags it to b - r (QA9: "moved by another source"). NaN without standstills."""
+    a fused drifting yaw drags it to b - r (the gyro verdict's "moved by another source"). NaN without
+    standstills."""
     if compared is None or not math.isfinite(compared[1]):
         return math.nan
     rest, _ = quiet_episodes(series, cfg, imu)
@@ -361,7 +363,7 @@ def _zero_while_turning(to: np.ndarray, wz: np.ndarray, tg: np.ndarray,
 def _missed_turn(series: Series) -> tuple[float, float]:
     """(rad, s): what the gyro turned while the wheels read exactly zero (``_zero_while_turning``), each
     odometry interval capped at MISSED_INTERVAL_S so a logging gap counts for nothing. No scale information,
-    but with the wheels driving heading, turns the heading never made (QA9's race car: hairpins with the
+    but with the wheels driving heading, turns the heading never made (a race car's hairpins with the
     drive reading zero)."""
     to, wz = np.array(series.odom_t), np.array(series.odom_wz)
     tg, gz = np.array(series.gyro_t), np.array(series.gyro_z)

@@ -4,7 +4,7 @@ A fix is the antenna's position, base + R(yaw) l with l the antenna in base_link
 (``extrinsic_xyz``). Stated wrong (or left at 0 on a robot whose antenna sits on a mast
 at the back), the fixes swing by (R(yaw2) - R(yaw1)) dl as the vehicle turns, dl the
 part of l not stated. The filter follows part of that swing, so neither its innovations
-nor the fixes against its estimate show all of it (QA6: 30-60 % of a 1.5 m lever, with
+nor the fixes against its estimate show all of it (30-60 % of a 1.5 m lever, with
 the GPS NIS in the "ok" band). Between two consecutive fixes, though, the wheels and the
 estimated heading say how far the base moved: the dead-reckoned displacement dP (the
 odometry bins' speed along the estimated yaw, summed), right over a second up to the
@@ -145,8 +145,8 @@ def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
     where = (f"over {pairs} pairs of fixes, what they moved beyond the wheels' dead-reckoned travel as the vehicle "
              "turned puts the antenna at ")
     if not named:
-        # not "as stated" when it is not: the distance is said, and why it is not named (QA7: a 0.25 m lever
-        # at 4.2 standard errors was called "as extrinsic_xyz says")
+        # not "as stated" when it is not: the distance is said, and why it is not named (a 0.25 m lever at
+        # 4.2 standard errors is not shown to be what extrinsic_xyz says, only not proven to differ)
         off = math.hypot(*dl)
         why = (f"within {LEVER_TOL:g} m: not worth a change" if off < LEVER_TOL else
                f"not named: {math.sqrt(chi2):.1f} standard errors, {Z_SIGMAS:g} needed")
@@ -155,7 +155,7 @@ def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
                        f"extrinsic_xyz's ({stated[0]:+.2f}, {stated[1]:+.2f}): {why}", evidence=evidence)
     latency = ""
     if dl[0] < 0.0 and abs(dl[0]) > LATENCY_ALONG * abs(dl[1]):
-        # QA7: fixes stamped late trail the vehicle by speed x latency, a lever behind it at one speed
+        # fixes stamped late trail the vehicle by speed x latency: at one speed that looks like a lever behind it
         latency = (". Behind and along the vehicle, it can also be fixes stamped late (a latency tau trails them "
                    "by speed x tau): if the antenna is not there, see the GPS's clock verdict and stamp_offset_s")
     return Verdict(gps.name, "lever_arm", "warn",

@@ -230,8 +230,9 @@ def twist_frame_verdict(odom: OdomSensor, t: TwistStats, min_updates: int = 50) 
     key = sensor_key(odom.name, "twist_frame")
     if odom.twist_frame == "world" and t.turned >= min_updates and t.along_x >= 0.9 * t.turned:
         # a world-frame twist points where the vehicle heads, which the message's own pose says: one that
-        # keeps pointing along x while that pose turns away is a body-frame twist. Gentle curves (a highway,
-        # QA9: 37 m, blamed on the wheel scale and an IMU mounting) never make the turn-rate rule below fire
+        # keeps pointing along x while that pose turns away is a body-frame twist. Gentle curves (a highway:
+        # 37 m off, otherwise blamed on the wheel scale and an IMU mounting) never make the turn-rate rule
+        # below fire
         return Verdict(odom.name, "twist", "problem",
                        f"twist configured in the world frame, but in {100 * t.along_x / t.turned:.0f}% of the "
                        f"{t.turned} moving messages whose own pose is turned beyond {TURNED_RAD:g} rad from the odom "

@@ -17,7 +17,7 @@ is the turn. At the first orientation after the IMU was silent longer than the g
   (``_learn_wheel_yaw``: a skid-steer reads short; not beside a GPS or pose heading, whose
   corrections the filter's turn already holds) and weighed against the IMU's by the two
   variances (the wheels': what the heading's variance grew, and the scale fit's misfit). An IMU
-  turn beyond WHEELS_GATE sigma of theirs is not fused (an AHRS rebooted in the silence, QA8).
+  turn beyond WHEELS_GATE sigma of theirs is not fused (an AHRS rebooted in the silence).
   Wheels reading zero when the IMU is back, the gyro turning, saw nothing: the IMU's turn is taken.
 - The heading's variance becomes what the two leave (``ErrorStateEKF.turn_heading``).
 Nothing turns for a yaw the IMU does not measure (covariance above orientation_max_sigma), one
@@ -49,7 +49,7 @@ log = get_logger("fusiond.core")
 GAP_YAW_DRIFT = 0.01  # rad/s: how fast an IMU's own yaw may drift through a gap before its drift is measured
 DRIFT_BLOCK_S = 5.0  # s: the IMU yaw's drift against the heading is measured as the slope over blocks this long ...
 DRIFT_TAU_S = 60.0  # ... averaged with this memory (exponential weights) ...
-DRIFT_MIN_BLOCKS = 3  # ... and used once this many blocks agree (before: none, GAP_YAW_DRIFT its uncertainty)
+DRIFT_MIN_BLOCKS = 3  # ... and used once this many blocks agree (until then: none, GAP_YAW_DRIFT its uncertainty)
 DRIFT_OUTLIER = 4.0  # a block's slope beyond this many sigma of the mean: a heading correction or a disturbance
 DRIFT_REOPEN = 3  # ... unless this many in a row are: then the drift itself changed, start its average again
 DRIFT_FLOOR = 1e-4  # rad/s: the block slopes' scatter is taken as at least this (quantised, steady yaws)
@@ -147,7 +147,7 @@ def _turn_across_gap(imu: "ImuModel", s: "FilterState", yaw: float, var: float, 
         innovation = rot.wrap(corrected - wheels_turn)
         if innovation * innovation > WHEELS_GATE**2 * (wheels_var + turn_var):
             # far beyond both turns' uncertainty: the IMU's yaw is no longer the one before the silence
-            # (QA8: an AHRS rebooted in it and integrating since, so not back at 0), keep the wheels'
+            # (an AHRS rebooted in it and integrating since, so not back at 0), keep the wheels'
             if emit:
                 log.warning("heading_not_turned_across_gap", sensor=imu.cfg.name, stamp=stamp, gap_s=silent,
                             reason="the IMU's turn disagrees with the wheels' beyond both their uncertainties",
@@ -229,7 +229,7 @@ def _learn_wheel_yaw(sums: tuple | None, t: float, gyro_z: float, wheel_z: float
 def wheel_yaw_scale(sums: tuple | None) -> tuple[float, float]:
     """(k, the relative variance of a turn the wheels read, rescaled by 1/k): the wheels' yaw rate as k x the
     gyro's, least squares through the origin. The relative variance is the fit's misfit against what it
-    explains (a skid-steer slips more on the spot than on an arc: one k fits neither exactly, QA8) plus k's
+    explains (a skid-steer slips more on the spot than on an arc: one k fits neither exactly) plus k's
     own; the misfit does not average down over a turn, the noise in it would. (1, 0) before
     WHEEL_YAW_MIN_SAMPLES turning samples (weighted), or for a fit that is not a scale (k below 0.2 or
     above 5: wheels that do not see the turn)."""

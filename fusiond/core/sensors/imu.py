@@ -379,7 +379,7 @@ class ImuModel(SensorModel):
         az = accel[2] - (wx * vy - wy * vx)
         # Averaged over GRAVITY_AVERAGE_S before the tilt is taken: vibration (an engine's 30 Hz, several m/s^2)
         # is zero-mean in the specific force, but not in atan2 of it, nor in which samples pass the magnitude
-        # gate: sample by sample it read as a steady tilt of tenths of a degree (QA4's car: 30 m of z). The
+        # gate: sample by sample it reads as a steady tilt of tenths of a degree (on a car, 30 m of z). The
         # mean's gate and angles are unbiased; its update carries the information of its n samples.
         own: ImuOwn = s.own[self.index]
         w = own.gravity

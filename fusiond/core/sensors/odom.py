@@ -97,8 +97,8 @@ def body_twist(s: OdomSample) -> tuple[tuple, tuple, mat3.Mat3] | None:
 
     The twist is in the driver's odometry frame, whose orientation of the body the same message states:
     turned back with it, the twist is the body's, whatever the driver's heading has drifted to. Integrated
-    in fusiond's world frame as it was, it followed the driver's (skid-corrupted) heading instead: QA4's
-    skid-steer, 26 m RMS and a 108 deg heading error, against 1.7 m for the body twist."""
+    in fusiond's world frame as it stands, it would follow the driver's (skid-corrupted) heading instead: on
+    a skid-steer, 26 m RMS and a 108 deg heading error, against 1.7 m for the body twist."""
     q = s.orientation
     if len(q) != 4 or q == (0.0, 0.0, 0.0, 1.0) or not finite(q):
         return None
