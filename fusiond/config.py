@@ -82,6 +82,7 @@ class FilterConfig(_Table):
     gyro_scale_sigma: float = 0.05  # initial gyro (yaw axis) scale uncertainty (gyro_scale_estimation)
     gyro_scale_walk: float = 1.0e-5  # its random walk, 1/sqrt(s)
     two_d_mode: bool = False  # planar robot (robot_localization's meaning): z, roll, pitch held at 0
+    continuous_odom: bool = False  # no heading reference: a bias learned at rest never turns the pose (REP-105)
     nis_window: int = 50  # updates per windowed NIS consistency test
     nis_confidence: float = 0.95  # two-sided chi-square confidence of that test
 

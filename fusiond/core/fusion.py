@@ -101,8 +101,11 @@ class FusionCore:
         # sensor: its own frame); nothing is published before its first message.
         self.frame_index = next((i for i, s in enumerate(self.sensors) if absolute_sensor(s)), -1)
         self.gps_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)), -1)
-        masks = update_masks(self.layout, self.frame_index >= 0)
+        yaw_fused = any(isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in self.sensors)
+        masks = update_masks(self.layout, self.frame_index >= 0,
+                             heading_observed=self.frame_index >= 0 or yaw_fused or not fc.continuous_odom)
         self.tilt_mask, self.position_mask, self.delta_mask = masks.tilt, masks.position, masks.delta
+        self.rest_mask = masks.rest
         # An IMU with absolute yaw (REP-103: ENU, yaw 0 = east): trusted as the GPS frame's heading when
         # yaw_offset_sigma = 0; otherwise read as heading + an estimated offset (the yaw_offset block).
         self.absolute_yaw = any(isinstance(s, ImuSensor) and s.orientation == "absolute" for s in self.sensors)
@@ -130,7 +133,7 @@ class FusionCore:
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
             track_acceleration=any(isinstance(sc, ImuSensor) and sc.tilt_from_gravity for sc in self.sensors),
             tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
-            timeout=self.inputs.timeout, inputs_at=self.inputs.at, forward_accel=self._forward_accel)
+            rest_mask=self.rest_mask, timeout=self.inputs.timeout, inputs_at=self.inputs.at, forward_accel=self._forward_accel)
         self.models = build_models(self.sensors, self.context)
         self._predicting = [m for m in self.models if m.predicts]  # on_predict hooks (GPS track, pose anchors)
         if self.two_d:

@@ -58,9 +58,12 @@ class UpdateMasks:
     tilt: np.ndarray  # a roll/pitch-only update
     position: np.ndarray  # a GPS fix while the heading is unknown
     delta: np.ndarray | None  # a differential pose beside an absolute sensor (None: no absolute sensor)
+    rest: np.ndarray | None  # a standstill's gyro-bias update while nothing observes heading (None: all)
 
 
-def update_masks(layout: StateLayout, has_frame_sensor: bool) -> UpdateMasks:
+def update_masks(layout: StateLayout, has_frame_sensor: bool, heading_observed: bool | None = None) -> UpdateMasks:
+    """``heading_observed`` False: the standstill bias update is masked (``rest``); default: as
+    ``has_frame_sensor``."""
     n = layout.error_dim
     # A roll/pitch-only update may correct roll, pitch and the x/y gyro bias, never
     # position, heading, the z bias or a scale (which drive heading and position).
@@ -87,7 +90,18 @@ def update_masks(layout: StateLayout, has_frame_sensor: bool) -> UpdateMasks:
         for name in ("gps_error", "yaw_offset"):  # a pose delta says nothing about these
             if layout.has(name):
                 delta[layout.error[name]] = False
-    return UpdateMasks(tilt, position, delta)
+    # A bias learned at a standstill is correlated with the heading it drifted while unknown. With
+    # nothing observing heading (no GPS or absolute pose, no IMU yaw fused) and filter.continuous_odom,
+    # the output frame is an odom frame, which REP-105 requires to be continuous: the bias corrects the
+    # heading's rate from now on, and the heading and position the old bias bent are left where they
+    # are (Schmidt update) rather than turned at once by tens of degrees. Beside a heading reference
+    # the correlated correction is the right one and the update is not masked.
+    heading_observed = has_frame_sensor if heading_observed is None else heading_observed
+    rest = None
+    if not heading_observed and layout.has("gyro_bias"):
+        rest = np.ones(n, dtype=bool)
+        rest[[0, 1, 2, 5]] = False
+    return UpdateMasks(tilt, position, delta, rest)
 
 
 __all__ = ["UpdateMasks", "absolute_sensor", "state_layout", "update_masks"]

@@ -176,8 +176,14 @@ class Recorder:
         return self._absolute
 
     def filter(self, samples: Iterator[Sample]) -> Iterator[Sample]:
-        """The bag's samples, less the held-back ones, in the same order."""
-        for s in samples:
+        """The bag's samples, less the held-back ones, in the same order. The baselines see each
+        stamp with its sensor's ``stamp_offset_s`` added, as the core does: what the configuration
+        knows of a sensor's clock, the baselines know too."""
+        offsets = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
+        for original in samples:
+            s = original
+            if s.sensor in offsets:
+                s = msgspec.structs.replace(s, stamp=s.stamp + offsets[s.sensor])
             if isinstance(s, OdomSample):
                 lin, ang = s.linear, s.angular
                 self.odom.append((s.stamp, lin[0], lin[1], ang[2], yaw(s.orientation),
@@ -196,7 +202,7 @@ class Recorder:
                     (self.fused_poses if keep else self.held_poses).append((s.stamp, *s.position, yaw(s.orientation)))
                 if not keep:
                     continue
-            yield s
+            yield original
 
 
 def read_reference(paths: Sequence[Path], topic: str) -> tuple[str, np.ndarray, np.ndarray, np.ndarray | None,

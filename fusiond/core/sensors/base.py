@@ -32,11 +32,11 @@ class SensorContext:
     asks the models whether they give roll/pitch)."""
 
     __slots__ = ("layout", "filter", "two_d", "tilt_reference", "absolute_yaw", "odom_index", "track_acceleration",
-                 "tilt_mask", "position_mask", "delta_mask", "timeout", "inputs_at", "forward_accel")
+                 "tilt_mask", "position_mask", "delta_mask", "rest_mask", "timeout", "inputs_at", "forward_accel")
 
     def __init__(self, layout: "StateLayout", filter_cfg: FilterConfig, *, two_d: bool, absolute_yaw: bool,
                  odom_index: int, track_acceleration: bool, tilt_mask: np.ndarray, position_mask: np.ndarray,
-                 delta_mask: np.ndarray | None,
+                 delta_mask: np.ndarray | None, rest_mask: np.ndarray | None = None,
                  timeout: Callable[[int, "FilterState"], float],
                  inputs_at: Callable[["FilterState"], "MotionInput"],
                  forward_accel: Callable[["FilterState"], float]) -> None:
@@ -55,6 +55,8 @@ class SensorContext:
         self.position_mask = position_mask
         # A pose delta beside an absolute sensor corrects tilt, biases and scales only (None: all).
         self.delta_mask = delta_mask
+        # A standstill's bias update with nothing observing heading: biases and tilt only (None: all).
+        self.rest_mask = rest_mask
         self.timeout = timeout  # (sensor index, state) -> how long that sensor's input is held
         self.inputs_at = inputs_at  # state -> the motion inputs held at its time
         # state -> the forward acceleration now (m/s^2; NaN while it changes too fast to know, 0.0 untracked)

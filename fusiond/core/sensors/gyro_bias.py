@@ -116,7 +116,7 @@ def learn_bias_at_rest(imu: "ImuModel", s: "FilterState", inp: "ImuInput", stamp
         # and left out of the consistency tests.
         learning |= float(s.ekf.P[e0 + axis, e0 + axis]) > LEARNING_PRIOR_RATIO * var
         y, H, R = obs.bias_axis(layout, s.ekf.x, axis, mean, var)
-        res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
+        res = s.ekf.update(y, H, R, ZERO_RATE_GATE, ctx.rest_mask)
         if res.rejected:
             recent = (rejects[axis] + (mean,))[-REOPEN_AFTER:]
             if len(recent) == REOPEN_AFTER and max(recent) - min(recent) <= AGREE_SIGMAS * math.sqrt(var):
@@ -124,7 +124,7 @@ def learn_bias_at_rest(imu: "ImuModel", s: "FilterState", inp: "ImuInput", stamp
                             estimate=float(s.ekf.x[layout.nominal["gyro_bias"].start + axis]), at_rest=mean)
                 s.ekf.reset_variance(e0 + axis, fc.gyro_bias_sigma**2)
                 y, H, R = obs.bias_axis(layout, s.ekf.x, axis, mean, var)
-                res = s.ekf.update(y, H, R, ZERO_RATE_GATE)
+                res = s.ekf.update(y, H, R, ZERO_RATE_GATE, ctx.rest_mask)
                 learning = True
                 recent = ()
             rejects[axis] = recent
