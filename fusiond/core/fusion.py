@@ -487,7 +487,12 @@ class FusionCore:
             if not u.from_gyro and u.angular_period > 0.0:  # the wheels' yaw rate turns the heading
                 s.wheel_turn += u.angular[2] * seg
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
-                m.on_predict(s, s.ekf.x, x)
+                extra = m.on_predict(s, s.ekf.x, x)
+                if extra is not None:  # what the linearised model leaves out of this step's horizontal motion
+                    Q[0, 0] += extra[0]
+                    Q[0, 1] += extra[1]
+                    Q[1, 0] += extra[1]
+                    Q[1, 1] += extra[2]
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
                 pos_var, yaw_var = held.unheld_motion_var(s, t_end, timeouts)

@@ -47,10 +47,10 @@ __all__ = ["Doctor", "Verdict", "Series", "SeriesCollector", "ChannelStats", "di
            "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 MIN_UPDATES = 50  # twist-frame and lean checks need this many samples (not NIS: that uses what there is)
-ABSOLUTE_CHANNELS = ("position", "position_unaligned", "position_provisional", "pose", "pose_delta")
+ABSOLUTE_CHANNELS = ("position", "position_unaligned", "position_provisional", "altitude", "pose", "pose_delta")
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
-KEPT_CHANNELS = ("gyro_bias", "position")
+KEPT_CHANNELS = ("gyro_bias", "position", "altitude")
 GATE_CHANNELS = ("yaw_jump",)  # every record is a reading its gate kept out: no NIS test (ChannelStats.judged)
 CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)
 
@@ -327,9 +327,12 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         elif (channel == "position_unaligned" and isinstance(s, GpsSensor) and ch.n >= UNALIGNED_MIN_FIXES
               and not any(n == name and c in ("position", "position_provisional", "position_reacquired") and c_.n
                           for (n, c), c_ in channels.items())):
-            found[(name, channel)].append(unaligned_verdict(s, ch))
+            found[(name, channel)].append(unaligned_verdict(s, ch, channels.get((name, "altitude"))))
         elif channel in ABSOLUTE_CHANNELS:
-            v = absolute_verdict(name, channel, ch, t0)
+            # a GPS fix's horizontal and vertical are two blocks (two channels): a paste line of
+            # position_noise takes its up from the altitude channel
+            up = channels.get((name, "altitude")) if channel != "altitude" else None
+            v = absolute_verdict(name, channel, ch, t0, up)
             judged = applied_verdict(ch)  # the whole run's, or the applied updates' (module channels)
             if lever is not None and lever.level != "ok" and lever.sensor == name and channel == "position":
                 # an unstated lever swings the fixes as the vehicle turns: what the NIS (or a wander) shows
@@ -343,7 +346,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
                 # With another source wrong (a culprit) its errors may be what the innovations carry: an ok
                 # channel is then left alone, a NIS-low one gets the wander verdict with that caveat
                 head = f"{nis_head(ch, t0)}: "
-                wander = gps_wander_verdict(s, ch, head)
+                wander = gps_wander_verdict(s, ch, head, up)
                 if wander is not None and culprit is not None:
                     wander.message += (f"; {culprit.sensor}/{culprit.channel} is wrong too (see it) and may carry "
                                        "part of this: fix it first, then replay to confirm")

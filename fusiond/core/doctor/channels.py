@@ -80,10 +80,13 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None,
     return out
 
 
-def _measured_noise(ch: ChannelStats) -> str:
+def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
     """``position_noise = [...]`` from the innovations' rms per axis (east north up), when the channel
-    has the three: the sensor's noise plus the filter's own uncertainty, so an upper bound."""
+    has the three, or the horizontal two and ``up`` (the fix's altitude channel) the third: the sensor's
+    noise plus the filter's own uncertainty, so an upper bound."""
     rms = [ch.component(i)[1] for i in range(len(ch.components))]
+    if len(rms) == 2 and up is not None and up.n and up.components == ["up"]:
+        rms.append(up.component(0)[1])
     if len(rms) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rms):
         return ""
     return "position_noise = [" + ", ".join(f"{r:.2g}" for r in rms) + "]"
@@ -112,7 +115,8 @@ def nis_head(ch: ChannelStats, t0: float | None) -> str:
             f"the {ch.n_nis_kept} applied ones read {ch.kept_nis_per_dof:.2f} per dof")
 
 
-def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None) -> Verdict:
+def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
+                     up: ChannelStats | None = None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
@@ -124,7 +128,7 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     if frac > MOST_GATED:
         # Jumps (multipath, relocalisation) come in bursts among good fixes; a gate that rejects most
         # of them is cutting into the ordinary noise, which is then larger than stated.
-        line = _measured_noise(ch)
+        line = _measured_noise(ch, up)
         return Verdict(name, channel, "problem",
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): too many for jumps, "
                        "which come in bursts among good fixes: the stated noise is too small, and the innovations "
@@ -149,12 +153,12 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "
                        "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation); "
                        "if it is the noise, the innovations (an upper bound) suggest the value below",
-                       key, _measured_noise(ch), evidence=ev)
+                       key, _measured_noise(ch, up), evidence=ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
                        f"NIS low ({figures(ch, t0)}; {detail}): the stated noise is larger than the innovations show "
                        "(the value below: their rms, an upper bound of the sensor's own noise)",
-                       key, _measured_noise(ch), evidence=ev)
+                       key, _measured_noise(ch, up), evidence=ev)
     return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)
 
 
@@ -203,7 +207,7 @@ UNALIGNED_MIN_FIXES = 50  # fixes before a heading never found is worth a verdic
 UNALIGNED_LARGE = 2.0  # predicted innovation rms this many times the measured one: the stated noise hides the heading
 
 
-def unaligned_verdict(gps: GpsSensor, ch: ChannelStats) -> Verdict:
+def unaligned_verdict(gps: GpsSensor, ch: ChannelStats, up: ChannelStats | None = None) -> Verdict:
     """The ``position_unaligned`` channel of a GPS whose heading search never ended: every fix was fused
     as a position-only update, ungated, and none was judged against the stated noise. The search fits
     the fixes to the wheels' track and waits until the fit's heading uncertainty is small; a stated noise
@@ -212,6 +216,8 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats) -> Verdict:
     The innovations' rms against what S predicted shows it: far below, the statement is what is wrong."""
     seen = [ch.learning_component(i) for i in range(len(ch.components))]
     rms, pred = [r for r, _ in seen], [p for _, p in seen]
+    if len(rms) == 2 and up is not None and up.n and up.components == ["up"]:
+        rms.append(up.component(0)[1])  # the fix's altitude, judged as its own block
     horizontal = [(r, p) for c, r, p in zip(ch.components, rms, pred) if c in ("east", "north")]
     measured = math.sqrt(sum(r * r for r, _ in horizontal) / len(horizontal)) if horizontal else math.nan
     predicted = math.sqrt(sum(p * p for _, p in horizontal) / len(horizontal)) if horizontal else math.nan

@@ -50,7 +50,8 @@ def autocorrelation(y: np.ndarray, max_lag: int) -> np.ndarray:
     return np.array([1.0] + [float(np.mean(y[k:] * y[:-k])) / var for k in range(1, max_lag + 1)])
 
 
-def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "") -> Verdict | None:
+def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "",
+                       up_ch: ChannelStats | None = None) -> Verdict | None:
     """A verdict when the channel's innovations are strongly autocorrelated (module doc), else None.
 
     None when the wander is already modelled (``error_tau_s`` set): the filter then follows the
@@ -89,7 +90,11 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "") -> Verd
     # (vertical_error_sigma over vertical_error_tau_s), whose innovations are what is left after it
     # absorbed the altitude's wander: their persisting part is far below it (0.6 m against a 5 m state;
     # pasted, z would wander 5 m instead of 0.18 m). So never below vertical_error_sigma.
-    up = _up_sigma([r[1] for r in rows])
+    # the altitude is its own measurement block (channel "altitude"); a 3-component channel carries it too
+    if up_ch is not None and up_ch.components == ["up"]:
+        up = _up_sigma([(0.0, 0.0, y[0]) for y, rej in zip(up_ch.innovations, up_ch.rejected_flags) if not rej])
+    else:
+        up = _up_sigma([r[1] for r in rows])
     sigma = [*sigma_h, max(up if up is not None else 0.0, gps.vertical_error_sigma)]
     evidence = {"innovation_lag1_correlation": share, "error_tau_s": tau, "error_sigma_east_m": sigma[0],
                 "error_sigma_north_m": sigma[1], "white_sigma_m": max(white), "fixes": float(n),

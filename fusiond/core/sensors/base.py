@@ -93,8 +93,11 @@ class SensorModel:
     def on_start(self, s: "FilterState") -> None:
         """A fresh state: put this sensor's slice (``s.own[self.index]``, None by default) in place."""
 
-    def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> None:
-        """One prediction step moved the nominal state from x0 to x1 (only when ``predicts``)."""
+    def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> tuple[float, float, float] | None:
+        """One prediction step moved the nominal state from x0 to x1 (only when ``predicts``). Returns
+        a horizontal position covariance (m^2: xx, xy, yy) to add for that step, what the linearised
+        motion model leaves out of it, or None."""
+        return None
 
     def apply(self, s: "FilterState", inp: Any, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         """What an applied input does to state s at ``stamp`` (already predicted there). Returns the

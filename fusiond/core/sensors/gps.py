@@ -155,6 +155,7 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     # consecutive gated-out fixes: (t, innovation east, north, variance, fix east, north, dead-reckoned east, north)
     rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
     accepted: tuple[float, float, float] | None = None  # the newest fix the gate let in: (t, innovation east, north)
+    unaligned: float = 0.0  # m dead-reckoned since the last fix (they share one heading error)
 
 
 class GpsModel(SensorModel):
@@ -184,13 +185,32 @@ class GpsModel(SensorModel):
         s.heading_ready = False
         s.own[self.index] = GpsOwn()
 
-    def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> None:
-        """While a track is kept, accumulate the dead-reckoned motion of each prediction."""
+    def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> tuple[float, float, float] | None:
+        """While a track is kept, accumulate the dead-reckoned motion of each prediction, and return
+        what the linearised motion model leaves out of its covariance.
+
+        A displacement D driven along a heading whose error is psi ~ N(0, s2) is off by D (R(psi) - I):
+        across the heading by D sin(psi), which the linearised model has (D^2 s2), and along it by
+        D (cos(psi) - 1), which it drops: E(1 - cos psi)^2 = 3/2 - 2 exp(-s2/2) + exp(-2 s2)/2, about
+        s2^2/2 (nothing) once the heading is known, but ~1.1 of D^2 while it is unknown (sigma ~pi/sqrt 3),
+        where the filter would otherwise claim metres of confidence along a track driven the wrong way.
+        The steps since the last fix share that heading error, so their lengths add before squaring:
+        each step adds var(D + d) - var(D) along its direction of travel; a fix resets D."""
         own: GpsOwn = s.own[self.index]
-        if own.track is not None:
-            tr = own.travel
-            s.own[self.index] = GpsOwn(own.track, (tr[0] + float(x1[0] - x0[0]), tr[1] + float(x1[1] - x0[1]),
-                                                   tr[2] + float(x1[2] - x0[2])), own.rejected, own.accepted)
+        if own.track is None:
+            return None
+        tr = own.travel
+        dx, dy = float(x1[0] - x0[0]), float(x1[1] - x0[1])
+        d = math.hypot(dx, dy)
+        s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + float(x1[2] - x0[2])), own.rejected,
+                                   own.accepted, own.unaligned + d)
+        if d == 0.0:
+            return None
+        s2 = float(s.ekf.P[5, 5])
+        along = 1.5 - 2.0 * math.exp(-0.5 * s2) + 0.5 * math.exp(-2.0 * s2)
+        var = along * ((own.unaligned + d) ** 2 - own.unaligned**2)
+        ux, uy = dx / d, dy / d
+        return var * ux * ux, var * ux * uy, var * uy * uy
 
     def apply(self, s: "FilterState", inp: GpsInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         cfg = self.cfg
@@ -216,17 +236,12 @@ class GpsModel(SensorModel):
                 return []
             return [self.record(stamp, [ENU_NAMES[i] for i in rows], [0.0] * len(rows),
                                 [inp.cov[4 * i] for i in rows], 0.0, len(rows), True, "position_frozen", late)]
-        y, H, R = obs.position(self.ctx.layout, ekf.x, z, inp.cov, cfg.extrinsic_xyz, self.error)
-        if len(rows) < 3:
-            if not rows:
-                return []
-            y, H, R = y[list(rows)], H[list(rows)], R[np.ix_(rows, rows)]
+        if not rows:
+            return []
+        horizontal = tuple(r for r in rows if r < 2)
+        vertical = tuple(r for r in rows if r == 2)
         if s.heading_ready:
-            res = ekf.update(y, H, R, cfg.mahalanobis_threshold)
-            channel = "position"
-            if self._locked_out(s, res.rejected, y, R, z, stamp):
-                self._reacquire(s, z, inp, rows, stamp)
-                channel = "position_reacquired"
+            threshold, mask, channel = cfg.mahalanobis_threshold, None, "position"
         else:
             # Heading unknown: the fix may move position only, and is not gated (a dead-reckoned
             # track along a wrong heading must not lock the filter out of the GPS), unless beside a
@@ -234,20 +249,48 @@ class GpsModel(SensorModel):
             # Gauss-Markov GPS error is a "consider" state here: its variance widens S (H has its
             # columns) but the offset a wrong heading builds up must not be absorbed into it as GPS error.
             gated = self.wander > 0.0 and float(ekf.P[5, 5]) <= HEADING_WANDER_READY_SIGMA**2
-            res = ekf.update(y, H, R, cfg.mahalanobis_threshold if gated else math.inf, self.ctx.position_mask)
+            threshold = cfg.mahalanobis_threshold if gated else math.inf
+            mask = self.ctx.position_mask
             channel = "position_provisional" if gated else "position_unaligned"
-            if gated and self._locked_out(s, res.rejected, y, R, z, stamp):
-                self._reacquire(s, z, inp, rows, stamp)
+        records: list[DiagnosticsRecord] = []
+        # The horizontal and the vertical of a fix are two measurement blocks, each gated on its own:
+        # a consumer receiver's altitude wanders by metres that say nothing about its east and north,
+        # and one 3-dof test would throw good horizontal fixes away with a bad altitude.
+        if horizontal:
+            y, H, R = self._block(ekf, z, inp.cov, horizontal)
+            res = ekf.update(y, H, R, threshold, mask)
+            own = s.own[self.index]
+            if own.unaligned and not res.rejected:  # the fix bounds the displacement again
+                s.own[self.index] = msgspec.structs.replace(own, unaligned=0.0)
+            if channel != "position_unaligned" and self._locked_out(s, res.rejected, y, R, z, stamp):
+                self._reacquire(s, z, inp, horizontal, stamp)
                 channel = "position_reacquired"
-            elif not res.rejected:
-                self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
-        if not emit:
-            return []
-        # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
-        # heading: its NIS tests the heading search, not the receiver's noise (learning); so does
-        # the fix that re-acquired a locked-out filter.
-        return [self.record(stamp, [ENU_NAMES[i] for i in rows], y.tolist(), res.innovation_var, res.nis, len(rows),
-                            res.rejected, channel, late, learning=channel != "position")]
+            elif channel == "position_unaligned" or (channel == "position_provisional" and not res.rejected):
+                if not res.rejected:
+                    self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
+            if emit:
+                # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
+                # heading: its NIS tests the heading search, not the receiver's noise (learning); so
+                # does the fix that re-acquired a locked-out filter.
+                records.append(self.record(stamp, [ENU_NAMES[i] for i in horizontal], y.tolist(), res.innovation_var,
+                                           res.nis, len(horizontal), res.rejected, channel, late,
+                                           learning=channel != "position"))
+        if vertical:
+            y, H, R = self._block(ekf, z, inp.cov, vertical)
+            # The altitude does not depend on the heading: gated as soon as a gate is configured.
+            res = ekf.update(y, H, R, cfg.mahalanobis_threshold, mask)
+            if emit:
+                records.append(self.record(stamp, ["up"], y.tolist(), res.innovation_var, res.nis, 1, res.rejected,
+                                           "altitude", late))
+        return records
+
+    def _block(self, ekf, z, cov, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fix's rows ``rows`` (east north up indices) as a measurement of the state now."""
+        y, H, R = obs.position(self.ctx.layout, ekf.x, z, cov, self.cfg.extrinsic_xyz, self.error)
+        if len(rows) < 3:
+            idx = list(rows)
+            y, H, R = y[idx], H[idx], R[np.ix_(idx, idx)]
+        return y, H, R
 
     def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
         """The first fix defines the world frame: the base goes where it says, heading unknown

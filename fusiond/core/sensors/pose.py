@@ -196,7 +196,7 @@ class PoseModel(SensorModel):
         """
         anchor: PoseAnchor | None = s.own[self.index]
         if anchor is None or anchor.epoch != s.frame_epoch:
-            return
+            return None
         q0 = (float(x0[3]), float(x0[4]), float(x0[5]), float(x0[6]))
         step_p, step_q = obs.relative_pose((float(x0[0]), float(x0[1]), float(x0[2])), q0,
                                            (float(x1[0]), float(x1[1]), float(x1[2])),
@@ -205,6 +205,7 @@ class PoseModel(SensorModel):
         a = mat3.apply(rot.matrix9(dq), step_p)
         moved = ((dp[0] + a[0], dp[1] + a[1], dp[2] + a[2]), rot.normalize(rot.mul(dq, step_q)))
         s.own[self.index] = PoseAnchor(anchor.position, anchor.q, moved, anchor.epoch)
+        return None
 
 
 __all__ = ["PoseAnchor", "PoseInput", "PoseModel", "PosePolicy"]
