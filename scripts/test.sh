@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The test command (README, CI): set up, then run the whole suite.
+# The test command (README, CI): set up, then run the whole suite (--fast: the fast tier, under a minute).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh

@@ -4,6 +4,32 @@ from pathlib import Path
 
 import pytest
 
+# --- the fast tier (`scripts/test.sh --fast`, under a minute on 2 cores) ---------------------------
+#
+# The modules that pin the maths, the sensor models, the core's behaviour, the codecs, the config and
+# the evaluation, without simulations of minutes nor processes nor Zenoh: what a developer runs on
+# every change. The whole suite (CI) adds the simulated recordings, the doctor, the daemon end to end.
+FAST_MODULES = frozenset({
+    "test_estimator_math", "test_estimator_fast_paths", "test_kernels", "test_layout", "test_history_ring",
+    "test_codecs", "test_config_truth", "test_logs", "test_thread_state", "test_drain_schedule",
+    "test_time_jumps", "test_fusion_core", "test_sensor_models", "test_evaluate", "test_health",
+    "test_diagnostics", "test_gps_blocks", "test_continuous_odom", "test_odom_rate", "test_world_twist",
+    "test_two_d_mode", "test_bag", "test_trajectory_pin", "test_standstill_bias",
+})
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--fast", action="store_true", help="only the fast tier (tests/conftest.py FAST_MODULES)")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not config.getoption("--fast"):
+        return
+    keep = [i for i in items if i.path.stem in FAST_MODULES and i.get_closest_marker("e2e") is None]
+    config.hook.pytest_deselected(items=[i for i in items if i not in keep])
+    items[:] = keep
+
+
 # --- bag fixtures (codecs / replay.bag tests) ------------------------------------------
 
 # robot_localization's test bag 2 (BSD, data/LICENSE.robot_localization), shipped in the repo so
