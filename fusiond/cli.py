@@ -131,6 +131,14 @@ def _zenoh_errors():
 
 def cmd_run(args: argparse.Namespace) -> int:
     cfg = _load_config(args.config)
+    if not cfg.sensors:  # nothing to subscribe to: the daemon would wait for input forever
+        print(f"fusiond: config error: {args.config}: no [[sensors]] configured: the daemon would wait forever "
+              "for input; add at least the odometry sensor (see config.toml)", file=sys.stderr)
+        return EXIT_USAGE
+    if getattr(args, "no_multicast", False):
+        import msgspec
+
+        cfg = msgspec.structs.replace(cfg, zenoh=msgspec.structs.replace(cfg.zenoh, multicast_scouting=False))
     from .transport.daemon import run
 
     ConfigError, SessionError = _zenoh_errors()
@@ -154,19 +162,27 @@ def cmd_play(args: argparse.Namespace) -> int:
     if args.rate < 0:
         print("fusiond: --rate must be >= 0", file=sys.stderr)
         return EXIT_USAGE
-    cfg, session = _tool_session(args, listen=args.listen)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    try:
-        with open_bag_samples([Path(b) for b in args.bags], cfg.sensors) as bag:
-            result = play(bag, cfg, session, rate=args.rate, duration=args.duration, wait_s=args.wait, stop=stop,
-                          names=args.bags)
+    cfg = _load_config(args.config)
+    try:  # the bag first: a file that is no bag is refused before a session is opened or a daemon awaited
+        bag = open_bag_samples([Path(b) for b in args.bags], cfg.sensors)
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE
+    stop = threading.Event()
+    try:
+        cfg, session = _tool_session(args, listen=args.listen)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+        try:
+            result = play(bag, cfg, session, rate=args.rate, duration=args.duration, wait_s=args.wait, stop=stop,
+                          names=args.bags)
+        finally:
+            session.close()
+    except BagError as err:  # a chunk that cannot be read halfway through
+        print(f"fusiond: {err}", file=sys.stderr)
+        return EXIT_USAGE
     finally:
-        session.close()
+        bag.close()
     per = " ".join(f"{k}={v}" for k, v in result.per_sensor.items())
     print(f"played {result.messages} messages ({per}), {result.bag_seconds:.3f} s of bag in {result.seconds:.3f} s"
           + (" (interrupted)" if result.interrupted else ""))
@@ -442,6 +458,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("run", help="the fusion daemon: subscribe to the sensors on Zenoh, publish the fused pose")
     d.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    d.add_argument("--no-multicast", action="store_true",
+                   help="do not scout for peers by multicast (overrides zenoh.multicast_scouting)")
     d.set_defaults(func=cmd_run, default_log_level="info")
 
     pl = sub.add_parser("play", help="publish a bag's sensor topics onto Zenoh as zenoh-bridge-ros2dds would")
@@ -453,6 +471,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "
                          "endpoints on loopback")
     pl.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
+    pl.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
     pl.add_argument("--wait", type=float, default=5.0,
                     help="wait up to S seconds for the config's daemon to answer on its health key before "
                          "playing, then play anyway (default 5; 0: do not wait)")
@@ -463,6 +482,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--connect", action="append", metavar="ENDPOINT",
                    help="Zenoh endpoint of the daemon (repeatable); default: from the config")
     h.add_argument("--key", help="health key (default: output.health_key of the config)")
+    h.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
     h.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for an answer (default 2)")
     h.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
                    help="worst status that still exits 0 (default degraded; failed = any answer)")
@@ -484,6 +504,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--connect", action="append", metavar="ENDPOINT",
                     help="Zenoh endpoint of the daemon (repeatable); default: from the config")
     sp.add_argument("--key", help="set_pose key (default: output.set_pose_key of the config)")
+    sp.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
     sp.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the answer (default 2)")
     sp.set_defaults(func=cmd_set_pose)
 

@@ -210,10 +210,20 @@ class Config(_Table):
         raise KeyError(name)
 
 
-def _check_struct(obj: msgspec.Struct, where: str) -> None:
+def sensor_key(names: typing.Sequence[object], i: int, field: str = "") -> str:
+    """How an error names key ``field`` of the i-th [[sensors]] table: by the sensor's name
+    (`sensor "imu": orientation`), which is what a user finds in the file, when the table has a
+    name no other table shares; else by its index (`sensors[2].orientation`)."""
+    name = names[i] if 0 <= i < len(names) else None
+    if isinstance(name, str) and name and list(names).count(name) == 1:
+        return f'sensor "{name}": {field}' if field else f'sensor "{name}"'
+    return f"sensors[{i}].{field}" if field else f"sensors[{i}]"
+
+
+def _check_struct(obj: msgspec.Struct, at: typing.Callable[[str], str]) -> None:
     for field in obj.__struct_fields__:
         value = getattr(obj, field)
-        path = f"{where}.{field}"
+        path = at(field)
         numbers = value if isinstance(value, tuple) else [value]
         for v in numbers:
             if isinstance(v, float) and math.isnan(v):
@@ -242,28 +252,28 @@ def validate(cfg: Config) -> Config:
     for table in ("connect", "listen"):
         for ep in getattr(cfg.zenoh, table):
             check_endpoint(ep, f"zenoh.{table}")
-    _check_struct(cfg.filter, "filter")
+    _check_struct(cfg.filter, lambda field: f"filter.{field}")
     if not 0.0 < cfg.filter.nis_confidence < 1.0:
         raise ConfigError("filter.nis_confidence: must be between 0 and 1")
     if cfg.filter.nis_window < 2:
         raise ConfigError("filter.nis_window: must be at least 2")
     names: set[str] = set()
     keys: set[str] = set()
+    every = [s.name for s in cfg.sensors]
     for i, s in enumerate(cfg.sensors):
-        where = f"sensors[{i}]"
-        _check_struct(s, where)
         if not s.name:
-            raise ConfigError(f"{where}.name: must not be empty")
+            raise ConfigError(f"sensors[{i}].name: must not be empty")
         if s.name in names:
-            raise ConfigError(f"{where}.name: duplicate sensor name {s.name!r}")
+            raise ConfigError(f"sensors[{i}].name: duplicate sensor name {s.name!r}")
+        _check_struct(s, lambda field: sensor_key(every, i, field))  # noqa: B023 - called at once
         if s.key in keys:
-            raise ConfigError(f"{where}.key: duplicate key {s.key!r}")
+            raise ConfigError(f"{sensor_key(every, i, 'key')}: duplicate key {s.key!r}")
         if not s.key or s.key.startswith("/"):
-            raise ConfigError(f"{where}.key: must be a Zenoh key without leading '/', got {s.key!r}")
+            raise ConfigError(f"{sensor_key(every, i, 'key')}: must be a Zenoh key without leading '/', got {s.key!r}")
         if s.timeout_s <= 0:
-            raise ConfigError(f"{where}.timeout_s: must be positive")
+            raise ConfigError(f"{sensor_key(every, i, 'timeout_s')}: must be positive")
         if not math.isfinite(s.stamp_offset_s):
-            raise ConfigError(f"{where}.stamp_offset_s: must be finite")
+            raise ConfigError(f"{sensor_key(every, i, 'stamp_offset_s')}: must be finite")
         names.add(s.name)
         keys.add(s.key)
     odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]
@@ -272,26 +282,29 @@ def validate(cfg: Config) -> Config:
     frames = [i for i, s in enumerate(cfg.sensors)
               if isinstance(s, GpsSensor) or (isinstance(s, PoseSensor) and not s.differential)]
     if len(frames) > 1:
-        raise ConfigError(f"sensors[{frames[1]}]: only one absolute sensor (gps, or pose without differential) "
+        raise ConfigError(f"{sensor_key(every, frames[1])}: only one absolute sensor (gps, or pose without differential) "
                           "may define the world frame")
     if cfg.output.navsat_key and not any(isinstance(s, GpsSensor) for s in cfg.sensors):
         raise ConfigError("output.navsat_key: needs a gps sensor (the NavSatFix is the fused position in WGS84)")
     _check_ros(cfg)
     for i, s in enumerate(cfg.sensors):
+        def at(field: str) -> str:
+            return sensor_key(every, i, field)  # noqa: B023 - called in this iteration only
+
         if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
-            raise ConfigError(f"sensors[{i}].gyro_scale_estimation: needs angular_velocity = true")
+            raise ConfigError(f"{at('gyro_scale_estimation')}: needs angular_velocity = true")
         if isinstance(s, ImuSensor) and not (0.0 <= s.orientation_rate_hz < math.inf):
-            raise ConfigError(f"sensors[{i}].orientation_rate_hz: must be >= 0 and finite (0: every sample)")
-        _check_radians(s, i)
+            raise ConfigError(f"{at('orientation_rate_hz')}: must be >= 0 and finite (0: every sample)")
+        _check_radians(s, at)
         if isinstance(s, GpsSensor):
             if s.datum is not None and not (-90.0 <= s.datum[0] <= 90.0 and -180.0 <= s.datum[1] <= 180.0):
-                raise ConfigError(f"sensors[{i}].datum: latitude must be in [-90, 90] and longitude in [-180, 180]")
+                raise ConfigError(f"{at('datum')}: latitude must be in [-90, 90] and longitude in [-180, 180]")
             if s.heading_init_m <= 0.0:
-                raise ConfigError(f"sensors[{i}].heading_init_m: must be positive")
+                raise ConfigError(f"{at('heading_init_m')}: must be positive")
             if s.error_tau_s > 0.0 and s.error_sigma is None:
-                raise ConfigError(f"sensors[{i}].error_sigma: needed when error_tau_s > 0")
+                raise ConfigError(f"{at('error_sigma')}: needed when error_tau_s > 0")
             if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s <= 0.0:
-                raise ConfigError(f"sensors[{i}].vertical_error_tau_s: must be positive when vertical_error_sigma > 0")
+                raise ConfigError(f"{at('vertical_error_tau_s')}: must be positive when vertical_error_sigma > 0")
     return cfg
 
 
@@ -301,14 +314,14 @@ def validate(cfg: Config) -> Config:
 _ANGLE_BOUNDS: Final = {"yaw_offset": 2.0 * math.pi, "magnetic_declination": math.pi, "extrinsic_rpy": 2.0 * math.pi}
 
 
-def _check_radians(s: object, i: int) -> None:
+def _check_radians(s: object, at: typing.Callable[[str], str]) -> None:
     for name, bound in _ANGLE_BOUNDS.items():
         value = getattr(s, name, None)
         if value is None:
             continue
         if any(not abs(v) <= bound for v in (value if isinstance(value, tuple) else (value,))):
             shown = list(value) if isinstance(value, tuple) else value
-            raise ConfigError(f"sensors[{i}].{name}: {shown} is beyond {bound:.2f}: angles are in radians "
+            raise ConfigError(f"{at(name)}: {shown} is beyond {bound:.2f}: angles are in radians "
                               "(degrees x pi / 180)")
 
 
@@ -332,9 +345,10 @@ def _check_ros(cfg: Config) -> None:
     if cfg.zenoh.namespace:
         raise ConfigError("zenoh.namespace: not used with ros.interop = \"rmw_zenoh\" (rmw_zenoh keys start with "
                           "the domain id); put a ROS namespace into the keys instead, e.g. \"robot1/odom\"")
+    every = [s.name for s in cfg.sensors]
     for i, s in enumerate(cfg.sensors):
         if s.encoding != "ros2-cdr":
-            raise ConfigError(f"sensors[{i}].encoding: rmw_zenoh carries ROS 2 CDR only, got {s.encoding!r}")
+            raise ConfigError(f"{sensor_key(every, i, 'encoding')}: rmw_zenoh carries ROS 2 CDR only, got {s.encoding!r}")
 
 def _resolve(raw: object, path: str) -> type | None:
     """The config Struct at a msgspec error path (`sensors[1]`, `filter`), reading a sensor's `kind`."""
@@ -400,8 +414,19 @@ def _one_line(err: msgspec.ValidationError, raw: object = None) -> str:
         text, _, path = msg.partition(" - at `$")
         path = path.lstrip(".").rstrip("`")
         hint = _hint(text, path, raw)
-        return f"{path}: {text}{hint}" if path else f"{text}{hint}"
+        return f"{_named(path, raw)}: {text}{hint}" if path else f"{text}{hint}"
     return msg + _hint(msg, "", raw)
+
+
+def _named(path: str, raw: object) -> str:
+    """A msgspec error path (`sensors[1].orientation`) with the sensor named as the raw TOML names it
+    (`sensor "imu": orientation`); other paths as they are."""
+    found = re.match(r"sensors\[(\d+)\](?:\.(.*))?$", path)
+    tables = raw.get("sensors") if isinstance(raw, dict) else None
+    if not found or not isinstance(tables, list):
+        return path
+    names = [t.get("name") if isinstance(t, dict) else None for t in tables]
+    return sensor_key(names, int(found.group(1)), found.group(2) or "")
 
 
 def loads(text: str, source: str = "<config>") -> Config:

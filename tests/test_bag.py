@@ -83,7 +83,7 @@ def test_missing_bag(tmp_path: Path) -> None:
 
 def test_unreadable_bag(tmp_path: Path) -> None:
     (tmp_path / "junk.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
-    with pytest.raises(BagError, match="cannot read bag"):
+    with pytest.raises(BagError, match="not a readable ROS 1/ROS 2 bag"):
         open_bag_samples([tmp_path / "junk.bag"], SENSORS)
     with pytest.raises(BagError, match="mix"):
         open_bag_samples([tmp_path / "junk.bag", tmp_path], SENSORS)

@@ -165,13 +165,13 @@ def test_issue_config_keys_parse():
 
 
 @pytest.mark.parametrize("gps, pose, imu, needle", [
-    ("datum = [48.0, 11.0]", None, "", "sensors[2].datum"),
-    ("position_noise = -1.0", None, "", "sensors[2].position_noise"),
-    ("", 'msgtype = "geometry_msgs/msg/Twist"', "", "sensors[3].msgtype"),
+    ("datum = [48.0, 11.0]", None, "", "sensor \"gps\": datum"),
+    ("position_noise = -1.0", None, "", "sensor \"gps\": position_noise"),
+    ("", 'msgtype = "geometry_msgs/msg/Twist"', "", "sensor \"pose\": msgtype"),
     ("", "differental = true", "", "differental"),
     ("", "", "", "only one absolute sensor"),
     (None, None, "angular_velocity = false\ngyro_scale_estimation = true", "gyro_scale_estimation"),
-    ("datum = [95.0, 11.0, 0.0]", None, "", "sensors[2].datum"),
+    ("datum = [95.0, 11.0, 0.0]", None, "", "sensor \"gps\": datum"),
 ])
 def test_bad_new_keys_are_one_line_errors(gps, pose, imu, needle):
     with pytest.raises(ConfigError) as err:
@@ -605,10 +605,10 @@ GM = "error_tau_s = 30.0\nerror_sigma = [1.0, 1.0, 1.0]"
 
 
 @pytest.mark.parametrize("gps, needle", [
-    ("error_tau_s = -1.0\nerror_sigma = [1.0, 1.0, 1.0]", "sensors[2].error_tau_s"),
-    ("error_tau_s = 30.0\nerror_sigma = [1.0, -1.0, 1.0]", "sensors[2].error_sigma"),
-    ("error_tau_s = 30.0", "sensors[2].error_sigma"),
-    ("error_tau_s = 30.0\nerror_sigma = [1.0, 1.0]", "sensors[2].error_sigma"),
+    ("error_tau_s = -1.0\nerror_sigma = [1.0, 1.0, 1.0]", "sensor \"gps\": error_tau_s"),
+    ("error_tau_s = 30.0\nerror_sigma = [1.0, -1.0, 1.0]", "sensor \"gps\": error_sigma"),
+    ("error_tau_s = 30.0", "sensor \"gps\": error_sigma"),
+    ("error_tau_s = 30.0\nerror_sigma = [1.0, 1.0]", "sensor \"gps\": error_sigma"),
 ])
 def test_gps_error_keys_are_validated(gps, needle):
     with pytest.raises(ConfigError) as err:

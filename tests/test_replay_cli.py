@@ -96,18 +96,18 @@ ODOM_IMU = '[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\n[[sensors]]\nname="i
 
 
 @pytest.mark.parametrize("toml, needle", [
-    ('[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\nbogus=1\n', "sensors[0]: Object contains unknown field `bogus`"),
-    ('[[sensors]]\nname="w"\nkind="lidar"\nkey="odom"\n', "sensors[0].kind: Invalid value 'lidar'"),
+    ('[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\nbogus=1\n', "sensor \"w\": Object contains unknown field `bogus`"),
+    ('[[sensors]]\nname="w"\nkind="lidar"\nkey="odom"\n', "sensor \"w\": kind: Invalid value 'lidar'"),
     ('[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\n[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\n'
-     'orientation="sideways"\n', "sensors[1].orientation"),
+     'orientation="sideways"\n', "sensor \"i\": orientation"),
     ('[filter]\nhistory_s="long"\n', "filter.history_s: Expected `float`, got `str`"),
     ('[zenoh]\nmode="mesh"\n', "zenoh.mode"),
-    ('[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\nextrinsic_rpy=[0.0, 1.0]\n', "sensors[0].extrinsic_rpy"),
-    ('[[sensors]]\nname="w"\nkind="odom"\nkey="/odom"\n', "sensors[0].key"),
+    ('[[sensors]]\nname="i"\nkind="imu"\nkey="imu"\nextrinsic_rpy=[0.0, 1.0]\n', "sensor \"i\": extrinsic_rpy"),
+    ('[[sensors]]\nname="w"\nkind="odom"\nkey="/odom"\n', "sensor \"w\": key"),
     # degrees typed as radians (yaw_offset = 20 would run with the heading 1.15 rad off)
-    (ODOM_IMU + 'yaw_offset=20\n', "sensors[1].yaw_offset: 20.0 is beyond 6.28"),
+    (ODOM_IMU + 'yaw_offset=20\n', "sensor \"i\": yaw_offset: 20.0 is beyond 6.28"),
     (ODOM_IMU + 'magnetic_declination=-4.0\n', "angles are in radians"),
-    (ODOM_IMU + 'extrinsic_rpy=[0.0, 0.0, 90.0]\n', "sensors[1].extrinsic_rpy: [0.0, 0.0, 90.0] is beyond"),
+    (ODOM_IMU + 'extrinsic_rpy=[0.0, 0.0, 90.0]\n', "sensor \"i\": extrinsic_rpy: [0.0, 0.0, 90.0] is beyond"),
 ])
 def test_bad_config_is_one_line_naming_the_key_and_exit_2(tmp_path, toml, needle):
     cfg = tmp_path / "bad.toml"

@@ -6,7 +6,8 @@ the same order (bag receive time) and the same samples the live codecs make.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+import difflib
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -46,8 +47,9 @@ class BagSamples:
     """
 
     def __init__(self, reader: AnyReader, selected: dict[str, tuple[SensorConfig, list[Connection]]],
-                 missing: list[str]) -> None:
+                 missing: list[str], names: str = "bag") -> None:
         self._reader = reader
+        self._names = names
         self._by_topic = {topic: sensor for topic, (sensor, _) in selected.items()}
         self._connections = [c for _, conns in selected.values() for c in conns]
         self.topics: dict[str, str] = {sensor.name: topic for topic, (sensor, _) in selected.items()}
@@ -64,7 +66,7 @@ class BagSamples:
             msgtype, from_ros = expected(s)
             convert[topic] = (s.name, msgtype, from_ros, bag_fast_path(reader.typestore, msgtype, ros1))
         deserialize = reader.deserialize
-        for connection, _, raw in reader.messages(connections=self._connections):
+        for connection, _, raw in self._messages():
             name, msgtype, from_ros, fast = convert[connection.topic]
             if fast is not None:  # odometry and IMU: read straight into the sample
                 sample = fast(raw, name)
@@ -85,7 +87,7 @@ class BagSamples:
         against the ROS 2 (Humble) types, which drops the ROS 1 header's `seq`.
         """
         is2 = self._reader.is2
-        for connection, bag_time, raw in self._reader.messages(connections=self._connections):
+        for connection, bag_time, raw in self._messages():
             sensor = self._by_topic[connection.topic]
             if is2:
                 yield bag_time, sensor, bytes(raw)
@@ -96,6 +98,19 @@ class BagSamples:
                 self.decode_errors += 1
                 continue
             yield bag_time, sensor, bytes(cdr)
+
+    def _messages(self) -> Iterator[tuple[Connection, int, bytes]]:
+        """The reader's messages; what rosbags raises on a damaged chunk (a corrupt compressed block,
+        a truncated record) becomes a BagError naming the bag, not a traceback halfway through."""
+        messages = iter(self._reader.messages(connections=self._connections))
+        while True:
+            try:
+                item = next(messages)
+            except StopIteration:
+                return
+            except Exception as err:  # noqa: BLE001 - rosbags raises builtins (OSError, AssertionError) on garbage
+                raise BagError(unreadable(self._names, err)) from None
+            yield item
 
     def close(self) -> None:
         if self._reader.stack is not None:
@@ -133,9 +148,30 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
         # rosbags' answer to a ROS 2 bag recorded without message definitions (before Iron): "Bag
         # contains no type definitions. Instantiate AnyReader with a default_typestore argument."
         if "default_typestore" not in str(err):
-            names = ", ".join(str(p) for p in paths)
-            raise BagError(f"{names}: cannot read bag: {err}{_repair_hint(paths, err)}") from None
+            raise BagError(unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
     return _opened(paths, typestore())  # the standard (Humble) definitions
+
+
+def _names(paths: Sequence[Path]) -> str:
+    return ", ".join(str(p) for p in paths)
+
+
+def unreadable(names: str, err: BaseException) -> str:
+    """One line: which files could not be read as a bag and what rosbags said (its messages can
+    span lines, a YAML parser's for one; builtins such as AssertionError can carry no text)."""
+    text = " ".join(str(err).split())
+    if not isinstance(err, AnyReaderError):
+        text = f"{type(err).__name__}: {text}" if text else type(err).__name__
+    return f"{names}: not a readable ROS 1/ROS 2 bag ({text})"
+
+
+def did_you_mean(wanted: str, topics: Iterable[str]) -> str:
+    """' (did you mean /x?)' for the bag topic closest to ``wanted`` (a topic, with or without its
+    leading slash), or '' when none is close: for the errors and warnings about an absent topic."""
+    want = "/" + wanted.lstrip("/")
+    names = {"/" + t.lstrip("/"): t for t in topics}
+    close = difflib.get_close_matches(want, list(names), n=1, cutoff=0.6)
+    return f" (did you mean {names[close[0]]}?)" if close else ""
 
 
 def _repair_hint(paths: Sequence[Path], err: Exception) -> str:
@@ -153,11 +189,11 @@ def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
     try:
         reader = AnyReader(list(paths), default_typestore=default)
         reader.open()
-    except (AnyReaderError, OSError) as err:
+    except Exception as err:  # noqa: BLE001 - on garbage rosbags raises builtins too (UnicodeDecodeError
+        # on a PNG named .bag, AssertionError on a damaged ROS 1 index, FileNotFoundError without metadata)
         if default is None and isinstance(err, AnyReaderError):
             raise
-        names = ", ".join(str(p) for p in paths)
-        raise BagError(f"{names}: cannot read bag: {err}") from None
+        raise BagError(unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
     return reader
 
 
@@ -202,7 +238,7 @@ def open_bag_samples(paths: Sequence[Path | str], sensors: Sequence[SensorConfig
     except BaseException:
         reader.close()
         raise
-    return BagSamples(reader, selected, missing)
+    return BagSamples(reader, selected, missing, _names([Path(p) for p in paths]))
 
 
 def iter_raw_cdr(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]
