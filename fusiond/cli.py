@@ -348,13 +348,26 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
     return 0
 
 
+# The source tree fusiond runs from (an editable install, a clone): `bench`'s defaults are found there,
+# not beside the current directory.
+REPO_ROOT = Path(__file__).resolve().parents[1]
+BENCH_BAG = REPO_ROOT / "data" / "jackal_test2.bag"
+BENCH_CONFIG = REPO_ROOT / "examples" / "jackal.toml"
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     import msgspec
 
     from . import bench
 
-    cfg = _load_config(args.config)
-    result = bench.run(Path(args.bag), Path(args.config), cfg, quick=args.quick)
+    bag = Path(args.bag) if args.bag else BENCH_BAG
+    config = args.config or str(BENCH_CONFIG)
+    if not bag.is_file():
+        default = "" if args.bag else " (the default, data/jackal_test2.bag of the source tree fusiond runs from)"
+        print(f"fusiond: bench: no such bag {bag}{default}; give one with --bag", file=sys.stderr)
+        return EXIT_USAGE
+    cfg = _load_config(config)
+    result = bench.run(bag, Path(config), cfg, quick=args.quick)
     if args.latency:
         from .transport.bench_latency import run_bench
 
@@ -389,9 +402,32 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
 LOG_LEVELS = ["debug", "info", "warning", "error"]
 
 
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml), read only when asked for."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("fusiond")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
+class _VersionAction(argparse.Action):
+    """`fusiond --version`: "fusiond <version>" on stdout, exit 0 (argparse's own action would read the
+    version when the parser is built, i.e. on every command)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        print(f"fusiond {_version()}")
+        parser.exit(0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fusiond", description="Wheel odometry + IMU EKF fusion over Eclipse Zenoh.")
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default: info for run and play, warning otherwise")
+    p.add_argument("--version", action=_VersionAction, help="print the version and exit")
     # --log-level also after the subcommand, and in each subcommand's help (SUPPRESS: an absent one does
     # not overwrite the value given before the subcommand)
     common = argparse.ArgumentParser(add_help=False)
@@ -446,10 +482,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate_imu)
 
     bb = sub.add_parser("bench", help="estimator, core and replay benchmarks on a bag")
-    bb.add_argument("--bag", default="../shared/data/jackal_test2.bag",
-                    help="bag to replay for the core and replay benchmarks (default: the shared Jackal bag)")
-    bb.add_argument("--config", default="examples/jackal.toml",
-                    help="TOML config the bag is replayed with (default examples/jackal.toml)")
+    bb.add_argument("--bag", help="bag to replay for the core and replay benchmarks (default: the Jackal bag "
+                                   "data/jackal_test2.bag of the source tree)")
+    bb.add_argument("--config", help="TOML config the bag is replayed with (default: examples/jackal.toml of "
+                                     "the source tree)")
     bb.add_argument("--quick", action="store_true", help="fewer repeats")
     bb.add_argument("--latency", action="store_true", help="also the Zenoh end-to-end latency benchmark")
     bb.add_argument("--seconds", type=float, default=10.0, help="latency benchmark duration")

@@ -188,3 +188,39 @@ def test_health_with_no_multicast_and_no_daemon_gives_up_quickly(tmp_path, capsy
     assert code == 1 and out == ""
     assert "no health answer" in one_line(err)
     assert took < 10, took
+
+
+# -- 4. --version -----------------------------------------------------------------------------------------
+
+def test_version(capsys):
+    from importlib.metadata import version
+
+    code, out, err = run_cli(capsys, "--version")
+    assert code == 0 and err == ""
+    assert out == f"fusiond {version('fusiond')}\n"
+
+
+def test_version_from_the_installed_script():
+    proc = subprocess.run([str(FUSIOND), "--version"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stdout.startswith("fusiond ") and proc.stdout.split()[1][0].isdigit()
+
+
+# -- 11. bench's default bag is the repo's own -------------------------------------------------------------
+
+def test_bench_defaults_to_the_bag_in_the_repo_from_any_directory(tmp_path, capsys, monkeypatch):
+    import fusiond.bench as bench
+
+    seen = []
+    monkeypatch.setattr(bench, "run", lambda bag, config, cfg, quick=False: seen.append((bag, config)) or {})
+    monkeypatch.setattr(bench, "format_table", lambda result: "table")
+    monkeypatch.chdir(tmp_path)  # not the repo: the defaults must not be relative to the current directory
+    code, out, err = run_cli(capsys, "bench", "--quick")
+    assert code == 0, err
+    assert seen == [(JACKAL, JACKAL_TOML)] and JACKAL.is_file()
+
+
+def test_bench_with_a_missing_bag_is_one_line_exit_2(tmp_path, capsys):
+    missing = tmp_path / "nope.bag"
+    code, out, err = run_cli(capsys, "bench", "--bag", str(missing), "--config", str(JACKAL_TOML))
+    assert code == 2 and out == ""
+    assert one_line(err) == f"fusiond: bench: no such bag {missing}; give one with --bag"
