@@ -224,3 +224,91 @@ def test_bench_with_a_missing_bag_is_one_line_exit_2(tmp_path, capsys):
     code, out, err = run_cli(capsys, "bench", "--bag", str(missing), "--config", str(JACKAL_TOML))
     assert code == 2 and out == ""
     assert one_line(err) == f"fusiond: bench: no such bag {missing}; give one with --bag"
+
+
+# -- 3. an absent topic names the bag's topics and the one it was likely meant to be ----------------------
+
+def _jackal_config(tmp_path: Path, odom: str = "jackal_velocity_controller/odom", imu: str = "imu/data",
+                   extra: str = "") -> Path:
+    return write_config(tmp_path, f'[[sensors]]\nname = "wheel"\nkind = "odom"\nkey = "{odom}"\n'
+                                  f'[[sensors]]\nname = "imu"\nkind = "imu"\nkey = "{imu}"\n'
+                                  f'orientation = "roll_pitch"\nangular_velocity = true\n{extra}')
+
+
+def test_did_you_mean():
+    from fusiond.replay.bag import did_you_mean
+
+    topics = ["/imu/data", "/jackal_velocity_controller/odom", "/gps/fix"]
+    assert did_you_mean("imu/dta", topics) == " (did you mean /imu/data?)"
+    assert did_you_mean("/imu/data_raw", topics) == " (did you mean /imu/data?)"
+    assert did_you_mean("jackal_velocity_controler/odom", topics) == " (did you mean /jackal_velocity_controller/odom?)"
+    assert did_you_mean("gps/fx", ["gps/fix"]) == " (did you mean gps/fix?)"  # the bag's own spelling
+    assert did_you_mean("camera/image", topics) == ""
+    assert did_you_mean("imu", []) == ""
+
+
+def test_an_absent_imu_topic_warns_naming_the_bag_topics_and_a_close_one(tmp_path, capsys):
+    tum = tmp_path / "out.tum"
+    cfg = _jackal_config(tmp_path, imu="imu/dta")
+    code, _, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(cfg), "--quiet", "--tum", str(tum))
+    assert code == 0, err  # still a replay: odometry alone
+    warning = one_line(err)
+    assert warning.startswith("fusiond: warning: sensor 'imu': topic /imu/dta is not in the bag"), warning
+    assert "(did you mean /imu/data?)" in warning
+    assert "/imu/data [sensor_msgs/msg/Imu]" in warning and "/jackal_velocity_controller/odom" in warning
+    assert len(tum.read_text().splitlines()) == 3060  # it ran
+
+
+def test_an_absent_odometry_topic_is_an_error_with_a_close_one(tmp_path, capsys):
+    cfg = _jackal_config(tmp_path, odom="jackal_velocity_controler/odom")
+    code, _, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(cfg), "--quiet")
+    line = one_line(err)
+    assert code == 2
+    assert "the odometry topic /jackal_velocity_controler/odom" in line
+    assert "(did you mean /jackal_velocity_controller/odom?)" in line and "/imu/data [sensor_msgs/msg/Imu]" in line
+
+
+def test_an_unlike_topic_gets_no_guess(tmp_path, capsys):
+    cfg = _jackal_config(tmp_path, imu="camera/image_raw")
+    code, _, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(cfg), "--quiet")
+    assert code == 0 and "did you mean" not in one_line(err) and "/camera/image_raw" in err
+
+
+def _bag_with_gps(path: Path) -> None:
+    """The Jackal's first 300 odometry and IMU messages as a ROS 2 bag, with NavSatFix fixes on /gps/fix."""
+    from rosbags.rosbag2 import Writer
+
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
+    from fusiond.codecs.payloads import NAVSATFIX, encode_gps_sample
+    from fusiond.config import ImuSensor, OdomSensor
+    from fusiond.replay.bag import iter_raw_cdr
+    from fusiond.samples import GpsSample
+
+    sensors = [OdomSensor(name="wheel", key="jackal_velocity_controller/odom"), ImuSensor(name="imu", key="imu/data")]
+    rows = list(iter_raw_cdr([JACKAL], sensors))[:300]
+    with Writer(path, version=9) as writer:
+        conns = {}
+        for t, sensor, cdr in rows:
+            msgtype = ODOMETRY if sensor.name == "wheel" else IMU
+            if sensor.key not in conns:
+                conns[sensor.key] = writer.add_connection("/" + sensor.key, msgtype, typestore=TYPESTORE)
+            writer.write(conns[sensor.key], t, cdr)
+        gps = writer.add_connection("/gps/fix", NAVSATFIX, typestore=TYPESTORE)
+        for i in range(5):
+            fix = GpsSample(sensor="gps", stamp=rows[0][0] * 1e-9 + i, latitude=48.0, longitude=11.0, altitude=500.0)
+            writer.write(gps, rows[0][0] + i * 1_000_000_000, encode_gps_sample(fix, "ros2-cdr"))
+
+
+def test_an_absent_gps_topic_names_the_close_one(tmp_path, capsys):
+    """A GPS defines the world frame: absent, nothing would be published, so it is an error (as before);
+    the message says which topic of the bag it likely meant."""
+    bag = tmp_path / "with_gps"
+    _bag_with_gps(bag)
+    gps = '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "{}"\n'
+    code, _, err = run_cli(capsys, "replay", str(bag), "--config", str(_jackal_config(tmp_path, extra=gps.format("gps/fix"))),
+                           "--quiet")
+    assert code in (0, 1) and "did you mean" not in err  # the right key: no complaint about topics
+    code, _, err = run_cli(capsys, "replay", str(bag), "--config", str(_jackal_config(tmp_path, extra=gps.format("gps/fx"))),
+                           "--quiet")
+    line = one_line(err)
+    assert code == 2 and "/gps/fx" in line and "(did you mean /gps/fix?)" in line and "/gps/fix [" in line
