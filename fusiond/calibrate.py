@@ -52,27 +52,35 @@ class Calibration:
     refuse: bool = False  # clear motion: the numbers must not be used
 
     def snippet(self, sensor: str = "imu") -> str:
+        """What to paste into the config: comments, then for each table a "# paste into ..." line and
+        its key = value lines only (no table header: a second [[sensors]] header would add a sensor,
+        a second [filter] header is a TOML error), each to go inside the user's existing table."""
         lines = [f"# measured by fusiond calibrate-imu: {self.samples} samples over {self.duration_s:.1f} s "
                  f"({self.rate_hz:.1f} Hz)"]
         if not self.static:
             why = "; ".join(self.motion) or "mean rate above 0.05 rad/s"
             lines.append(f"# WARNING: the IMU was not static ({why}): numbers overstate the noise")
-        lines.append(f"[[sensors]]  # {sensor}: add these keys to its table")
+        keys = []
         if self.orientation_sigma:
             r, p, y = (max(v, 1e-4) for v in self.orientation_sigma)
-            lines.append(f"orientation_noise = [{r:.5f}, {p:.5f}, {y:.5f}]  # rad")
+            stated = ""
             if self.stated_orientation_sigma:
                 sr, sp, sy = self.stated_orientation_sigma
-                lines.append(f"#   the messages state [{sr:.5f}, {sp:.5f}, {sy:.5f}]")
+                stated = f"; the messages state [{sr:.5f}, {sp:.5f}, {sy:.5f}]"
+            keys.append(("orientation_noise", f"orientation_noise = [{r:.5f}, {p:.5f}, {y:.5f}]  # rad{stated}"))
         if self.gyro_sigma:
             g = max(max(self.gyro_sigma), 1e-5)
-            lines.append(f"gyro_noise = {g:.5f}  # rad/s, the largest axis")
-            if self.stated_gyro_sigma:
-                lines.append(f"#   the messages state {max(self.stated_gyro_sigma):.5f}")
+            stated = f"; the messages state {max(self.stated_gyro_sigma):.5f}" if self.stated_gyro_sigma else ""
+            keys.append(("gyro_noise", f"gyro_noise = {g:.5f}  # rad/s, the largest axis{stated}"))
+        if keys:
+            lines.append(f'# paste into the [[sensors]] table named "{sensor}" (in place of any '
+                         f'{" or ".join(k for k, _ in keys)} it has)')
+            lines.extend(line for _, line in keys)
         if self.gyro_bias:
             b = max(abs(v) for v in self.gyro_bias)
             lines.append("")
-            lines.append("[filter]")
+            lines.append("# paste into the [filter] table (in place of any gyro_bias_sigma it has; "
+                         "a config without one: a [filter] line first)")
             lines.append(f"gyro_bias_sigma = {max(2.0 * b, 1e-4):.5f}  # rad/s, twice the largest bias seen; "
                          f"bias was [{self.gyro_bias[0]:+.5f}, {self.gyro_bias[1]:+.5f}, {self.gyro_bias[2]:+.5f}]")
         return "\n".join(lines)

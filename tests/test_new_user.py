@@ -312,3 +312,87 @@ def test_an_absent_gps_topic_names_the_close_one(tmp_path, capsys):
                            "--quiet")
     line = one_line(err)
     assert code == 2 and "/gps/fx" in line and "(did you mean /gps/fix?)" in line and "/gps/fix [" in line
+
+
+# -- 8. calibrate-imu's snippet pastes into the existing tables --------------------------------------------
+
+ROBOT = """[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+
+[[sensors]]
+name = "front_imu"
+kind = "imu"
+key = "imu/data"
+orientation = "roll_pitch"
+angular_velocity = true
+
+[filter]
+nis_window = 50
+"""
+
+
+def _static_imu_bag(path: Path, n: int = 3000, rate: float = 100.0) -> None:
+    import numpy as np
+    from rosbags.rosbag2 import Writer
+
+    from fusiond.codecs import IMU, TYPESTORE
+    from fusiond.codecs.payloads import encode_imu_sample
+    from fusiond.estimator import rotation as rot
+    from fusiond.samples import ImuSample
+
+    rng = np.random.default_rng(3)
+    cov = (1e-6, 0.0, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 1e-6)
+    with Writer(path, version=9) as writer:
+        conn = writer.add_connection("/imu/data", IMU, typestore=TYPESTORE)
+        for k in range(n):
+            t = 100.0 + k / rate
+            q = rot.from_rpy(rng.normal(0, 0.01), rng.normal(0, 0.02), 1.0 + rng.normal(0, 0.05))
+            w = tuple(b + rng.normal(0, 0.003) for b in (0.001, -0.002, 0.003))
+            acc = (rng.normal(0, 0.02), rng.normal(0, 0.02), 9.81 + rng.normal(0, 0.02))
+            sample = ImuSample("imu", t, tuple(q), cov, w, cov, acc, cov)
+            writer.write(conn, int(t * 1e9), encode_imu_sample(sample, "ros2-cdr"))
+
+
+def paste(config: str, snippet: str) -> str:
+    """Do what the snippet's comments say: each block's key lines at the end of the table it names."""
+    import re
+
+    lines = config.splitlines()
+    for block in snippet.split("\n\n"):
+        rows = block.splitlines()
+        target = next(r for r in rows if r.startswith("# paste into "))
+        keys = rows[rows.index(target) + 1:]
+        assert keys and all(re.match(r"^[a-z_]+ = \S", k) for k in keys), keys  # key = value lines only
+        named = re.match(r'# paste into the \[\[sensors\]\] table named "([^"]+)"', target)
+        if named:
+            start = lines.index(f'name = "{named.group(1)}"')
+        else:
+            assert target.startswith("# paste into the [filter] table")
+            start = lines.index("[filter]")
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+        while lines[end - 1] == "":
+            end -= 1
+        lines[end:end] = keys
+    return "\n".join(lines) + "\n"
+
+
+def test_calibrate_imu_snippet_pastes_into_the_named_sensor_table(tmp_path, capsys):
+    from fusiond.config import loads
+
+    bag = tmp_path / "static"
+    _static_imu_bag(bag)
+    cfg = write_config(tmp_path, ROBOT)
+    code, out, err = run_cli(capsys, "calibrate-imu", "--bag", str(bag), "--config", str(cfg),
+                             "--sensor", "front_imu", "--duration", "20")
+    assert code == 0, err
+    assert "[[sensors]]" not in [line.split("#")[0].strip() for line in out.splitlines()]  # no header to clash
+    assert not any(line.strip().startswith("[") for line in out.splitlines())
+    assert '# paste into the [[sensors]] table named "front_imu"' in out
+    pasted = loads(paste(ROBOT, out.strip()))
+    assert [s.name for s in pasted.sensors] == ["wheel", "front_imu"]  # no sensor added
+    imu = pasted.sensor("front_imu")
+    assert imu.orientation_noise == pytest.approx((0.01, 0.02, 0.05), rel=0.1)
+    assert imu.gyro_noise == pytest.approx(0.003, rel=0.1)
+    assert pasted.filter.nis_window == 50 and pasted.filter.gyro_bias_sigma == pytest.approx(0.006, rel=0.1)
