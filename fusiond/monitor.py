@@ -9,7 +9,11 @@ its output not a terminal (a pipe, a log file) it streams plain text lines as it
 
 A channel's verdict is judged over everything seen since the monitor started (the
 doctor's whole-run rule, chi-square bounds for that count) and says when the latest
-window differs, exactly as the replay summary does.
+window differs, exactly as the replay summary does. Every NIS figure of a row comes from
+the doctor's statistics of that channel: the whole run's mean, bounds and verdict side by
+side, and the latest window's mean, bounds and verdict side by side, each verdict judged
+on the very mean and bounds printed beside it (a verdict beside another window's mean
+read "ok" next to a NIS outside its bounds).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from dataclasses import dataclass, field
 import msgspec
 
 from .core.diagnostics import DiagnosticsRecord
-from .core.doctor import Doctor, Verdict, judge_nis, nis_bounds
+from .core.doctor import ChannelStats, Doctor, Verdict, judge_nis, nis_bounds
 
 ALIVE_SUFFIX = "/alive"
 DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"
@@ -49,7 +53,6 @@ class ChannelView:
     window: int
     confidence: float
     arrivals: deque = field(default_factory=lambda: deque(maxlen=4096))  # wall times
-    nis: deque = field(default_factory=deque)
     innovations: deque = field(default_factory=deque)
     dof: int = 0
     total: int = 0
@@ -57,7 +60,6 @@ class ChannelView:
     last_stamp: float | None = None
 
     def __post_init__(self) -> None:
-        self.nis = deque(maxlen=self.window)
         self.innovations = deque(maxlen=self.window)
 
     def add(self, r: DiagnosticsRecord, now: float) -> None:
@@ -65,30 +67,46 @@ class ChannelView:
         self.total += 1
         self.rejected += r.rejected
         self.last_stamp = r.stamp
-        if r.dof != self.dof or r.components != self.components:
-            self.nis.clear()
+        if r.components != self.components:  # the rms columns are per component: one shape at a time
             self.innovations.clear()
-            self.dof, self.components = r.dof, list(r.components)
-        if math.isfinite(r.nis):
-            self.nis.append(r.nis)
+            self.components = list(r.components)
+        self.dof = r.dof
         self.innovations.append(r.innovation)
 
     def row(self, now: float) -> dict:
+        """Rate, age, the latest window's innovation rms and the counts; the NIS figures are the doctor's
+        (:func:`nis_figures`)."""
         recent = [t for t in self.arrivals if now - t <= RATE_WINDOW_S]
         rate = (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 and recent[-1] > recent[0] else 0.0
-        nis_mean = sum(self.nis) / len(self.nis) if self.nis else None
-        n = len(self.nis)
-        bounds = nis_bounds(n, self.dof, self.confidence) if n and self.dof else None
         rms = [math.sqrt(sum(v[i] ** 2 for v in self.innovations) / len(self.innovations))
                for i in range(len(self.components))] if self.innovations else []
-        verdict = judge_nis(nis_mean, n, self.dof, self.confidence)
         return {
             "sensor": self.sensor, "channel": self.channel, "rate_hz": rate,
-            "age_s": now - self.arrivals[-1] if self.arrivals else None,
-            "nis_mean": nis_mean, "nis_bounds": list(bounds) if bounds else None, "dof": self.dof,
+            "age_s": now - self.arrivals[-1] if self.arrivals else None, "dof": self.dof,
             "rms": dict(zip(self.components, rms)), "updates": self.total, "gated": self.rejected,
-            "verdict": verdict,
         }
+
+
+def nis_figures(stats: ChannelStats) -> dict:
+    """A channel's NIS columns, all from its doctor statistics: the whole run's mean, bounds and verdict,
+    the latest window's mean, bounds and verdict. Each verdict is judged on the mean and bounds beside it
+    (the window's on exactly the sums the doctor's window test uses), so neither can read "ok" beside a
+    mean outside its bounds, and the window's verdict is the one the "now:" note speaks of."""
+    whole = stats.summary()
+    out = {"nis_mean": whole["nis_mean"], "nis_bounds": whole["nis_bounds"], "verdict": whole["verdict"],
+           "now_note": whole["now_note"], "window_nis_mean": None, "window_nis_bounds": None,
+           "window_verdict": whole["verdict"]}  # not_judged / learning: no window test either
+    if whole["verdict"] in ("not_judged", "learning"):
+        return out
+    n = len(stats.recent)
+    if n == 0:
+        out["window_verdict"] = "no_updates"
+        return out
+    mean, dof = stats.recent_sum / n, stats.recent_dof / n
+    out["window_nis_mean"] = mean
+    out["window_nis_bounds"] = list(nis_bounds(n, dof, stats.confidence))
+    out["window_verdict"] = judge_nis(mean, n, dof, stats.confidence)
+    return out
 
 
 class DaemonView:
@@ -118,11 +136,7 @@ class DaemonView:
             rows = []
             for key, ch in sorted(self.channels.items()):
                 row = ch.row(now)
-                whole = self.doctor.channels.get(key)
-                if whole is not None:  # one verdict per channel: the whole run's, and what the window says now
-                    row["window_verdict"] = row["verdict"]
-                    row["verdict"] = whole.verdict()
-                    row["now_note"] = whole.now_note(None)
+                row.update(nis_figures(self.doctor.channels[key]))  # every record reached both
                 rows.append(row)
             verdicts = self.doctor.verdicts()
         return {"daemon": self.prefix or "(no namespace)", "health": self.health, "channels": rows,
@@ -205,6 +219,16 @@ def _fmt(v: float | None, spec: str = ".2f") -> str:
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
 
 
+# a NIS mean and its bounds in one format: rounding both alike never shows a mean inside its bounds
+# beside a verdict that found it outside, nor the reverse
+NIS_FORMAT = ".3f"
+_VERDICT_STYLE = {"nis_high": "red", "nis_low": "yellow", "ok": "green"}
+
+
+def _bounds(b: list[float] | None) -> str:
+    return f"[{b[0]:{NIS_FORMAT}}, {b[1]:{NIS_FORMAT}}]" if b else "-"
+
+
 def render(snapshots: list[dict]):
     """A rich renderable of the snapshots (imported lazily: --json needs no rich)."""
     from rich.console import Group
@@ -227,16 +251,17 @@ def render(snapshots: list[dict]):
                           str(s.get("received")), str(s.get("dropped")), str(s.get("rejected")))
             parts.append(t)
         t = Table(show_header=True, header_style="bold", box=None)
-        for col in ("sensor/channel", "rate Hz", "age s", "NIS mean", "bounds", "innovation rms", "gated", "window"):
+        for col in ("sensor/channel", "rate Hz", "age s", "NIS mean", "bounds", "verdict", "window NIS",
+                    "window bounds", "window", "window rms", "gated"):
             t.add_column(col)
         for r in snap["channels"]:
-            b = r["nis_bounds"]
-            bounds = f"[{b[0]:.2f}, {b[1]:.2f}]" if b else "-"
             rms = " ".join(f"{k} {v:.4f}" for k, v in r["rms"].items())
-            style = {"nis_high": "red", "nis_low": "yellow", "ok": "green"}.get(r["verdict"], "")
             t.add_row(f"{r['sensor']}/{r['channel']}", _fmt(r["rate_hz"], ".1f"), _fmt(r["age_s"]),
-                      _fmt(r["nis_mean"], ".3f"), bounds, rms, f"{r['gated']}/{r['updates']}",
-                      Text(r["verdict"], style=style))
+                      _fmt(r["nis_mean"], NIS_FORMAT), _bounds(r["nis_bounds"]),
+                      Text(r["verdict"], style=_VERDICT_STYLE.get(r["verdict"], "")),
+                      _fmt(r["window_nis_mean"], NIS_FORMAT), _bounds(r["window_nis_bounds"]),
+                      Text(r["window_verdict"], style=_VERDICT_STYLE.get(r["window_verdict"], "")),
+                      rms, f"{r['gated']}/{r['updates']}")
         parts.append(t)
         for v in snap["verdicts"]:
             style = {"ok": "green", "warn": "yellow", "problem": "bold red"}[v["level"]]
@@ -262,8 +287,9 @@ def plain_lines(snapshots: list[dict], wall: float) -> list[str]:
             rms = " ".join(f"{k}={v:.4f}" for k, v in r["rms"].items())
             now = f" ({r['now_note']})" if r.get("now_note") else ""
             out.append(f"{stamp}   {r['sensor']}/{r['channel']} rate={_fmt(r['rate_hz'], '.1f')}Hz "
-                       f"nis_window={_fmt(r['nis_mean'], '.3f')} rms[{rms}] gated={r['gated']}/{r['updates']} "
-                       f"-> {r['verdict']}{now}")
+                       f"nis={_fmt(r['nis_mean'], NIS_FORMAT)} {_bounds(r['nis_bounds'])} -> {r['verdict']}{now} "
+                       f"window_nis={_fmt(r['window_nis_mean'], NIS_FORMAT)} {_bounds(r['window_nis_bounds'])} "
+                       f"-> {r['window_verdict']} rms[{rms}] gated={r['gated']}/{r['updates']}")
         for v in snap["verdicts"]:
             key = f"  [{v['key']}]" if v["key"] else ""
             out.append(f"{stamp}   {v['level'].upper():7} {v['sensor']}/{v['channel']}: {v['message']}{key}")
@@ -324,4 +350,5 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     return 0
 
 
-__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "decode_diagnostics", "render", "run"]
+__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "decode_diagnostics", "nis_figures", "plain_lines",
+           "render", "run"]

@@ -396,3 +396,107 @@ def test_calibrate_imu_snippet_pastes_into_the_named_sensor_table(tmp_path, caps
     assert imu.orientation_noise == pytest.approx((0.01, 0.02, 0.05), rel=0.1)
     assert imu.gyro_noise == pytest.approx(0.003, rel=0.1)
     assert pasted.filter.nis_window == 50 and pasted.filter.gyro_bias_sigma == pytest.approx(0.006, rel=0.1)
+
+
+# -- 9. the monitor: no "ok" beside a NIS outside its bounds, a window column that agrees with its text -------
+
+def _records(nis_values, dof=2, channel="orientation", t0=0.0, learning=False):
+    from fusiond.core.diagnostics import DiagnosticsRecord
+
+    components = ["roll", "pitch", "yaw"][:dof]
+    return [DiagnosticsRecord(t0 + 0.02 * k, "imu", components, [0.01] * dof, [1e-4] * dof, float(v), dof, False,
+                              channel=channel, learning=learning) for k, v in enumerate(nis_values)]
+
+
+def _view(records, window=50):
+    from fusiond.monitor import DaemonView
+
+    view = DaemonView("", window=window)
+    for k, r in enumerate(records):
+        view.add(r, now=100.0 + 0.02 * k)
+    return view.snapshot(now=100.0 + 0.02 * len(records))
+
+
+def _inside(mean, bounds):
+    return bounds[0] <= mean <= bounds[1]
+
+
+def _assert_consistent(row):
+    """Each verdict is the one its own mean and bounds give, and the 'now:' note is the window's verdict."""
+    for mean, bounds, verdict in ((row["nis_mean"], row["nis_bounds"], row["verdict"]),
+                                  (row["window_nis_mean"], row["window_nis_bounds"], row["window_verdict"])):
+        if verdict == "ok":
+            assert mean is not None and _inside(mean, bounds), row
+        elif verdict == "nis_high":
+            assert mean > bounds[1], row
+        elif verdict == "nis_low":
+            assert mean < bounds[0], row
+    note = row["now_note"]
+    if note:
+        assert note.startswith(f"now: {row['window_verdict']} since"), row
+    elif row["window_verdict"] not in ("no_updates", row["verdict"]):
+        pytest.fail(f"the window says {row['window_verdict']} and the text says nothing: {row}")
+
+
+def test_monitor_whole_run_ok_with_a_high_window(capsys):
+    """1000 good updates then 50 whose NIS is 5x: the run is still ok, the window is not. Before, the row
+    printed the window's mean and bounds beside the run's 'ok'."""
+    from fusiond.monitor import plain_lines
+
+    snap = _view(_records([2.0] * 1000 + [10.0] * 50))
+    row = snap["channels"][0]
+    assert row["verdict"] == "ok" and _inside(row["nis_mean"], row["nis_bounds"])
+    assert row["nis_mean"] == pytest.approx((2000 + 500) / 1050)
+    assert row["window_verdict"] == "nis_high" and row["window_nis_mean"] == pytest.approx(10.0)
+    assert row["window_nis_mean"] > row["window_nis_bounds"][1]
+    assert row["now_note"].startswith("now: nis_high since")
+    _assert_consistent(row)
+    line = next(ln for ln in plain_lines([snap], 0.0) if "imu/orientation" in ln)
+    assert f"nis={row['nis_mean']:.3f} " in line and "-> ok (now: nis_high since" in line, line
+    assert "window_nis=10.000" in line and "-> nis_high rms[" in line, line
+
+
+def test_monitor_terminal_view_columns_agree(capsys):
+    from rich.console import Console
+
+    from fusiond.monitor import render
+
+    snap = _view(_records([2.0] * 1000 + [10.0] * 50))
+    console = Console(record=True, width=250, force_terminal=False)
+    console.print(render([snap]))
+    text = console.export_text()
+    header = next(ln for ln in text.splitlines() if "sensor/channel" in ln)
+    row_line = next(ln for ln in text.splitlines() if "imu/orientation" in ln)
+    cells = row_line.split()
+    names = header.split()
+    # sensor/channel rate age NIS mean [lo, hi] verdict window NIS [lo, hi] window ...
+    assert cells[3] == f"{snap['channels'][0]['nis_mean']:.3f}" and cells[6] == "ok", row_line
+    assert cells[7] == "10.000" and cells[10] == "nis_high", row_line
+    assert names.index("verdict") < names.index("window"), header
+
+
+@pytest.mark.parametrize("values", [
+    [2.0] * 60,  # ok throughout
+    [20.0] * 80,  # high throughout
+    [0.01] * 80,  # low throughout
+    [20.0] * 30 + [2.0] * 20,  # high run, window recovering
+    [2.0] * 300 + [0.01] * 60,  # ok run, low window
+])
+def test_monitor_rows_are_consistent(values):
+    _assert_consistent(_view(_records(values))["channels"][0])
+
+
+def test_monitor_window_mixing_dofs_is_the_doctors_window():
+    """A message without its yaw row (dof 2 among dof 3): the window test of the row is the doctor's, which
+    keeps both in the window; the monitor used to start a window of its own at every dof change."""
+    records = _records([3.0] * 200, dof=3) + _records([15.0] * 10, dof=2, t0=10.0)
+    row = _view(records)["channels"][0]
+    stats_mean = (40 * 3.0 + 10 * 15.0) / 50
+    assert row["window_nis_mean"] == pytest.approx(stats_mean)
+    _assert_consistent(row)
+
+
+def test_monitor_learning_channel_is_not_judged_in_the_window_either():
+    row = _view(_records([50.0] * 40, learning=True))["channels"][0]
+    assert row["verdict"] == "learning" and row["window_verdict"] == "learning"
+    assert row["window_nis_mean"] is None
