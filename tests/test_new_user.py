@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fusiond.cli import main
@@ -334,7 +335,6 @@ nis_window = 50
 
 
 def _static_imu_bag(path: Path, n: int = 3000, rate: float = 100.0) -> None:
-    import numpy as np
     from rosbags.rosbag2 import Writer
 
     from fusiond.codecs import IMU, TYPESTORE
@@ -500,3 +500,80 @@ def test_monitor_learning_channel_is_not_judged_in_the_window_either():
     row = _view(_records([50.0] * 40, learning=True))["channels"][0]
     assert row["verdict"] == "learning" and row["window_verdict"] == "learning"
     assert row["window_nis_mean"] is None
+
+
+# -- 10. the report's innovation panels are scaled to the data -----------------------------------------------
+
+def test_innovation_limits_stay_near_the_bulk():
+    from fusiond.replay.report import innovation_limits
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(0.0, 0.1, 2000)
+    band = np.full(2000, 0.2)
+    band[:10] = 500.0  # the first updates: S huge before the state converged
+    y[700] = 1e3  # one outlier
+    lo, hi = innovation_limits(y, band)
+    bulk = np.percentile(np.abs(y), 99)
+    assert lo == -hi and bulk < hi < 2.0 * max(bulk, 0.2), (hi, bulk)
+    # NaN rows (the gap breaks) are left out; nothing finite: matplotlib's own limits
+    assert innovation_limits(np.array([np.nan, 0.1, -0.1]), np.array([np.nan, 0.1, 0.1]))[1] == pytest.approx(0.125)
+    assert innovation_limits(np.array([np.nan]), np.array([np.nan])) is None
+    assert innovation_limits(np.zeros(5), np.zeros(5)) is None
+
+
+def _jackal_with_an_imu_outlier(path: Path, roll: float = 0.8, messages: int = 1500) -> None:
+    from rosbags.rosbag2 import Writer
+
+    import msgspec
+
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, make_decoder
+    from fusiond.codecs.payloads import encode_imu_sample
+    from fusiond.config import ImuSensor, OdomSensor
+    from fusiond.estimator import rotation as rot
+    from fusiond.replay.bag import iter_raw_cdr
+
+    sensors = [OdomSensor(name="wheel", key="jackal_velocity_controller/odom"), ImuSensor(name="imu", key="imu/data")]
+    rows = list(iter_raw_cdr([JACKAL], sensors))[:messages]
+    decode = make_decoder("imu", "ros2-cdr", "imu")
+    imu_rows = [i for i, (_, s, _) in enumerate(rows) if s.name == "imu"]
+    bad = imu_rows[len(imu_rows) // 2]
+    sample = decode(rows[bad][2])
+    r, p, y = rot.to_rpy(np.asarray(sample.orientation))
+    sample = msgspec.structs.replace(sample, orientation=tuple(rot.from_rpy(r + roll, p, y)))
+    rows[bad] = (rows[bad][0], rows[bad][1], encode_imu_sample(sample, "ros2-cdr"))
+    with Writer(path, version=9) as writer:
+        conns = {}
+        for t, s, cdr in rows:
+            if s.key not in conns:
+                conns[s.key] = writer.add_connection("/" + s.key, ODOMETRY if s.name == "wheel" else IMU,
+                                                     typestore=TYPESTORE)
+            writer.write(conns[s.key], t, cdr)
+
+
+def _panel_limits(monkeypatch) -> dict[str, list[tuple[str, tuple[float, float]]]]:
+    """(y label, y-limits) of every panel of each figure the report saves, by file name."""
+    from matplotlib.figure import Figure
+
+    saved: dict = {}
+    real = Figure.savefig
+
+    def spy(self, fname, *a, **k):
+        saved[Path(fname).name] = [(ax.get_ylabel(), ax.get_ylim()) for ax in self.axes]
+        return real(self, fname, *a, **k)
+
+    monkeypatch.setattr(Figure, "savefig", spy)
+    return saved
+
+
+def test_report_innovation_panels_are_scaled_to_the_bulk_not_an_outlier(tmp_path, capsys, monkeypatch):
+    bag = tmp_path / "outlier"
+    _jackal_with_an_imu_outlier(bag, roll=0.8)
+    saved = _panel_limits(monkeypatch)
+    out = tmp_path / "report"
+    code, _, err = run_cli(capsys, "replay", str(bag), "--config", str(JACKAL_TOML), "--report", str(out), "--quiet")
+    assert code == 0, err
+    assert (out / "innovations.png").is_file()
+    panels = dict(saved["innovations.png"])
+    roll = panels["imu/orientation\nroll"]
+    assert roll[0] == -roll[1]
+    assert 0.005 < roll[1] < 0.1, roll  # the 0.8 rad outlier does not set the scale

@@ -8,12 +8,36 @@ scripts, no network, it opens from a file:// URL anywhere.
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 
 import numpy as np
 
 from .plot import break_gaps, plot_replay, run_start
 from .run import ReplayResult, summary
+
+
+# An innovation panel is scaled to its bulk, not to its extremes: one outlier (a fix 50 m off) or the
+# 2-sigma band of the first updates (S huge before the state has converged) would flatten every other
+# update into a line at zero. The panel spans the larger of the 99th percentile of |innovation| and the
+# 95th of the band, times a margin; what lies beyond is marked at the panel's edge, with its count.
+INNOVATION_PERCENTILE = 99.0
+BAND_PERCENTILE = 95.0
+LIMIT_MARGIN = 1.25
+
+
+def innovation_limits(y: np.ndarray, band: np.ndarray) -> tuple[float, float] | None:
+    """Symmetric y-limits of one innovation panel from robust percentiles of |y| and of the 2-sigma band
+    (NaN rows, the gap breaks, left out); None when there is nothing finite to scale to."""
+    y = np.abs(np.asarray(y, dtype=float))
+    band = np.abs(np.asarray(band, dtype=float))
+    y, band = y[np.isfinite(y)], band[np.isfinite(band)]
+    parts = [np.percentile(y, INNOVATION_PERCENTILE)] if len(y) else []
+    parts += [np.percentile(band, BAND_PERCENTILE)] if len(band) else []
+    lim = LIMIT_MARGIN * max(parts, default=0.0)
+    if not lim > 0.0 or not math.isfinite(lim):
+        return None
+    return -lim, lim
 
 
 def plot_innovations(result: ReplayResult, path: Path) -> bool:
@@ -38,6 +62,16 @@ def plot_innovations(result: ReplayResult, path: Path) -> bool:
             ax = axes[k, 0]
             ax.fill_between(t, -2 * sd[:, i], 2 * sd[:, i], color="tab:green", alpha=0.2, label="±2σ predicted (S)")
             ax.plot(t, y[:, i], lw=0.8, color="tab:blue", label="innovation")
+            limits = innovation_limits(y[:, i], 2 * sd[:, i])
+            if limits is not None:
+                ax.set_ylim(*limits)
+                beyond = np.abs(np.nan_to_num(y[:, i])) > limits[1]
+                if beyond.any():  # off the scale: marked at the edge it went past, and counted
+                    edge = np.sign(y[beyond, i]) * limits[1] * 0.97
+                    ax.scatter(t[beyond], edge, marker="|", s=30, color="tab:red", zorder=3,
+                               label="beyond the scale")
+                    ax.text(0.005, 0.95, f"{int(beyond.sum())} beyond ±{limits[1]:.3g}", transform=ax.transAxes,
+                            fontsize=7, va="top", color="tab:red")
             ax.set_ylabel(f"{name}\n{comp}", fontsize=8)
             ax.grid(alpha=0.3)
             if k == 0:
