@@ -22,7 +22,7 @@ from ..errors import ReplayError
 from ..core.fusion import FusionCore
 from ..estimator.rotation import to_rpy
 from ..samples import OdomSample, Sample
-from .bag import BagError, BagSamples, open_bag_samples
+from .bag import BagError, BagSamples, did_you_mean, open_bag_samples
 
 if TYPE_CHECKING:  # the doctor is imported only by a replay that runs it (not by --quiet)
     from ..core.doctor import Doctor, Verdict
@@ -88,18 +88,19 @@ def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | Non
     for s in cfg.sensors:
         if s.name in bag.missing and isinstance(s, OdomSensor):
             raise BagError(f"the odometry topic /{s.key} (sensor {s.name!r}, which drives the prediction) is not "
-                           f"in the bag; the bag has: {have}")
+                           f"in the bag{did_you_mean(s.key, bag.bag_topics)}; the bag has: {have}")
     # Nothing is published before a GPS or absolute pose has defined the world frame: without any
     # of them in the bag the run would fuse everything and publish nothing.
     frame = [s for s in cfg.sensors if absolute_sensor(s)]
     if frame and all(s.name in bag.missing for s in frame):
-        names = " or ".join(f"/{s.key} (sensor {s.name!r})" for s in frame)
+        names = " or ".join(f"/{s.key} (sensor {s.name!r}){did_you_mean(s.key, bag.bag_topics)}" for s in frame)
         raise BagError(f"the topic {names} that defines the world frame is not in the bag: nothing would be "
                        f"published; the bag has: {have}")
     if bag.missing and warn is not None:
         for name in bag.missing:
             s = cfg.sensor(name)
-            warn(f"sensor {name!r}: topic /{s.key} is not in the bag; replaying without it (the bag has: {have})")
+            warn(f"sensor {name!r}: topic /{s.key} is not in the bag{did_you_mean(s.key, bag.bag_topics)}; "
+                 f"replaying without it (the bag has: {have})")
 
 
 _TUM = "%.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n"
