@@ -178,6 +178,22 @@ def test_wheel_scale_error_against_gps_names_scale_estimation():
     assert v.key != "sensors.wheel.scale_estimation" and "estimated wheel scale" in v.message, v
 
 
+def test_a_learned_wheel_scale_the_gps_chords_do_not_support_is_a_defect():
+    """Wheels without error beside a GPS: the chord fit says 1 within its band. A wheel_scale state that
+    learned 0.89 meanwhile (what a gate drowning good fixes in a bad altitude taught it on a real
+    skid-steer) learned the damage of something else: the doctor says so, and stays ok for the state
+    the filter really learned here (near 1)."""
+    samples = sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0))
+    result = run_samples(samples, robot_config(gps=""))
+    v = one(result.verdicts(), "wheel", "speed")
+    assert v.level == "ok", v
+    stats = {s.name: {"received": st.received, "dropped": st.dropped}
+             for s, st in zip(result.core.sensors, result.core.stats)}
+    v = one(result.doctor.verdicts(stats, scales={"wheel_scale": 0.89}), "wheel", "speed")
+    assert v.level == "warn" and v.key == "sensors.wheel.scale_estimation" and "0.890" in v.message, v
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(1.0, abs=3 * v.evidence["wheel_scale_se"])
+
+
 # A receiver whose error wanders (Gauss-Markov, tau 100 s, sigma 2 m: the harsh end of consumer receivers)
 # while it states 0.3 m. Over chords of the track its error telescopes: the chord sum carries the wander's
 # change along a stretch, ~2 sqrt(2) m per ~tau of travel (400 m at 4 m/s), so over the ~1170 m of chords of

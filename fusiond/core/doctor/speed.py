@@ -254,6 +254,17 @@ def speed_check(series: Series, cfg: Config, scales: dict[str, float] | None = N
                        f"{scale:.3f} +- {se:.3f}, over {n} chords, {fit.distance_m:.0f} m): a tyre radius or slip "
                        "error; estimate the wheel scale", sensor_key(odom.name, "scale_estimation"),
                        "scale_estimation = true", evidence)
+    if estimating and estimated is not None and abs(estimated - scale) > band:
+        # The wheels agree with the GPS chords, yet the filter's wheel_scale state moved away: it learned
+        # something the data does not contain (fixes gated out while the estimate drifted, a heading or
+        # altitude error explained as a scale, a filter re-acquired after a gap), and it bends every
+        # dead-reckoned metre by that much.
+        return Verdict(odom.name, "speed", "warn",
+                       f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
+                       f"{fit.distance_m:.0f} m) but the filter's estimated wheel scale is {estimated:.3f}: the "
+                       "state learned an error the wheels do not have; see the GPS verdicts (gated or lost fixes, "
+                       "a wrong heading), or turn the state off", sensor_key(odom.name, "scale_estimation"),
+                       "scale_estimation = false", {**evidence, "wheel_scale_estimated": estimated})
     return Verdict(odom.name, "speed", "ok",
                    f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
                    f"{fit.distance_m:.0f} m)", evidence=evidence)
