@@ -56,6 +56,10 @@ CASES = (
          ("gyro + wheel speed", "wheel odometry"), segments=True),
     Case("f110_ds2", "f110.toml", "F1/10 car, orientation off, per segment: heading", "heading_deg",
          ("gyro + wheel speed", "wheel odometry"), segments=True),
+    Case("f110_ds2", "f110_imu_yaw.toml", "F1/10 car, IMU yaw relative, per segment", "aligned_h",
+         ("gyro + wheel speed", "wheel odometry"), segments=True),
+    Case("f110_ds2", "f110_imu_yaw.toml", "F1/10 car, IMU yaw relative, per segment: heading", "heading_deg",
+         ("gyro + wheel speed", "wheel odometry"), segments=True),
 )
 
 UNITS = {"world_h": "m world", "aligned_h": "m aligned", "heading_deg": "deg heading"}
