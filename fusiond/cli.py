@@ -1,4 +1,5 @@
-"""Command line: `fusiond run | play | replay | monitor | health | set-pose | calibrate-imu | bench | bench-latency`.
+"""Command line: `fusiond run | play | replay | doctor | report | monitor | health | set-pose | calibrate-imu | bench |
+bench-latency`.
 
 Each command imports what it needs when it runs, so `replay` does not pay for Zenoh
 nor `run` for matplotlib.
@@ -116,6 +117,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if result.final is None or result.poses == 0:
         return 1  # nothing fused, or nothing published (the summary says why)
     return 0
+
+
+def _as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespace:
+    """The replay command's own arguments for these bags and options, parsed by its own parser (every
+    default as `fusiond replay` has it), so that `doctor` and `report` are that command, not a copy."""
+    return build_parser().parse_args(["replay", "--config", config, *options, "--", *bags])
+
+
+def cmd_doctor(args: argparse.Namespace) -> int:
+    """`fusiond doctor BAG --config FILE`: `replay` with the doctor and no output files; prints the
+    summary with the doctor's verdicts. Exit codes as replay's."""
+    return cmd_replay(_as_replay(args.bags, args.config))
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """`fusiond report BAG --config FILE --out DIR`: `replay --report DIR`."""
+    return cmd_replay(_as_replay(args.bags, args.config, "--report", args.out, *(["--quiet"] if args.quiet else [])))
 
 
 EXIT_UNHEALTHY = 1
@@ -460,6 +478,20 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
     r.set_defaults(func=cmd_replay)
 
+    dr = sub.add_parser("doctor", help="replay bags and print the doctor's verdicts with the summary; writes no file "
+                                       "(replay without outputs)")
+    dr.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    dr.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    dr.set_defaults(func=cmd_doctor)
+
+    rp = sub.add_parser("report", help="replay bags and write the HTML report (plots, the doctor's verdicts) into "
+                                       "DIR (replay --report DIR)")
+    rp.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    rp.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    rp.add_argument("--out", required=True, metavar="DIR", help="directory to write index.html and its images into")
+    rp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    rp.set_defaults(func=cmd_report)
+
     m = sub.add_parser("monitor", help="live per-sensor innovation/NIS view of running daemons")
     m.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")
     m.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional)")
@@ -572,7 +604,12 @@ def main(argv: list[str] | None = None) -> int:
         except EstimatorError as e:
             print(f"fusiond: {e}", file=sys.stderr)
             return 2
-    return args.func(args)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # `fusiond doctor ... | head`: the reader left; no traceback for that
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # and none from the interpreter flushing stdout at exit
+        return 1
 
 
 if __name__ == "__main__":

@@ -577,3 +577,62 @@ def test_report_innovation_panels_are_scaled_to_the_bulk_not_an_outlier(tmp_path
     roll = panels["imu/orientation\nroll"]
     assert roll[0] == -roll[1]
     assert 0.005 < roll[1] < 0.1, roll  # the 0.8 rad outlier does not set the scale
+
+
+# -- 5. `doctor` and `report` subcommands: replay's own machinery ---------------------------------------------
+
+def _without_timing(text: str) -> list[str]:
+    return [ln for ln in text.splitlines() if not ln.startswith("messages ")]  # wall time differs run to run
+
+
+def test_doctor_prints_the_verdicts_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_TOML))
+    assert code == 0, err
+    assert list(tmp_path.iterdir()) == []  # no files
+    assert "doctor WARN    wheel/yaw_rate" in out and "doctor ok      imu/orientation" in out
+    assert "report " not in out
+    code, replayed, _ = run_cli(capsys, "replay", str(JACKAL), "--config", str(JACKAL_TOML))
+    assert code == 0 and _without_timing(out) == _without_timing(replayed)  # the same replay, the same words
+
+
+def test_doctor_on_bad_input_exits_2(tmp_path, capsys):
+    png = tmp_path / "photo.bag"
+    png.write_bytes(PNG)
+    code, _, err = run_cli(capsys, "doctor", str(png), "--config", str(JACKAL_TOML))
+    assert code == 2 and "not a readable ROS 1/ROS 2 bag" in one_line(err)
+    code, _, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(tmp_path / "none.toml"))
+    assert code == 2 and "cannot read config" in one_line(err)
+
+
+def test_report_writes_the_html_report_like_replay_report(tmp_path, capsys):
+    out_dir = tmp_path / "report"
+    code, out, err = run_cli(capsys, "report", str(JACKAL), "--config", str(JACKAL_TOML), "--out", str(out_dir))
+    assert code == 0, err
+    assert sorted(p.name for p in out_dir.iterdir()) == ["index.html", "innovations.png", "overview.png"]
+    assert f"report      {out_dir / 'index.html'}" in out
+    page = (out_dir / "index.html").read_text()
+    assert 'id="verdicts"' in page and "wheel/yaw_rate" in page
+    code, out, _ = run_cli(capsys, "report", str(JACKAL), "--config", str(JACKAL_TOML), "--out", str(out_dir),
+                           "--quiet")
+    assert code == 0 and out == ""
+
+
+def test_report_refuses_an_out_that_is_a_file_before_replaying(tmp_path, capsys):
+    taken = tmp_path / "taken.html"
+    taken.write_text("x")
+    code, out, err = run_cli(capsys, "report", str(JACKAL), "--config", str(JACKAL_TOML), "--out", str(taken))
+    assert code == 2 and "names an existing file" in one_line(err)
+
+
+def test_doctor_and_report_are_in_the_help(capsys):
+    code, out, _ = run_cli(capsys, "--help")
+    assert code == 0 and "doctor" in out and "report" in out
+
+
+def test_a_closed_pipe_is_no_traceback(tmp_path):
+    proc = subprocess.Popen([str(FUSIOND), "doctor", str(JACKAL), "--config", str(JACKAL_TOML)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader (`| head`) left before anything was written
+    _, err = proc.communicate(timeout=120)
+    assert b"Traceback" not in err and b"BrokenPipe" not in err, err.decode()
