@@ -47,7 +47,8 @@ def _output_error(path: str, option: str, directory: bool = False) -> str | None
 def cmd_replay(args: argparse.Namespace) -> int:
     cfg = _load_config(args.config)
     for option, value, directory in (("--tum", args.tum, False), ("--diagnostics", args.diagnostics, False),
-                                     ("--plot", args.plot, False), ("--report", args.report, True)):
+                                     ("--plot", args.plot, False), ("--report", args.report, True),
+                                     ("--evaluation", args.evaluation, False)):
         problem = _output_error(value, option, directory) if value else None
         if problem:
             print(f"fusiond: {problem}", file=sys.stderr)
@@ -55,8 +56,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from .errors import ReplayError
     from .replay.run import replay, summary
 
-    reference = getattr(args, "reference", None)
-    fuse_every = getattr(args, "fuse_every", 1)
+    reference = args.reference
+    fuse_every = args.fuse_every
     recorder = None
     if reference or fuse_every > 1:
         from .replay.evaluate import Recorder
@@ -97,6 +98,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
         Path(args.evaluation).parent.mkdir(parents=True, exist_ok=True)
         Path(args.evaluation).write_bytes(msgspec.json.format(msgspec.json.encode(evaluation)))
+    evaluation_text = None
+    if evaluation is not None:
+        from .replay.evaluate import format_evaluation
+
+        evaluation_text = format_evaluation(evaluation)
     title = ", ".join(Path(b).name for b in args.bags)
     if args.plot:
         from .replay.plot import plot_replay
@@ -105,15 +111,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.report:
         from .replay.report import write_report
 
-        index = write_report(result, Path(args.report), title)
+        index = write_report(result, Path(args.report), title, evaluation_text)
         if not args.quiet:
             print(f"report      {index}")
     if not args.quiet:
         print(summary(result))
-    if evaluation is not None:
-        from .replay.evaluate import format_evaluation
-
-        print(format_evaluation(evaluation))
+    if evaluation_text is not None:
+        print(evaluation_text)
     if result.final is None or result.poses == 0:
         return 1  # nothing fused, or nothing published (the summary says why)
     return 0

@@ -128,6 +128,14 @@ def test_the_absolute_sensor_itself_is_the_reference_of_its_held_back_messages(d
     assert s["fusiond"]["n"] > 0
 
 
+def test_the_report_shows_the_evaluation(drive, tmp_path: Path) -> None:
+    bag, cfg, _ = drive
+    assert main(["replay", str(bag), "--config", str(cfg), "--reference", "/ground_truth", "--quiet",
+                 "--report", str(tmp_path / "report")]) == 0
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert '<pre id="evaluation">' in page and "gyro + wheel speed" in page
+
+
 def test_a_fused_topic_is_refused_as_reference(drive, capsys) -> None:
     bag, cfg, _ = drive
     assert main(["replay", str(bag), "--config", str(cfg), "--reference", "/odom", "--quiet"]) == 2

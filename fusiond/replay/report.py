@@ -84,7 +84,8 @@ def plot_innovations(result: ReplayResult, path: Path) -> bool:
     return True
 
 
-def write_report(result: ReplayResult, directory: Path, title: str) -> Path:
+def write_report(result: ReplayResult, directory: Path, title: str, evaluation: str | None = None) -> Path:
+    """``evaluation``: the `--reference` table (format_evaluation), shown beside the doctor."""
     directory.mkdir(parents=True, exist_ok=True)
     plot_replay(result, directory / "overview.png", title=title)
     has_innov = plot_innovations(result, directory / "innovations.png")
@@ -118,6 +119,7 @@ pre {{ background: #f6f6f6; padding: 1em; overflow-x: auto; }}
 <table id="verdicts"><tr><th>level</th><th>sensor/channel</th><th>verdict</th><th>config key</th></tr>
 {rows}
 </table>
+{"" if evaluation is None else '<h2>Against the reference</h2>' + chr(10) + '<pre id="evaluation">' + html.escape(evaluation) + '</pre>'}
 <h2>Trajectory and NIS</h2>
 <img src="overview.png" alt="trajectory and NIS per sensor channel">
 {innov}
