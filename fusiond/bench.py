@@ -458,7 +458,7 @@ def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: i
 
 
 def targets(result: dict[str, dict[str, float]]) -> dict[str, float]:
-    """Issue 13's ratios, each against its yardstick from the same run (targets in the names)."""
+    """The performance ratios, each against its yardstick from the same run (targets in the names)."""
     out: dict[str, float] = {}
     est, yard = result.get("estimator", {}), result.get("yardstick", {})
     if est and yard:

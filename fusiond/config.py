@@ -1,4 +1,4 @@
-"""Configuration: the TOML contract of DESIGN.md as msgspec Structs.
+"""Configuration: the TOML contract (config.toml documents every key) as msgspec Structs.
 
 Every table forbids unknown fields and every sensor kind is a tagged Struct, so a
 typo, a wrong type or an unknown kind/mode is one clear line naming the key,

@@ -15,7 +15,7 @@ import msgspec
 
 
 class DiagnosticsRecord(msgspec.Struct, gc=False):
-    """One record per update (DESIGN.md schema; ``channel`` and later fields are extensions)."""
+    """One record per update (the documented diagnostics schema; ``channel`` and later fields are extensions)."""
 
     stamp: float
     sensor: str

@@ -14,11 +14,11 @@ track turned with the state, so each new fit measures what is left) and re-appli
 its uncertainty is below HEADING_READY_SIGMA; then the heading is known and fixes become
 ordinary, gated updates (channel ``position``). With a wandering receiver error modelled
 (``error_tau_s``) the fit's uncertainty carries what the wander can bend the track by, which
-more fixes do not average away on a small field (a mower's back-and-forth: QA9, the heading
-never found in 180 s, every fix fused unchecked, a multipath burst with it). Once the fit is
+more fixes do not average away on a small field (a mower's back-and-forth: the heading could
+stay unfound for minutes, every fix fused unchecked, a multipath burst with them). Once the fit is
 within HEADING_WANDER_READY_SIGMA there the fixes stay position-only updates but are gated
 (channel ``position_provisional``). Full updates there were tried and lost: they teach the
-wheel scale what a drive reading zero for seconds cost the dead-reckoning (QA9: 0.78 -> 2.39 m).
+wheel scale what a drive reading zero for seconds cost the dead-reckoning.
 
 Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
 1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
@@ -323,7 +323,7 @@ class GpsModel(SensorModel):
         (a constant offset, not a multipath burst whose error jumps around) and which moved with
         the wheels say so. A receiver that lost its fix and repeats it with a little noise (its
         covariance then as unknown, wide enough for the growing innovations to "agree") stays where
-        it was while the wheels drive on (QA9: a car at 28 m/s pulled back 330 m): no evidence that
+        it was while the wheels drive on (a car at 28 m/s would be pulled back hundreds of metres): no evidence that
         the filter is wrong. Wheels spinning on the spot look the same until the robot moves again."""
         own: GpsOwn = s.own[self.index]
         if not rejected:
@@ -354,8 +354,8 @@ class GpsModel(SensorModel):
         """How long a run of gated-out fixes must last to say the filter is lost: REACQUIRE_S, or
         REACQUIRE_JUMP_S when the fixes jumped (the run's first fix came within JUMP_AFTER_S of one the
         gate let in, and most of its offset is new). A filter drifts off continuously (dead-reckoning
-        through a gap or a tunnel, a wrong heading); a receiver jumps: multipath (QA9: a 4 s burst 18 m
-        off was taken in after 3 s and left again 1 s later), a reset. Its new fixes may be right, but
+        through a gap or a tunnel, a wrong heading); a receiver jumps: multipath (a 4 s burst 18 m
+        off would be taken in after 3 s and left again 1 s later), a reset. Its new fixes may be right, but
         they have to keep saying so for longer."""
         last = own.accepted
         if last is None or first[0] - last[0] > JUMP_AFTER_S:
@@ -386,7 +386,7 @@ class GpsModel(SensorModel):
     def _frozen(self, s: "FilterState", lla: tuple[float, float, float], z) -> bool:
         """Is this fix a repeat of the previous one although the robot has moved since those coordinates
         first came: bit for bit after FROZEN_MIN_TRAVEL, or within FROZEN_JITTER after FROZEN_JITTER_TRAVEL
-        (a receiver that lost its fix and republishes it with rounding noise, QA9)? Independent fixes
+        (a receiver that lost its fix and republishes it with rounding noise)? Independent fixes
         of a moving antenna are never bit-identical, nor a centimetre apart after half a metre; a robot
         at rest (odometry exactly zero: no dead-reckoned travel) may get repeats and fuses them.
         Remembers the fix otherwise (a repeat keeps the fix it repeats)."""
