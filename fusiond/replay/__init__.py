@@ -19,6 +19,10 @@ _EXPORTS = {
     "BagError": "bag",
     "plot_replay": "plot",
     "write_report": "report",
+    "evaluate": "evaluate",
+    "Evaluation": "evaluate",
+    "Recorder": "evaluate",
+    "format_evaluation": "evaluate",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
