@@ -10,6 +10,12 @@ def robot_config(gps: str | None = None, pose: str | None = None, odom: str = ""
                  filt: str = "", orientation: str = "roll_pitch", gyro: bool = True, imu_key: str = "imu") -> Config:
     """``gps``/``pose``: None for no such sensor, else the extra lines of its table; ``gyro``: whether
     the IMU's angular velocity is fused."""
+    return loads(robot_config_text(gps, pose, odom, imu, filt, orientation, gyro, imu_key))
+
+
+def robot_config_text(gps: str | None = None, pose: str | None = None, odom: str = "", imu: str = "",
+                      filt: str = "", orientation: str = "roll_pitch", gyro: bool = True, imu_key: str = "imu") -> str:
+    """The TOML of ``robot_config`` (for a test that needs the config as a file)."""
     text = f"""
 [filter]
 {filt}
@@ -30,7 +36,7 @@ angular_velocity = {"true" if gyro else "false"}
         text += f'[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps"\n{gps}\n'
     if pose is not None:
         text += f'[[sensors]]\nname = "pose"\nkind = "pose"\nkey = "pose"\n{pose}\n'
-    return loads(text)
+    return text
 
 
 def loopback_daemon_config(output: str = "", imu: str = "", extra: str = "") -> Config:

@@ -21,28 +21,13 @@ from fusiond.codecs import encode_sample, typestore
 from fusiond.estimator import rotation as rot
 from fusiond.replay.evaluate import Track, _aligned_rms
 from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample
+from tests.configs import robot_config_text
 from tests.sim_gps import World, simulate
 
 TYPES = {OdomSample: "nav_msgs/msg/Odometry", ImuSample: "sensor_msgs/msg/Imu",
          GpsSample: "sensor_msgs/msg/NavSatFix", PoseSample: "geometry_msgs/msg/PoseStamped"}
 TOPICS = {"wheel": "/odom", "imu": "/imu", "gps": "/gps", "truth": "/ground_truth"}
 
-CONFIG = """
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "gps"
-"""
 
 
 def _write_bag(path: Path, w: World) -> None:
@@ -68,7 +53,7 @@ def drive(tmp_path_factory) -> tuple[Path, Path, World]:
     w = World(duration=40.0, gps_rate=5.0, gps_sigma=0.5, speed=2.0, seed=3)
     _write_bag(root / "bag", w)
     cfg = root / "robot.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(robot_config_text(gps=""))
     return root / "bag", cfg, w
 
 
