@@ -1,5 +1,5 @@
-"""Command line: `fusiond run | play | replay | doctor | report | monitor | health | set-pose | calibrate-imu | bench |
-bench-latency`.
+"""Command line: `fusiond run | play | replay | doctor | report | tune | monitor | health | set-pose | calibrate-imu |
+bench | bench-latency`.
 
 Each command imports what it needs when it runs, so `replay` does not pay for Zenoh
 nor `run` for matplotlib.
@@ -142,6 +142,40 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 EXIT_UNHEALTHY = 1
 _STATUS_RANK = {"failed": 0, "starting": 1, "degraded": 1, "ok": 2}
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    """Fit the configured noise to the bags (fusiond/tune) and write the complete tuned config."""
+    cfg = _load_config(args.config)
+    problem = _output_error(args.out, "--out")
+    if problem:
+        print(f"fusiond: {problem}", file=sys.stderr)
+        return EXIT_USAGE
+    if not args.budget_s > 0.0:
+        print(f"fusiond: --budget-s {args.budget_s:g}: must be a positive number of seconds", file=sys.stderr)
+        return EXIT_USAGE
+    from .errors import ConfigError, ReplayError
+    from .tune import format_table, read_samples, select, tunable_params, tune, write
+
+    keys = [k for part in args.keys for k in part.split(",")] if args.keys else None
+    try:
+        if keys is not None:
+            select(tunable_params(cfg), keys)  # an unknown key fails before the bags are read
+        samples = read_samples([Path(b) for b in args.bags], cfg,
+                               warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr))
+        result = tune(samples, cfg, keys, budget_s=args.budget_s, progress=not args.quiet)
+    except (ConfigError, ReplayError) as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    bags = ", ".join(Path(b).name for b in args.bags)
+    b, a = result.heldback_before, result.heldback_after
+    held = f"; held-back -log L {b.neg_loglik:.1f} -> {a.neg_loglik:.1f}" if b is not None and a is not None else ""
+    header = (f"fusiond tune of {bags} from {args.config}: {len(result.changed)} key(s) tuned{held}.\n"
+              "Keys at their default are left out; config.toml documents them.")
+    write(args.out, result.config, result.comments, header)
+    print(format_table(result))
+    print(f"tuned config {args.out}")
+    return 0
 
 
 def _zenoh_errors():
@@ -495,6 +529,18 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", required=True, metavar="DIR", help="directory to write index.html and its images into")
     rp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     rp.set_defaults(func=cmd_report)
+
+    tu = sub.add_parser("tune", help="fit the configured sensors' and the process's noise to bags by the innovations' "
+                                     "likelihood, check it on the held-back last 30 %%, write the tuned config")
+    tu.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    tu.add_argument("--config", required=True, help="TOML config (see config.toml): the sensors and the start")
+    tu.add_argument("--out", required=True, metavar="TUNED.toml", help="write the complete tuned config here")
+    tu.add_argument("--keys", action="append", metavar="KEY[,KEY]",
+                    help="fit only these (e.g. imu.gyro_noise, wheel.twist_noise, filter); default: every tunable key")
+    tu.add_argument("--budget-s", type=float, default=120.0, metavar="S",
+                    help="stop the fit after S seconds of replays (default 120; the held-back check runs after)")
+    tu.add_argument("--quiet", action="store_true", help="no progress bar")
+    tu.set_defaults(func=cmd_tune)
 
     m = sub.add_parser("monitor", help="live per-sensor innovation/NIS view of running daemons")
     m.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")

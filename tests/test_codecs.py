@@ -383,7 +383,7 @@ def sensor_stream(draw: st.DrawFn) -> tuple[str, list[bytes]]:
 
 
 @given(case=sensor_stream())
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=120, deadline=None)
 def test_one_decoder_over_a_stream_agrees_with_rosbags(case: tuple[str, list[bytes]]) -> None:
     """A decoder remembers the layout of the last payload it accepted and skips re-checking the frame
     ids of a payload that repeats it (`_RepeatedLayout`): over a stream that mixes repeats, other

@@ -1,0 +1,350 @@
+"""The fit: noise parameters that maximise the innovations' likelihood, checked on held-back data.
+
+1. Split the recording by stamp: the first ``fit_fraction`` (70 %) is fitted, the rest held back.
+2. Probe: each parameter x2 (and, if that changes -log L by less than 1, /2) from its start on the
+   fit part. One the likelihood does not notice either way (less than 1 over a factor of 2) is
+   something the data cannot inform: it is left as the config has it, and the table says so.
+3. Optimise the informed parameters' log-scales with Nelder-Mead (below), within ``budget_s``
+   seconds (probes included) and ``maxfev`` evaluations, each one replay of the fit part through a
+   fresh FusionCore. An optimum less than 1 below the start's -log L is no finding: nothing changes.
+4. Validate on the held-back part, with the filter run over the whole recording (so the held-back
+   part starts from the state the fit part left, as it would in use) and -log L counted only over
+   the updates stamped after the split: each changed key is dropped back to its original in turn
+   and stays dropped when that scores the held-back part no worse; if what is left does not beat
+   the original config there, nothing is changed.
+
+Why derivative-free. The likelihood of this filter is not a smooth function of its noise: the
+Mahalanobis gates switch updates between applied and rejected, the standstill detection and the
+gyro-bias windows open and close on thresholds of the stated noise, the GPS heading search is
+accepted at a threshold of its uncertainty. Each is a step in -log L; finite-difference gradients
+across them are noise, and a quasi-Newton method fed those stalls or jumps. Nelder-Mead compares
+values only, over a simplex whose steps (a factor of 2 to begin with) are wider than those
+steps, and needs nothing but replays, which are what is available. In log-scale every parameter
+stays positive and a factor is the same step at any magnitude.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from ..config import Config
+from ..errors import ReplayError
+from .likelihood import Reference, Score, reference, replay_records, residuals, score
+from .params import Param, apply, select, sensor_of, tunable_params, value
+
+PROBE = math.log(2.0)  # the informedness probe and the first simplex step: a factor of 2
+INFORMED = 1.0  # -log L must change by at least this over a factor of 2
+BOUND = math.log(1000.0)  # no scale beyond x1000 or /1000 of the start
+# Nelder-Mead stops when the simplex spans < 3 % in every scale and its values < 0.5 in -log L
+# (a difference of 0.5 in log L is half a standard deviation of the likelihood-ratio statistic)
+XATOL = 0.03
+FATOL = 0.5
+
+
+class _OutOfBudget(Exception):
+    pass
+
+
+@dataclass
+class Row:
+    """One parameter's line of the table."""
+
+    param: Param
+    before: object  # value(original config): None = unset (the messages' covariances)
+    after: object
+    status: str  # tuned | unchanged | not informed | refused | skipped
+    note: str = ""
+    nis_before: float | None = None  # held-back mean NIS per dof of the updates it is judged by
+    nis_after: float | None = None
+
+
+@dataclass
+class TuneResult:
+    original: Config
+    config: Config  # the tuned config (== original when nothing changed)
+    rows: list[Row]
+    split: float  # stamp between the fitted and the held-back part
+    fit_before: float  # -log L of the fit part at the start ...
+    fit_after: float  # ... and at the optimum
+    heldback_before: Score | None  # the original config on the held-back part ...
+    heldback_after: Score | None  # ... and the tuned one
+    evaluations: int  # replays run (fit part and whole recording)
+    seconds: float
+    stopped: str  # converged | budget | maxfev | nothing to fit
+    fit_residuals: int = 0  # scalar innovations in the fit part's terms
+    comments: dict[tuple[str, str], str] = field(default_factory=dict)  # (table, key) -> its TOML comment
+
+    @property
+    def changed(self) -> list[Row]:
+        return [r for r in self.rows if r.status == "tuned"]
+
+
+class _Progress:
+    """rich's progress bar on stderr when it is a terminal (and asked for); silent otherwise."""
+
+    def __init__(self, enabled: bool, total: int) -> None:
+        self.bar = None
+        if enabled and sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(TextColumn("tune {task.description}"), BarColumn(), MofNCompleteColumn(),
+                                TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+            self.bar.start()
+            self.task = self.bar.add_task("", total=total)
+
+    def step(self, description: str, total: int | None = None) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, advance=1, description=description, total=total)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+class _Objective:
+    """-log L of the fit part as a function of the active parameters' log-scales, memoised (the
+    probes are the first simplex's vertices), counting replays against the budget."""
+
+    def __init__(self, cfg: Config, params: Sequence[Param], samples: Sequence[object], deadline: float,
+                 maxfev: int, bar: _Progress) -> None:
+        self.cfg, self.params, self.samples = cfg, list(params), samples
+        self.deadline, self.maxfev, self.bar = deadline, maxfev, bar
+        self.cache: dict[tuple[float, ...], float] = {}
+        self.replays = 0
+        self.ref: Reference | None = None
+        self.best: tuple[float, tuple[float, ...]] = (math.inf, ())
+        self.stopped = ""
+
+    def config(self, theta: Sequence[float]) -> Config:
+        return apply(self.cfg, self.params, list(theta))
+
+    def __call__(self, theta: Sequence[float]) -> float:
+        key = tuple(round(float(t), 9) for t in theta)
+        hit = self.cache.get(key)
+        if hit is not None:
+            return hit
+        if self.ref is not None:  # the reference replay is never refused
+            if time.perf_counter() > self.deadline:
+                self.stopped = "budget"
+                raise _OutOfBudget
+            if self.replays >= self.maxfev:
+                self.stopped = "maxfev"
+                raise _OutOfBudget
+        records = replay_records(self.config(key), self.samples)
+        self.replays += 1
+        if self.ref is None:
+            self.ref = reference(records, self.cfg)
+        f = score(records, self.ref).neg_loglik
+        self.cache[key] = f
+        if f < self.best[0]:
+            self.best = (f, key)
+        self.bar.step(f"fit: -log L {self.best[0]:.1f}")
+        return f
+
+
+def _informed(obj: _Objective, n: int) -> list[bool]:
+    """Step 2 of the module doc, per parameter."""
+    f0 = obj([0.0] * n)
+    out = []
+    for i in range(n):
+        up = [0.0] * n
+        up[i] = PROBE
+        if abs(obj(up) - f0) >= INFORMED:
+            out.append(True)
+            continue
+        up[i] = -PROBE
+        out.append(abs(obj(up) - f0) >= INFORMED)
+    return out
+
+
+def _minimise(obj: _Objective, n: int, informed: list[bool]) -> tuple[list[float], str]:
+    """Nelder-Mead over the informed log-scales (the others held at their start), within budget."""
+    from scipy.optimize import minimize
+
+    free = [i for i in range(n) if informed[i]]
+    if not free:
+        return [0.0] * n, "nothing to fit"
+
+    def full(z) -> list[float]:
+        theta = [0.0] * n
+        for k, i in enumerate(free):
+            theta[i] = float(z[k])
+        return theta
+
+    simplex = [[0.0] * len(free)]
+    for k in range(len(free)):
+        v = [0.0] * len(free)
+        v[k] = PROBE  # the probes already replayed
+        simplex.append(v)
+    try:
+        res = minimize(lambda z: obj(full(z)), [0.0] * len(free), method="Nelder-Mead",
+                       bounds=[(max(-BOUND, obj.params[i].lowest()), BOUND) for i in free],
+                       options={"initial_simplex": simplex, "xatol": XATOL, "fatol": FATOL,
+                                "maxfev": 10**9, "adaptive": len(free) > 3})
+        stopped = "converged" if res.success else (obj.stopped or "maxfev")
+    except _OutOfBudget:
+        stopped = obj.stopped
+    best = obj.best[1]
+    return (list(best) if best else [0.0] * n), stopped
+
+
+def _fmt(v: object) -> str:
+    if v is None:
+        return "unset"
+    if isinstance(v, tuple):
+        return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = None, budget_s: float = 120.0,
+         maxfev: int | None = None, progress: bool = False, fit_fraction: float = 0.7) -> TuneResult:
+    """Fit ``cfg``'s noise to ``samples`` (a recording's configured-sensor samples in bag order; the
+    module doc says how). ``keys``: the parameters to fit (``params.select``; ConfigError for an
+    unknown one). ``maxfev`` (default 60 per parameter) and ``budget_s`` bound the fit's replays;
+    validation adds 2 + one per changed key replays of the whole recording."""
+    t_start = time.perf_counter()
+    samples = list(samples)
+    if not samples:
+        raise ReplayError("nothing to tune: the recording has no sample of a configured sensor")
+    params = select(tunable_params(cfg, samples), keys)
+    active = [p for p in params if not p.skipped]
+    n = len(active)
+    if maxfev is None:
+        maxfev = 60 * max(n, 1)
+    lo = min(s.stamp for s in samples)
+    split = lo + fit_fraction * (max(s.stamp for s in samples) - lo)
+    fit_part = [s for s in samples if s.stamp <= split]
+    bar = _Progress(progress, total=2 * n + maxfev + 2 + n)
+    try:
+        obj = _Objective(cfg, active, fit_part, t_start + budget_s, maxfev, bar)
+        informed = [False] * n
+        stopped = "nothing to fit"
+        theta = [0.0] * n
+        f_start = f_best = math.nan
+        if n:
+            try:
+                informed = _informed(obj, n)
+            except _OutOfBudget:
+                informed = [False] * n  # not even probed in time: nothing is claimed about them
+                stopped = "budget"
+            else:
+                theta, stopped = _minimise(obj, n, informed)
+            f_start = obj.cache[tuple([0.0] * n)]
+            f_best = obj.cache.get(tuple(round(t, 9) for t in theta), f_start)
+            if not f_start - f_best >= INFORMED:  # the fit found nothing the data tell apart from the start
+                theta = [0.0] * n
+                f_best = f_start
+        floored = [informed[i] and theta[i] <= active[i].lowest() + 1e-9 for i in range(n)]
+        result = _validate(cfg, samples, active, theta, informed, split, bar, floored)
+    finally:
+        bar.close()
+    rows, config, before, after, comments, replays = result
+    skipped = [Row(p, value(cfg, p), value(cfg, p), "skipped", p.skipped) for p in params if p.skipped]
+    rows = rows + skipped
+    order = {p.name: i for i, p in enumerate(params)}
+    rows.sort(key=lambda r: order[r.param.name])
+    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays,
+                      time.perf_counter() - t_start, stopped,
+                      residuals(obj.ref) if n and obj.ref is not None else 0, comments)
+
+
+def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
+              informed: list[bool], split: float, bar: _Progress, floored: list[bool]):
+    """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays)."""
+    replays = 0
+
+    def run(c: Config) -> list:
+        nonlocal replays
+        replays += 1
+        bar.step("held-back check")
+        return replay_records(c, samples)
+
+    original = run(cfg)
+    ref = reference(original, cfg, after=split)
+    before = score(original, ref)
+    start = apply(cfg, active, [0.0] * len(active))
+    kept: list[float | None] = [None] * len(active)
+    for i, p in enumerate(active):
+        if informed[i] and value(apply(cfg, active, theta), p) != value(start, p):
+            kept[i] = theta[i]
+    status = ["not informed" if not informed[i] else "unchanged" for i in range(len(active))]
+    notes = [""] * len(active)
+    after, config = before, cfg
+    if any(t is not None for t in kept):
+        config = apply(cfg, active, kept)
+        after = score(run(config), ref)
+        for i in range(len(active)):
+            if kept[i] is None:
+                continue
+            trial = list(kept)
+            trial[i] = None
+            trial_cfg = apply(cfg, active, trial)
+            trial_score = score(run(trial_cfg), ref)
+            if trial_score.neg_loglik <= after.neg_loglik:
+                status[i] = "refused"
+                notes[i] = (f"fitted {_fmt(value(apply(cfg, active, kept), active[i]))}; held-back -log L "
+                            f"{trial_score.neg_loglik:.1f} without it, {after.neg_loglik:.1f} with it")
+                kept, config, after = trial, trial_cfg, trial_score
+        if after.neg_loglik >= before.neg_loglik and any(t is not None for t in kept):
+            for i in range(len(active)):
+                if kept[i] is not None:
+                    status[i] = "refused"
+                    notes[i] = (f"fitted {_fmt(value(config, active[i]))}; the tuned config's held-back -log L "
+                                f"{after.neg_loglik:.1f} is not below the original's {before.neg_loglik:.1f}")
+            kept, config, after = [None] * len(active), cfg, before
+    for i, p in enumerate(active):
+        if kept[i] is not None:
+            status[i] = "tuned"
+    comments: dict[tuple[str, str], str] = {}
+    for i, p in enumerate(active):
+        if status[i] == "tuned":
+            was = getattr(cfg.filter if p.table == "filter" else cfg.sensor(p.table), p.key)
+            was_text = _fmt(was) if was is not None else "unset (the messages' covariances)"
+            comments[p.group] = (f"tuned: was {was_text}; held-back -log L {before.neg_loglik:.1f} -> "
+                                 f"{after.neg_loglik:.1f}")
+            for name, _ in p.companions:
+                comments[(p.table, name)] = f"tuned: set with {p.key} (the components the messages state as not measured)"
+    rows = []
+    for i, p in enumerate(active):
+        s = sensor_of(p) or ""
+        note = notes[i] or ("the likelihood changes by less than 1 over a factor of 2" if status[i] == "not informed"
+                            else "")
+        if floored[i] and status[i] in ("tuned", "unchanged"):
+            note = f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower"
+        rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
+                        after.nis_per_dof.get(s)))
+    return rows, config, before, after, comments, replays
+
+
+def format_table(result: TuneResult) -> str:
+    """The table `fusiond tune` prints: key | before | after | held-back NIS per dof | status."""
+    head = ("key", "before", "after", "held-back NIS/dof", "status")
+    lines = []
+    for r in result.rows:
+        before = _fmt(r.before) if r.before is not None else f"unset (messages ~{_fmt(r.param.start())})" \
+            if r.param.source != "config" and not r.param.skipped else "unset"
+        nis = "" if r.nis_before is None else f"{r.nis_before:.3g} -> {r.nis_after:.3g}" \
+            if r.nis_after is not None else f"{r.nis_before:.3g} -> n/a"
+        status = r.status + (f": {r.note}" if r.note else "")
+        lines.append((r.param.name, before, _fmt(r.after), nis, status))
+    widths = [max(len(x[k]) for x in [head, *lines]) for k in range(4)]
+    out = ["  ".join(h.ljust(w) for h, w in zip(head[:4], widths)) + "  " + head[4]]
+    out += ["  ".join(c.ljust(w) for c, w in zip(line[:4], widths)) + "  " + line[4] for line in lines]
+    b, a = result.heldback_before, result.heldback_after
+    if b is not None and a is not None:
+        out.append(f"held-back   -log L {b.neg_loglik:.1f} -> {a.neg_loglik:.1f} over {b.terms} updates after stamp "
+                   f"{result.split:.3f} (mean NIS/dof {_fmt(b.nis_per_dof.get(''))} -> "
+                   f"{_fmt(a.nis_per_dof.get(''))})")
+    if result.fit_before == result.fit_before:
+        out.append(f"fit part    -log L {result.fit_before:.1f} -> {result.fit_after:.1f} over "
+                   f"{result.fit_residuals} residuals; {result.stopped}")
+    out.append(f"replays     {result.evaluations} in {result.seconds:.1f} s")
+    return "\n".join(out)
+
+
+__all__ = ["Row", "TuneResult", "format_table", "tune"]

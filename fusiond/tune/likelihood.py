@@ -1,0 +1,181 @@
+"""The innovations' negative log-likelihood of one replay: what `fusiond tune` minimises.
+
+The filter's own prediction-error decomposition: each update's innovation y with its predicted
+covariance S = H P H^T + R is, for a filter whose model is right, a Gaussian independent of the
+earlier ones, so the recording's negative log-likelihood is
+
+    -log L = 1/2 sum over updates of (log det S + y^T S^-1 y)   (+ a constant: m log 2 pi)
+
+and the noise that maximises L is the noise the innovations say the sensors and the process have.
+
+What a diagnostics record carries. A record has the NIS, y^T S^-1 y computed from the full S
+(the estimator's Cholesky solve), so that term is exact; of S it carries only the diagonal
+(``innovation_var``). log det S is taken as sum(log S_ii), the log determinant of S's diagonal
+approximation. That is exact for scalar updates (a GPS fix's up, each axis of a standstill's
+gyro-bias window, which are separate scalar updates recorded together) and an upper bound otherwise (Hadamard: det S <= prod S_ii),
+off by -log det of the correlation matrix of the innovation, small for roll/pitch (nearly
+uncorrelated) and for a GPS fix once the heading is known. The exact value would need the log
+det from the update itself (2 sum log L_ii of its Cholesky factor), which ``UpdateResult`` does
+not return; adding it touches the compiled update kernel, which this module leaves alone.
+
+Which records are terms. Updates only: a check that moves no state (the wheels' yaw rate against
+the gyro, channel ``yaw_rate``) is not a prediction error of the filter. Learning updates (the
+first standstill windows, the GPS heading search: their NIS tests a prior, not a noise) are left
+out too. The set of terms must not depend on the parameters being compared, or a parameter that
+makes the gate reject more updates, or a sensor model emit fewer records, would win by having
+fewer (mostly negative: log of a small variance) terms. So one replay fixes the terms
+(``reference``: keyed by sensor, channel, stamp), every other replay is scored on exactly
+those, and:
+
+- a rejected update (gated out) counts its log det S and its NIS capped at the gate (the
+  sensor's ``mahalanobis_threshold``^2, or 5^2 = the standstill gate's per axis where the sensor
+  has none): dropping an update costs at least as much as a 5-sigma innovation, not nothing;
+- a term the replay does not produce at all counts as rejected with the reference's log det S;
+- a record the reference does not have is not scored.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+from ..config import Config
+from ..core.diagnostics import DiagnosticsRecord
+from ..core.fusion import FusionCore
+from ..core.sensors.gyro_bias import ZERO_RATE_GATE
+
+CHECK_CHANNELS = frozenset({"yaw_rate"})  # records of consistency checks, not of updates
+DEFAULT_GATE = ZERO_RATE_GATE  # sigma: the cap of a rejected update of a sensor without a gate
+
+TermKey = tuple[str, str, float, int]  # sensor, channel, stamp, occurrence (records sharing the first three)
+
+
+def replay_records(cfg: Config, samples: Iterable[object]) -> list[DiagnosticsRecord]:
+    """Every diagnostics record of one replay of ``samples`` (in the order given: a bag's) through a
+    fresh FusionCore with ``cfg``."""
+    core = FusionCore(cfg)
+    ingest = core.ingest
+    records: list[DiagnosticsRecord] = []
+    for s in samples:
+        step = ingest(s)
+        if step.records:
+            records.extend(step.records)
+    return records
+
+
+def _keys(records: Iterable[DiagnosticsRecord]) -> Iterable[tuple[TermKey, DiagnosticsRecord]]:
+    seen: dict[tuple[str, str, float], int] = {}
+    for r in records:
+        k = (r.sensor, r.channel, r.stamp)
+        n = seen.get(k, 0)
+        seen[k] = n + 1
+        yield (r.sensor, r.channel, r.stamp, n), r
+
+
+def _log_det(r: DiagnosticsRecord) -> float | None:
+    """log det of S's diagonal approximation (module doc); None when S is not usable."""
+    total = 0.0
+    for v in r.innovation_var:
+        if not (v > 0.0 and math.isfinite(v)):
+            return None
+        total += math.log(v)
+    return total
+
+
+def nis_cap(cfg: Config, sensor: str, channel: str, dof: int) -> float:
+    """What a rejected update's NIS counts at most: the squared gate (per axis for the standstill
+    bias windows, whose axes are gated one by one and recorded together)."""
+    if channel == "gyro_bias":
+        return ZERO_RATE_GATE**2 * max(dof, 1)
+    try:
+        gate = getattr(cfg.sensor(sensor), "mahalanobis_threshold", math.inf)
+    except KeyError:
+        gate = math.inf
+    if not math.isfinite(gate):
+        gate = DEFAULT_GATE
+    return gate * gate
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The terms every replay is scored on: key -> (log det S in the reference replay, NIS cap, dof)."""
+
+    terms: dict[TermKey, tuple[float, float, int]]
+
+    def __len__(self) -> int:
+        return len(self.terms)
+
+
+def reference(records: Iterable[DiagnosticsRecord], cfg: Config, after: float = -math.inf,
+              until: float = math.inf) -> Reference:
+    """The terms of this replay (module doc) with stamp in (after, until]."""
+    terms: dict[TermKey, tuple[float, float, int]] = {}
+    for key, r in _keys(records):
+        if r.channel in CHECK_CHANNELS or r.learning or not (after < r.stamp <= until):
+            continue
+        ld = _log_det(r)
+        if ld is None:
+            continue
+        terms[key] = (ld, nis_cap(cfg, r.sensor, r.channel, r.dof), r.dof)
+    return Reference(terms)
+
+
+@dataclass
+class Score:
+    """A replay scored on a reference's terms."""
+
+    neg_loglik: float  # 1/2 sum (log det S + NIS), over the reference's terms
+    terms: int
+    applied: int  # of them, applied (not rejected) in this replay
+    rejected: int
+    missing: int  # reference terms this replay did not produce
+    # mean NIS per dof over the applied terms, per sensor ("" = all): near 1 for a consistent filter
+    nis_per_dof: dict[str, float] = field(default_factory=dict)
+
+
+def score(records: Iterable[DiagnosticsRecord], ref: Reference) -> Score:
+    """-log L of a replay's records on ``ref``'s terms (module doc)."""
+    terms = ref.terms
+    total = 0.0
+    applied = rejected = 0
+    found: set[TermKey] = set()
+    nis_sum: dict[str, float] = {}
+    nis_n: dict[str, int] = {}
+    for key, r in _keys(records):
+        t = terms.get(key)
+        if t is None:
+            continue
+        found.add(key)
+        ld = _log_det(r)
+        cap = t[1]
+        if ld is None:
+            total += t[0] + cap
+            rejected += 1
+            continue
+        nis = r.nis
+        if r.rejected or nis != nis:
+            total += ld + (min(nis, cap) if nis == nis else cap)
+            rejected += 1
+            continue
+        total += ld + nis
+        applied += 1
+        per = nis / max(r.dof, 1)
+        nis_sum[r.sensor] = nis_sum.get(r.sensor, 0.0) + per
+        nis_n[r.sensor] = nis_n.get(r.sensor, 0) + 1
+    missing = [k for k in terms if k not in found]
+    for k in missing:
+        total += terms[k][0] + terms[k][1]
+    means = {s: nis_sum[s] / nis_n[s] for s in nis_sum}
+    if nis_n:
+        means[""] = sum(nis_sum.values()) / sum(nis_n.values())
+    return Score(0.5 * total, len(terms), applied, rejected, len(missing), means)
+
+
+def residuals(ref: Reference, sensors: Sequence[str] | None = None, channel: str | None = None) -> int:
+    """How many scalar innovations the reference's terms hold (of these sensors, this channel): the
+    n of a noise estimate's spread, ~1/sqrt(2n) relative for a standard deviation."""
+    return sum(t[2] for k, t in ref.terms.items() if (sensors is None or k[0] in sensors) and (channel is None or k[1] == channel))
+
+
+__all__ = ["CHECK_CHANNELS", "Reference", "Score", "nis_cap", "reference", "replay_records", "residuals", "score"]

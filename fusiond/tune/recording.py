@@ -1,0 +1,37 @@
+"""The recording `fusiond tune` fits: the configured sensors' samples, read once into memory.
+
+Read through the replay's own machinery (``open_bag_samples``: only the configured sensors'
+topics are ever opened; ``check_topics``: the same errors and warnings as ``replay``), then
+replayed from memory once per evaluation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from ..config import Config
+from ..errors import BagError
+from ..replay.bag import open_bag_samples
+from ..replay.run import check_topics
+
+
+def read_samples(paths: Sequence[Path | str], cfg: Config, warn: Callable[[str], None] | None = None) -> list:
+    """The configured sensors' samples of the bags, in bag order. BagError (a ReplayError) for a bag
+    that cannot be replayed as configured, or one without a single sample of them."""
+    with open_bag_samples([Path(p) for p in paths], cfg.sensors) as bag:
+        check_topics(bag, cfg, warn)
+        samples = list(bag)
+    if not samples:
+        raise BagError(f"{', '.join(str(p) for p in paths)}: no message of a configured sensor could be read")
+    return samples
+
+
+def split_stamp(samples: Sequence[object], fraction: float) -> float:
+    """The stamp ``fraction`` of the way through the recording (by stamp, not by message count)."""
+    stamps = [s.stamp for s in samples]  # type: ignore[attr-defined]
+    lo, hi = min(stamps), max(stamps)
+    return lo + fraction * (hi - lo)
+
+
+__all__ = ["read_samples", "split_stamp"]
