@@ -10,13 +10,20 @@ structlog and applies ``configure``'s settings when it is first used.
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import Any
 
-__all__ = ["configure", "get_logger"]
+__all__ = ["configure", "get_logger", "muted"]
 
 # logging's level names (``logging.getLevelNamesMapping()``), spelled out: importing logging to check
 # a name costs ~10 ms of a replay that logs nothing (a test holds the two equal)
 LEVELS = ("CRITICAL", "FATAL", "ERROR", "WARN", "WARNING", "INFO", "DEBUG", "NOTSET")
+
+# Inside ``muted()``: events are dropped. A processor reads it at each event, so it holds for loggers
+# that structlog has already cached (a level change through ``configure`` would not reach those).
+_MUTED: ContextVar[bool] = ContextVar("fusiond_logs_muted", default=False)
 
 # configure()'s settings, waiting for structlog's import (None: nothing asked, structlog's defaults)
 _pending: tuple[str, bool | None] | None = None
@@ -48,6 +55,7 @@ def _apply() -> None:
     renderer = structlog.processors.JSONRenderer() if json else structlog.dev.ConsoleRenderer(colors=False)
     structlog.configure(
         processors=[
+            _drop_when_muted,
             structlog.processors.add_log_level,
             structlog.processors.TimeStamper(fmt="iso", utc=True),
             renderer,
@@ -56,6 +64,26 @@ def _apply() -> None:
         logger_factory=structlog.PrintLoggerFactory(file=_Stderr()),
         cache_logger_on_first_use=True,
     )
+
+
+def _drop_when_muted(logger: Any, method: str, event: dict) -> dict:
+    if _MUTED.get():
+        import structlog
+
+        raise structlog.DropEvent
+    return event
+
+
+@contextmanager
+def muted() -> Iterator[None]:
+    """Drop every event logged inside the block. For a caller that replays one recording many times
+    (``fusiond tune``): the recording's warnings are said once, by the replay that is shown, not once
+    per replay of the fit."""
+    token = _MUTED.set(True)
+    try:
+        yield
+    finally:
+        _MUTED.reset(token)
 
 
 class _Stderr:

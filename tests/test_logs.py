@@ -107,3 +107,18 @@ def test_a_replay_that_logs_nothing_imports_neither_structlog_nor_logging():
         print("structlog" in sys.modules, "logging" in sys.modules)
     """)
     assert out.stdout.split() == ["False", "False"], out.stdout
+
+
+def test_muted_drops_the_events_of_its_block_even_from_a_logger_already_used():
+    out = _run("""
+        from fusiond.logs import configure, get_logger, muted
+        configure("info", json=True)
+        log = get_logger("fusiond.test")
+        log.warning("before_block")  # structlog caches this logger now
+        with muted():
+            log.warning("inside_block")
+            get_logger("fusiond.other").error("inside_block_new_logger")
+        log.warning("after_block")
+    """)
+    events = [json.loads(line)["event"] for line in out.stderr.splitlines()]
+    assert events == ["before_block", "after_block"], out.stderr

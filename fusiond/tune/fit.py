@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 from ..config import Config
 from ..errors import ReplayError
+from ..logs import muted
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
 
@@ -135,7 +136,8 @@ class _Objective:
             if self.replays >= self.maxfev:
                 self.stopped = "maxfev"
                 raise _OutOfBudget
-        records = replay_records(self.config(key), self.samples)
+        with muted():  # the recording's warnings are said once, by the held-back check's first replay
+            records = replay_records(self.config(key), self.samples)
         self.replays += 1
         if self.ref is None:
             self.ref = reference(records, self.cfg)
@@ -262,7 +264,10 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         nonlocal replays
         replays += 1
         bar.step("held-back check")
-        return replay_records(c, samples)
+        if replays == 1:  # the user's config over the whole recording: its warnings are the recording's
+            return replay_records(c, samples)
+        with muted():
+            return replay_records(c, samples)
 
     original = run(cfg)
     ref = reference(original, cfg, after=split)
