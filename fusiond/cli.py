@@ -72,6 +72,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
             return EXIT_USAGE
         if not reference:  # score on the held-back messages of the absolute sensor themselves
             reference = cfg.sensor(recorder.absolute).key
+    if not args.advice_budget_s >= 0.0:
+        print(f"fusiond: --advice-budget-s {args.advice_budget_s:g}: must be 0 or a positive number of seconds",
+              file=sys.stderr)
+        return EXIT_USAGE
+    doctor = not args.quiet or bool(args.plot or args.report)  # --quiet: no summary to judge for
+    # the samples as fused, kept to replay the doctor's advice on (what --fuse-every left, in bag order)
+    fused: list | None = [] if doctor and args.advice_budget_s > 0.0 else None
+    through = recorder.filter if recorder is not None else None
+    if fused is not None:
+        through = _kept(fused, through)
     try:
         result = replay(
             [Path(p) for p in args.bags],
@@ -81,9 +91,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
             keep_trace=bool(args.plot or args.report),
             progress=not args.quiet,
             warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
-            doctor=not args.quiet or bool(args.plot or args.report),  # --quiet: no summary to judge for
-            through=recorder.filter if recorder is not None else None,
+            doctor=doctor,
+            through=through,
         )
+        if fused:
+            from .tune.advice import prove_advice
+
+            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s)
         evaluation = None
         if recorder is not None:
             from .replay.evaluate import evaluate
@@ -121,6 +135,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if result.final is None or result.poses == 0:
         return 1  # nothing fused, or nothing published (the summary says why)
     return 0
+
+
+def _kept(into: list, through=None):
+    """A replay ``through`` hook that appends every sample reaching the core to ``into`` (after ``through``)."""
+    def keep(samples):
+        for s in samples if through is None else through(samples):
+            into.append(s)
+            yield s
+    return keep
 
 
 def _as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespace:
@@ -514,6 +537,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--rpe-s", type=float, default=1.0, metavar="S",
                    help="relative pose error over S seconds (default 1)")
     r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
+    r.add_argument("--advice-budget-s", type=float, default=60.0, metavar="S",
+                   help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
+                        "seconds (default 60; 0: print them unreplayed)")
     r.set_defaults(func=cmd_replay)
 
     dr = sub.add_parser("doctor", help="replay bags and print the doctor's verdicts with the summary; writes no file "

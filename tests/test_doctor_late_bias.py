@@ -181,7 +181,7 @@ def test_across_logging_gaps_a_drifting_imu_yaw_carries_the_heading_at_its_drift
     result_off, err_off, _ = replay(samples, "off")
     assert err_off[rel > gap[1] + 0.5].mean() > 0.5 * abs(missed)  # held along the old heading
     v = one(result_off.verdicts(), "imu", "heading_across_gaps")
-    assert v.level == "warn" and v.suggestion == 'orientation = "roll_pitch" and yaw_across_gaps = true', v
+    assert v.level == "warn" and v.suggestion == 'orientation = "roll_pitch"\nyaw_across_gaps = true', v
     assert abs(v.evidence["imu_yaw_drift_rad_s"] - GYRO_BIAS) < 0.0005, v
     assert abs(abs(v.evidence["largest_missed_turn_rad"]) - abs(missed)) < 0.1, v
     _, err_relative, _ = replay(samples, "relative")

@@ -98,7 +98,7 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
     assert abs(v.evidence["largest_missed_turn_rad"] - turn) < 0.1, v.evidence
     named, error = replayed(orientation="off")  # nor is the yaw carried with roll/pitch not fused
     (v,) = named
-    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "roll_pitch" and yaw_across_gaps = true', v
+    assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "roll_pitch"\nyaw_across_gaps = true', v
 
 
 def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():

@@ -93,7 +93,9 @@ def write_report(result: ReplayResult, directory: Path, title: str, evaluation: 
     rows = "\n".join(
         f'<tr class="{v.level}"><td>{html.escape(v.level)}</td><td>{html.escape(v.sensor)}/{html.escape(v.channel)}'
         f"</td><td>{html.escape(v.message)}</td><td><code>{html.escape(v.key)}</code>"
-        + (f"<br><code>{html.escape(v.suggestion)}</code>" if v.suggestion else "") + "</td></tr>"
+        + (f"<br><code>{html.escape(v.suggestion)}</code>" if v.suggestion else "")
+        + (f"<br>{'replayed' if v.proof.tried else 'not replayed'}: {html.escape(v.proof.effect)}"
+           f"{'' if v.proof.advised else '; not advised'}" if v.proof is not None else "") + "</td></tr>"
         for v in verdicts
     )
     cons = "\n".join(

@@ -3,7 +3,8 @@
 ``params``: which config keys are tunable, where they start, how a value enters a Config;
 ``likelihood``: the innovations' negative log-likelihood of one replay; ``fit``: the optimiser
 and the held-back validation; ``toml_out``: the complete tuned config with a comment per
-changed key; ``recording``: the samples read once from the bags. Its public surface is
+changed key; ``recording``: the samples read once from the bags; ``advice``: the doctor's paste
+lines replayed before they are printed. Its public surface is
 ``__all__``.
 """
 
@@ -30,6 +31,8 @@ _EXPORTS = {
     "dumps": "toml_out",
     "write": "toml_out",
     "read_samples": "recording",
+    "prove_advice": "advice",
+    "with_suggestion": "advice",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

@@ -64,7 +64,8 @@ def replay_records(cfg: Config, samples: Iterable[object]) -> list[DiagnosticsRe
     return records
 
 
-def _keys(records: Iterable[DiagnosticsRecord]) -> Iterable[tuple[TermKey, DiagnosticsRecord]]:
+def term_keys(records: Iterable[DiagnosticsRecord]) -> Iterable[tuple[TermKey, DiagnosticsRecord]]:
+    """Each record with the key its term has (sensor, channel, stamp, occurrence)."""
     seen: dict[tuple[str, str, float], int] = {}
     for r in records:
         k = (r.sensor, r.channel, r.stamp)
@@ -111,7 +112,7 @@ def reference(records: Iterable[DiagnosticsRecord], cfg: Config, after: float = 
               until: float = math.inf) -> Reference:
     """The terms of this replay (module doc) with stamp in (after, until]."""
     terms: dict[TermKey, tuple[float, float, int]] = {}
-    for key, r in _keys(records):
+    for key, r in term_keys(records):
         if r.channel in CHECK_CHANNELS or r.learning or not (after < r.stamp <= until):
             continue
         ld = _log_det(r)
@@ -142,7 +143,7 @@ def score(records: Iterable[DiagnosticsRecord], ref: Reference) -> Score:
     found: set[TermKey] = set()
     nis_sum: dict[str, float] = {}
     nis_n: dict[str, int] = {}
-    for key, r in _keys(records):
+    for key, r in term_keys(records):
         t = terms.get(key)
         if t is None:
             continue
@@ -178,4 +179,5 @@ def residuals(ref: Reference, sensors: Sequence[str] | None = None, channel: str
     return sum(t[2] for k, t in ref.terms.items() if (sensors is None or k[0] in sensors) and (channel is None or k[1] == channel))
 
 
-__all__ = ["CHECK_CHANNELS", "Reference", "Score", "nis_cap", "reference", "replay_records", "residuals", "score"]
+__all__ = ["CHECK_CHANNELS", "Reference", "Score", "TermKey", "nis_cap", "reference", "replay_records", "residuals",
+           "score", "term_keys"]

@@ -41,9 +41,9 @@ from .nis import ChannelStats, judge_nis, nis_bounds
 from .series import Series, SeriesCollector
 from .speed import speed_check
 from .twist import TwistStats, slip_verdict, twist_frame_verdict, unmeasured_yaw_rate, yaw_rate_not_measured
-from .verdict import LEVELS, Verdict, filter_key, format_verdicts, sensor_key
+from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
 
-__all__ = ["Doctor", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
+__all__ = ["Doctor", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
            "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 MIN_UPDATES = 50  # twist-frame and lean checks need this many samples (not NIS: that uses what there is)

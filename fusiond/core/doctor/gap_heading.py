@@ -140,7 +140,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
     return Verdict(imu.name, "heading_across_gaps", "warn",
                    msg + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, and with yaw_across_gaps its "
                    f"yaw change across a gap turns the heading{cost}", sensor_key(imu.name, "orientation"),
-                   'orientation = "roll_pitch" and yaw_across_gaps = true', evidence)
+                   'orientation = "roll_pitch"\nyaw_across_gaps = true', evidence)
 
 
 def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, float] | None:

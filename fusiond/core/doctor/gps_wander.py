@@ -106,7 +106,7 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "",
            f"(error_tau_s, error_sigma), leaving position_noise ~{max(white):.2f} m for the white part. Estimated "
            "from the innovations, which the filter already smooths: lower bounds")
     return Verdict(gps.name, "position", "warn", msg, sensor_key(gps.name, "error_tau_s"),
-                   f"error_tau_s = {tau:.0f} and error_sigma = [{sigma[0]:.2f}, {sigma[1]:.2f}, {sigma[2]:.2f}]",
+                   f"error_tau_s = {tau:.0f}\nerror_sigma = [{sigma[0]:.2f}, {sigma[1]:.2f}, {sigma[2]:.2f}]",
                    evidence)
 
 

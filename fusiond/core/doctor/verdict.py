@@ -12,9 +12,20 @@ import msgspec
 LEVELS = ("ok", "warn", "problem")
 
 
+class Proof(msgspec.Struct):
+    """What a verdict's paste line did when the recording was replayed with it (``fusiond.tune.advice``).
+    ``advised``: it improved the innovations' likelihood by more than the change's own complexity, so it
+    is printed as a fix; otherwise it is printed as tried, with what it did."""
+
+    advised: bool
+    effect: str  # e.g. "likelihood +812, NIS/dof 0.04 -> 0.93"; or why it was not tried
+    tried: bool = True
+
+
 class Verdict(msgspec.Struct):
-    """One channel's verdict. ``suggestion`` is a ready-to-paste TOML line when there is one,
-    in the frame of ``key`` (e.g. orientation noise in the IMU's own axes)."""
+    """One channel's verdict. ``suggestion`` is ready-to-paste TOML when there is one (a line per key),
+    in the frame of ``key`` (e.g. orientation noise in the IMU's own axes). ``proof``: set when the
+    suggestion was replayed on the recording it came from (None: not replayed, e.g. the live monitor)."""
 
     sensor: str
     channel: str
@@ -23,6 +34,7 @@ class Verdict(msgspec.Struct):
     key: str = ""  # the config key to change, when there is one
     suggestion: str = ""  # e.g. 'orientation_noise = [0.005, 0.005, 0.05]'
     evidence: dict[str, float] = {}  # measured figures behind the verdict (offsets, drifts, scales)
+    proof: Proof | None = None
 
 
 def sensor_key(sensor: str, key: str) -> str:
@@ -52,6 +64,15 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
     for v in verdicts:
         key = f"  [{v.key}]" if v.key else ""
         lines.append(f"doctor {marks[v.level]} {v.sensor}/{v.channel}: {v.message}{key}")
-        if v.suggestion:
-            lines.append(f"       -> {where_to_set(v.key)}: {v.suggestion}")
+        if not v.suggestion:
+            continue
+        p = v.proof
+        # a line per key, each as it pastes
+        where = f"{where_to_set(v.key)}: {v.suggestion}".replace("\n", "\n          ")
+        if p is None:
+            lines.append(f"       -> {where}")
+        elif p.advised:
+            lines.append(f"       -> {where}\n          ({'replayed' if p.tried else 'not replayed'}: {p.effect})")
+        else:
+            lines.append(f"       {'tried' if p.tried else 'not replayed'} {where}\n          ({p.effect}; not advised)")
     return "\n".join(lines)

@@ -1,0 +1,129 @@
+"""Advice proven before it is printed: each doctor paste line replayed on the recording it came from.
+
+The doctor reads its figures off innovations and cross-checks, and a figure read that way can be a
+bound rather than a value: pasted, it can make the estimate worse. So before a paste line is shown
+as a fix, the recording is replayed with that one change (a fresh FusionCore over the same samples)
+and scored by the innovations' likelihood on the terms of the replay as configured (``likelihood``:
+the same terms for both, a gated-out or vanished update charged at its gate, so a change cannot win
+by rejecting data). A change of what is measured (``orientation = "roll_pitch"`` turns a 3-dof
+orientation update into a 2-dof one; ``orientation = "roll_pitch"`` on an IMU whose accelerometer
+gave the tilt replaces its gravity updates by orientation ones) makes those updates' likelihoods
+incomparable: the terms whose dof the change altered, and those of a channel the change removed,
+are left out of both scores, and the change is judged by how well the filter
+then predicts everything else. The line is advised only when -log L improves by more than the number of keys it
+sets: Akaike's penalty of one per free parameter, the smallest improvement that a change fitted to
+this recording has to beat to be expected to hold on the next one. Otherwise it is printed as tried,
+with what it did.
+"""
+
+from __future__ import annotations
+
+import time
+import tomllib
+from collections.abc import Sequence
+
+import msgspec
+
+from ..config import Config, ConfigError, validate
+from ..core.doctor import Proof, Verdict
+from ..logs import muted
+from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
+
+__all__ = ["prove_advice", "with_suggestion"]
+
+
+def with_suggestion(cfg: Config, verdict: Verdict) -> tuple[Config, int]:
+    """``cfg`` with the verdict's paste line set in the table its key names, and the number of keys
+    the line sets. ConfigError when the line does not parse or the result is not a valid config."""
+    try:
+        values = tomllib.loads(verdict.suggestion)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{verdict.suggestion!r}: not a TOML line: {err}") from None
+    parts = verdict.key.split(".")
+    raw = msgspec.to_builtins(cfg)
+    if parts[0] == "sensors" and len(parts) >= 3:
+        name = ".".join(parts[1:-1])
+        tables = [t for t in raw["sensors"] if t.get("name") == name]
+        if not tables:
+            raise ConfigError(f"{verdict.key}: no sensor named {name!r} in the config")
+        table = tables[0]
+    elif len(parts) == 2 and isinstance(raw.get(parts[0]), dict):
+        table = raw[parts[0]]
+    else:
+        raise ConfigError(f"{verdict.key}: not a key of a config table")
+    table.update(values)
+    try:
+        return validate(msgspec.convert(raw, type=Config)), len(values)
+    except (msgspec.ValidationError, ConfigError) as err:
+        raise ConfigError(f"{verdict.suggestion!r} in {verdict.key}: {err}") from None
+
+
+def _comparable(ref: Reference, records: Sequence[object]) -> tuple[Reference, int]:
+    """``ref`` without the terms that ``records`` measure otherwise (module doc): with another dof, or
+    of a channel ``records`` no longer have at all; and how many those are."""
+    dof: dict[TermKey, int] = {}
+    channels: set[tuple[str, str]] = set()
+    for k, r in term_keys(records):
+        dof[k] = r.dof
+        channels.add((k[0], k[1]))
+    keep = {k: t for k, t in ref.terms.items() if (k[0], k[1]) in channels and dof.get(k, t[2]) == t[2]}
+    return Reference(keep), len(ref.terms) - len(keep)
+
+
+def _nis(s: Score, sensor: str) -> float | None:
+    return s.nis_per_dof.get(sensor, s.nis_per_dof.get(""))
+
+
+def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
+    gain = before.neg_loglik - after.neg_loglik
+    text = f"likelihood {gain:+.0f}"
+    if dropped:
+        text += f" over the {after.terms} updates it leaves measured as they were"
+    b, a = _nis(before, sensor), _nis(after, sensor)
+    if b is not None and a is not None:
+        text += f", NIS/dof {b:.2f} -> {a:.2f}"
+    if after.rejected != before.rejected:
+        text += f", {after.rejected} gated (was {before.rejected})"
+    return text
+
+
+def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
+                 budget_s: float = 60.0) -> list[Verdict]:
+    """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
+    recording as the replay fused it, in its order. One replay for the terms, one per distinct paste
+    line, while ``budget_s`` lasts (the lines not replayed in time say so). The recording's warnings
+    were logged by the replay the verdicts come from: these replays log nothing."""
+    pending = [v for v in verdicts if v.suggestion]
+    if not pending:
+        return list(verdicts)
+    deadline = time.perf_counter() + budget_s
+    with muted():
+        base_records = replay_records(cfg, samples)
+    full = reference(base_records, cfg)
+    proofs: dict[tuple[str, str], Proof] = {}
+    # problems first: if the budget runs out, the lines left unproven are the least urgent ones
+    for v in sorted(pending, key=lambda v: v.level != "problem"):
+        line = (v.key, v.suggestion)
+        if line in proofs:
+            continue
+        try:
+            changed, n_keys = with_suggestion(cfg, v)
+        except ConfigError as err:
+            proofs[line] = Proof(False, f"it does not apply to this config ({err})", tried=False)
+            continue
+        if time.perf_counter() > deadline:
+            proofs[line] = Proof(True, f"the {budget_s:g} s budget for replaying advice ran out", tried=False)
+            continue
+        with muted():
+            records = replay_records(changed, samples)
+        ref, dropped = _comparable(full, records)
+        before, after = score(base_records, ref), score(records, ref)
+        gain = before.neg_loglik - after.neg_loglik
+        if gain == 0.0 and not dropped and after.rejected == before.rejected:
+            # a key the filter does not use here (a floor of a channel only the doctor's check reads)
+            proofs[line] = Proof(False, "it changes none of the filter's updates on this recording, only the "
+                                        "doctor's own check")
+        else:
+            proofs[line] = Proof(gain > n_keys, _effect(before, after, v.sensor, dropped))
+    return [msgspec.structs.replace(v, proof=proofs[(v.key, v.suggestion)]) if v.suggestion else v
+            for v in verdicts]
