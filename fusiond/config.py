@@ -47,6 +47,9 @@ class OutputConfig(_Table):
     child_frame_id: str = "base_link"
     navsat_key: str = ""  # with a gps sensor: the fused position as NavSatFix here (empty: off)
     publish_tf: bool = True  # tf2_msgs/msg/TFMessage frame_id -> child_frame_id on tf_key (robot_localization's name)
+    # With a GPS or absolute pose: the world frame. TF then carries map_frame -> frame_id (the corrections)
+    # and frame_id -> child_frame_id (continuous), as robot_localization's dual EKF; "" or frame_id: one TF.
+    map_frame: str = "map"
     tf_key: str = "tf"  # the bridge's mapping of /tf
     ros_diagnostics_key: str = "diagnostics"  # health as diagnostic_msgs/msg/DiagnosticArray (empty: off)
     ros_diagnostics_period_s: float = 1.0  # how often it is published (diagnostic_updater's default rate)

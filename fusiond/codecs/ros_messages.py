@@ -1,7 +1,8 @@
 """The ROS-facing messages beyond pose and odometry: TF, diagnostics, set_pose; ROS type names.
 
 - `tf2_msgs/msg/TFMessage` with one `geometry_msgs/msg/TransformStamped`: what
-  robot_localization's `publish_tf` broadcasts on /tf.
+  robot_localization's `publish_tf` broadcasts on /tf; with several (map -> odom ->
+  base_link) when a GPS or absolute pose defines the world.
 - `diagnostic_msgs/msg/DiagnosticArray`: what rqt_robot_monitor and
   diagnostic_aggregator read on /diagnostics.
 - `geometry_msgs/msg/PoseWithCovarianceStamped` in (CDR) or its JSON twin: a
@@ -60,6 +61,23 @@ def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Se
     pack, head, middle = _output_layout(_TF_HEAD, (frame_id, child_frame_id), 7)  # translation (3) + rotation (4)
     sec, nanosec = stamp_to_ros(stamp)
     return pack(head, sec, nanosec, middle, x, y, z, qx, qy, qz, qw)
+
+
+def encode_tf_tree_cdr(stamp: float, transforms: Sequence[tuple[str, str, Sequence[float], Sequence[float]]]) -> bytes:
+    """Several transforms at one stamp in one TFMessage: (frame_id, child_frame_id, translation,
+    quaternion x y z w) each, parents first. One message, so a listener never holds map -> odom
+    from one estimate and odom -> base_link from another."""
+    T = _types()
+    header = _header(stamp, "")
+    items = []
+    for frame_id, child, p, q in transforms:
+        items.append(T["geometry_msgs/msg/TransformStamped"](
+            header=T["std_msgs/msg/Header"](stamp=header.stamp, frame_id=frame_id), child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]),
+                                                           w=float(q[3])))))
+    return _serialize(T[TF_MESSAGE](transforms=items), TF_MESSAGE)
 
 
 # --------------------------------------------------------------------------- diagnostics

@@ -47,7 +47,10 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 - ROS outputs: a TF (`tf2_msgs/msg/TFMessage`, frame_id -> child_frame_id) with
   each published pose whose stamp is newer than the last TF's (tf2 rejects a
   repeated stamp, and a late odometry sample can be answered at a stamp already
-  published); health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
+  published). With a GPS or absolute pose the estimate is the world pose: the TF
+  then holds map_frame -> frame_id (the corrections) and frame_id -> child_frame_id
+  (a continuous odometry frame), Nav2's tree (`core/tf_tree.py`), and the pose and
+  odometry messages carry map_frame; health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
   the health thread (it reads health, never the core).
 - set_pose: a queryable (and in rmw_zenoh mode the topic /set_pose) whose
   request is decoded on the Zenoh thread, then queued like a sample (and wakes
@@ -81,12 +84,13 @@ import zenoh
 
 from ..codecs import (
     DIAGNOSTIC_ARRAY, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, DecodeError, SetPose, decode_set_pose,
-    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr, make_decoder,
-    ros_msgtype,
+    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr,
+    encode_tf_tree_cdr, make_decoder, ros_msgtype,
 )
 from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
+from ..core.tf_tree import OdomFrame, map_to_odom, tf_tree_active
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
 from ..logs import get_logger
 from .drain_schedule import DrainSchedule
@@ -212,6 +216,14 @@ class Daemon:
         self._tf_pub: Any = None
         self._ros_diag_pub: Any = None
         self._tf_stamp = -float("inf")  # stamp of the last TF published: TF stamps strictly increase
+        # With a world sensor: map -> odom -> base_link, the odom frame dead-reckoned beside the estimate
+        # (core/tf_tree.py), whose inputs the filter holds no longer than the odometry's timeout.
+        self._odom_frame: OdomFrame | None = None
+        if tf_tree_active(cfg):
+            odom = next(s for s in cfg.sensors if sensor_kind(s) == "odom")
+            self._odom_frame = OdomFrame(odom.timeout_s)
+        # The estimate's frame: the world (map) frame when the tree is published, else frame_id.
+        self._pose_frame = cfg.output.map_frame if self._odom_frame is not None else cfg.output.frame_id
         self.node: RmwNode | None = None
         self.tf_published = 0
         self.set_poses = 0  # set_pose requests applied
@@ -530,8 +542,9 @@ class Daemon:
     def _publish_estimate(self) -> None:
         out = self.cfg.output
         est = self.core.estimate()
-        pose = encode_pose_cdr(est.stamp, out.frame_id, est.position, est.orientation, est.pose_covariance)
-        odom = encode_odometry_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position, est.orientation,
+        frame = self._pose_frame
+        pose = encode_pose_cdr(est.stamp, frame, est.position, est.orientation, est.pose_covariance)
+        odom = encode_odometry_cdr(est.stamp, frame, out.child_frame_id, est.position, est.orientation,
                                    est.pose_covariance, est.linear, est.angular, est.twist_covariance)
         self._pose_pub.put(pose)
         self._odom_pub.put(odom)
@@ -540,8 +553,15 @@ class Daemon:
             if fix is not None:
                 self._navsat_pub.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
         if self._tf_pub is not None and est.stamp > self._tf_stamp:
-            self._tf_pub.put(encode_tf_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position,
-                                           est.orientation))
+            if self._odom_frame is None:
+                tf = encode_tf_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position, est.orientation)
+            else:
+                odom_base = self._odom_frame.advance(est.stamp, est.position, est.orientation, est.linear,
+                                                     est.angular)
+                map_odom = map_to_odom((est.position, est.orientation), odom_base)
+                tf = encode_tf_tree_cdr(est.stamp, [(out.map_frame, out.frame_id, *map_odom),
+                                                    (out.frame_id, out.child_frame_id, *odom_base)])
+            self._tf_pub.put(tf)
             self._tf_stamp = est.stamp
             self.tf_published += 1
         self.published += 1
