@@ -20,6 +20,8 @@ _EXPORTS = {
     "History": "history",
     "FilterState": "state",
     "Rejected": "sensors",
+    "ResumeState": "resume",
+    "state_fingerprint": "resume",
     "OdomFrame": "tf_tree",
     "map_to_odom": "tf_tree",
     "tf_tree_active": "tf_tree",

@@ -61,9 +61,13 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 - Interop (`[ros] interop`): "bridge" uses zenoh-bridge-ros2dds's plain keys;
   "rmw_zenoh" uses rmw_zenoh's keys, attachments and liveliness tokens for every
   ROS topic in and out (`rmw_zenoh.py`); the JSON health/diagnostics keys stay plain.
+- Persisted state (`[state] path`, `state_file.py`): resumed before the first input
+  when it fits the config and is fresh; the worker exports the core's state every
+  `save_interval_s` while it fuses and a thread of its own writes it (an fsync must
+  not delay a pose); the last state is written when the worker has ended.
 - Stop: subscribers first (no new input), then the worker drains what is queued
-  (bounded time; each sample is published completely or not at all), then the
-  outputs are undeclared; the caller closes the session.
+  (bounded time; each sample is published completely or not at all), the state is
+  written, then the outputs are undeclared; the caller closes the session.
 """
 
 from __future__ import annotations
@@ -90,12 +94,14 @@ from ..codecs import (
 from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
+from ..errors import CoreError
 from ..core.tf_tree import OdomFrame, map_to_odom, tf_tree_active
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
 from ..logs import get_logger
 from .drain_schedule import DrainSchedule
 from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
+from .state_file import StateRefused, StateSaver, load_state
 from .thread_state import with_kept_thread_state
 
 log = get_logger("fusiond.daemon")
@@ -183,7 +189,8 @@ class Daemon:
 
     def __init__(self, cfg: Config, session: zenoh.Session, *, queue_size: int = QUEUE_SIZE,
                  health_log_s: float = HEALTH_LOG_S, express: bool = False, direct_callbacks: bool = True,
-                 monitor: bool = True, clock: Callable[[], float] = time.monotonic, hold_s: float = HOLD_S) -> None:
+                 monitor: bool = True, clock: Callable[[], float] = time.monotonic, hold_s: float = HOLD_S,
+                 base_dir: Path | None = None) -> None:
         if not hold_s >= 0.0:
             raise ValueError(f"hold_s must be >= 0 s, got {hold_s}")
         self.cfg = cfg
@@ -238,11 +245,21 @@ class Daemon:
         self.diagnostics_puts = 0  # puts on the diagnostics key (one per batch, or per record with batch 0)
         self.worker_cpu_s = 0.0  # CPU time of the worker thread, set when it ends
         self.wakeups = 0  # passes of the worker that found samples to fuse (each a batch of one or more)
+        # `[state] path`: resumed at start, written by a thread of its own every save_interval_s (state_file.py)
+        self.state_path: Path | None = None
+        if cfg.state.path:
+            path = Path(cfg.state.path).expanduser()
+            self.state_path = path if path.is_absolute() else (base_dir or Path.cwd()) / path
+        self._saver: StateSaver | None = None
+        self.resumed = False
 
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
         out = self.cfg.output
         s = self.session
+        if self.state_path is not None:
+            self._resume()
+            self._saver = StateSaver(self.state_path, time.time)
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
         self._pose_pub = self._ros_publisher(out.pose_key, POSE_COV_STAMPED)
@@ -280,6 +297,30 @@ class Daemon:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
 
+    def _resume(self) -> None:
+        """Before any input: go on from the state file when it fits this config and is fresh; one log
+        event says which (`state_resumed`, or `state_resume_refused` with the reason)."""
+        path = self.state_path
+        assert path is not None
+        st = self.cfg.state
+        try:
+            saved = load_state(path, self.core.fingerprint, st.max_age_s, time.time())
+            try:
+                self.core.resume(saved.state)
+            except CoreError as err:
+                raise StateRefused("corrupt", str(err)) from None
+        except StateRefused as err:
+            log.info("state_resume_refused", path=str(path), reason=err.reason, detail=err.detail)
+            return
+        self.resumed = True
+        log.info("state_resumed", path=str(path), age_s=round(time.time() - saved.saved_wall, 3),
+                 stamp=saved.state.stamp, position=saved.state.x[0:3])
+
+    def _save_state(self) -> None:
+        """Worker (or after it ended): hand the core's state to the saver thread."""
+        if self._saver is not None and self.core.initialised:
+            self._saver.offer(self.core.export_state())
+
     def _ros_publisher(self, key: str, msgtype: str, depth: int = QUEUE_DEPTH) -> Any:
         """A publisher of a ROS topic: the bridge's plain key, or rmw_zenoh's key with attachments and token."""
         if self.node is not None:
@@ -305,6 +346,8 @@ class Daemon:
         left = len(self.inbox)
         if left:
             log.warning("samples_discarded_at_stop", count=left)
+        if self._saver is not None:  # the worker has ended (or was abandoned between samples): the last state
+            self._saver.flush(self.core.export_state() if self.core.initialised else None)
         if self._monitor is not None:
             self._monitor.join(1.0)
         for obj in reversed(self._outputs):  # the node's token last: rmw_zenoh undeclares entities first
@@ -395,6 +438,9 @@ class Daemon:
         next_refresh = 0.0
         next_flush = monotonic() + batch_s
         dirty = False
+        save_every = self.cfg.state.save_interval_s
+        next_save = monotonic() + save_every
+        unsaved = False  # fused since the state was last handed to the saver
         idle = True  # nothing arrived during the last wait: wait long, and let any arrival wake us
         stopping = False
         try:
@@ -425,7 +471,7 @@ class Daemon:
                         idle = True
                 if inbox:
                     self.wakeups += 1
-                    dirty = True
+                    dirty = unsaved = True
                     started = clock()
                     fuse(schedule)
                     if backlog:
@@ -439,6 +485,10 @@ class Daemon:
                     self._refresh()
                     dirty = False
                     next_refresh = now + CORE_REFRESH_S
+                if unsaved and now >= next_save:
+                    self._save_state()
+                    unsaved = False
+                    next_save = now + save_every
                 if stopping:
                     break
             if dirty:
@@ -645,7 +695,7 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
             signal.signal(sig, on_signal)
     session = open_session(conf)
     try:
-        daemon = Daemon(cfg, session)
+        daemon = Daemon(cfg, session, base_dir=base_dir)
         daemon.start()
         z = cfg.zenoh
         log.info("daemon_started", zid=str(session.zid()), mode=z.mode, listen=z.listen, connect=z.connect,
@@ -655,7 +705,8 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
                  alive_key=alive_key(cfg.output.health_key), set_pose_key=cfg.output.set_pose_key,
                  tf_key=cfg.output.tf_key if cfg.output.publish_tf else None,
                  ros_diagnostics_key=cfg.output.ros_diagnostics_key or None, interop=cfg.ros.interop,
-                 node=daemon.node.token_key if daemon.node is not None else None)
+                 node=daemon.node.token_key if daemon.node is not None else None,
+                 state_path=str(daemon.state_path) if daemon.state_path is not None else None)
         while not stop.wait(0.5):
             pass
         log.info("daemon_stopping", signal=received[0] if received else None)
