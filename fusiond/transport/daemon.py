@@ -49,7 +49,7 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   repeated stamp, and a late odometry sample can be answered at a stamp already
   published). With a GPS or absolute pose the estimate is the world pose: the TF
   then holds map_frame -> frame_id (the corrections) and frame_id -> child_frame_id
-  (a continuous odometry frame), Nav2's tree (`core/tf_tree.py`), and the pose and
+  (a continuous odometry frame), Nav2's tree (`tf_broadcast.py`), and the pose and
   odometry messages carry map_frame; health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
   the health thread (it reads health, never the core).
 - set_pose: a queryable (and in rmw_zenoh mode the topic /set_pose) whose
@@ -73,7 +73,6 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 from __future__ import annotations
 
 import math
-import operator
 import queue
 import signal
 import threading
@@ -88,21 +87,19 @@ import zenoh
 
 from ..codecs import (
     DIAGNOSTIC_ARRAY, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, DecodeError, SetPose, decode_set_pose,
-    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr,
-    encode_tf_tree_cdr, make_decoder, ros_msgtype,
+    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder, ros_msgtype,
 )
 from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
-from ..errors import CoreError
-from ..core.tf_tree import OdomFrame, map_to_odom, tf_tree_active
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
 from ..logs import get_logger
 from .drain_schedule import DrainSchedule
 from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
-from .state_file import StateRefused, StateSaver, load_state
-from .thread_state import with_kept_thread_state
+from .state_file import StateSaver, resume_from_file
+from .intake import direct, sensor_kind, zero_covariance_check  # noqa: F401  (their import path since the split)
+from .tf_broadcast import TfBroadcast
 
 log = get_logger("fusiond.daemon")
 
@@ -138,50 +135,9 @@ class _SetPoseItem:
         self.source = source
 
 
-def sensor_kind(sensor: Any) -> str:
-    """The config's `kind` tag (msgspec keeps it on the class)."""
-    return str(type(sensor).__struct_config__.tag)
-
-
-def direct(callback: Callable[[Any], None]) -> Any:
-    """Run a non-blocking callback on Zenoh's receive thread (unstable zenoh-python option; else as is),
-    keeping that thread's Python thread state between calls (`thread_state.py`)."""
-    try:
-        return zenoh.handlers.Callback(with_kept_thread_state(callback), indirect=False)
-    except (AttributeError, TypeError):
-        return callback
-
-
 def alive_key(health_key: str) -> str:
     """The daemon's liveliness token: `<health_key>/alive` (strip `/alive` to get the health key)."""
     return f"{health_key}/alive"
-
-
-def zero_covariance_check(sensor: Any) -> Callable[[Any], bool] | None:
-    """For health's `zero_covariance_floored`: does an accepted sample carry a zero variance that
-    the sensor's floor replaces? Real drivers send all-zero covariances (robot_pose_ekf's "zero
-    covariance" case); they are accepted with floors, and counted so an operator sees it. None when
-    the config overrides the message covariances (they are not read) or the kind has no such check."""
-    kind = sensor_kind(sensor)
-    if kind == "odom":
-        if sensor.twist_noise is not None:
-            return None
-        variances = operator.itemgetter(0, 7, 14, 21, 28, 35)  # the diagonal of the 6x6
-        return lambda s: 0.0 in variances(s.twist_covariance)
-    if kind == "imu":
-        use_orientation = sensor.orientation != "off" and sensor.orientation_noise is None
-        use_gyro = sensor.angular_velocity and sensor.gyro_noise is None
-        if not (use_orientation or use_gyro):
-            return None
-
-        def check(s: Any) -> bool:
-            oc, gc = s.orientation_covariance, s.angular_velocity_covariance
-            if use_orientation and oc[0] != -1.0 and (oc[0] == 0.0 or oc[4] == 0.0 or oc[8] == 0.0):
-                return True
-            return use_gyro and gc[0] != -1.0 and (gc[0] == 0.0 or gc[4] == 0.0 or gc[8] == 0.0)
-
-        return check
-    return None
 
 
 class Daemon:
@@ -222,17 +178,8 @@ class Daemon:
         self._navsat_pub: Any = None
         self._tf_pub: Any = None
         self._ros_diag_pub: Any = None
-        self._tf_stamp = -float("inf")  # stamp of the last TF published: TF stamps strictly increase
-        # With a world sensor: map -> odom -> base_link, the odom frame dead-reckoned beside the estimate
-        # (core/tf_tree.py), whose inputs the filter holds no longer than the odometry's timeout.
-        self._odom_frame: OdomFrame | None = None
-        if tf_tree_active(cfg):
-            odom = next(s for s in cfg.sensors if sensor_kind(s) == "odom")
-            self._odom_frame = OdomFrame(odom.timeout_s)
-        # The estimate's frame: the world (map) frame when the tree is published, else frame_id.
-        self._pose_frame = cfg.output.map_frame if self._odom_frame is not None else cfg.output.frame_id
+        self._tf = TfBroadcast(cfg)  # what goes on the TF key, and when (tf_broadcast.py)
         self.node: RmwNode | None = None
-        self.tf_published = 0
         self.set_poses = 0  # set_pose requests applied
         self._worker: threading.Thread | None = None
         self._monitor: threading.Thread | None = None
@@ -258,7 +205,7 @@ class Daemon:
         out = self.cfg.output
         s = self.session
         if self.state_path is not None:
-            self._resume()
+            self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s)
             self._saver = StateSaver(self.state_path, time.time)
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
@@ -296,25 +243,6 @@ class Daemon:
         if self._monitor_on or self._ros_diag_pub is not None:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
-
-    def _resume(self) -> None:
-        """Before any input: go on from the state file when it fits this config and is fresh; one log
-        event says which (`state_resumed`, or `state_resume_refused` with the reason)."""
-        path = self.state_path
-        assert path is not None
-        st = self.cfg.state
-        try:
-            saved = load_state(path, self.core.fingerprint, st.max_age_s, time.time())
-            try:
-                self.core.resume(saved.state)
-            except CoreError as err:
-                raise StateRefused("corrupt", str(err)) from None
-        except StateRefused as err:
-            log.info("state_resume_refused", path=str(path), reason=err.reason, detail=err.detail)
-            return
-        self.resumed = True
-        log.info("state_resumed", path=str(path), age_s=round(time.time() - saved.saved_wall, 3),
-                 stamp=saved.state.stamp, position=saved.state.x[0:3])
 
     def _save_state(self) -> None:
         """Worker (or after it ended): hand the core's state to the saver thread."""
@@ -356,6 +284,11 @@ class Daemon:
             except zenoh.ZError:
                 pass
         self._outputs.clear()
+
+    @property
+    def tf_published(self) -> int:
+        """TF messages put (one per estimate whose stamp advanced)."""
+        return self._tf.published
 
     def report(self) -> HealthReport:
         return self.health.report()
@@ -592,7 +525,7 @@ class Daemon:
     def _publish_estimate(self) -> None:
         out = self.cfg.output
         est = self.core.estimate()
-        frame = self._pose_frame
+        frame = self._tf.pose_frame
         pose = encode_pose_cdr(est.stamp, frame, est.position, est.orientation, est.pose_covariance)
         odom = encode_odometry_cdr(est.stamp, frame, out.child_frame_id, est.position, est.orientation,
                                    est.pose_covariance, est.linear, est.angular, est.twist_covariance)
@@ -602,18 +535,10 @@ class Daemon:
             fix = self.core.geodetic()
             if fix is not None:
                 self._navsat_pub.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
-        if self._tf_pub is not None and est.stamp > self._tf_stamp:
-            if self._odom_frame is None:
-                tf = encode_tf_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position, est.orientation)
-            else:
-                odom_base = self._odom_frame.advance(est.stamp, est.position, est.orientation, est.linear,
-                                                     est.angular)
-                map_odom = map_to_odom((est.position, est.orientation), odom_base)
-                tf = encode_tf_tree_cdr(est.stamp, [(out.map_frame, out.frame_id, *map_odom),
-                                                    (out.frame_id, out.child_frame_id, *odom_base)])
-            self._tf_pub.put(tf)
-            self._tf_stamp = est.stamp
-            self.tf_published += 1
+        if self._tf_pub is not None:
+            tf = self._tf.message(est)
+            if tf is not None:
+                self._tf_pub.put(tf)
         self.published += 1
 
     def _set_pose(self, item: _SetPoseItem) -> None:

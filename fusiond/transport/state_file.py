@@ -23,15 +23,17 @@ from __future__ import annotations
 import os
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import msgspec
 
+from ..core.fusion import FusionCore
 from ..core.resume import ResumeState
-from ..errors import TransportError
+from ..errors import CoreError, TransportError
 from ..logs import get_logger
 
-__all__ = ["FILE_VERSION", "StateFile", "StateRefused", "StateSaver", "load_state", "save_state"]
+__all__ = ["FILE_VERSION", "StateFile", "StateRefused", "StateSaver", "load_state", "resume_from_file", "save_state"]
 
 log = get_logger("fusiond.state")
 
@@ -116,6 +118,23 @@ def load_state(path: Path, fingerprint: str, max_age_s: float, now_wall: float) 
     return saved
 
 
+def resume_from_file(core: FusionCore, path: Path, max_age_s: float) -> bool:
+    """Before any input: go on from the file when it fits the core's config and is fresh. One log
+    event says which: `state_resumed`, or `state_resume_refused` with the reason. True if resumed."""
+    try:
+        saved = load_state(path, core.fingerprint, max_age_s, time.time())
+        try:
+            core.resume(saved.state)
+        except CoreError as err:  # fits the config by its fingerprint, yet the numbers are not usable
+            raise StateRefused("corrupt", str(err)) from None
+    except StateRefused as err:
+        log.info("state_resume_refused", path=str(path), reason=err.reason, detail=err.detail)
+        return False
+    log.info("state_resumed", path=str(path), age_s=round(time.time() - saved.saved_wall, 3),
+             stamp=saved.state.stamp, position=saved.state.x[0:3])
+    return True
+
+
 class StateSaver:
     """A thread that writes the newest state handed to it (``offer``), then waits for the next.
 
@@ -131,6 +150,10 @@ class StateSaver:
         self.saved = 0  # files written
         self.failed = 0  # writes that raised
         self.last_stamp: float | None = None  # filter stamp of the newest state written
+        try:  # a state directory that does not exist yet (a first start) is made, as a log directory would be
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            log.error("state_save_failed", path=str(path), error=str(err), count=0)
         self._thread = threading.Thread(target=self._run, name="fusiond-state", daemon=True)
         self._thread.start()
 
