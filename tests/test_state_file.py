@@ -156,3 +156,30 @@ def test_the_saver_writes_the_newest_state_and_flush_writes_the_last(driven, tmp
 def test_export_before_any_sample_is_a_core_error():
     with pytest.raises(CoreError):
         FusionCore(robot_config()).export_state()
+
+
+def test_resume_from_file_logs_one_event_saying_why(driven, tmp_path):
+    """What the daemon does at start: resumed, or refused with the reason (stale, foreign, corrupt)."""
+    import structlog
+
+    from fusiond.transport.state_file import resume_from_file
+
+    path = tmp_path / "state"
+    saved = driven.export_state()
+    cases = [
+        (time.time() - 100.0, robot_config(gps=GPS), "state_resume_refused", "stale"),
+        (time.time(), robot_config(), "state_resume_refused", "foreign"),
+        (time.time(), robot_config(gps=GPS), "state_resumed", None),
+    ]
+    for wall, cfg, event, reason in cases:
+        save_state(path, saved, saved_wall=wall)
+        core = FusionCore(cfg)
+        with structlog.testing.capture_logs() as logs:
+            resumed = resume_from_file(core, path, max_age_s=30.0)
+        mine = [e for e in logs if e["event"].startswith("state_resume")]
+        assert [(e["event"], e.get("reason")) for e in mine] == [(event, reason)]
+        assert resumed is (event == "state_resumed") and core.initialised is resumed
+    path.write_bytes(path.read_bytes()[:-7])  # truncated by a crash of something other than save_state
+    with structlog.testing.capture_logs() as logs:
+        assert not resume_from_file(FusionCore(robot_config(gps=GPS)), path, max_age_s=30.0)
+    assert [e.get("reason") for e in logs if e["event"] == "state_resume_refused"] == ["corrupt"]
