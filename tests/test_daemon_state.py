@@ -35,7 +35,7 @@ GYRO_COV = (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)
 SAVE_SLACK_S = 0.15
 
 
-def write_config(path: Path, port: int, state: Path) -> Path:
+def write_config(path: Path, port: int, state: Path, max_age_s: float = 60.0) -> Path:
     path.write_text(f"""
 [zenoh]
 mode = "peer"
@@ -45,7 +45,7 @@ multicast_scouting = false
 [state]
 path = "{state.name}"
 save_interval_s = {SAVE_S}
-max_age_s = 60.0
+max_age_s = {max_age_s}
 
 [[sensors]]
 name = "wheel"
@@ -149,3 +149,11 @@ def test_a_restart_resumes_the_saved_pose_and_kill_9_loses_at_most_one_interval(
     lost = last2 - killed.stamp
     assert 0.0 <= lost <= SAVE_S + SAVE_SLACK_S, f"the file is {lost:.3f} s of stamps behind the last input"
     assert math.isfinite(killed.x[0]) and killed.x[0] > x_last
+
+    # -- third run, the file now older than max_age_s: started fresh, and the log says why
+    log3 = tmp_path / "third.log"
+    write_config(config, port, state, max_age_s=0.0)
+    with daemon_process(config, log3) as proc, client_session(port) as session:
+        wait_daemon_ready(session, proc, log3)
+        events = [e for e in log_events(log3) if e["event"] in ("state_resumed", "state_resume_refused")]
+        assert [(e["event"], e["reason"]) for e in events] == [("state_resume_refused", "stale")]

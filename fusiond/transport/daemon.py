@@ -205,7 +205,7 @@ class Daemon:
         out = self.cfg.output
         s = self.session
         if self.state_path is not None:
-            self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s)
+            self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s) is None
             self._saver = StateSaver(self.state_path, time.time)
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)

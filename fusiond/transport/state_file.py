@@ -118,9 +118,10 @@ def load_state(path: Path, fingerprint: str, max_age_s: float, now_wall: float) 
     return saved
 
 
-def resume_from_file(core: FusionCore, path: Path, max_age_s: float) -> bool:
+def resume_from_file(core: FusionCore, path: Path, max_age_s: float) -> str | None:
     """Before any input: go on from the file when it fits the core's config and is fresh. One log
-    event says which: `state_resumed`, or `state_resume_refused` with the reason. True if resumed."""
+    event says which: `state_resumed`, or `state_resume_refused` with the reason. Returns None when
+    resumed, else that reason."""
     try:
         saved = load_state(path, core.fingerprint, max_age_s, time.time())
         try:
@@ -129,10 +130,10 @@ def resume_from_file(core: FusionCore, path: Path, max_age_s: float) -> bool:
             raise StateRefused("corrupt", str(err)) from None
     except StateRefused as err:
         log.info("state_resume_refused", path=str(path), reason=err.reason, detail=err.detail)
-        return False
+        return err.reason
     log.info("state_resumed", path=str(path), age_s=round(time.time() - saved.saved_wall, 3),
              stamp=saved.state.stamp, position=saved.state.x[0:3])
-    return True
+    return None
 
 
 class StateSaver:
