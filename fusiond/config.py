@@ -47,6 +47,9 @@ class OutputConfig(_Table):
     child_frame_id: str = "base_link"
     navsat_key: str = ""  # with a gps sensor: the fused position as NavSatFix here (empty: off)
     publish_tf: bool = True  # tf2_msgs/msg/TFMessage frame_id -> child_frame_id on tf_key (robot_localization's name)
+    # With a GPS or absolute pose: the world frame. TF then carries map_frame -> frame_id (the corrections)
+    # and frame_id -> child_frame_id (continuous), as robot_localization's dual EKF; "" or frame_id: one TF.
+    map_frame: str = "map"
     tf_key: str = "tf"  # the bridge's mapping of /tf
     ros_diagnostics_key: str = "diagnostics"  # health as diagnostic_msgs/msg/DiagnosticArray (empty: off)
     ros_diagnostics_period_s: float = 1.0  # how often it is published (diagnostic_updater's default rate)
@@ -59,6 +62,15 @@ class RosConfig(_Table):
     interop: Literal["bridge", "rmw_zenoh"] = "bridge"
     domain_id: int = 0  # ROS_DOMAIN_ID (rmw_zenoh mode): the first chunk of every key
     node_name: str = "fusiond"  # the node rmw_zenoh tools list (ros2 node list)
+
+
+class StateConfig(_Table):
+    """The daemon's persisted state, so that a restart resumes where the filter was instead of at the origin
+    with nothing learnt (biases, scales, the GPS frame). Off unless a path is given."""
+
+    path: str = ""  # file the state is written to (atomically) and resumed from; relative: to the config's directory
+    save_interval_s: float = 1.0  # how often it is written while samples are fused (and once at a clean stop)
+    max_age_s: float = 30.0  # an older file is refused at start (the robot may have moved meanwhile)
 
 
 class FilterConfig(_Table):
@@ -201,6 +213,7 @@ class Config(_Table):
     output: OutputConfig = msgspec.field(default_factory=OutputConfig)
     ros: RosConfig = msgspec.field(default_factory=RosConfig)
     filter: FilterConfig = msgspec.field(default_factory=FilterConfig)
+    state: StateConfig = msgspec.field(default_factory=StateConfig)
     sensors: list[SensorConfig] = []
 
     def sensor(self, name: str) -> SensorConfig:
@@ -253,6 +266,9 @@ def validate(cfg: Config) -> Config:
         for ep in getattr(cfg.zenoh, table):
             check_endpoint(ep, f"zenoh.{table}")
     _check_struct(cfg.filter, lambda field: f"filter.{field}")
+    _check_struct(cfg.state, lambda field: f"state.{field}")
+    if cfg.state.save_interval_s <= 0.0:
+        raise ConfigError(f"state.save_interval_s: must be positive, got {cfg.state.save_interval_s}")
     if not 0.0 < cfg.filter.nis_confidence < 1.0:
         raise ConfigError("filter.nis_confidence: must be between 0 and 1")
     if cfg.filter.nis_window < 2:

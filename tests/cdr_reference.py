@@ -90,3 +90,16 @@ def encode_tf_cdr_rosbags(stamp: float, frame_id: str, child_frame_id: str, posi
             rotation=_T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))),
     )
     return _serialize(_T[TF_MESSAGE](transforms=[transform]), TF_MESSAGE)
+
+
+def encode_tf_tree_cdr_rosbags(stamp: float, transforms) -> bytes:
+    """Reference implementation of `encode_tf_tree_cdr` through rosbags (tests)."""
+    items = []
+    for frame_id, child_frame_id, p, q in transforms:
+        items.append(_T["geometry_msgs/msg/TransformStamped"](
+            header=_header(stamp, frame_id), child_frame_id=child_frame_id,
+            transform=_T["geometry_msgs/msg/Transform"](
+                translation=_vec3(p),
+                rotation=_T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]),
+                                                            w=float(q[3])))))
+    return _serialize(_T[TF_MESSAGE](transforms=items), TF_MESSAGE)

@@ -157,6 +157,75 @@ def test_publish_tf_false_publishes_nothing_on_tf(daemon_factory):
     assert daemon.tf_published == 0 and out["t/tf"] == []
 
 
+def test_with_a_gps_the_tf_holds_map_to_odom_and_a_continuous_odom_to_base_link(sessions):
+    """Nav2's tree beside a GPS: every TF carries map -> odom and odom -> base_link at the pose's stamp;
+    composed they are the published (map-frame) pose, and when a fix moves the estimate sideways the
+    odom frame keeps driving straight while map -> odom takes the jump."""
+    from fusiond.codecs import encode_gps_sample
+    from fusiond.core.tf_tree import compose
+    from fusiond.samples import GpsSample
+
+    gps = '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n' \
+          'position_noise = [0.1, 0.1, 1.0]\n'
+    cfg = loopback_daemon_config(output=ROS_OUTPUTS, extra=gps)
+    dsession, client = sessions
+    out = Collector(client, "t/pose", "t/tf")
+    daemon = Daemon(cfg, dsession, monitor=False)
+    daemon.start()
+    try:
+        pubs = {k: client.declare_publisher(f"t/{k}", congestion_control=zenoh.CongestionControl.BLOCK)
+                for k in ("odom", "imu", "gps")}
+        wait_until(lambda: health(client), 10, "the daemon")
+        cov = (0.01, 0, 0, 0, 0.01, 0, 0, 0, 1.0)
+        north_per_m = 1.0 / 111_200.0  # degrees of latitude per metre at 48 deg
+        steps = 100
+        for k in range(steps):
+            t = 100.0 + 0.02 * k
+            pubs["imu"].put(imu(t - 0.005))
+            if k in (0, 60):  # the first fix defines the world; the second sits 1 m north of the track
+                east = V * 0.02 * k
+                lat = 48.0 + (1.0 if k == 60 else 0.0) * north_per_m
+                lon = 11.0 + east / (111_200.0 * math.cos(math.radians(48.0)))
+                pubs["gps"].put(encode_gps_sample(GpsSample("gps", t - 0.001, lat, lon, 500.0, 0, cov, 2),
+                                                  "ros2-cdr"))
+            pubs["odom"].put(odom(t))
+        last = 100.0 + 0.02 * (steps - 1)
+        wait_until(lambda: out["t/tf"] and stamp_of(TYPESTORE.deserialize_cdr(out["t/tf"][-1], TF_MESSAGE)
+                                                     .transforms[0].header) == last, 10, "the last odometry's TF")
+        poses = {}
+        for raw in out["t/pose"]:
+            p = decode_pose_cdr(raw)
+            assert p.header.frame_id == "map"  # the estimate is the world pose
+            poses.setdefault(stamp_of(p.header), p.pose.pose)
+        tfs = [TYPESTORE.deserialize_cdr(raw, TF_MESSAGE) for raw in out["t/tf"]]
+        assert len(tfs) > 0.9 * steps
+        odom_track = []
+        for m in tfs:
+            (mo, ob) = m.transforms
+            assert (mo.header.frame_id, mo.child_frame_id) == ("map", "odom")
+            assert (ob.header.frame_id, ob.child_frame_id) == ("odom", "base_link")
+            assert stamp_of(mo.header) == stamp_of(ob.header)
+
+            def tr(t):
+                v, q = t.transform.translation, t.transform.rotation
+                return (v.x, v.y, v.z), (q.x, q.y, q.z, q.w)
+
+            (p, q) = compose(tr(mo), tr(ob))
+            pose = poses[stamp_of(mo.header)]
+            assert max(abs(a - b) for a, b in zip(p, (pose.position.x, pose.position.y, pose.position.z))) < 1e-9
+            odom_track.append((stamp_of(ob.header), tr(ob)[0], tr(mo)[0]))
+        # The second fix pulled the estimate north; the odom frame drove on along its line, and the
+        # jump is in map -> odom.
+        before = [y for st, (x, y, z), _ in odom_track if st < 100.0 + 0.02 * 60]
+        after = [y for st, (x, y, z), _ in odom_track if st >= 100.0 + 0.02 * 60]
+        assert max(abs(y - before[0]) for y in before + after) < 1e-3
+        assert odom_track[-1][2][1] > 0.3  # map -> odom moved north by most of the 1 m
+        for (t0, a, _), (t1, b, _) in zip(odom_track, odom_track[1:]):
+            assert math.dist(a, b) <= V * (t1 - t0) * 1.05 + 1e-9  # continuous: never faster than the wheels
+    finally:
+        daemon.stop()
+
+
 # --------------------------------------------------------------------------- ROS diagnostics
 
 

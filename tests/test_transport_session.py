@@ -13,7 +13,7 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusiond.codecs import encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr
+from fusiond.codecs import encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr, encode_tf_tree_cdr
 from fusiond.config import ConfigError, ZenohConfig
 from fusiond.transport.session import (
     build_config,
@@ -24,7 +24,9 @@ from fusiond.transport.session import (
     zenoh_error_text,
 )
 
-from .cdr_reference import encode_odometry_cdr_rosbags, encode_pose_cdr_rosbags, encode_tf_cdr_rosbags
+from .cdr_reference import (
+    encode_odometry_cdr_rosbags, encode_pose_cdr_rosbags, encode_tf_cdr_rosbags, encode_tf_tree_cdr_rosbags,
+)
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 frames = st.text(alphabet=st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=20)
@@ -39,6 +41,16 @@ def test_struct_encoders_are_byte_identical_to_rosbags(stamp, frame, child, valu
     assert encode_tf_cdr(stamp, frame, child, p, q) == encode_tf_cdr_rosbags(stamp, frame, child, p, q)
     assert (encode_odometry_cdr(stamp, frame, child, np.array(p), tuple(q), np.array(cov), lin, ang, tcov)
             == encode_odometry_cdr_rosbags(stamp, frame, child, p, q, cov, lin, ang, tcov))
+
+
+@settings(max_examples=200, deadline=None)
+@given(stamp=st.floats(min_value=0.0, max_value=2.0e9), names=st.lists(frames, min_size=2, max_size=6),
+       values=st.lists(finite, min_size=21, max_size=21))
+def test_the_tf_tree_encoder_is_byte_identical_to_rosbags(stamp, names, values):
+    """Any frame names (their lengths move the padding before each transform's doubles), 1-3 transforms."""
+    transforms = [(names[i], names[i + 1], values[7 * i:7 * i + 3], values[7 * i + 3:7 * i + 7])
+                  for i in range(min(len(names) - 1, 3))]
+    assert encode_tf_tree_cdr(stamp, transforms) == encode_tf_tree_cdr_rosbags(stamp, transforms)
 
 
 def free_port() -> int:

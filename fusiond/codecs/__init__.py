@@ -58,6 +58,7 @@ from .ros_messages import (
     decode_set_pose,
     encode_diagnostic_array_cdr,
     encode_tf_cdr,
+    encode_tf_tree_cdr,
     type_hash,
 )
 
@@ -69,7 +70,8 @@ __all__ = [
     "encode_sample", "flat_layout", "gps_from_ros", "imu_from_ros", "make_decoder", "odom_from_ros", "pose_from_ros",
     "ros_converter", "ros_msgtype", "stamp_to_ros", "typestore",
     "DIAGNOSTIC_ARRAY", "ERROR", "OK", "TF_MESSAGE", "WARN", "DiagnosticStatus", "SetPose", "SetPoseMessage",
-    "check_set_pose", "dds_type_name", "decode_set_pose", "encode_diagnostic_array_cdr", "encode_tf_cdr", "type_hash",
+    "check_set_pose", "dds_type_name", "decode_set_pose", "encode_diagnostic_array_cdr", "encode_tf_cdr", "encode_tf_tree_cdr",
+    "type_hash",
 ]
 
 

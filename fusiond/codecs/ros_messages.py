@@ -1,7 +1,8 @@
 """The ROS-facing messages beyond pose and odometry: TF, diagnostics, set_pose; ROS type names.
 
 - `tf2_msgs/msg/TFMessage` with one `geometry_msgs/msg/TransformStamped`: what
-  robot_localization's `publish_tf` broadcasts on /tf.
+  robot_localization's `publish_tf` broadcasts on /tf; with several (map -> odom ->
+  base_link) when a GPS or absolute pose defines the world.
 - `diagnostic_msgs/msg/DiagnosticArray`: what rqt_robot_monitor and
   diagnostic_aggregator read on /diagnostics.
 - `geometry_msgs/msg/PoseWithCovarianceStamped` in (CDR) or its JSON twin: a
@@ -60,6 +61,83 @@ def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Se
     pack, head, middle = _output_layout(_TF_HEAD, (frame_id, child_frame_id), 7)  # translation (3) + rotation (4)
     sec, nanosec = stamp_to_ros(stamp)
     return pack(head, sec, nanosec, middle, x, y, z, qx, qy, qz, qw)
+
+
+def encode_tf_tree_cdr(stamp: float, transforms: Sequence[tuple[str, str, Sequence[float], Sequence[float]]]) -> bytes:
+    """Several transforms at one stamp in one TFMessage: (frame_id, child_frame_id, translation,
+    quaternion x y z w) each, parents first. One message, so a listener never holds map -> odom
+    from one estimate and odom -> base_link from another.
+
+    Packed with struct like `encode_tf_cdr` (rosbags took 70 us for two transforms, per pose);
+    byte for byte what rosbags serialises (a test compares both)."""
+    pack = _tf_tree_layout(tuple((frame, child) for frame, child, _, _ in transforms))
+    sec, nanosec = stamp_to_ros(stamp)
+    values: list[Any] = []
+    for _, _, p, q in transforms:
+        values += (sec, nanosec, *p, *q)
+    return pack(*values)
+
+
+@cache
+def _tf_tree_layout(frames: tuple[tuple[str, str], ...]) -> Any:
+    """A struct packer of a TFMessage with these (frame_id, child_frame_id) pairs, whose arguments are
+    (sec, nanosec, x, y, z, qx, qy, qz, qw) per transform. CDR aligns each primitive to its size,
+    counted from after the 4-byte encapsulation header; the frame strings and the padding they
+    cause are fixed per pair, so they are baked into the format as constants."""
+    fmt = ["<4s"]  # encapsulation (little-endian CDR)
+    consts: list[Any] = [b"\x00\x01\x00\x00"]
+    order: list[int | str] = [-1]  # -1: a constant, "v": the next caller value
+    pos = 0  # offset after the encapsulation header
+
+    def pad(align: int) -> None:
+        nonlocal pos
+        n = (-pos) % align
+        if n:
+            fmt.append(f"{n}x")
+            pos += n
+
+    def const(code: str, value: Any, size: int) -> None:
+        nonlocal pos
+        fmt.append(code)
+        consts.append(value)
+        order.append(-1)
+        pos += size
+
+    def string(text: str) -> None:
+        raw = text.encode() + b"\x00"
+        pad(4)
+        const("I", len(raw), 4)
+        const(f"{len(raw)}s", raw, len(raw))
+
+    const("I", len(frames), 4)
+    for frame, child in frames:
+        pad(4)
+        fmt.append("iI")
+        order += ["v", "v"]
+        pos += 8
+        string(frame)
+        string(child)
+        pad(8)
+        fmt.append("7d")
+        order += ["v"] * 7
+        pos += 56
+    packer = struct.Struct("".join(fmt)).pack
+    n_const = len(consts)
+    slots = []  # per struct argument: index into the constants, or into the caller's values (offset by n_const)
+    c = v = 0
+    for o in order:
+        if o == -1:
+            slots.append(c)
+            c += 1
+        else:
+            slots.append(n_const + v)
+            v += 1
+
+    def pack(*values: Any) -> bytes:
+        pool = (*consts, *values)
+        return packer(*[pool[i] for i in slots])
+
+    return pack
 
 
 # --------------------------------------------------------------------------- diagnostics

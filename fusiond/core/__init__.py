@@ -20,6 +20,11 @@ _EXPORTS = {
     "History": "history",
     "FilterState": "state",
     "Rejected": "sensors",
+    "ResumeState": "resume",
+    "state_fingerprint": "resume",
+    "OdomFrame": "tf_tree",
+    "map_to_odom": "tf_tree",
+    "tf_tree_active": "tf_tree",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

@@ -31,13 +31,15 @@ from ..config import Config, GpsSensor, ImuSensor, OdomSensor
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import ErrorStateEKF, PredictWorkspace, corrected_inputs, predict
-from ..estimator.geodesy import enu_to_geodetic
+from ..errors import EstimatorError
+from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
 from .inputs import HeldInputs, note_period
 from .layout import absolute_sensor, state_layout, update_masks
+from .resume import RESUME_VERSION, ResumeState, state_fingerprint
 from .time_jumps import HeldTimeline
 from .sensors import Rejected, SensorContext, build_models
 from .state import FilterState
@@ -149,6 +151,7 @@ class FusionCore:
         self.state: FilterState | None = None
         self._reset_history()
         self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max)
+        self.fingerprint = state_fingerprint(cfg)  # which saved states fit this config (core/resume.py)
         self.resets = 0
         self.covariance_resets = 0
         self.glitches = 0  # bursts of far stamps dropped as a clock glitch
@@ -423,14 +426,70 @@ class FusionCore:
         s.ekf.set_attitude(q / norm)
         s.ekf.reset_covariance(list(range(6)), cov)
         s.attitude_ready = True
+        self._anchor(stamp)
+        log.info("pose_set", stamp=stamp, position=p.tolist(), orientation=(q / norm).tolist())
+
+    def export_state(self) -> ResumeState:
+        """The filter now, as a restarted core resumes it (``resume``; what it holds: core/resume.py).
+
+        A copy: the caller may keep it, encode it or hand it to another thread while this core goes on.
+        Raises CoreError before anything has been fused (there is nothing to resume)."""
+        if not self.initialised:
+            raise CoreError("no sample has been fused yet")
+        s = self.state
+        x, P = s.ekf.snapshot()
+        return ResumeState(
+            fingerprint=self.fingerprint, stamp=float(s.t), x=x.tolist(), P=P.ravel().tolist(),
+            frame_ready=bool(s.frame_ready), heading_ready=bool(s.heading_ready),
+            datum=tuple(s.enu.datum) if s.enu is not None else None, period=[float(v) for v in s.period])
+
+    def resume(self, saved: ResumeState) -> None:
+        """Go on from a state ``export_state`` gave, typically the previous run's.
+
+        As ``set_pose`` does, the filter is re-initialised at the saved stamp with the history cleared
+        (nothing older is placed) and the motion inputs forgotten, but here every block of the state
+        and its full covariance are the saved ones, and so is the world frame. Raises CoreError, with
+        nothing changed, for a state of another version or config (fingerprint) or one that does not
+        fit or is not sound (``ErrorStateEKF.restore``)."""
+        if saved.version != RESUME_VERSION:
+            raise CoreError(f"saved state has version {saved.version}, this fusiond reads {RESUME_VERSION}")
+        if saved.fingerprint != self.fingerprint:
+            raise CoreError(f"saved state belongs to another config (fingerprint {saved.fingerprint}, "
+                            f"this config {self.fingerprint})")
+        if not (math.isfinite(saved.stamp) and saved.stamp > 0.0) or len(saved.period) != len(self.sensors):
+            raise CoreError("saved state has no valid stamp or does not list this config's sensors")
+        ekf = ErrorStateEKF(self.layout)
+        try:
+            ekf.restore(saved.x, saved.P)
+            enu = EnuFrame(*saved.datum) if saved.datum is not None else None
+        except (EstimatorError, TypeError, ValueError) as err:
+            raise CoreError(f"saved state is not usable: {err}") from err
+        self._start()
+        s = self.state
+        assert s is not None
+        ekf.resets = s.ekf.resets
+        s.ekf = ekf
+        s.t = saved.stamp
+        s.tilt_seen = saved.stamp
+        s.period = [float(v) for v in saved.period]
+        s.frame_ready, s.heading_ready = saved.frame_ready, saved.heading_ready
+        if enu is not None:
+            s.enu = enu
+        s.attitude_ready = True
+        if self.two_d:
+            s.ekf.hold_planar(self._planar_nominal, self._planar_error)
+        self._anchor(saved.stamp)
+        log.info("state_restored", stamp=saved.stamp, position=saved.x[0:3], frame_ready=saved.frame_ready)
+
+    def _anchor(self, stamp: float) -> None:
+        """After a re-initialisation at ``stamp``: the history starts at that state."""
         self._abandon_jump()  # samples held for a time jump belong to the timeline before the reset
         self._reset_history()  # its base is this state: nothing older can be placed ...
         # ... once the history holds an entry at the set stamp (with an empty history an older
         # sample would not count as late). The marker (sensor index -1) is never re-applied:
         # a sample is only re-applied after one inserted before it, and nothing older than the
         # set stamp is accepted.
-        self.history.insert(0, (stamp, -1), (-1, None, stamp), s)
-        log.info("pose_set", stamp=stamp, position=p.tolist(), orientation=(q / norm).tolist())
+        self.history.insert(0, (stamp, -1), (-1, None, stamp), self.state)
 
     # -- internals ------------------------------------------------------------
     def _drop(self, idx: int, reason: str, stamp: float) -> Step:

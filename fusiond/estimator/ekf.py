@@ -405,6 +405,30 @@ class ErrorStateEKF:
     def snapshot(self) -> tuple[np.ndarray, np.ndarray]:
         return self.x.copy(), self.P.copy()
 
+    def restore(self, x, P) -> None:
+        """Take a nominal state and covariance that ``snapshot`` gave (a filter resuming after a
+        restart). Refused, with nothing changed, unless both fit this layout and are finite, the
+        quaternion has a norm and P is symmetric (to rounding) with a non-negative diagonal: a
+        resumed filter must be as sound as a running one. A quaternion off unit norm is normalised;
+        otherwise both are taken as they are, so a resumed filter is the saved one to the bit."""
+        x = np.array(x, dtype=float).reshape(-1)
+        P = np.array(P, dtype=float)
+        n, e = self.layout.nominal_dim, self.layout.error_dim
+        if x.shape != (n,) or P.size != e * e:
+            raise EstimatorError(f"state of {x.size} values and covariance of {P.size} do not fit this layout "
+                                 f"({n} and {e} x {e})")
+        P = P.reshape(e, e)
+        if not (np.isfinite(x).all() and np.isfinite(P).all()):
+            raise EstimatorError("state or covariance is not finite")
+        if (np.diagonal(P) < 0.0).any() or not np.allclose(P, P.T, rtol=1e-9, atol=1e-12):
+            raise EstimatorError("covariance is not symmetric with a non-negative diagonal")
+        q = tuple(x[3:7].tolist())
+        if abs(math.fsum(v * v for v in q) - 1.0) > 1e-12:  # a unit quaternion is taken bit for bit
+            x[3:7] = rot.normalize(q)
+        self.x = x
+        self.P = P  # as saved, bit for bit: the running filter's own rounding asymmetry is within the check
+        self._spare = None  # the next P's buffer must not be the array just taken
+
 
 _MASKS_KEPT = 8  # distinct masks held by a workspace (the core uses at most three)
 # the compiled kernels' fixed sizes and status codes (_kernels.c)

@@ -1,4 +1,5 @@
-"""Zenoh I/O: the daemon, sessions, bag playback onto Zenoh and the latency benchmark.
+"""Zenoh I/O: the daemon, sessions, bag playback onto Zenoh, the latency benchmark and the daemon's
+state file.
 Its public surface is ``__all__``; the rest are this package's internals.
 """
 
@@ -19,6 +20,11 @@ _EXPORTS = {
     "PlayResult": "player",
     "run_bench": "bench_latency",
     "BenchResult": "bench_latency",
+    "StateFile": "state_file",
+    "StateRefused": "state_file",
+    "StateSaver": "state_file",
+    "load_state": "state_file",
+    "save_state": "state_file",
 }
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

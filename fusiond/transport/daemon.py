@@ -47,7 +47,10 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 - ROS outputs: a TF (`tf2_msgs/msg/TFMessage`, frame_id -> child_frame_id) with
   each published pose whose stamp is newer than the last TF's (tf2 rejects a
   repeated stamp, and a late odometry sample can be answered at a stamp already
-  published); health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
+  published). With a GPS or absolute pose the estimate is the world pose: the TF
+  then holds map_frame -> frame_id (the corrections) and frame_id -> child_frame_id
+  (a continuous odometry frame), Nav2's tree (`tf_broadcast.py`), and the pose and
+  odometry messages carry map_frame; health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
   the health thread (it reads health, never the core).
 - set_pose: a queryable (and in rmw_zenoh mode the topic /set_pose) whose
   request is decoded on the Zenoh thread, then queued like a sample (and wakes
@@ -58,15 +61,18 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
 - Interop (`[ros] interop`): "bridge" uses zenoh-bridge-ros2dds's plain keys;
   "rmw_zenoh" uses rmw_zenoh's keys, attachments and liveliness tokens for every
   ROS topic in and out (`rmw_zenoh.py`); the JSON health/diagnostics keys stay plain.
+- Persisted state (`[state] path`, `state_file.py`): resumed before the first input
+  when it fits the config and is fresh; the worker exports the core's state every
+  `save_interval_s` while it fuses and a thread of its own writes it (an fsync must
+  not delay a pose); the last state is written when the worker has ended.
 - Stop: subscribers first (no new input), then the worker drains what is queued
-  (bounded time; each sample is published completely or not at all), then the
-  outputs are undeclared; the caller closes the session.
+  (bounded time; each sample is published completely or not at all), the state is
+  written, then the outputs are undeclared; the caller closes the session.
 """
 
 from __future__ import annotations
 
 import math
-import operator
 import queue
 import signal
 import threading
@@ -81,8 +87,7 @@ import zenoh
 
 from ..codecs import (
     DIAGNOSTIC_ARRAY, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, DecodeError, SetPose, decode_set_pose,
-    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr, make_decoder,
-    ros_msgtype,
+    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder, ros_msgtype,
 )
 from ..config import Config
 from .. import reasons
@@ -92,7 +97,9 @@ from ..logs import get_logger
 from .drain_schedule import DrainSchedule
 from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
 from .session import build_config, open_session
-from .thread_state import with_kept_thread_state
+from .state_file import StateSaver, resume_from_file
+from .intake import direct, sensor_kind, zero_covariance_check  # noqa: F401  (their import path since the split)
+from .tf_broadcast import TfBroadcast
 
 log = get_logger("fusiond.daemon")
 
@@ -128,50 +135,9 @@ class _SetPoseItem:
         self.source = source
 
 
-def sensor_kind(sensor: Any) -> str:
-    """The config's `kind` tag (msgspec keeps it on the class)."""
-    return str(type(sensor).__struct_config__.tag)
-
-
-def direct(callback: Callable[[Any], None]) -> Any:
-    """Run a non-blocking callback on Zenoh's receive thread (unstable zenoh-python option; else as is),
-    keeping that thread's Python thread state between calls (`thread_state.py`)."""
-    try:
-        return zenoh.handlers.Callback(with_kept_thread_state(callback), indirect=False)
-    except (AttributeError, TypeError):
-        return callback
-
-
 def alive_key(health_key: str) -> str:
     """The daemon's liveliness token: `<health_key>/alive` (strip `/alive` to get the health key)."""
     return f"{health_key}/alive"
-
-
-def zero_covariance_check(sensor: Any) -> Callable[[Any], bool] | None:
-    """For health's `zero_covariance_floored`: does an accepted sample carry a zero variance that
-    the sensor's floor replaces? Real drivers send all-zero covariances (robot_pose_ekf's "zero
-    covariance" case); they are accepted with floors, and counted so an operator sees it. None when
-    the config overrides the message covariances (they are not read) or the kind has no such check."""
-    kind = sensor_kind(sensor)
-    if kind == "odom":
-        if sensor.twist_noise is not None:
-            return None
-        variances = operator.itemgetter(0, 7, 14, 21, 28, 35)  # the diagonal of the 6x6
-        return lambda s: 0.0 in variances(s.twist_covariance)
-    if kind == "imu":
-        use_orientation = sensor.orientation != "off" and sensor.orientation_noise is None
-        use_gyro = sensor.angular_velocity and sensor.gyro_noise is None
-        if not (use_orientation or use_gyro):
-            return None
-
-        def check(s: Any) -> bool:
-            oc, gc = s.orientation_covariance, s.angular_velocity_covariance
-            if use_orientation and oc[0] != -1.0 and (oc[0] == 0.0 or oc[4] == 0.0 or oc[8] == 0.0):
-                return True
-            return use_gyro and gc[0] != -1.0 and (gc[0] == 0.0 or gc[4] == 0.0 or gc[8] == 0.0)
-
-        return check
-    return None
 
 
 class Daemon:
@@ -179,7 +145,8 @@ class Daemon:
 
     def __init__(self, cfg: Config, session: zenoh.Session, *, queue_size: int = QUEUE_SIZE,
                  health_log_s: float = HEALTH_LOG_S, express: bool = False, direct_callbacks: bool = True,
-                 monitor: bool = True, clock: Callable[[], float] = time.monotonic, hold_s: float = HOLD_S) -> None:
+                 monitor: bool = True, clock: Callable[[], float] = time.monotonic, hold_s: float = HOLD_S,
+                 base_dir: Path | None = None) -> None:
         if not hold_s >= 0.0:
             raise ValueError(f"hold_s must be >= 0 s, got {hold_s}")
         self.cfg = cfg
@@ -211,9 +178,8 @@ class Daemon:
         self._navsat_pub: Any = None
         self._tf_pub: Any = None
         self._ros_diag_pub: Any = None
-        self._tf_stamp = -float("inf")  # stamp of the last TF published: TF stamps strictly increase
+        self._tf = TfBroadcast(cfg)  # what goes on the TF key, and when (tf_broadcast.py)
         self.node: RmwNode | None = None
-        self.tf_published = 0
         self.set_poses = 0  # set_pose requests applied
         self._worker: threading.Thread | None = None
         self._monitor: threading.Thread | None = None
@@ -226,11 +192,21 @@ class Daemon:
         self.diagnostics_puts = 0  # puts on the diagnostics key (one per batch, or per record with batch 0)
         self.worker_cpu_s = 0.0  # CPU time of the worker thread, set when it ends
         self.wakeups = 0  # passes of the worker that found samples to fuse (each a batch of one or more)
+        # `[state] path`: resumed at start, written by a thread of its own every save_interval_s (state_file.py)
+        self.state_path: Path | None = None
+        if cfg.state.path:
+            path = Path(cfg.state.path).expanduser()
+            self.state_path = path if path.is_absolute() else (base_dir or Path.cwd()) / path
+        self._saver: StateSaver | None = None
+        self.resumed = False
 
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
         out = self.cfg.output
         s = self.session
+        if self.state_path is not None:
+            self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s) is None
+            self._saver = StateSaver(self.state_path, time.time)
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
         self._pose_pub = self._ros_publisher(out.pose_key, POSE_COV_STAMPED)
@@ -268,6 +244,11 @@ class Daemon:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
 
+    def _save_state(self) -> None:
+        """Worker (or after it ended): hand the core's state to the saver thread."""
+        if self._saver is not None and self.core.initialised:
+            self._saver.offer(self.core.export_state())
+
     def _ros_publisher(self, key: str, msgtype: str, depth: int = QUEUE_DEPTH) -> Any:
         """A publisher of a ROS topic: the bridge's plain key, or rmw_zenoh's key with attachments and token."""
         if self.node is not None:
@@ -293,6 +274,8 @@ class Daemon:
         left = len(self.inbox)
         if left:
             log.warning("samples_discarded_at_stop", count=left)
+        if self._saver is not None:  # the worker has ended (or was abandoned between samples): the last state
+            self._saver.flush(self.core.export_state() if self.core.initialised else None)
         if self._monitor is not None:
             self._monitor.join(1.0)
         for obj in reversed(self._outputs):  # the node's token last: rmw_zenoh undeclares entities first
@@ -301,6 +284,11 @@ class Daemon:
             except zenoh.ZError:
                 pass
         self._outputs.clear()
+
+    @property
+    def tf_published(self) -> int:
+        """TF messages put (one per estimate whose stamp advanced)."""
+        return self._tf.published
 
     def report(self) -> HealthReport:
         return self.health.report()
@@ -383,6 +371,9 @@ class Daemon:
         next_refresh = 0.0
         next_flush = monotonic() + batch_s
         dirty = False
+        save_every = self.cfg.state.save_interval_s
+        next_save = monotonic() + save_every
+        unsaved = False  # fused since the state was last handed to the saver
         idle = True  # nothing arrived during the last wait: wait long, and let any arrival wake us
         stopping = False
         try:
@@ -413,7 +404,7 @@ class Daemon:
                         idle = True
                 if inbox:
                     self.wakeups += 1
-                    dirty = True
+                    dirty = unsaved = True
                     started = clock()
                     fuse(schedule)
                     if backlog:
@@ -427,6 +418,10 @@ class Daemon:
                     self._refresh()
                     dirty = False
                     next_refresh = now + CORE_REFRESH_S
+                if unsaved and now >= next_save:
+                    self._save_state()
+                    unsaved = False
+                    next_save = now + save_every
                 if stopping:
                     break
             if dirty:
@@ -530,8 +525,9 @@ class Daemon:
     def _publish_estimate(self) -> None:
         out = self.cfg.output
         est = self.core.estimate()
-        pose = encode_pose_cdr(est.stamp, out.frame_id, est.position, est.orientation, est.pose_covariance)
-        odom = encode_odometry_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position, est.orientation,
+        frame = self._tf.pose_frame
+        pose = encode_pose_cdr(est.stamp, frame, est.position, est.orientation, est.pose_covariance)
+        odom = encode_odometry_cdr(est.stamp, frame, out.child_frame_id, est.position, est.orientation,
                                    est.pose_covariance, est.linear, est.angular, est.twist_covariance)
         self._pose_pub.put(pose)
         self._odom_pub.put(odom)
@@ -539,11 +535,10 @@ class Daemon:
             fix = self.core.geodetic()
             if fix is not None:
                 self._navsat_pub.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
-        if self._tf_pub is not None and est.stamp > self._tf_stamp:
-            self._tf_pub.put(encode_tf_cdr(est.stamp, out.frame_id, out.child_frame_id, est.position,
-                                           est.orientation))
-            self._tf_stamp = est.stamp
-            self.tf_published += 1
+        if self._tf_pub is not None:
+            tf = self._tf.message(est)
+            if tf is not None:
+                self._tf_pub.put(tf)
         self.published += 1
 
     def _set_pose(self, item: _SetPoseItem) -> None:
@@ -625,7 +620,7 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
             signal.signal(sig, on_signal)
     session = open_session(conf)
     try:
-        daemon = Daemon(cfg, session)
+        daemon = Daemon(cfg, session, base_dir=base_dir)
         daemon.start()
         z = cfg.zenoh
         log.info("daemon_started", zid=str(session.zid()), mode=z.mode, listen=z.listen, connect=z.connect,
@@ -635,7 +630,8 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
                  alive_key=alive_key(cfg.output.health_key), set_pose_key=cfg.output.set_pose_key,
                  tf_key=cfg.output.tf_key if cfg.output.publish_tf else None,
                  ros_diagnostics_key=cfg.output.ros_diagnostics_key or None, interop=cfg.ros.interop,
-                 node=daemon.node.token_key if daemon.node is not None else None)
+                 node=daemon.node.token_key if daemon.node is not None else None,
+                 state_path=str(daemon.state_path) if daemon.state_path is not None else None)
         while not stop.wait(0.5):
             pass
         log.info("daemon_stopping", signal=received[0] if received else None)
