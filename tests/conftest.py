@@ -25,7 +25,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if not config.getoption("--fast"):
         return
-    keep = [i for i in items if i.path.stem in FAST_MODULES and i.get_closest_marker("e2e") is None]
+    keep = [i for i in items if i.path.stem in FAST_MODULES
+            and i.get_closest_marker("e2e") is None and i.get_closest_marker("long_sim") is None]
     config.hook.pytest_deselected(items=[i for i in items if i not in keep])
     items[:] = keep
 

@@ -113,6 +113,7 @@ def test_the_absolute_sensor_itself_is_the_reference_of_its_held_back_messages(d
     assert s["fusiond"]["n"] > 0
 
 
+@pytest.mark.e2e
 def test_the_report_shows_the_evaluation(drive, tmp_path: Path) -> None:
     bag, cfg, _ = drive
     assert main(["replay", str(bag), "--config", str(cfg), "--reference", "/ground_truth", "--quiet",

@@ -10,6 +10,8 @@ axis holds a true error with probability 0.997, so over some tens of fixes none 
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 from fusiond.core.fusion import FusionCore
@@ -19,6 +21,7 @@ from .configs import robot_config
 from .sim_gps import World, simulate, truth_at
 
 
+@pytest.mark.long_sim
 def test_a_wandering_altitude_gated_out_never_costs_the_horizontal_fix() -> None:
     """Altitude stated as 1.7 m like the horizontal, but wandering 15 m (Gauss-Markov over 60 s) with
     its own error state off: the altitude innovations are gated out as they wander beyond 5 sigma, and

@@ -42,6 +42,7 @@ def _along_track_sigma(odom_rate: float, odom: str = "") -> float:
     return math.sqrt(core.state.ekf.P[0, 0])  # east = along the track
 
 
+@pytest.mark.long_sim
 def test_10_and_83_hz_odometry_of_the_same_drive_end_with_the_same_covariance():
     """The stated twist sigma is a velocity error lasting tau = twist_correlation_s (0.5 s): over
     t >> tau the along-track variance is SIGMA_V^2 * 2 tau * t + process_noise^2 * t, whatever the
