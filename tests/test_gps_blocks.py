@@ -10,9 +10,9 @@ axis holds a true error with probability 0.997, so over some tens of fixes none 
 
 from __future__ import annotations
 
-import pytest
-
 import math
+
+import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.samples import GpsSample
