@@ -60,6 +60,7 @@ class World:
     imu_yaw_disturbance: tuple[float, float] = (0.0, 60.0)  # (amplitude rad, period s) of a slow sinusoid
     imu_yaw_sigma: float = 0.02  # its noise and stated std dev, rad
     imu_yaw_steps: tuple[tuple[float, float, float], ...] = ()  # (t0, t1, rad): a disturbance switched on
+    imu_mount_pitch: float = 0.0  # rad: the IMU pitched in its mount (level ground: its pitch reads this)
     # pose sensor
     pose_rate: float = 0.0  # 0: no pose sensor
     pose_sigma: tuple[float, float] = (0.01, 0.005)  # position m, orientation rad
@@ -130,8 +131,12 @@ def simulate(w: World) -> list:
                            + yaw_rng.normal(0, w.imu_yaw_sigma)
                            + sum(d for t0, t1, d in w.imu_yaw_steps if t0 <= rel < t1))
                 yaw_var = w.imu_yaw_sigma**2
-            out.append(ImuSample("imu", t, rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), imu_yaw),
-                                 (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, yaw_var), (rng.normal(0, gs), rng.normal(0, gs), gz),
+            # a pitched mount turns the body's z rate onto the IMU's x axis: R_y(p)^T (0, 0, w)
+            # (the draws in the order worlds without a mount have always made them)
+            mp = w.imu_mount_pitch
+            q = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002) + mp, imu_yaw)
+            gx, gy = rng.normal(0, gs) - math.sin(mp) * gz, rng.normal(0, gs)
+            out.append(ImuSample("imu", t, q, (4e-6, 0, 0, 0, 4e-6, 0, 0, 0, yaw_var), (gx, gy, math.cos(mp) * gz),
                                  (gs**2, 0, 0, 0, gs**2, 0, 0, 0, gs**2)))
         if w.gps_rate > 0 and rel >= nxt["gps"]:
             nxt["gps"] += 1.0 / w.gps_rate

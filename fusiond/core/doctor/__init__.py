@@ -24,6 +24,7 @@ from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...samples import OdomSample
 from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
+from .grade import grade_fit, grade_verdict
 from .channels import (UNALIGNED_MIN_FIXES, absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head,
                        orientation_verdicts, reacquired_verdict, unaligned_verdict, yaw_jump_verdict)
 from .clock import ClockOffsets, clock_verdicts
@@ -366,7 +367,12 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         mounted = mount_verdict(imu, mount, tilt, MIN_UPDATES)
         if wrong_frame is not None:
             mounted = _blamed(mounted, wrong_frame)
-        for v in (lean_verdict(tilt, imu, MIN_UPDATES, mount), mounted):
+        # With a GPS altitude the grade is measured, so the lean against it replaces the lean check's
+        # "on level ground"; without enough driving to tell, the lean check still speaks.
+        grade = grade_fit(series, cfg)
+        graded = grade_verdict(grade, imu, mount)
+        lean = graded if graded is not None else lean_verdict(tilt, imu, MIN_UPDATES, mount)
+        for v in (lean, mounted):
             if v is not None:
                 found[(v.sensor, v.channel)].append(v)
         if (imu is not None and odom is not None and (odom.name, "yaw_rate") in found

@@ -79,6 +79,8 @@ class Series(msgspec.Struct):
     gps_e: list[float] = []
     gps_n: list[float] = []
     gps_sigma: list[float] = []  # stated horizontal sigma, m
+    gps_u: list[float] = []  # up, m (ENU at the first fix)
+    gps_sigma_up: list[float] = []  # stated vertical sigma, m (NaN: not stated)
     est_t: list[float] = []
     est_yaw: list[float] = []
     est_roll: list[float] = []
@@ -193,7 +195,7 @@ class SeriesCollector:
             return
         if self._enu is None:
             self._enu = EnuFrame(s.latitude, s.longitude, s.altitude)
-        e, n, _ = self._enu.enu(s.latitude, s.longitude, s.altitude)
+        e, n, u = self._enu.enu(s.latitude, s.longitude, s.altitude)
         c = s.position_covariance
         sigma = math.sqrt(max(0.5 * (c[0] + c[4]), 0.0)) if len(c) == 9 and s.covariance_type > 0 else math.nan
         ser = self.series
@@ -201,3 +203,5 @@ class SeriesCollector:
         ser.gps_e.append(e)
         ser.gps_n.append(n)
         ser.gps_sigma.append(sigma)
+        ser.gps_u.append(u)
+        ser.gps_sigma_up.append(math.sqrt(max(c[8], 0.0)) if len(c) == 9 and s.covariance_type > 0 else math.nan)

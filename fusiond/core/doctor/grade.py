@@ -1,0 +1,184 @@
+"""IMU mounting pitch: the GPS's climb against the climb the estimate's pitch implies.
+
+The lean check (``attitude``) reads a steady tilt of the estimate as a mounting error, which
+holds on level ground only: a car on a highway leans with the road. With a GPS that measures
+altitude the road's grade is measured too. The body-frame twist is integrated along the
+estimate's pitch theta_est = theta + delta, delta the IMU's pitch in its mount that
+``extrinsic_rpy`` does not say; for a vehicle that moves along its x axis (REP-103, pitch
+positive nose down)
+
+    dz/dt = -v sin(theta) = -v sin(theta_est - delta) ~ -v sin(theta_est) + delta v cos(theta_est).
+
+Over a chord from fix a to fix b, with Z the climb the estimate implies (the integral of
+-v sin theta_est) and D the distance driven along the track (the integral of v cos theta_est),
+
+    r = (u_b - u_a) - (Z_b - Z_a) = delta (D_b - D_a) + (E_b - E_a),
+
+E the fixes' vertical error. The chords are consecutive (speed.chord_ends: they start where the
+last one ended), so the errors telescope: over a run of chords without a break the sum of r
+carries only E at its two ends. Hence delta = sum(r) / sum(d), with, per unbroken run of length
+T, Var(E_end - E_start) = 2 sigma_w^2 + 2 sigma_m^2 (1 - exp(-T / tau)): the white noise at the
+two ends and the slow wander (the GPS's vertical error state, ``vertical_error_sigma`` /
+``vertical_error_tau_s``, else ``error_sigma``'s up / ``error_tau_s``, else the stated sigma as in
+speed.py). The residuals' Newey-West variance catches errors larger than that model; the verdict
+uses the larger.
+
+The fit measures what is left in the estimate: a filter whose pitch already follows the grade
+gives delta near 0. A roll in the mount leaves z alone (the vehicle does not move sideways) and is
+not seen here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...config import Config, GpsSensor, ImuSensor
+from .attitude import full_mount, paste_mount
+from .heading import gps_sigma
+from .mounting import MountYaw
+from .series import Series
+from .speed import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, Z_SIGMAS, _cumulative, _newey_west, chord_ends, t_quantile
+from .verdict import Verdict, sensor_key
+
+# A pitch error delta sinks or lifts the dead-reckoned z by delta per metre driven: at 0.01 rad, 1 %
+# of the distance, twice the 0.5 % below which mounting.py names no yaw error. Smaller: not named.
+MOUNT_PITCH_RAD = 0.01
+
+
+@dataclass
+class GradeFit:
+    """The IMU's mounting pitch error (rad, the sense of a lean: the estimate's pitch minus the body's)."""
+
+    delta: float
+    se_model: float
+    se_empirical: float
+    chords: int
+    distance_m: float  # driven over the chords
+    runs: int  # unbroken runs of consecutive chords
+
+    @property
+    def se(self) -> float:
+        return max(self.se_model, self.se_empirical)
+
+    @property
+    def band(self) -> float:
+        """Within it the pitch is not named: the tolerance, or Z_SIGMAS standard errors of the model (a
+        normal quantile), or Student's t of the residuals' (estimated from the chords themselves)."""
+        return max(MOUNT_PITCH_RAD, Z_SIGMAS * self.se_model, t_quantile(Z_SIGMAS, self.chords - 1) * self.se_empirical)
+
+    @property
+    def named(self) -> bool:
+        return abs(self.delta) > self.band
+
+    @property
+    def resolved(self) -> bool:
+        """Known well enough to say the mount's pitch agrees with the grade."""
+        return self.band <= MOUNT_PITCH_RAD
+
+    def evidence(self) -> dict[str, float]:
+        return {"mount_pitch_error_rad": self.delta, "mount_pitch_error_se": self.se,
+                "mount_pitch_se_model": self.se_model, "mount_pitch_se_residuals": self.se_empirical,
+                "grade_chords": float(self.chords), "grade_distance_m": self.distance_m}
+
+
+def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float]:
+    """(sigma_w, sigma_m, tau) of the fixes' altitude: white part and slow wander."""
+    if gps.position_noise is not None:
+        sigma_w = float(gps.position_noise[2])
+    else:
+        stated = [v for v in series.gps_sigma_up if math.isfinite(v)]
+        sigma_w = float(np.median(stated)) if stated else float(gps.unknown_position_sigma[2])
+    if gps.vertical_error_sigma > 0.0:
+        return sigma_w, float(gps.vertical_error_sigma), float(gps.vertical_error_tau_s)
+    if gps.error_tau_s > 0.0 and gps.error_sigma is not None:
+        return sigma_w, float(gps.error_sigma[2]), float(gps.error_tau_s)
+    return sigma_w, sigma_w, ASSUMED_TAU_S
+
+
+def _altitude_fused(cfg: Config, gps: GpsSensor) -> bool:
+    if cfg.filter.two_d_mode:
+        return False
+    return gps.position_noise is None or gps.position_noise[2] <= gps.max_sigma
+
+
+def _tilt_from_imu(imu: ImuSensor) -> bool:
+    return imu.orientation != "off" or imu.tilt_from_gravity
+
+
+def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
+    """The chord fit of the mounting pitch, or None without a GPS altitude, an IMU tilt or enough chords."""
+    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
+    if gps is None or imu is None or not _altitude_fused(cfg, gps) or not _tilt_from_imu(imu):
+        return None
+    if len(series.gps_t) < 5 or len(series.odom_t) < 10 or len(series.est_t) < 10:
+        return None
+    to = np.asarray(series.odom_t)
+    v = np.asarray(series.odom_v)
+    te = np.asarray(series.est_t)
+    pitch = np.interp(to, te, np.asarray(series.est_pitch))
+    climb = _cumulative(to, -v * np.sin(pitch))
+    along = _cumulative(to, v * np.cos(pitch))
+    sigma_w, sigma_m, tau = _vertical_noise(series, gps)
+    breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
+    gt, gu = series.gps_t, series.gps_u
+    r, d, ends = [], [], []
+    for i, j in chord_ends(series, to, _cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
+        t0, t1 = gt[i], gt[j]
+        if t0 < te[0] or t1 > te[-1]:
+            continue  # before the first estimate (or after the last): no pitch to compare
+        if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
+            continue  # across a logging gap the wheels' travel is missing, not the GPS's climb
+        dist = float(np.interp(t1, to, along) - np.interp(t0, to, along))
+        r.append((gu[j] - gu[i]) - float(np.interp(t1, to, climb) - np.interp(t0, to, climb)))
+        d.append(dist)
+        ends.append((i, j))
+    n = len(r)
+    if n < MIN_CHORDS:
+        return None
+    r_, d_ = np.array(r), np.array(d)
+    total = float(d_.sum())
+    if abs(total) <= 0.0:
+        return None
+    delta = float(r_.sum()) / total
+    # unbroken runs: a chord that starts on the fix the previous one ended on continues it
+    var_n, runs, start = 0.0, 0, None
+    for k, (i, j) in enumerate(ends):
+        if start is None:
+            start = i
+        if k + 1 == n or ends[k + 1][0] != j:
+            span = abs(gt[j] - gt[start])
+            var_n += 2.0 * sigma_w**2 + 2.0 * sigma_m**2 * (1.0 - math.exp(-span / tau))
+            runs += 1
+            start = None
+    se_model = math.sqrt(var_n) / abs(total)
+    se_emp = math.sqrt(_newey_west((r_ - delta * d_) / total) * n / (n - 1))
+    return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs)
+
+
+def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None) -> Verdict | None:
+    """The GPS climb's verdict on the IMU's mounting pitch; None when the drive could not tell."""
+    if fit is None or imu is None:
+        return None
+    deg, se_deg = math.degrees(fit.delta), math.degrees(fit.se)
+    ev = fit.evidence()
+    if fit.named:
+        yaw = mount.delta if mount is not None and mount.named else 0.0
+        return Verdict(imu.name, "attitude", "warn",
+                       f"the GPS altitude climbs against the estimate's pitch by {deg:+.2f} deg (+- {se_deg:.2f}) "
+                       f"over {fit.distance_m:.0f} m of driving ({fit.chords} chords): the IMU is pitched by that in "
+                       "its mount and extrinsic_rpy does not say so, so the body-frame twist climbs or sinks "
+                       f"({abs(fit.delta) * 100:.1f} m of height per 100 m driven, which the GPS's vertical error "
+                       "state then takes for receiver wander). The full mount is below",
+                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, (0.0, fit.delta), yaw)), ev)
+    if fit.resolved:
+        return Verdict(imu.name, "attitude", "ok",
+                       f"the GPS climb agrees with the estimate's pitch: mounting pitch {deg:+.2f} deg (+- {se_deg:.2f}) "
+                       "against extrinsic_rpy", evidence=ev)
+    return None
+
+
+__all__ = ["MOUNT_PITCH_RAD", "GradeFit", "grade_fit", "grade_verdict"]
