@@ -103,7 +103,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
             from .replay.evaluate import evaluate
 
             evaluation = evaluate([Path(p) for p in args.bags], cfg, reference, result.trajectory, recorder,
-                                  segment_gap_s=args.segment_gap, rpe_s=args.rpe_s)
+                                  segment_gap_s=args.segment_gap, rpe_s=args.rpe_s,
+                                  heading_known=result.heading_known)
     except ReplayError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE

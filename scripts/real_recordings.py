@@ -74,7 +74,7 @@ def _evaluate(data: Path, case: Case):
     rec = Recorder(cfg, case.fuse_every)
     bag = [data / case.recording]
     result = replay(bag, cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
-    return evaluate(bag, cfg, "/ground_truth", result.trajectory, rec)
+    return evaluate(bag, cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
 
 
 def _jackal_row(data: Path) -> list[str]:

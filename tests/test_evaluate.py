@@ -152,3 +152,37 @@ def test_tracks_interpolate_within_their_gaps_and_hold_a_step() -> None:
     held = Track.build("h", t, xyz, held=True)
     p, _, ok = held.at(np.array([-1.0, 1.5, 5.0]), max_gap=1.0)
     assert ok.tolist() == [False, True, True] and p[1, 0] == 1.0 and p[2, 0] == 2.0
+
+
+def test_poses_published_before_the_heading_is_known_are_not_scored_on_heading(tmp_path: Path) -> None:
+    """The robot starts facing north; the filter publishes yaw 0 with an "unknown" yaw variance until the
+    fixes span the travel a heading fit needs. Those placeholder yaws, 90 deg off, would dominate the RMS
+    (at least 90 sqrt(k / n) deg for k of n poses); they are left out of the heading and RPE, the note
+    says how many, and what remains is the filter's real heading error (well under 10 deg)."""
+    from fusiond.config import loads
+    from fusiond.core.fusion import FusionCore
+
+    w = World(duration=30.0, gps_rate=5.0, gps_sigma=0.5, speed=2.0, start=(0.0, 0.0, math.pi / 2), seed=4)
+    _write_bag(tmp_path / "bag", w)
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(robot_config_text(gps=""))
+    core = FusionCore(loads(cfg.read_text()))
+    unknown = total = 0
+    for s in simulate(World(duration=30.0, gps_rate=5.0, gps_sigma=0.5, speed=2.0, start=(0.0, 0.0, math.pi / 2),
+                            seed=4)):
+        if core.ingest(s).publish:
+            total += 1
+            unknown += not core.heading_known
+    assert unknown >= 0.1 * total  # the trait: a tenth of the run waits for its heading
+    out = tmp_path / "ev.json"
+    assert main(["replay", str(tmp_path / "bag"), "--config", str(cfg), "--reference", "/ground_truth", "--quiet",
+                 "--evaluation", str(out)]) == 0
+    ev = json.loads(out.read_text())
+    assert any(f"skip the {unknown} poses published before its heading was known" in n for n in ev["notes"]), ev["notes"]
+    assert _scores(out)["fusiond"]["heading_deg"] < 10.0
+
+
+def test_a_track_reads_no_heading_where_it_was_not_known() -> None:
+    tr = Track.build("t", [0.0, 1.0, 2.0, 3.0], np.zeros((4, 3)), [0.0, 0.0, 1.0, 1.0], heading_known=[0, 0, 1, 1])
+    _, h, valid = tr.at(np.array([0.5, 1.5, 2.5]), 5.0)
+    assert valid.all() and np.isnan(h[0]) and np.isnan(h[1]) and h[2] == pytest.approx(1.0)

@@ -52,9 +52,13 @@ class Track:
     heading: np.ndarray | None
     world: bool  # expressed in the world frame, so that unaligned errors mean something
     held: bool = False  # a held value (the last fix): read as a step, never interpolated
+    # per sample: is its heading an estimate? (None: every one is) A pose published while a GPS-referenced
+    # heading waits for travel states its yaw as unknown: its yaw is a placeholder, not scored.
+    heading_known: np.ndarray | None = None
 
     @classmethod
-    def build(cls, name: str, t, xyz, heading=None, world: bool = False, held: bool = False) -> Track:
+    def build(cls, name: str, t, xyz, heading=None, world: bool = False, held: bool = False,
+              heading_known=None) -> Track:
         """Sorted by stamp, one sample a stamp (the last one published for it), the heading unwrapped so
         that interpolation never runs the long way round."""
         t = np.asarray(t, dtype=float)
@@ -63,7 +67,8 @@ class Track:
         keep = np.append(t[1:] != t[:-1], True) if t.size else np.zeros(0, bool)
         xyz = np.asarray(xyz, dtype=float).reshape(-1, 3)[order][keep]
         h = None if heading is None else np.unwrap(np.asarray(heading, dtype=float)[order][keep])
-        return cls(name, t[keep], xyz, h, world, held)
+        known = None if heading_known is None else np.asarray(heading_known, dtype=bool)[order][keep]
+        return cls(name, t[keep], xyz, h, world, held, known)
 
     def at(self, ts: np.ndarray, max_gap: float) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """(xyz, heading, valid) at the times ``ts``."""
@@ -85,6 +90,8 @@ class Track:
         w = np.where(span > 0.0, (ts - self.t[lo]) / np.where(span > 0.0, span, 1.0), 0.0)
         xyz = self.xyz[lo] + w[:, None] * (self.xyz[hi] - self.xyz[lo])
         h = None if self.heading is None else self.heading[lo] + w * (self.heading[hi] - self.heading[lo])
+        if h is not None and self.heading_known is not None:
+            h = np.where(self.heading_known[lo] & self.heading_known[hi], h, np.nan)
         return xyz, h, valid
 
 
@@ -355,11 +362,17 @@ def _score(segment: str, track, ts, ref_xyz, ref_h, world: bool, max_gap: float,
     if n >= 2:
         sc.aligned_h = _aligned_rms(xyz[:, :2], rx[:, :2])
     if h is not None and ref_h is not None:
-        hv, rh = h[valid], ref_h[valid]
+        hv, rh, ts_h, rxy = h[valid], ref_h[valid], ts_v, rx[:, :2]
+        xy = xyz[:, :2]
+        known = np.isfinite(hv)
+        if not known.all():  # scored where the track's heading is an estimate (Track.heading_known)
+            hv, rh, ts_h, rxy, xy = hv[known], rh[known], ts_h[known], rxy[known], xy[known]
+        if hv.size == 0:
+            return sc
         err = np.angle(np.exp(1j * (hv - rh)))
         offset = np.angle(np.mean(np.exp(1j * err)))  # the segment's heading alignment: its mean offset
         sc.heading_deg = float(np.degrees(np.sqrt(np.mean(np.angle(np.exp(1j * (err - offset))) ** 2))))
-        sc.rpe_m = _rpe(rx[:, :2], rh, xyz[:, :2], hv, ts_v, rpe_s)
+        sc.rpe_m = _rpe(rxy, rh, xy, hv, ts_h, rpe_s)
     return sc
 
 
@@ -372,9 +385,10 @@ def _segments(t: np.ndarray, gap: float) -> list[tuple[float, float]]:
 
 
 def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec: Recorder,
-             segment_gap_s: float = 1.0, rpe_s: float = 1.0) -> Evaluation:
+             segment_gap_s: float = 1.0, rpe_s: float = 1.0, heading_known=None) -> Evaluation:
     """Score the published ``trajectory`` (8 doubles a pose: t x y z qx qy qz qw) and the baselines
-    ``rec`` gathered during the replay."""
+    ``rec`` gathered during the replay. ``heading_known`` (one flag a pose, ReplayResult's): the heading
+    and RPE of the poses published before the filter knew its heading are not scored."""
     msgtype, rt, rpos, rhead, ref_lla = read_reference(paths, reference)
     world = rec.absolute is not None
     notes: list[str] = []
@@ -408,8 +422,14 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
         ts_all = ref.t
         scored_at = "reference stamps"
     tr = np.asarray(trajectory, dtype=float).reshape(-1, 8)
+    known = None
+    if heading_known is not None and len(heading_known) == len(tr) and not all(heading_known):
+        known = np.asarray(heading_known, dtype=bool)
+        notes.append(f"fusiond's heading and RPE skip the {int((~known).sum())} poses published before its heading "
+                     "was known (their yaw variance says unknown)")
     fused = Track.build("fusiond", tr[:, 0], tr[:, 1:4],
-                        np.array([yaw(tuple(q)) for q in tr[:, 4:8]]) if tr.size else None, world=world)
+                        np.array([yaw(tuple(q)) for q in tr[:, 4:8]]) if tr.size else None, world=world,
+                        heading_known=known)
     tracks = [fused] + baseline_tracks(rec, frame, segment_gap_s)
     t0 = float(ref.t[0])
     segments = [Segment("all", 0.0, spans[-1][1] - t0)]

@@ -50,6 +50,9 @@ class ReplayResult:
     missing: list[str]
     decode_errors: int
     trajectory: array = field(default_factory=lambda: array("d"))  # t x y z qx qy qz qw of every published pose
+    # per published pose: 1 when its heading was known (a GPS-referenced heading waits for the first metres
+    # of travel; until then the pose's yaw variance says "unknown" and its yaw is not an estimate)
+    heading_known: array = field(default_factory=lambda: array("b"))
     # the verdicts with their paste lines replayed (fusiond.tune.advice), once that has run
     proven: list[Verdict] | None = None
 
@@ -229,6 +232,7 @@ class Runner:
         self.trace = Trace()
         self.keep_trace = keep_trace
         self.trajectory = array("d")  # t x y z qx qy qz qw of every published pose (64 bytes each)
+        self.heading_known = array("b")  # per published pose (ReplayResult.heading_known)
         self.messages = 0
         self.on_record: Callable | None = None
 
@@ -239,15 +243,18 @@ class Runner:
         if doctor is not None:
             doctor.add_sample(sample)
         if step.poses:  # samples held for a time jump, applied at once: one pose per odometry message
+            known = core.heading_known
             for t_held, x_held in step.poses:
                 self.trajectory.append(t_held)
                 self.trajectory.extend(x_held.tolist())
+                self.heading_known.append(known)
         if step.publish:
             t, x = core.pose()
             p = x.tolist()  # one conversion for the trajectory, the doctor and the trace
             if not step.poses:
                 self.trajectory.append(t)
                 self.trajectory.extend(p)
+                self.heading_known.append(core.heading_known)
             if doctor is not None:
                 q = (p[3], p[4], p[5], p[6])
                 doctor.add_orientation(q)
@@ -276,7 +283,7 @@ class Runner:
 
     def result(self, seconds: float = 0.0, missing: list[str] | None = None, decode_errors: int = 0) -> ReplayResult:
         return ReplayResult(self.core, self.doctor, self.trace, self.messages, len(self.trajectory) // 8, seconds,
-                            missing or [], decode_errors, self.trajectory)
+                            missing or [], decode_errors, self.trajectory, self.heading_known)
 
 
 def run_samples(samples, cfg: Config, keep_trace: bool = False) -> ReplayResult:
