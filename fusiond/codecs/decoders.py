@@ -14,24 +14,20 @@ from typing import Any, Final
 
 from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
 
-from .cdr_fast_path import IMU_BLOCK, ODOM_BLOCK, RepeatedLayout, fast_imu, fast_odom, imu_from_block, odom_from_block
+from .cdr_fast_path import IMU_BLOCK, ODOM_BLOCK, RepeatedLayout, imu_from_block, odom_from_block
 from .from_ros import gps_from_ros, imu_from_ros, odom_from_ros, pose_from_ros
 from .json_msgpack import structured_decoder
 from .rosbags_cdr import deserialize, typestore
 from .sample_encoders import encode_gps_sample, encode_imu_sample, encode_odom_sample, encode_pose_sample
 from .wire import IMU, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, POSE_TYPES, Decoder, Payload, check_size
 
-
-def _no_fast_path(buf: Payload, sensor: str) -> None:
-    return None  # GPS and pose sensors run at 1-100 Hz: rosbags' generic path is fast enough
-
-
-_KINDS: Final = {  # kind -> (ROS type, struct fast path, rosbags message -> sample)
-    "odom": (ODOMETRY, fast_odom, odom_from_ros),
-    "imu": (IMU, fast_imu, imu_from_ros),
-    "gps": (NAVSATFIX, _no_fast_path, gps_from_ros),
-    "pose": (POSE_COV_STAMPED, _no_fast_path, pose_from_ros),
+_KINDS: Final[dict[str, tuple[str, Callable[[Any, str], Sample]]]] = {  # kind -> (ROS type, rosbags message -> sample)
+    "odom": (ODOMETRY, odom_from_ros),
+    "imu": (IMU, imu_from_ros),
+    "gps": (NAVSATFIX, gps_from_ros),
+    "pose": (POSE_COV_STAMPED, pose_from_ros),
 }
+# GPS and pose sensors run at 1-100 Hz: rosbags' generic path is fast enough for them.
 _REPEATED: Final = {  # kind -> (child frame id?, float64 block, sample builder) of `RepeatedLayout`
     "odom": (True, ODOM_BLOCK, odom_from_block),
     "imu": (False, IMU_BLOCK, imu_from_block),
@@ -52,7 +48,7 @@ def ros_msgtype(kind: str, msgtype: str | None = None) -> str:
 
 def ros_converter(kind: str) -> Callable[[Any, str], Sample]:
     """rosbags message -> sample for a sensor kind (bag replay)."""
-    return _KINDS[kind][2]
+    return _KINDS[kind][1]
 
 
 def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None = None) -> Decoder:
@@ -66,7 +62,7 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
     """
     if kind not in _KINDS:
         raise ValueError(f"unknown sensor kind {kind!r}, expected one of {sorted(_KINDS)}")
-    _, fast, from_ros = _KINDS[kind]
+    from_ros = _KINDS[kind][1]
     if kind == "pose" and msgtype is None and encoding == "ros2-cdr":
         for t in POSE_TYPES:
             _warm(t)
@@ -105,9 +101,6 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
 
     def decode_cdr(payload: Payload) -> Sample:
         check_size(payload)
-        sample = fast(payload, sensor)
-        if sample is not None:
-            return sample
         return from_ros(deserialize(payload, msgtype), sensor)
 
     return decode_cdr
