@@ -26,22 +26,11 @@ import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
 from .output_encoders import output_layout
-from .rosbags_cdr import deserialize, ros_types, typestore
+from .rosbags_cdr import deserialize, ros_header, ros_types, serialize
 from .wire import POSE_COV_STAMPED, DecodeError, Payload, check_size, stamp_to_ros
 
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 DIAGNOSTIC_ARRAY: Final = "diagnostic_msgs/msg/DiagnosticArray"
-
-
-def _header(stamp: float, frame_id: str) -> Any:
-    sec, nanosec = stamp_to_ros(stamp)
-    T = ros_types()
-    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
-                                    frame_id=frame_id)
-
-
-def _serialize(msg: Any, msgtype: str) -> bytes:
-    return bytes(typestore().serialize_cdr(msg, msgtype, little_endian=True))
 
 
 # --------------------------------------------------------------------------- TF
@@ -164,11 +153,11 @@ def encode_diagnostic_array_cdr(stamp: float, statuses: Sequence[DiagnosticStatu
     T = ros_types()
     status, key_value = T["diagnostic_msgs/msg/DiagnosticStatus"], T["diagnostic_msgs/msg/KeyValue"]
     msg = T[DIAGNOSTIC_ARRAY](
-        header=_header(stamp, ""),
+        header=ros_header(stamp, ""),
         status=[status(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
                        values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
     )
-    return _serialize(msg, DIAGNOSTIC_ARRAY)
+    return serialize(msg, DIAGNOSTIC_ARRAY)
 
 
 # --------------------------------------------------------------------------- set_pose
