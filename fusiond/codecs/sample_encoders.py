@@ -2,8 +2,8 @@
 
 The inverse of the decoders: `fusiond play` publishes bags with it, the benchmarks and the
 tests build their inputs with it, and the decoders warm rosbags' serialisers on its output.
-ROS 2 CDR is built and serialised by rosbags (Odometry by `encode_odometry_cdr`, its byte-for-
-byte equal); JSON and msgpack are the Structs of `json_msgpack`.
+ROS 2 CDR is built and serialised by rosbags, except Odometry: `encode_odometry_cdr` packs the
+same bytes with struct. JSON and msgpack are the Structs of `json_msgpack`.
 """
 
 from __future__ import annotations
