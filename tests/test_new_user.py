@@ -279,8 +279,7 @@ def _bag_with_gps(path: Path) -> None:
     """The Jackal's first 300 odometry and IMU messages as a ROS 2 bag, with NavSatFix fixes on /gps/fix."""
     from rosbags.rosbag2 import Writer
 
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
-    from fusiond.codecs.payloads import NAVSATFIX, encode_gps_sample
+    from fusiond.codecs import IMU, NAVSATFIX, ODOMETRY, TYPESTORE, encode_gps_sample
     from fusiond.config import ImuSensor, OdomSensor
     from fusiond.replay.bag import iter_raw_cdr
     from fusiond.samples import GpsSample
@@ -337,8 +336,7 @@ nis_window = 50
 def _static_imu_bag(path: Path, n: int = 3000, rate: float = 100.0) -> None:
     from rosbags.rosbag2 import Writer
 
-    from fusiond.codecs import IMU, TYPESTORE
-    from fusiond.codecs.payloads import encode_imu_sample
+    from fusiond.codecs import IMU, TYPESTORE, encode_imu_sample
     from fusiond.estimator import rotation as rot
     from fusiond.samples import ImuSample
 
@@ -526,8 +524,7 @@ def _jackal_with_an_imu_outlier(path: Path, roll: float = 0.8, messages: int = 1
 
     import msgspec
 
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, make_decoder
-    from fusiond.codecs.payloads import encode_imu_sample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, make_decoder
     from fusiond.config import ImuSensor, OdomSensor
     from fusiond.estimator import rotation as rot
     from fusiond.replay.bag import iter_raw_cdr

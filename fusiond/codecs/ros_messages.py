@@ -25,22 +25,12 @@ import msgspec
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from .payloads import (POSE_COV_STAMPED, DecodeError, Payload, _check_size, _deserialize, _output_layout, _types,
-                       stamp_to_ros, typestore)
+from .output_encoders import output_layout
+from .rosbags_cdr import deserialize, ros_header, ros_types, serialize
+from .wire import POSE_COV_STAMPED, DecodeError, Payload, check_size, stamp_to_ros
 
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 DIAGNOSTIC_ARRAY: Final = "diagnostic_msgs/msg/DiagnosticArray"
-
-
-def _header(stamp: float, frame_id: str) -> Any:
-    sec, nanosec = stamp_to_ros(stamp)
-    T = _types()
-    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
-                                    frame_id=frame_id)
-
-
-def _serialize(msg: Any, msgtype: str) -> bytes:
-    return bytes(typestore().serialize_cdr(msg, msgtype, little_endian=True))
 
 
 # --------------------------------------------------------------------------- TF
@@ -58,7 +48,7 @@ def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Se
     """
     x, y, z = position
     qx, qy, qz, qw = quat_xyzw
-    pack, head, middle = _output_layout(_TF_HEAD, (frame_id, child_frame_id), 7)  # translation (3) + rotation (4)
+    pack, head, middle = output_layout(_TF_HEAD, (frame_id, child_frame_id), 7)  # translation (3) + rotation (4)
     sec, nanosec = stamp_to_ros(stamp)
     return pack(head, sec, nanosec, middle, x, y, z, qx, qy, qz, qw)
 
@@ -160,14 +150,14 @@ class DiagnosticStatus(msgspec.Struct, frozen=True):
 
 def encode_diagnostic_array_cdr(stamp: float, statuses: Sequence[DiagnosticStatus]) -> bytes:
     """A diagnostic_msgs/msg/DiagnosticArray (header frame_id empty, as diagnostic_updater sends it)."""
-    T = _types()
+    T = ros_types()
     status, key_value = T["diagnostic_msgs/msg/DiagnosticStatus"], T["diagnostic_msgs/msg/KeyValue"]
     msg = T[DIAGNOSTIC_ARRAY](
-        header=_header(stamp, ""),
+        header=ros_header(stamp, ""),
         status=[status(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
                        values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
     )
-    return _serialize(msg, DIAGNOSTIC_ARRAY)
+    return serialize(msg, DIAGNOSTIC_ARRAY)
 
 
 # --------------------------------------------------------------------------- set_pose
@@ -212,7 +202,7 @@ def decode_set_pose(payload: Payload) -> SetPose:
     Raises DecodeError whose detail names the problem (field and value); the daemon
     sends it back as the query's error reply.
     """
-    _check_size(payload)
+    check_size(payload)
     raw = bytes(payload)
     if raw.lstrip()[:1] == b"{":
         try:
@@ -223,7 +213,7 @@ def decode_set_pose(payload: Payload) -> SetPose:
             raise DecodeError("json_invalid", str(exc)) from None
         req = SetPose(m.stamp, m.position, m.orientation, tuple(m.covariance))
     else:
-        msg = _deserialize(raw, POSE_COV_STAMPED)
+        msg = deserialize(raw, POSE_COV_STAMPED)
         st, pose = msg.header.stamp, msg.pose.pose
         p, q = pose.position, pose.orientation
         req = SetPose(st.sec + st.nanosec * 1e-9, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w),

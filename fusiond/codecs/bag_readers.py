@@ -1,0 +1,115 @@
+"""Struct readers of a bag's raw Odometry and Imu messages (ROS 1 and ROS 2), and the check that
+a bag defines those types with the standard layout before they are used (`bag_fast_path`).
+
+A bag replay reads the same two messages thousands of times a second. ROS 2 bags hold the CDR
+of `cdr_fast_path`; ROS 1 bags hold ROS 1 serialisation: the same fields with a `seq` in the
+header, strings without a terminator and no alignment, so one struct call reads the float64
+block as well. A bag carries its own message definitions, which may differ from the standard
+ones under the same name: a fast path is used only for a type whose definition in the bag's
+store (rosbags parsed it) has exactly the layout it reads.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Final
+
+from fusiond.samples import ImuSample, OdomSample, Sample
+
+from .cdr_fast_path import IMU_BLOCK, ODOM_BLOCK, U32, Block, fast_imu, fast_odom, imu_from_block, odom_from_block
+from .wire import IMU, ODOMETRY, Payload
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
+
+_ROS1_HEAD: Final = struct.Struct("<IiI").unpack_from  # header.seq, header.stamp.sec, header.stamp.nanosec
+
+
+def _ros1_string_end(buf: Payload, pos: int) -> int:
+    """End of the ROS 1 string at `pos` (length prefix, no terminator), -1 where rosbags would reject it."""
+    (length,) = U32(buf, pos)
+    end = pos + 4 + length
+    if end > len(buf):
+        return -1
+    str(buf[pos + 4 : end], "utf-8")  # rosbags decodes the string; invalid UTF-8 raises here
+    return end
+
+
+def _ros1_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> Block | None:
+    try:
+        _, sec, nanosec = _ROS1_HEAD(buf, 0)
+        pos = _ros1_string_end(buf, 12)
+        if pos >= 0 and has_child_frame:
+            pos = _ros1_string_end(buf, pos)
+        if pos < 0 or pos + block.size != len(buf):  # rosbags rejects any size mismatch in ROS 1
+            return None
+        return sec + nanosec * 1e-9, block.unpack_from(buf, pos)
+    except (struct.error, UnicodeDecodeError):
+        return None
+
+
+def _fast_odom_ros1(buf: Payload, sensor: str) -> OdomSample | None:
+    return odom_from_block(_ros1_block(buf, True, ODOM_BLOCK), sensor)
+
+
+def _fast_imu_ros1(buf: Payload, sensor: str) -> ImuSample | None:
+    return imu_from_block(_ros1_block(buf, False, IMU_BLOCK), sensor)
+
+
+_HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id
+_FAST_LAYOUTS: Final = {
+    ODOMETRY: (*_HEADER_LAYOUT, "string", *("float64",) * 85),  # + child_frame_id, pose, twist
+    IMU: (*_HEADER_LAYOUT, *("float64",) * 37),
+}
+_FAST_PATHS: Final = {
+    (ODOMETRY, False): fast_odom, (ODOMETRY, True): _fast_odom_ros1,
+    (IMU, False): fast_imu, (IMU, True): _fast_imu_ros1,
+}
+
+
+def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
+    """The base types of a message's fields in wire order, nested messages and fixed arrays
+    expanded, from the field definitions in ``store``; None when it holds a variable-length
+    sequence (no fixed layout) or a type the store does not know."""
+    from rosbags.interfaces import Nodetype
+
+    out: list[str] = []
+
+    def walk(name: str) -> bool:
+        fields = store.fielddefs.get(name)
+        if fields is None:
+            return False
+        for _, (node, detail) in fields[1]:
+            if node == Nodetype.BASE:
+                out.append(detail[0])
+            elif node == Nodetype.NAME:
+                if not walk(detail):
+                    return False
+            elif node == Nodetype.ARRAY and detail[0][0] == Nodetype.BASE:
+                out.extend([detail[0][1][0]] * detail[1])
+            elif node == Nodetype.ARRAY and detail[0][0] == Nodetype.NAME:
+                for _ in range(detail[1]):
+                    if not walk(detail[0][1]):
+                        return False
+            else:
+                return False
+        return True
+
+    return tuple(out) if walk(msgtype) else None
+
+
+def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Payload, str], Sample | None] | None:
+    """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR), when the
+    bag's definition of it (in ``store``, the bag reader's type store) has the standard layout.
+
+    It returns the sample, or None for a message it does not read exactly as rosbags would
+    (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority
+    on errors. None when ``msgtype`` has no fast path or the bag defines it differently.
+    """
+    want = _FAST_LAYOUTS.get(msgtype)
+    if want is None:
+        return None
+    if ros1:
+        want = ("uint32", *want)  # header.seq
+    return _FAST_PATHS[msgtype, ros1] if flat_layout(store, msgtype) == want else None

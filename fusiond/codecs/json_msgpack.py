@@ -1,0 +1,165 @@
+"""The JSON / msgpack wire format of the sensors: one msgspec Struct per kind, the decoder of a
+sensor's JSON or msgpack key, and the encoding of a Struct as either.
+
+For sensors that do not speak ROS 2 CDR: the ROS fields flattened into one object per message,
+`stamp` in seconds. The Structs' docstrings are the format's documentation (README points here).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Annotated, Any, Final
+
+import msgspec
+
+from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+
+from .wire import Decoder, DecodeError, Payload, check_size
+
+_Vec3 = tuple[float, float, float]
+_Quat = tuple[float, float, float, float]
+_Cov9 = Annotated[tuple[float, ...], msgspec.Meta(min_length=9, max_length=9)]
+_Cov36 = Annotated[tuple[float, ...], msgspec.Meta(min_length=36, max_length=36)]
+
+
+class OdomMessage(msgspec.Struct, kw_only=True):
+    """Wheel odometry on a `json` or `msgpack` key: one object per message.
+
+    - `stamp`: seconds (float), the measurement time, as header.stamp in ROS.
+    - `linear`, `angular`: twist [x, y, z] in m/s and rad/s, in the sensor's `twist_frame`.
+    - `twist_covariance`: 36 numbers, row-major 6x6 over (vx vy vz wx wy wz).
+    - `position` [x, y, z] (default [0, 0, 0]) and `orientation` [x, y, z, w]
+      (default [0, 0, 0, 1]): optional, used for plots only.
+
+    Example: `{"stamp": 12.5, "linear": [0.4, 0, 0], "angular": [0, 0, 0.1],
+    "twist_covariance": [0.001, 0, ..., 0.01]}`. Unknown fields are ignored;
+    wrong lengths or types reject the message.
+    """
+
+    stamp: float
+    linear: _Vec3
+    angular: _Vec3
+    twist_covariance: _Cov36
+    position: _Vec3 = (0.0, 0.0, 0.0)
+    orientation: _Quat = (0.0, 0.0, 0.0, 1.0)
+
+
+class ImuMessage(msgspec.Struct, kw_only=True):
+    """IMU on a `json` or `msgpack` key: one object per message, in the IMU's own frame.
+
+    - `stamp`: seconds (float), the measurement time.
+    - `orientation`: quaternion [x, y, z, w]; `orientation_covariance`: 9 numbers,
+      row-major 3x3 over roll, pitch, yaw (rad^2); its first element -1 means
+      "no orientation", as in sensor_msgs/Imu.
+    - `angular_velocity`: [x, y, z] rad/s; `angular_velocity_covariance`: 9 numbers.
+    - `linear_acceleration` [x, y, z] m/s^2 and `linear_acceleration_covariance`
+      (9): optional, default zeros.
+
+    Unknown fields are ignored; wrong lengths or types reject the message.
+    """
+
+    stamp: float
+    orientation: _Quat
+    orientation_covariance: _Cov9
+    angular_velocity: _Vec3
+    angular_velocity_covariance: _Cov9
+    linear_acceleration: _Vec3 = (0.0, 0.0, 0.0)
+    linear_acceleration_covariance: _Cov9 = (0.0,) * 9
+
+
+class GpsMessage(msgspec.Struct, kw_only=True):
+    """A GPS fix on a `json` or `msgpack` key (sensor_msgs/NavSatFix's fields).
+
+    - `stamp`: seconds; `latitude`, `longitude` in degrees (WGS84), `altitude` in m.
+    - `status`: NavSatStatus.status (-1 no fix: skipped and counted; default 0).
+    - `position_covariance`: 9 numbers, row-major ENU, m^2 (default zeros), and
+      `position_covariance_type` (0 unknown, default; 1 approximated; 2 diagonal; 3 known).
+    """
+
+    stamp: float
+    latitude: float
+    longitude: float
+    altitude: float = 0.0
+    status: int = 0
+    position_covariance: _Cov9 = (0.0,) * 9
+    position_covariance_type: int = 0
+
+
+class PoseMessage(msgspec.Struct, kw_only=True):
+    """A pose on a `json` or `msgpack` key: `stamp`, `position` [x, y, z] m, `orientation`
+    [x, y, z, w], optional `covariance` (36 numbers, row-major over x y z roll pitch yaw)."""
+
+    stamp: float
+    position: _Vec3
+    orientation: _Quat
+    covariance: _Cov36 | None = None
+
+
+def _gps_from_message(m: GpsMessage, sensor: str) -> GpsSample:
+    return GpsSample(sensor, m.stamp, m.latitude, m.longitude, m.altitude, m.status, m.position_covariance,
+                     m.position_covariance_type)
+
+
+def _pose_from_message(m: PoseMessage, sensor: str) -> PoseSample:
+    return PoseSample(sensor, m.stamp, m.position, m.orientation, m.covariance or ())
+
+
+def _odom_from_message(m: OdomMessage, sensor: str) -> OdomSample:
+    return OdomSample(sensor, m.stamp, m.linear, m.angular, m.twist_covariance, m.position, m.orientation)
+
+
+def _imu_from_message(m: ImuMessage, sensor: str) -> ImuSample:
+    return ImuSample(
+        sensor, m.stamp, m.orientation, m.orientation_covariance, m.angular_velocity,
+        m.angular_velocity_covariance, m.linear_acceleration, m.linear_acceleration_covariance,
+    )
+
+
+_KINDS: Final[dict[str, tuple[type[msgspec.Struct], Callable[[Any, str], Sample]]]] = {
+    "odom": (OdomMessage, _odom_from_message),
+    "imu": (ImuMessage, _imu_from_message),
+    "gps": (GpsMessage, _gps_from_message),
+    "pose": (PoseMessage, _pose_from_message),
+}
+
+
+def structured_decoder(kind: str, encoding: str, sensor: str) -> Decoder:
+    """The bytes -> sample function of a sensor of ``kind`` (a known one) on a `json` or
+    `msgpack` key; it raises only DecodeError. Another encoding is a ValueError."""
+    wire_type, from_message = _KINDS[kind]
+    if encoding == "json":
+        parser: Any = msgspec.json.Decoder(wire_type)
+        syntax = "json_invalid"
+    elif encoding == "msgpack":
+        parser = msgspec.msgpack.Decoder(wire_type)
+        syntax = "msgpack_invalid"
+    else:
+        raise ValueError(f"unknown encoding {encoding!r}, expected ros2-cdr, json or msgpack")
+
+    def decode_structured(payload: Payload) -> Sample:
+        check_size(payload)
+        try:
+            message = parser.decode(payload)
+        except msgspec.ValidationError as exc:
+            raise DecodeError("schema_invalid", str(exc)) from None
+        except msgspec.DecodeError as exc:
+            raise DecodeError(syntax, str(exc)) from None
+        if not math.isfinite(message.stamp):
+            raise DecodeError("schema_invalid", f"stamp must be finite, got {message.stamp}")
+        return from_message(message, sensor)
+
+    return decode_structured
+
+
+_json_encoder = msgspec.json.Encoder()
+_msgpack_encoder = msgspec.msgpack.Encoder()
+
+
+def encode_structured(message: msgspec.Struct, encoding: str) -> bytes:
+    """``message`` as ``encoding`` (`json` or `msgpack`; another is a ValueError)."""
+    if encoding == "json":
+        return _json_encoder.encode(message)
+    if encoding == "msgpack":
+        return _msgpack_encoder.encode(message)
+    raise ValueError(f"unknown encoding {encoding!r}, expected ros2-cdr, json or msgpack")

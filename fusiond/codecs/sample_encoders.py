@@ -1,0 +1,131 @@
+"""Samples -> bytes as their sensor would publish them, in any of the three encodings.
+
+The inverse of the decoders: `fusiond play` publishes bags with it, the benchmarks and the
+tests build their inputs with it, and the decoders warm rosbags' serialisers on its output.
+ROS 2 CDR is built and serialised by rosbags, except Odometry: `encode_odometry_cdr` packs the
+same bytes with struct. JSON and msgpack are the Structs of `json_msgpack`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+
+from .json_msgpack import GpsMessage, ImuMessage, OdomMessage, PoseMessage, encode_structured
+from .output_encoders import encode_odometry_cdr
+from .rosbags_cdr import float_array, ros_header, ros_types, serialize
+from .wire import IMU, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, POSE_STAMPED, POSE_TYPES
+
+
+def _pose(position: Sequence[float], quat_xyzw: Sequence[float]) -> Any:
+    x, y, z = (float(v) for v in position)
+    qx, qy, qz, qw = (float(v) for v in quat_xyzw)
+    T = ros_types()
+    return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
+                                      orientation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
+
+
+def _vec3(v: Sequence[float]) -> Any:
+    return ros_types()["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def encode_odom_sample(sample: OdomSample, encoding: str) -> bytes:
+    """What a wheel-odometry publisher puts on the key (CDR: frames odom -> base_link, zero pose covariance)."""
+    if encoding == "ros2-cdr":
+        return encode_odometry_cdr(
+            sample.stamp, "odom", "base_link", sample.position, sample.orientation, np.zeros(36),
+            sample.linear, sample.angular, sample.twist_covariance,
+        )
+    return encode_structured(
+        OdomMessage(
+            stamp=sample.stamp, linear=sample.linear, angular=sample.angular,
+            twist_covariance=sample.twist_covariance, position=sample.position, orientation=sample.orientation,
+        ),
+        encoding,
+    )
+
+
+def encode_imu_sample(sample: ImuSample, encoding: str) -> bytes:
+    """What an IMU publisher puts on the key (CDR: frame base_link)."""
+    if encoding == "ros2-cdr":
+        q = sample.orientation
+        T = ros_types()
+        msg = T[IMU](
+            header=ros_header(sample.stamp, "base_link"),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+            orientation_covariance=float_array(sample.orientation_covariance, 9),
+            angular_velocity=_vec3(sample.angular_velocity),
+            angular_velocity_covariance=float_array(sample.angular_velocity_covariance, 9),
+            linear_acceleration=_vec3(sample.linear_acceleration),
+            linear_acceleration_covariance=float_array(sample.linear_acceleration_covariance, 9),
+        )
+        return serialize(msg, IMU)
+    return encode_structured(
+        ImuMessage(
+            stamp=sample.stamp, orientation=sample.orientation,
+            orientation_covariance=sample.orientation_covariance,
+            angular_velocity=sample.angular_velocity,
+            angular_velocity_covariance=sample.angular_velocity_covariance,
+            linear_acceleration=sample.linear_acceleration,
+            linear_acceleration_covariance=sample.linear_acceleration_covariance,
+        ),
+        encoding,
+    )
+
+
+def encode_gps_sample(sample: GpsSample, encoding: str) -> bytes:
+    """What a GPS driver puts on the key (CDR: sensor_msgs/msg/NavSatFix, frame gps)."""
+    if encoding == "ros2-cdr":
+        T = ros_types()
+        msg = T[NAVSATFIX](
+            header=ros_header(sample.stamp, "gps"),
+            status=T["sensor_msgs/msg/NavSatStatus"](status=int(sample.status), service=1),
+            latitude=float(sample.latitude), longitude=float(sample.longitude), altitude=float(sample.altitude),
+            position_covariance=float_array(sample.position_covariance, 9),
+            position_covariance_type=int(sample.covariance_type),
+        )
+        return serialize(msg, NAVSATFIX)
+    return encode_structured(
+        GpsMessage(stamp=sample.stamp, latitude=sample.latitude, longitude=sample.longitude,
+                   altitude=sample.altitude, status=sample.status, position_covariance=sample.position_covariance,
+                   position_covariance_type=sample.covariance_type),
+        encoding,
+    )
+
+
+def encode_pose_sample(sample: PoseSample, encoding: str, msgtype: str = POSE_COV_STAMPED) -> bytes:
+    """What a pose publisher puts on the key, as ``msgtype`` (CDR; frame map, child base_link)."""
+    if encoding == "ros2-cdr":
+        T = ros_types()
+        header = ros_header(sample.stamp, "map")
+        pose = _pose(sample.position, sample.orientation)
+        cov = float_array(sample.covariance or (0.0,) * 36, 36)
+        if msgtype == POSE_STAMPED:
+            return serialize(T[POSE_STAMPED](header=header, pose=pose), POSE_STAMPED)
+        if msgtype == POSE_COV_STAMPED:
+            msg = T[POSE_COV_STAMPED](header=header, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov))
+            return serialize(msg, POSE_COV_STAMPED)
+        if msgtype == ODOMETRY:
+            return encode_odometry_cdr(sample.stamp, "map", "base_link", sample.position, sample.orientation, cov,
+                                       (0.0,) * 3, (0.0,) * 3, np.zeros(36))
+        raise ValueError(f"msgtype {msgtype!r} is not a pose type, expected one of {POSE_TYPES}")
+    return encode_structured(
+        PoseMessage(stamp=sample.stamp, position=sample.position, orientation=sample.orientation,
+                    covariance=sample.covariance or None),
+        encoding,
+    )
+
+
+def encode_sample(sample: Sample, encoding: str, msgtype: str | None = None) -> bytes:
+    """Any sample as its sensor would publish it (``msgtype``: a pose sensor's ROS type)."""
+    if isinstance(sample, OdomSample):
+        return encode_odom_sample(sample, encoding)
+    if isinstance(sample, ImuSample):
+        return encode_imu_sample(sample, encoding)
+    if isinstance(sample, GpsSample):
+        return encode_gps_sample(sample, encoding)
+    return encode_pose_sample(sample, encoding, msgtype or POSE_COV_STAMPED)
