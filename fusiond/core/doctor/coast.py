@@ -34,7 +34,7 @@ __all__ = ["DECEL_TOLERANCE", "MIN_COAST_BINS", "MIN_COAST_DECEL", "coast_verdic
 MIN_COAST_BINS = 2 * SMOOTH_BINS  # 2 s of coasting measured, at least
 DECEL_TOLERANCE = 0.15  # m/s^2: a coast-down constant this close to the measured one is right enough
 MIN_COAST_DECEL = 0.05  # m/s^2: the smallest advised (a 3 m/s coast then runs a minute); 0 turns the coast off
-Z_SIGMAS = 3.0
+Z_SIGMAS = 3.0  # a coast-down is named beyond 3 standard errors (0.27 % two-sided for a normal error)
 LEVEL_SHARE = 0.5  # an accelerometer bin counts when gravity was removed with the IMU's attitude in most of it
 
 

@@ -41,7 +41,7 @@ from .series import Series
 from .verdict import Verdict, sensor_key
 
 MIN_GAP_S = 1.0  # shorter silences: the held inputs cover most of them
-TURN_RAD = 0.2
+TURN_RAD = 0.2  # rad of unexplained turn across a gap: several times the yaw noise (module doc)
 DRIFT_RATE = 0.01  # rad/s
 EDGE_S = 2.0  # the estimates compared lie this close to the gap's ends (a time jump holds poses ~1 s), or it is not judged
 

@@ -37,7 +37,7 @@ from .verdict import Verdict, sensor_key
 # the more the fixes are distrusted; at 10 Hz on a car at 25 m/s it follows more of it and leaves 0.18-0.25
 # (a highway car: 0.18; a threshold of 0.3 misses it, and the advice would be "lower position_noise").
 PERSISTING_SHARE = 0.15
-MIN_FIXES = 50
+MIN_FIXES = 50  # fixes for an autocorrelation: at lag 1 its standard error is ~1/sqrt(50) = 0.14
 MAX_LAG_FRACTION = 0.25  # autocorrelation lags up to this share of the run (beyond, too few pairs)
 
 

@@ -22,7 +22,7 @@ from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
 
-MIN_REJECTED_FRACTION = 0.1
+MIN_REJECTED_FRACTION = 0.1  # rejected standstill updates beyond a tenth: more than a gate's chance ones
 OVERSTATED_RATIO = 3.0  # a stated gyro noise this many times the measured one at rest is overstated
 # the gyro's noise at rest measured beyond this factor of the stated (either way) explains a NIS high or low;
 # within it, the noise is as stated

@@ -58,8 +58,8 @@ from .verdict import Verdict, sensor_key
 SCALE_TOLERANCE = 0.02  # a wheel scale within 2 % is not worth a state
 CHORD_M = 10.0  # chords at least this long (or 20 sigma_w): short and consecutive, see above
 CHORD_MAX_S = 60.0  # a chord spans at most this long (slower: the robot is standing or creeping)
-MIN_CHORDS = 3
-ASSUMED_TAU_S = 100.0
+MIN_CHORDS = 3  # the fewest for a residual standard error (2 dof) next to the model's
+ASSUMED_TAU_S = 100.0  # the fast end of receivers' wander times (module docstring)
 Z_SIGMAS = 3.0  # a scale is named beyond this many standard errors (as a normal quantile: 0.27 % two-sided)
 
 

@@ -24,7 +24,7 @@ TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noi
 UNMEASURED_FRACTION = 0.5  # in turns, this share of exact zeros is a component the driver does not measure
 ALL_ZEROS_FRACTION = 0.99  # ... and in gentle turns only: (nearly) every moving sample an exact zero
 MIN_TURNED_RAD = 1.0  # ... over a run whose heading the gyro turned by at least this much
-SLIP_FRACTION = 0.2
+SLIP_FRACTION = 0.2  # samples flagged as slip beyond a fifth: the wheels' yaw rate is not just noisy
 CHUNK = 4096  # twists noted before they are summed (bounded memory)
 
 
