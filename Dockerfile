@@ -8,7 +8,7 @@
 # health key: healthy while the status is ok or degraded, unhealthy when failed
 # (no sensor alive, filter non-finite) or not answering. A replacement config
 # must keep a listen endpoint (or change the HEALTHCHECK to pass --connect).
-# CI checks these install steps without Docker (tests/test_deploy.py).
+# CI checks these install steps without Docker (tests/e2e/test_deploy.py).
 
 FROM python:3.11-slim
 

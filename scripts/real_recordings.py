@@ -39,7 +39,7 @@ class Case:
     # how far the reference's clock may be from the sensors' (its README): along-track, that much
     # time at the median speed is within the reference's own uncertainty for an unaligned error
     time_base_s: float = 0.0
-    acceptance: bool = True  # a row fusiond must not lose (tests/test_real_recordings.py holds it to that)
+    acceptance: bool = True  # a row fusiond must not lose (tests/e2e/test_real_recordings.py holds it to that)
 
 
 CASES = (

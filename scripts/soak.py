@@ -19,7 +19,7 @@ verdict is a least-squares line through the RSS samples after `--warmup-s` (allo
 and import warm-up): a slope above `--slope-threshold` MiB/min is flagged ("GROWING",
 exit status 1); otherwise "flat" (exit 0). Exit 2 when the daemon dies or never answers.
 
-Not part of CI (minutes long); tests/test_soak.py runs it for ~10 s to keep it working.
+Not part of CI (minutes long); tests/e2e/test_soak.py runs it for ~10 s to keep it working.
 """
 
 from __future__ import annotations

@@ -1,8 +1,29 @@
+"""Fixtures and options shared by every test tier.
+
+The tests are in tiers, one directory each, by subject:
+
+- ``tests/unit``: the maths, the estimator and its kernels, codecs and bags, config, logs, layout, and
+  small core units (history, health, diagnostics, TF tree, state file, drain schedule);
+- ``tests/sensors``: the sensor models and the fusion core's behaviour on simulated robots (GPS, IMU,
+  odometry, pose, time jumps, gaps, two_d_mode, ...);
+- ``tests/doctor``: the doctor's verdicts, the advice it pastes, ``fusiond tune`` and ``calibrate-imu``;
+- ``tests/e2e``: the daemon and Zenoh on loopback, the CLI end to end, replays of real bags and
+  recordings, deploy, benchmarks, soak.
+
+``tests/support`` holds the helpers (simulations, configs, reference encoders, daemon and session
+helpers); a test module imports helpers from ``tests.support`` only, never from another test module.
+Test data stays in ``tests/data`` (and the Jackal bag in the repository's ``data/``).
+``--fast`` (below) selects by module name, whatever the tier.
+"""
+
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+
+# the helpers hold asserts of their own (tests.support.verdicts): rewrite them as pytest does in test modules
+pytest.register_assert_rewrite("tests.support")
 
 # --- the fast tier (`scripts/test.sh --fast`, under a minute on 2 cores) ---------------------------
 #
@@ -46,7 +67,7 @@ def jackal_bag() -> Path:
     return JACKAL_BAG
 
 
-# --- reliability observations (tests/test_reliability.py, tests/test_security.py) -----------
+# --- reliability observations (tests/e2e/test_reliability.py, tests/e2e/test_security.py) -----------
 #
 # The reliability tests record what they fed the daemon and what they observed into one
 # JSON file in pytest's session temp dir. With FUSIOND_WRITE_RELIABILITY=1 the session end

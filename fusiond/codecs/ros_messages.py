@@ -44,7 +44,7 @@ def encode_tf_cdr(stamp: float, frame_id: str, child_frame_id: str, position: Se
     """One transform frame_id -> child_frame_id at `stamp` (the pose itself), as a TFMessage.
 
     Packed with struct, byte for byte what rosbags serialises (a test compares both on many
-    inputs; `tests/cdr_reference.py` holds the rosbags version): it is sent with every pose.
+    inputs; `tests/support/cdr_reference.py` holds the rosbags version): it is sent with every pose.
     """
     x, y, z = position
     qx, qy, qz, qw = quat_xyzw

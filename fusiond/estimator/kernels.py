@@ -4,7 +4,7 @@
 source for why C rather than numba) does the propagation F P F^T + Q and the whole masked Kalman
 update in one call each. The numpy code in ``ekf.py`` is the reference: the same maths, and the
 only path where the extension was not built. Tests run both and hold them to the same estimates
-(tests/test_kernels.py, the trajectory pin).
+(tests/unit/test_kernels.py, the trajectory pin).
 
 ``use("numpy")`` selects the reference path for the whole process. The ``FUSIOND_KERNELS``
 environment variable (``auto``, the default, ``compiled`` or ``numpy``) is applied by the

@@ -114,7 +114,7 @@ MIN_WAIT_S = 0.001  # shortest wait of the worker (a diagnostics batch due now i
 # Records in one diagnostics put at most. A backlog (a bag played at full speed) flushes early, so a put
 # stays within one Zenoh batch (65,535 bytes by default; a record is ~290 bytes of JSON): a larger put is
 # fragmented, and under the publisher's default DROP congestion control one dropped fragment loses the
-# whole put. Measured with the burst of tests/test_diagnostics_batches.py: at 1024 records a put was lost
+# whole put. Measured with the burst of tests/e2e/test_diagnostics_batches.py: at 1024 records a put was lost
 # in 2 of 13 runs, at 200 in none of 25.
 MAX_BATCH = 200
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence

@@ -11,7 +11,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from tests.conftest import JACKAL_BAG  # noqa: E402
-from tests.jackal_pin import write  # noqa: E402
+from tests.support.jackal_pin import write  # noqa: E402
 
 if __name__ == "__main__":
     bag = Path(sys.argv[1]) if len(sys.argv) > 1 else JACKAL_BAG

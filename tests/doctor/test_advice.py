@@ -1,0 +1,138 @@
+"""The doctor's paste lines are replayed before they are printed (fusiond.tune.advice).
+
+Simulated drives (tests/sim.py: gyro white noise 0.002 rad/s, roll/pitch of the IMU's orientation
+with noise 0.0024 rad, 5 s at rest first) with a config mistake planted: a gyro noise stated 10x
+too large, an orientation noise stated 12x too small. The doctor's line for each must, replayed,
+raise the innovations' likelihood by more than its one key (the advice rule) and be printed as a
+fix; a line that states the wrong direction must come out as tried and not advised.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from rosbags.rosbag2 import Writer
+
+from fusiond.cli import main
+from fusiond.codecs import encode_sample, typestore
+from fusiond.config import ConfigError
+from fusiond.core.doctor import Verdict, format_verdicts
+from fusiond.replay.run import run_samples
+from fusiond.samples import ImuSample, OdomSample
+from fusiond.tune.advice import prove_advice, with_suggestion
+
+from tests.support.configs import robot_config, robot_config_text
+from tests.support.sim import SimConfig, simulate
+
+GYRO_SIGMA = 0.002  # the simulation's gyro noise, rad/s
+
+
+@pytest.fixture(scope="module")
+def drive() -> list:
+    return simulate(SimConfig(duration=60.0, standstill=5.0, gyro_sigma=GYRO_SIGMA, seed=11))
+
+
+def _proven(samples: list, imu: str = "", budget_s: float = 60.0) -> list[Verdict]:
+    cfg = robot_config(imu=imu)
+    return prove_advice(cfg, samples, run_samples(samples, cfg).verdicts(), budget_s)
+
+
+def _by_key(verdicts: list[Verdict], key: str) -> Verdict:
+    (v,) = [v for v in verdicts if v.key == key and v.suggestion]
+    return v
+
+
+def test_an_overstated_gyro_noise_is_advised_with_its_replayed_gain(drive) -> None:
+    v = _by_key(_proven(drive, imu="gyro_noise = 0.02"), "sensors.imu.gyro_noise")
+    assert v.proof is not None and v.proof.tried and v.proof.advised, v
+    gain = float(v.proof.effect.split("likelihood ")[1].split(",")[0])
+    assert gain > 1.0, v.proof  # more than the one key it sets
+    text = format_verdicts([v])
+    assert f"-> in the [[sensors]] table with name = \"imu\": {v.suggestion}" in text
+    assert "(replayed: likelihood +" in text
+
+
+def test_an_understated_orientation_noise_is_advised_and_brings_the_nis_near_one(drive) -> None:
+    v = _by_key(_proven(drive, imu="orientation_noise = [0.0002, 0.0002, 0.0002]"), "sensors.imu.orientation_noise")
+    assert v.proof is not None and v.proof.advised, v
+    before, after = (float(x) for x in v.proof.effect.split("NIS/dof ")[1].split(" -> "))
+    # stated 0.0002 against 0.0024: the NIS per dof is ~(0.0024 / 0.0002)^2 / 2.6 or more before, and
+    # within a factor 2 of one once the measured noise is stated
+    assert before > 10.0 and 0.5 < after < 2.0, v.proof
+
+
+def test_a_line_that_makes_the_likelihood_worse_is_not_printed_as_advice(drive) -> None:
+    cfg = robot_config()
+    wrong = Verdict("imu", "orientation", "warn", "planted: ten times too small", "sensors.imu.orientation_noise",
+                    "orientation_noise = [0.00024, 0.00024, 0.00024]")
+    (v,) = prove_advice(cfg, drive, [wrong])
+    assert v.proof is not None and v.proof.tried and not v.proof.advised, v
+    assert v.proof.effect.startswith("likelihood -"), v.proof
+    text = format_verdicts([v])
+    assert "       ->" not in text and "not advised" in text and v.suggestion in text
+
+
+def test_a_key_the_filter_does_not_use_here_is_said_to_change_nothing(drive) -> None:
+    """The gyro drives heading: the wheels' yaw-rate floor is read only by the doctor's wheel-vs-gyro check."""
+    cfg = robot_config()
+    floor = Verdict("wheel", "yaw_rate", "warn", "planted", "sensors.wheel.twist_min_sigma",
+                    "twist_min_sigma = [0.01, 0.03]")
+    (v,) = prove_advice(cfg, drive, [floor])
+    assert v.proof is not None and not v.proof.advised and "changes none of the filter's updates" in v.proof.effect
+
+
+def test_out_of_budget_lines_are_printed_as_not_replayed(drive) -> None:
+    v = _by_key(_proven(drive, imu="gyro_noise = 0.02", budget_s=0.0), "sensors.imu.gyro_noise")
+    assert v.proof is not None and not v.proof.tried and v.proof.advised
+    assert "(not replayed: the 0 s budget" in format_verdicts([v])
+
+
+def test_with_suggestion_sets_every_key_of_the_line_in_the_named_table() -> None:
+    cfg = robot_config(gps="")
+    two = Verdict("gps", "position", "warn", "", "sensors.gps.error_tau_s",
+                  "error_tau_s = 8\nerror_sigma = [0.06, 0.28, 5.00]")
+    changed, n = with_suggestion(cfg, two)
+    assert n == 2 and changed.sensor("gps").error_tau_s == 8.0
+    assert tuple(changed.sensor("gps").error_sigma) == (0.06, 0.28, 5.0)
+    assert changed.sensor("imu") == cfg.sensor("imu") and changed.filter == cfg.filter
+    filt, n = with_suggestion(cfg, Verdict("imu", "gyro_bias", "warn", "", "filter.standstill_s", "standstill_s = 0.5"))
+    assert n == 1 and filt.filter.standstill_s == 0.5
+
+
+@pytest.mark.parametrize("key, line, said", [
+    ("sensors.imu.gyro_noise", "gyro_noise = 0.002 and more", "not a TOML line"),
+    ("sensors.nowhere.gyro_noise", "gyro_noise = 0.002", "no sensor named 'nowhere'"),
+    ("sensors.imu.gyro_noise", "gyro_noise = \"loud\"", "gyro_noise"),
+    ("sensors.imu.no_such_key", "no_such_key = 1", "no_such_key"),
+])
+def test_a_line_that_does_not_apply_is_a_config_error(key: str, line: str, said: str) -> None:
+    with pytest.raises(ConfigError, match=said):
+        with_suggestion(robot_config(), Verdict("imu", "x", "warn", "", key, line))
+
+
+def _write_bag(path: Path, samples: list) -> None:
+    store = typestore()
+    types = {OdomSample: "nav_msgs/msg/Odometry", ImuSample: "sensor_msgs/msg/Imu"}
+    topics = {"wheel": "/odom", "imu": "/imu"}
+    with Writer(path, version=9) as writer:
+        conns = {}
+        for s in samples:
+            msgtype = types[type(s)]
+            if s.sensor not in conns:
+                conns[s.sensor] = writer.add_connection(topics[s.sensor], msgtype, typestore=store)
+            writer.write(conns[s.sensor], int(s.stamp * 1e9), encode_sample(s, "ros2-cdr", msgtype=msgtype))
+
+
+def test_the_doctor_command_prints_the_replayed_effect(drive, tmp_path: Path, capsys) -> None:
+    _write_bag(tmp_path / "bag", drive)
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(robot_config_text(imu="gyro_noise = 0.02"))
+    assert main(["doctor", str(tmp_path / "bag"), "--config", str(cfg)]) == 0
+    out = capsys.readouterr().out
+    assert "gyro_noise = 0.00" in out and "(replayed: likelihood +" in out, out
+    assert main(["replay", str(tmp_path / "bag"), "--config", str(cfg), "--advice-budget-s", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "gyro_noise = 0.00" in out and "replayed" not in out, out
+    assert main(["replay", str(tmp_path / "bag"), "--config", str(cfg), "--advice-budget-s", "-1"]) == 2
+    assert "--advice-budget-s" in capsys.readouterr().err

@@ -1,0 +1,181 @@
+"""`fusiond tune` on simulated recordings whose noise is known, and through the real CLI.
+
+The bounds come from the data, not from a run's output: a noise standard deviation fitted by
+maximum likelihood from n independent scalar residuals has a relative standard error of
+1/sqrt(2n) (the sample variance's chi-square spread), so a fit is held to three of those plus
+the optimiser's own stopping width (``fit.XATOL`` in log-scale).
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+
+from fusiond.config import load, loads
+from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
+from fusiond.samples import GpsSample, ImuSample
+from fusiond.tune import dumps, tune
+from fusiond.tune.fit import XATOL
+from fusiond.tune.likelihood import reference, replay_records, score
+
+from tests.support.configs import robot_config
+from tests.support.sim import SimConfig
+from tests.support.sim import simulate as simulate_imu
+from tests.support.sim_gps import World
+from tests.support.sim_gps import simulate as simulate_gps
+
+ROOT = Path(__file__).resolve().parents[2]
+JACKAL = ROOT / "data" / "jackal_test2.bag"
+SIGMAS = 3.0  # how many standard errors a fit may be off
+
+
+def bound(n: int) -> float:
+    """The relative error a fitted standard deviation may have with n scalar residuals."""
+    return SIGMAS / math.sqrt(2.0 * n) + (math.exp(XATOL) - 1.0)
+
+
+def row(result, name: str):
+    return next(r for r in result.rows if r.param.name == name)
+
+
+def fit_count(samples, result, kind: type) -> int:
+    return sum(1 for s in samples if type(s) is kind and s.stamp <= result.split)
+
+
+@pytest.fixture(scope="module")
+def gps_recording():
+    """60 s of a robot with 5 Hz fixes of 0.3 m white noise per axis, no wander."""
+    return simulate_gps(World(duration=60.0, gps_rate=5.0, gps_sigma=0.3))
+
+
+def test_tune_recovers_a_gps_noise_stated_four_times_too_large(gps_recording):
+    # the simulated altitude does not wander, so the filter is told so (vertical_error_sigma = 0)
+    cfg = robot_config(gps="position_noise = [1.2, 1.2, 1.2]\nvertical_error_sigma = 0.0")
+    result = tune(gps_recording, cfg, keys=["gps.position_noise"], budget_s=300.0)
+    fixes = fit_count(gps_recording, result, GpsSample)
+    horizontal, vertical = row(result, "gps.position_noise.horizontal"), row(result, "gps.position_noise.vertical")
+    assert horizontal.status == "tuned" and vertical.status == "tuned"
+    for value in horizontal.after:
+        assert abs(value / 0.3 - 1.0) < bound(2 * fixes), horizontal.after
+    assert abs(vertical.after[0] / 0.3 - 1.0) < bound(fixes), vertical.after
+    after = result.config.sensor("gps").position_noise
+    assert after == (*horizontal.after, *vertical.after)
+    # the held-back part agrees: its likelihood rose and its NIS per dof came to about 1
+    assert result.heldback_after.neg_loglik < result.heldback_before.neg_loglik
+    assert result.heldback_before.nis_per_dof["gps"] < 0.3 < 0.5 < result.heldback_after.nis_per_dof["gps"] < 1.5
+
+
+def test_tune_recovers_an_imu_orientation_noise_and_leaves_what_nothing_observes():
+    samples = simulate_imu(SimConfig(duration=30.0, orientation_sigma=0.002))
+    cfg = robot_config(imu="orientation_noise = [0.008, 0.008, 0.008]")
+    result = tune(samples, cfg, keys=["imu.orientation_noise", "wheel.twist_noise.linear"], budget_s=300.0)
+    orientation = row(result, "imu.orientation_noise")
+    n = 2 * fit_count(samples, result, ImuSample)  # roll and pitch of each message
+    assert orientation.status == "tuned"
+    for value in orientation.after:
+        assert abs(value / 0.002 - 1.0) < bound(n), orientation.after
+    # nothing in this recording observes position: the speed's noise cannot be told apart
+    linear = row(result, "wheel.twist_noise.linear")
+    assert linear.status == "not informed" and linear.after == linear.before
+    assert result.config.sensor("wheel") == cfg.sensor("wheel")
+
+
+def test_tune_refuses_a_value_the_held_back_part_contradicts(gps_recording):
+    """The fixes' noise grows to the configured 1.2 m in the last 30 %: the fit part says 0.3 m, the
+    held-back part says the config was right, so nothing may change."""
+    cfg = robot_config(gps="position_noise = [1.2, 1.2, 1.2]\nvertical_error_sigma = 0.0")
+    stamps = [s.stamp for s in gps_recording]
+    split = min(stamps) + 0.7 * (max(stamps) - min(stamps))
+    frame = EnuFrame(*World().datum)
+    rng = np.random.default_rng(11)
+    extra = math.sqrt(1.2**2 - 0.3**2)
+    samples = []
+    for s in gps_recording:
+        if type(s) is GpsSample and s.stamp > split and s.status >= 0:
+            e, n, u = frame.enu(s.latitude, s.longitude, s.altitude)
+            lat, lon, alt = enu_to_geodetic(frame, *(np.array([e, n, u]) + rng.normal(0.0, extra, 3)))
+            s = msgspec.structs.replace(s, latitude=lat, longitude=lon, altitude=alt)
+        samples.append(s)
+    result = tune(samples, cfg, keys=["gps.position_noise.horizontal"], budget_s=300.0)
+    horizontal = row(result, "gps.position_noise.horizontal")
+    assert horizontal.status == "refused", format_rows(result)
+    assert "held-back" in horizontal.note
+    assert result.config == cfg
+    assert result.heldback_after.neg_loglik == result.heldback_before.neg_loglik
+
+
+def format_rows(result) -> str:
+    return "\n".join(f"{r.param.name} {r.before} -> {r.after} {r.status} {r.note}" for r in result.rows)
+
+
+def test_a_replay_scored_on_its_own_terms_is_half_the_sum_of_log_det_and_nis():
+    samples = simulate_imu(SimConfig(duration=5.0))
+    cfg = robot_config()
+    records = replay_records(cfg, samples)
+    ref = reference(records, cfg)
+    terms = [r for r in records if r.channel == "orientation" and not r.learning and not r.rejected]
+    assert len(ref) == len(terms) > 0
+    by_hand = 0.5 * sum(sum(math.log(v) for v in r.innovation_var) + r.nis for r in terms)
+    got = score(records, ref)
+    assert got.applied == len(terms) and got.rejected == got.missing == 0
+    assert got.neg_loglik == pytest.approx(by_hand, rel=1e-12)
+    # a replay that produces none of the terms pays each one's log det S and its capped NIS
+    empty = score([], ref)
+    assert empty.missing == len(ref) and empty.neg_loglik > got.neg_loglik
+
+
+@pytest.mark.parametrize("example", sorted((ROOT / "examples").glob("*.toml")) + [ROOT / "config.toml"],
+                         ids=lambda p: p.name)
+def test_the_written_config_loads_back_to_the_same_config(example):
+    cfg = load(example)
+    assert loads(dumps(cfg, {("filter", "process_noise"): "a comment"}, header="a header\nline two")) == cfg
+
+
+# --- through the real CLI --------------------------------------------------------------------------
+
+def fusiond(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fusiond", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+@pytest.mark.e2e
+def test_tune_cli_writes_a_config_that_replay_accepts(tmp_path):
+    out = tmp_path / "tuned.toml"
+    done = fusiond("tune", str(JACKAL), "--config", "examples/jackal.toml", "--out", str(out),
+                   "--keys", "imu.orientation_noise,filter.process_noise", "--budget-s", "30", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert "imu.orientation_noise" in done.stdout and "held-back" in done.stdout
+    assert f"tuned config {out}" in done.stdout
+    tuned = load(out)
+    assert [s.name for s in tuned.sensors] == ["wheel", "imu"]
+    replayed = fusiond("replay", str(JACKAL), "--config", str(out), "--tum", str(tmp_path / "t.tum"), "--quiet")
+    assert replayed.returncode == 0, replayed.stderr
+    assert (tmp_path / "t.tum").read_text().count("\n") > 100
+
+
+@pytest.mark.e2e
+def test_tune_cli_refuses_an_unknown_key_before_reading_the_bag(tmp_path):
+    done = fusiond("tune", str(tmp_path / "missing.bag"), "--config", "examples/jackal.toml",
+                   "--out", str(tmp_path / "t.toml"), "--keys", "imu.gyro_nosie")
+    assert done.returncode == 2
+    assert "unknown key 'imu.gyro_nosie'" in done.stderr and "imu.gyro_noise" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.e2e
+def test_tune_cli_bad_inputs_exit_2_in_one_line(tmp_path):
+    not_a_bag = tmp_path / "x.bag"
+    not_a_bag.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * 64)
+    done = fusiond("tune", str(not_a_bag), "--config", "examples/jackal.toml", "--out", str(tmp_path / "t.toml"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr and done.stderr.strip()
+    done = fusiond("tune", str(JACKAL), "--config", "examples/jackal.toml", "--out", str(tmp_path))
+    assert done.returncode == 2 and "is a directory" in done.stderr
+    done = fusiond("tune", str(JACKAL), "--config", "examples/jackal.toml", "--out", str(tmp_path / "t.toml"),
+                   "--budget-s", "0")
+    assert done.returncode == 2 and "--budget-s" in done.stderr

@@ -1,0 +1,1 @@
+"""Helpers of the tests (simulated robots, configs, reference encoders, shared fixtures): no tests here."""

@@ -1,0 +1,156 @@
+"""Replay reads odometry and IMU straight from a bag's raw bytes (codecs.bag_fast_path), and builds
+the standard type store only for a bag without message definitions. rosbags stays the authority:
+these tests hold the fast path to exactly what rosbags' deserialisation gives, on the real
+Jackal ROS 1 bag, on mutations of its messages, and on bags whose definitions differ."""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import msgspec
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from fusiond.codecs import (IMU, ODOMETRY, bag_fast_path, encode_imu_sample, encode_odom_sample, flat_layout,
+                            imu_from_ros, odom_from_ros, typestore)
+from fusiond.config import ImuSensor, OdomSensor
+from fusiond.replay.bag import open_bag_samples
+from fusiond.samples import ImuSample, OdomSample
+
+ROOT = Path(__file__).resolve().parents[2]
+JACKAL_TOPICS = {"/jackal_velocity_controller/odom": (ODOMETRY, odom_from_ros), "/imu/data": (IMU, imu_from_ros)}
+
+
+@pytest.fixture(scope="module")
+def jackal_raw(jackal_bag: Path) -> tuple[object, list[tuple[str, bytes]]]:
+    """(the bag's own type store, [(msgtype, ROS 1 bytes)] of every odometry and IMU message)."""
+    with AnyReader([jackal_bag]) as reader:
+        conns = [c for c in reader.connections if c.topic in JACKAL_TOPICS]
+        raw = [(c.msgtype, bytes(data)) for c, _, data in reader.messages(connections=conns)]
+        return reader.typestore, raw
+
+
+def _reference(store, msgtype: str, raw: bytes, ros1: bool) -> OdomSample | ImuSample | None:
+    """rosbags' deserialisation + the *_from_ros converter; None where rosbags rejects the bytes."""
+    from_ros = odom_from_ros if msgtype == ODOMETRY else imu_from_ros
+    try:
+        msg = store.deserialize_ros1(raw, msgtype) if ros1 else store.deserialize_cdr(raw, msgtype)
+    except Exception:
+        return None
+    return from_ros(msg, "s")
+
+
+def test_every_jackal_message_reads_as_rosbags_reads_it(jackal_raw) -> None:
+    store, raw = jackal_raw
+    assert len(raw) == 6121
+    fast = {t: bag_fast_path(store, t, ros1=True) for t in (ODOMETRY, IMU)}
+    assert None not in fast.values()  # the bag's definitions are the standard ones
+    for msgtype, data in raw:
+        got = fast[msgtype](data, "s")
+        assert got is not None and got == _reference(store, msgtype, data, ros1=True)
+
+
+@st.composite
+def mutated_ros1(draw: st.DrawFn, raw: list[tuple[str, bytes]]) -> tuple[str, bytes]:
+    """A Jackal message with a few bytes overwritten (string lengths included) and bytes cut or added."""
+    msgtype, data = draw(st.sampled_from(raw[:200]))
+    buf = bytearray(data)
+    for _ in range(draw(st.integers(0, 3))):
+        at = draw(st.one_of(st.integers(0, 24), st.integers(0, len(buf) - 1)))  # the header is where it branches
+        buf[at] = draw(st.integers(0, 255))
+    cut = draw(st.integers(-9, 9))
+    buf = buf[:len(buf) + cut] if cut < 0 else buf + bytes(cut)
+    return msgtype, bytes(buf)
+
+
+def test_mutated_ros1_messages_read_as_rosbags_or_not_at_all(jackal_raw) -> None:
+    """Where the fast path answers, rosbags gives the same sample; where rosbags rejects the bytes,
+    the fast path answers None (the replay then asks rosbags, which counts the message undecodable)."""
+    store, raw = jackal_raw
+
+    @given(case=mutated_ros1(raw))
+    @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+    def check(case: tuple[str, bytes]) -> None:
+        msgtype, data = case
+        got = bag_fast_path(store, msgtype, ros1=True)(data, "s")
+        expected = _reference(store, msgtype, data, ros1=True)
+        if got is not None:
+            # the same values; a mutated double can be NaN, equal to the other path's only bit for bit
+            assert got == expected or msgspec.msgpack.encode(got) == msgspec.msgpack.encode(expected)
+        if expected is None:
+            assert got is None
+
+    check()
+
+
+def test_cdr_fast_path_of_a_ros2_bag_reads_as_rosbags() -> None:
+    store = typestore()
+    odom = encode_odom_sample(OdomSample("s", 12.25, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1), tuple(range(36))), "ros2-cdr")
+    imu = encode_imu_sample(ImuSample("s", 12.5, (0.0, 0.0, 0.0, 1.0), (0.1,) * 9, (0.0, 0.0, 0.1), (0.2,) * 9),
+                            "ros2-cdr")
+    for msgtype, data in ((ODOMETRY, odom), (IMU, imu)):
+        got = bag_fast_path(store, msgtype, ros1=False)(data, "s")
+        assert got is not None and got == _reference(store, msgtype, data, ros1=False)
+
+
+def test_a_bag_defining_the_type_differently_gets_no_fast_path() -> None:
+    """A bag may define nav_msgs/msg/Odometry its own way: then rosbags reads it, by its definition."""
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg("std_msgs/Header header\nfloat32[36] covariance\n", ODOMETRY))
+    store.register(get_types_from_msg("uint32 seq\ntime stamp\nstring frame_id\n", "std_msgs/msg/Header"))
+    assert flat_layout(store, ODOMETRY) == ("uint32", "int32", "uint32", "string", *("float32",) * 36)
+    assert bag_fast_path(store, ODOMETRY, ros1=True) is None
+    assert bag_fast_path(store, IMU, ros1=True) is None  # not defined in this store at all
+    assert flat_layout(store, IMU) is None
+    assert bag_fast_path(typestore(), "sensor_msgs/msg/NavSatFix", ros1=False) is None  # no fast path of its own
+
+
+def _ros2_bag(path: Path, n: int = 40) -> Path:
+    with Writer(path, version=9) as writer:
+        odom = writer.add_connection("/odom", ODOMETRY, typestore=typestore())
+        imu = writer.add_connection("/imu", IMU, typestore=typestore())
+        for k in range(n):
+            t = 100.0 + 0.02 * k
+            writer.write(odom, int(t * 1e9), encode_odom_sample(
+                OdomSample("wheel", t, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1), (1e-3,) * 36), "ros2-cdr"))
+            writer.write(imu, int(t * 1e9) + 1000, encode_imu_sample(
+                ImuSample("imu", t + 1e-6, (0.0, 0.0, 0.0, 1.0), (1e-4,) * 9, (0.0, 0.0, 0.1), (1e-5,) * 9), "ros2-cdr"))
+    return path
+
+
+SENSORS = [OdomSensor(name="wheel", key="odom"), ImuSensor(name="imu", key="imu")]
+
+
+def test_a_ros2_bag_without_definitions_is_read_with_the_standard_types(tmp_path: Path) -> None:
+    """Bags recorded before Iron hold no message definitions: rosbags needs a default type store,
+    and the replay builds the Humble one for them only. The samples are those of the same bag with
+    its definitions."""
+    with_defs = _ros2_bag(tmp_path / "with")
+    without = _ros2_bag(tmp_path / "without")
+    db = next(without.glob("*.db3"))
+    with sqlite3.connect(db) as conn:
+        conn.execute("DELETE FROM message_definitions")
+    with pytest.raises(Exception, match="default_typestore"):  # what rosbags says of such a bag
+        with AnyReader([without]):
+            pass
+    with open_bag_samples([with_defs], SENSORS) as a, open_bag_samples([without], SENSORS) as b:
+        first, second = list(a), list(b)
+        assert b.decode_errors == 0
+    assert len(first) == 80 and first == second
+
+
+def test_replay_imports_neither_the_standard_type_store_nor_zenoh(jackal_bag: Path) -> None:
+    """`fusiond replay` of a bag with definitions does not pay for the Humble store or Zenoh."""
+    code = ("import sys\nfrom fusiond.cli import main\n"
+            f"rc = main(['replay', {str(jackal_bag)!r}, '--config', 'examples/jackal.toml', '--quiet'])\n"
+            "print(rc, sorted(m for m in sys.modules if m.endswith('ros2_humble') or m.split('.')[0] == 'zenoh'))\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "0 []"

@@ -1,0 +1,343 @@
+"""The compiled kernels (estimator/_kernels.c) compute what the numpy reference path computes.
+
+Each test runs the same EKF step twice, once through the C kernel and once through ekf.py's
+numpy code (``kernels.use("numpy")``), and compares. The tolerances are rounding, not modelling:
+the two differ only in the order of the products' sums (OpenBLAS against plain loops), a few ulps
+of values of order one, so 1e-12 relative holds with margin; a wrong index or a missed mask
+weight moves a result by its own size. On the Jackal bag the two trajectories must agree to the
+pin's 1e-9 m / 1e-9 rad.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fusiond.errors import EstimatorError
+from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock,
+                               PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
+from fusiond.estimator import ekf as ekf_module
+from fusiond.estimator import kernels
+
+pytestmark = pytest.mark.skipif(not kernels.available(),
+                                reason="fusiond.estimator._kernels not built (no C compiler at install)")
+
+RTOL = 1e-12
+
+
+@pytest.fixture(autouse=True)
+def _restore_kernels():
+    yield
+    kernels.use("auto")
+
+
+class _LoggedOffset(StateBlock):
+    """A non-additive block (its boxplus is not plain addition): the kernel hands dx back to Python."""
+
+    name = "logged_offset"
+    nominal_size = error_size = 1
+    additive = False
+
+    def initial_sigma(self) -> list[float]:
+        return [0.3]
+
+    def boxplus(self, x, dx, n0, e0) -> None:
+        x[n0] += 0.5 * dx[e0]
+
+
+LAYOUTS = {
+    "pose": StateLayout([PoseBlock(0.1, 0.1)]),
+    "bias_scale": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), WheelScaleBlock(0.05, 1e-4)]),
+    "non_additive": StateLayout([PoseBlock(0.1, 0.1), _LoggedOffset()]),
+}
+
+
+def _random_filter(layout: StateLayout, rng: np.random.Generator) -> ErrorStateEKF:
+    n = layout.error_dim
+    A = rng.normal(size=(n, n)) * rng.uniform(0.01, 1.0)
+    x = layout.initial_state()
+    q = rng.normal(size=4)
+    x[3:7] = q / np.linalg.norm(q)
+    x[0:3] = rng.normal(size=3) * 10.0
+    return ErrorStateEKF(layout, x, A @ A.T + np.eye(n) * 1e-4)
+
+
+def _both(layout: StateLayout, seed: int, step) -> tuple:
+    """(result, x, P, resets) of ``step(ekf)`` on the same random filter, compiled then numpy."""
+    out = []
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        ekf = _random_filter(layout, np.random.default_rng(seed))
+        res = step(ekf)
+        out.append((res, ekf.x.copy(), ekf.P.copy(), ekf.resets))
+    return out[0], out[1]
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> None:
+    scale = max(float(np.max(np.abs(b))), 1.0)
+    np.testing.assert_allclose(a, b, rtol=0.0, atol=RTOL * scale)
+
+
+@settings(max_examples=80, deadline=None)
+@given(layout=st.sampled_from(sorted(LAYOUTS)), seed=st.integers(0, 100_000), m=st.integers(1, 6),
+       masked=st.booleans(), hold=st.booleans(), gate=st.sampled_from([math.inf, 3.0, 0.5]))
+def test_update_matches_the_numpy_path(layout, seed, m, masked, hold, gate):
+    lay = LAYOUTS[layout]
+    n = lay.error_dim
+    rng = np.random.default_rng(seed + 1)
+    H = np.zeros((m, n))
+    for r in range(m):  # a few columns per row, as the measurement models make
+        cols = rng.choice(n, size=min(n, 3), replace=False)
+        H[r, cols] = rng.normal(size=cols.size)
+    B = rng.normal(size=(m, m)) * 0.1
+    R = B @ B.T + np.eye(m) * 1e-3
+    y = rng.normal(size=m) * 0.5
+    mask = rng.random(n) < 0.6 if masked else None
+
+    def step(ekf):
+        return ekf.update(y, H, R, gate, mask=mask, hold_heading=hold and lay is not LAYOUTS["non_additive"])
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, seed, step)
+    assert (rc.rejected, rc.singular, rc.covariance_reset) == (rn.rejected, rn.singular, rn.covariance_reset)
+    assert rc.nis == pytest.approx(rn.nis, rel=1e-11)
+    np.testing.assert_allclose(rc.innovation_var, rn.innovation_var, rtol=1e-11)
+    _close(Pc, Pn)
+    _close(xc, xn)
+    assert abs(np.linalg.norm(xc[3:7]) - 1.0) < 1e-12
+
+
+@settings(max_examples=60, deadline=None)
+@given(layout=st.sampled_from(sorted(LAYOUTS)), seed=st.integers(0, 100_000))
+def test_propagate_matches_the_numpy_path(layout, seed):
+    lay = LAYOUTS[layout]
+    n = lay.error_dim
+    rng = np.random.default_rng(seed + 2)
+    F = np.eye(n)
+    F[rng.random((n, n)) < 0.2] = rng.normal()  # identity plus a few blocks, as the motion model's
+    Qh = rng.normal(size=(n, n)) * 0.01
+    Q = Qh @ Qh.T
+    x_new = lay.initial_state()
+    (ok_c, _, Pc, _), (ok_n, _, Pn, _) = _both(lay, seed, lambda ekf: ekf.propagate(x_new.copy(), F, Q))
+    assert ok_c is ok_n is True
+    _close(Pc, Pn)
+
+
+PREDICT_LAYOUTS = {
+    "pose": StateLayout([PoseBlock(0.1, 0.1)]),
+    "inputs": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GyroScaleBlock(0.05, 1e-5),
+                           WheelScaleBlock(0.05, 1e-4)]),
+    "gps_error": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
+}
+finite = st.floats(-3.0, 3.0)
+cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple of a silent input
+    st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)).map(
+        lambda d: (d[0], 0.0, 0.0, 0.0, d[1], 0.0, 0.0, 0.0, d[2])),
+    st.lists(st.floats(-0.1, 1.0), min_size=9, max_size=9).map(tuple))
+
+
+@settings(max_examples=150, deadline=None)
+@given(layout=st.sampled_from(sorted(PREDICT_LAYOUTS)), seed=st.integers(0, 10_000),
+       v=st.tuples(finite, finite, finite), w=st.tuples(finite, finite, finite), lin_cov=cov9, ang_cov=cov9,
+       periods=st.tuples(st.sampled_from([0.0, 0.01, 0.2]), st.sampled_from([0.0, 0.005, 0.1])),
+       flags=st.tuples(st.booleans(), st.booleans(), st.booleans()), tau=st.sampled_from([0.0, 0.05]),
+       dt=st.sampled_from([0.0, 0.001, 0.02, 0.7]))
+def test_input_noise_writes_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau, dt):
+    """The motion model's Q from kernels.input_noise is the Python path's, to the bit (the same
+    expressions in C, compiled without FMA contraction), and so are x' and F."""
+    lay = PREDICT_LAYOUTS[layout]
+    u = MotionInput()
+    u.linear, u.angular, u.linear_cov, u.angular_cov = v, w, lin_cov, ang_cov
+    u.linear_period, u.angular_period = periods
+    u.from_gyro, u.world_frame, u.planar = flags
+    u.twist_correlation = tau
+    ekf = _random_filter(lay, np.random.default_rng(seed))
+    density = np.random.default_rng(seed).uniform(0.0, 1e-3, lay.error_dim)
+    out = []
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        ws = PredictWorkspace(lay)
+        predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
+        x, F, Q = predict(lay, ekf.x, u, dt, density, ws)
+        out.append((x.copy(), F.copy(), Q.copy()))
+    (xc, Fc, Qc), (xn, Fn, Qn) = out
+    np.testing.assert_array_equal(xc, xn)
+    np.testing.assert_array_equal(Fc, Fn)
+    np.testing.assert_array_equal(Qc, Qn)
+
+
+def test_a_non_finite_propagation_resets_alike():
+    lay = LAYOUTS["bias_scale"]
+    F = np.eye(lay.error_dim)
+    F[0, 4] = math.nan
+    Q = np.zeros_like(F)
+    (ok_c, _, Pc, rc), (ok_n, _, Pn, rn) = _both(lay, 7, lambda ekf: ekf.propagate(lay.initial_state(), F, Q))
+    assert ok_c is ok_n is False
+    assert rc == rn == 1
+    np.testing.assert_array_equal(Pc, lay.initial_covariance())
+    np.testing.assert_array_equal(Pn, lay.initial_covariance())
+
+
+def test_a_negative_variance_takes_the_reference_checks():
+    """P with a negative variance (not PSD) and an update that keeps S positive: the kernel reports
+    the diagonal and the reference path's clipping (an eigendecomposition) makes the same P."""
+    lay = LAYOUTS["pose"]
+    n = lay.error_dim
+
+    def step(ekf):
+        ekf.P = np.eye(n) * 0.5
+        ekf.P[0, 0] = -0.2
+        H = np.zeros((1, n))
+        H[0, 0] = 1.0
+        return ekf.update(np.array([0.1]), H, np.array([[1.0]]))
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, 3, step)
+    assert not rc.rejected and not rn.rejected
+    assert np.diagonal(Pc).min() >= 0.0
+    _close(Pc, Pn)
+    _close(xc, xn)
+
+
+def test_a_singular_innovation_covariance_is_refused_alike():
+    lay = LAYOUTS["pose"]
+    H = np.zeros((2, lay.error_dim))  # observes nothing, with no noise: S = 0
+
+    def step(ekf):
+        return ekf.update(np.array([0.1, 0.2]), H, np.zeros((2, 2)))
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, 4, step)
+    assert rc.singular and rn.singular and rc.rejected and rn.rejected
+    assert math.isnan(rc.nis) and math.isnan(rn.nis)
+    np.testing.assert_array_equal(xc, xn)
+    np.testing.assert_array_equal(Pc, Pn)
+
+
+def test_arrays_the_kernel_cannot_read_take_the_numpy_path():
+    """An int or Fortran-ordered array is not refused: the update falls back to numpy and agrees."""
+    lay = LAYOUTS["pose"]
+    n = lay.error_dim
+    H = np.zeros((3, n))
+    H[0, 0] = H[1, 1] = H[2, 5] = 1.0
+
+    def step(ekf):
+        ekf.P = np.asfortranarray(ekf.P)
+        return ekf.update(np.array([1, 2, 0]), np.asfortranarray(H), np.eye(3, dtype=int))
+
+    (rc, xc, Pc, _), (rn, xn, Pn, _) = _both(lay, 5, step)
+    assert rc.nis == rn.nis
+    np.testing.assert_array_equal(xc, xn)
+    np.testing.assert_array_equal(Pc, Pn)
+
+
+def test_kernel_refuses_wrong_shapes_with_a_clear_error():
+    k = kernels.active()
+    P = np.eye(4)
+    with pytest.raises(ValueError, match="F has 9 values, expected 16"):
+        k.propagate(np.eye(3), P, np.zeros((4, 4)), np.empty((4, 4)))
+    with pytest.raises(BufferError, match="C-contiguous float64"):
+        k.propagate(np.eye(4, dtype=np.float32), P, np.zeros((4, 4)), np.empty((4, 4)))
+    with pytest.raises(ValueError, match="square with 1 to 48 rows"):
+        k.propagate(np.eye(49), np.eye(49), np.eye(49), np.empty((49, 49)))
+    y, H, R, out, x = np.zeros(2), np.zeros((2, 4)), np.eye(2), np.empty((4, 4)), np.zeros(5)
+    with pytest.raises(ValueError, match="H has 6 values, expected 8"):
+        k.update(P, np.zeros((2, 3)), R, y, 1.0, None, None, out, x, 1)
+    with pytest.raises(ValueError, match="y must have 1 to 12 rows"):
+        k.update(P, H, R, np.zeros(0), 1.0, None, None, out, x, 1)
+    with pytest.raises(ValueError, match="x has 5 values, expected 4"):
+        k.update(P, H, R, y, 1.0, None, None, out, x, 0)  # mode 0 writes dx: n values
+    frozen = np.empty((4, 4))
+    frozen.flags.writeable = False
+    with pytest.raises(BufferError, match="out must be a C-contiguous writable"):
+        k.update(P, H, R, y, 1.0, None, None, frozen, x, 1)
+    with pytest.raises(ValueError, match="Q must be square with 6 to 48 rows"):
+        k.input_noise(np.zeros((4, 4)), np.zeros(4), 0.1, None, None, None, 0.0, None, None, 0.0)
+    with pytest.raises(ValueError, match="G must have 9 entries"):
+        k.input_noise(np.zeros((6, 6)), np.zeros(6), 0.1, None, (1.0,) * 8, (0.0,) * 9, 1.0, None, None, 0.0)
+
+
+def test_a_zero_quaternion_is_an_estimator_error_and_leaves_x():
+    lay = LAYOUTS["pose"]
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        ekf = ErrorStateEKF(lay)
+        ekf.x[3:7] = 0.0
+        before = ekf.x.copy()
+        H = np.zeros((1, lay.error_dim))
+        H[0, 3] = 1.0
+        with pytest.raises(EstimatorError, match="quaternion"):
+            ekf.update(np.array([0.1]), H, np.array([[0.01]]))
+        np.testing.assert_array_equal(ekf.x, before)
+
+
+def test_layouts_beyond_the_kernel_size_use_numpy():
+    """The kernels have fixed-size scratch: a layout with more error states than MAX_N runs numpy."""
+
+    class Wide(StateBlock):
+        name = "wide"
+        nominal_size = error_size = 50
+
+    ekf = ErrorStateEKF(StateLayout([PoseBlock(0.1, 0.1), Wide()]))
+    assert not ekf._fits
+    F, Q = np.eye(56), np.eye(56) * 1e-3
+    assert ekf.propagate(ekf.x.copy(), F, Q)
+    np.testing.assert_allclose(np.diagonal(ekf.P)[:6], 0.01 + 1e-3)
+
+
+def test_the_constants_mirror_the_c_module():
+    k = kernels.active()
+    assert (ekf_module._MAX_N, ekf_module._MAX_M) == (k.MAX_N, k.MAX_M)
+    assert (ekf_module._GATED, ekf_module._SINGULAR, ekf_module._NEEDS_CHECK) == (k.GATED, k.SINGULAR, k.NEEDS_CHECK)
+
+
+def test_use_names_the_choices():
+    assert kernels.use("numpy") == "numpy" and kernels.active() is None
+    assert kernels.use("auto") == "compiled" and kernels.active() is not None
+    with pytest.raises(EstimatorError, match="auto, compiled, numpy"):
+        kernels.use("fast")
+
+
+def test_the_environment_selects_the_path():
+    assert kernels.use_environment({"FUSIOND_KERNELS": "numpy"}) == "numpy" and kernels.active() is None
+    assert kernels.use_environment({}) == "compiled"
+    with pytest.raises(EstimatorError, match="FUSIOND_KERNELS=fast: kernels must be one of"):
+        kernels.use_environment({"FUSIOND_KERNELS": "fast"})
+
+
+@pytest.mark.e2e
+def test_fusiond_replay_gives_the_same_tum_on_both_paths(jackal_bag, tmp_path):
+    """The command line's FUSIOND_KERNELS: the numpy path and the compiled one write the same TUM
+    (9 decimals), and an unknown name is refused before anything runs."""
+    import os
+    import subprocess
+    import sys
+
+    out = {}
+    for name in ("numpy", "compiled", "bogus"):
+        tum = tmp_path / f"{name}.tum"
+        proc = subprocess.run([sys.executable, "-m", "fusiond", "replay", str(jackal_bag), "--config",
+                               "examples/jackal.toml", "--tum", str(tum), "--quiet"],
+                              env={**os.environ, "FUSIOND_KERNELS": name}, capture_output=True, text=True,
+                              timeout=120, cwd=Path(__file__).resolve().parents[2])
+        out[name] = (proc.returncode, tum.read_text() if tum.exists() else "", proc.stderr)
+    assert out["numpy"][0] == out["compiled"][0] == 0
+    assert out["numpy"][1] == out["compiled"][1] and out["numpy"][1].count("\n") > 3000
+    assert out["bogus"][0] == 2 and "FUSIOND_KERNELS=bogus" in out["bogus"][2] and not out["bogus"][1]
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("config", ["examples/jackal_rl.toml", "examples/jackal.toml"])
+def test_jackal_trajectory_is_the_same_on_both_paths(jackal_bag, config):
+    from tests.support.jackal_pin import trajectory
+
+    kernels.use("numpy")
+    ref = trajectory(jackal_bag, config)
+    kernels.use("compiled")
+    now = trajectory(jackal_bag, config)
+    assert now["counters"] == ref["counters"]
+    assert now["published"] == ref["published"]
+    worst = max(abs(a - b) for pa, pb in zip(now["poses"], ref["poses"]) for a, b in zip(pa, pb))
+    assert worst <= 1e-9
