@@ -1,6 +1,6 @@
 """The doctor's paste lines are replayed before they are printed (fusiond.tune.advice).
 
-Simulated drives (tests/sim.py: gyro white noise 0.002 rad/s, roll/pitch of the IMU's orientation
+Simulated drives (tests/support/sim.py: gyro white noise 0.002 rad/s, roll/pitch of the IMU's orientation
 with noise 0.0024 rad, 5 s at rest first) with a config mistake planted: a gyro noise stated 10x
 too large, an orientation noise stated 12x too small. The doctor's line for each must, replayed,
 raise the innovations' likelihood by more than its one key (the advice rule) and be printed as a

@@ -95,7 +95,7 @@ def test_a_gps_with_gated_outlier_fixes_end_to_end():
 
 def test_a_wandering_gps_with_gated_outliers_gets_the_wander_verdict():
     """The second QA trial's wandering receiver (white 0.6 m plus a Gauss-Markov wander of 1.2 m, tau 60 s,
-    2 Hz for 400 s, stating 2.2 m: the filter follows the wander, NIS low; tests/test_doctor_qa2.py) with
+    2 Hz for 400 s, stating 2.2 m: the filter follows the wander, NIS low; tests/doctor/test_doctor_qa2.py) with
     every 100th fix 220 m off, gated at 5: 8 fixes of NIS ~(220 / 2.2)^2 = 1e4 among 800 make the whole-run
     mean ~50 per dof, "nis_high". The applied ones read low, as without the outliers, so the verdict is the
     wander's (error_tau_s), not "noise too small" and not "lower position_noise"."""

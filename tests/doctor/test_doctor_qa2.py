@@ -1,7 +1,7 @@
 """The doctor on the faults of the second QA trial (issue 12 follow-up): a logging gap, a wandering
 GPS error, an overstated gyro noise, a yaw rate nobody measures, a sensor on another clock.
 
-Each fault is applied to a simulation (tests/sim_faults.py) and run through `run_samples`, the
+Each fault is applied to a simulation (tests/support/sim_faults.py) and run through `run_samples`, the
 loop `fusiond replay` runs; each has a clean twin that must stay quiet. Thresholds are derived
 from the simulations' physics in the comments.
 """
@@ -26,7 +26,7 @@ from tests.support.verdicts import agree, one, verdicts_of
 from tests.support.core_samples import make_config
 from tests.support.gps_wander import STATED_HDOP, WANDER
 
-T0 = 1000.0  # tests/sim.py and tests/sim_gps.py stamp from 1000 s
+T0 = 1000.0  # tests/support/sim.py and tests/support/sim_gps.py stamp from 1000 s
 
 
 # -- 1. a logging gap is not a magnetometer disturbance ---------------------------------------------------
@@ -34,7 +34,7 @@ GAP = (40.0, 45.0)  # relative seconds: every topic silent, the robot keeps turn
 
 
 def missed_turn(cfg: SimConfig) -> float:
-    """The heading the robot turns during the gap (tests/sim.py: yaw rate 0.3 sin(0.5 (t - standstill)))."""
+    """The heading the robot turns during the gap (tests/support/sim.py: yaw rate 0.3 sin(0.5 (t - standstill)))."""
     a, b = (g - cfg.standstill for g in GAP)
     return 0.6 * (math.cos(0.5 * a) - math.cos(0.5 * b))
 

@@ -1,4 +1,4 @@
-"""pytest-benchmark timings of the hot paths (`pytest --benchmark-enable tests/test_benchmarks.py`).
+"""pytest-benchmark timings of the hot paths (`pytest --benchmark-enable tests/e2e/test_benchmarks.py`).
 
 In the normal suite (benchmarks disabled) each runs once, as a smoke test of the
 benchmarked code; the numbers are read from the benchmark table, never asserted.

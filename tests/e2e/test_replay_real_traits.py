@@ -1,7 +1,7 @@
 """A recording with a logger's faults, through the real path: a ROS 2 bag written with rosbags,
 decoded by the real codec, replayed by `fusiond replay`, judged on its TUM output.
 
-The robot drives at 1 m/s (tests/sim.py) with a 26.4 s gap in which every sensor is silent
+The robot drives at 1 m/s (tests/support/sim.py) with a 26.4 s gap in which every sensor is silent
 (a logger that stopped) and five odometry messages stamped one hour ahead (a driver's clock
 glitch; the bag's own times are right, so they sit in the bag where they were recorded).
 """

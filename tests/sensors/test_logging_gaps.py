@@ -37,7 +37,7 @@ def test_a_long_gap_moves_the_pose_by_at_most_speed_times_timeout(orientation, c
         if step.accepted:  # the new timeline confirmed (held samples applied)
             break
     t1, x1 = core.pose()
-    # The robot drives at 1 m/s and turns at |w| <= 0.3 rad/s (tests/sim.py). Inputs are held
+    # The robot drives at 1 m/s and turns at |w| <= 0.3 rad/s (tests/support/sim.py). Inputs are held
     # for the odometry/gyro timeout (0.2 s at 50/100 Hz: max(timeout_s, 3 periods)); after the
     # gap the filter integrates the held post-gap samples (t1 - (GAP_START + GAP)). Anything
     # beyond that bound is the gap integrated with stale inputs (26.4 m before the fix).

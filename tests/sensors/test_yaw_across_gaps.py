@@ -1,6 +1,6 @@
 """yaw_across_gaps: the IMU's own yaw change across a gap turns the heading (core/sensors/gap_turn.py).
 
-The simulated robot (tests/sim.py) turns at 0.3 sin(0.5 t) rad/s; its IMU reports the true yaw with
+The simulated robot (tests/support/sim.py) turns at 0.3 sin(0.5 t) rad/s; its IMU reports the true yaw with
 0.002 rad of noise and its gyro the true rate. What each test removes from the stream is a gap; the
 heading after it is judged against the simulation's truth, as a change from before the gap (the
 filter's yaw reference in roll_pitch mode is its own start, not the IMU's).

@@ -160,7 +160,7 @@ def test_export_before_any_sample_is_a_core_error():
 
 def test_resume_from_file_resumes_or_says_why_not(driven, tmp_path):
     """What the daemon does at start: resumed (None), or refused with the reason its log event carries
-    (the events themselves: tests/test_daemon_state.py reads them from a real daemon's log)."""
+    (the events themselves: tests/e2e/test_daemon_state.py reads them from a real daemon's log)."""
     from fusiond.transport.state_file import resume_from_file
 
     path = tmp_path / "state"

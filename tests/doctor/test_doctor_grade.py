@@ -1,4 +1,4 @@
-"""The IMU mounting-pitch verdict (core/doctor/grade.py) against the simulation's mount (tests/sim_gps.py).
+"""The IMU mounting-pitch verdict (core/doctor/grade.py) against the simulation's mount (tests/support/sim_gps.py).
 
 The world: level ground, a robot driving loops at 5 m/s for 150 s, 5 Hz fixes of 0.5 m white noise on
 every axis, its IMU pitched in its mount by 0.05 rad with ``extrinsic_rpy`` left at 0: the filter's
@@ -16,8 +16,8 @@ from fusiond.core.doctor.grade import grade_fit
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.run import run_samples
 
-from . import sim_gps
-from .configs import robot_config
+from tests.support import sim_gps
+from tests.support.configs import robot_config
 
 MOUNT = 0.05
 WORLD = dict(duration=150.0, speed=5.0, gps_rate=5.0, gps_sigma=0.5, arcs=((10.0, 150.0, 0.05),))
