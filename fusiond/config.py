@@ -143,7 +143,7 @@ class ImuSensor(_Sensor, tag="imu"):
     orientation_rate_hz: float = 100.0
     # orientation = "roll_pitch": after a silence of the IMU longer than filter.gap_s (a logging gap), turn
     # the heading by what the IMU's own yaw turned across it, less the yaw's measured drift, weighed against
-    # what the (rescaled) wheels turned meanwhile (core/sensors/gap_turn.py)
+    # what the (rescaled) wheels turned meanwhile (core/sensors/imu/gap_turn.py)
     yaw_across_gaps: bool = True
     gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
     tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from ..config import Config
 from ..core.diagnostics import DiagnosticsRecord
 from ..core.fusion import FusionCore
-from ..core.sensors.gyro_bias import ZERO_RATE_GATE
+from ..core.sensors.imu.gyro_bias import ZERO_RATE_GATE
 
 CHECK_CHANNELS = frozenset({"yaw_rate"})  # records of consistency checks, not of updates
 DEFAULT_GATE = ZERO_RATE_GATE  # sigma: the cap of a rejected update of a sensor without a gate

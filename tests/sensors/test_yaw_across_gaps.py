@@ -1,4 +1,4 @@
-"""yaw_across_gaps: the IMU's own yaw change across a gap turns the heading (core/sensors/gap_turn.py).
+"""yaw_across_gaps: the IMU's own yaw change across a gap turns the heading (core/sensors/imu/gap_turn.py).
 
 The simulated robot (tests/support/sim.py) turns at 0.3 sin(0.5 t) rad/s; its IMU reports the true yaw with
 0.002 rad of noise and its gyro the true rate. What each test removes from the stream is a gap; the
@@ -221,7 +221,7 @@ def test_the_drift_average_leaves_out_a_heading_correction_and_follows_a_changed
     """_learn_drift on a noiseless difference drifting 0.01 rad/s: after a few blocks the rate is 0.01 with the
     floor's standard error; a 0.5 rad jump of the heading (a GPS fit) makes one block an outlier, left out;
     the drift turning to -0.01 rad/s is taken up after DRIFT_REOPEN blocks in a row disagree."""
-    from fusiond.core.sensors.gap_turn import (DRIFT_BLOCK_S, DRIFT_FLOOR, DRIFT_MIN_BLOCKS, DRIFT_REOPEN,
+    from fusiond.core.sensors.imu.gap_turn import (DRIFT_BLOCK_S, DRIFT_FLOOR, DRIFT_MIN_BLOCKS, DRIFT_REOPEN,
                                                _learn_drift, drift_rate)
 
     assert drift_rate(None)[0] == 0.0
@@ -247,7 +247,7 @@ def test_the_wheels_yaw_scale_is_their_rate_over_the_gyro_s():
     turning samples."""
     import numpy as np
 
-    from fusiond.core.sensors.gap_turn import WHEEL_YAW_MIN_SAMPLES, _learn_wheel_yaw, wheel_yaw_scale
+    from fusiond.core.sensors.imu.gap_turn import WHEEL_YAW_MIN_SAMPLES, _learn_wheel_yaw, wheel_yaw_scale
 
     rng = np.random.default_rng(5)
     sums = None

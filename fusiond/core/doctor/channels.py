@@ -167,7 +167,7 @@ JUMP_NOISE_SHARE = 0.2  # ... in more than this, the stated yaw noise is what is
 
 
 def yaw_jump_verdict(name: str, ch: ChannelStats, orientation: ChannelStats | None) -> Verdict:
-    """The ``yaw_jump`` channel (core/sensors/imu.py ``_yaw_jump``): every record is an absolute yaw reading
+    """The ``yaw_jump`` channel (core/sensors/imu/model.py ``_yaw_jump``): every record is an absolute yaw reading
     that jumped against the gyro-carried heading beyond YAW_JUMP_GATE sigma and was not fused, so its NIS
     says nothing about the stated noise (all are beyond the gate by construction). What it says is how often
     the magnetometer's disturbance switched on."""

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
-from ..sensors.gyro_bias import _turning, quiet_bound
+from ..sensors.imu.gyro_bias import _turning, quiet_bound
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
@@ -78,7 +78,7 @@ def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
 
 def turning_by_own_scatter(e: Episode, bias_sigma: float, min_sigma: float) -> bool:
     """Does the episode's mean rate exceed the quiet bound of its readings' OWN scatter? The core's test
-    of a closed standstill window (``core/sensors/gyro_bias._turning``, called here on the episode's z
+    of a closed standstill window (``core/sensors/imu/gyro_bias._turning``, called here on the episode's z
     axis as a window): a driver overstating its gyro noise (razor_imu_9dof states 0.14 rad/s for a
     0.004 rad/s gyro) makes a slow turn with the drive at zero pass for rest by the stated noise."""
     n = e.samples
@@ -149,7 +149,7 @@ def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Ep
     """(standstills, stretches that only look like one): the wheels' runs exactly at rest, split by the gyro.
 
     The core confirms a standstill only while the gyro is quiet (each axis within quiet_bound: its noise
-    plus the prior bias range, core/sensors/gyro_bias.py): an episode whose gyro turns is the vehicle
+    plus the prior bias range, core/sensors/imu/gyro_bias.py): an episode whose gyro turns is the vehicle
     coasting or turning with its wheels reading zero, not a standstill. So is one beyond the quiet bound
     of the readings' own scatter (the stated noise may be overstated tenfold), as the core judges a closed
     window; their scatter (the turn rate changing) must not enter the measured noise at rest."""

@@ -5,8 +5,8 @@ A model is built once per configured sensor from its typed config table and a na
 overrides, "not measured" rules, mounting rotations) and applies them to the filter
 state through the EKF's own methods, keeping what it must remember between messages in
 its own immutable slice of the state (``FilterState.own[index]``). The core's time
-handling knows none of them: adding a kind is a new module here, its config table, and
-a line in ``MODELS``.
+handling knows none of them: adding a kind is a new module here (or a package, as ``imu/``
+with its gyro-bias learning and gap turn), its config table, and a line in ``MODELS``.
 """
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ from ...config import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from .base import SensorContext, SensorModel
 from .checks import Rejected
 from .gps import GpsInput, GpsModel, GpsPolicy
-from .gyro_bias import quiet_bound
-from .imu import ImuInput, ImuModel, ImuPolicy
+from .imu import ImuInput, ImuModel, ImuPolicy, quiet_bound
 from .odom import OdomInput, OdomModel, OdomPolicy
 from .pose import PoseInput, PoseModel, PosePolicy
 

@@ -41,7 +41,7 @@ from ...samples import OdomSample
 from ..diagnostics import DiagnosticsRecord
 from .base import SensorContext, SensorModel
 from .checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
-from .gyro_bias import quiet_bound
+from .imu.gyro_bias import quiet_bound
 
 if TYPE_CHECKING:
     from ..state import FilterState

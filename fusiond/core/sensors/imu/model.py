@@ -12,26 +12,27 @@ mode the IMU's own yaw still carries the heading across logging gaps (``gap_turn
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import msgspec
 
-from ... import reasons
-from ...config import ImuSensor
-from ...estimator import mat3
-from ...estimator import observations as obs
-from ...estimator import rotation as rot
-from ...logs import get_logger
-from ...samples import ImuSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import MAX_RATE, Rejected, finite, plausible, resolve_variances, unit_quaternion
+from .... import reasons
+from ....config import ImuSensor
+from ....estimator import mat3
+from ....estimator import observations as obs
+from ....estimator import rotation as rot
+from ....logs import get_logger
+from ....samples import ImuSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import MAX_RATE, Rejected, finite, plausible, resolve_variances, unit_quaternion
 from .gap_turn import carry_yaw
-from .gyro_bias import BiasLearning, learn_bias_at_rest
+from .gyro_bias import learn_bias_at_rest
+from .inputs import ImuInput
+from .own import ImuOwn
 
 if TYPE_CHECKING:
-    from ..state import FilterState
+    from ...state import FilterState
 
 log = get_logger("fusiond.core")
 
@@ -43,47 +44,6 @@ GRAVITY_AVERAGE_S = 0.1  # s of specific force averaged into one gravity roll/pi
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
 ORIENTATION_BURST = 3.0  # samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``)
 YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
-
-
-class ImuOwn(msgspec.Struct, frozen=True, gc=False):
-    """The IMU's slice of the filter state (immutable: history snapshots share it)."""
-
-    yaw_offset: float | None = None  # relative orientation: the yaw read at the first message minus the filter's
-    yaw_residual: float | None = None  # absolute yaw: reading - heading - offset after the previous sample ...
-    yaw_stamp: float | None = None  # ... and its stamp (the yaw-jump gate)
-    adaptive: tuple[float, float, int] = (1.0, 0.0, 0)  # R scale of the orientation, window NIS/dof sum, count
-    bias: BiasLearning = BiasLearning()  # the standstill windows of the gyro-bias learning
-    gravity: tuple | None = None  # (start stamp, samples, sums of x, y, z) of the specific force being averaged
-    orientation_credit: tuple[float, float] | None = None  # (credit, stamp): ``orientation_rate_hz``'s bucket
-    # yaw_across_gaps: (stamp, the IMU's yaw, the filter's yaw, the fused orientations' period, the heading's
-    # variance, standing still: odometry zero and gyro quiet, the state's wheel_turn)
-    # at the last fused orientation, and whether the IMU's yaw has ever moved; its drift (``_learn_drift``)
-    yaw_mark: tuple[float, float, float, float, float, bool, float] | None = None
-    yaw_live: bool = False
-    yaw_drift: tuple[float, float, float, int, float, float, int] | None = None
-    wheel_yaw: tuple[float, float, float, float, float] | None = None  # ``_learn_wheel_yaw``'s sums
-
-
-@dataclass(slots=True)
-class ImuInput:
-    """Base-frame attitude observation (roll, pitch, yaw rows usable) and gyro rate; 9-tuple covariances.
-
-    The attitude is kept as the base-frame quaternion and turned into roll/pitch/yaw (``rpy``) only
-    when the model fuses it: an IMU faster than ``orientation_rate_hz`` has most of its orientations
-    thinned, and their angles would be computed for nothing."""
-
-    attitude: tuple[float, float, float, float] | None
-    rpy_cov: tuple[float, ...] | None
-    rows: tuple[int, ...]
-    gyro: tuple[float, float, float] | None
-    gyro_cov: tuple[float, ...] | None
-    accel: tuple[float, float, float] | None = None  # base-frame specific force, when gravity gives the tilt
-    yaw_measured: bool = False  # the message's yaw is measured (its variance below orientation_max_sigma^2)
-
-    @property
-    def rpy(self) -> tuple[float, float, float] | None:
-        """Fixed-axis roll, pitch, yaw of ``attitude`` (None without one)."""
-        return None if self.attitude is None else rot.to_rpy(self.attitude)
 
 
 class ImuPolicy:

@@ -31,20 +31,34 @@ not fused, so its drift over the run never reaches the heading (``relative`` wou
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import msgspec
 
-from ...estimator import rotation as rot
-from ...logs import get_logger
-from ..inputs import smoothed_period
+from ....estimator import rotation as rot
+from ....logs import get_logger
+from ...inputs import smoothed_period
 from .gyro_bias import quiet_bound
+from .own import ImuOwn
 
 if TYPE_CHECKING:
-    from ..state import FilterState
-    from .imu import ImuModel, ImuOwn
+    from ...state import FilterState
+    from ..base import SensorContext
 
 log = get_logger("fusiond.core")
+
+
+class GapTurnImu(Protocol):
+    """What the gap turn reads of the IMU's model (``model.ImuModel``), so that it needs no import of it."""
+
+    cfg: Any
+    ctx: "SensorContext"
+    index: int
+    orientation_period: float  # s between fused orientations (0: every sample)
+    gap_s: float  # filter.gap_s
+    bias_sigma: float  # filter.gyro_bias_sigma
+    bias_z: int  # the z gyro bias's index in the state, -1 without one
+    gap_turns: int  # headings turned across gaps so far (counted here)
 
 GAP_YAW_DRIFT = 0.01  # rad/s: how fast an IMU's own yaw may drift through a gap before its drift is measured
 DRIFT_BLOCK_S = 5.0  # s: the IMU yaw's drift against the heading is measured as the slope over blocks this long ...
@@ -62,11 +76,11 @@ YAW_MOVED = 1e-6  # rad: a yaw reading that changed by more than this between fu
 YAW_RESET_RAD = 1e-3  # a yaw reading within this of 0 after a gap, having read elsewhere before: the IMU restarted
 
 
-def carry_yaw(imu: "ImuModel", s: "FilterState", yaw: float, var: float, gyro: tuple | None,
+def carry_yaw(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float, gyro: tuple | None,
               gyro_cov: tuple | None, stamp: float, emit: bool) -> None:
     """Turn the heading across a gap by the IMU's own yaw change, less its drift, weighed against the
     filter's own change (module doc); mark this sample and learn the yaw's drift outside gaps."""
-    own: "ImuOwn" = s.own[imu.index]
+    own: ImuOwn = s.own[imu.index]
     heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
     quiet = gyro is not None and abs(gyro[2]) <= quiet_bound(math.sqrt(gyro_cov[8]), imu.bias_sigma)
     mark, live, period, drift = own.yaw_mark, own.yaw_live, 0.0, own.yaw_drift
@@ -95,7 +109,7 @@ def carry_yaw(imu: "ImuModel", s: "FilterState", yaw: float, var: float, gyro: t
         yaw_drift=drift, wheel_yaw=wheel)
 
 
-def _wheels_turning(imu: "ImuModel", s: "FilterState", stamp: float) -> bool:
+def _wheels_turning(imu: "GapTurnImu", s: "FilterState", stamp: float) -> bool:
     """The odometry's yaw rate is a measurement now: measured, fresh, and the wheels not at rest (a drive
     reading zero while the vehicle turns must not teach the wheels' scale as 0)."""
     odom = imu.ctx.odom_index
@@ -104,7 +118,7 @@ def _wheels_turning(imu: "ImuModel", s: "FilterState", stamp: float) -> bool:
             and stamp - last <= imu.ctx.timeout(odom, s))
 
 
-def _turn_across_gap(imu: "ImuModel", s: "FilterState", yaw: float, var: float, heading: float, stamp: float,
+def _turn_across_gap(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float, heading: float, stamp: float,
                      emit: bool, silent: float, mark: tuple, live: bool, parked: bool, drift: tuple | None,
                      wheel: tuple | None) -> float:
     """The heading after the gap (module doc), from the filter's ``heading`` now: turned by the gain-weighted

@@ -19,13 +19,14 @@ from typing import TYPE_CHECKING
 
 import msgspec
 
-from ...estimator import observations as obs
-from ...logs import get_logger
-from ..diagnostics import DiagnosticsRecord
+from ....estimator import observations as obs
+from ....logs import get_logger
+from ...diagnostics import DiagnosticsRecord
 
 if TYPE_CHECKING:
-    from ..state import FilterState
-    from .imu import ImuInput, ImuModel
+    from ...state import FilterState
+    from ..base import SensorModel
+    from .inputs import ImuInput
 
 log = get_logger("fusiond.core")
 
@@ -68,7 +69,7 @@ def _turning(w: tuple, bias_sigma: float, min_sigma: float) -> bool:
     return False
 
 
-def learn_bias_at_rest(imu: "ImuModel", s: "FilterState", inp: "ImuInput", stamp: float, emit: bool,
+def learn_bias_at_rest(imu: "SensorModel", s: "FilterState", inp: "ImuInput", stamp: float, emit: bool,
                        late: bool) -> list[DiagnosticsRecord]:
     """One gyro sample at a possible standstill (module doc): extend the window, or close it with
     one gated scalar update per axis. The window lives in the IMU's slice of the state."""
