@@ -93,6 +93,8 @@ class FilterConfig(_Table):
     wheel_scale_walk: float = 1.0e-4  # its random walk, 1/sqrt(s)
     gyro_scale_sigma: float = 0.05  # initial gyro (yaw axis) scale uncertainty (gyro_scale_estimation)
     gyro_scale_walk: float = 1.0e-5  # its random walk, 1/sqrt(s)
+    twist_pitch_sigma: float = 0.1  # initial uncertainty of the twist's pitch in the body, rad (pitch_estimation)
+    twist_pitch_walk: float = 1.0e-5  # its random walk, rad/sqrt(s)
     two_d_mode: bool = False  # planar robot (robot_localization's meaning): z, roll, pitch held at 0
     continuous_odom: bool = False  # no heading reference: a bias learned at rest never turns the pose (REP-105)
     nis_window: int = 50  # updates per windowed NIS consistency test
@@ -121,6 +123,9 @@ class OdomSensor(_Sensor, tag="odom"):
     # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
     # makes it observable; false: an explicit opt-out
     scale_estimation: bool | None = None
+    # estimate the pitch of the wheels' twist in the body (an IMU pitched in its mount beyond extrinsic_rpy);
+    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one
+    pitch_estimation: bool = False
     twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
     # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
     # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom.py); 0: off

@@ -362,6 +362,13 @@ class FusionCore:
             return None
         return float(self.state.ekf.x[self.layout.nominal["yaw_offset"].start])
 
+    @property
+    def twist_pitch(self) -> float | None:
+        """The estimated pitch of the wheels' twist in the body (rad), when it is in the state."""
+        if not self.initialised or not self.layout.has("twist_pitch"):
+            return None
+        return float(self.state.ekf.x[self.layout.nominal["twist_pitch"].start])
+
     def held(self) -> list[int]:
         """Per sensor: samples held while a far-off time jump is unconfirmed (later applied or dropped)."""
         return self._held.counts(len(self.sensors))

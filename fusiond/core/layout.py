@@ -15,13 +15,27 @@ import numpy as np
 
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..estimator import (
-    GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, PoseBlock, StateLayout, WheelScaleBlock, YawOffsetBlock,
+    GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, PoseBlock, StateLayout, TwistPitchBlock, WheelScaleBlock,
+    YawOffsetBlock,
 )
 
 
 def absolute_sensor(sc) -> bool:
     """Does this sensor define the world frame (a GPS, or a pose that is not differential)?"""
     return isinstance(sc, GpsSensor) or (isinstance(sc, PoseSensor) and not sc.differential)
+
+
+def absolute_height(cfg: Config) -> bool:
+    """Is an absolute height fused (a GPS altitude, an absolute pose's z), outside two_d_mode?"""
+    if cfg.filter.two_d_mode:
+        return False
+    for s in cfg.sensors:
+        if isinstance(s, GpsSensor) and (s.position_noise is None or s.position_noise[2] <= s.max_sigma):
+            return True
+        if isinstance(s, PoseSensor) and not s.differential and (
+                s.position_noise is None or s.position_noise[2] <= s.max_sigma[0]):
+            return True
+    return False
 
 
 def state_layout(cfg: Config) -> StateLayout:
@@ -38,6 +52,12 @@ def state_layout(cfg: Config) -> StateLayout:
     if any(isinstance(s, OdomSensor) and (s.scale_estimation or (s.scale_estimation is None and absolute))
            for s in sensors):
         blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
+    # The twist's pitch in the body is observable from an absolute height while moving. Not on by default:
+    # over a short drive it is confounded with the altitude's wander, and an error model that calls a slow
+    # wander white (error_tau_s of seconds) lets it take the wander for a slope and z follow it.
+    if absolute_height(cfg) and any(isinstance(s, OdomSensor) and s.twist_frame == "body" and s.pitch_estimation
+                                    for s in sensors):
+        blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
     # An absolute IMU yaw beside an absolute position or pose: heading + an estimated offset.
     yaw_imu = next((s for s in sensors if isinstance(s, ImuSensor) and s.orientation == "absolute"
                     and s.yaw_offset_sigma > 0.0), None)
@@ -71,7 +91,7 @@ def update_masks(layout: StateLayout, has_frame_sensor: bool, heading_observed: 
     tilt[[0, 1, 2, 5]] = False
     if layout.has("gyro_bias"):
         tilt[layout.error["gyro_bias"].start + 2] = False
-    for name in ("gyro_scale", "wheel_scale", "gps_error", "yaw_offset"):
+    for name in ("gyro_scale", "wheel_scale", "twist_pitch", "gps_error", "yaw_offset"):
         if layout.has(name):
             tilt[layout.error[name]] = False
     # While the GPS heading is unknown a fix may only move position: a wrong heading
@@ -104,4 +124,4 @@ def update_masks(layout: StateLayout, has_frame_sensor: bool, heading_observed: 
     return UpdateMasks(tilt, position, delta, rest)
 
 
-__all__ = ["UpdateMasks", "absolute_sensor", "state_layout", "update_masks"]
+__all__ = ["UpdateMasks", "absolute_height", "absolute_sensor", "state_layout", "update_masks"]

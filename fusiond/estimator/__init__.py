@@ -5,9 +5,10 @@ from .gps_error import GpsErrorBlock
 from .motion import MotionInput, PredictWorkspace, corrected_inputs, predict
 from .scale import GyroScaleBlock, WheelScaleBlock
 from .state import GyroBiasBlock, InputBlock, PoseBlock, StateBlock, StateLayout, YawOffsetBlock
+from .twist_pitch import TwistPitchBlock
 
 __all__ = [
     "ErrorStateEKF", "UpdateResult", "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
-    "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "WheelScaleBlock", "InputBlock", "PoseBlock", "StateBlock", "StateLayout",
-    "YawOffsetBlock",
+    "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "TwistPitchBlock", "WheelScaleBlock", "InputBlock",
+    "PoseBlock", "StateBlock", "StateLayout", "YawOffsetBlock",
 ]

@@ -330,6 +330,8 @@ def summary(result: ReplayResult) -> str:
     learned = dict(core.scales)
     if core.yaw_offset is not None:
         learned["yaw_offset"] = core.yaw_offset
+    if core.twist_pitch is not None:
+        learned["twist_pitch"] = core.twist_pitch
     if learned:
         out.append("estimated   " + "  ".join(f"{k}={v:.4f}" for k, v in learned.items()))
     for name, c in result.doctor.channel_summaries().items():

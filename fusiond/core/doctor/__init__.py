@@ -22,6 +22,7 @@ import msgspec
 
 from ...config import Config, GpsSensor, ImuSensor, OdomSensor
 from ...samples import OdomSample
+from ..layout import state_layout
 from ..sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
 from .grade import grade_fit, grade_verdict
@@ -370,7 +371,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
         # With a GPS altitude the grade is measured, so the lean against it replaces the lean check's
         # "on level ground"; without enough driving to tell, the lean check still speaks.
         grade = grade_fit(series, cfg)
-        graded = grade_verdict(grade, imu, mount)
+        graded = grade_verdict(grade, imu, mount, state_layout(cfg).has("twist_pitch"))
         lean = graded if graded is not None else lean_verdict(tilt, imu, MIN_UPDATES, mount)
         for v in (lean, mounted):
             if v is not None:

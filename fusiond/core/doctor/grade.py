@@ -159,8 +159,10 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs)
 
 
-def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None) -> Verdict | None:
-    """The GPS climb's verdict on the IMU's mounting pitch; None when the drive could not tell."""
+def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None,
+                  learned: bool = False) -> Verdict | None:
+    """The GPS climb's verdict on the IMU's mounting pitch; None when the drive could not tell. ``learned``:
+    the filter estimates the twist's pitch (``pitch_estimation``), so the climb itself is already corrected."""
     if fit is None or imu is None:
         return None
     deg, se_deg = math.degrees(fit.delta), math.degrees(fit.se)
@@ -171,8 +173,11 @@ def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw |
                        f"the GPS altitude climbs against the estimate's pitch by {deg:+.2f} deg (+- {se_deg:.2f}) "
                        f"over {fit.distance_m:.0f} m of driving ({fit.chords} chords): the IMU is pitched by that in "
                        "its mount and extrinsic_rpy does not say so, so the body-frame twist climbs or sinks "
-                       f"({abs(fit.delta) * 100:.1f} m of height per 100 m driven, which the GPS's vertical error "
-                       "state then takes for receiver wander). The full mount is below",
+                       f"({abs(fit.delta) * 100:.1f} m of height per 100 m driven, "
+                       + ("which the filter's twist_pitch state learns as the fixes come; stated, it holds from the "
+                          "first metre and in the published attitude too" if learned else
+                          "which the GPS's vertical error state then takes for receiver wander")
+                       + "). The full mount is below",
                        sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, (0.0, fit.delta), yaw)), ev)
     if fit.resolved:
         return Verdict(imu.name, "attitude", "ok",
