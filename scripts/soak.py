@@ -2,7 +2,7 @@
 """Soak test of `fusiond run`: a daemon subprocess fed 1 kHz IMU + 100 Hz odometry for N minutes.
 
     python scripts/soak.py [--minutes 10] [--imu-hz 1000] [--odom-hz 100] [--sample-s 5]
-                           [--warmup-s 30] [--slope-threshold 1.0] [--json out/soak.json]
+                           [--warmup-s 30] [--slope-threshold 1.0] [--json out/soak.json] [--state]
 
 The daemon runs as its own process (`python -m fusiond run`, the Jackal sensor setup of
 examples/jackal.toml on a free loopback port, multicast off); this script is a Zenoh peer
@@ -115,9 +115,11 @@ class Templates:
         return bytes(buf)
 
 
-def write_config(path: Path, port: int) -> None:
+def write_config(path: Path, port: int, state: Path | None = None) -> None:
+    """The soak's config; with ``state``, the daemon also persists its filter state there every second."""
+    saved = f'[state]\npath = "{state}"\nsave_interval_s = 1.0\n\n' if state is not None else ""
     path.write_text(f'[zenoh]\nmode = "peer"\nlisten = ["tcp/127.0.0.1:{port}"]\nmulticast_scouting = false\n\n'
-                    + (ROOT / "examples" / "jackal.toml").read_text())
+                    + saved + (ROOT / "examples" / "jackal.toml").read_text())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -130,13 +132,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--slope-threshold", type=float, default=1.0, help="MiB/min above which memory is flagged")
     ap.add_argument("--json", default="out/soak.json", help="where to write the results (default out/soak.json)")
     ap.add_argument("--quiet", action="store_true", help="no per-sample lines while running")
+    ap.add_argument("--state", action="store_true", help="the daemon persists its state every second ([state])")
     args = ap.parse_args(argv)
 
     duration = args.minutes * 60.0
     tmp = Path(tempfile.mkdtemp(prefix="fusiond-soak-"))
     port = free_port()
     config = tmp / "soak.toml"
-    write_config(config, port)
+    write_config(config, port, tmp / "state" if args.state else None)
     log_path = tmp / "daemon.log"
     with open(log_path, "wb") as err:
         proc = subprocess.Popen([sys.executable, "-m", "fusiond", "run", "--config", str(config)], cwd=ROOT,
