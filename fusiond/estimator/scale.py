@@ -10,36 +10,15 @@ prior around 1 and a small random walk (tyre wear, temperature).
 
 from __future__ import annotations
 
-from .state import InputBlock, Vec3
+from .state import ScalarInputBlock, Vec3
 
 
-class _ScalarScale(InputBlock):
-    nominal_size = 1
-    error_size = 1
-    scales_input = True
-
-    def __init__(self, sigma: float, walk: float) -> None:
-        self.sigma = sigma
-        self.walk = walk
-
-    def initial(self) -> list[float]:
-        return [1.0]
-
-    def initial_sigma(self) -> list[float]:
-        return [self.sigma]
-
-    def random_walk(self) -> list[float]:
-        return [self.walk]
-
-    def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
-        x[n0] += dx[e0]
-
-
-class WheelScaleBlock(_ScalarScale):
+class WheelScaleBlock(ScalarInputBlock):
     """Wheel speed scale s: v' = s v (tyre radius, skid-steer track slip along the body)."""
 
     name = "wheel_scale"
     corrects = "linear"
+    start = 1.0  # the input as measured
 
     def correct(self, xb: list[float], u: Vec3) -> Vec3:
         s = xb[0]
@@ -58,7 +37,7 @@ class WheelScaleBlock(_ScalarScale):
         return (g0 * a + g1 * b + g2 * c, g3 * a + g4 * b + g5 * c, g6 * a + g7 * b + g8 * c)
 
 
-class GyroScaleBlock(_ScalarScale):
+class GyroScaleBlock(ScalarInputBlock):
     """Yaw-axis gyro scale k: w' = (wx, wy, k wz), applied after the bias (k (w_z - b_z)).
 
     Only the base-frame z axis turns far enough for its scale to be observable;
@@ -67,6 +46,7 @@ class GyroScaleBlock(_ScalarScale):
 
     name = "gyro_scale"
     corrects = "angular"
+    start = 1.0  # the input as measured
 
     def applies(self, from_gyro: bool) -> bool:
         return from_gyro

@@ -132,6 +132,32 @@ class InputBlock(StateBlock):
         return np.dot(np.array(G).reshape(3, 3), self.input_jacobian(xb, u)).ravel().tolist()
 
 
+class ScalarInputBlock(InputBlock):
+    """An input block with one state: its nominal value starts at ``start`` (the input as measured),
+    with a prior ``sigma`` around it and a random walk ``walk`` per sqrt(s)."""
+
+    nominal_size = 1
+    error_size = 1
+    scales_input = True
+    start = 0.0
+
+    def __init__(self, sigma: float, walk: float) -> None:
+        self.sigma = sigma
+        self.walk = walk
+
+    def initial(self) -> list[float]:
+        return [self.start]
+
+    def initial_sigma(self) -> list[float]:
+        return [self.sigma]
+
+    def random_walk(self) -> list[float]:
+        return [self.walk]
+
+    def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
+        x[n0] += dx[e0]
+
+
 class GyroBiasBlock(InputBlock):
     """Additive gyro bias: omega = omega_measured - b. Only applies to gyro-driven rates."""
 

@@ -19,31 +19,13 @@ from __future__ import annotations
 
 import math
 
-from .state import InputBlock, Vec3
+from .state import ScalarInputBlock, Vec3
 
 
-class TwistPitchBlock(InputBlock):
+class TwistPitchBlock(ScalarInputBlock):
     name = "twist_pitch"
     corrects = "linear"
-    nominal_size = 1
-    error_size = 1
-    scales_input = True
-
-    def __init__(self, sigma: float, walk: float) -> None:
-        self.sigma = sigma
-        self.walk = walk
-
-    def initial(self) -> list[float]:
-        return [0.0]
-
-    def initial_sigma(self) -> list[float]:
-        return [self.sigma]
-
-    def random_walk(self) -> list[float]:
-        return [self.walk]
-
-    def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
-        x[n0] += dx[e0]
+    start = 0.0  # the mount as configured
 
     def correct(self, xb: list[float], u: Vec3) -> Vec3:
         c, s = math.cos(xb[0]), math.sin(xb[0])
