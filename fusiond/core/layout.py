@@ -25,17 +25,21 @@ def absolute_sensor(sc) -> bool:
     return isinstance(sc, GpsSensor) or (isinstance(sc, PoseSensor) and not sc.differential)
 
 
-def absolute_height(cfg: Config) -> bool:
-    """Is an absolute height fused (a GPS altitude, an absolute pose's z), outside two_d_mode?"""
+def fuses_height(cfg: Config, sensor) -> bool:
+    """Does this sensor's absolute height reach the filter (a GPS altitude, an absolute pose's z, whose
+    stated noise is not beyond its max_sigma), outside two_d_mode?"""
     if cfg.filter.two_d_mode:
         return False
-    for s in cfg.sensors:
-        if isinstance(s, GpsSensor) and (s.position_noise is None or s.position_noise[2] <= s.max_sigma):
-            return True
-        if isinstance(s, PoseSensor) and not s.differential and (
-                s.position_noise is None or s.position_noise[2] <= s.max_sigma[0]):
-            return True
+    if isinstance(sensor, GpsSensor):
+        return sensor.position_noise is None or sensor.position_noise[2] <= sensor.max_sigma
+    if isinstance(sensor, PoseSensor) and not sensor.differential:
+        return sensor.position_noise is None or sensor.position_noise[2] <= sensor.max_sigma[0]
     return False
+
+
+def absolute_height(cfg: Config) -> bool:
+    """Is an absolute height fused by any sensor (``fuses_height``)?"""
+    return any(fuses_height(cfg, s) for s in cfg.sensors)
 
 
 def state_layout(cfg: Config) -> StateLayout:
@@ -124,4 +128,4 @@ def update_masks(layout: StateLayout, has_frame_sensor: bool, heading_observed: 
     return UpdateMasks(tilt, position, delta, rest)
 
 
-__all__ = ["UpdateMasks", "absolute_height", "absolute_sensor", "state_layout", "update_masks"]
+__all__ = ["UpdateMasks", "absolute_height", "absolute_sensor", "fuses_height", "state_layout", "update_masks"]

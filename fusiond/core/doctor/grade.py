@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import Config, GpsSensor, ImuSensor
+from ..layout import fuses_height
 from .attitude import full_mount, paste_mount
 from .heading import gps_sigma
 from .mounting import MountYaw
@@ -98,12 +99,6 @@ def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float
     return sigma_w, sigma_w, ASSUMED_TAU_S
 
 
-def _altitude_fused(cfg: Config, gps: GpsSensor) -> bool:
-    if cfg.filter.two_d_mode:
-        return False
-    return gps.position_noise is None or gps.position_noise[2] <= gps.max_sigma
-
-
 def _tilt_from_imu(imu: ImuSensor) -> bool:
     return imu.orientation != "off" or imu.tilt_from_gravity
 
@@ -112,7 +107,7 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     """The chord fit of the mounting pitch, or None without a GPS altitude, an IMU tilt or enough chords."""
     gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
     imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
-    if gps is None or imu is None or not _altitude_fused(cfg, gps) or not _tilt_from_imu(imu):
+    if gps is None or imu is None or not fuses_height(cfg, gps) or not _tilt_from_imu(imu):
         return None
     if len(series.gps_t) < 5 or len(series.odom_t) < 10 or len(series.est_t) < 10:
         return None
