@@ -79,6 +79,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     doctor = not args.quiet or bool(args.plot or args.report)  # --quiet: no summary to judge for
     # the samples as fused, kept to replay the doctor's advice on (what --fuse-every left, in bag order)
     fused: list | None = [] if doctor and args.advice_budget_s > 0.0 else None
+    records: list | None = [] if fused is not None else None  # ... and what it made of them
     through = recorder.filter if recorder is not None else None
     if fused is not None:
         through = _kept(fused, through)
@@ -93,11 +94,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
             warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
             doctor=doctor,
             through=through,
+            records=records,
         )
         if fused:
             from .tune.advice import prove_advice
 
-            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s)
+            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records)
         evaluation = None
         if recorder is not None:
             from .replay.evaluate import evaluate

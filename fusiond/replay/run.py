@@ -185,20 +185,29 @@ def replay(
     warn: Callable[[str], None] | None = None,
     doctor: bool = True,
     through: Callable[[Iterator[Sample]], Iterator[Sample]] | None = None,
+    records: list | None = None,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
     its series); a replay whose only output is files (``--quiet`` without plot or report) skips it.
     ``through``: the bag's samples pass through it on their way to the core (the evaluation's
-    recorder sees every one and holds back the fixes it scores on)."""
+    recorder sees every one and holds back the fixes it scores on). ``records``: every diagnostics
+    record of the replay is appended to it (the advice's proof scores them as its reference run)."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn)
             runner = Runner(cfg, keep_trace, doctor)
-            if diag_out is not None:
+            if diag_out is not None and records is not None:
+                def keep(r, add=diag_out.add, append=records.append) -> None:
+                    add(r)
+                    append(r)
+                runner.on_record = keep
+            elif diag_out is not None:
                 runner.on_record = diag_out.add
+            elif records is not None:
+                runner.on_record = records.append
             bar = _Progress(bag.total if progress else 0)
             for sample in (bag if through is None else through(iter(bag))):
                 runner.feed(sample)

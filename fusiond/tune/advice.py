@@ -88,17 +88,19 @@ def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
 
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
-                 budget_s: float = 60.0) -> list[Verdict]:
+                 budget_s: float = 60.0, base_records: Sequence[object] | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
-    recording as the replay fused it, in its order. One replay for the terms, one per distinct paste
-    line, while ``budget_s`` lasts (the lines not replayed in time say so). The recording's warnings
-    were logged by the replay the verdicts come from: these replays log nothing."""
+    recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
+    when the caller kept them (else the recording is replayed once more for them). Then one replay per
+    distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
+    recording's warnings were logged by the replay the verdicts come from: these replays log nothing."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
     deadline = time.perf_counter() + budget_s
-    with muted():
-        base_records = replay_records(cfg, samples)
+    if base_records is None:
+        with muted():
+            base_records = replay_records(cfg, samples)
     full = reference(base_records, cfg)
     proofs: dict[tuple[str, str], Proof] = {}
     # problems first: if the budget runs out, the lines left unproven are the least urgent ones
