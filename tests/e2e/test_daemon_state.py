@@ -20,6 +20,7 @@ from fusiond.core.resume import state_fingerprint
 from fusiond.samples import ImuSample, OdomSample
 from fusiond.transport.state_file import load_state
 
+from tests.support.configs import sensor_tables
 from tests.support.daemon import client_session, daemon_process, free_port, log_events, wait_daemon_ready, wait_until
 
 pytestmark = pytest.mark.e2e
@@ -33,6 +34,7 @@ GYRO_COV = (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)
 # What the worker's loop adds to the save interval: it looks at the timer between passes, at least
 # every 0.1 s (CORE_REFRESH_S), and the saver thread's write (an fsync) follows.
 SAVE_SLACK_S = 0.15
+SENSORS = sensor_tables('orientation = "roll_pitch"\nangular_velocity = true', imu_key="imu/data")
 
 
 def write_config(path: Path, port: int, state: Path, max_age_s: float = 60.0) -> Path:
@@ -47,17 +49,7 @@ path = "{state.name}"
 save_interval_s = {SAVE_S}
 max_age_s = {max_age_s}
 
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-orientation = "roll_pitch"
-angular_velocity = true
+{SENSORS}
 """)
     return path
 

@@ -33,6 +33,7 @@ from fusiond.health import decode_report
 from fusiond.transport.daemon import Daemon
 from fusiond.transport.session import build_config, open_session, query_health
 
+from tests.support.configs import sensor_tables
 from tests.support.loopback import free_port, wait_until
 
 sdk = pytest.importorskip("zenoh_ros2_sdk", reason="zenoh-ros2-sdk (test extra) not installed")
@@ -50,15 +51,7 @@ interop = "rmw_zenoh"
 domain_id = {domain}
 [output]
 ros_diagnostics_period_s = 0.2
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-"""
+""" + sensor_tables(imu_key="imu/data")
 
 DOMAIN = 7
 TYPES = {"/odom_combined": POSE_COV_STAMPED, "/odometry/filtered": ODOMETRY, "/tf": TF_MESSAGE,

@@ -177,6 +177,24 @@ def test_mutual_tls_only_a_client_with_a_valid_certificate_gets_anything(pki, tm
 # --------------------------------------------------------------------------- access control
 
 
+def daemon_rules(outputs: list[str], sensor_keys: list[str], health: list[str]) -> list[dict]:
+    """The ACL rules every fusiond deployment needs: publish its outputs (and let them be subscribed
+    to), subscribe to and receive its sensors, answer health queries and liveliness."""
+    return [
+        {"id": "publish-outputs", "permission": "allow", "flows": ["egress"], "messages": ["put"],
+         "key_exprs": outputs},
+        {"id": "outputs-subscribers", "permission": "allow", "flows": ["ingress"],
+         "messages": ["declare_subscriber"], "key_exprs": outputs},
+        {"id": "subscribe-sensors", "permission": "allow", "flows": ["egress"],
+         "messages": ["declare_subscriber"], "key_exprs": sensor_keys},
+        {"id": "receive-sensors", "permission": "allow", "flows": ["ingress"], "messages": ["put"],
+         "key_exprs": sensor_keys},
+        {"id": "health", "permission": "allow", "flows": ["ingress", "egress"],
+         "messages": ["declare_queryable", "query", "reply", "liveliness_token", "liveliness_query",
+                      "declare_liveliness_subscriber"], "key_exprs": health},
+    ]
+
+
 def acl_json5(sensor_keys: list[str]) -> str:
     """fusiond's least privilege: publish only its outputs, subscribe only to its sensors, answer health."""
     outputs = ["odom_combined", "odometry/filtered", "fusiond/**"]
@@ -184,20 +202,7 @@ def acl_json5(sensor_keys: list[str]) -> str:
         "access_control": {
             "enabled": True,
             "default_permission": "deny",
-            "rules": [
-                {"id": "publish-outputs", "permission": "allow", "flows": ["egress"], "messages": ["put"],
-                 "key_exprs": outputs},
-                {"id": "outputs-subscribers", "permission": "allow", "flows": ["ingress"],
-                 "messages": ["declare_subscriber"], "key_exprs": outputs},
-                {"id": "subscribe-sensors", "permission": "allow", "flows": ["egress"],
-                 "messages": ["declare_subscriber"], "key_exprs": sensor_keys},
-                {"id": "receive-sensors", "permission": "allow", "flows": ["ingress"], "messages": ["put"],
-                 "key_exprs": sensor_keys},
-                {"id": "health", "permission": "allow", "flows": ["ingress", "egress"],
-                 "messages": ["declare_queryable", "query", "reply", "liveliness_token", "liveliness_query",
-                              "declare_liveliness_subscriber"],
-                 "key_exprs": ["fusiond/**"]},
-            ],
+            "rules": daemon_rules(outputs, sensor_keys, ["fusiond/**"]),
             "subjects": [{"id": "every-peer"}],
             "policies": [{"rules": ["publish-outputs", "outputs-subscribers", "subscribe-sensors", "receive-sensors",
                                     "health"], "subjects": ["every-peer"]}],
@@ -310,17 +315,7 @@ def set_pose_acl_json5(pki: Path, sensor_keys: list[str]) -> str:
             "enabled": True,
             "default_permission": "deny",
             "rules": [
-                {"id": "publish-outputs", "permission": "allow", "flows": ["egress"], "messages": ["put"],
-                 "key_exprs": outputs},
-                {"id": "outputs-subscribers", "permission": "allow", "flows": ["ingress"],
-                 "messages": ["declare_subscriber"], "key_exprs": outputs},
-                {"id": "subscribe-sensors", "permission": "allow", "flows": ["egress"],
-                 "messages": ["declare_subscriber"], "key_exprs": sensor_keys},
-                {"id": "receive-sensors", "permission": "allow", "flows": ["ingress"], "messages": ["put"],
-                 "key_exprs": sensor_keys},
-                {"id": "health", "permission": "allow", "flows": ["ingress", "egress"],
-                 "messages": ["declare_queryable", "query", "reply", "liveliness_token", "liveliness_query",
-                              "declare_liveliness_subscriber"], "key_exprs": health},
+                *daemon_rules(outputs, sensor_keys, health),
                 {"id": "set-pose", "permission": "allow", "flows": ["ingress", "egress"],
                  "messages": ["declare_queryable", "query", "reply"], "key_exprs": ["fusiond/set_pose"]},
             ],

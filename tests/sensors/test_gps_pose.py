@@ -27,6 +27,7 @@ from fusiond.codecs import (
 )
 
 from tests.support.sim_gps import World, simulate, truth_at
+from tests.support.configs import sensor_tables
 from tests.support.gps_pose import DATUM, _gps_config, _gps_world, config
 
 
@@ -171,17 +172,7 @@ def test_issue_config_keys_parse():
 def test_bad_new_keys_are_one_line_errors(gps, pose, imu, needle):
     with pytest.raises(ConfigError) as err:
         config(gps=gps, pose=pose, imu=imu.replace("angular_velocity = false\n", ""),
-               filt="") if "angular_velocity = false" not in imu else loads(f"""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-{imu}
-""")
+               filt="") if "angular_velocity = false" not in imu else loads(sensor_tables(imu))
     assert needle in str(err.value) and "\n" not in str(err.value)
 
 
@@ -661,23 +652,8 @@ def test_gps_with_a_trusted_absolute_imu_yaw_takes_heading_from_the_imu():
     from fusiond.estimator import rotation as rot
     from fusiond.samples import ImuSample
 
-    cfg = loads("""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "absolute"
-yaw_offset_sigma = 0.0
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "fix"
-datum = [48.0, 11.0, 500.0]
-""")
+    cfg = loads(sensor_tables('orientation = "absolute"\nyaw_offset_sigma = 0.0', gps="datum = [48.0, 11.0, 500.0]",
+                              gps_key="fix"))
     core = FusionCore(cfg)
     cov36 = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
     q = rot.from_rpy(0.0, 0.0, 1.0)

@@ -59,3 +59,14 @@ kind = "imu"
 key = "t/imu"
 {imu}
 {extra}""")
+
+
+def sensor_tables(imu: str = "", imu_key: str = "imu", gps: str | None = None, gps_key: str = "gps") -> str:
+    """Just the ``[[sensors]]`` tables of the usual robot, for a test that writes the other tables itself:
+    odometry "wheel" on key "odom", an IMU "imu" on ``imu_key`` (plus the ``imu`` lines) and, when ``gps``
+    is not None, a GPS "gps" on ``gps_key`` (plus the ``gps`` lines)."""
+    text = f'[[sensors]]\nname = "wheel"\nkind = "odom"\nkey = "odom"\n' \
+           f'[[sensors]]\nname = "imu"\nkind = "imu"\nkey = "{imu_key}"\n{imu}\n'
+    if gps is not None:
+        text += f'[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "{gps_key}"\n{gps}\n'
+    return text

@@ -16,6 +16,7 @@ from fusiond.health import (
     encode_report,
 )
 from fusiond.samples import ImuSample, OdomSample
+from tests.support.configs import sensor_tables
 
 
 class Clock:
@@ -189,21 +190,7 @@ def test_health_says_when_the_world_frame_is_not_defined_yet():
     from fusiond.health import core_counters
     from fusiond.samples import ImuSample
 
-    cfg = loads("""
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-angular_velocity = true
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "gps/fix"
-""")
+    cfg = loads(sensor_tables("angular_velocity = true", gps="", gps_key="gps/fix"))
     core = FusionCore(cfg)
     core.ingest(ImuSample("imu", 10.0, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0.0, 0.0, 0.0),
                           (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)))
