@@ -131,8 +131,10 @@ class Row:
         if self.ours is None or self.best is None:
             return "-"
         if self.ours <= self.best[0]:
-            return "yes"
-        return "within noise" if self.ours <= self.best[0] + self.noise else "NO"
+            verdict = "yes"
+        else:
+            verdict = "within noise" if self.ours <= self.best[0] + self.noise else "NO"
+        return verdict if self.case.acceptance else f"{verdict} (shown, not judged)"
 
 
 def rows(data: Path) -> list[Row]:
