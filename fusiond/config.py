@@ -101,7 +101,10 @@ class FilterConfig(_Table):
     nis_confidence: float = 0.95  # two-sided chi-square confidence of that test
 
 
-class _Sensor(_Table, tag_field="kind"):
+class SensorTable(_Table, tag_field="kind"):
+    """The keys every [[sensors]] table has; each kind's table subclasses it with ``tag="<kind>"``
+    and is registered with its descriptor (``core/sensors/registry.py``)."""
+
     name: str
     key: str
     encoding: Literal["ros2-cdr", "json", "msgpack"] = "ros2-cdr"
@@ -111,7 +114,7 @@ class _Sensor(_Table, tag_field="kind"):
     stamp_offset_s: float = 0.0
 
 
-class OdomSensor(_Sensor, tag="odom"):
+class OdomSensor(SensorTable, tag="odom"):
     twist_frame: Literal["body", "world"] = "body"
     twist_noise: Vec6 | None = None  # std devs vx vy vz wx wy wz, replace message covariance
     twist_min_sigma: Vec2 = (0.01, 0.01)  # floors: linear m/s, angular rad/s
@@ -132,7 +135,7 @@ class OdomSensor(_Sensor, tag="odom"):
     coast_decel: float = 0.5
 
 
-class ImuSensor(_Sensor, tag="imu"):
+class ImuSensor(SensorTable, tag="imu"):
     mahalanobis_threshold: float = math.inf  # gate on sqrt(NIS); inf disables
     adaptive: bool = False  # scale R from the innovation window
     adaptive_window: int = 50
@@ -169,7 +172,7 @@ POSE_MSGTYPES = (
 )
 
 
-class GpsSensor(_Sensor, tag="gps"):
+class GpsSensor(SensorTable, tag="gps"):
     """sensor_msgs/msg/NavSatFix; with one configured, the world frame is ENU at the datum."""
 
     timeout_s: float = 2.0
@@ -192,7 +195,7 @@ class GpsSensor(_Sensor, tag="gps"):
     max_sigma: float = 1.0e3  # an axis stated less precise than this (m) is "not measured": not fused
 
 
-class PoseSensor(_Sensor, tag="pose"):
+class PoseSensor(SensorTable, tag="pose"):
     """An absolute (or, with differential, relative) pose: visual odometry, motion capture, ..."""
 
     timeout_s: float = 1.0
@@ -210,6 +213,8 @@ class PoseSensor(_Sensor, tag="pose"):
     extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
 
 
+# The built-in kinds' tables (type hints, the documented defaults); a config's sensors decode as
+# whatever kinds are registered (``registry.config_types``), which a new kind extends.
 SensorConfig = OdomSensor | ImuSensor | GpsSensor | PoseSensor
 
 
@@ -219,7 +224,9 @@ class Config(_Table):
     ros: RosConfig = msgspec.field(default_factory=RosConfig)
     filter: FilterConfig = msgspec.field(default_factory=FilterConfig)
     state: StateConfig = msgspec.field(default_factory=StateConfig)
-    sensors: list[SensorConfig] = []
+    # Decoded by ``loads`` against the registered kinds' tables (``_sensor_tables``), not by this
+    # annotation, so that a kind registered after import is a valid [[sensors]] table.
+    sensors: list[typing.Any] = []
 
     def sensor(self, name: str) -> SensorConfig:
         for s in self.sensors:
@@ -297,35 +304,27 @@ def validate(cfg: Config) -> Config:
             raise ConfigError(f"{sensor_key(every, i, 'stamp_offset_s')}: must be finite")
         names.add(s.name)
         keys.add(s.key)
-    odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]
+    # What a sensor's kind means to the others (which one drives the prediction, defines the world
+    # frame, is geodetic) its descriptor says; asked at call time, since core/sensors imports this module.
+    from .core.sensors.registry import kind_of
+
+    kinds = [kind_of(s) for s in cfg.sensors]
+    odoms = [s for s, k in zip(cfg.sensors, kinds) if k.drives_prediction]
     if len(odoms) != 1 and cfg.sensors:
         raise ConfigError(f"sensors: exactly one odom sensor drives the prediction, found {len(odoms)}")
-    frames = [i for i, s in enumerate(cfg.sensors)
-              if isinstance(s, GpsSensor) or (isinstance(s, PoseSensor) and not s.differential)]
+    frames = [i for i, (s, k) in enumerate(zip(cfg.sensors, kinds)) if k.defines_frame(s)]
     if len(frames) > 1:
         raise ConfigError(f"{sensor_key(every, frames[1])}: only one absolute sensor (gps, or pose without differential) "
                           "may define the world frame")
-    if cfg.output.navsat_key and not any(isinstance(s, GpsSensor) for s in cfg.sensors):
+    if cfg.output.navsat_key and not any(k.geodetic for k in kinds):
         raise ConfigError("output.navsat_key: needs a gps sensor (the NavSatFix is the fused position in WGS84)")
     _check_ros(cfg)
-    for i, s in enumerate(cfg.sensors):
+    for i, (s, k) in enumerate(zip(cfg.sensors, kinds)):
         def at(field: str) -> str:
             return sensor_key(every, i, field)  # noqa: B023 - called in this iteration only
 
-        if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
-            raise ConfigError(f"{at('gyro_scale_estimation')}: needs angular_velocity = true")
-        if isinstance(s, ImuSensor) and not (0.0 <= s.orientation_rate_hz < math.inf):
-            raise ConfigError(f"{at('orientation_rate_hz')}: must be >= 0 and finite (0: every sample)")
+        k.validate(s, at)
         _check_radians(s, at)
-        if isinstance(s, GpsSensor):
-            if s.datum is not None and not (-90.0 <= s.datum[0] <= 90.0 and -180.0 <= s.datum[1] <= 180.0):
-                raise ConfigError(f"{at('datum')}: latitude must be in [-90, 90] and longitude in [-180, 180]")
-            if s.heading_init_m <= 0.0:
-                raise ConfigError(f"{at('heading_init_m')}: must be positive")
-            if s.error_tau_s > 0.0 and s.error_sigma is None:
-                raise ConfigError(f"{at('error_sigma')}: needed when error_tau_s > 0")
-            if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s <= 0.0:
-                raise ConfigError(f"{at('vertical_error_tau_s')}: must be positive when vertical_error_sigma > 0")
     return cfg
 
 
@@ -384,7 +383,7 @@ def _resolve(raw: object, path: str) -> type | None:
             i = int(part[1:-1])
             node = node[i] if i < len(node) else None
             kind = node.get("kind") if isinstance(node, dict) else None
-            cls = next((c for c in typing.get_args(SensorConfig) if c.__struct_config__.tag == kind), None)
+            cls = next((c for c in _sensor_tables() if c.__struct_config__.tag == kind), None)
             if cls is None:
                 return None
             continue
@@ -416,7 +415,7 @@ def _hint(msg: str, path: str, raw: object) -> str:
         table, _, field = path.rpartition(".")
         cls = _resolve(raw, table) if table else Config
         if field == "kind":
-            valid = [c.__struct_config__.tag for c in typing.get_args(SensorConfig)]
+            valid = [c.__struct_config__.tag for c in _sensor_tables()]
         elif cls is not None:
             hint = typing.get_type_hints(cls).get(field)
             valid = [a for t in ([hint] + list(typing.get_args(hint))) if typing.get_origin(t) is Literal
@@ -450,13 +449,37 @@ def _named(path: str, raw: object) -> str:
     return sensor_key(names, int(found.group(1)), found.group(2) or "")
 
 
+def _sensor_tables() -> tuple[type, ...]:
+    """The registered kinds' [[sensors]] tables (at call time: core/sensors imports this module)."""
+    from .core.sensors.registry import config_types
+
+    return config_types()
+
+
+def convert(raw: object) -> Config:
+    """A parsed TOML document as a Config (not yet ``validate``-d); msgspec.ValidationError as msgspec
+    raises it, its path from the document's root. The [[sensors]] tables decode as the union of the
+    kinds registered now."""
+    cfg = msgspec.convert(raw, type=Config)
+    if not cfg.sensors:
+        return cfg
+    tables = _sensor_tables()
+    union = typing.Union[tables] if len(tables) > 1 else tables[0]  # noqa: UP007 - built at run time
+    try:
+        sensors = msgspec.convert(cfg.sensors, type=list[union])  # type: ignore[valid-type]
+    except msgspec.ValidationError as err:
+        text, sep, path = str(err).partition(" - at `$")
+        raise msgspec.ValidationError(f"{text}{sep}.sensors{path}" if sep else text) from None
+    return msgspec.structs.replace(cfg, sensors=sensors)
+
+
 def loads(text: str, source: str = "<config>") -> Config:
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{source}: invalid TOML: {err}") from None
     try:
-        cfg = msgspec.convert(raw, type=Config)
+        cfg = convert(raw)
     except msgspec.ValidationError as err:
         raise ConfigError(f"{source}: {_one_line(err, raw)}") from None
     try:

@@ -8,14 +8,15 @@ predicted motion over the same interval, kept in its slice of the state.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 import numpy as np
 
 from ... import reasons
-from ...config import PoseSensor
+from ...config import POSE_MSGTYPES, FilterConfig, PoseSensor
 from ...estimator import mat3
 from ...estimator import observations as obs
 from ...estimator import rotation as rot
@@ -24,6 +25,7 @@ from ..diagnostics import DiagnosticsRecord
 from .base import SensorContext, SensorModel
 from .checks import Rejected, finite, plausible, unit_quaternion
 from .frame import new_frame, set_position
+from .kind import SensorKind
 
 if TYPE_CHECKING:
     from ..state import FilterState
@@ -208,4 +210,35 @@ class PoseModel(SensorModel):
         return None
 
 
-__all__ = ["PoseAnchor", "PoseInput", "PoseModel", "PosePolicy"]
+class PoseKind(SensorKind):
+    """An absolute pose (visual odometry, motion capture) defines the world frame and gives position,
+    height, tilt and yaw; a differential one fuses deltas between its poses and defines nothing."""
+
+    name = "pose"
+    config_type = PoseSensor
+    sample_type = PoseSample
+    model_type = PoseModel
+    ros_types = POSE_MSGTYPES
+    frame_message = "pose"
+
+    def defines_frame(self, cfg: PoseSensor) -> bool:
+        return not cfg.differential
+
+    def fuses_height(self, cfg: PoseSensor, filter_cfg: FilterConfig) -> bool:
+        return not cfg.differential and (cfg.position_noise is None or cfg.position_noise[2] <= cfg.max_sigma[0])
+
+    def ros_type(self, cfg: PoseSensor) -> str:
+        return cfg.msgtype  # a CDR payload does not say which of the pose types it is
+
+    def from_ros(self) -> Callable[[Any, str], Any]:
+        from ...codecs.from_ros import pose_from_ros
+
+        return pose_from_ros
+
+    def decoder(self, cfg: PoseSensor) -> Callable[[Any], Any]:
+        from ...codecs.decoders import make_decoder
+
+        return make_decoder(self.name, cfg.encoding, cfg.name, msgtype=cfg.msgtype)
+
+
+__all__ = ["PoseAnchor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy"]
