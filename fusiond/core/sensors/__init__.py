@@ -9,7 +9,7 @@ its own immutable slice of the state (``FilterState.own[index]``). The core's ti
 handling knows none of them, and what the rest of fusiond asks of a kind (does it define the
 world frame, which state blocks, which decoder) its descriptor answers: adding a kind is a new
 module here (or a package, as ``imu/`` with its gyro-bias learning and gap turn) and one
-``register`` call (docs/ARCHITECTURE.md, "Adding a sensor kind").
+``register`` call (docs/SENSOR_KINDS.md, "Adding a sensor kind").
 """
 
 from __future__ import annotations
