@@ -114,108 +114,28 @@ class SensorTable(_Table, tag_field="kind"):
     stamp_offset_s: float = 0.0
 
 
-class OdomSensor(SensorTable, tag="odom"):
-    twist_frame: Literal["body", "world"] = "body"
-    twist_noise: Vec6 | None = None  # std devs vx vy vz wx wy wz, replace message covariance
-    twist_min_sigma: Vec2 = (0.01, 0.01)  # floors: linear m/s, angular rad/s
-    twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
-    twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
-    slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
-    # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
-    twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
-    # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
-    # makes it observable; false: an explicit opt-out
-    scale_estimation: bool | None = None
-    # estimate the pitch of the wheels' twist in the body (an IMU pitched in its mount beyond extrinsic_rpy);
-    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one
-    pitch_estimation: bool = False
-    twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
-    # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
-    # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom.py); 0: off
-    coast_decel: float = 0.5
+# Each kind's [[sensors]] table lives with its kind in core/sensors/ (which imports this module), and
+# is importable from here too: read on first use. ``SensorConfig`` is the union of the built-in ones
+# (type hints, the documented defaults of config.toml); a config's sensors decode as whatever kinds
+# are registered (``registry.config_types``), which a new kind extends.
+_KIND_TABLES: Final = {
+    "OdomSensor": "odom", "ImuSensor": "imu", "GpsSensor": "gps", "PoseSensor": "pose", "POSE_MSGTYPES": "pose",
+}
 
 
-class ImuSensor(SensorTable, tag="imu"):
-    mahalanobis_threshold: float = math.inf  # gate on sqrt(NIS); inf disables
-    adaptive: bool = False  # scale R from the innovation window
-    adaptive_window: int = 50
-    orientation: Literal["absolute", "relative", "roll_pitch", "off"] = "roll_pitch"
-    angular_velocity: bool = False
-    extrinsic_rpy: Vec3 = (0.0, 0.0, 0.0)
-    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
-    gyro_noise: float | None = None  # std dev rad/s
-    orientation_min_sigma: float = 0.001  # floor, rad
-    orientation_max_sigma: float = 3.0  # above: "not measured"
-    gyro_min_sigma: float = 0.0005  # floor, rad/s
-    # highest rate (Hz) at which the orientation is fused (the gyro is taken at every sample); 0: every sample
-    orientation_rate_hz: float = 100.0
-    # orientation = "roll_pitch": after a silence of the IMU longer than filter.gap_s (a logging gap), turn
-    # the heading by what the IMU's own yaw turned across it, less the yaw's measured drift, weighed against
-    # what the (rescaled) wheels turned meanwhile (core/sensors/imu/gap_turn.py)
-    yaw_across_gaps: bool = True
-    gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
-    tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer
-    gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics
-    # absolute yaw, as navsat_transform: yaw in ENU = reading + yaw_offset + magnetic_declination (rad)
-    yaw_offset: float = 0.0  # e.g. pi/2 for an IMU that reads 0 facing north
-    magnetic_declination: float = 0.0  # for a magnetometer's yaw (magnetic north), rad, west-positive (minus NOAA's)
-    # beside a gps or absolute pose: what is left of the offset is estimated, with this prior (rad)
-    # and random walk (rad/sqrt(s)); yaw_offset_sigma = 0 takes the corrected yaw as the heading
-    yaw_offset_sigma: float = 0.5
-    yaw_offset_walk: float = 0.05
+def __getattr__(name: str) -> typing.Any:
+    if name == "SensorConfig":
+        from .core.sensors import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 
+        value: typing.Any = OdomSensor | ImuSensor | GpsSensor | PoseSensor
+    elif name in _KIND_TABLES:
+        from importlib import import_module
 
-POSE_MSGTYPES = (
-    "geometry_msgs/msg/PoseWithCovarianceStamped",
-    "geometry_msgs/msg/PoseStamped",
-    "nav_msgs/msg/Odometry",
-)
-
-
-class GpsSensor(SensorTable, tag="gps"):
-    """sensor_msgs/msg/NavSatFix; with one configured, the world frame is ENU at the datum."""
-
-    timeout_s: float = 2.0
-    # gate on sqrt(NIS) once the heading is known: multipath bursts and placeholder fixes, not the
-    # receiver's ordinary noise (a consistent filter rejects ~1 fix in 10^5); a run of agreeing
-    # rejected fixes re-acquires (core/sensors/gps.py), so the gate cannot lock the filter out
-    mahalanobis_threshold: float = 5.0
-    datum: Vec3 | None = None  # [lat deg, lon deg, alt m]; default: the first valid fix
-    position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
-    position_min_sigma: float = 0.01  # floor, m
-    unknown_position_sigma: Vec3 = (2.5, 2.5, 5.0)  # used when the covariance type is UNKNOWN (0)
-    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # antenna position in base_link, m
-    heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
-    error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s
-    error_sigma: Vec3 | None = None  # its steady-state std devs east north up, m (needed with error_tau_s)
-    # Without error_tau_s: the vertical alone as such a state (consumer receivers' altitude wanders
-    # metres over minutes while they state ~1-2 m); vertical_error_sigma = 0 turns it off
-    vertical_error_tau_s: float = 300.0
-    vertical_error_sigma: float = 5.0  # m
-    max_sigma: float = 1.0e3  # an axis stated less precise than this (m) is "not measured": not fused
-
-
-class PoseSensor(SensorTable, tag="pose"):
-    """An absolute (or, with differential, relative) pose: visual odometry, motion capture, ..."""
-
-    timeout_s: float = 1.0
-    mahalanobis_threshold: float = math.inf
-    msgtype: Literal[
-        "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry"
-    ] = "geometry_msgs/msg/PoseWithCovarianceStamped"
-    differential: bool = False  # fuse deltas between consecutive poses (drifting origin) instead
-    position_noise: Vec3 | None = None  # std devs x y z, m; replaces the message covariance
-    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
-    position_min_sigma: float = 0.001  # floor, m
-    orientation_min_sigma: float = 0.001  # floor, rad
-    max_sigma: Vec2 = (100.0, 3.0)  # larger means "not measured": m, rad
-    unknown_sigma: Vec2 = (0.1, 0.05)  # for a message without covariance (PoseStamped): m, rad
-    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
-
-
-# The built-in kinds' tables (type hints, the documented defaults); a config's sensors decode as
-# whatever kinds are registered (``registry.config_types``), which a new kind extends.
-SensorConfig = OdomSensor | ImuSensor | GpsSensor | PoseSensor
+        value = getattr(import_module(f".core.sensors.{_KIND_TABLES[name]}", __package__), name)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 
 class Config(_Table):

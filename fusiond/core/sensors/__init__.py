@@ -1,7 +1,8 @@
 """Sensor kinds: one module or package each, with its ``SensorKind`` descriptor (``kind.py``),
 registered by its `kind` tag in ``registry.py``, and its ``SensorModel`` (``base.py``).
 
-A model is built once per configured sensor from its typed config table and a narrow
+Each kind's [[sensors]] table is defined with it (``fusiond.config`` re-exports the built-in
+ones). A model is built once per configured sensor from its typed config table and a narrow
 ``SensorContext``; it converts raw samples into filter input (its policy: floors,
 overrides, "not measured" rules, mounting rotations) and applies them to the filter
 state through the EKF's own methods, keeping what it must remember between messages in
@@ -16,11 +17,11 @@ from __future__ import annotations
 
 from .base import SensorContext, SensorModel
 from .checks import Rejected
-from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy
-from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, quiet_bound
+from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy, GpsSensor
+from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSensor, quiet_bound
 from .kind import LayoutView, SensorKind
-from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy
-from .pose import PoseInput, PoseKind, PoseModel, PosePolicy
+from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSensor
+from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSensor
 from .registry import KINDS, config_types, kind_named, kind_of, register, unregister
 
 
@@ -30,8 +31,9 @@ def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
 
 
 __all__ = [
-    "KINDS", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "ImuInput", "ImuKind", "ImuModel", "ImuPolicy",
-    "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy", "PoseInput", "PoseKind", "PoseModel",
-    "PosePolicy", "Rejected", "SensorContext", "SensorKind", "SensorModel", "build_models", "config_types",
-    "kind_named", "kind_of", "quiet_bound", "register", "unregister",
+    "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSensor", "ImuInput", "ImuKind",
+    "ImuModel", "ImuPolicy", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
+    "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor", "Rejected", "SensorContext",
+    "SensorKind", "SensorModel", "build_models", "config_types", "kind_named", "kind_of", "quiet_bound", "register",
+    "unregister",
 ]

@@ -30,12 +30,12 @@ import math
 import operator
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import msgspec
 
 from ... import reasons
-from ...config import OdomSensor
+from ...config import SensorTable, Vec2, Vec6
 from ...estimator import StateBlock, TwistPitchBlock, WheelScaleBlock, mat3
 from ...estimator import rotation as rot
 from ...logs import get_logger
@@ -48,6 +48,27 @@ from .imu.gyro_bias import quiet_bound
 
 if TYPE_CHECKING:
     from ..state import FilterState
+
+class OdomSensor(SensorTable, tag="odom"):
+    twist_frame: Literal["body", "world"] = "body"
+    twist_noise: Vec6 | None = None  # std devs vx vy vz wx wy wz, replace message covariance
+    twist_min_sigma: Vec2 = (0.01, 0.01)  # floors: linear m/s, angular rad/s
+    twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
+    twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
+    slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
+    # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
+    twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
+    # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
+    # makes it observable; false: an explicit opt-out
+    scale_estimation: bool | None = None
+    # estimate the pitch of the wheels' twist in the body (an IMU pitched in its mount beyond extrinsic_rpy);
+    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one
+    pitch_estimation: bool = False
+    twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
+    # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
+    # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom.py); 0: off
+    coast_decel: float = 0.5
+
 
 ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
 ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
@@ -370,5 +391,5 @@ class OdomKind(SensorKind):
         return lambda s: 0.0 in variances(s.twist_covariance)
 
 
-__all__ = ["OdomInput", "OdomKind", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT", "body_twist",
+__all__ = ["OdomInput", "OdomKind", "OdomModel", "OdomOwn", "OdomPolicy", "OdomSensor", "STOP_DECEL_LIMIT", "body_twist",
            "impossible_stop"]

@@ -8,15 +8,16 @@ predicted motion over the same interval, kept in its slice of the state.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import msgspec
 import numpy as np
 
 from ... import reasons
-from ...config import POSE_MSGTYPES, FilterConfig, PoseSensor
+from ...config import FilterConfig, SensorTable, Vec2, Vec3
 from ...estimator import mat3
 from ...estimator import observations as obs
 from ...estimator import rotation as rot
@@ -29,6 +30,31 @@ from .kind import SensorKind
 
 if TYPE_CHECKING:
     from ..state import FilterState
+
+POSE_MSGTYPES = (
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/PoseStamped",
+    "nav_msgs/msg/Odometry",
+)
+
+
+class PoseSensor(SensorTable, tag="pose"):
+    """An absolute (or, with differential, relative) pose: visual odometry, motion capture, ..."""
+
+    timeout_s: float = 1.0
+    mahalanobis_threshold: float = math.inf
+    msgtype: Literal[
+        "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry"
+    ] = "geometry_msgs/msg/PoseWithCovarianceStamped"
+    differential: bool = False  # fuse deltas between consecutive poses (drifting origin) instead
+    position_noise: Vec3 | None = None  # std devs x y z, m; replaces the message covariance
+    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
+    position_min_sigma: float = 0.001  # floor, m
+    orientation_min_sigma: float = 0.001  # floor, rad
+    max_sigma: Vec2 = (100.0, 3.0)  # larger means "not measured": m, rad
+    unknown_sigma: Vec2 = (0.1, 0.05)  # for a message without covariance (PoseStamped): m, rad
+    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
+
 
 NO_MOTION = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
@@ -241,4 +267,4 @@ class PoseKind(SensorKind):
         return make_decoder(self.name, cfg.encoding, cfg.name, msgtype=cfg.msgtype)
 
 
-__all__ = ["PoseAnchor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy"]
+__all__ = ["POSE_MSGTYPES", "PoseAnchor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor"]

@@ -8,12 +8,12 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from ....config import ImuSensor
 from ....errors import ConfigError
 from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
 from ....samples import ImuSample
 from ..kind import LayoutView, SensorKind
 from .model import ImuModel
+from .table import ImuSensor
 
 
 class ImuKind(SensorKind):
