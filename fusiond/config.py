@@ -148,7 +148,7 @@ class Config(_Table):
     # annotation, so that a kind registered after import is a valid [[sensors]] table.
     sensors: list[typing.Any] = []
 
-    def sensor(self, name: str) -> SensorConfig:
+    def sensor(self, name: str) -> SensorTable:
         for s in self.sensors:
             if s.name == name:
                 return s

@@ -17,7 +17,6 @@ errors mean anything, and only those are shown.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path

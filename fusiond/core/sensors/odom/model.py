@@ -27,48 +27,24 @@ reports its commanded speed and drops it to zero at once, 0.25 m from 0.5 m/s.
 from __future__ import annotations
 
 import math
-import operator
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING
 
 import msgspec
 
-from ... import reasons
-from ...config import SensorTable, Vec2, Vec6
-from ...estimator import StateBlock, TwistPitchBlock, WheelScaleBlock, mat3
-from ...estimator import rotation as rot
-from ...logs import get_logger
-from ...samples import OdomSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
-from .kind import LayoutView, SensorKind
-from .imu.gyro_bias import quiet_bound
+from .... import reasons
+from ....estimator import mat3
+from ....estimator import rotation as rot
+from ....logs import get_logger
+from ....samples import OdomSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
+from ..imu.gyro_bias import quiet_bound
+from .table import OdomSensor
 
 if TYPE_CHECKING:
     from ..state import FilterState
-
-class OdomSensor(SensorTable, tag="odom"):
-    twist_frame: Literal["body", "world"] = "body"
-    twist_noise: Vec6 | None = None  # std devs vx vy vz wx wy wz, replace message covariance
-    twist_min_sigma: Vec2 = (0.01, 0.01)  # floors: linear m/s, angular rad/s
-    twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
-    twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
-    slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
-    # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
-    twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
-    # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
-    # makes it observable; false: an explicit opt-out
-    scale_estimation: bool | None = None
-    # estimate the pitch of the wheels' twist in the body (an IMU pitched in its mount beyond extrinsic_rpy);
-    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one
-    pitch_estimation: bool = False
-    twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
-    # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
-    # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom.py); 0: off
-    coast_decel: float = 0.5
-
 
 ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
 ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
@@ -349,47 +325,4 @@ class OdomModel(SensorModel):
         return slope if misfit <= noise else math.nan
 
 
-class OdomKind(SensorKind):
-    """Wheel odometry: the motion input that drives the prediction; its messages prompt a publish.
-
-    Its wheel speed scale becomes observable once something defines the world frame (on by default
-    there), and the twist's pitch in the body once an absolute height is fused (opt-in)."""
-
-    name = "odom"
-    config_type = OdomSensor
-    sample_type = OdomSample
-    model_type = OdomModel
-    ros_types = ("nav_msgs/msg/Odometry",)
-    drives_prediction = True
-    prompts_publish = True
-
-    def state_blocks(self, cfg: OdomSensor, view: LayoutView) -> list[StateBlock]:
-        fc = view.filter
-        blocks: list[StateBlock] = []
-        if cfg.scale_estimation or (cfg.scale_estimation is None and view.absolute):
-            blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
-        # Not on by default: over a short drive the twist's pitch is confounded with the altitude's
-        # wander, and an error model that calls a slow wander white lets it take the wander for a slope.
-        if view.absolute_height and cfg.twist_frame == "body" and cfg.pitch_estimation:
-            blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
-        return blocks
-
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ...codecs.from_ros import odom_from_ros
-
-        return odom_from_ros
-
-    def decoder(self, cfg: OdomSensor) -> Callable[[Any], Any]:
-        from ...codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name)
-
-    def zero_covariance(self, cfg: OdomSensor) -> Callable[[Any], bool] | None:
-        if cfg.twist_noise is not None:
-            return None
-        variances = operator.itemgetter(0, 7, 14, 21, 28, 35)  # the diagonal of the 6x6
-        return lambda s: 0.0 in variances(s.twist_covariance)
-
-
-__all__ = ["OdomInput", "OdomKind", "OdomModel", "OdomOwn", "OdomPolicy", "OdomSensor", "STOP_DECEL_LIMIT", "body_twist",
-           "impossible_stop"]
+__all__ = ["OdomInput", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT", "body_twist", "impossible_stop"]

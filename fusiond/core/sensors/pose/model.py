@@ -8,53 +8,25 @@ predicted motion over the same interval, kept in its slice of the state.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
 
-from ... import reasons
-from ...config import FilterConfig, SensorTable, Vec2, Vec3
-from ...estimator import mat3
-from ...estimator import observations as obs
-from ...estimator import rotation as rot
-from ...samples import PoseSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import Rejected, finite, plausible, unit_quaternion
-from .frame import new_frame, set_position
-from .kind import SensorKind
+from .... import reasons
+from ....estimator import mat3
+from ....estimator import observations as obs
+from ....estimator import rotation as rot
+from ....samples import PoseSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import Rejected, finite, plausible, unit_quaternion
+from ..frame import new_frame, set_position
+from .table import PoseSensor
 
 if TYPE_CHECKING:
     from ..state import FilterState
-
-POSE_MSGTYPES = (
-    "geometry_msgs/msg/PoseWithCovarianceStamped",
-    "geometry_msgs/msg/PoseStamped",
-    "nav_msgs/msg/Odometry",
-)
-
-
-class PoseSensor(SensorTable, tag="pose"):
-    """An absolute (or, with differential, relative) pose: visual odometry, motion capture, ..."""
-
-    timeout_s: float = 1.0
-    mahalanobis_threshold: float = math.inf
-    msgtype: Literal[
-        "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry"
-    ] = "geometry_msgs/msg/PoseWithCovarianceStamped"
-    differential: bool = False  # fuse deltas between consecutive poses (drifting origin) instead
-    position_noise: Vec3 | None = None  # std devs x y z, m; replaces the message covariance
-    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
-    position_min_sigma: float = 0.001  # floor, m
-    orientation_min_sigma: float = 0.001  # floor, rad
-    max_sigma: Vec2 = (100.0, 3.0)  # larger means "not measured": m, rad
-    unknown_sigma: Vec2 = (0.1, 0.05)  # for a message without covariance (PoseStamped): m, rad
-    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
-
 
 NO_MOTION = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
@@ -236,35 +208,4 @@ class PoseModel(SensorModel):
         return None
 
 
-class PoseKind(SensorKind):
-    """An absolute pose (visual odometry, motion capture) defines the world frame and gives position,
-    height, tilt and yaw; a differential one fuses deltas between its poses and defines nothing."""
-
-    name = "pose"
-    config_type = PoseSensor
-    sample_type = PoseSample
-    model_type = PoseModel
-    ros_types = POSE_MSGTYPES
-    frame_message = "pose"
-
-    def defines_frame(self, cfg: PoseSensor) -> bool:
-        return not cfg.differential
-
-    def fuses_height(self, cfg: PoseSensor, filter_cfg: FilterConfig) -> bool:
-        return not cfg.differential and (cfg.position_noise is None or cfg.position_noise[2] <= cfg.max_sigma[0])
-
-    def ros_type(self, cfg: PoseSensor) -> str:
-        return cfg.msgtype  # a CDR payload does not say which of the pose types it is
-
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ...codecs.from_ros import pose_from_ros
-
-        return pose_from_ros
-
-    def decoder(self, cfg: PoseSensor) -> Callable[[Any], Any]:
-        from ...codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name, msgtype=cfg.msgtype)
-
-
-__all__ = ["POSE_MSGTYPES", "PoseAnchor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor"]
+__all__ = ["PoseAnchor", "PoseInput", "PoseModel", "PosePolicy"]

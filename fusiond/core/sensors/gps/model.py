@@ -32,54 +32,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
 
-from ... import reasons
-from ...config import FilterConfig, SensorTable, Vec3
-from ...errors import ConfigError
-from ...estimator import GpsErrorBlock, StateBlock, mat3
-from ...estimator import observations as obs
-from ...estimator.geodesy import EnuFrame
-from ...estimator.rigid_fit import RigidFit, fit_rigid
-from ...logs import get_logger
-from ...samples import GpsSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import Rejected, finite
-from .frame import lever, new_frame, set_position
-from .kind import LayoutView, SensorKind
+from .... import reasons
+from ....estimator import mat3
+from ....estimator import observations as obs
+from ....estimator.geodesy import EnuFrame
+from ....estimator.rigid_fit import RigidFit, fit_rigid
+from ....logs import get_logger
+from ....samples import GpsSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import Rejected, finite
+from ..frame import lever, new_frame, set_position
+from .table import GpsSensor
 
 if TYPE_CHECKING:
     from ..state import FilterState
 
 log = get_logger("fusiond.core")
-
-
-class GpsSensor(SensorTable, tag="gps"):
-    """sensor_msgs/msg/NavSatFix; with one configured, the world frame is ENU at the datum."""
-
-    timeout_s: float = 2.0
-    # gate on sqrt(NIS) once the heading is known: multipath bursts and placeholder fixes, not the
-    # receiver's ordinary noise (a consistent filter rejects ~1 fix in 10^5); a run of agreeing
-    # rejected fixes re-acquires (core/sensors/gps.py), so the gate cannot lock the filter out
-    mahalanobis_threshold: float = 5.0
-    datum: Vec3 | None = None  # [lat deg, lon deg, alt m]; default: the first valid fix
-    position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
-    position_min_sigma: float = 0.01  # floor, m
-    unknown_position_sigma: Vec3 = (2.5, 2.5, 5.0)  # used when the covariance type is UNKNOWN (0)
-    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # antenna position in base_link, m
-    heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
-    error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s
-    error_sigma: Vec3 | None = None  # its steady-state std devs east north up, m (needed with error_tau_s)
-    # Without error_tau_s: the vertical alone as such a state (consumer receivers' altitude wanders
-    # metres over minutes while they state ~1-2 m); vertical_error_sigma = 0 turns it off
-    vertical_error_tau_s: float = 300.0
-    vertical_error_sigma: float = 5.0  # m
-    max_sigma: float = 1.0e3  # an axis stated less precise than this (m) is "not measured": not fused
 
 
 HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipping or GPS wander, start over
@@ -519,53 +493,4 @@ def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
     return tuple(i for i in range(3) if cov[4 * i] <= limit)
 
 
-class GpsKind(SensorKind):
-    """A NavSatFix receiver: it defines the world frame (ENU at its datum), its heading is measured
-    from travel, and its receiver's slowly wandering error is a state block of its own."""
-
-    name = "gps"
-    config_type = GpsSensor
-    sample_type = GpsSample
-    model_type = GpsModel
-    ros_types = ("sensor_msgs/msg/NavSatFix",)
-    geodetic = True
-    frame_message = "GPS fix"
-
-    def validate(self, cfg: GpsSensor, at: Callable[[str], str]) -> None:
-        if cfg.datum is not None and not (-90.0 <= cfg.datum[0] <= 90.0 and -180.0 <= cfg.datum[1] <= 180.0):
-            raise ConfigError(f"{at('datum')}: latitude must be in [-90, 90] and longitude in [-180, 180]")
-        if cfg.heading_init_m <= 0.0:
-            raise ConfigError(f"{at('heading_init_m')}: must be positive")
-        if cfg.error_tau_s > 0.0 and cfg.error_sigma is None:
-            raise ConfigError(f"{at('error_sigma')}: needed when error_tau_s > 0")
-        if cfg.vertical_error_sigma > 0.0 and cfg.vertical_error_tau_s <= 0.0:
-            raise ConfigError(f"{at('vertical_error_tau_s')}: must be positive when vertical_error_sigma > 0")
-
-    def defines_frame(self, cfg: GpsSensor) -> bool:
-        return True
-
-    def fuses_height(self, cfg: GpsSensor, filter_cfg: FilterConfig) -> bool:
-        return cfg.position_noise is None or cfg.position_noise[2] <= cfg.max_sigma
-
-    def state_blocks(self, cfg: GpsSensor, view: LayoutView) -> list[StateBlock]:
-        if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
-            return [GpsErrorBlock(cfg.error_tau_s, cfg.error_sigma)]
-        if cfg.vertical_error_sigma > 0.0:  # the altitude's wander alone
-            return [GpsErrorBlock(cfg.vertical_error_tau_s, (0.0, 0.0, cfg.vertical_error_sigma))]
-        return []
-
-    def datum(self, cfg: GpsSensor) -> tuple[float, float, float] | None:
-        return cfg.datum
-
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ...codecs.from_ros import gps_from_ros
-
-        return gps_from_ros
-
-    def decoder(self, cfg: GpsSensor) -> Callable[[Any], Any]:
-        from ...codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name)
-
-
-__all__ = ["GpsInput", "GpsKind", "GpsModel", "GpsOwn", "GpsPolicy", "GpsSensor", "GpsTrack"]
+__all__ = ["GpsInput", "GpsModel", "GpsOwn", "GpsPolicy", "GpsTrack"]
