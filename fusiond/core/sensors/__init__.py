@@ -1,16 +1,15 @@
-"""Sensor kinds: one module or package each, with its ``SensorKind`` descriptor (``kind.py``),
-registered by its `kind` tag in ``registry.py``, and its ``SensorModel`` (``base.py``).
+"""Sensor kinds: one package each (``odom/``, ``imu/``, ``gps/``, ``pose/``) with its [[sensors]]
+table, its ``SensorModel`` (``base.py``) and its ``SensorKind`` descriptor (``kind.py``), registered
+by its `kind` tag in ``registry.py``.
 
-Each kind's [[sensors]] table is defined with it (``fusiond.config`` re-exports the built-in
-ones). A model is built once per configured sensor from its typed config table and a narrow
-``SensorContext``; it converts raw samples into filter input (its policy: floors,
-overrides, "not measured" rules, mounting rotations) and applies them to the filter
-state through the EKF's own methods, keeping what it must remember between messages in
-its own immutable slice of the state (``FilterState.own[index]``). The core's time
-handling knows none of them, and what the rest of fusiond asks of a kind (does it define the
-world frame, which state blocks, which decoder) its descriptor answers: adding a kind is a new
-module here (or a package, as ``imu/`` with its gyro-bias learning and gap turn) and one
-``register`` call (docs/SENSOR_KINDS.md, "Adding a sensor kind").
+``fusiond.config`` re-exports the built-in kinds' tables. A model is built once per configured
+sensor from its typed config table and a narrow ``SensorContext``; it converts raw samples into
+filter input (its policy: floors, overrides, "not measured" rules, mounting rotations) and applies
+them to the filter state through the EKF's own methods, keeping what it must remember between
+messages in its own immutable slice of the state (``FilterState.own[index]``). The core's time
+handling knows none of them, and what the rest of fusiond asks of a kind (does it define the world
+frame, which state blocks, which decoder) its descriptor answers: adding a kind is a new package
+here (or a single module) and one ``register`` call (docs/SENSOR_KINDS.md, "Adding a sensor kind").
 """
 
 from __future__ import annotations

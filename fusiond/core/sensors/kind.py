@@ -1,9 +1,10 @@
 """What the rest of fusiond may ask about a sensor kind: one ``SensorKind`` descriptor per kind.
 
-Config loading, the state layout, the fusion core, the codecs' decoder choice, the bag reader,
-the daemon, replay's evaluation and the tuner all used to test ``isinstance(s, GpsSensor)`` and
-the like; each such question is a method or flag here instead, answered by the kind's own
-module (``odom.py``, ``imu/``, ``gps.py``, ``pose.py``) and looked up through ``registry.py``.
+Config loading, the state layout, the fusion core, the decoder choice, the bag reader, the
+daemon, replay's evaluation and resume need to know what a sensor's kind means to them (does it
+define the world frame, which state blocks does it need, which ROS type does it read); each such
+question is a method or flag here, answered by the kind's own package (``odom/``, ``imu/``,
+``gps/``, ``pose/``) and looked up through ``registry.py``, so that none of them names a kind.
 The defaults describe a plain aiding sensor (no world frame, no yaw, no state block of its own,
 no publish prompt), so a new kind overrides only what it is.
 
