@@ -114,10 +114,10 @@ class SensorTable(_Table, tag_field="kind"):
     stamp_offset_s: float = 0.0
 
 
-# Each kind's [[sensors]] table lives with its kind in core/sensors/ (which imports this module), and
-# is importable from here too: read on first use. ``SensorConfig`` is the union of the built-in ones
-# (type hints, the documented defaults of config.toml); a config's sensors decode as whatever kinds
-# are registered (``registry.config_types``), which a new kind extends.
+# Each kind's [[sensors]] table lives in its kind's package under core/sensors/ (which imports this
+# module), and is importable from here too: read on first use. ``SensorConfig`` is the union of the
+# built-in ones (type hints, the documented defaults of config.toml); a config's sensors decode as
+# whatever kinds are registered (``registry.config_types``), which a new kind extends.
 _KIND_TABLES: Final = {
     "OdomSensor": "odom", "ImuSensor": "imu", "GpsSensor": "gps", "PoseSensor": "pose", "POSE_MSGTYPES": "pose",
 }

@@ -15,6 +15,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from fusiond import reasons
 from fusiond.config import FilterConfig, SensorTable
 from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.core.sensors import Rejected, SensorKind, SensorModel
@@ -43,7 +44,7 @@ class AltimeterPolicy:
 
     def convert(self, sample: AltimeterSample) -> float:
         if not math.isfinite(sample.height):
-            raise Rejected("non_finite", "height")
+            raise Rejected(reasons.NON_FINITE, "height")
         return sample.height
 
 
