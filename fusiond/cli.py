@@ -387,9 +387,9 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
         print(f"fusiond: no imu sensor {args.sensor or ''} in {args.config}".replace("  ", " "), file=sys.stderr)
         return EXIT_USAGE
     imu = imus[0] if imus else ImuSensor(name="imu", key=args.key or "imu/data")
-    from .config import OdomSensor
+    from .core.sensors.registry import kind_of
 
-    odom_cfg = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None) if cfg else None
+    odom_cfg = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None) if cfg else None
     odom: list = []
     if args.bag:
         from .replay.bag import BagError, open_bag_samples

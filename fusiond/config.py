@@ -101,7 +101,10 @@ class FilterConfig(_Table):
     nis_confidence: float = 0.95  # two-sided chi-square confidence of that test
 
 
-class _Sensor(_Table, tag_field="kind"):
+class SensorTable(_Table, tag_field="kind"):
+    """The keys every [[sensors]] table has; each kind's table subclasses it with ``tag="<kind>"``
+    and is registered with its descriptor (``core/sensors/registry.py``)."""
+
     name: str
     key: str
     encoding: Literal["ros2-cdr", "json", "msgpack"] = "ros2-cdr"
@@ -111,106 +114,28 @@ class _Sensor(_Table, tag_field="kind"):
     stamp_offset_s: float = 0.0
 
 
-class OdomSensor(_Sensor, tag="odom"):
-    twist_frame: Literal["body", "world"] = "body"
-    twist_noise: Vec6 | None = None  # std devs vx vy vz wx wy wz, replace message covariance
-    twist_min_sigma: Vec2 = (0.01, 0.01)  # floors: linear m/s, angular rad/s
-    twist_max_sigma: Vec2 = (10.0, 10.0)  # above: "not measured" (input zero, default noise)
-    twist_unmeasured_sigma: Vec2 = (0.1, 0.1)  # noise of a "not measured" component: m/s, rad/s
-    slip_threshold: float = 0.3  # rad/s wheel-vs-gyro yaw rate that flags slip
-    # which of vx vy vz wx wy wz the driver measures; false: not used as an input, not slip-checked
-    twist_measured: tuple[bool, bool, bool, bool, bool, bool] = (True, True, True, True, True, True)
-    # estimate a wheel speed scale (v' = s v); None: on exactly when a gps or absolute pose sensor
-    # makes it observable; false: an explicit opt-out
-    scale_estimation: bool | None = None
-    # estimate the pitch of the wheels' twist in the body (an IMU pitched in its mount beyond extrinsic_rpy);
-    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one
-    pitch_estimation: bool = False
-    twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
-    # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
-    # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom.py); 0: off
-    coast_decel: float = 0.5
+# Each kind's [[sensors]] table lives in its kind's package under core/sensors/ (which imports this
+# module), and is importable from here too: read on first use. ``SensorConfig`` is the union of the
+# built-in ones (type hints, the documented defaults of config.toml); a config's sensors decode as
+# whatever kinds are registered (``registry.config_types``), which a new kind extends.
+_KIND_TABLES: Final = {
+    "OdomSensor": "odom", "ImuSensor": "imu", "GpsSensor": "gps", "PoseSensor": "pose", "POSE_MSGTYPES": "pose",
+}
 
 
-class ImuSensor(_Sensor, tag="imu"):
-    mahalanobis_threshold: float = math.inf  # gate on sqrt(NIS); inf disables
-    adaptive: bool = False  # scale R from the innovation window
-    adaptive_window: int = 50
-    orientation: Literal["absolute", "relative", "roll_pitch", "off"] = "roll_pitch"
-    angular_velocity: bool = False
-    extrinsic_rpy: Vec3 = (0.0, 0.0, 0.0)
-    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
-    gyro_noise: float | None = None  # std dev rad/s
-    orientation_min_sigma: float = 0.001  # floor, rad
-    orientation_max_sigma: float = 3.0  # above: "not measured"
-    gyro_min_sigma: float = 0.0005  # floor, rad/s
-    # highest rate (Hz) at which the orientation is fused (the gyro is taken at every sample); 0: every sample
-    orientation_rate_hz: float = 100.0
-    # orientation = "roll_pitch": after a silence of the IMU longer than filter.gap_s (a logging gap), turn
-    # the heading by what the IMU's own yaw turned across it, less the yaw's measured drift, weighed against
-    # what the (rescaled) wheels turned meanwhile (core/sensors/imu/gap_turn.py)
-    yaw_across_gaps: bool = True
-    gyro_scale_estimation: bool = False  # estimate the yaw-rate scale of the gyro (needs angular_velocity)
-    tilt_from_gravity: bool = True  # no roll/pitch from the IMU's orientation: take them from the accelerometer
-    gravity_tilt_noise: float = 0.05  # std dev (rad) of that roll/pitch at low dynamics
-    # absolute yaw, as navsat_transform: yaw in ENU = reading + yaw_offset + magnetic_declination (rad)
-    yaw_offset: float = 0.0  # e.g. pi/2 for an IMU that reads 0 facing north
-    magnetic_declination: float = 0.0  # for a magnetometer's yaw (magnetic north), rad, west-positive (minus NOAA's)
-    # beside a gps or absolute pose: what is left of the offset is estimated, with this prior (rad)
-    # and random walk (rad/sqrt(s)); yaw_offset_sigma = 0 takes the corrected yaw as the heading
-    yaw_offset_sigma: float = 0.5
-    yaw_offset_walk: float = 0.05
+def __getattr__(name: str) -> typing.Any:
+    if name == "SensorConfig":
+        from .core.sensors import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 
+        value: typing.Any = OdomSensor | ImuSensor | GpsSensor | PoseSensor
+    elif name in _KIND_TABLES:
+        from importlib import import_module
 
-POSE_MSGTYPES = (
-    "geometry_msgs/msg/PoseWithCovarianceStamped",
-    "geometry_msgs/msg/PoseStamped",
-    "nav_msgs/msg/Odometry",
-)
-
-
-class GpsSensor(_Sensor, tag="gps"):
-    """sensor_msgs/msg/NavSatFix; with one configured, the world frame is ENU at the datum."""
-
-    timeout_s: float = 2.0
-    # gate on sqrt(NIS) once the heading is known: multipath bursts and placeholder fixes, not the
-    # receiver's ordinary noise (a consistent filter rejects ~1 fix in 10^5); a run of agreeing
-    # rejected fixes re-acquires (core/sensors/gps.py), so the gate cannot lock the filter out
-    mahalanobis_threshold: float = 5.0
-    datum: Vec3 | None = None  # [lat deg, lon deg, alt m]; default: the first valid fix
-    position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
-    position_min_sigma: float = 0.01  # floor, m
-    unknown_position_sigma: Vec3 = (2.5, 2.5, 5.0)  # used when the covariance type is UNKNOWN (0)
-    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # antenna position in base_link, m
-    heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
-    error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s
-    error_sigma: Vec3 | None = None  # its steady-state std devs east north up, m (needed with error_tau_s)
-    # Without error_tau_s: the vertical alone as such a state (consumer receivers' altitude wanders
-    # metres over minutes while they state ~1-2 m); vertical_error_sigma = 0 turns it off
-    vertical_error_tau_s: float = 300.0
-    vertical_error_sigma: float = 5.0  # m
-    max_sigma: float = 1.0e3  # an axis stated less precise than this (m) is "not measured": not fused
-
-
-class PoseSensor(_Sensor, tag="pose"):
-    """An absolute (or, with differential, relative) pose: visual odometry, motion capture, ..."""
-
-    timeout_s: float = 1.0
-    mahalanobis_threshold: float = math.inf
-    msgtype: Literal[
-        "geometry_msgs/msg/PoseWithCovarianceStamped", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry"
-    ] = "geometry_msgs/msg/PoseWithCovarianceStamped"
-    differential: bool = False  # fuse deltas between consecutive poses (drifting origin) instead
-    position_noise: Vec3 | None = None  # std devs x y z, m; replaces the message covariance
-    orientation_noise: Vec3 | None = None  # std devs roll pitch yaw, rad
-    position_min_sigma: float = 0.001  # floor, m
-    orientation_min_sigma: float = 0.001  # floor, rad
-    max_sigma: Vec2 = (100.0, 3.0)  # larger means "not measured": m, rad
-    unknown_sigma: Vec2 = (0.1, 0.05)  # for a message without covariance (PoseStamped): m, rad
-    extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
-
-
-SensorConfig = OdomSensor | ImuSensor | GpsSensor | PoseSensor
+        value = getattr(import_module(f".core.sensors.{_KIND_TABLES[name]}", __package__), name)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 
 class Config(_Table):
@@ -219,9 +144,11 @@ class Config(_Table):
     ros: RosConfig = msgspec.field(default_factory=RosConfig)
     filter: FilterConfig = msgspec.field(default_factory=FilterConfig)
     state: StateConfig = msgspec.field(default_factory=StateConfig)
-    sensors: list[SensorConfig] = []
+    # Decoded by ``loads`` against the registered kinds' tables (``_sensor_tables``), not by this
+    # annotation, so that a kind registered after import is a valid [[sensors]] table.
+    sensors: list[typing.Any] = []
 
-    def sensor(self, name: str) -> SensorConfig:
+    def sensor(self, name: str) -> SensorTable:
         for s in self.sensors:
             if s.name == name:
                 return s
@@ -297,35 +224,27 @@ def validate(cfg: Config) -> Config:
             raise ConfigError(f"{sensor_key(every, i, 'stamp_offset_s')}: must be finite")
         names.add(s.name)
         keys.add(s.key)
-    odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]
+    # What a sensor's kind means to the others (which one drives the prediction, defines the world
+    # frame, is geodetic) its descriptor says; asked at call time, since core/sensors imports this module.
+    from .core.sensors.registry import kind_of
+
+    kinds = [kind_of(s) for s in cfg.sensors]
+    odoms = [s for s, k in zip(cfg.sensors, kinds) if k.drives_prediction]
     if len(odoms) != 1 and cfg.sensors:
         raise ConfigError(f"sensors: exactly one odom sensor drives the prediction, found {len(odoms)}")
-    frames = [i for i, s in enumerate(cfg.sensors)
-              if isinstance(s, GpsSensor) or (isinstance(s, PoseSensor) and not s.differential)]
+    frames = [i for i, (s, k) in enumerate(zip(cfg.sensors, kinds)) if k.defines_frame(s)]
     if len(frames) > 1:
         raise ConfigError(f"{sensor_key(every, frames[1])}: only one absolute sensor (gps, or pose without differential) "
                           "may define the world frame")
-    if cfg.output.navsat_key and not any(isinstance(s, GpsSensor) for s in cfg.sensors):
+    if cfg.output.navsat_key and not any(k.geodetic for k in kinds):
         raise ConfigError("output.navsat_key: needs a gps sensor (the NavSatFix is the fused position in WGS84)")
     _check_ros(cfg)
-    for i, s in enumerate(cfg.sensors):
+    for i, (s, k) in enumerate(zip(cfg.sensors, kinds)):
         def at(field: str) -> str:
             return sensor_key(every, i, field)  # noqa: B023 - called in this iteration only
 
-        if isinstance(s, ImuSensor) and s.gyro_scale_estimation and not s.angular_velocity:
-            raise ConfigError(f"{at('gyro_scale_estimation')}: needs angular_velocity = true")
-        if isinstance(s, ImuSensor) and not (0.0 <= s.orientation_rate_hz < math.inf):
-            raise ConfigError(f"{at('orientation_rate_hz')}: must be >= 0 and finite (0: every sample)")
+        k.validate(s, at)
         _check_radians(s, at)
-        if isinstance(s, GpsSensor):
-            if s.datum is not None and not (-90.0 <= s.datum[0] <= 90.0 and -180.0 <= s.datum[1] <= 180.0):
-                raise ConfigError(f"{at('datum')}: latitude must be in [-90, 90] and longitude in [-180, 180]")
-            if s.heading_init_m <= 0.0:
-                raise ConfigError(f"{at('heading_init_m')}: must be positive")
-            if s.error_tau_s > 0.0 and s.error_sigma is None:
-                raise ConfigError(f"{at('error_sigma')}: needed when error_tau_s > 0")
-            if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s <= 0.0:
-                raise ConfigError(f"{at('vertical_error_tau_s')}: must be positive when vertical_error_sigma > 0")
     return cfg
 
 
@@ -384,7 +303,7 @@ def _resolve(raw: object, path: str) -> type | None:
             i = int(part[1:-1])
             node = node[i] if i < len(node) else None
             kind = node.get("kind") if isinstance(node, dict) else None
-            cls = next((c for c in typing.get_args(SensorConfig) if c.__struct_config__.tag == kind), None)
+            cls = next((c for c in _sensor_tables() if c.__struct_config__.tag == kind), None)
             if cls is None:
                 return None
             continue
@@ -416,7 +335,7 @@ def _hint(msg: str, path: str, raw: object) -> str:
         table, _, field = path.rpartition(".")
         cls = _resolve(raw, table) if table else Config
         if field == "kind":
-            valid = [c.__struct_config__.tag for c in typing.get_args(SensorConfig)]
+            valid = [c.__struct_config__.tag for c in _sensor_tables()]
         elif cls is not None:
             hint = typing.get_type_hints(cls).get(field)
             valid = [a for t in ([hint] + list(typing.get_args(hint))) if typing.get_origin(t) is Literal
@@ -450,13 +369,37 @@ def _named(path: str, raw: object) -> str:
     return sensor_key(names, int(found.group(1)), found.group(2) or "")
 
 
+def _sensor_tables() -> tuple[type, ...]:
+    """The registered kinds' [[sensors]] tables (at call time: core/sensors imports this module)."""
+    from .core.sensors.registry import config_types
+
+    return config_types()
+
+
+def convert(raw: object) -> Config:
+    """A parsed TOML document as a Config (not yet ``validate``-d); msgspec.ValidationError as msgspec
+    raises it, its path from the document's root. The [[sensors]] tables decode as the union of the
+    kinds registered now."""
+    cfg = msgspec.convert(raw, type=Config)
+    if not cfg.sensors:
+        return cfg
+    tables = _sensor_tables()
+    union = typing.Union[tables] if len(tables) > 1 else tables[0]  # noqa: UP007 - built at run time
+    try:
+        sensors = msgspec.convert(cfg.sensors, type=list[union])  # type: ignore[valid-type]
+    except msgspec.ValidationError as err:
+        text, sep, path = str(err).partition(" - at `$")
+        raise msgspec.ValidationError(f"{text}{sep}.sensors{path}" if sep else text) from None
+    return msgspec.structs.replace(cfg, sensors=sensors)
+
+
 def loads(text: str, source: str = "<config>") -> Config:
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{source}: invalid TOML: {err}") from None
     try:
-        cfg = msgspec.convert(raw, type=Config)
+        cfg = convert(raw)
     except msgspec.ValidationError as err:
         raise ConfigError(f"{source}: {_one_line(err, raw)}") from None
     try:

@@ -21,11 +21,13 @@ from .rosbags_cdr import deserialize, typestore
 from .sample_encoders import encode_gps_sample, encode_imu_sample, encode_odom_sample, encode_pose_sample
 from .wire import IMU, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, POSE_TYPES, Decoder, Payload, check_size
 
-_KINDS: Final[dict[str, tuple[str, Callable[[Any, str], Sample]]]] = {  # kind -> (ROS type, rosbags message -> sample)
-    "odom": (ODOMETRY, odom_from_ros),
-    "imu": (IMU, imu_from_ros),
-    "gps": (NAVSATFIX, gps_from_ros),
-    "pose": (POSE_COV_STAMPED, pose_from_ros),
+# kind -> (its ROS types, the first the default; rosbags message -> sample). Which of them a sensor reads is
+# its kind descriptor's to say (core/sensors/kind.py); these are the codecs of the built-in kinds.
+_KINDS: Final[dict[str, tuple[tuple[str, ...], Callable[[Any, str], Sample]]]] = {
+    "odom": ((ODOMETRY,), odom_from_ros),
+    "imu": ((IMU,), imu_from_ros),
+    "gps": ((NAVSATFIX,), gps_from_ros),
+    "pose": (POSE_TYPES, pose_from_ros),
 }
 # GPS and pose sensors run at 1-100 Hz: rosbags' generic path is fast enough for them.
 _REPEATED: Final = {  # kind -> (child frame id?, float64 block, sample builder) of `RepeatedLayout`
@@ -38,12 +40,13 @@ def ros_msgtype(kind: str, msgtype: str | None = None) -> str:
     """The ROS 2 message type of a sensor kind (a pose sensor's own `msgtype` when given)."""
     if kind not in _KINDS:
         raise ValueError(f"unknown sensor kind {kind!r}, expected one of {sorted(_KINDS)}")
+    types = _KINDS[kind][0]
     if msgtype is not None:
-        if kind != "pose" or msgtype not in POSE_TYPES:
+        if len(types) < 2 or msgtype not in types:  # only a kind reading several types has a choice
             article = "an" if kind[0] in "aeiou" else "a"
             raise ValueError(f"msgtype {msgtype!r} is not valid for {article} {kind} sensor")
         return msgtype
-    return _KINDS[kind][0]
+    return types[0]
 
 
 def ros_converter(kind: str) -> Callable[[Any, str], Sample]:
@@ -62,21 +65,21 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
     """
     if kind not in _KINDS:
         raise ValueError(f"unknown sensor kind {kind!r}, expected one of {sorted(_KINDS)}")
-    from_ros = _KINDS[kind][1]
-    if kind == "pose" and msgtype is None and encoding == "ros2-cdr":
-        for t in POSE_TYPES:
+    types, from_ros = _KINDS[kind]
+    if len(types) > 1 and msgtype is None and encoding == "ros2-cdr":
+        for t in types:
             _warm(t)
 
-        def decode_any_pose(payload: Payload) -> Sample:
+        def decode_any_type(payload: Payload) -> Sample:
             check_size(payload)
-            for t in POSE_TYPES:
+            for t in types:
                 try:
                     return from_ros(typestore().deserialize_cdr(memoryview(payload), t), sensor)
                 except Exception:
                     continue
-            return from_ros(deserialize(payload, POSE_COV_STAMPED), sensor)  # raises the DecodeError
+            return from_ros(deserialize(payload, types[0]), sensor)  # raises the DecodeError
 
-        return decode_any_pose
+        return decode_any_type
     msgtype = ros_msgtype(kind, msgtype)
 
     if encoding != "ros2-cdr":
@@ -99,7 +102,15 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
 
         return decode_repeated
 
-    def decode_cdr(payload: Payload) -> Sample:
+    return cdr_decoder(msgtype, from_ros, sensor)
+
+
+def cdr_decoder(msgtype: str, from_ros: Callable[[Any, str], Any], sensor: str) -> Decoder:
+    """ROS 2 CDR of ``msgtype`` (any type rosbags' typestore knows) -> sample, through rosbags and
+    ``from_ros``: the decoder of a kind without a fast path of its own; raises only DecodeError."""
+    _warm(msgtype)
+
+    def decode_cdr(payload: Payload) -> Any:
         check_size(payload)
         return from_ros(deserialize(payload, msgtype), sensor)
 
@@ -121,8 +132,10 @@ def _warm(msgtype: str) -> None:
                                 "ros2-cdr")
     elif msgtype == NAVSATFIX:
         raw = encode_gps_sample(GpsSample("", 0.0, 0.0, 0.0, 0.0), "ros2-cdr")
-    else:
+    elif msgtype in POSE_TYPES:
         raw = encode_pose_sample(PoseSample("", 0.0, (0.0,) * 3, (0.0, 0.0, 0.0, 1.0)), "ros2-cdr", msgtype)
+    else:  # a type without a sample encoder here (another kind's): its first message pays instead
+        return
     typestore().deserialize_cdr(raw, msgtype)
     _warmed.add(msgtype)
 

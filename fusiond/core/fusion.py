@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import msgspec
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, OdomSensor
+from ..config import Config
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import ErrorStateEKF, PredictWorkspace, corrected_inputs, predict
@@ -41,7 +41,7 @@ from .inputs import HeldInputs, note_period
 from .layout import absolute_sensor, state_layout, update_masks
 from .resume import RESUME_VERSION, ResumeState, state_fingerprint
 from .time_jumps import HeldTimeline
-from .sensors import Rejected, SensorContext, build_models
+from .sensors import Rejected, SensorContext, build_models, kind_of
 from .state import FilterState
 
 log = get_logger("fusiond.core")
@@ -95,22 +95,23 @@ class FusionCore:
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
         self._stamp_offset = [s.stamp_offset_s for s in self.sensors]  # added to each sensor's header stamps
-        self.odom_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, OdomSensor)), -1)
+        kinds = [kind_of(s) for s in self.sensors]  # what each sensor's kind means here (core/sensors/kind.py)
+        self.odom_index = next((i for i, k in enumerate(kinds) if k.drives_prediction), -1)
         self.layout = state_layout(cfg)
         self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
         # The sensor that defines the world frame (GPS: ENU at the datum; an absolute pose
         # sensor: its own frame); nothing is published before its first message.
         self.frame_index = next((i for i, s in enumerate(self.sensors) if absolute_sensor(s)), -1)
-        self.gps_index = next((i for i, s in enumerate(self.sensors) if isinstance(s, GpsSensor)), -1)
-        yaw_fused = any(isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in self.sensors)
+        self.gps_index = next((i for i, k in enumerate(kinds) if k.geodetic), -1)
+        yaw_fused = any(k.fuses_yaw(s) for s, k in zip(self.sensors, kinds))
         masks = update_masks(self.layout, self.frame_index >= 0,
                              heading_observed=self.frame_index >= 0 or yaw_fused or not fc.continuous_odom)
         self.tilt_mask, self.position_mask, self.delta_mask = masks.tilt, masks.position, masks.delta
         self.rest_mask = masks.rest
         # An IMU with absolute yaw (REP-103: ENU, yaw 0 = east): trusted as the GPS frame's heading when
         # yaw_offset_sigma = 0; otherwise read as heading + an estimated offset (the yaw_offset block).
-        self.absolute_yaw = any(isinstance(s, ImuSensor) and s.orientation == "absolute" for s in self.sensors)
+        self.absolute_yaw = any(k.absolute_yaw(s) for s, k in zip(self.sensors, kinds))
         self.noise_density = self.layout.noise_density(
             np.array([fc.process_noise[0] ** 2] * 3 + [fc.process_noise[1] ** 2] * 3)
         )
@@ -133,7 +134,7 @@ class FusionCore:
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,
-            track_acceleration=any(isinstance(sc, ImuSensor) and sc.tilt_from_gravity for sc in self.sensors),
+            track_acceleration=any(k.tracks_acceleration(s) for s, k in zip(self.sensors, kinds)),
             tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
             rest_mask=self.rest_mask, timeout=self.inputs.timeout, inputs_at=self.inputs.at, forward_accel=self._forward_accel)
         self.models = build_models(self.sensors, self.context)
@@ -146,6 +147,7 @@ class FusionCore:
         # taken as planar instead (roll/pitch rates not integrated), and the summary says so.
         self.tilt_reference = self.two_d or any(m.gives_tilt for m in self.models)
         self.context.tilt_reference = self.inputs.tilt_reference = self.tilt_reference
+        self._publishes = [k.prompts_publish for k in kinds]  # an applied sample of these is a publish moment
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
@@ -216,7 +218,7 @@ class FusionCore:
                 r.consistency = w.add(r.nis, r.dof, r.rejected)
             if r.rejected and r.channel != "yaw_rate":
                 st.rejected += 1
-        publish = idx == self.odom_index and (self.frame_index < 0 or self.state.frame_ready)
+        publish = self._publishes[idx] and (self.frame_index < 0 or self.state.frame_ready)
         return Step(self.sensors[idx].name, True, late=late, publish=publish, records=records)
 
     # -- time jumps ------------------------------------------------------------------------------------
@@ -288,8 +290,7 @@ class FusionCore:
         if not self.initialised:
             return "no sample fused yet"
         s = self.sensors[self.frame_index]
-        what = "GPS fix" if isinstance(s, GpsSensor) else "pose"
-        return f"waiting for the first {what} from {s.name!r} to define the world frame"
+        return f"waiting for the first {kind_of(s).frame_message} from {s.name!r} to define the world frame"
 
     @property
     def heading_known(self) -> bool:

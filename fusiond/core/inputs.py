@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-from ..config import OdomSensor
 from ..estimator import MotionInput, StateLayout, corrected_inputs, mat3
 from .state import FilterState
 
@@ -31,12 +30,12 @@ class HeldInputs:
         self.tilt_reference = True  # set by the core once the sensor models say whether any gives tilt
         self._timeout_base = [sc.timeout_s for sc in sensors]
         odom = sensors[odom_index] if odom_index >= 0 else None
-        unmeasured = odom.twist_unmeasured_sigma if isinstance(odom, OdomSensor) else [0.1, 0.1]
+        unmeasured = odom.twist_unmeasured_sigma if odom is not None else [0.1, 0.1]
         # the twist nobody measures: zero, with the "not measured" variances
         self.default_linear_cov = mat3.diag(*[unmeasured[0] ** 2] * 3)
         self.default_angular_cov = mat3.diag(*[unmeasured[1] ** 2] * 3)
         self._u = MotionInput()
-        self._u.twist_correlation = odom.twist_correlation_s if isinstance(odom, OdomSensor) else 0.0
+        self._u.twist_correlation = odom.twist_correlation_s if odom is not None else 0.0
 
     def timeout(self, idx: int, s: FilterState | None) -> float:
         """How long sensor idx's input is held after its last message in state s."""

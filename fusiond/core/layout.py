@@ -13,28 +13,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
-from ..estimator import (
-    GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, PoseBlock, StateLayout, TwistPitchBlock, WheelScaleBlock,
-    YawOffsetBlock,
-)
+from ..config import Config
+from ..estimator import PoseBlock, StateBlock, StateLayout
+from .sensors.kind import LayoutView
+from .sensors.registry import kind_of
+
+# The blocks' order in the state, whichever sensor asks for them first (a saved state's fingerprint
+# and every index depend on it); a block a new kind brings that is not named here follows these.
+BLOCK_ORDER = ("pose", "gyro_bias", "gyro_scale", "wheel_scale", "twist_pitch", "yaw_offset", "gps_error")
 
 
 def absolute_sensor(sc) -> bool:
     """Does this sensor define the world frame (a GPS, or a pose that is not differential)?"""
-    return isinstance(sc, GpsSensor) or (isinstance(sc, PoseSensor) and not sc.differential)
+    return kind_of(sc).defines_frame(sc)
 
 
 def fuses_height(cfg: Config, sensor) -> bool:
     """Does this sensor's absolute height reach the filter (a GPS altitude, an absolute pose's z, whose
     stated noise is not beyond its max_sigma), outside two_d_mode?"""
-    if cfg.filter.two_d_mode:
-        return False
-    if isinstance(sensor, GpsSensor):
-        return sensor.position_noise is None or sensor.position_noise[2] <= sensor.max_sigma
-    if isinstance(sensor, PoseSensor) and not sensor.differential:
-        return sensor.position_noise is None or sensor.position_noise[2] <= sensor.max_sigma[0]
-    return False
+    return not cfg.filter.two_d_mode and kind_of(sensor).fuses_height(sensor, cfg.filter)
 
 
 def absolute_height(cfg: Config) -> bool:
@@ -42,37 +39,24 @@ def absolute_height(cfg: Config) -> bool:
     return any(fuses_height(cfg, s) for s in cfg.sensors)
 
 
+def state_blocks(cfg: Config) -> list[StateBlock]:
+    """The error-state blocks this configuration's sensors ask for (``SensorKind.state_blocks``): one per
+    name, the first sensor's in configuration order (at most one GPS, one absolute IMU yaw counts),
+    sorted into ``BLOCK_ORDER``."""
+    fc = cfg.filter
+    view = LayoutView(fc, any(absolute_sensor(s) for s in cfg.sensors), absolute_height(cfg))
+    chosen: dict[str, StateBlock] = {}
+    for s in cfg.sensors:
+        for block in kind_of(s).state_blocks(s, view):
+            chosen.setdefault(block.name, block)
+    known = {name: i for i, name in enumerate(BLOCK_ORDER)}
+    ordered = sorted(chosen.values(), key=lambda b: known.get(b.name, len(known)))  # stable: new kinds in order
+    return [PoseBlock(fc.initial_sigma[0], fc.initial_sigma[1])] + ordered
+
+
 def state_layout(cfg: Config) -> StateLayout:
     """The error-state blocks this configuration's sensors need, in a fixed order."""
-    fc = cfg.filter
-    sensors = cfg.sensors
-    blocks = [PoseBlock(fc.initial_sigma[0], fc.initial_sigma[1])]
-    if any(isinstance(s, ImuSensor) and s.angular_velocity for s in sensors):
-        blocks.append(GyroBiasBlock(fc.gyro_bias_sigma, fc.gyro_bias_walk))
-    if any(isinstance(s, ImuSensor) and s.gyro_scale_estimation for s in sensors):
-        blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
-    # A wheel scale is observable once an absolute position is fused: on by default there.
-    absolute = any(absolute_sensor(s) for s in sensors)
-    if any(isinstance(s, OdomSensor) and (s.scale_estimation or (s.scale_estimation is None and absolute))
-           for s in sensors):
-        blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
-    # The twist's pitch in the body is observable from an absolute height while moving. Not on by default:
-    # over a short drive it is confounded with the altitude's wander, and an error model that calls a slow
-    # wander white (error_tau_s of seconds) lets it take the wander for a slope and z follow it.
-    if absolute_height(cfg) and any(isinstance(s, OdomSensor) and s.twist_frame == "body" and s.pitch_estimation
-                                    for s in sensors):
-        blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
-    # An absolute IMU yaw beside an absolute position or pose: heading + an estimated offset.
-    yaw_imu = next((s for s in sensors if isinstance(s, ImuSensor) and s.orientation == "absolute"
-                    and s.yaw_offset_sigma > 0.0), None)
-    if yaw_imu is not None and absolute:
-        blocks.append(YawOffsetBlock(yaw_imu.yaw_offset_sigma, yaw_imu.yaw_offset_walk))
-    for sc in sensors:  # at most one GPS (it defines the world frame)
-        if isinstance(sc, GpsSensor) and sc.error_tau_s > 0.0 and sc.error_sigma is not None:
-            blocks.append(GpsErrorBlock(sc.error_tau_s, sc.error_sigma))
-        elif isinstance(sc, GpsSensor) and sc.vertical_error_sigma > 0.0:  # the altitude's wander alone
-            blocks.append(GpsErrorBlock(sc.vertical_error_tau_s, (0.0, 0.0, sc.vertical_error_sigma)))
-    return StateLayout(blocks)
+    return StateLayout(state_blocks(cfg))
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,4 +112,5 @@ def update_masks(layout: StateLayout, has_frame_sensor: bool, heading_observed: 
     return UpdateMasks(tilt, position, delta, rest)
 
 
-__all__ = ["UpdateMasks", "absolute_height", "absolute_sensor", "fuses_height", "state_layout", "update_masks"]
+__all__ = ["BLOCK_ORDER", "UpdateMasks", "absolute_height", "absolute_sensor", "fuses_height", "state_blocks",
+           "state_layout", "update_masks"]

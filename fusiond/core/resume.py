@@ -23,8 +23,9 @@ import hashlib
 
 import msgspec
 
-from ..config import Config, GpsSensor
+from ..config import Config
 from .layout import state_layout
+from .sensors.registry import kind_of
 
 __all__ = ["RESUME_VERSION", "ResumeState", "state_fingerprint"]
 
@@ -48,10 +49,10 @@ class ResumeState(msgspec.Struct, frozen=True, kw_only=True):
 def state_fingerprint(cfg: Config) -> str:
     """A short hash of what makes a saved state fit this config (see the module docstring)."""
     layout = state_layout(cfg)
-    datum = next((list(s.datum) for s in cfg.sensors if isinstance(s, GpsSensor) and s.datum is not None), None)
+    datum = next((list(d) for d in (kind_of(s).datum(s) for s in cfg.sensors) if d is not None), None)
     parts = {
         "blocks": [(b.name, b.nominal_size, b.error_size) for b in layout.blocks],
-        "sensors": [(s.name, str(type(s).__struct_config__.tag), s.key) for s in cfg.sensors],
+        "sensors": [(s.name, kind_of(s).name, s.key) for s in cfg.sensors],
         "two_d_mode": cfg.filter.two_d_mode,
         "datum": datum,
     }

@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
-from fusiond.codecs import bag_fast_path, ros_converter, ros_msgtype, typestore
+from fusiond.codecs import bag_fast_path, typestore
+from fusiond.core.sensors.registry import KINDS, kind_of
 from fusiond.samples import Sample
 from fusiond.errors import BagError  # importable from here, as before
 
@@ -24,13 +25,11 @@ if TYPE_CHECKING:
 
     from fusiond.config import SensorConfig
 
-KINDS = ("odom", "imu", "gps", "pose")
-
-
 def expected(sensor: SensorConfig) -> tuple[str, Callable[[Any, str], Sample]]:
-    """(ROS message type, message -> sample) of a sensor; a pose sensor's `msgtype` selects its type."""
-    kind = sensor_kind(sensor)
-    return ros_msgtype(kind, getattr(sensor, "msgtype", None)), ros_converter(kind)
+    """(ROS message type, message -> sample) of a sensor, as its kind's descriptor says (a pose
+    sensor's `msgtype` selects its type)."""
+    kind = kind_of(sensor)
+    return kind.ros_type(sensor), kind.from_ros()
 
 
 def sensor_kind(sensor: SensorConfig) -> str:
@@ -205,7 +204,7 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
     for sensor in sensors:
         kind = sensor_kind(sensor)
         if kind not in KINDS:
-            raise BagError(f"sensor {sensor.name!r}: kind {kind!r} cannot be read from a bag")
+            raise BagError(f"sensor {sensor.name!r}: kind {kind!r} is not a registered sensor kind")
         topic = next((t for t in ("/" + sensor.key, sensor.key) if t in topics), None)
         if topic is None:
             missing.append(sensor.name)
@@ -213,7 +212,7 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
         want = expected(sensor)[0]
         found = {c.msgtype for c in topics[topic].connections}
         if found != {want}:
-            hint = " (set its msgtype)" if kind == "pose" else ""
+            hint = " (set its msgtype)" if len(KINDS[kind].ros_types) > 1 else ""
             raise BagError(
                 f"topic {topic} (sensor {sensor.name!r}) has type {', '.join(sorted(found))}, "
                 f"expected {want} for {'an' if kind[0] in 'aeiou' else 'a'} {kind} sensor{hint}"

@@ -17,7 +17,6 @@ errors mean anything, and only those are shown.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,8 +24,9 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from ..config import Config, ImuSensor
 from ..core.layout import absolute_sensor
+from ..core.sensors.registry import kind_of
 from ..errors import ReplayError
 from ..estimator.geodesy import EnuFrame
 from ..estimator.rotation import from_rpy, matrix, yaw
@@ -170,12 +170,12 @@ class Recorder:
         if self.fuse_every < 1:
             raise ReplayError("--fuse-every must be >= 1")
         sensors = {s.name: s for s in self.cfg.sensors}
-        self._odom_world = {n for n, s in sensors.items() if isinstance(s, OdomSensor) and s.twist_frame == "world"}
+        self._odom_world = {n for n, s in sensors.items() if kind_of(s).drives_prediction and s.twist_frame == "world"}
         self._imu_rot = {n: matrix(from_rpy(*s.extrinsic_rpy)) for n, s in sensors.items()
                          if isinstance(s, ImuSensor) and s.angular_velocity}
         self._absolute = next((s.name for s in self.cfg.sensors if absolute_sensor(s)), None)
-        self.absolute_kind = None if self._absolute is None else (
-            "gps" if isinstance(sensors[self._absolute], GpsSensor) else "pose")
+        # the world frame's sensor is a GPS (fixes in WGS84, their status scored) rather than a pose sensor
+        self.geodetic = self._absolute is not None and kind_of(sensors[self._absolute]).geodetic
         self._count = 0
 
     @property
@@ -303,7 +303,7 @@ def baseline_tracks(rec: Recorder, frame: EnuFrame | None, max_gap: float) -> li
             tracks.append(Track.build("hold last fused fix", ft, fx, world=True, held=True))
             tracks.append(ExtrapolatedFixes("fixes at constant velocity", ft, fx))
     poses = sorted(rec.fused_poses + rec.held_poses)
-    if poses and rec.absolute_kind == "pose":
+    if poses and rec.absolute is not None and not rec.geodetic:
         p = np.array(poses)
         tracks.append(Track.build("raw poses", p[:, 0], p[:, 1:4], p[:, 4], world=True))
         if rec.fuse_every > 1 and rec.fused_poses:
@@ -397,11 +397,12 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
         raise ReplayError(f"--reference {reference} is a fused sensor's topic: a reference must never be fused "
                           "(an absolute sensor's own topic can be, with --fuse-every N > 1: the held-back messages)")
     # The world frame: ENU at the GPS's datum (configured, or its first valid fused fix in stamp order).
-    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
     frame = None
     if gps is not None:
-        if gps.datum is not None:
-            frame = EnuFrame(*gps.datum)
+        datum = kind_of(gps).datum(gps)
+        if datum is not None:
+            frame = EnuFrame(*datum)
         else:
             first = min((f for f in rec.fused_fixes if f[4] >= 0), default=None)
             frame = EnuFrame(*first[1:4]) if first is not None else None
@@ -415,8 +416,8 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
         raise ReplayError(f"--reference {reference}: fewer than two poses")
     spans = _segments(ref.t, segment_gap_s)
     if rec.fuse_every > 1:
-        held = rec.held_fixes if rec.absolute_kind == "gps" else rec.held_poses
-        ts_all = np.array(sorted(h[0] for h in held if rec.absolute_kind != "gps" or h[4] >= 0))
+        held = rec.held_fixes if rec.geodetic else rec.held_poses
+        ts_all = np.array(sorted(h[0] for h in held if not rec.geodetic or h[4] >= 0))
         scored_at = f"the {ts_all.size} held-back {rec.absolute} messages"
     else:
         ts_all = ref.t

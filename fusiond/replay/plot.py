@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import GpsSensor
+from ..core.sensors.registry import kind_of
 from ..core.diagnostics import chi2_ppf
 from .run import ReplayResult
 
@@ -70,7 +70,7 @@ def plot_replay(result: ReplayResult, path: Path, title: str = "") -> None:
 
     ax = fig.add_subplot(gs[0, :])
     t0 = run_start(result)
-    has_gps = any(isinstance(s, GpsSensor) for s in result.core.cfg.sensors)
+    has_gps = any(kind_of(s).geodetic for s in result.core.cfg.sensors)
     series = result.doctor.series()
     if has_gps:
         if series.gps_t:

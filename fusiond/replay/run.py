@@ -16,8 +16,9 @@ from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
 
-from ..config import Config, OdomSensor
+from ..config import Config
 from ..core.layout import absolute_sensor
+from ..core.sensors.registry import kind_of
 from ..errors import ReplayError
 from ..core.fusion import FusionCore
 from ..estimator.rotation import to_rpy
@@ -93,7 +94,7 @@ def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | Non
     second pose sensor is still a replay)."""
     have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items())) or "none"
     for s in cfg.sensors:
-        if s.name in bag.missing and isinstance(s, OdomSensor):
+        if s.name in bag.missing and kind_of(s).drives_prediction:
             raise BagError(f"the odometry topic /{s.key} (sensor {s.name!r}, which drives the prediction) is not "
                            f"in the bag{did_you_mean(s.key, bag.bag_topics)}; the bag has: {have}")
     # Nothing is published before a GPS or absolute pose has defined the world frame: without any

@@ -87,11 +87,12 @@ import zenoh
 
 from ..codecs import (
     DIAGNOSTIC_ARRAY, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, DecodeError, SetPose, decode_set_pose,
-    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr, make_decoder, ros_msgtype,
+    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr,
 )
 from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
+from ..core.sensors.registry import kind_of
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
 from ..logs import get_logger
 from .drain_schedule import DrainSchedule
@@ -161,7 +162,7 @@ class Daemon:
         # A sample never waits in the inbox for more than a quarter of the shortest sensor timeout, so
         # batching cannot make a live sensor look silent to health (which ages it from its arrival).
         self.hold_s = min(hold_s, min((s.timeout_s for s in cfg.sensors), default=math.inf) * HOLD_OF_TIMEOUT)
-        self._prompt = [sensor_kind(s) == "odom" for s in cfg.sensors]  # samples that publish: fused at once
+        self._prompt = [kind_of(s).prompts_publish for s in cfg.sensors]  # samples that publish: fused at once
         self.capacity = queue_size
         self.health = Health([(s.name, s.timeout_s) for s in cfg.sensors], clock=clock,
                              queue_capacity=queue_size, queue_depth=self.inbox.__len__)
@@ -170,8 +171,7 @@ class Daemon:
         self._direct = direct_callbacks
         self._monitor_on = monitor
         self._health_log_s = health_log_s
-        self._decoders = [make_decoder(sensor_kind(s), s.encoding, s.name, msgtype=getattr(s, "msgtype", None))
-                          for s in cfg.sensors]
+        self._decoders = [kind_of(s).decoder(s) for s in cfg.sensors]
         self._zero_cov = [zero_covariance_check(s) for s in cfg.sensors]
         self._subscribers: list[Any] = []
         self._outputs: list[Any] = []
@@ -222,7 +222,7 @@ class Daemon:
             cb = self._callback(idx)
             handler = direct(cb) if self._direct else cb
             if self.node is not None:
-                msgtype = ros_msgtype(sensor_kind(sensor), getattr(sensor, "msgtype", None))
+                msgtype = kind_of(sensor).ros_type(sensor)
                 self._subscribers.append(self.node.subscriber(topic_name(sensor.key), msgtype, handler))
             else:
                 self._subscribers.append(s.declare_subscriber(sensor.key, handler))

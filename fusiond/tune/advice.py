@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import msgspec
 
-from ..config import Config, ConfigError, validate
+from ..config import Config, ConfigError, convert, validate
 from ..core.doctor import Proof, Verdict
 from ..logs import muted
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
@@ -53,7 +53,7 @@ def with_suggestion(cfg: Config, verdict: Verdict) -> tuple[Config, int]:
         raise ConfigError(f"{verdict.key}: not a key of a config table")
     table.update(values)
     try:
-        return validate(msgspec.convert(raw, type=Config)), len(values)
+        return validate(convert(raw)), len(values)
     except (msgspec.ValidationError, ConfigError) as err:
         raise ConfigError(f"{verdict.suggestion!r} in {verdict.key}: {err}") from None
 

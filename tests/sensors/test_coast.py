@@ -1,4 +1,4 @@
-"""A drive that drops to exactly zero while the vehicle coasts on (``core/sensors/odom.py``).
+"""A drive that drops to exactly zero while the vehicle coasts on (``core/sensors/odom/model.py``).
 
 The worlds are ``sim_rest``'s: a car driving a circle of radius R = v / w, its odometry at
 50 Hz reading the true twist plus noise (sigma 0.01), or exactly zero in a segment marked

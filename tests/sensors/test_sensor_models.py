@@ -15,7 +15,7 @@ import pytest
 from fusiond.config import OdomSensor, loads
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors import (
-    MODELS, GpsModel, ImuModel, OdomModel, OdomPolicy, SensorContext, SensorModel, build_models,
+    GpsModel, ImuModel, OdomModel, OdomPolicy, SensorContext, SensorModel, build_models, config_types,
 )
 from fusiond.core.sensors.imu import ImuOwn
 from fusiond.core.state import FilterState
@@ -103,7 +103,7 @@ def test_a_relative_imu_keeps_its_yaw_offset_in_its_own_slice_and_snapshots_carr
 def test_every_configured_kind_has_a_model_and_the_core_builds_one_per_sensor():
     cfg = robot_config(gps="datum = [48.137, 11.575, 520.0]", pose="differential = true")
     core = FusionCore(cfg)
-    assert {type(s) for s in cfg.sensors} <= set(MODELS)
+    assert {type(s) for s in cfg.sensors} <= set(config_types())
     assert [m.name for m in core.models] == [s.name for s in cfg.sensors]
     assert isinstance(core.models[2], GpsModel)
     # only the kinds that carry something along the prediction are called on every prediction step

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import ast
 import importlib
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -87,3 +90,57 @@ def test_no_reason_code_is_a_literal_outside_reasons_py():
                 if isinstance(sub, ast.IfExp) and any(isinstance(b, ast.Constant) for b in (sub.body, sub.orelse)):
                     literal.append(f"{path.relative_to(PACKAGE)}:{node.lineno} {callee}(...)")
     assert not literal, literal
+
+
+# What a sensor's kind means is its descriptor's to say (core/sensors/kind.py): outside core/sensors/
+# no module tests a kind by its config class or tag. What stays says why: the IMU calibration
+# command and the gyro baseline of replay's evaluation are about the IMU itself, and the latency
+# bench's schedule tags its own two streams. The doctor's checks are outside this rule (their own
+# floor of checks, fusiond/core/doctor/).
+_KIND_BRANCH = re.compile(r"kind *(==|!=|in) *|\.kind\b.*(==|in)|isinstance\([^)]*(Imu|Odom|Gps|Pose)(Config|Sensor|Model)")
+_KIND_BRANCHES_KEPT = {
+    "cli.py": 1,  # calibrate-imu picks the configured IMUs
+    "replay/evaluate.py": 1,  # the "gyro + wheel speed" baseline reads an IMU's gyro through its mounting
+    "transport/bench_latency.py": 1,  # the bench's schedule: its IMU stream or its odometry stream
+}
+
+
+def test_no_module_outside_the_sensor_kinds_branches_on_a_kind():
+    found: dict[str, int] = {}
+    for path in PACKAGE.rglob("*.py"):
+        rel = path.relative_to(PACKAGE).as_posix()
+        if rel.startswith(("core/sensors/", "core/doctor/", "doctor/")):
+            continue
+        hits = sum(1 for line in path.read_text().splitlines() if _KIND_BRANCH.search(line))
+        if hits:
+            found[rel] = hits
+    assert found == _KIND_BRANCHES_KEPT
+
+
+def test_the_config_never_imports_the_core_and_the_kinds_never_import_the_outer_layers():
+    """fusiond.config reads the kinds' tables on first use (the kinds import it); the registry, the kinds
+    and the fusion core import nothing of transport, replay, the CLI, the tuner, nor (until a decoder is
+    asked for) the codecs and rosbags."""
+    code = ("import sys, fusiond.config; a = {m for m in sys.modules if m.startswith('fusiond.core')}; "
+            "import fusiond.core.sensors.registry, fusiond.core.fusion; "
+            "b = {m for m in sys.modules if m.split('.')[1:2] in (['transport'], ['replay'], ['cli'], ['tune'], "
+            "['codecs']) or m.startswith('rosbags')}; print(sorted(a), sorted(b))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[] []"
+
+
+def test_a_kind_registers_under_its_tables_tag_and_an_unknown_tag_names_the_known_ones():
+    from fusiond.config import SensorTable
+    from fusiond.core.sensors import SensorKind, kind_named, register
+
+    class Tagged(SensorTable, tag="tagged"):
+        pass
+
+    class Misnamed(SensorKind):
+        name = "other"
+        config_type = Tagged
+
+    with pytest.raises(ValueError, match="its config table Tagged is tagged 'tagged'"):
+        register(Misnamed())
+    with pytest.raises(ValueError, match=r"unknown sensor kind 'tagged', expected one of \['gps', 'imu', 'odom', 'pose'"):
+        kind_named("tagged")

@@ -1,39 +1,38 @@
-"""Sensor kinds: one module each, every one a ``SensorModel`` (``base.py``).
+"""Sensor kinds: one package each (``odom/``, ``imu/``, ``gps/``, ``pose/``) with its [[sensors]]
+table, its ``SensorModel`` (``base.py``) and its ``SensorKind`` descriptor (``kind.py``), registered
+by its `kind` tag in ``registry.py``.
 
-A model is built once per configured sensor from its typed config table and a narrow
-``SensorContext``; it converts raw samples into filter input (its policy: floors,
-overrides, "not measured" rules, mounting rotations) and applies them to the filter
-state through the EKF's own methods, keeping what it must remember between messages in
-its own immutable slice of the state (``FilterState.own[index]``). The core's time
-handling knows none of them: adding a kind is a new module here (or a package, as ``imu/``
-with its gyro-bias learning and gap turn), its config table, and a line in ``MODELS``.
+``fusiond.config`` re-exports the built-in kinds' tables. A model is built once per configured
+sensor from its typed config table and a narrow ``SensorContext``; it converts raw samples into
+filter input (its policy: floors, overrides, "not measured" rules, mounting rotations) and applies
+them to the filter state through the EKF's own methods, keeping what it must remember between
+messages in its own immutable slice of the state (``FilterState.own[index]``). The core's time
+handling knows none of them, and what the rest of fusiond asks of a kind (does it define the world
+frame, which state blocks, which decoder) its descriptor answers: adding a kind is a new package
+here (or a single module) and one ``register`` call (docs/SENSOR_KINDS.md, "Adding a sensor kind").
 """
 
 from __future__ import annotations
 
-from ...config import GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from .base import SensorContext, SensorModel
 from .checks import Rejected
-from .gps import GpsInput, GpsModel, GpsPolicy
-from .imu import ImuInput, ImuModel, ImuPolicy, quiet_bound
-from .odom import OdomInput, OdomModel, OdomPolicy
-from .pose import PoseInput, PoseModel, PosePolicy
-
-MODELS: dict[type, type[SensorModel]] = {
-    OdomSensor: OdomModel,
-    ImuSensor: ImuModel,
-    GpsSensor: GpsModel,
-    PoseSensor: PoseModel,
-}
+from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy, GpsSensor
+from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSensor, quiet_bound
+from .kind import LayoutView, SensorKind
+from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSensor
+from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSensor
+from .registry import KINDS, config_types, kind_named, kind_of, register, unregister
 
 
 def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
     """One model per configured sensor, in configuration order (their index in the state)."""
-    return [MODELS[type(cfg)](cfg, i, ctx) for i, cfg in enumerate(sensors)]
+    return [kind_of(cfg).model_type(cfg, i, ctx) for i, cfg in enumerate(sensors)]
 
 
 __all__ = [
-    "MODELS", "GpsInput", "GpsModel", "GpsPolicy", "ImuInput", "ImuModel", "ImuPolicy", "OdomInput", "OdomModel",
-    "OdomPolicy", "PoseInput", "PoseModel", "PosePolicy", "Rejected", "SensorContext", "SensorModel", "build_models",
-    "quiet_bound",
+    "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSensor", "ImuInput", "ImuKind",
+    "ImuModel", "ImuPolicy", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
+    "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor", "Rejected", "SensorContext",
+    "SensorKind", "SensorModel", "build_models", "config_types", "kind_named", "kind_of", "quiet_bound", "register",
+    "unregister",
 ]

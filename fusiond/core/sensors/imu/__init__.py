@@ -1,13 +1,15 @@
-"""The IMU sensor kind: its model (``model``), the filter input a message becomes (``inputs``), its
-slice of the filter state (``own``), the gyro bias learned at standstills (``gyro_bias``) and the
-heading carried across logging gaps by the IMU's own yaw (``gap_turn``)."""
+"""The IMU sensor kind: its descriptor (``kind``), its model (``model``), the filter input a message
+becomes (``inputs``), its [[sensors]] table (``table``), its slice of the filter state (``own``), the gyro bias learned at standstills
+(``gyro_bias``) and the heading carried across logging gaps by the IMU's own yaw (``gap_turn``)."""
 
 from __future__ import annotations
 
 from .gyro_bias import BiasLearning, quiet_bound
 from .inputs import ImuInput
+from .kind import ImuKind
 from .model import G_UNITS_BAND, GRAVITY, ORIENTATION_BURST, YAW_JUMP_GATE, ImuModel, ImuPolicy
 from .own import ImuOwn
+from .table import ImuSensor
 
-__all__ = ["G_UNITS_BAND", "GRAVITY", "ORIENTATION_BURST", "YAW_JUMP_GATE", "BiasLearning", "ImuInput", "ImuModel",
-           "ImuOwn", "ImuPolicy", "quiet_bound"]
+__all__ = ["G_UNITS_BAND", "GRAVITY", "ORIENTATION_BURST", "YAW_JUMP_GATE", "BiasLearning", "ImuInput", "ImuKind",
+           "ImuModel", "ImuOwn", "ImuPolicy", "ImuSensor", "quiet_bound"]

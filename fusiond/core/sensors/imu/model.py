@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING
 import msgspec
 
 from .... import reasons
-from ....config import ImuSensor
 from ....estimator import mat3
 from ....estimator import observations as obs
 from ....estimator import rotation as rot
@@ -30,6 +29,7 @@ from .gap_turn import carry_yaw
 from .gyro_bias import learn_bias_at_rest
 from .inputs import ImuInput
 from .own import ImuOwn
+from .table import ImuSensor
 
 if TYPE_CHECKING:
     from ...state import FilterState

@@ -32,16 +32,16 @@ from typing import TYPE_CHECKING
 
 import msgspec
 
-from ... import reasons
-from ...config import OdomSensor
-from ...estimator import mat3
-from ...estimator import rotation as rot
-from ...logs import get_logger
-from ...samples import OdomSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
-from .imu.gyro_bias import quiet_bound
+from .... import reasons
+from ....estimator import mat3
+from ....estimator import rotation as rot
+from ....logs import get_logger
+from ....samples import OdomSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
+from ..imu.gyro_bias import quiet_bound
+from .table import OdomSensor
 
 if TYPE_CHECKING:
     from ..state import FilterState

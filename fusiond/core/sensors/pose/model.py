@@ -14,16 +14,16 @@ from typing import TYPE_CHECKING
 import msgspec
 import numpy as np
 
-from ... import reasons
-from ...config import PoseSensor
-from ...estimator import mat3
-from ...estimator import observations as obs
-from ...estimator import rotation as rot
-from ...samples import PoseSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import Rejected, finite, plausible, unit_quaternion
-from .frame import new_frame, set_position
+from .... import reasons
+from ....estimator import mat3
+from ....estimator import observations as obs
+from ....estimator import rotation as rot
+from ....samples import PoseSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import Rejected, finite, plausible, unit_quaternion
+from ..frame import new_frame, set_position
+from .table import PoseSensor
 
 if TYPE_CHECKING:
     from ..state import FilterState

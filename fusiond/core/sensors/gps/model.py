@@ -37,23 +37,24 @@ from typing import TYPE_CHECKING
 import msgspec
 import numpy as np
 
-from ... import reasons
-from ...config import GpsSensor
-from ...estimator import mat3
-from ...estimator import observations as obs
-from ...estimator.geodesy import EnuFrame
-from ...estimator.rigid_fit import RigidFit, fit_rigid
-from ...logs import get_logger
-from ...samples import GpsSample
-from ..diagnostics import DiagnosticsRecord
-from .base import SensorContext, SensorModel
-from .checks import Rejected, finite
-from .frame import lever, new_frame, set_position
+from .... import reasons
+from ....estimator import mat3
+from ....estimator import observations as obs
+from ....estimator.geodesy import EnuFrame
+from ....estimator.rigid_fit import RigidFit, fit_rigid
+from ....logs import get_logger
+from ....samples import GpsSample
+from ...diagnostics import DiagnosticsRecord
+from ..base import SensorContext, SensorModel
+from ..checks import Rejected, finite
+from ..frame import lever, new_frame, set_position
+from .table import GpsSensor
 
 if TYPE_CHECKING:
     from ..state import FilterState
 
 log = get_logger("fusiond.core")
+
 
 HEADING_MIN_TRAVEL = 0.3  # dead-reckoned / GPS extent below this: pushed, slipping or GPS wander, start over
 HEADING_UNKNOWN_SIGMA = math.pi / math.sqrt(3.0)  # std dev of a heading uniform on the circle, rad

@@ -1,0 +1,66 @@
+"""The GPS's descriptor (``SensorKind``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from ....config import FilterConfig
+from ....errors import ConfigError
+from ....estimator import GpsErrorBlock, StateBlock
+from ....samples import GpsSample
+from ..kind import LayoutView, SensorKind
+from .model import GpsModel
+from .table import GpsSensor
+
+
+class GpsKind(SensorKind):
+    """A NavSatFix receiver: it defines the world frame (ENU at its datum), its heading is measured
+    from travel, and its receiver's slowly wandering error is a state block of its own."""
+
+    name = "gps"
+    config_type = GpsSensor
+    sample_type = GpsSample
+    model_type = GpsModel
+    ros_types = ("sensor_msgs/msg/NavSatFix",)
+    geodetic = True
+    frame_message = "GPS fix"
+
+    def validate(self, cfg: GpsSensor, at: Callable[[str], str]) -> None:
+        if cfg.datum is not None and not (-90.0 <= cfg.datum[0] <= 90.0 and -180.0 <= cfg.datum[1] <= 180.0):
+            raise ConfigError(f"{at('datum')}: latitude must be in [-90, 90] and longitude in [-180, 180]")
+        if cfg.heading_init_m <= 0.0:
+            raise ConfigError(f"{at('heading_init_m')}: must be positive")
+        if cfg.error_tau_s > 0.0 and cfg.error_sigma is None:
+            raise ConfigError(f"{at('error_sigma')}: needed when error_tau_s > 0")
+        if cfg.vertical_error_sigma > 0.0 and cfg.vertical_error_tau_s <= 0.0:
+            raise ConfigError(f"{at('vertical_error_tau_s')}: must be positive when vertical_error_sigma > 0")
+
+    def defines_frame(self, cfg: GpsSensor) -> bool:
+        return True
+
+    def fuses_height(self, cfg: GpsSensor, filter_cfg: FilterConfig) -> bool:
+        return cfg.position_noise is None or cfg.position_noise[2] <= cfg.max_sigma
+
+    def state_blocks(self, cfg: GpsSensor, view: LayoutView) -> list[StateBlock]:
+        if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
+            return [GpsErrorBlock(cfg.error_tau_s, cfg.error_sigma)]
+        if cfg.vertical_error_sigma > 0.0:  # the altitude's wander alone
+            return [GpsErrorBlock(cfg.vertical_error_tau_s, (0.0, 0.0, cfg.vertical_error_sigma))]
+        return []
+
+    def datum(self, cfg: GpsSensor) -> tuple[float, float, float] | None:
+        return cfg.datum
+
+    def from_ros(self) -> Callable[[Any, str], Any]:
+        from ....codecs.from_ros import gps_from_ros
+
+        return gps_from_ros
+
+    def decoder(self, cfg: GpsSensor) -> Callable[[Any], Any]:
+        from ....codecs.decoders import make_decoder
+
+        return make_decoder(self.name, cfg.encoding, cfg.name)
+
+
+__all__ = ["GpsKind"]

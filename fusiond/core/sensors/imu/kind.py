@@ -1,0 +1,80 @@
+"""The IMU's descriptor: its gyro brings a bias (and, opted in, a yaw-rate scale), an absolute yaw
+beside a world frame an estimated offset, and an orientation read from gravity needs the odometry's
+forward acceleration."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+from ....errors import ConfigError
+from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
+from ....samples import ImuSample
+from ..kind import LayoutView, SensorKind
+from .model import ImuModel
+from .table import ImuSensor
+
+
+class ImuKind(SensorKind):
+    """An IMU: orientation (roll/pitch, optionally yaw) as updates, its gyro as a motion input."""
+
+    name = "imu"
+    config_type = ImuSensor
+    sample_type = ImuSample
+    model_type = ImuModel
+    ros_types = ("sensor_msgs/msg/Imu",)
+
+    def validate(self, cfg: ImuSensor, at: Callable[[str], str]) -> None:
+        if cfg.gyro_scale_estimation and not cfg.angular_velocity:
+            raise ConfigError(f"{at('gyro_scale_estimation')}: needs angular_velocity = true")
+        if not (0.0 <= cfg.orientation_rate_hz < math.inf):
+            raise ConfigError(f"{at('orientation_rate_hz')}: must be >= 0 and finite (0: every sample)")
+
+    def fuses_yaw(self, cfg: ImuSensor) -> bool:
+        return cfg.orientation in ("absolute", "relative")
+
+    def absolute_yaw(self, cfg: ImuSensor) -> bool:
+        return cfg.orientation == "absolute"
+
+    def tracks_acceleration(self, cfg: ImuSensor) -> bool:
+        return cfg.tilt_from_gravity
+
+    def state_blocks(self, cfg: ImuSensor, view: LayoutView) -> list[StateBlock]:
+        fc = view.filter
+        blocks: list[StateBlock] = []
+        if cfg.angular_velocity:
+            blocks.append(GyroBiasBlock(fc.gyro_bias_sigma, fc.gyro_bias_walk))
+        if cfg.gyro_scale_estimation:
+            blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
+        # An absolute yaw beside an absolute position or pose: heading + an estimated offset.
+        if cfg.orientation == "absolute" and cfg.yaw_offset_sigma > 0.0 and view.absolute:
+            blocks.append(YawOffsetBlock(cfg.yaw_offset_sigma, cfg.yaw_offset_walk))
+        return blocks
+
+    def from_ros(self) -> Callable[[Any, str], Any]:
+        from ....codecs.from_ros import imu_from_ros
+
+        return imu_from_ros
+
+    def decoder(self, cfg: ImuSensor) -> Callable[[Any], Any]:
+        from ....codecs.decoders import make_decoder
+
+        return make_decoder(self.name, cfg.encoding, cfg.name)
+
+    def zero_covariance(self, cfg: ImuSensor) -> Callable[[Any], bool] | None:
+        use_orientation = cfg.orientation != "off" and cfg.orientation_noise is None
+        use_gyro = cfg.angular_velocity and cfg.gyro_noise is None
+        if not (use_orientation or use_gyro):
+            return None
+
+        def check(s: Any) -> bool:
+            oc, gc = s.orientation_covariance, s.angular_velocity_covariance
+            if use_orientation and oc[0] != -1.0 and (oc[0] == 0.0 or oc[4] == 0.0 or oc[8] == 0.0):
+                return True
+            return use_gyro and gc[0] != -1.0 and (gc[0] == 0.0 or gc[4] == 0.0 or gc[8] == 0.0)
+
+        return check
+
+
+__all__ = ["ImuKind"]

@@ -1,0 +1,124 @@
+"""What the rest of fusiond may ask about a sensor kind: one ``SensorKind`` descriptor per kind.
+
+Config loading, the state layout, the fusion core, the decoder choice, the bag reader, the
+daemon, replay's evaluation and resume need to know what a sensor's kind means to them (does it
+define the world frame, which state blocks does it need, which ROS type does it read); each such
+question is a method or flag here, answered by the kind's own package (``odom/``, ``imu/``,
+``gps/``, ``pose/``) and looked up through ``registry.py``, so that none of them names a kind.
+The defaults describe a plain aiding sensor (no world frame, no yaw, no state block of its own,
+no publish prompt), so a new kind overrides only what it is.
+
+Decoding is the one place a descriptor reaches below the core: ``from_ros`` and ``decoder``
+import ``fusiond.codecs`` when called (it pulls rosbags in), never at import, so the filter core
+stays importable without it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from ...errors import ConfigError
+
+if TYPE_CHECKING:
+    from ...config import FilterConfig
+    from ...estimator import StateBlock
+    from .base import SensorModel
+
+
+class LayoutView:
+    """What a kind may know of the whole configuration when it says which state blocks it needs:
+    the filter table, and whether some sensor defines the world frame / fuses an absolute height
+    (a wheel scale and a twist pitch are observable only then)."""
+
+    __slots__ = ("filter", "absolute", "absolute_height")
+
+    def __init__(self, filter_cfg: "FilterConfig", absolute: bool, absolute_height: bool) -> None:
+        self.filter = filter_cfg
+        self.absolute = absolute
+        self.absolute_height = absolute_height
+
+
+class SensorKind:
+    """One sensor kind: its config table, sample, model, decoders and what it means to the core.
+
+    Subclasses set the class attributes and override the hooks their kind answers differently
+    from the defaults. ``cfg`` arguments are instances of ``config_type``.
+    """
+
+    name: ClassVar[str]  # the config's `kind` tag
+    config_type: ClassVar[type]  # the [[sensors]] table (a tagged ``SensorTable``)
+    sample_type: ClassVar[type]  # what its decoders make and its model converts
+    model_type: ClassVar[type["SensorModel"]]  # built once per configured sensor
+    ros_types: ClassVar[tuple[str, ...]] = ()  # the ROS 2 message types its decoders read
+    # exactly one sensor of this kind drives the prediction (the odometry): config loading requires it
+    drives_prediction: ClassVar[bool] = False
+    # an applied sample of this kind is a moment to publish the estimate (the odometry's rate)
+    prompts_publish: ClassVar[bool] = False
+    # the world frame it defines is geodetic (ENU at a WGS84 datum): NavSatFix output, heading from travel
+    geodetic: ClassVar[bool] = False
+    # what "waiting for the first ... to define the world frame" names
+    frame_message: ClassVar[str] = "message"
+
+    # -- config -------------------------------------------------------------------------------------
+    def validate(self, cfg: Any, at: Callable[[str], str]) -> None:
+        """Checks of one table msgspec cannot express; raise ConfigError naming ``at(field)``."""
+
+    # -- the world frame and the state ----------------------------------------------------------------
+    def defines_frame(self, cfg: Any) -> bool:
+        """Does this sensor define the world frame (nothing is published before its first message)?"""
+        return False
+
+    def fuses_height(self, cfg: Any, filter_cfg: "FilterConfig") -> bool:
+        """Does its absolute height reach the filter (outside two_d_mode, which the caller checks)?"""
+        return False
+
+    def fuses_yaw(self, cfg: Any) -> bool:
+        """Does it observe the heading itself (an absolute or relative IMU yaw)?"""
+        return False
+
+    def absolute_yaw(self, cfg: Any) -> bool:
+        """Is its yaw absolute (REP-103 ENU), a heading reference beside a GPS?"""
+        return False
+
+    def tracks_acceleration(self, cfg: Any) -> bool:
+        """Does its model need the odometry's forward acceleration (tilt from gravity)?"""
+        return False
+
+    def state_blocks(self, cfg: Any, view: LayoutView) -> Sequence["StateBlock"]:
+        """The error-state blocks this sensor needs; the layout keeps one block per name (the first
+        sensor asking wins) in its fixed order (``layout.BLOCK_ORDER``), unknown names after."""
+        return ()
+
+    def datum(self, cfg: Any) -> tuple[float, float, float] | None:
+        """A configured geodetic origin (lat deg, lon deg, alt m) of the world frame, if any."""
+        return None
+
+    # -- decoding ---------------------------------------------------------------------------------------
+    def ros_type(self, cfg: Any) -> str:
+        """The ROS 2 message type this sensor's topic carries (the first of ``ros_types`` by default)."""
+        return self.ros_types[0]
+
+    def from_ros(self) -> Callable[[Any, str], Any]:
+        """(rosbags message, sensor name) -> sample: what a bag replay reads with."""
+        raise NotImplementedError(f"sensor kind {self.name!r} has no ROS message converter")
+
+    def decoder(self, cfg: Any) -> Callable[[Any], Any]:
+        """bytes -> sample of this sensor's key; raises only ``DecodeError``. The default reads ROS 2 CDR
+        of ``ros_type`` through rosbags and ``from_ros``; other encodings are the kind's to offer."""
+        from ...codecs.decoders import cdr_decoder
+
+        if cfg.encoding != "ros2-cdr":
+            raise ConfigError(f"sensor {cfg.name!r}: kind {self.name!r} reads ros2-cdr only, got {cfg.encoding!r}")
+        return cdr_decoder(self.ros_type(cfg), self.from_ros(), cfg.name)
+
+    def zero_covariance(self, cfg: Any) -> Callable[[Any], bool] | None:
+        """For health's ``zero_covariance_floored``: does an accepted sample carry a zero variance the
+        sensor's floor replaces? None when the covariances are not read (overridden, or none)."""
+        return None
+
+    def __repr__(self) -> str:
+        return f"<sensor kind {self.name!r}>"
+
+
+__all__ = ["LayoutView", "SensorKind"]

@@ -1,0 +1,11 @@
+"""The wheel-odometry sensor kind: its [[sensors]] table (``table``), its model, policy and coast
+(``model``) and its descriptor (``kind``)."""
+
+from __future__ import annotations
+
+from .kind import OdomKind
+from .model import STOP_DECEL_LIMIT, OdomInput, OdomModel, OdomOwn, OdomPolicy, body_twist, impossible_stop
+from .table import OdomSensor
+
+__all__ = ["STOP_DECEL_LIMIT", "OdomInput", "OdomKind", "OdomModel", "OdomOwn", "OdomPolicy", "OdomSensor",
+           "body_twist", "impossible_stop"]

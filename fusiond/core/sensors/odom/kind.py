@@ -1,0 +1,58 @@
+"""The odometry's descriptor (``SensorKind``)."""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable
+from typing import Any
+
+from ....estimator import StateBlock, TwistPitchBlock, WheelScaleBlock
+from ....samples import OdomSample
+from ..kind import LayoutView, SensorKind
+from .model import OdomModel
+from .table import OdomSensor
+
+
+class OdomKind(SensorKind):
+    """Wheel odometry: the motion input that drives the prediction; its messages prompt a publish.
+
+    Its wheel speed scale becomes observable once something defines the world frame (on by default
+    there), and the twist's pitch in the body once an absolute height is fused (opt-in)."""
+
+    name = "odom"
+    config_type = OdomSensor
+    sample_type = OdomSample
+    model_type = OdomModel
+    ros_types = ("nav_msgs/msg/Odometry",)
+    drives_prediction = True
+    prompts_publish = True
+
+    def state_blocks(self, cfg: OdomSensor, view: LayoutView) -> list[StateBlock]:
+        fc = view.filter
+        blocks: list[StateBlock] = []
+        if cfg.scale_estimation or (cfg.scale_estimation is None and view.absolute):
+            blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
+        # Not on by default: over a short drive the twist's pitch is confounded with the altitude's
+        # wander, and an error model that calls a slow wander white lets it take the wander for a slope.
+        if view.absolute_height and cfg.twist_frame == "body" and cfg.pitch_estimation:
+            blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
+        return blocks
+
+    def from_ros(self) -> Callable[[Any, str], Any]:
+        from ....codecs.from_ros import odom_from_ros
+
+        return odom_from_ros
+
+    def decoder(self, cfg: OdomSensor) -> Callable[[Any], Any]:
+        from ....codecs.decoders import make_decoder
+
+        return make_decoder(self.name, cfg.encoding, cfg.name)
+
+    def zero_covariance(self, cfg: OdomSensor) -> Callable[[Any], bool] | None:
+        if cfg.twist_noise is not None:
+            return None
+        variances = operator.itemgetter(0, 7, 14, 21, 28, 35)  # the diagonal of the 6x6
+        return lambda s: 0.0 in variances(s.twist_covariance)
+
+
+__all__ = ["OdomKind"]

@@ -1,0 +1,10 @@
+"""The pose sensor kind (absolute, or differential: deltas between its poses): its [[sensors]] table
+(``table``), its model (``model``) and its descriptor (``kind``)."""
+
+from __future__ import annotations
+
+from .kind import PoseKind
+from .model import PoseAnchor, PoseInput, PoseModel, PosePolicy
+from .table import POSE_MSGTYPES, PoseSensor
+
+__all__ = ["POSE_MSGTYPES", "PoseAnchor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor"]
