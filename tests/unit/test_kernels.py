@@ -22,6 +22,8 @@ from fusiond.errors import EstimatorError
 from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock,
                                PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
 from fusiond.estimator import ekf as ekf_module
+from fusiond.estimator import motion as motion_module
+from fusiond.estimator.twist_pitch import TwistPitchBlock
 from fusiond.estimator import kernels
 
 pytestmark = pytest.mark.skipif(not kernels.available(),
@@ -127,12 +129,32 @@ def test_propagate_matches_the_numpy_path(layout, seed):
     _close(Pc, Pn)
 
 
+class _HalfWheelScale(WheelScaleBlock):
+    """A subclass that changes the maths without naming a kernel code of its own: Python predicts it."""
+
+    def correct(self, xb, u):
+        return (0.5 * xb[0] * u[0], 0.5 * xb[0] * u[1], 0.5 * xb[0] * u[2])
+
+    def input_derivative(self, xb, u):
+        s = 0.5 * xb[0]
+        return (s, 0.0, 0.0, 0.0, s, 0.0, 0.0, 0.0, s)
+
+    def chain(self, G, xb, u):
+        return tuple(0.5 * c for c in super().chain(G, xb, u))
+
+
 PREDICT_LAYOUTS = {
     "pose": StateLayout([PoseBlock(0.1, 0.1)]),
     "inputs": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GyroScaleBlock(0.05, 1e-5),
                            WheelScaleBlock(0.05, 1e-4)]),
     "gps_error": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
+    # every compiled kind, the twist corrected twice (scale then pitch: the chain through both), a dynamic block
+    "all_kinds": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), WheelScaleBlock(0.05, 1e-4),
+                              GyroScaleBlock(0.05, 1e-5), TwistPitchBlock(0.05, 1e-5),
+                              GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
+    "python_block": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), _HalfWheelScale(0.05, 1e-4)]),
 }
+COMPILED_PREDICT = {"pose", "inputs", "gps_error", "all_kinds"}
 finite = st.floats(-3.0, 3.0)
 cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple of a silent input
     st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)).map(
@@ -146,21 +168,28 @@ cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple
        periods=st.tuples(st.sampled_from([0.0, 0.01, 0.2]), st.sampled_from([0.0, 0.005, 0.1])),
        flags=st.tuples(st.booleans(), st.booleans(), st.booleans()), tau=st.sampled_from([0.0, 0.05]),
        dt=st.sampled_from([0.0, 0.001, 0.02, 0.7]))
-def test_input_noise_writes_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau, dt):
-    """The motion model's Q from kernels.input_noise is the Python path's, to the bit (the same
-    expressions in C, compiled without FMA contraction), and so are x' and F."""
+def test_compiled_predict_gives_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau,
+                                                        dt):
+    """The motion model's x', F and Q from kernels.predict are the Python path's, to the bit: the input
+    blocks' corrections and chain, the rotation, the right Jacobian and the input noise are the same
+    expressions in C, compiled without FMA contraction. A layout with a block that has no compiled
+    form predicts in Python on both paths."""
     lay = PREDICT_LAYOUTS[layout]
     u = MotionInput()
     u.linear, u.angular, u.linear_cov, u.angular_cov = v, w, lin_cov, ang_cov
     u.linear_period, u.angular_period = periods
     u.from_gyro, u.world_frame, u.planar = flags
     u.twist_correlation = tau
-    ekf = _random_filter(lay, np.random.default_rng(seed))
-    density = np.random.default_rng(seed).uniform(0.0, 1e-3, lay.error_dim)
+    rng = np.random.default_rng(seed)
+    ekf = _random_filter(lay, rng)
+    # the blocks away from their priors: a bias, scales off 1, a pitch, a GPS error
+    ekf.x[7:] += rng.uniform(-0.3, 0.3, lay.nominal_dim - 7)
+    density = rng.uniform(0.0, 1e-3, lay.error_dim)
     out = []
     for name in ("compiled", "numpy"):
         kernels.use(name)
         ws = PredictWorkspace(lay)
+        assert (ws._kernel_blocks is not None) is (layout in COMPILED_PREDICT)
         predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
         x, F, Q = predict(lay, ekf.x, u, dt, density, ws)
         out.append((x.copy(), F.copy(), Q.copy()))
@@ -287,8 +316,37 @@ def test_layouts_beyond_the_kernel_size_use_numpy():
     np.testing.assert_allclose(np.diagonal(ekf.P)[:6], 0.01 + 1e-3)
 
 
+def test_compiled_predict_refuses_a_zero_quaternion_as_python_does():
+    lay = PREDICT_LAYOUTS["inputs"]
+    u = MotionInput()
+    u.angular, u.from_gyro = (0.1, 0.2, 0.3), True
+    x = lay.initial_state()
+    x[3:7] = 0.0
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        with pytest.raises(EstimatorError, match="quaternion"):
+            predict(lay, x, u, 0.01, np.zeros(lay.error_dim))
+
+
+def test_compiled_predict_refuses_blocks_outside_the_state():
+    k = kernels.active()
+    x, n = np.zeros(10), 9
+    args = (x, np.empty(10), np.eye(n), np.zeros((n, n)), np.zeros(n), 0.01, None, (0.0,) * 3, (0.0,) * 3,
+            (0.0,) * 9, (0.0,) * 9, 0.0, 0.0, 0.0, 0)
+    with pytest.raises(ValueError, match="outside the state, or of an unknown kind"):
+        k.predict(*args, ((1, 1, 0, 8, 6, 3),))  # a 3-vector bias from nominal 8 runs past x
+    with pytest.raises(ValueError, match="outside the state, or of an unknown kind"):
+        k.predict(*args, ((9, 1, 0, 7, 6, 3),))
+    with pytest.raises(BufferError):
+        k.predict(x.astype(np.float32), *args[1:], ())
+
+
 def test_the_constants_mirror_the_c_module():
     k = kernels.active()
+    assert motion_module._KERNEL_MAX_N == k.MAX_N
+    codes = {GyroBiasBlock: k.BLOCK_GYRO_BIAS, WheelScaleBlock: k.BLOCK_WHEEL_SCALE,
+             GyroScaleBlock: k.BLOCK_GYRO_SCALE, TwistPitchBlock: k.BLOCK_TWIST_PITCH}
+    assert {cls: cls.__dict__["kernel_code"] for cls in codes} == codes
     assert (ekf_module._MAX_N, ekf_module._MAX_M) == (k.MAX_N, k.MAX_M)
     assert (ekf_module._GATED, ekf_module._SINGULAR, ekf_module._NEEDS_CHECK) == (k.GATED, k.SINGULAR, k.NEEDS_CHECK)
 
