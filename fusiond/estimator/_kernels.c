@@ -11,15 +11,19 @@
  * runs the numpy reference path in ekf.py, which tests hold equal to this one.
  *
  * What is here is the EKF's linear algebra and, as the one model that runs on every message, the
- * motion model's prediction; the measurement models stay in Python. The maths is exactly that of
+ * motion model's prediction and the orientation observation; the other measurement models stay
+ * in Python. The maths is exactly that of
  * ErrorStateEKF.propagate / update (ekf.py, whose docstrings derive it), of StateLayout.boxplus for
- * the layout where every block after the pose is additive, and of motion.predict:
+ * the layout where every block after the pose is additive, of motion.predict and of
+ * observations.orientation:
  *
  *   predict:    motion.predict for input blocks of the kinds listed under BLOCK_* (the classes
  *               name theirs in kernel_code): each block's correction of its input, x' (the pose
  *               moved by the twist and the rate), F (the cross block and the blocks' columns by the
  *               chain rule) and Q as input_noise; a layout with any other block predicts in Python.
  *               tests/unit/test_kernels.py holds x', F and Q to the Python path's bits.
+ *   orientation: observations.orientation's innovation and Jacobian (rpy_jacobian, rot.wrap), the
+ *               IMU's most frequent update.
  *   input_noise: Q's diagonal (noise density * dt) and the input-noise blocks scale * G S G^T of
  *               the odometry twist and the gyro rate (motion.py's _input_noise, same expressions).
  *   propagate:  P' = (F P) F^T + Q, finite iff its diagonal sums to a finite number.
@@ -630,6 +634,103 @@ fail:
     return NULL;
 }
 
+/* -- orientation observation ------------------------------------------------------------------ */
+
+/* observations.rpy_jacobian: (roll, pitch, yaw) of q and their rows of d(rpy)/d(global dtheta), the
+ * same expressions (Python's min/max written out with their comparisons, for the same NaN behaviour) */
+static void rpy_jacobian(const double *q, double *rpy, double *Hrpy) {
+    const double min_cos_pitch = 1e-3;
+    double r[9];
+    quat_matrix9(q, r);
+    double r00 = r[0], r01 = r[1], r02 = r[2], r10 = r[3], r11 = r[4], r12 = r[5], r20 = r[6], r21 = r[7], r22 = r[8];
+    double roll = atan2(r21, r22);
+    double sp = -r20 < 1.0 ? -r20 : 1.0;     /* min(1.0, -r20) */
+    double pitch = asin(sp > -1.0 ? sp : -1.0); /* max(-1.0, .) */
+    double yaw = atan2(r10, r00);
+    double c = cos(pitch);
+    double cp = min_cos_pitch > c ? min_cos_pitch : c;
+    double cr = cos(roll), sr = sin(roll);
+    double c2 = r00 * r00 + r10 * r10, floor2 = pow(min_cos_pitch, 2.0); /* Python's 1e-3**2 */
+    if (floor2 > c2) {
+        c2 = floor2;
+    }
+    rpy[0] = roll, rpy[1] = pitch, rpy[2] = yaw;
+    Hrpy[0] = (cr * r11 - sr * r12) / cp, Hrpy[1] = (cr * -r01 - sr * -r02) / cp, Hrpy[2] = 0.0;
+    Hrpy[3] = -r10 / cp, Hrpy[4] = -(-r00) / cp, Hrpy[5] = 0.0;
+    Hrpy[6] = -r00 * r20 / c2, Hrpy[7] = -r10 * r20 / c2, Hrpy[8] = 1.0;
+}
+
+PyDoc_STRVAR(orientation_doc,
+"orientation(x, z_rpy, rows, y, H) -> None\n\n"
+"observations.orientation's innovation and Jacobian: for each of rows (roll 0, pitch 1, yaw 2) in\n"
+"order, y[k] = wrap(z_rpy[i] - rpy(q)[i]) and H's row k d(rpy_i)/d(global dtheta) in columns 3-5,\n"
+"zero elsewhere. x the nominal state (q at 3-6), y (m) and H (m x n) written whole.");
+
+static PyObject *orientation(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "orientation takes 5 arguments");
+        return NULL;
+    }
+    double z[3];
+    int rows[3];
+    if (three(args[1], z, "z_rpy") < 0) {
+        return NULL;
+    }
+    PyObject *fast = PySequence_Fast(args[2], "rows");
+    if (fast == NULL) {
+        return NULL;
+    }
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(fast);
+    for (Py_ssize_t k = 0; k < m && k < 3; k++) {
+        long i = PyLong_AsLong(PySequence_Fast_ITEMS(fast)[k]);
+        rows[k] = (int)i;
+        if ((i == -1 && PyErr_Occurred()) || i < 0 || i > 2) {
+            Py_DECREF(fast);
+            if (!PyErr_Occurred()) {
+                PyErr_SetString(PyExc_ValueError, "rows must be among 0, 1, 2");
+            }
+            return NULL;
+        }
+    }
+    Py_DECREF(fast);
+    if (m < 1 || m > 3) {
+        PyErr_SetString(PyExc_ValueError, "rows must have 1 to 3 entries");
+        return NULL;
+    }
+    Held held = {.count = 0};
+    const double *x = hold(&held, args[0], 0, -1, "x");
+    double *y = NULL, *H = NULL;
+    Py_ssize_t n = 0;
+    if (x == NULL) {
+        goto fail;
+    }
+    if (last_items(&held) < 7) {
+        PyErr_SetString(PyExc_ValueError, "x must hold a pose");
+        goto fail;
+    }
+    if ((y = hold(&held, args[3], 1, m, "y")) == NULL || (H = hold(&held, args[4], 1, -1, "H")) == NULL) {
+        goto fail;
+    }
+    n = last_items(&held) / m;
+    if (n * m != last_items(&held) || n < 6) {
+        PyErr_SetString(PyExc_ValueError, "H must have len(rows) rows of at least 6 columns");
+        goto fail;
+    }
+    double rpy[3], Hrpy[9];
+    rpy_jacobian(x + 3, rpy, Hrpy);
+    memset(H, 0, sizeof(double) * (size_t)(m * n));
+    for (Py_ssize_t k = 0; k < m; k++) {
+        int i = rows[k];
+        y[k] = wrap_angle(z[i] - rpy[i]);
+        H[k * n + 3] = Hrpy[3 * i], H[k * n + 4] = Hrpy[3 * i + 1], H[k * n + 5] = Hrpy[3 * i + 2];
+    }
+    release(&held);
+    Py_RETURN_NONE;
+fail:
+    release(&held);
+    return NULL;
+}
+
 /* -- propagate ------------------------------------------------------------------------------- */
 
 PyDoc_STRVAR(propagate_doc,
@@ -896,6 +997,7 @@ static PyMethodDef methods[] = {
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
     {"input_noise", (PyCFunction)(void (*)(void))input_noise, METH_FASTCALL, input_noise_doc},
     {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL, predict_doc},
+    {"orientation", (PyCFunction)(void (*)(void))orientation, METH_FASTCALL, orientation_doc},
     {NULL, NULL, 0, NULL},
 };
 

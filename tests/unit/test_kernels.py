@@ -23,6 +23,7 @@ from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, Gyro
                                PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
 from fusiond.estimator import ekf as ekf_module
 from fusiond.estimator import motion as motion_module
+from fusiond.estimator import observations
 from fusiond.estimator.twist_pitch import TwistPitchBlock
 from fusiond.estimator import kernels
 
@@ -399,3 +400,48 @@ def test_jackal_trajectory_is_the_same_on_both_paths(jackal_bag, config):
     assert now["published"] == ref["published"]
     worst = max(abs(a - b) for pa, pb in zip(now["poses"], ref["poses"]) for a, b in zip(pa, pb))
     assert worst <= 1e-9
+
+
+unit = st.floats(-1.0, 1.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(q=st.one_of(st.tuples(unit, unit, unit, unit),
+                   # near pitch +-90 degrees, where cos(pitch) and the yaw row's denominator meet their floors
+                   st.tuples(st.floats(-1e-3, 1e-3), st.sampled_from([0.7071067811865476, -0.7071067811865476]),
+                             st.floats(-1e-3, 1e-3), st.sampled_from([0.7071067811865476, 0.7071067811865475]))),
+       z=st.tuples(st.floats(-4.0, 4.0), st.floats(-4.0, 4.0), st.floats(-4.0, 4.0)),
+       rows=st.sampled_from([(0, 1), (0, 1, 2), (2,), (1,), (2, 0)]),
+       layout=st.sampled_from(["pose", "bias_scale"]))
+def test_compiled_orientation_gives_the_python_paths_floats(q, z, rows, layout):
+    """observations.orientation's y and H from kernels.orientation are the Python path's to the bit
+    (rpy_jacobian and rot.wrap as the same expressions in C); R is the same shared array."""
+    lay = LAYOUTS[layout]
+    norm = math.sqrt(sum(c * c for c in q))
+    if norm < 1e-6:
+        q = (0.0, 0.0, 0.0, 1.0)
+    x = lay.initial_state()
+    x[3:7] = q if norm < 1e-6 else tuple(c / norm for c in q)
+    cov = (0.01, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.03)
+    out = []
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        out.append(observations.orientation(lay, x, z, cov, rows))
+    (yc, Hc, Rc), (yn, Hn, Rn) = out
+    np.testing.assert_array_equal(yc, yn)
+    np.testing.assert_array_equal(Hc, Hn)
+    assert Rc is Rn
+
+
+def test_compiled_orientation_refuses_bad_rows_and_shapes():
+    k = kernels.active()
+    x = np.zeros(7)
+    x[6] = 1.0
+    with pytest.raises(ValueError, match="rows must be among 0, 1, 2"):
+        k.orientation(x, (0.0,) * 3, (0, 3), np.empty(2), np.empty((2, 6)))
+    with pytest.raises(ValueError, match="rows must have 1 to 3 entries"):
+        k.orientation(x, (0.0,) * 3, (), np.empty(0), np.empty((0, 6)))
+    with pytest.raises(ValueError, match="H must have len\\(rows\\) rows"):
+        k.orientation(x, (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 5)))
+    with pytest.raises(BufferError):
+        k.orientation(x[::-1], (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 6)))
