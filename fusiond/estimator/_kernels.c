@@ -731,6 +731,36 @@ fail:
     return NULL;
 }
 
+/* -- snapshots -------------------------------------------------------------------------------- */
+
+PyDoc_STRVAR(copy_into_doc,
+"copy_into(x, P, x_to, P_to) -> None\n\n"
+"x_to[...] = x and P_to[...] = P in one call (ErrorStateEKF.copy into a recycled snapshot): each pair\n"
+"must be float64 C-contiguous of the same size, checked before anything is written (a ValueError\n"
+"otherwise: the caller allocates a new snapshot).");
+
+static PyObject *copy_into(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "copy_into(x, P, x_to, P_to) takes 4 arguments");
+        return NULL;
+    }
+    Held held = {.count = 0};
+    const double *x = hold(&held, args[0], 0, -1, "x");
+    Py_ssize_t nx = x == NULL ? -1 : last_items(&held);
+    const double *P = nx < 0 ? NULL : hold(&held, args[1], 0, -1, "P");
+    Py_ssize_t nP = P == NULL ? -1 : last_items(&held);
+    double *x_to = NULL, *P_to = NULL;
+    if (nP < 0 || (x_to = hold(&held, args[2], 1, nx, "x_to")) == NULL ||
+        (P_to = hold(&held, args[3], 1, nP, "P_to")) == NULL) {
+        release(&held);
+        return NULL;
+    }
+    memmove(x_to, x, sizeof(double) * (size_t)nx);
+    memmove(P_to, P, sizeof(double) * (size_t)nP);
+    release(&held);
+    Py_RETURN_NONE;
+}
+
 /* -- propagate ------------------------------------------------------------------------------- */
 
 PyDoc_STRVAR(propagate_doc,
@@ -998,6 +1028,7 @@ static PyMethodDef methods[] = {
     {"input_noise", (PyCFunction)(void (*)(void))input_noise, METH_FASTCALL, input_noise_doc},
     {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL, predict_doc},
     {"orientation", (PyCFunction)(void (*)(void))orientation, METH_FASTCALL, orientation_doc},
+    {"copy_into", (PyCFunction)(void (*)(void))copy_into, METH_FASTCALL, copy_into_doc},
     {NULL, NULL, 0, NULL},
 };
 

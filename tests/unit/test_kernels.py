@@ -445,3 +445,31 @@ def test_compiled_orientation_refuses_bad_rows_and_shapes():
         k.orientation(x, (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 5)))
     with pytest.raises(BufferError):
         k.orientation(x[::-1], (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 6)))
+
+
+@pytest.mark.parametrize("name", ["compiled", "numpy"])
+def test_a_copy_into_a_recycled_filter_is_the_filter_in_its_own_arrays(name):
+    kernels.use(name)
+    lay = LAYOUTS["bias_scale"]
+    src = _random_filter(lay, np.random.default_rng(3))
+    old = _random_filter(lay, np.random.default_rng(4))
+    x_buf, P_buf = old.x, old.P
+    c = src.copy(into=old)
+    assert c is old and c.x is x_buf and c.P is P_buf  # the recycled arrays, overwritten
+    np.testing.assert_array_equal(c.x, src.x)
+    np.testing.assert_array_equal(c.P, src.P)
+    assert not np.shares_memory(c.P, src.P) and not np.shares_memory(c.x, src.x)
+    other = _random_filter(LAYOUTS["pose"], np.random.default_rng(5))  # another size: a new object
+    d = src.copy(into=other)
+    assert d is not other
+    np.testing.assert_array_equal(d.P, src.P)
+    np.testing.assert_array_equal(other.P, _random_filter(LAYOUTS["pose"], np.random.default_rng(5)).P)
+
+
+def test_copy_into_checks_every_size_before_writing():
+    k = kernels.active()
+    x, P = np.ones(4), np.ones((2, 2))
+    x_to, P_to = np.zeros(4), np.zeros((3, 3))
+    with pytest.raises(ValueError, match="P_to has 9 values, expected 4"):
+        k.copy_into(x, P, x_to, P_to)
+    assert not x_to.any()
