@@ -10,11 +10,20 @@
  * `pip install` already uses; the build is optional (setup.py), and without it the estimator
  * runs the numpy reference path in ekf.py, which tests hold equal to this one.
  *
- * What is here is linear algebra only, with no model in it: the models (motion, measurements)
- * stay in Python. The maths is exactly that of ErrorStateEKF.propagate / update (ekf.py, whose
- * docstrings derive it) and of StateLayout.boxplus for the layout where every block after the
- * pose is additive:
+ * What is here is the EKF's linear algebra and, as the one model that runs on every message, the
+ * motion model's prediction and the orientation observation; the other measurement models stay
+ * in Python. The maths is exactly that of
+ * ErrorStateEKF.propagate / update (ekf.py, whose docstrings derive it), of StateLayout.boxplus for
+ * the layout where every block after the pose is additive, of motion.predict and of
+ * observations.orientation:
  *
+ *   predict:    motion.predict for input blocks of the kinds listed under BLOCK_* (the classes
+ *               name theirs in kernel_code): each block's correction of its input, x' (the pose
+ *               moved by the twist and the rate), F (the cross block and the blocks' columns by the
+ *               chain rule) and Q as input_noise; a layout with any other block predicts in Python.
+ *               tests/unit/test_kernels.py holds x', F and Q to the Python path's bits.
+ *   orientation: observations.orientation's innovation and Jacobian (rpy_jacobian, rot.wrap), the
+ *               IMU's most frequent update.
  *   input_noise: Q's diagonal (noise density * dt) and the input-noise blocks scale * G S G^T of
  *               the odometry twist and the gyro rate (motion.py's _input_noise, same expressions).
  *   propagate:  P' = (F P) F^T + Q, finite iff its diagonal sums to a finite number.
@@ -316,6 +325,442 @@ static PyObject *input_noise(PyObject *self, PyObject *const *args, Py_ssize_t n
     Py_RETURN_NONE;
 }
 
+/* -- motion model ----------------------------------------------------------------------------- */
+
+/* The input blocks the motion model knows in C, by their class's kernel_code (state.py, scale.py,
+ * twist_pitch.py): each one's correct / chain / input_derivative, the same expressions. A layout with
+ * any other input block takes motion.py's Python path. */
+enum { BLOCK_GYRO_BIAS = 1, BLOCK_WHEEL_SCALE = 2, BLOCK_GYRO_SCALE = 3, BLOCK_TWIST_PITCH = 4 };
+#define MAX_INPUT_BLOCKS 8
+
+typedef struct {
+    int code, applies, linear; /* linear: corrects the twist (F rows 0-2), else the rate (rows 3-5) */
+    Py_ssize_t n0, c0, size;    /* nominal index, first error column, error size */
+    double xb[3];               /* the block's nominal values this step */
+    double u_in[3];             /* the input as it reached the block */
+} MotionBlock;
+
+/* mat3.mul: k * A B, row-major */
+static void mat3_mul(const double *a, const double *b, double k, double *out) {
+    double r[9];
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) {
+            r[3 * i + j] = (a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j]) * k;
+        }
+    }
+    memcpy(out, r, sizeof(r));
+}
+
+/* rotation.matrix9 */
+static void quat_matrix9(const double *q, double *R) {
+    double x = q[0], y = q[1], z = q[2], w = q[3];
+    double xx = x * x, yy = y * y, zz = z * z, xy = x * y, xz = x * z, yz = y * z, wx = w * x, wy = w * y, wz = w * z;
+    R[0] = 1.0 - 2.0 * (yy + zz), R[1] = 2.0 * (xy - wz), R[2] = 2.0 * (xz + wy);
+    R[3] = 2.0 * (xy + wz), R[4] = 1.0 - 2.0 * (xx + zz), R[5] = 2.0 * (yz - wx);
+    R[6] = 2.0 * (xz - wy), R[7] = 2.0 * (yz + wx), R[8] = 1.0 - 2.0 * (xx + yy);
+}
+
+/* motion._right_jacobian */
+static void right_jacobian(double x, double y, double z, double *J) {
+    double t2 = x * x + y * y + z * z, a, b;
+    if (t2 < 1e-10) {
+        a = 0.5, b = 1.0 / 6.0;
+    } else {
+        double t = sqrt(t2);
+        a = (1.0 - cos(t)) / t2;
+        b = (t - sin(t)) / (t2 * t);
+    }
+    J[0] = 1.0 + b * (x * x - t2), J[1] = a * z + b * x * y, J[2] = -a * y + b * x * z;
+    J[3] = -a * z + b * x * y, J[4] = 1.0 + b * (y * y - t2), J[5] = a * x + b * y * z;
+    J[6] = a * y + b * x * z, J[7] = -a * x + b * y * z, J[8] = 1.0 + b * (z * z - t2);
+}
+
+/* InputBlock.correct of each kind: u' from u (u_out may be u) */
+static void block_correct(const MotionBlock *blk, const double *u, double *u_out) {
+    double u0 = u[0], u1 = u[1], u2 = u[2], s = blk->xb[0];
+    switch (blk->code) {
+    case BLOCK_GYRO_BIAS:
+        u_out[0] = u0 - blk->xb[0], u_out[1] = u1 - blk->xb[1], u_out[2] = u2 - blk->xb[2];
+        break;
+    case BLOCK_WHEEL_SCALE:
+        u_out[0] = s * u0, u_out[1] = s * u1, u_out[2] = s * u2;
+        break;
+    case BLOCK_GYRO_SCALE:
+        u_out[0] = u0, u_out[1] = u1, u_out[2] = s * u2;
+        break;
+    case BLOCK_TWIST_PITCH: {
+        double c = cos(s), sn = sin(s);
+        u_out[0] = c * u0 - sn * u2, u_out[1] = u1, u_out[2] = sn * u0 + c * u2;
+        break;
+    }
+    }
+}
+
+/* InputBlock.chain (this block's 3 x size columns of F, row-major) and, for the blocks that scale their
+ * input (scales_input), G = mat3.mul(G, input_derivative). */
+static void block_chain(const MotionBlock *blk, double *G, double *columns) {
+    const double *u = blk->u_in;
+    double s = blk->xb[0], d[9];
+    switch (blk->code) {
+    case BLOCK_GYRO_BIAS:
+        for (int i = 0; i < 9; i++) {
+            columns[i] = -G[i];
+        }
+        return;
+    case BLOCK_WHEEL_SCALE:
+        columns[0] = G[0] * u[0] + G[1] * u[1] + G[2] * u[2];
+        columns[1] = G[3] * u[0] + G[4] * u[1] + G[5] * u[2];
+        columns[2] = G[6] * u[0] + G[7] * u[1] + G[8] * u[2];
+        d[0] = s, d[1] = 0.0, d[2] = 0.0, d[3] = 0.0, d[4] = s, d[5] = 0.0, d[6] = 0.0, d[7] = 0.0, d[8] = s;
+        break;
+    case BLOCK_GYRO_SCALE:
+        columns[0] = G[2] * u[2], columns[1] = G[5] * u[2], columns[2] = G[8] * u[2];
+        d[0] = 1.0, d[1] = 0.0, d[2] = 0.0, d[3] = 0.0, d[4] = 1.0, d[5] = 0.0, d[6] = 0.0, d[7] = 0.0, d[8] = s;
+        break;
+    case BLOCK_TWIST_PITCH: {
+        double c = cos(s), sn = sin(s);
+        double a = -sn * u[0] - c * u[2], b = c * u[0] - sn * u[2];
+        columns[0] = G[0] * a + G[2] * b, columns[1] = G[3] * a + G[5] * b, columns[2] = G[6] * a + G[8] * b;
+        d[0] = c, d[1] = 0.0, d[2] = -sn, d[3] = 0.0, d[4] = 1.0, d[5] = 0.0, d[6] = sn, d[7] = 0.0, d[8] = c;
+        break;
+    }
+    default:
+        return;
+    }
+    mat3_mul(G, d, 1.0, G);
+}
+
+/* Three doubles from a 3-sequence of floats. */
+static int three(PyObject *seq, double *out, const char *what) {
+    PyObject *fast = PySequence_Fast(seq, what);
+    if (fast == NULL) {
+        return -1;
+    }
+    if (PySequence_Fast_GET_SIZE(fast) != 3) {
+        Py_DECREF(fast);
+        PyErr_Format(PyExc_ValueError, "%s must have 3 entries", what);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(fast);
+    for (int i = 0; i < 3; i++) {
+        out[i] = PyFloat_AsDouble(items[i]);
+        if (out[i] == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+/* The layout's input blocks, a tuple of (code, applies, linear, n0, c0, size) tuples, into blocks. */
+static Py_ssize_t read_blocks(PyObject *spec, MotionBlock *blocks, Py_ssize_t nx, Py_ssize_t n) {
+    if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) > MAX_INPUT_BLOCKS) {
+        PyErr_Format(PyExc_ValueError, "blocks must be a tuple of at most %d entries", MAX_INPUT_BLOCKS);
+        return -1;
+    }
+    Py_ssize_t count = PyTuple_GET_SIZE(spec);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        MotionBlock *b = &blocks[i];
+        long code, applies, linear;
+        if (!PyArg_ParseTuple(PyTuple_GET_ITEM(spec, i), "lllnnn", &code, &applies, &linear, &b->n0, &b->c0,
+                              &b->size)) {
+            return -1;
+        }
+        b->code = (int)code, b->applies = applies != 0, b->linear = linear != 0;
+        Py_ssize_t expected = code == BLOCK_GYRO_BIAS ? 3 : 1;
+        if (code < BLOCK_GYRO_BIAS || code > BLOCK_TWIST_PITCH || b->size != expected || b->n0 < 7 ||
+            b->n0 + b->size > nx || b->c0 < 6 || b->c0 + b->size > n) {
+            PyErr_SetString(PyExc_ValueError, "an input block outside the state, or of an unknown kind");
+            return -1;
+        }
+    }
+    return count;
+}
+
+PyDoc_STRVAR(predict_doc,
+"predict(x, x_out, F, Q, density, dt, extra, linear, angular, linear_cov, angular_cov, linear_period,\n"
+"        angular_period, twist_correlation, flags, blocks) -> None\n\n"
+"motion.predict for a layout whose input blocks all have a kernel_code: x_out (nominal, as long as\n"
+"x) gets the propagated pose and x's other entries, F (n x n, the identity elsewhere) its cross\n"
+"block and the input blocks' columns, Q the entries input_noise writes. flags: 1 world-frame twist,\n"
+"2 planar rates. blocks: (code, applies, linear, n0, c0, size) per input block in layout order.\n"
+"The dynamic blocks' decay is left to the caller (their extra noise comes in extra, or None).");
+
+static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 16) {
+        PyErr_SetString(PyExc_TypeError, "predict takes 16 arguments");
+        return NULL;
+    }
+    double dt = PyFloat_AsDouble(args[5]);
+    double lin_period = PyFloat_AsDouble(args[11]), ang_period = PyFloat_AsDouble(args[12]);
+    double tau = PyFloat_AsDouble(args[13]);
+    long flags = PyLong_AsLong(args[14]);
+    double v[3], w[3], cov[2][9];
+    if (PyErr_Occurred() || three(args[7], v, "linear") < 0 || three(args[8], w, "angular") < 0 ||
+        nine(args[9], cov[0], "linear_cov") < 0 || nine(args[10], cov[1], "angular_cov") < 0) {
+        return NULL;
+    }
+    Held held = {.count = 0};
+    const double *x = NULL, *d = NULL, *extra = NULL;
+    double *x_out = NULL, *F = NULL, *Q = NULL;
+    Py_ssize_t nx = -1, n = -1;
+    MotionBlock blocks[MAX_INPUT_BLOCKS];
+    if ((x = hold(&held, args[0], 0, -1, "x")) == NULL) {
+        goto fail;
+    }
+    nx = last_items(&held);
+    if ((x_out = hold(&held, args[1], 1, nx, "x_out")) == NULL || (F = hold(&held, args[2], 1, -1, "F")) == NULL ||
+        (n = square_side(last_items(&held), 6, "F")) < 0 || (Q = hold(&held, args[3], 1, n * n, "Q")) == NULL ||
+        (d = hold(&held, args[4], 0, n, "density")) == NULL ||
+        (args[6] != Py_None && (extra = hold(&held, args[6], 0, n, "extra")) == NULL)) {
+        goto fail;
+    }
+    if (nx < 7 || nx - 1 > n) {
+        PyErr_SetString(PyExc_ValueError, "x must hold a pose and fit F");
+        goto fail;
+    }
+    Py_ssize_t count = read_blocks(args[15], blocks, nx, n);
+    if (count < 0) {
+        goto fail;
+    }
+    /* the input blocks correct the inputs in layout order, each keeping the input it saw */
+    for (Py_ssize_t i = 0; i < count; i++) {
+        MotionBlock *b = &blocks[i];
+        if (!b->applies) {
+            continue;
+        }
+        memcpy(b->xb, x + b->n0, sizeof(double) * (size_t)b->size);
+        double *u = b->linear ? v : w;
+        memcpy(b->u_in, u, sizeof(b->u_in));
+        block_correct(b, u, u);
+    }
+    double q[4] = {x[3], x[4], x[5], x[6]}, R[9], G_lin[9], G_ang[9], Jr[9], dp[3], q1[4], e[4];
+    quat_matrix9(q, R);
+    if (flags & 1) {
+        for (int i = 0; i < 9; i++) {
+            G_lin[i] = (i % 4 == 0) ? dt : 0.0;
+        }
+        dp[0] = v[0] * dt, dp[1] = v[1] * dt, dp[2] = v[2] * dt;
+    } else {
+        for (int i = 0; i < 9; i++) {
+            G_lin[i] = R[i] * dt;
+        }
+        for (int i = 0; i < 3; i++) {
+            dp[i] = (R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2]) * dt;
+        }
+    }
+    if (flags & 2) {
+        w[0] = 0.0, w[1] = 0.0;
+    }
+    double ax = w[0] * dt, ay = w[1] * dt, az = w[2] * dt;
+    if (quat_exp(ax, ay, az, e) < 0 || mul_unit(q, e, q1) < 0) {
+        PyErr_SetString(PyExc_ArithmeticError, "quaternion has zero or non-finite norm");
+        goto fail;
+    }
+    /* d theta' / d w = R Jl(w dt) dt, Jl(phi) = Jr(-phi); planar: the x/y columns go */
+    right_jacobian(-ax, -ay, -az, Jr);
+    mat3_mul(R, Jr, dt, G_ang);
+    if (flags & 2) {
+        G_ang[0] = G_ang[1] = G_ang[3] = G_ang[4] = G_ang[6] = G_ang[7] = 0.0;
+    }
+    /* F: the cross block -[dp]x (zero for a world-frame twist), then each input block's columns,
+     * walking the blocks backwards and carrying G through those that scale their input */
+    int world = (flags & 1) != 0;
+    F[0 * n + 4] = world ? 0.0 : dp[2], F[0 * n + 5] = world ? 0.0 : -dp[1];
+    F[1 * n + 3] = world ? 0.0 : -dp[2], F[1 * n + 5] = world ? 0.0 : dp[0];
+    F[2 * n + 3] = world ? 0.0 : dp[1], F[2 * n + 4] = world ? 0.0 : -dp[0];
+    for (Py_ssize_t i = count - 1; i >= 0; i--) {
+        MotionBlock *b = &blocks[i];
+        double columns[9] = {0.0};
+        if (b->applies) {
+            block_chain(b, b->linear ? G_lin : G_ang, columns);
+        }
+        Py_ssize_t r0 = b->linear ? 0 : 3;
+        for (Py_ssize_t r = 0; r < 3; r++) {
+            for (Py_ssize_t c = 0; c < b->size; c++) {
+                F[(r0 + r) * n + b->c0 + c] = columns[r * b->size + c];
+            }
+        }
+    }
+    /* Q: as input_noise, the odometry's period widened to its correlation (motion.py's module doc) */
+    if (dt > 0.0) {
+        double qd[MAX_N];
+        for (Py_ssize_t i = 0; i < n; i++) {
+            qd[i] = d[i] * dt;
+            if (extra != NULL) {
+                qd[i] += extra[i];
+            }
+        }
+        const double *gs[2] = {G_lin, G_ang};
+        double periods[2] = {lin_period, ang_period};
+        for (int j = 0; j < 2; j++) {
+            int k = 3 * j;
+            if (periods[j] > 0.0) {
+                double period = periods[j];
+                if (j == 0 && 2.0 * tau > period) { /* Python's max(period, 2 tau) */
+                    period = 2.0 * tau;
+                }
+                input_block(Q, n, qd, k, gs[j], cov[j], period / dt);
+            } else {
+                Q[k * n + k + 1] = Q[(k + 1) * n + k] = 0.0;
+                Q[k * n + k + 2] = Q[(k + 2) * n + k] = 0.0;
+                Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = 0.0;
+            }
+        }
+        for (Py_ssize_t i = 0; i < n; i++) {
+            Q[i * n + i] = qd[i];
+        }
+    } else {
+        for (int k = 0; k <= 3; k += 3) {
+            Q[k * n + k + 1] = Q[(k + 1) * n + k] = 0.0;
+            Q[k * n + k + 2] = Q[(k + 2) * n + k] = 0.0;
+            Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = 0.0;
+        }
+        for (Py_ssize_t i = 0; i < n; i++) {
+            Q[i * n + i] = 0.0;
+        }
+    }
+    /* x_out last: x may be x_out */
+    double head[7] = {x[0] + dp[0], x[1] + dp[1], x[2] + dp[2], q1[0], q1[1], q1[2], q1[3]};
+    if (x_out != x) {
+        memcpy(x_out + 7, x + 7, sizeof(double) * (size_t)(nx - 7));
+    }
+    memcpy(x_out, head, sizeof(head));
+    release(&held);
+    Py_RETURN_NONE;
+fail:
+    release(&held);
+    return NULL;
+}
+
+/* -- orientation observation ------------------------------------------------------------------ */
+
+/* observations.rpy_jacobian: (roll, pitch, yaw) of q and their rows of d(rpy)/d(global dtheta), the
+ * same expressions (Python's min/max written out with their comparisons, for the same NaN behaviour) */
+static void rpy_jacobian(const double *q, double *rpy, double *Hrpy) {
+    const double min_cos_pitch = 1e-3;
+    double r[9];
+    quat_matrix9(q, r);
+    double r00 = r[0], r01 = r[1], r02 = r[2], r10 = r[3], r11 = r[4], r12 = r[5], r20 = r[6], r21 = r[7], r22 = r[8];
+    double roll = atan2(r21, r22);
+    double sp = -r20 < 1.0 ? -r20 : 1.0;     /* min(1.0, -r20) */
+    double pitch = asin(sp > -1.0 ? sp : -1.0); /* max(-1.0, .) */
+    double yaw = atan2(r10, r00);
+    double c = cos(pitch);
+    double cp = min_cos_pitch > c ? min_cos_pitch : c;
+    double cr = cos(roll), sr = sin(roll);
+    double c2 = r00 * r00 + r10 * r10, floor2 = pow(min_cos_pitch, 2.0); /* Python's 1e-3**2 */
+    if (floor2 > c2) {
+        c2 = floor2;
+    }
+    rpy[0] = roll, rpy[1] = pitch, rpy[2] = yaw;
+    Hrpy[0] = (cr * r11 - sr * r12) / cp, Hrpy[1] = (cr * -r01 - sr * -r02) / cp, Hrpy[2] = 0.0;
+    Hrpy[3] = -r10 / cp, Hrpy[4] = -(-r00) / cp, Hrpy[5] = 0.0;
+    Hrpy[6] = -r00 * r20 / c2, Hrpy[7] = -r10 * r20 / c2, Hrpy[8] = 1.0;
+}
+
+PyDoc_STRVAR(orientation_doc,
+"orientation(x, z_rpy, rows, y, H) -> None\n\n"
+"observations.orientation's innovation and Jacobian: for each of rows (roll 0, pitch 1, yaw 2) in\n"
+"order, y[k] = wrap(z_rpy[i] - rpy(q)[i]) and H's row k d(rpy_i)/d(global dtheta) in columns 3-5,\n"
+"zero elsewhere. x the nominal state (q at 3-6), y (m) and H (m x n) written whole.");
+
+static PyObject *orientation(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "orientation takes 5 arguments");
+        return NULL;
+    }
+    double z[3];
+    int rows[3];
+    if (three(args[1], z, "z_rpy") < 0) {
+        return NULL;
+    }
+    PyObject *fast = PySequence_Fast(args[2], "rows");
+    if (fast == NULL) {
+        return NULL;
+    }
+    Py_ssize_t m = PySequence_Fast_GET_SIZE(fast);
+    for (Py_ssize_t k = 0; k < m && k < 3; k++) {
+        long i = PyLong_AsLong(PySequence_Fast_ITEMS(fast)[k]);
+        rows[k] = (int)i;
+        if ((i == -1 && PyErr_Occurred()) || i < 0 || i > 2) {
+            Py_DECREF(fast);
+            if (!PyErr_Occurred()) {
+                PyErr_SetString(PyExc_ValueError, "rows must be among 0, 1, 2");
+            }
+            return NULL;
+        }
+    }
+    Py_DECREF(fast);
+    if (m < 1 || m > 3) {
+        PyErr_SetString(PyExc_ValueError, "rows must have 1 to 3 entries");
+        return NULL;
+    }
+    Held held = {.count = 0};
+    const double *x = hold(&held, args[0], 0, -1, "x");
+    double *y = NULL, *H = NULL;
+    Py_ssize_t n = 0;
+    if (x == NULL) {
+        goto fail;
+    }
+    if (last_items(&held) < 7) {
+        PyErr_SetString(PyExc_ValueError, "x must hold a pose");
+        goto fail;
+    }
+    if ((y = hold(&held, args[3], 1, m, "y")) == NULL || (H = hold(&held, args[4], 1, -1, "H")) == NULL) {
+        goto fail;
+    }
+    n = last_items(&held) / m;
+    if (n * m != last_items(&held) || n < 6) {
+        PyErr_SetString(PyExc_ValueError, "H must have len(rows) rows of at least 6 columns");
+        goto fail;
+    }
+    double rpy[3], Hrpy[9];
+    rpy_jacobian(x + 3, rpy, Hrpy);
+    memset(H, 0, sizeof(double) * (size_t)(m * n));
+    for (Py_ssize_t k = 0; k < m; k++) {
+        int i = rows[k];
+        y[k] = wrap_angle(z[i] - rpy[i]);
+        H[k * n + 3] = Hrpy[3 * i], H[k * n + 4] = Hrpy[3 * i + 1], H[k * n + 5] = Hrpy[3 * i + 2];
+    }
+    release(&held);
+    Py_RETURN_NONE;
+fail:
+    release(&held);
+    return NULL;
+}
+
+/* -- snapshots -------------------------------------------------------------------------------- */
+
+PyDoc_STRVAR(copy_into_doc,
+"copy_into(x, P, x_to, P_to) -> None\n\n"
+"x_to[...] = x and P_to[...] = P in one call (ErrorStateEKF.copy into a recycled snapshot): each pair\n"
+"must be float64 C-contiguous of the same size, checked before anything is written (a ValueError\n"
+"otherwise: the caller allocates a new snapshot).");
+
+static PyObject *copy_into(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "copy_into(x, P, x_to, P_to) takes 4 arguments");
+        return NULL;
+    }
+    Held held = {.count = 0};
+    const double *x = hold(&held, args[0], 0, -1, "x");
+    Py_ssize_t nx = x == NULL ? -1 : last_items(&held);
+    const double *P = nx < 0 ? NULL : hold(&held, args[1], 0, -1, "P");
+    Py_ssize_t nP = P == NULL ? -1 : last_items(&held);
+    double *x_to = NULL, *P_to = NULL;
+    if (nP < 0 || (x_to = hold(&held, args[2], 1, nx, "x_to")) == NULL ||
+        (P_to = hold(&held, args[3], 1, nP, "P_to")) == NULL) {
+        release(&held);
+        return NULL;
+    }
+    memmove(x_to, x, sizeof(double) * (size_t)nx);
+    memmove(P_to, P, sizeof(double) * (size_t)nP);
+    release(&held);
+    Py_RETURN_NONE;
+}
+
 /* -- propagate ------------------------------------------------------------------------------- */
 
 PyDoc_STRVAR(propagate_doc,
@@ -581,6 +1026,9 @@ static PyMethodDef methods[] = {
     {"propagate", (PyCFunction)(void (*)(void))propagate, METH_FASTCALL, propagate_doc},
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
     {"input_noise", (PyCFunction)(void (*)(void))input_noise, METH_FASTCALL, input_noise_doc},
+    {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL, predict_doc},
+    {"orientation", (PyCFunction)(void (*)(void))orientation, METH_FASTCALL, orientation_doc},
+    {"copy_into", (PyCFunction)(void (*)(void))copy_into, METH_FASTCALL, copy_into_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -598,7 +1046,11 @@ PyMODINIT_FUNC PyInit__kernels(void) {
     if (PyModule_AddIntConstant(mod, "MAX_N", MAX_N) < 0 || PyModule_AddIntConstant(mod, "MAX_M", MAX_M) < 0 ||
         PyModule_AddIntConstant(mod, "APPLIED", APPLIED) < 0 || PyModule_AddIntConstant(mod, "GATED", GATED) < 0 ||
         PyModule_AddIntConstant(mod, "SINGULAR", SINGULAR) < 0 ||
-        PyModule_AddIntConstant(mod, "NEEDS_CHECK", NEEDS_CHECK) < 0) {
+        PyModule_AddIntConstant(mod, "NEEDS_CHECK", NEEDS_CHECK) < 0 ||
+        PyModule_AddIntConstant(mod, "BLOCK_GYRO_BIAS", BLOCK_GYRO_BIAS) < 0 ||
+        PyModule_AddIntConstant(mod, "BLOCK_WHEEL_SCALE", BLOCK_WHEEL_SCALE) < 0 ||
+        PyModule_AddIntConstant(mod, "BLOCK_GYRO_SCALE", BLOCK_GYRO_SCALE) < 0 ||
+        PyModule_AddIntConstant(mod, "BLOCK_TWIST_PITCH", BLOCK_TWIST_PITCH) < 0) {
         Py_DECREF(mod);
         return NULL;
     }

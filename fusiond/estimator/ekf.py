@@ -384,17 +384,16 @@ class ErrorStateEKF:
         return J
 
     def copy(self, into: "ErrorStateEKF | None" = None) -> "ErrorStateEKF":
-        """A copy with its own x and P; ``into`` reuses an existing object's arrays (written in place:
-        ``a[...] = b`` of equal shapes and dtype copies the bytes, at half np.copyto's call cost)."""
+        """A copy with its own x and P; ``into`` reuses an existing object's arrays, written in place
+        (``_copied_into``), or, when they do not fit, is replaced by a new object."""
         c = into
-        if c is None or c.P.shape != self.P.shape or c.x.shape != self.x.shape:
+        if c is not None and not _copied_into(self, c):
+            c = None
+        if c is None:
             c = ErrorStateEKF.__new__(ErrorStateEKF)
             c.x = self.x.copy()
             c.P = self.P.copy()
             c._spare = None
-        else:
-            c.x[...] = self.x
-            c.P[...] = self.P
         c.layout = self.layout
         c._fits, c._boxplus_mode = self._fits, self._boxplus_mode
         c.resets = self.resets
@@ -428,6 +427,26 @@ class ErrorStateEKF:
         self.x = x
         self.P = P  # as saved, bit for bit: the running filter's own rounding asymmetry is within the check
         self._spare = None  # the next P's buffer must not be the array just taken
+
+
+def _copied_into(src: ErrorStateEKF, dst: ErrorStateEKF) -> bool:
+    """Write src's x and P into dst's arrays; False (nothing written) when they do not fit.
+
+    One call of ``kernels.copy_into`` when compiled (the sizes checked there: a history snapshot is
+    written once per message, and the two numpy assignments with their shape checks cost twice the
+    call), else ``a[...] = b`` of equal shapes, which copies the bytes."""
+    k = kernels.active()
+    if k is not None:
+        try:
+            k.copy_into(src.x, src.P, dst.x, dst.P)
+            return True
+        except (BufferError, ValueError):  # another size or layout of array: the checks below decide
+            pass
+    if dst.P.shape != src.P.shape or dst.x.shape != src.x.shape:
+        return False
+    dst.x[...] = src.x
+    dst.P[...] = src.P
+    return True
 
 
 _MASKS_KEPT = 8  # distinct masks held by a workspace (the core uses at most three)

@@ -31,8 +31,11 @@ heading only without a gyro, where skid-steer wheels misreading the turn must ke
 showing as inconsistent innovations of the absolute yaw (the doctor's cue), not be
 hidden behind a widened prediction.
 
-This runs once per message: the 3x3 algebra is done on Python floats (several
-times cheaper than numpy calls on 3-vectors); numpy only sees the n x n blocks.
+This runs once per message. With the compiled kernels (``kernels.active()``) the whole step is one
+call of ``kernels.predict``, the same expressions in C (``_kernels.c``), for layouts whose input blocks
+all name a ``kernel_code``; the Python below is the reference, held to the same bits by
+tests/unit/test_kernels.py. In it the 3x3 algebra is done on Python floats (several times cheaper
+than numpy calls on 3-vectors); numpy only sees the n x n blocks.
 """
 
 from __future__ import annotations
@@ -44,10 +47,12 @@ import numpy as np
 
 from . import kernels, mat3
 from . import rotation as rot
+from ..errors import EstimatorError
 from .state import StateLayout, Vec3
 
 _POSITION = slice(0, 3)
 _ATTITUDE = slice(3, 6)
+_KERNEL_MAX_N = 48  # the compiled kernels' largest error dimension (_kernels.c MAX_N, pinned by test_kernels)
 
 
 class MotionInput:
@@ -114,7 +119,7 @@ class PredictWorkspace:
     """
 
     __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_index_f", "_pack_f", "_q_entries", "_zero_columns",
-                 "_cov_seen", "_cov_diagonal")
+                 "_cov_seen", "_cov_diagonal", "_nominal_dim", "_kernel_blocks", "_decay_f", "_decay_x")
 
     def __init__(self, layout: StateLayout) -> None:
         n = layout.error_dim
@@ -149,6 +154,30 @@ class PredictWorkspace:
         # the last covariance tuple of each input (linear, angular) and its diagonal (None: not diagonal)
         self._cov_seen: list[tuple | None] = [None, None]
         self._cov_diagonal: list[tuple[float, float, float] | None] = [None, None]
+        self._nominal_dim = layout.nominal_dim
+        self._kernel_blocks = _kernel_blocks(layout)
+        # the dynamic blocks' entries that the compiled path leaves to Python: F's diagonal (flat) and x
+        self._decay_f = np.array([(e0 + i) * (n + 1) for blk, _, e0 in layout.dynamic_blocks
+                                  for i in range(blk.error_size)], dtype=np.intp)
+        self._decay_x = np.array([n0 + i for blk, n0, _ in layout.dynamic_blocks for i in range(blk.error_size)],
+                                 dtype=np.intp)
+
+
+def _kernel_blocks(layout: StateLayout) -> tuple[tuple, tuple] | None:
+    """The layout's input blocks as ``kernels.predict`` takes them, for a step without and with the gyro
+    (index: ``from_gyro``): (code, applies, corrects linear, nominal start, error start, error size) each.
+    ``applies`` is asked of the block here, once per layout. None when a block has no compiled form: its
+    own class must name one (a subclass that changes the maths inherits its parent's code otherwise)."""
+    if layout.error_dim > _KERNEL_MAX_N:
+        return None
+    specs = []
+    for blk, n0, _, cols in layout.input_blocks:
+        code = type(blk).__dict__.get("kernel_code", 0)
+        if not code:
+            return None
+        specs.append((code, blk.corrects == "linear", n0, cols.start, cols.stop - cols.start, blk))
+    return tuple(tuple((c, int(b.applies(g)), int(lin), n0, c0, size) for c, lin, n0, c0, size, b in specs)
+                 for g in (False, True))
 
 
 # F[0:3, 3:6] = -[dp]x: its off-diagonal entries, row-major (the diagonal stays 0)
@@ -207,6 +236,35 @@ def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: floa
     return predict(layout, x, u, dt, np.zeros(layout.error_dim))[0]
 
 
+def _predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float,
+                      noise_density: np.ndarray, ws: PredictWorkspace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``predict`` as one call of ``kernels.predict`` (the same expressions in C, _kernels.c): the
+    input blocks' chain, x', F and Q. The dynamic blocks' decay and noise stay here, the blocks' own
+    ``transition``/``process_noise``: x' = a x and F's diagonal a are written after the call."""
+    dynamic = layout.dynamic_blocks
+    extra = None
+    decay: list[float] = []
+    if dynamic:
+        extra = np.zeros(len(noise_density))
+        for blk, _, e0 in dynamic:
+            decay += blk.transition(dt)
+            if dt > 0.0:
+                for i, q in enumerate(blk.process_noise(dt)):
+                    extra[e0 + i] += q
+    x_new = np.empty(ws._nominal_dim)
+    flags = (1 if u.world_frame else 0) | (2 if u.planar else 0)
+    try:
+        k.predict(x, x_new, ws.F, ws.Q, noise_density, dt, extra, u.linear, u.angular, u.linear_cov, u.angular_cov,
+                  u.linear_period, u.angular_period, u.twist_correlation, flags, ws._kernel_blocks[u.from_gyro])
+    except ArithmeticError:
+        raise EstimatorError("quaternion has zero or non-finite norm") from None
+    if decay:
+        a = np.array(decay)
+        x_new[ws._decay_x] *= a
+        ws._flat[ws._decay_f] = a
+    return x_new, ws.F, ws.Q
+
+
 def predict(
     layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, noise_density: np.ndarray,
     ws: PredictWorkspace | None = None,
@@ -220,6 +278,12 @@ def predict(
     """
     if ws is None:
         ws = PredictWorkspace(layout)
+    k = kernels.active()
+    if k is not None and ws._kernel_blocks is not None:
+        try:
+            return _predict_compiled(k, layout, x, u, dt, noise_density, ws)
+        except BufferError:  # an array not C-contiguous float64: the Python path below
+            pass
     xl = x.tolist()
     v = u.linear
     w = u.angular

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from . import kernels
 from . import rotation as rot
 from .state import StateLayout
 
@@ -55,7 +56,19 @@ def orientation(
     layout: StateLayout, x: np.ndarray, z_rpy: tuple[float, float, float], cov: tuple[float, ...],
     rows: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Observe the selected roll/pitch/yaw rows of the attitude; cov is row-major 3x3 (9-tuple)."""
+    """Observe the selected roll/pitch/yaw rows of the attitude; cov is row-major 3x3 (9-tuple).
+
+    With the compiled kernels y and H come from ``kernels.orientation``, the same expressions in C
+    (this Python is the reference, held to the same bits by tests/unit/test_kernels.py)."""
+    k = kernels.active()
+    if k is not None:
+        y, H = np.empty(len(rows)), np.empty((len(rows), layout.error_dim))
+        try:
+            k.orientation(x, z_rpy, rows, y, H)
+        except BufferError:  # x not C-contiguous float64: the Python path below
+            pass
+        else:
+            return y, H, _noise_rows(cov, rows)
     h, Hrpy = rpy_jacobian(x[3:7].tolist())
     H = np.zeros((len(rows), layout.error_dim))
     residual = []

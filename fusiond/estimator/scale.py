@@ -18,6 +18,7 @@ class WheelScaleBlock(ScalarInputBlock):
 
     name = "wheel_scale"
     corrects = "linear"
+    kernel_code = 2  # _kernels.c BLOCK_WHEEL_SCALE
     start = 1.0  # the input as measured
 
     def correct(self, xb: list[float], u: Vec3) -> Vec3:
@@ -46,6 +47,7 @@ class GyroScaleBlock(ScalarInputBlock):
 
     name = "gyro_scale"
     corrects = "angular"
+    kernel_code = 3  # _kernels.c BLOCK_GYRO_SCALE
     start = 1.0  # the input as measured
 
     def applies(self, from_gyro: bool) -> bool:

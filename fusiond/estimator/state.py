@@ -104,6 +104,10 @@ class InputBlock(StateBlock):
 
     corrects: InputName = "angular"
     scales_input = False  # True when d u'/d u is not the identity (see input_derivative)
+    # Which of the compiled motion model's block kinds this is (_kernels.c, BLOCK_*): its correct,
+    # chain and input_derivative written there too, held equal to these by tests/unit/test_kernels.py.
+    # 0: none, and a layout with such a block predicts on the Python path.
+    kernel_code = 0
 
     def applies(self, from_gyro: bool) -> bool:
         return True
@@ -165,6 +169,7 @@ class GyroBiasBlock(InputBlock):
     nominal_size = 3
     error_size = 3
     corrects = "angular"
+    kernel_code = 1  # _kernels.c BLOCK_GYRO_BIAS
     _MINUS_I = -np.eye(3)
 
     def __init__(self, sigma: float = 0.01, walk: float = 2e-5) -> None:

@@ -25,6 +25,7 @@ from .state import ScalarInputBlock, Vec3
 class TwistPitchBlock(ScalarInputBlock):
     name = "twist_pitch"
     corrects = "linear"
+    kernel_code = 4  # _kernels.c BLOCK_TWIST_PITCH
     start = 0.0  # the mount as configured
 
     def correct(self, xb: list[float], u: Vec3) -> Vec3:

@@ -22,6 +22,9 @@ from fusiond.errors import EstimatorError
 from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock,
                                PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
 from fusiond.estimator import ekf as ekf_module
+from fusiond.estimator import motion as motion_module
+from fusiond.estimator import observations
+from fusiond.estimator.twist_pitch import TwistPitchBlock
 from fusiond.estimator import kernels
 
 pytestmark = pytest.mark.skipif(not kernels.available(),
@@ -127,12 +130,32 @@ def test_propagate_matches_the_numpy_path(layout, seed):
     _close(Pc, Pn)
 
 
+class _HalfWheelScale(WheelScaleBlock):
+    """A subclass that changes the maths without naming a kernel code of its own: Python predicts it."""
+
+    def correct(self, xb, u):
+        return (0.5 * xb[0] * u[0], 0.5 * xb[0] * u[1], 0.5 * xb[0] * u[2])
+
+    def input_derivative(self, xb, u):
+        s = 0.5 * xb[0]
+        return (s, 0.0, 0.0, 0.0, s, 0.0, 0.0, 0.0, s)
+
+    def chain(self, G, xb, u):
+        return tuple(0.5 * c for c in super().chain(G, xb, u))
+
+
 PREDICT_LAYOUTS = {
     "pose": StateLayout([PoseBlock(0.1, 0.1)]),
     "inputs": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GyroScaleBlock(0.05, 1e-5),
                            WheelScaleBlock(0.05, 1e-4)]),
     "gps_error": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
+    # every compiled kind, the twist corrected twice (scale then pitch: the chain through both), a dynamic block
+    "all_kinds": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), WheelScaleBlock(0.05, 1e-4),
+                              GyroScaleBlock(0.05, 1e-5), TwistPitchBlock(0.05, 1e-5),
+                              GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
+    "python_block": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), _HalfWheelScale(0.05, 1e-4)]),
 }
+COMPILED_PREDICT = {"pose", "inputs", "gps_error", "all_kinds"}
 finite = st.floats(-3.0, 3.0)
 cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple of a silent input
     st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)).map(
@@ -146,21 +169,28 @@ cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple
        periods=st.tuples(st.sampled_from([0.0, 0.01, 0.2]), st.sampled_from([0.0, 0.005, 0.1])),
        flags=st.tuples(st.booleans(), st.booleans(), st.booleans()), tau=st.sampled_from([0.0, 0.05]),
        dt=st.sampled_from([0.0, 0.001, 0.02, 0.7]))
-def test_input_noise_writes_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau, dt):
-    """The motion model's Q from kernels.input_noise is the Python path's, to the bit (the same
-    expressions in C, compiled without FMA contraction), and so are x' and F."""
+def test_compiled_predict_gives_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau,
+                                                        dt):
+    """The motion model's x', F and Q from kernels.predict are the Python path's, to the bit: the input
+    blocks' corrections and chain, the rotation, the right Jacobian and the input noise are the same
+    expressions in C, compiled without FMA contraction. A layout with a block that has no compiled
+    form predicts in Python on both paths."""
     lay = PREDICT_LAYOUTS[layout]
     u = MotionInput()
     u.linear, u.angular, u.linear_cov, u.angular_cov = v, w, lin_cov, ang_cov
     u.linear_period, u.angular_period = periods
     u.from_gyro, u.world_frame, u.planar = flags
     u.twist_correlation = tau
-    ekf = _random_filter(lay, np.random.default_rng(seed))
-    density = np.random.default_rng(seed).uniform(0.0, 1e-3, lay.error_dim)
+    rng = np.random.default_rng(seed)
+    ekf = _random_filter(lay, rng)
+    # the blocks away from their priors: a bias, scales off 1, a pitch, a GPS error
+    ekf.x[7:] += rng.uniform(-0.3, 0.3, lay.nominal_dim - 7)
+    density = rng.uniform(0.0, 1e-3, lay.error_dim)
     out = []
     for name in ("compiled", "numpy"):
         kernels.use(name)
         ws = PredictWorkspace(lay)
+        assert (ws._kernel_blocks is not None) is (layout in COMPILED_PREDICT)
         predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
         x, F, Q = predict(lay, ekf.x, u, dt, density, ws)
         out.append((x.copy(), F.copy(), Q.copy()))
@@ -287,8 +317,37 @@ def test_layouts_beyond_the_kernel_size_use_numpy():
     np.testing.assert_allclose(np.diagonal(ekf.P)[:6], 0.01 + 1e-3)
 
 
+def test_compiled_predict_refuses_a_zero_quaternion_as_python_does():
+    lay = PREDICT_LAYOUTS["inputs"]
+    u = MotionInput()
+    u.angular, u.from_gyro = (0.1, 0.2, 0.3), True
+    x = lay.initial_state()
+    x[3:7] = 0.0
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        with pytest.raises(EstimatorError, match="quaternion"):
+            predict(lay, x, u, 0.01, np.zeros(lay.error_dim))
+
+
+def test_compiled_predict_refuses_blocks_outside_the_state():
+    k = kernels.active()
+    x, n = np.zeros(10), 9
+    args = (x, np.empty(10), np.eye(n), np.zeros((n, n)), np.zeros(n), 0.01, None, (0.0,) * 3, (0.0,) * 3,
+            (0.0,) * 9, (0.0,) * 9, 0.0, 0.0, 0.0, 0)
+    with pytest.raises(ValueError, match="outside the state, or of an unknown kind"):
+        k.predict(*args, ((1, 1, 0, 8, 6, 3),))  # a 3-vector bias from nominal 8 runs past x
+    with pytest.raises(ValueError, match="outside the state, or of an unknown kind"):
+        k.predict(*args, ((9, 1, 0, 7, 6, 3),))
+    with pytest.raises(BufferError):
+        k.predict(x.astype(np.float32), *args[1:], ())
+
+
 def test_the_constants_mirror_the_c_module():
     k = kernels.active()
+    assert motion_module._KERNEL_MAX_N == k.MAX_N
+    codes = {GyroBiasBlock: k.BLOCK_GYRO_BIAS, WheelScaleBlock: k.BLOCK_WHEEL_SCALE,
+             GyroScaleBlock: k.BLOCK_GYRO_SCALE, TwistPitchBlock: k.BLOCK_TWIST_PITCH}
+    assert {cls: cls.__dict__["kernel_code"] for cls in codes} == codes
     assert (ekf_module._MAX_N, ekf_module._MAX_M) == (k.MAX_N, k.MAX_M)
     assert (ekf_module._GATED, ekf_module._SINGULAR, ekf_module._NEEDS_CHECK) == (k.GATED, k.SINGULAR, k.NEEDS_CHECK)
 
@@ -341,3 +400,76 @@ def test_jackal_trajectory_is_the_same_on_both_paths(jackal_bag, config):
     assert now["published"] == ref["published"]
     worst = max(abs(a - b) for pa, pb in zip(now["poses"], ref["poses"]) for a, b in zip(pa, pb))
     assert worst <= 1e-9
+
+
+unit = st.floats(-1.0, 1.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(q=st.one_of(st.tuples(unit, unit, unit, unit),
+                   # near pitch +-90 degrees, where cos(pitch) and the yaw row's denominator meet their floors
+                   st.tuples(st.floats(-1e-3, 1e-3), st.sampled_from([0.7071067811865476, -0.7071067811865476]),
+                             st.floats(-1e-3, 1e-3), st.sampled_from([0.7071067811865476, 0.7071067811865475]))),
+       z=st.tuples(st.floats(-4.0, 4.0), st.floats(-4.0, 4.0), st.floats(-4.0, 4.0)),
+       rows=st.sampled_from([(0, 1), (0, 1, 2), (2,), (1,), (2, 0)]),
+       layout=st.sampled_from(["pose", "bias_scale"]))
+def test_compiled_orientation_gives_the_python_paths_floats(q, z, rows, layout):
+    """observations.orientation's y and H from kernels.orientation are the Python path's to the bit
+    (rpy_jacobian and rot.wrap as the same expressions in C); R is the same shared array."""
+    lay = LAYOUTS[layout]
+    norm = math.sqrt(sum(c * c for c in q))
+    if norm < 1e-6:
+        q = (0.0, 0.0, 0.0, 1.0)
+    x = lay.initial_state()
+    x[3:7] = q if norm < 1e-6 else tuple(c / norm for c in q)
+    cov = (0.01, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.03)
+    out = []
+    for name in ("compiled", "numpy"):
+        kernels.use(name)
+        out.append(observations.orientation(lay, x, z, cov, rows))
+    (yc, Hc, Rc), (yn, Hn, Rn) = out
+    np.testing.assert_array_equal(yc, yn)
+    np.testing.assert_array_equal(Hc, Hn)
+    assert Rc is Rn
+
+
+def test_compiled_orientation_refuses_bad_rows_and_shapes():
+    k = kernels.active()
+    x = np.zeros(7)
+    x[6] = 1.0
+    with pytest.raises(ValueError, match="rows must be among 0, 1, 2"):
+        k.orientation(x, (0.0,) * 3, (0, 3), np.empty(2), np.empty((2, 6)))
+    with pytest.raises(ValueError, match="rows must have 1 to 3 entries"):
+        k.orientation(x, (0.0,) * 3, (), np.empty(0), np.empty((0, 6)))
+    with pytest.raises(ValueError, match="H must have len\\(rows\\) rows"):
+        k.orientation(x, (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 5)))
+    with pytest.raises(BufferError):
+        k.orientation(x[::-1], (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 6)))
+
+
+@pytest.mark.parametrize("name", ["compiled", "numpy"])
+def test_a_copy_into_a_recycled_filter_is_the_filter_in_its_own_arrays(name):
+    kernels.use(name)
+    lay = LAYOUTS["bias_scale"]
+    src = _random_filter(lay, np.random.default_rng(3))
+    old = _random_filter(lay, np.random.default_rng(4))
+    x_buf, P_buf = old.x, old.P
+    c = src.copy(into=old)
+    assert c is old and c.x is x_buf and c.P is P_buf  # the recycled arrays, overwritten
+    np.testing.assert_array_equal(c.x, src.x)
+    np.testing.assert_array_equal(c.P, src.P)
+    assert not np.shares_memory(c.P, src.P) and not np.shares_memory(c.x, src.x)
+    other = _random_filter(LAYOUTS["pose"], np.random.default_rng(5))  # another size: a new object
+    d = src.copy(into=other)
+    assert d is not other
+    np.testing.assert_array_equal(d.P, src.P)
+    np.testing.assert_array_equal(other.P, _random_filter(LAYOUTS["pose"], np.random.default_rng(5)).P)
+
+
+def test_copy_into_checks_every_size_before_writing():
+    k = kernels.active()
+    x, P = np.ones(4), np.ones((2, 2))
+    x_to, P_to = np.zeros(4), np.zeros((3, 3))
+    with pytest.raises(ValueError, match="P_to has 9 values, expected 4"):
+        k.copy_into(x, P, x_to, P_to)
+    assert not x_to.any()

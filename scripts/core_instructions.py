@@ -1,0 +1,101 @@
+"""Instructions per message of the fusion core, counted by valgrind (load-independent).
+
+Wall and CPU times on a shared machine move with its load; an instruction count does not. This
+runs the `FusionCore` loop of `fusiond bench` (samples decoded beforehand, then ingested, a pose
+read after each odometry sample) under `valgrind --tool=callgrind` twice, over the first N and the
+first 2N samples of a workload, and prints the difference per message: the interpreter's start,
+the imports and the bag reading cancel out.
+
+    .venv/bin/python scripts/core_instructions.py [--workload jackal|synthetic] [--messages 1000]
+
+`jackal`: data/jackal_test2.bag with examples/jackal.toml (up to its 6,121 messages).
+`synthetic`: the traffic of `fusiond bench-latency` (1 kHz IMU with roll/pitch and gyro, 100 Hz
+odometry, driving a circle) with its configuration. Takes about a minute per workload.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+WARM_UP = 200  # samples fused first in each count: imports and first allocations, alike in both runs
+
+
+def _jackal():
+    from fusiond.config import load
+    from fusiond.replay.bag import open_bag_samples
+
+    cfg = load(ROOT / "examples" / "jackal.toml")
+    with open_bag_samples([ROOT / "data" / "jackal_test2.bag"], cfg.sensors) as b:
+        return cfg, list(b)
+
+
+def _synthetic(messages: int):
+    from fusiond.config import loads
+    from fusiond.samples import ImuSample, OdomSample
+    from fusiond.transport import bench_latency
+
+    cfg = loads(bench_latency._config_text(bench_latency.free_port()), "<core_instructions>")
+    cov_o = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
+    cov_g = (1e-5, 0.0, 0.0, 0.0, 1e-5, 0.0, 0.0, 0.0, 1e-5)
+    twist_cov = tuple(1e-3 if i % 7 == 0 else 0.0 for i in range(36))
+    v, w, out, k = 0.5, 0.2, [], 0
+    while len(out) < messages:
+        t = k / 1000.0
+        q = (0.0, 0.0, math.sin(w * t / 2), math.cos(w * t / 2))
+        out.append(ImuSample("imu", 1000.0 + t, q, cov_o, (0.0, 0.0, w), cov_g))
+        if k % 10 == 0:
+            out.append(OdomSample("wheel", 1000.0 + t + 0.0005, (v, 0.0, 0.0), (0.0, 0.0, w), twist_cov))
+        k += 1
+    return cfg, out
+
+
+def _child(workload: str, count: int) -> None:
+    """Fuse WARM_UP samples, then the first ``count`` of the workload in a fresh core."""
+    import structlog
+
+    from fusiond.core.fusion import FusionCore
+
+    structlog.configure(logger_factory=structlog.ReturnLoggerFactory())  # the core's logs cost nothing here
+    cfg, samples = _jackal() if workload == "jackal" else _synthetic(count + WARM_UP)
+    for part in (samples[:WARM_UP], samples[:count]):
+        core = FusionCore(cfg)
+        for s in part:
+            if core.ingest(s).publish:
+                core.pose()
+    print(min(count, len(samples)))
+
+
+def _count(workload: str, count: int) -> tuple[int, int]:
+    """(samples fused, instructions) of one child under callgrind."""
+    proc = subprocess.run(
+        ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, __file__,
+         "--child", workload, str(count)], capture_output=True, text=True, check=True, cwd=ROOT)
+    collected = re.search(r"Collected\s*:\s*([\d,]+)", proc.stderr)
+    if collected is None:
+        raise SystemExit(f"no instruction count in valgrind's output:\n{proc.stderr[-2000:]}")
+    return int(proc.stdout.split()[-1]), int(collected.group(1).replace(",", ""))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workload", choices=("jackal", "synthetic"), default="jackal")
+    ap.add_argument("--messages", type=int, default=1000, help="N: the runs fuse N and 2N samples")
+    ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        _child(args.child[0], int(args.child[1]))
+        return
+    n1, i1 = _count(args.workload, args.messages)
+    n2, i2 = _count(args.workload, 2 * args.messages)
+    print(f"{args.workload}: {(i2 - i1) / (n2 - n1):,.0f} instructions per message "
+          f"(callgrind, {n2 - n1} messages)")
+
+
+if __name__ == "__main__":
+    main()
