@@ -192,6 +192,9 @@ def test_with_a_gps_the_tf_holds_map_to_odom_and_a_continuous_odom_to_base_link(
         last = 100.0 + 0.02 * (steps - 1)
         wait_until(lambda: out["t/tf"] and stamp_of(TYPESTORE.deserialize_cdr(out["t/tf"][-1], TF_MESSAGE)
                                                      .transforms[0].header) == last, 10, "the last odometry's TF")
+        # the pose travels on its own key: its last one may come after the last TF
+        wait_until(lambda: out["t/pose"] and stamp_of(decode_pose_cdr(out["t/pose"][-1]).header) == last, 10,
+                   "the last odometry's pose")
         poses = {}
         for raw in out["t/pose"]:
             p = decode_pose_cdr(raw)
