@@ -121,4 +121,12 @@ class SensorKind:
         return f"<sensor kind {self.name!r}>"
 
 
-__all__ = ["LayoutView", "SensorKind"]
+def codecs_decoder(kind: SensorKind, cfg: Any) -> Callable[[Any], Any]:
+    """The decoder ``fusiond.codecs`` writes for a built-in kind (its CDR fast path, JSON and msgpack),
+    for the kinds whose ``decoder`` is this function rather than the default plain CDR path."""
+    from ...codecs.decoders import make_decoder
+
+    return make_decoder(kind.name, cfg.encoding, cfg.name)
+
+
+__all__ = ["LayoutView", "SensorKind", "codecs_decoder"]

@@ -9,7 +9,7 @@ from ....config import FilterConfig
 from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
 from ....samples import GpsSample
-from ..kind import LayoutView, SensorKind
+from ..kind import LayoutView, SensorKind, codecs_decoder
 from .model import GpsModel
 from .table import GpsSensor
 
@@ -57,10 +57,7 @@ class GpsKind(SensorKind):
 
         return gps_from_ros
 
-    def decoder(self, cfg: GpsSensor) -> Callable[[Any], Any]:
-        from ....codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name)
+    decoder = codecs_decoder
 
 
 __all__ = ["GpsKind"]

@@ -11,7 +11,7 @@ from typing import Any
 from ....errors import ConfigError
 from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
 from ....samples import ImuSample
-from ..kind import LayoutView, SensorKind
+from ..kind import LayoutView, SensorKind, codecs_decoder
 from .model import ImuModel
 from .table import ImuSensor
 
@@ -57,10 +57,7 @@ class ImuKind(SensorKind):
 
         return imu_from_ros
 
-    def decoder(self, cfg: ImuSensor) -> Callable[[Any], Any]:
-        from ....codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name)
+    decoder = codecs_decoder
 
     def zero_covariance(self, cfg: ImuSensor) -> Callable[[Any], bool] | None:
         use_orientation = cfg.orientation != "off" and cfg.orientation_noise is None

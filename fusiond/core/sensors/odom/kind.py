@@ -8,7 +8,7 @@ from typing import Any
 
 from ....estimator import StateBlock, TwistPitchBlock, WheelScaleBlock
 from ....samples import OdomSample
-from ..kind import LayoutView, SensorKind
+from ..kind import LayoutView, SensorKind, codecs_decoder
 from .model import OdomModel
 from .table import OdomSensor
 
@@ -43,10 +43,7 @@ class OdomKind(SensorKind):
 
         return odom_from_ros
 
-    def decoder(self, cfg: OdomSensor) -> Callable[[Any], Any]:
-        from ....codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name)
+    decoder = codecs_decoder
 
     def zero_covariance(self, cfg: OdomSensor) -> Callable[[Any], bool] | None:
         if cfg.twist_noise is not None:
