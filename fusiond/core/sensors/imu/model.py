@@ -42,7 +42,11 @@ G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer re
 GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
 GRAVITY_AVERAGE_S = 0.1  # s of specific force averaged into one gravity roll/pitch update
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
-ORIENTATION_BURST = 3.0  # samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``)
+# Samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``). Derived: an IMU at f
+# arrives with the bucket full, so a sample late by l < 1 period clips l of credit and the next one, early by
+# l, finds 2 - l >= 1: two is the least that loses no sample to jitter under a period; more only fuses more of
+# one AHRS's correlated samples at once after a pause (tests/sensors/test_orientation_rate.py pins both sides).
+ORIENTATION_BURST = 2.0
 YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
 
 
