@@ -73,6 +73,7 @@ JUMP_AFTER_S = 1.0  # ... "a jump": its first fix within this of an accepted one
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is that fix again, with rounding noise ...
 FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
+NOISE_UPPER_Z = 2.0  # the measured unstated noise is used at its ~98 % upper bound (one-sided normal, z = 2)
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -97,10 +98,12 @@ class GpsTrack:
 
 @dataclass(slots=True)
 class GpsInput:
-    """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2)."""
+    """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2). ``stated``: False
+    when the covariance is the unknown default (the receiver said nothing, and no position_noise)."""
 
     lla: tuple[float, float, float]
     cov: tuple[float, ...]
+    stated: bool = True
 
 
 class GpsPolicy:
@@ -129,7 +132,7 @@ class GpsPolicy:
         if self._override is not None:
             return GpsInput(lla, self._override)
         if s.covariance_type == 0:
-            return GpsInput(lla, self._unknown)
+            return GpsInput(lla, self._unknown, False)
         c = s.position_covariance
         if len(c) != 9 or not finite(c):
             raise Rejected(reasons.BAD_COVARIANCE, "position covariance must be 9 finite numbers")
@@ -138,7 +141,7 @@ class GpsPolicy:
         if c[0] == 0.0 and c[4] == 0.0 and c[8] == 0.0:
             # no receiver is exact on every axis: a driver that did not fill the covariance in (or
             # lost the fix and says so with zeros) states nothing, as covariance_type UNKNOWN
-            return GpsInput(lla, self._unknown)
+            return GpsInput(lla, self._unknown, False)
         if s.covariance_type == 2:  # COVARIANCE_TYPE_DIAGONAL_KNOWN: off-diagonals are not meaningful
             c = mat3.diag(c[0], c[4], c[8])
         f = self._floor
@@ -157,6 +160,10 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
     accepted: tuple[float, float, float] | None = None  # the newest fix the gate let in: (t, innovation east, north)
     unaligned: float = 0.0  # m dead-reckoned since the last fix (they share one heading error)
+    # unstated noise (``_measured_noise``): consecutive fixes' distances against the dead-reckoned ones,
+    # (count, sum of squared differences), and the previous fix: (t, east, north, dead-reckoned east, north)
+    increments: tuple[int, float] = (0, 0.0)
+    last: tuple[float, ...] | None = None
 
 
 class GpsModel(SensorModel):
@@ -204,7 +211,7 @@ class GpsModel(SensorModel):
         dx, dy = float(x1[0] - x0[0]), float(x1[1] - x0[1])
         d = math.hypot(dx, dy)
         s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + float(x1[2] - x0[2])), own.rejected,
-                                   own.accepted, own.unaligned + d)
+                                   own.accepted, own.unaligned + d, own.increments, own.last)
         if d == 0.0:
             return None
         s2 = float(s.ekf.P[5, 5])
@@ -237,6 +244,8 @@ class GpsModel(SensorModel):
                 return []
             return [self.record(stamp, [ENU_NAMES[i] for i in rows], [0.0] * len(rows),
                                 [inp.cov[4 * i] for i in rows], 0.0, len(rows), True, "position_frozen", late)]
+        if not inp.stated and cfg.estimate_unknown_noise:
+            inp = self._measured_noise(s, z, inp, stamp)
         if not rows:
             return []
         horizontal = tuple(r for r in rows if r < 2)
@@ -284,6 +293,33 @@ class GpsModel(SensorModel):
                 records.append(self.record(stamp, ["up"], y.tolist(), res.innovation_var, res.nis, 1, res.rejected,
                                            "altitude", late))
         return records
+
+    def _measured_noise(self, s: "FilterState", z, inp: GpsInput, stamp: float) -> GpsInput:
+        """A receiver that states no accuracy: its horizontal white noise, measured. Between two consecutive
+        fixes (within the sensor's timeout) the wheels know how far the antenna went far better than a fix
+        knows where it is, and a distance needs no heading (this works while the heading is searched for):
+        d = |z_k - z_k-1| - |dr_k - dr_k-1| is the difference of the two fixes' noises along the direction
+        of travel, E d^2 = 2 sigma^2, plus what a wheel scale error and a wandering receiver error add over
+        one interval (at rest, the noise's full horizontal norm): the estimate errs large, never small. It
+        is used below the unknown default only, at the upper end of its own uncertainty (a variance from n
+        increments has a relative std dev sqrt(2/n)), floored by position_min_sigma. The sums live in the
+        state's slice: a late fix re-applied counts once. The altitude keeps the default and its wander state."""
+        own: GpsOwn = s.own[self.index]
+        t, b = own.travel, own.track.base
+        dr = (b[0] + t[0], b[1] + t[1])
+        n, sq = own.increments
+        prev = own.last
+        if prev is not None and 0.0 < stamp - prev[0] <= self.cfg.timeout_s:
+            d = math.hypot(z[0] - prev[1], z[1] - prev[2]) - math.hypot(dr[0] - prev[3], dr[1] - prev[4])
+            n, sq = n + 1, sq + d * d
+        s.own[self.index] = msgspec.structs.replace(own, increments=(n, sq), last=(stamp, z[0], z[1], *dr))
+        if n == 0:
+            return inp
+        var = max(self.cfg.position_min_sigma**2, (1.0 + NOISE_UPPER_Z * math.sqrt(2.0 / n)) * sq / (2.0 * n))
+        c = inp.cov
+        if var >= c[0] and var >= c[4]:
+            return inp
+        return GpsInput(inp.lla, (min(c[0], var), 0.0, 0.0, 0.0, min(c[4], var), 0.0, 0.0, 0.0, c[8]), False)
 
     def _block(self, ekf, z, cov, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The fix's rows ``rows`` (east north up indices) as a measurement of the state now."""
