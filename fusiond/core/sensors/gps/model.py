@@ -38,7 +38,7 @@ import msgspec
 import numpy as np
 
 from .... import reasons
-from ....estimator import mat3
+from ....estimator import POSITION_ROWS, YAW_ROW, mat3, position_of
 from ....estimator import observations as obs
 from ....estimator.geodesy import EnuFrame
 from ....estimator.rigid_fit import RigidFit, fit_rigid
@@ -208,13 +208,14 @@ class GpsModel(SensorModel):
         if own.track is None:
             return None
         tr = own.travel
-        dx, dy = float(x1[0] - x0[0]), float(x1[1] - x0[1])
+        p0, p1 = position_of(x0), position_of(x1)
+        dx, dy = p1[0] - p0[0], p1[1] - p0[1]
         d = math.hypot(dx, dy)
-        s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + float(x1[2] - x0[2])), own.rejected,
+        s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + (p1[2] - p0[2])), own.rejected,
                                    own.accepted, own.unaligned + d, own.increments, own.last)
         if d == 0.0:
             return None
-        s2 = float(s.ekf.P[5, 5])
+        s2 = s.ekf.yaw_variance()
         along = 1.5 - 2.0 * math.exp(-0.5 * s2) + 0.5 * math.exp(-2.0 * s2)
         var = along * ((own.unaligned + d) ** 2 - own.unaligned**2)
         ux, uy = dx / d, dy / d
@@ -258,7 +259,7 @@ class GpsModel(SensorModel):
             # modelled wander the fit is already within HEADING_WANDER_READY_SIGMA (module doc). A
             # Gauss-Markov GPS error is a "consider" state here: its variance widens S (H has its
             # columns) but the offset a wrong heading builds up must not be absorbed into it as GPS error.
-            gated = self.wander > 0.0 and float(ekf.P[5, 5]) <= HEADING_WANDER_READY_SIGMA**2
+            gated = self.wander > 0.0 and ekf.yaw_variance() <= HEADING_WANDER_READY_SIGMA**2
             threshold = cfg.mahalanobis_threshold if gated else math.inf
             mask = self.ctx.position_mask
             channel = "position_provisional" if gated else "position_unaligned"
@@ -334,12 +335,12 @@ class GpsModel(SensorModel):
         (unless an absolute IMU yaw is trusted as ENU heading)."""
         ekf = s.ekf
         set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, rows)
-        split = (0, 1, 2)
+        split = POSITION_ROWS
         if self.cfg.datum is None and 2 in rows:
             # The datum's altitude is this fix's: the frame's zero height is where the antenna is
             # now, exactly, whatever this fix's own error. (With a configured datum the first
             # altitude is as uncertain as the fix, slow error included.)
-            ekf.reset_covariance([2], np.zeros((1, 1)))
+            ekf.reset_covariance([POSITION_ROWS[2]], np.zeros((1, 1)))
             split = (0, 1)
         if self.error is not None:
             self._split_first_fix(s, split)
@@ -349,7 +350,7 @@ class GpsModel(SensorModel):
         if self.yaw_given:
             s.heading_ready = True
         else:
-            ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             self._heading(s, z, inp.cov, stamp)
 
     def _locked_out(self, s: "FilterState", rejected: bool, y: np.ndarray, R: np.ndarray, z, stamp: float) -> bool:
@@ -409,14 +410,13 @@ class GpsModel(SensorModel):
                     seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
         set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, tuple(r for r in rows if r < 2))
         if not self.yaw_given:
-            s.ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            s.ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             s.heading_ready = False
         new_frame(s)
         self._start_track(s, z, inp.lla, stamp)
 
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
-        x = s.ekf.x
-        base = (float(x[0]), float(x[1]), float(x[2]))
+        base = s.ekf.position()
         s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
                                                   last_enu=(z[0], z[1])))
 
@@ -482,18 +482,19 @@ class GpsModel(SensorModel):
         then re-set to the fit's variance: its old correlations described the wrong heading."""
         ekf = s.ekf
         a = lever(ekf.x, self.cfg.extrinsic_xyz)
-        ekf.rotate_yaw(fit.theta, (float(ekf.x[0]) + a[0], float(ekf.x[1]) + a[1]))
+        p = ekf.position()
+        ekf.rotate_yaw(fit.theta, (p[0] + a[0], p[1] + a[1]))
         if self.ctx.layout.has("yaw_offset"):  # an absolute IMU yaw reads the same: its offset turns the other way
             ekf.shift("yaw_offset", [-fit.theta])
         # While the heading was unknown, the position's correlations with the gyro bias and the scales
         # were built through a heading error of ~1.8 rad: kept, they would feed the next fixes'
         # innovations into those states. They are dropped with the heading's row and column; the
         # position's own covariance and its relation to the GPS error state are what the fixes made them.
-        group = [0, 1, 2]
+        group = list(POSITION_ROWS)
         if self._error_rows is not None:
             group += self._error_rows
         ekf.decorrelate(group)
-        ekf.reset_covariance([5], np.array([[fit.var_theta]]))
+        ekf.reset_covariance([YAW_ROW], np.array([[fit.var_theta]]))
         # the stored track is now seen in the turned frame: the next fit measures what is left
         points = tuple((gx, gy, *fit.apply(px, py), w) for gx, gy, px, py, w in track.points)
         bx, by = fit.apply(track.base[0] + t[0], track.base[1] + t[1])
