@@ -80,3 +80,24 @@ def test_a_stated_covariance_is_left_alone() -> None:
     for s in simulate(w):  # covariance type DIAGONAL_KNOWN, as the receiver states it
         core.ingest(s)
     assert _gps_own(core).increments == (0, 0.0)
+
+
+@pytest.mark.parametrize("n", [3, 5, 10, 30, 100, 1000])
+def test_the_upper_bound_is_the_chi_square_quantiles_on_the_safe_side(n: int) -> None:
+    """Wilson-Hilferty's approximation against scipy's exact quantile: never below it (a bound that is
+    not safe would trust a lucky few increments), within 5 % of it from 5 increments on."""
+    from scipy.stats import chi2, norm
+
+    from fusiond.core.sensors.gps.model import NOISE_UPPER_Z, _upper_variance
+
+    exact = 2.0 * n / (2.0 * chi2.ppf(norm.cdf(-NOISE_UPPER_Z), n))  # sigma^2 bound for sum d^2 = 2 n
+    approx = _upper_variance(2.0 * n, n)
+    assert approx >= exact
+    if n >= 5:
+        assert approx <= 1.05 * exact
+
+
+def test_no_bound_from_too_few_increments() -> None:
+    from fusiond.core.sensors.gps.model import _upper_variance
+
+    assert _upper_variance(1.0, 0) is None and _upper_variance(1.0, 1) is None

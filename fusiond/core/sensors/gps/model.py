@@ -73,7 +73,7 @@ JUMP_AFTER_S = 1.0  # ... "a jump": its first fix within this of an accepted one
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is that fix again, with rounding noise ...
 FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
-NOISE_UPPER_Z = 2.0  # the measured unstated noise is used at its ~98 % upper bound (one-sided normal, z = 2)
+NOISE_UPPER_Z = 2.0  # the measured unstated noise is used at its ~98 % upper bound (one-sided, z = 2 sigmas)
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -302,9 +302,9 @@ class GpsModel(SensorModel):
         d = |z_k - z_k-1| - |dr_k - dr_k-1| is the difference of the two fixes' noises along the direction
         of travel, E d^2 = 2 sigma^2, plus what a wheel scale error and a wandering receiver error add over
         one interval (at rest, the noise's full horizontal norm): the estimate errs large, never small. It
-        is used below the unknown default only, at the upper end of its own uncertainty (a variance from n
-        increments has a relative std dev sqrt(2/n)), floored by position_min_sigma. The sums live in the
-        state's slice: a late fix re-applied counts once. The altitude keeps the default and its wander state."""
+        is used below the unknown default only, at the upper end of its own uncertainty (``_upper_variance``),
+        floored by position_min_sigma. The sums live in the state's slice: a late fix re-applied counts
+        once. The altitude keeps the default and its wander state."""
         own: GpsOwn = s.own[self.index]
         t, b = own.travel, own.track.base
         dr = (b[0] + t[0], b[1] + t[1])
@@ -314,9 +314,10 @@ class GpsModel(SensorModel):
             d = math.hypot(z[0] - prev[1], z[1] - prev[2]) - math.hypot(dr[0] - prev[3], dr[1] - prev[4])
             n, sq = n + 1, sq + d * d
         s.own[self.index] = msgspec.structs.replace(own, increments=(n, sq), last=(stamp, z[0], z[1], *dr))
-        if n == 0:
+        upper = _upper_variance(sq, n)
+        if upper is None:
             return inp
-        var = max(self.cfg.position_min_sigma**2, (1.0 + NOISE_UPPER_Z * math.sqrt(2.0 / n)) * sq / (2.0 * n))
+        var = max(self.cfg.position_min_sigma**2, upper)
         c = inp.cov
         if var >= c[0] and var >= c[4]:
             return inp
@@ -418,7 +419,7 @@ class GpsModel(SensorModel):
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
         base = s.ekf.position()
         s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
-                                                  last_enu=(z[0], z[1])))
+                                                  last_enu=(z[0], z[1])), last=(stamp, z[0], z[1], base[0], base[1]))
 
     def _frozen(self, s: "FilterState", lla: tuple[float, float, float], z) -> bool:
         """Is this fix a repeat of the previous one although the robot has moved since those coordinates
@@ -522,6 +523,20 @@ class GpsModel(SensorModel):
         for i in rows:
             J[i, eb + i] = -1.0
         s.ekf.map_errors(J)
+
+
+def _upper_variance(sq: float, n: int) -> float | None:
+    """The upper confidence bound (NOISE_UPPER_Z) of sigma^2 from n increments d, E d^2 = 2 sigma^2, whose
+    squares sum to ``sq``: sq / (2 sigma^2) is chi-square with n dof, so sigma^2 <= sq / (2 q) with q its
+    lower quantile, by Wilson and Hilferty's cube-root normal approximation (a few per cent at n >= 5,
+    on the large, safe side below). None while n is too small for any bound (q not positive: n <= 2)."""
+    if n <= 0:
+        return None
+    h = 2.0 / (9.0 * n)
+    root = 1.0 - h - NOISE_UPPER_Z * math.sqrt(h)
+    if root <= 0.0:
+        return None
+    return sq / (2.0 * n * root**3)
 
 
 def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
