@@ -42,7 +42,7 @@ def _floor_child(conn: Any, config_text: str, express: bool) -> None:
             return Step(sample.sensor, True)
 
         def publish() -> None:
-            self._pose_pub.put(encode_pose_cdr(last[0], "odom", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), zero_cov))
+            self.outputs.pose.put(encode_pose_cdr(last[0], "odom", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), zero_cov))
 
         self.core.ingest = ingest  # type: ignore[method-assign]
         self._publish_estimate = publish  # type: ignore[method-assign]

@@ -31,27 +31,16 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   `core.ingest`, then publish. The core's history absorbs the arrival order.
   Bookkeeping that can wait for the end of a pass does (health learns a pass's
   accepted samples under one lock), so the per-message path is decode, fuse, publish.
-- Outputs are declared once: pose (PoseWithCovarianceStamped CDR) and odometry
-  (nav_msgs/Odometry CDR) on every odometry sample, the JSON diagnostics records
-  (one per update), a health queryable, and a liveliness token `<health_key>/alive`
-  so remote tools see the daemon come and go (with a namespace both are prefixed).
-  They are batched, not `express`: on a loaded 2-core machine express messages
-  lost a few poses to Zenoh's drop-on-congestion where batching lost none, at
-  the same latency.
-- Diagnostics are batched (`[output] diagnostics_batch_s`): the worker collects the
-  records and, on a timer of its own loop (never a Zenoh thread), puts ONE JSON array
-  of them, encoded in one msgspec call: at 1 kHz IMU 20 puts a second instead of
-  1,100 encodes and puts (6-9 us of worker time a message here). The batch is flushed
-  when the worker ends, so a clean stop loses no record; 0 restores one record per
-  put. Readers accept both forms (`fusiond.monitor.decode_diagnostics`).
-- ROS outputs: a TF (`tf2_msgs/msg/TFMessage`, frame_id -> child_frame_id) with
-  each published pose whose stamp is newer than the last TF's (tf2 rejects a
-  repeated stamp, and a late odometry sample can be answered at a stamp already
-  published). With a GPS or absolute pose the estimate is the world pose: the TF
-  then holds map_frame -> frame_id (the corrections) and frame_id -> child_frame_id
-  (a continuous odometry frame), Nav2's tree (`tf_broadcast.py`), and the pose and
-  odometry messages carry map_frame; health as `diagnostic_msgs/msg/DiagnosticArray` once a period, from
-  the health thread (it reads health, never the core).
+- What goes out, in which encoding and on which key, is `outputs.py`'s: the pose,
+  odometry, NavSatFix and TF of every estimate the core says to publish, and the JSON
+  diagnostics records. Here: when. Diagnostics are put on a timer of the worker's own
+  loop (never a Zenoh thread), one JSON array a put: at 1 kHz IMU 20 puts a second
+  instead of 1,100 encodes and puts (6-9 us of worker time a message here); the batch
+  is flushed when the worker ends, so a clean stop loses no record. Health as
+  `diagnostic_msgs/msg/DiagnosticArray` once a period, from the health thread (it
+  reads health, never the core). A health queryable, and a liveliness token
+  `<health_key>/alive` so remote tools see the daemon come and go (with a namespace
+  both are prefixed).
 - set_pose: a queryable (and in rmw_zenoh mode the topic /set_pose) whose
   request is decoded on the Zenoh thread, then queued like a sample (and wakes
   the worker): the worker alone re-initialises the core, publishes the new pose
@@ -82,13 +71,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import msgspec
 import zenoh
 
-from ..codecs import (
-    DIAGNOSTIC_ARRAY, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, DecodeError, SetPose, decode_set_pose,
-    encode_diagnostic_array_cdr, encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr,
-)
+from ..codecs import POSE_COV_STAMPED, DecodeError, SetPose, decode_set_pose
 from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
@@ -96,11 +81,11 @@ from ..core.sensors.registry import kind_of
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
 from ..logs import get_logger
 from .drain_schedule import DrainSchedule
-from .rmw_zenoh import QUEUE_DEPTH, TF_DEPTH, RmwNode, topic_name
+from .outputs import Outputs
+from .rmw_zenoh import RmwNode, topic_name
 from .session import build_config, open_session
 from .state_file import StateSaver, resume_from_file
 from .intake import direct, sensor_kind, zero_covariance_check  # noqa: F401  (their import path since the split)
-from .tf_broadcast import TfBroadcast
 
 log = get_logger("fusiond.daemon")
 
@@ -112,12 +97,6 @@ HEALTH_POLL_S = 0.1  # how often status changes are looked for (`health_changed`
 CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while busy
 DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
 MIN_WAIT_S = 0.001  # shortest wait of the worker (a diagnostics batch due now is flushed on the next pass)
-# Records in one diagnostics put at most. A backlog (a bag played at full speed) flushes early, so a put
-# stays within one Zenoh batch (65,535 bytes by default; a record is ~290 bytes of JSON): a larger put is
-# fragmented, and under the publisher's default DROP congestion control one dropped fragment loses the
-# whole put. Measured with the burst of tests/e2e/test_diagnostics_batches.py: at 1024 records a put was lost
-# in 2 of 13 runs, at 200 in none of 25.
-MAX_BATCH = 200
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
 HEALTH_CHUNK = 64  # accepted samples handed to health at once in a long pass (~10 ms of fusing here)
 
@@ -174,22 +153,16 @@ class Daemon:
         self._decoders = [kind_of(s).decoder(s) for s in cfg.sensors]
         self._zero_cov = [zero_covariance_check(s) for s in cfg.sensors]
         self._subscribers: list[Any] = []
-        self._outputs: list[Any] = []
-        self._navsat_pub: Any = None
-        self._tf_pub: Any = None
-        self._ros_diag_pub: Any = None
-        self._tf = TfBroadcast(cfg)  # what goes on the TF key, and when (tf_broadcast.py)
+        self._declared: list[Any] = []  # everything undeclared at stop, in reverse
+        self.outputs: Outputs | None = None  # the publishers (outputs.py), declared by start
         self.node: RmwNode | None = None
         self.set_poses = 0  # set_pose requests applied
         self._worker: threading.Thread | None = None
         self._monitor: threading.Thread | None = None
         self._stopping = threading.Event()
         self._abort = False
-        self.published = 0
         self.errors = 0
         self._batch_s = cfg.output.diagnostics_batch_s
-        self._diag_batch: list[Any] = []  # records not yet published (worker only)
-        self.diagnostics_puts = 0  # puts on the diagnostics key (one per batch, or per record with batch 0)
         self.worker_cpu_s = 0.0  # CPU time of the worker thread, set when it ends
         self.wakeups = 0  # passes of the worker that found samples to fuse (each a batch of one or more)
         # `[state] path`: resumed at start, written by a thread of its own every save_interval_s (state_file.py)
@@ -209,13 +182,7 @@ class Daemon:
             self._saver = StateSaver(self.state_path, time.time)
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
-        self._pose_pub = self._ros_publisher(out.pose_key, POSE_COV_STAMPED)
-        self._odom_pub = self._ros_publisher(out.odometry_key, ODOMETRY)
-        self._diag_pub = s.declare_publisher(out.diagnostics_key, encoding=zenoh.Encoding.APPLICATION_JSON)
-        self._navsat_pub = self._ros_publisher(out.navsat_key, NAVSATFIX) if out.navsat_key else None
-        self._tf_pub = self._ros_publisher(out.tf_key, TF_MESSAGE, depth=TF_DEPTH) if out.publish_tf else None
-        self._ros_diag_pub = (self._ros_publisher(out.ros_diagnostics_key, DIAGNOSTIC_ARRAY)
-                              if out.ros_diagnostics_key else None)
+        self.outputs = Outputs(self.cfg, s, self.node, self._express)
         self._worker = threading.Thread(target=self._work, name="fusiond-worker", daemon=True)
         self._worker.start()
         for idx, sensor in enumerate(self.cfg.sensors):
@@ -237,10 +204,9 @@ class Daemon:
         # (`play`, tests) wait for that answer; a publisher's matching status is no such proof.
         self._queryable = s.declare_queryable(out.health_key, self._on_query)
         self._token = s.liveliness().declare_token(alive_key(out.health_key))
-        self._outputs = [o for o in (self.node, self._pose_pub, self._odom_pub, self._diag_pub, self._navsat_pub,
-                                     self._tf_pub, self._ros_diag_pub, self._queryable, self._token)
-                         if o is not None]
-        if self._monitor_on or self._ros_diag_pub is not None:
+        self._declared = [o for o in (self.node, *self.outputs.declared, self._queryable, self._token)
+                          if o is not None]
+        if self._monitor_on or self.outputs.ros_diagnostics is not None:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
 
@@ -248,12 +214,6 @@ class Daemon:
         """Worker (or after it ended): hand the core's state to the saver thread."""
         if self._saver is not None and self.core.initialised:
             self._saver.offer(self.core.export_state())
-
-    def _ros_publisher(self, key: str, msgtype: str, depth: int = QUEUE_DEPTH) -> Any:
-        """A publisher of a ROS topic: the bridge's plain key, or rmw_zenoh's key with attachments and token."""
-        if self.node is not None:
-            return self.node.publisher(topic_name(key), msgtype, depth=depth, express=self._express)
-        return self.session.declare_publisher(key, encoding=zenoh.Encoding.APPLICATION_CDR, express=self._express)
 
     def stop(self, drain_s: float = DRAIN_S) -> None:
         """Stop input, let the worker finish what is queued (bounded), undeclare outputs."""
@@ -278,17 +238,27 @@ class Daemon:
             self._saver.flush(self.core.export_state() if self.core.initialised else None)
         if self._monitor is not None:
             self._monitor.join(1.0)
-        for obj in reversed(self._outputs):  # the node's token last: rmw_zenoh undeclares entities first
+        for obj in reversed(self._declared):  # the node's token last: rmw_zenoh undeclares entities first
             try:
                 obj.undeclare()
             except zenoh.ZError:
                 pass
-        self._outputs.clear()
+        self._declared.clear()
+
+    @property
+    def published(self) -> int:
+        """Estimates published."""
+        return self.outputs.published if self.outputs is not None else 0
+
+    @property
+    def diagnostics_puts(self) -> int:
+        """Puts on the diagnostics key (one per batch, or per record with diagnostics_batch_s = 0)."""
+        return self.outputs.diagnostics_puts if self.outputs is not None else 0
 
     @property
     def tf_published(self) -> int:
         """TF messages put (one per estimate whose stamp advanced)."""
-        return self._tf.published
+        return self.outputs.tf_published if self.outputs is not None else 0
 
     def report(self) -> HealthReport:
         return self.health.report()
@@ -367,6 +337,7 @@ class Daemon:
         monotonic = time.monotonic
         clock = self._clock  # the arrivals' clock
         schedule = DrainSchedule(self.hold_s)
+        outputs = self.outputs
         batch_s = self._batch_s
         next_refresh = 0.0
         next_flush = monotonic() + batch_s
@@ -385,7 +356,7 @@ class Daemon:
                     else:
                         wait, any_arrival = schedule.next_wait(clock())
                         wait = min(wait, CORE_REFRESH_S)
-                    if self._diag_batch:
+                    if outputs.pending:
                         wait = min(wait, max(next_flush - monotonic(), MIN_WAIT_S))
                     self._sleeping = any_arrival
                     token = None
@@ -411,7 +382,7 @@ class Daemon:
                         schedule.on_backlog(clock() - started)
                 now = monotonic()
                 if now >= next_flush:
-                    if self._diag_batch:
+                    if outputs.pending:
                         self._flush_diagnostics()
                     next_flush = now + batch_s
                 if dirty and now >= next_refresh:
@@ -431,22 +402,19 @@ class Daemon:
             self.health.set_worker_alive(False)
             raise
         finally:
-            if self._diag_batch:  # at stop (or a crash): the records of samples already fused go out
+            if outputs.pending:  # at stop (or a crash): the records of samples already fused go out
                 self._flush_diagnostics()
             self.worker_cpu_s = time.thread_time()
         if not self._stopping.is_set():
             self.health.set_worker_alive(False)
 
     def _flush_diagnostics(self) -> None:
-        """Publish the collected records as one JSON array: one encode, one put."""
-        batch = self._diag_batch
-        self._diag_batch = []
-        try:
-            self._diag_pub.put(_diag_encoder.encode(batch))
-        except zenoh.ZError as err:  # the publisher is gone (stop timed out): say what is lost
-            log.warning("diagnostics_lost", count=len(batch), error=str(err))
-            return
-        self.diagnostics_puts += 1
+        """Publish the collected records (an attribute of the daemon, for profiling tools to wrap)."""
+        self.outputs.flush_diagnostics()
+
+    def _publish_estimate(self) -> None:
+        """Publish the core's newest estimate (an attribute of the daemon, for profiling tools to wrap)."""
+        self.outputs.publish_estimate(self.core)
 
     def _refresh(self) -> None:
         self.health.set_core(core_counters(self.core, self.published))
@@ -465,6 +433,7 @@ class Daemon:
         ingest = self.core.ingest
         prompt = self._prompt
         zero_cov = self._zero_cov
+        collect = self.outputs.collect
         accepted: list[tuple[int, float, bool]] = []  # (sensor, arrival, floored) for health, per pass
         while inbox and not self._abort:
             item = take()
@@ -492,7 +461,7 @@ class Daemon:
                     self._publish_estimate()
                 records = step.records
                 if records:
-                    self._collect(records)
+                    collect(records)
             except Exception:  # a bug on one sample must not stop the service
                 self.errors += 1
                 if self.errors == 1 or self.errors % LOG_EVERY == 0:
@@ -508,38 +477,6 @@ class Daemon:
         if n == 1 or n % LOG_EVERY == 0:
             log.warning("sample_dropped", sensor=self.cfg.sensors[idx].name, reason=err.reason,
                         detail=err.detail, count=n)
-
-    def _collect(self, records: list[Any]) -> None:
-        """Diagnostics records of one sample: into the batch (flushed on the worker's timer, or now when
-        it is full), or one put per record when batching is off."""
-        if self._batch_s > 0.0:
-            self._diag_batch += records
-            if len(self._diag_batch) >= MAX_BATCH:
-                self._flush_diagnostics()
-        else:  # diagnostics_batch_s = 0: one record per put
-            put, enc = self._diag_pub.put, _diag_encoder.encode
-            for r in records:
-                put(enc(r))
-            self.diagnostics_puts += len(records)
-
-    def _publish_estimate(self) -> None:
-        out = self.cfg.output
-        est = self.core.estimate()
-        frame = self._tf.pose_frame
-        pose = encode_pose_cdr(est.stamp, frame, est.position, est.orientation, est.pose_covariance)
-        odom = encode_odometry_cdr(est.stamp, frame, out.child_frame_id, est.position, est.orientation,
-                                   est.pose_covariance, est.linear, est.angular, est.twist_covariance)
-        self._pose_pub.put(pose)
-        self._odom_pub.put(odom)
-        if self._navsat_pub is not None:
-            fix = self.core.geodetic()
-            if fix is not None:
-                self._navsat_pub.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
-        if self._tf_pub is not None:
-            tf = self._tf.message(est)
-            if tf is not None:
-                self._tf_pub.put(tf)
-        self.published += 1
 
     def _set_pose(self, item: _SetPoseItem) -> None:
         """Worker only: re-initialise the core at the requested pose, publish it, answer with the new health."""
@@ -578,10 +515,9 @@ class Daemon:
         while not self._stopping.wait(HEALTH_POLL_S):
             rep = self.health.report()
             now = time.monotonic()
-            if self._ros_diag_pub is not None and now >= next_diag:
+            if self.outputs.ros_diagnostics is not None and now >= next_diag:
                 next_diag = now + period
-                statuses = ros_statuses(rep, self.cfg.ros.node_name, hardware_ids)
-                self._ros_diag_pub.put(encode_diagnostic_array_cdr(time.time(), statuses))
+                self.outputs.put_ros_diagnostics(time.time(), ros_statuses(rep, self.cfg.ros.node_name, hardware_ids))
             if not self._monitor_on:
                 continue
             names = [p.split(":")[0] for p in rep.problems]
@@ -599,7 +535,6 @@ class Daemon:
 
 
 _LEVEL = {"ok": 20, "starting": 20, "degraded": 30, "failed": 40}
-_diag_encoder = msgspec.json.Encoder()
 
 
 def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | None = None) -> int:
