@@ -437,6 +437,23 @@ BENCH_BAG = REPO_ROOT / "data" / "jackal_test2.bag"
 BENCH_CONFIG = REPO_ROOT / "examples" / "jackal.toml"
 
 
+def _bench_input_error(bag: Path, cfg) -> str | None:
+    """Why ``bench`` cannot replay this bag with this config, as ``replay`` would refuse it (no odometry
+    sensor, a file that is no bag, the odometry or world-frame topic not in it), or None."""
+    from .core.sensors.registry import kind_of
+    from .replay.bag import BagError, open_bag_samples
+    from .replay.run import check_topics
+
+    if not any(kind_of(s).drives_prediction for s in cfg.sensors):
+        return "the config has no odometry sensor to replay the bag with (add an odom [[sensors]] table)"
+    try:
+        with open_bag_samples([bag], cfg.sensors) as opened:
+            check_topics(opened, cfg, None)
+    except BagError as err:
+        return str(err)
+    return None
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     import msgspec
 
@@ -449,6 +466,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"fusiond: bench: no such bag {bag}{default}; give one with --bag", file=sys.stderr)
         return EXIT_USAGE
     cfg = _load_config(config)
+    problem = _bench_input_error(bag, cfg)
+    if problem:  # found now, not after a minute of estimator benchmarks
+        print(f"fusiond: bench: {problem}", file=sys.stderr)
+        return EXIT_USAGE
     result = bench.run(bag, Path(config), cfg, quick=args.quick)
     if args.latency:
         from .transport.bench_latency import run_bench
@@ -504,6 +525,12 @@ class _VersionAction(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         print(f"fusiond {_version()}")
         parser.exit(0)
+
+
+# Every command that opens a Zenoh session takes --no-multicast, so that it can be typed on any of them. The
+# latency benchmark's sessions (bench-latency, bench --latency) connect to each other on loopback and never
+# scout (transport/bench_latency.py): for them the flag states what already holds.
+BENCH_NO_MULTICAST = "do not scout for peers by multicast (always so: the benchmark's sessions are on loopback)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -601,6 +628,7 @@ def build_parser() -> argparse.ArgumentParser:
     bb.add_argument("--latency", action="store_true", help="also the Zenoh end-to-end latency benchmark")
     bb.add_argument("--seconds", type=float, default=10.0, help="latency benchmark duration")
     bb.add_argument("--json", action="store_true", help="machine-readable output")
+    bb.add_argument("--no-multicast", action="store_true", help=BENCH_NO_MULTICAST)
     bb.set_defaults(func=cmd_bench)
 
     d = sub.add_parser("run", help="the fusion daemon: subscribe to the sensors on Zenoh, publish the fused pose")
@@ -662,6 +690,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="odometry messages per second sent; each yields a fused pose (default 100)")
     b.add_argument("--express", action="store_true", help="send the daemon's outputs unbatched (Zenoh express)")
     b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.add_argument("--no-multicast", action="store_true", help=BENCH_NO_MULTICAST)
     b.set_defaults(func=cmd_bench_latency)
     return p
 

@@ -144,6 +144,8 @@ SESSION_COMMANDS = {
     "set-pose": ["set-pose", "1", "2"],
     "monitor": ["monitor"],
     "calibrate-imu": ["calibrate-imu"],
+    "bench": ["bench", "--latency"],
+    "bench-latency": ["bench-latency"],
 }
 
 
@@ -180,6 +182,16 @@ def test_tools_no_multicast_reaches_the_zenoh_config(tmp_path, capsys, monkeypat
     monkeypatch.setattr(session, "client_config", spy)
     code, _, err = run_cli(capsys, "health", "--no-multicast", "--timeout", "0.5")
     assert code == 1 and seen == [False]
+
+
+def test_the_latency_benchmarks_sessions_never_scout():
+    """bench-latency and bench --latency take --no-multicast like every session command; their daemon and load
+    generator share the benchmark's config, whose sessions meet on loopback without multicast."""
+    from fusiond.config import loads
+    from fusiond.transport.bench_latency import _config_text, free_port
+
+    zc = loads(_config_text(free_port()), "<bench>").zenoh
+    assert zc.multicast_scouting is False and all(ep.startswith("tcp/127.0.0.1:") for ep in zc.listen)
 
 
 def test_health_with_no_multicast_and_no_daemon_gives_up_quickly(tmp_path, capsys):
@@ -225,6 +237,38 @@ def test_bench_with_a_missing_bag_is_one_line_exit_2(tmp_path, capsys):
     code, out, err = run_cli(capsys, "bench", "--bag", str(missing), "--config", str(JACKAL_TOML))
     assert code == 2 and out == ""
     assert one_line(err) == f"fusiond: bench: no such bag {missing}; give one with --bag"
+
+
+def _no_benchmark(monkeypatch):
+    import fusiond.bench as bench
+
+    monkeypatch.setattr(bench, "run", lambda *a, **k: pytest.fail("benchmarked input that replay refuses"))
+
+
+def test_bench_refuses_a_file_that_is_no_bag_before_benchmarking(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    png = _not_bags(tmp_path)[0]
+    code, out, err = run_cli(capsys, "bench", "--bag", str(png), "--config", str(JACKAL_TOML), "--quick")
+    assert code == 2 and out == ""
+    assert one_line(err).startswith(f"fusiond: bench: {png}: not a readable ROS 1/ROS 2 bag ("), err
+
+
+def test_bench_refuses_a_config_without_odometry(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    for text in ("", '[[sensors]]\nname = "imu"\nkind = "imu"\nkey = "imu/data"\n'):
+        cfg = write_config(tmp_path, text)
+        code, out, err = run_cli(capsys, "bench", "--config", str(cfg), "--quick")
+        assert code == 2 and out == "", err
+        line = one_line(err)
+        assert line.startswith("fusiond: ") and ("no odometry sensor" in line or "exactly one odom" in line), line
+
+
+def test_bench_refuses_a_world_frame_topic_the_bag_lacks(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    cfg = _jackal_config(tmp_path, extra='[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps/fix"\n')
+    code, out, err = run_cli(capsys, "bench", "--config", str(cfg), "--quick")
+    assert code == 2 and out == ""
+    assert "fusiond: bench: the topic /gps/fix (sensor 'gps') that defines the world frame" in one_line(err)
 
 
 # -- 3. an absent topic names the bag's topics and the one it was likely meant to be ----------------------
