@@ -677,3 +677,15 @@ def test_a_closed_pipe_is_no_traceback(tmp_path):
     proc.stdout.close()  # the reader (`| head`) left before anything was written
     _, err = proc.communicate(timeout=120)
     assert b"Traceback" not in err and b"BrokenPipe" not in err, err.decode()
+
+
+# -- tune's summary says why the fit ended, in words -----------------------------------------------------------
+
+def test_tune_says_the_fit_stopped_at_its_budget(tmp_path, capsys):
+    """A budget shorter than the first replay of the fit part: the fit stops there, and says so."""
+    out = tmp_path / "tuned.toml"
+    code, text, err = run_cli(capsys, "tune", str(JACKAL), "--config", str(JACKAL_TOML), "--out", str(out),
+                              "--keys", "imu.gyro_noise", "--budget-s", "0.05", "--quiet")
+    assert code == 0, err
+    line = next(ln for ln in text.splitlines() if ln.startswith("fit part "))
+    assert line.endswith("; the fit stopped at --budget-s"), line
