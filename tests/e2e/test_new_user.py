@@ -481,8 +481,8 @@ def _assert_consistent(row):
 
 
 def test_monitor_whole_run_ok_with_a_high_window(capsys):
-    """1000 good updates then 50 whose NIS is 5x: the run is still ok, the window is not. Before, the row
-    printed the window's mean and bounds beside the run's 'ok'."""
+    """1000 good updates then 50 whose NIS is 5x: the run is still ok, the window is not; the row shows the
+    run's mean and bounds beside the run's 'ok', the window's beside the window's verdict."""
     from fusiond.monitor import plain_lines
 
     snap = _view(_records([2.0] * 1000 + [10.0] * 50))
@@ -530,7 +530,7 @@ def test_monitor_rows_are_consistent(values):
 
 def test_monitor_window_mixing_dofs_is_the_doctors_window():
     """A message without its yaw row (dof 2 among dof 3): the window test of the row is the doctor's, which
-    keeps both in the window; the monitor used to start a window of its own at every dof change."""
+    keeps both in the window, rather than a window of the monitor's own restarted at every dof change."""
     records = _records([3.0] * 200, dof=3) + _records([15.0] * 10, dof=2, t0=10.0)
     row = _view(records)["channels"][0]
     stats_mean = (40 * 3.0 + 10 * 15.0) / 50

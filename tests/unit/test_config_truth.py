@@ -1,8 +1,8 @@
 """config.toml is the truth: every key it shows carries the code's default.
 
 config.toml says it lists every key with its default; a user who trusts it must get
-what the code does (issue 12: it showed `angular_velocity = true` while the default
-was false, and a user who copied it got no gyro). The test is generic over whatever
+what the code does (a file showing `angular_velocity = true` over a default of false
+would leave whoever copied the rest without a gyro). The test is generic over whatever
 structs and keys exist: it walks the file's tables (active and commented-out
 examples), finds each table's config Struct (a sensor table by its `kind`), and
 compares every `key = value` line with that Struct's field default. A commented
