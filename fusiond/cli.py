@@ -394,8 +394,15 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
     if args.bag:
         from .replay.bag import BagError, open_bag_samples
 
+        from .replay.bag import did_you_mean
+
         try:
             with open_bag_samples([Path(args.bag)], [imu] + ([odom_cfg] if odom_cfg else [])) as bag:
+                if imu.name in bag.missing:  # the odometry's topic is there, the IMU's is not
+                    have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items()))
+                    print(f"fusiond: calibrate-imu: the IMU topic /{imu.key} (sensor {imu.name!r}) is not in "
+                          f"{args.bag}{did_you_mean(imu.key, bag.bag_topics)}; the bag has: {have}", file=sys.stderr)
+                    return EXIT_USAGE
                 read = list(bag)
         except BagError as err:
             print(f"fusiond: {err}", file=sys.stderr)
@@ -414,6 +421,11 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
                 samples = record_imu(session, imu, args.duration)
         finally:
             session.close()
+        if not samples:  # nothing answered: say where it listened, not only that it got nothing
+            print(f"fusiond: calibrate-imu: no IMU message on key {imu.key!r} ({imu.encoding}) in {args.duration:g} s; "
+                  "is the IMU publishing there? (--key, or --config and --sensor, name it; --connect reaches its "
+                  "router)", file=sys.stderr)
+            return 1
     try:
         cal = calibrate(samples, imu, odom or None)
     except ValueError as err:

@@ -689,3 +689,21 @@ def test_tune_says_the_fit_stopped_at_its_budget(tmp_path, capsys):
     assert code == 0, err
     line = next(ln for ln in text.splitlines() if ln.startswith("fit part "))
     assert line.endswith("; the fit stopped at --budget-s"), line
+
+
+# -- calibrate-imu that gets no IMU says where it looked ----------------------------------------------------------
+
+def test_calibrate_imu_with_nothing_on_its_key_names_the_key(capsys):
+    code, out, err = run_cli(capsys, "calibrate-imu", "--duration", "0.5", "--no-multicast", "--key", "nobody/imu")
+    assert code == 1 and out == ""
+    line = one_line(err)
+    assert line.startswith("fusiond: calibrate-imu: no IMU message on key 'nobody/imu' (ros2-cdr) in 0.5 s"), line
+
+
+def test_calibrate_imu_on_a_bag_without_the_imu_topic_names_the_bags_topics(tmp_path, capsys):
+    cfg = _jackal_config(tmp_path, imu="imu/dta")
+    code, out, err = run_cli(capsys, "calibrate-imu", "--bag", str(JACKAL), "--config", str(cfg))
+    assert code == 2 and out == ""
+    line = one_line(err)
+    assert "the IMU topic /imu/dta (sensor 'imu') is not in" in line and "(did you mean /imu/data?)" in line, line
+    assert "/jackal_velocity_controller/odom [nav_msgs/msg/Odometry]" in line
