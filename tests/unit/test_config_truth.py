@@ -158,3 +158,17 @@ def test_the_checker_catches_a_wrong_default():
     text = (ROOT / "config.toml").read_text().replace("angular_velocity = false", "angular_velocity = true", 1)
     rows = [r for r in shown_keys(text) if r[2] == "angular_velocity"]
     assert rows and not same(rows[0][4], defaults(C.ImuSensor)["angular_velocity"])
+
+
+def test_the_readme_steps_load_as_configs_one_on_another():
+    """README's "Configure your robot" builds a config step by step: step 1 (odometry + IMU) alone, then with
+    step 2's GPS or step 3's pose added, is each a config the code accepts with the keys the README shows."""
+    blocks = re.findall(r"```toml\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    assert len(blocks) == 3, "README's three configure steps"
+    step1, gps, pose = blocks
+    base = C.loads(step1, "README step 1")
+    assert [s.name for s in base.sensors] == ["wheel", "imu"] and base.sensor("imu").angular_velocity is True
+    with_gps = C.loads(step1 + gps, "README step 2")
+    assert [s.name for s in with_gps.sensors] == ["wheel", "imu", "gps"]
+    with_pose = C.loads(step1 + pose, "README step 3")
+    assert with_pose.sensor("vo").differential is True
