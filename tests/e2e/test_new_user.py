@@ -707,3 +707,26 @@ def test_calibrate_imu_on_a_bag_without_the_imu_topic_names_the_bags_topics(tmp_
     line = one_line(err)
     assert "the IMU topic /imu/dta (sensor 'imu') is not in" in line and "(did you mean /imu/data?)" in line, line
     assert "/jackal_velocity_controller/odom [nav_msgs/msg/Odometry]" in line
+
+
+# -- the README's flags are the CLI's --------------------------------------------------------------------------
+
+def test_every_flag_the_readme_and_migration_guide_show_is_a_fusiond_flag():
+    """A flag the guides show that no command takes would fail a user with argparse's "unrecognized arguments"."""
+    import argparse
+    import re
+
+    from fusiond.cli import build_parser
+
+    flags: set[str] = set()
+    for action in build_parser()._actions:
+        flags.update(action.option_strings)
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                for a in sub._actions:
+                    flags.update(a.option_strings)
+    others = {"--fast": "scripts/test.sh", "--rm": "docker run", "--network": "docker run"}
+    for doc in ("README.md", "docs/MIGRATION.md"):
+        shown = set(re.findall(r"(?<![\w/.-])(--[a-z][a-z0-9-]*)", (ROOT / doc).read_text()))
+        assert shown, doc
+        assert not shown - flags - set(others), f"{doc} shows {sorted(shown - flags - set(others))}"
