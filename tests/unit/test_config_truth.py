@@ -172,3 +172,17 @@ def test_the_readme_steps_load_as_configs_one_on_another():
     assert [s.name for s in with_gps.sensors] == ["wheel", "imu", "gps"]
     with_pose = C.loads(step1 + pose, "README step 3")
     assert with_pose.sensor("vo").differential is True
+
+
+def test_the_readme_diagnostics_schema_names_every_record_field_and_verdict():
+    """README's "Diagnostics record" is the schema a consumer codes against: every field a record carries and
+    every `consistency` value it can take is named there."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("### Diagnostics record"):]
+    section = section[:section.index("\n### ", 1)]
+    named = set(re.findall(r'"([a-z_]+)":', section)) | set(re.findall(r"`([a-z_]+)`", section))
+    assert set(DiagnosticsRecord.__struct_fields__) <= named, set(DiagnosticsRecord.__struct_fields__) - named
+    assert {"ok", "nis_high", "nis_low", "warming_up"} <= named
+    assert DiagnosticsRecord(0.0, "s", [], [], [], 0.0, 0, False).consistency in named
