@@ -158,12 +158,13 @@ def _as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespac
 def cmd_doctor(args: argparse.Namespace) -> int:
     """`fusiond doctor BAG --config FILE`: `replay` with the doctor and no output files; prints the
     summary with the doctor's verdicts. Exit codes as replay's."""
-    return cmd_replay(_as_replay(args.bags, args.config))
+    return cmd_replay(_as_replay(args.bags, args.config, "--advice-budget-s", repr(args.advice_budget_s)))
 
 
 def cmd_report(args: argparse.Namespace) -> int:
     """`fusiond report BAG --config FILE --out DIR`: `replay --report DIR`."""
-    return cmd_replay(_as_replay(args.bags, args.config, "--report", args.out, *(["--quiet"] if args.quiet else [])))
+    return cmd_replay(_as_replay(args.bags, args.config, "--report", args.out, "--advice-budget-s",
+                                 repr(args.advice_budget_s), *(["--quiet"] if args.quiet else [])))
 
 
 EXIT_UNHEALTHY = 1
@@ -539,6 +540,11 @@ class _VersionAction(argparse.Action):
         parser.exit(0)
 
 
+# replay, doctor and report: how long the doctor's paste lines may be replayed before they are printed
+ADVICE_BUDGET = dict(type=float, default=60.0, metavar="S",
+                     help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
+                          "seconds (default 60; 0: print them unreplayed)")
+
 # Every command that opens a Zenoh session takes --no-multicast, so that it can be typed on any of them. The
 # latency benchmark's sessions (bench-latency, bench --latency) connect to each other on loopback and never
 # scout (transport/bench_latency.py): for them the flag states what already holds.
@@ -579,15 +585,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--rpe-s", type=float, default=1.0, metavar="S",
                    help="relative pose error over S seconds (default 1)")
     r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
-    r.add_argument("--advice-budget-s", type=float, default=60.0, metavar="S",
-                   help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
-                        "seconds (default 60; 0: print them unreplayed)")
+    r.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     r.set_defaults(func=cmd_replay)
 
     dr = sub.add_parser("doctor", help="replay bags and print the doctor's verdicts with the summary; writes no file "
                                        "(replay without outputs)")
     dr.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     dr.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    dr.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     dr.set_defaults(func=cmd_doctor)
 
     rp = sub.add_parser("report", help="replay bags and write the HTML report (plots, the doctor's verdicts) into "
@@ -596,6 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--config", required=True, help="TOML config (see config.toml)")
     rp.add_argument("--out", required=True, metavar="DIR", help="directory to write index.html and its images into")
     rp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    rp.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     rp.set_defaults(func=cmd_report)
 
     tu = sub.add_parser("tune", help="fit the configured sensors' and the process's noise to bags by the innovations' "

@@ -730,3 +730,30 @@ def test_every_flag_the_readme_and_migration_guide_show_is_a_fusiond_flag():
         shown = set(re.findall(r"(?<![\w/.-])(--[a-z][a-z0-9-]*)", (ROOT / doc).read_text()))
         assert shown, doc
         assert not shown - flags - set(others), f"{doc} shows {sorted(shown - flags - set(others))}"
+
+
+# -- doctor and report take replay's --advice-budget-s (the README names it for the doctor's paste lines) ---------
+
+JACKAL_RL_TOML = ROOT / "examples" / "jackal_rl.toml"
+
+
+def test_doctor_takes_the_advice_budget(capsys):
+    """jackal_rl.toml gets a paste line (fuse the gyro); with budget 0 it is printed unreplayed, by default
+    replayed and scored, as `replay` does."""
+    code, unreplayed, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_RL_TOML),
+                                    "--advice-budget-s", "0")
+    assert code == 0, err
+    assert 'name = "imu": angular_velocity = true' in unreplayed and "(replayed:" not in unreplayed
+    code, replayed, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_RL_TOML))
+    assert code == 0 and "(replayed: likelihood +" in replayed, err
+    code, _, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_RL_TOML), "--advice-budget-s", "-1")
+    assert code == 2 and "--advice-budget-s -1" in one_line(err)
+
+
+def test_report_takes_the_advice_budget(tmp_path, capsys):
+    out_dir = tmp_path / "report"
+    code, out, err = run_cli(capsys, "report", str(JACKAL), "--config", str(JACKAL_RL_TOML), "--out", str(out_dir),
+                             "--advice-budget-s", "0")
+    assert code == 0, err
+    assert "angular_velocity = true" in out and "(replayed:" not in out
+    assert "angular_velocity = true" in (out_dir / "index.html").read_text()
