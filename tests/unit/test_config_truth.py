@@ -1,4 +1,6 @@
-"""config.toml is the truth: every key it shows carries the code's default.
+"""config.toml is the truth: every key it shows carries the code's default. The README's configuration
+steps and diagnostics schema are held to the code the same way, and the guides to their size and to
+statements of why (no lab notebook).
 
 config.toml says it lists every key with its default; a user who trusts it must get
 what the code does (a file showing `angular_velocity = true` over a default of false
@@ -186,3 +188,27 @@ def test_the_readme_diagnostics_schema_names_every_record_field_and_verdict():
     assert set(DiagnosticsRecord.__struct_fields__) <= named, set(DiagnosticsRecord.__struct_fields__) - named
     assert {"ok", "nis_high", "nis_low", "warming_up"} <= named
     assert DiagnosticsRecord(0.0, "s", [], [], [], 0.0, 0, False).consistency in named
+
+
+def test_the_readme_is_a_guide_of_at_most_20000_characters():
+    """The README is a user guide (what fusiond is, the quick start, configure your robot, daemon, tools, a
+    short results table); measurements live in docs/RESULTS.md. Counted in bytes, as `wc -c` counts."""
+    size = len((ROOT / "README.md").read_bytes())
+    assert size <= 20_000, f"README.md is {size} bytes: cut as much as is added"
+
+
+# lab-notebook markers: a QA run's name, a session / stop / round number, a "(new)" tag, a commit hash
+NOTEBOOK = re.compile(r"\bQA\b|\b[Ss]ession \d|\b[Ss]top \d|\b[Rr]ound \d|\(new\)"
+                      r"|\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+
+
+def test_no_lab_notebook_lines_in_the_docs_config_examples_or_code():
+    """Git keeps the history; a doc or a comment says why things are as they are."""
+    files = [ROOT / "README.md", ROOT / "config.toml", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "examples").glob("*.toml")), *sorted((ROOT / "fusiond").rglob("*.py")),
+             *sorted((ROOT / "fusiond").rglob("*.c"))]
+    found = [f"{f.relative_to(ROOT)}:{n}: {line.strip()}" for f in files
+             for n, line in enumerate(f.read_text().splitlines(), 1) if NOTEBOOK.search(line)]
+    assert not found, "\n".join(found)
+    assert NOTEBOOK.search("measured in session 12") and NOTEBOOK.search("fixed by 4b3b453")
+    assert not NOTEBOOK.search("a session that cannot open; 1e6 m; jackal_test2.bag")
