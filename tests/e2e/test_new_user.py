@@ -757,3 +757,20 @@ def test_report_takes_the_advice_budget(tmp_path, capsys):
     assert code == 0, err
     assert "angular_velocity = true" in out and "(replayed:" not in out
     assert "angular_velocity = true" in (out_dir / "index.html").read_text()
+
+
+def test_tune_keeps_every_table_of_the_config_it_tunes(tmp_path, capsys):
+    """The tuned config is the user's config with the tuned keys changed: a [state] table (the daemon's
+    persisted state) and every other table come through, so nothing but the noise changes."""
+    from fusiond.config import load
+
+    cfg = write_config(tmp_path, JACKAL_TOML.read_text() + '\n[state]\npath = "state.bin"\nmax_age_s = 10.0\n'
+                       '\n[zenoh]\nmulticast_scouting = false\n\n[ros]\nnode_name = "robot"\n'
+                       '\n[output]\nmap_frame = "world"\n\n[filter]\nnis_window = 40\n')
+    out = tmp_path / "tuned.toml"
+    code, _, err = run_cli(capsys, "tune", str(JACKAL), "--config", str(cfg), "--out", str(out),
+                           "--keys", "imu.gyro_noise", "--budget-s", "0.05", "--quiet")
+    assert code == 0, err
+    before, after = load(cfg), load(out)
+    assert after.state.path == "state.bin" and after.state.max_age_s == 10.0
+    assert after == before  # the budget ran out before any fit: nothing tuned, nothing else lost
