@@ -303,6 +303,21 @@ def cmd_set_pose(args: argparse.Namespace) -> int:
     from .estimator.rotation import from_rpy
     from .transport.session import request_set_pose
 
+    import math
+
+    values = {"x": args.x, "y": args.y, "yaw": args.yaw, "--z": args.z, "--roll": args.roll, "--pitch": args.pitch,
+              "--stamp": args.stamp, "--sigma POSITION_M": args.sigma[0], "--sigma ATTITUDE_RAD": args.sigma[1]}
+    for name, value in values.items():  # refused here, before a session, rather than by the daemon (or not at all)
+        if not math.isfinite(value):
+            print(f"fusiond: set-pose {name} {value}: must be a finite number", file=sys.stderr)
+            return EXIT_USAGE
+        if value < 0.0 and name.startswith("--sigma"):  # squared, a typed sign would vanish unseen
+            print(f"fusiond: set-pose {name} {value:g}: a standard deviation must not be negative", file=sys.stderr)
+            return EXIT_USAGE
+        if value < 0.0 and name == "--stamp":
+            print(f"fusiond: set-pose --stamp {value:g}: must not be negative (0: the filter's current time)",
+                  file=sys.stderr)
+            return EXIT_USAGE
     pos_var, att_var = args.sigma[0] ** 2, args.sigma[1] ** 2
     cov = [0.0] * 36
     for i in range(6):

@@ -774,3 +774,21 @@ def test_tune_keeps_every_table_of_the_config_it_tunes(tmp_path, capsys):
     before, after = load(cfg), load(out)
     assert after.state.path == "state.bin" and after.state.max_age_s == 10.0
     assert after == before  # the budget ran out before any fit: nothing tuned, nothing else lost
+
+
+# -- set-pose refuses what it would send wrong, before any session ------------------------------------------------
+
+@pytest.mark.parametrize("argv, needle", [
+    (["1", "2", "--sigma", "-0.5", "0.1"], "set-pose --sigma POSITION_M -0.5: a standard deviation must not be negative"),
+    (["1", "2", "--sigma", "0.5", "-0.1"], "set-pose --sigma ATTITUDE_RAD -0.1: a standard deviation must not be"),
+    (["nan", "2"], "set-pose x nan: must be a finite number"),
+    (["1", "2", "inf"], "set-pose yaw inf: must be a finite number"),
+    (["1", "2", "--stamp", "-3"], "set-pose --stamp -3: must not be negative (0: the filter's current time)"),
+])
+def test_set_pose_refuses_a_value_it_cannot_send_as_typed(capsys, monkeypatch, argv, needle):
+    import fusiond.transport.session as session
+
+    monkeypatch.setattr(session, "open_session", lambda *a, **k: pytest.fail("a session was opened"))
+    code, out, err = run_cli(capsys, "set-pose", *argv, "--no-multicast")
+    assert code == 2 and out == ""
+    assert one_line(err).startswith(f"fusiond: {needle}"), err
