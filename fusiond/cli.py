@@ -53,6 +53,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if problem:
             print(f"fusiond: {problem}", file=sys.stderr)
             return EXIT_USAGE
+    for option, value in (("--rpe-s", args.rpe_s), ("--segment-gap", args.segment_gap)):
+        if not 0.0 < value < float("inf"):  # a window or a gap of no length scores nothing meaningful
+            print(f"fusiond: {option} {value:g}: must be a positive number of seconds", file=sys.stderr)
+            return EXIT_USAGE
+    if args.fuse_every < 1:
+        print(f"fusiond: --fuse-every {args.fuse_every}: must be 1 (fuse every message) or more", file=sys.stderr)
+        return EXIT_USAGE
     from .errors import ReplayError
     from .replay.run import replay, summary
 

@@ -792,3 +792,20 @@ def test_set_pose_refuses_a_value_it_cannot_send_as_typed(capsys, monkeypatch, a
     code, out, err = run_cli(capsys, "set-pose", *argv, "--no-multicast")
     assert code == 2 and out == ""
     assert one_line(err).startswith(f"fusiond: {needle}"), err
+
+
+# -- replay's scoring options are refused when they cannot mean anything, with or without --reference -------------
+
+@pytest.mark.parametrize("option, value, needle", [
+    ("--rpe-s", "0", "--rpe-s 0: must be a positive number of seconds"),
+    ("--rpe-s", "-1", "--rpe-s -1: must be a positive number of seconds"),
+    ("--segment-gap", "nan", "--segment-gap nan: must be a positive number of seconds"),
+    ("--segment-gap", "-0.5", "--segment-gap -0.5: must be a positive number of seconds"),
+    ("--fuse-every", "0", "--fuse-every 0: must be 1 (fuse every message) or more"),
+])
+def test_replay_refuses_a_scoring_option_of_no_meaning(tmp_path, capsys, option, value, needle):
+    tum = tmp_path / "t.tum"
+    code, out, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(JACKAL_TOML), "--quiet", "--tum", str(tum),
+                             option, value)
+    assert code == 2 and out == "" and not tum.exists()  # refused before the replay
+    assert one_line(err) == f"fusiond: {needle}"
