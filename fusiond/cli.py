@@ -8,6 +8,7 @@ nor `run` for matplotlib.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -562,6 +563,26 @@ class _VersionAction(argparse.Action):
         parser.exit(0)
 
 
+def _number(text: str, *, zero: bool) -> float:
+    """An option's number, finite and positive (or, with ``zero``, also 0): argparse's own error otherwise, so that
+    a duration, timeout or rate of no meaning is refused before anything runs (not as a traceback later)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and (value >= 0.0 if zero else value > 0.0)):
+        raise argparse.ArgumentTypeError(f"{text}: must be {'0 or more' if zero else 'a positive number'}")
+    return value
+
+
+def _positive(text: str) -> float:
+    return _number(text, zero=False)
+
+
+def _non_negative(text: str) -> float:
+    return _number(text, zero=True)
+
+
 # replay, doctor and report: how long the doctor's paste lines may be replayed before they are printed
 ADVICE_BUDGET = dict(type=float, default=60.0, metavar="S",
                      help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
@@ -642,16 +663,16 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")
     m.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional)")
     m.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    m.add_argument("--timeout", type=float, default=5.0, help="seconds to find a daemon before giving up (default 5)")
-    m.add_argument("--duration", type=float, help="stop after S seconds (default: until Ctrl-C)")
-    m.add_argument("--interval", type=float, default=1.0, help="refresh period in seconds")
+    m.add_argument("--timeout", type=_positive, default=5.0, help="seconds to find a daemon before giving up (default 5)")
+    m.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
+    m.add_argument("--interval", type=_positive, default=1.0, help="refresh period in seconds")
     m.add_argument("--json", action="store_true", help="stream JSON lines instead of the terminal view")
     m.set_defaults(func=cmd_monitor)
 
     c = sub.add_parser("calibrate-imu", help="measure a static IMU's noise and print it as config")
-    c.add_argument("--duration", type=float, default=60.0, help="seconds to record (default 60)")
+    c.add_argument("--duration", type=_positive, default=60.0, help="seconds to record (default 60)")
     c.add_argument("--bag", help="read the IMU from this bag instead of Zenoh")
-    c.add_argument("--start", type=float, default=0.0, help="with --bag: skip the first S seconds")
+    c.add_argument("--start", type=_non_negative, default=0.0, help="with --bag: skip the first S seconds")
     c.add_argument("--config", help="TOML config naming the IMU sensor (key, encoding, extrinsic_rpy)")
     c.add_argument("--sensor", help="which imu sensor of the config (default: the first)")
     c.add_argument("--key", help="Zenoh key of the IMU without a config (default imu/data, ROS 2 CDR)")
@@ -666,7 +687,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "the source tree)")
     bb.add_argument("--quick", action="store_true", help="fewer repeats")
     bb.add_argument("--latency", action="store_true", help="also the Zenoh end-to-end latency benchmark")
-    bb.add_argument("--seconds", type=float, default=10.0, help="latency benchmark duration")
+    bb.add_argument("--seconds", type=_positive, default=10.0, help="latency benchmark duration")
     bb.add_argument("--json", action="store_true", help="machine-readable output")
     bb.add_argument("--no-multicast", action="store_true", help=BENCH_NO_MULTICAST)
     bb.set_defaults(func=cmd_bench)
@@ -681,13 +702,13 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     pl.add_argument("--config", required=True, help="TOML config: sensors, keys and the [zenoh] section")
     pl.add_argument("--rate", type=float, default=1.0, help="pace relative to the recording; 0 = as fast as possible")
-    pl.add_argument("--duration", type=float, help="play only the first S seconds of the bag")
+    pl.add_argument("--duration", type=_positive, help="play only the first S seconds of the bag")
     pl.add_argument("--connect", action="append", metavar="ENDPOINT",
                     help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "
                          "endpoints on loopback")
     pl.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
     pl.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    pl.add_argument("--wait", type=float, default=5.0,
+    pl.add_argument("--wait", type=_non_negative, default=5.0,
                     help="wait up to S seconds for the config's daemon to answer on its health key before "
                          "playing, then play anyway (default 5; 0: do not wait)")
     pl.set_defaults(func=cmd_play, default_log_level="info")
@@ -698,7 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Zenoh endpoint of the daemon (repeatable); default: from the config")
     h.add_argument("--key", help="health key (default: output.health_key of the config)")
     h.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    h.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for an answer (default 2)")
+    h.add_argument("--timeout", type=_positive, default=2.0, help="seconds to wait for an answer (default 2)")
     h.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
                    help="worst status that still exits 0 (default degraded; failed = any answer)")
     h.set_defaults(func=cmd_health)
@@ -720,13 +741,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Zenoh endpoint of the daemon (repeatable); default: from the config")
     sp.add_argument("--key", help="set_pose key (default: output.set_pose_key of the config)")
     sp.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    sp.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the answer (default 2)")
+    sp.add_argument("--timeout", type=_positive, default=2.0, help="seconds to wait for the answer (default 2)")
     sp.set_defaults(func=cmd_set_pose)
 
     b = sub.add_parser("bench-latency", help="sensor put -> fused pose latency over Zenoh on loopback")
-    b.add_argument("--seconds", type=float, default=10.0, help="measurement duration (default 10)")
-    b.add_argument("--imu-hz", type=float, default=1000.0, help="IMU messages per second sent (default 1000)")
-    b.add_argument("--odom-hz", type=float, default=100.0,
+    b.add_argument("--seconds", type=_positive, default=10.0, help="measurement duration (default 10)")
+    b.add_argument("--imu-hz", type=_positive, default=1000.0, help="IMU messages per second sent (default 1000)")
+    b.add_argument("--odom-hz", type=_positive, default=100.0,
                    help="odometry messages per second sent; each yields a fused pose (default 100)")
     b.add_argument("--express", action="store_true", help="send the daemon's outputs unbatched (Zenoh express)")
     b.add_argument("--json", action="store_true", help="machine-readable output")

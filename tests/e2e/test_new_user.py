@@ -809,3 +809,27 @@ def test_replay_refuses_a_scoring_option_of_no_meaning(tmp_path, capsys, option,
                              option, value)
     assert code == 2 and out == "" and not tum.exists()  # refused before the replay
     assert one_line(err) == f"fusiond: {needle}"
+
+
+# -- durations, timeouts and rates of no meaning are argparse errors, not tracebacks later -----------------------
+
+@pytest.mark.parametrize("argv", [
+    ["health", "--timeout", "-1"],  # zenoh would raise "ValueError: negative timeout"
+    ["set-pose", "1", "2", "--timeout", "0"],
+    ["monitor", "--interval", "0"],
+    ["monitor", "--timeout", "nan"],
+    ["monitor", "--duration", "-3"],
+    ["calibrate-imu", "--duration", "0"],
+    ["calibrate-imu", "--start", "-5"],
+    ["play", "b.bag", "--config", "c.toml", "--wait", "-1"],
+    ["play", "b.bag", "--config", "c.toml", "--duration", "0"],
+    ["bench", "--latency", "--seconds", "0"],
+    ["bench-latency", "--seconds", "0"],  # the benchmark would end in a KeyError
+    ["bench-latency", "--imu-hz", "0"],
+    ["bench-latency", "--odom-hz", "inf"],
+])
+def test_an_option_of_no_meaning_is_refused_by_the_parser(capsys, argv):
+    code, out, err = run_cli(capsys, *argv, "--no-multicast")
+    option = [a for a in argv if a.startswith("--")][-1]  # the one given a value of no meaning
+    assert code == 2 and out == "" and "Traceback" not in err
+    assert f"error: argument {option}: " in err and ("must be" in err or "is not a number" in err), err
