@@ -311,8 +311,6 @@ def cmd_set_pose(args: argparse.Namespace) -> int:
     from .estimator.rotation import from_rpy
     from .transport.session import request_set_pose
 
-    import math
-
     values = {"x": args.x, "y": args.y, "yaw": args.yaw, "--z": args.z, "--roll": args.roll, "--pitch": args.pitch,
               "--stamp": args.stamp, "--sigma POSITION_M": args.sigma[0], "--sigma ATTITUDE_RAD": args.sigma[1]}
     for name, value in values.items():  # refused here, before a session, rather than by the daemon (or not at all)
@@ -416,9 +414,7 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
     odom_cfg = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None) if cfg else None
     odom: list = []
     if args.bag:
-        from .replay.bag import BagError, open_bag_samples
-
-        from .replay.bag import did_you_mean
+        from .replay.bag import BagError, did_you_mean, open_bag_samples
 
         try:
             with open_bag_samples([Path(args.bag)], [imu] + ([odom_cfg] if odom_cfg else [])) as bag:
@@ -663,7 +659,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")
     m.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional)")
     m.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    m.add_argument("--timeout", type=_positive, default=5.0, help="seconds to find a daemon before giving up (default 5)")
+    m.add_argument("--timeout", type=_positive, default=5.0,
+                   help="seconds to find a daemon before giving up (default 5)")
     m.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
     m.add_argument("--interval", type=_positive, default=1.0, help="refresh period in seconds")
     m.add_argument("--json", action="store_true", help="stream JSON lines instead of the terminal view")
