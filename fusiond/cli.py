@@ -493,6 +493,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     bag = Path(args.bag) if args.bag else BENCH_BAG
     config = args.config or str(BENCH_CONFIG)
+    if bag.is_dir():  # bench.run replays a bag file only (it skips anything else): say so, not "no such bag"
+        print(f"fusiond: bench: --bag {bag} is a directory (a ROS 2 bag?); bench takes one bag file, a ROS 1 .bag "
+              "or a ROS 2 .mcap", file=sys.stderr)
+        return EXIT_USAGE
     if not bag.is_file():
         default = "" if args.bag else " (the default, data/jackal_test2.bag of the source tree fusiond runs from)"
         print(f"fusiond: bench: no such bag {bag}{default}; give one with --bag", file=sys.stderr)

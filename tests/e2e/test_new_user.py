@@ -833,3 +833,13 @@ def test_an_option_of_no_meaning_is_refused_by_the_parser(capsys, argv):
     option = [a for a in argv if a.startswith("--")][-1]  # the one given a value of no meaning
     assert code == 2 and out == "" and "Traceback" not in err
     assert f"error: argument {option}: " in err and ("must be" in err or "is not a number" in err), err
+
+
+def test_bench_with_a_bag_directory_says_it_takes_a_file(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    ros2 = tmp_path / "ros2_bag"
+    ros2.mkdir()
+    code, out, err = run_cli(capsys, "bench", "--bag", str(ros2), "--config", str(JACKAL_TOML))
+    assert code == 2 and out == ""
+    assert one_line(err) == (f"fusiond: bench: --bag {ros2} is a directory (a ROS 2 bag?); bench takes one bag file, "
+                             "a ROS 1 .bag or a ROS 2 .mcap")
