@@ -30,7 +30,8 @@ import numpy as np
 from ..config import Config
 from .. import reasons
 from ..errors import CoreError
-from ..estimator import ErrorStateEKF, PredictWorkspace, corrected_inputs, predict
+from ..estimator import (POSE, POSE_ERR, POSITION, POSITION_ERR, ErrorStateEKF, PredictWorkspace, add_motion_noise,
+                         corrected_inputs, predict)
 from ..errors import EstimatorError
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..logs import get_logger
@@ -252,7 +253,7 @@ class FusionCore:
         for stamp, i, inp in cluster.in_order():
             steps.append(self._place(i, inp, stamp))
             if steps[-1].publish:
-                poses.append((self.state.t, self.state.ekf.x[0:7].copy()))
+                poses.append((self.state.t, self.state.ekf.x[POSE].copy()))
         last = steps[-1]
         return Step(last.sensor, last.accepted, last.reason, late=any(s.late for s in steps),
                     publish=bool(poses), records=[r for s in steps for r in s.records], poses=poses)
@@ -326,9 +327,9 @@ class FusionCore:
         twist_cov[3:6, 3:6] = np.reshape(u.angular_cov, (3, 3))
         return Estimate(
             stamp=s.t,
-            position=(float(x[0]), float(x[1]), float(x[2])),
-            orientation=(float(x[3]), float(x[4]), float(x[5]), float(x[6])),
-            pose_covariance=P[0:6, 0:6].ravel().tolist(),
+            position=s.ekf.position(),
+            orientation=s.ekf.attitude(),
+            pose_covariance=P[POSE_ERR, POSE_ERR].ravel().tolist(),
             linear=tuple(linear),
             angular=tuple(angular),
             twist_covariance=twist_cov.ravel().tolist(),
@@ -340,15 +341,14 @@ class FusionCore:
         s = self.state
         if s is None or s.t is None or s.enu is None or not s.frame_ready:
             return None
-        x = s.ekf.x
-        lat, lon, alt = enu_to_geodetic(s.enu, float(x[0]), float(x[1]), float(x[2]))
-        return lat, lon, alt, s.ekf.P[0:3, 0:3].ravel().tolist()
+        lat, lon, alt = enu_to_geodetic(s.enu, *s.ekf.position())
+        return lat, lon, alt, s.ekf.P[POSITION_ERR, POSITION_ERR].ravel().tolist()
 
     def pose(self) -> tuple[float, np.ndarray]:
         """(filter time, nominal [x y z qx qy qz qw]) without building a full Estimate."""
         if not self.initialised:
             raise CoreError("no sample has been fused yet")
-        return self.state.t, self.state.ekf.x[0:7]
+        return self.state.t, self.state.ekf.x[POSE]
 
     @property
     def gyro_bias(self) -> np.ndarray | None:
@@ -487,7 +487,7 @@ class FusionCore:
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
         self._anchor(saved.stamp)
-        log.info("state_restored", stamp=saved.stamp, position=saved.x[0:3], frame_ready=saved.frame_ready)
+        log.info("state_restored", stamp=saved.stamp, position=saved.x[POSITION], frame_ready=saved.frame_ready)
 
     def _anchor(self, stamp: float) -> None:
         """After a re-initialisation at ``stamp``: the history starts at that state."""
@@ -556,16 +556,11 @@ class FusionCore:
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
                 extra = m.on_predict(s, s.ekf.x, x)
                 if extra is not None:  # what the linearised model leaves out of this step's horizontal motion
-                    Q[0, 0] += extra[0]
-                    Q[0, 1] += extra[1]
-                    Q[1, 0] += extra[1]
-                    Q[1, 1] += extra[2]
+                    add_motion_noise(Q, *extra)
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
                 pos_var, yaw_var = held.unheld_motion_var(s, t_end, timeouts)
-                Q[0, 0] += pos_var
-                Q[1, 1] += pos_var
-                Q[5, 5] += yaw_var
+                add_motion_noise(Q, pos_var, 0.0, pos_var, yaw_var)
                 if u.angular_period == 0.0:  # no yaw rate held at the gap's end: its turn was not seen
                     s.turn_unseen = t_end
             s.ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it

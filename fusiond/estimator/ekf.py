@@ -35,7 +35,7 @@ from . import kernels
 from . import rotation as rot
 from .cholesky import gain_rows
 from ..errors import EstimatorError
-from .state import StateLayout
+from .state import YAW_ROW, StateLayout, attitude_of, position_of
 
 
 class UpdateResult(msgspec.Struct, gc=False):
@@ -314,6 +314,18 @@ class ErrorStateEKF:
         P[:, 6:] = 0.0
         P[6:, 6:] = other.P[6:, 6:]
         self.P = P
+
+    def position(self) -> tuple[float, float, float]:
+        """The nominal position (m)."""
+        return position_of(self.x)
+
+    def attitude(self) -> tuple[float, float, float, float]:
+        """The nominal attitude quaternion (x y z w)."""
+        return attitude_of(self.x)
+
+    def yaw_variance(self) -> float:
+        """The heading's variance (rad^2): the global attitude error's z component."""
+        return float(self.P[YAW_ROW, YAW_ROW])
 
     def set_position(self, p, rows: tuple[int, ...] = (0, 1, 2)) -> None:
         """Set the nominal position components ``rows`` (covariance: ``reset_covariance``)."""

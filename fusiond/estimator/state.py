@@ -65,6 +65,40 @@ class StateBlock:
             x[n0 + i] += dx[e0 + i]
 
 
+# Where the pose sits in every layout (its first block: ``StateLayout`` refuses any other order). Outside
+# the estimator the pose is read through these names (and ``ErrorStateEKF.position`` / ``attitude`` /
+# ``yaw_variance``), never by bare indices: the nominal position x[POSITION], the attitude quaternion
+# x[ATTITUDE] (x y z w), and in the error state the position's rows POSITION_ROWS (POSITION_ERR), the
+# pose's (POSE_ERR: position, then attitude) and the heading's row YAW_ROW (the global attitude error's z).
+POSITION = slice(0, 3)
+ATTITUDE = slice(3, 7)
+POSE = slice(0, 7)
+POSITION_ROWS = (0, 1, 2)
+POSITION_ERR = slice(0, 3)
+POSE_ERR = slice(0, 6)
+YAW_ROW = 5
+
+
+def position_of(x) -> tuple[float, float, float]:
+    """The position of a nominal state vector, as floats."""
+    return (float(x[0]), float(x[1]), float(x[2]))
+
+
+def attitude_of(x) -> tuple[float, float, float, float]:
+    """The attitude quaternion (x y z w) of a nominal state vector, as floats."""
+    return (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
+
+
+def add_motion_noise(Q: np.ndarray, xx: float = 0.0, xy: float = 0.0, yy: float = 0.0, yaw: float = 0.0) -> None:
+    """Add to a prediction's error covariance Q, in place, a horizontal position covariance
+    [[xx, xy], [xy, yy]] (m^2) and a heading variance (rad^2): motion the model's inputs did not describe."""
+    Q[0, 0] += xx
+    Q[0, 1] += xy
+    Q[1, 0] += xy
+    Q[1, 1] += yy
+    Q[YAW_ROW, YAW_ROW] += yaw
+
+
 class PoseBlock(StateBlock):
     """Position (3) and unit quaternion (4, x y z w); error: dp (3), global dtheta (3)."""
 

@@ -114,9 +114,9 @@ def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | Non
 _TUM = "%.9f %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n"
 
 
-def tum_line(t: float, x) -> str:
-    """One TUM trajectory line: stamp x y z qx qy qz qw."""
-    return _TUM % (t, x[0], x[1], x[2], x[3], x[4], x[5], x[6])
+def tum_line(t: float, pose) -> str:
+    """One TUM trajectory line: stamp x y z qx qy qz qw (``pose``: those seven)."""
+    return _TUM % (t, *pose[:7])
 
 
 def tum_text(trajectory: array) -> str:

@@ -32,6 +32,7 @@ from ..core.fusion import FusionCore
 from ..core.resume import ResumeState
 from ..errors import CoreError, TransportError
 from ..logs import get_logger
+from ..estimator import POSITION
 
 __all__ = ["FILE_VERSION", "StateFile", "StateRefused", "StateSaver", "load_state", "resume_from_file", "save_state"]
 
@@ -132,7 +133,7 @@ def resume_from_file(core: FusionCore, path: Path, max_age_s: float) -> str | No
         log.info("state_resume_refused", path=str(path), reason=err.reason, detail=err.detail)
         return err.reason
     log.info("state_resumed", path=str(path), age_s=round(time.time() - saved.saved_wall, 3),
-             stamp=saved.state.stamp, position=saved.state.x[0:3])
+             stamp=saved.state.stamp, position=saved.state.x[POSITION])
     return None
 
 

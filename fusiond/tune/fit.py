@@ -336,7 +336,8 @@ def format_table(result: TuneResult) -> str:
     head = ("key", "before", "after", "held-back NIS/dof", "status")
     lines = []
     for r in result.rows:
-        before = _fmt(r.before) if r.before is not None else f"unset (messages ~{_fmt(r.param.start())})" \
+        said = "messages ~" if r.param.source == "messages (median)" else r.param.source + " "
+        before = _fmt(r.before) if r.before is not None else f"unset ({said}{_fmt(r.param.start())})" \
             if r.param.source != "config" and not r.param.skipped else "unset"
         nis = "" if r.nis_before is None else f"{r.nis_before:.3g} -> {r.nis_after:.3g}" \
             if r.nis_after is not None else f"{r.nis_before:.3g} -> n/a"

@@ -63,7 +63,7 @@ class Param:
     key: str  # the config field
     indices: tuple[int, ...] | None
     base: float | tuple[float, ...] = 1.0
-    source: str = "config"  # where base came from: "config" or "messages (median)"
+    source: str = "config"  # where base came from: "config", "messages (median)" or "unstated: measured, at most"
     unit: str = ""
     skipped: str = ""  # not tunable in this recording, and why
     # other keys of the same table set together with this one when it changes
@@ -182,7 +182,7 @@ def _gps_sigmas(s: GpsSensor, m: GpsSample) -> tuple[float, float, float] | None
     if m.status < 0:
         return None
     c = m.position_covariance
-    if m.covariance_type == 0 or (len(c) == 9 and c[0] == 0.0 and c[4] == 0.0 and c[8] == 0.0):
+    if _gps_unstated(m):
         return tuple(s.unknown_position_sigma)  # type: ignore[return-value]
     if len(c) != 9 or not all(map(math.isfinite, c)) or min(c[0], c[4], c[8]) < 0.0:
         return None
@@ -227,8 +227,19 @@ def _gps_noise_params(s: GpsSensor, samples: Sequence[object]) -> list[Param]:
     # one key: an axis stated "not measured" leaves both parts alone (an override would fuse it)
     bad = "the fixes state an axis not measured (an override would fuse it)" \
         if any(b >= s.max_sigma for b in base) else ""
-    return [Param(n, s.name, "position_noise", g, base, "messages (median)", "m", bad, floor=s.position_min_sigma)
-            for n, g in zip(names, groups)]
+    # fixes that state nothing have their horizontal noise measured by the filter (estimate_unknown_noise):
+    # the default is then only its upper bound, and the table says so
+    fixes_unstated = sum(_gps_unstated(m) for m in _sensor_samples(samples, s.name, GpsSample)) > len(fixes) / 2
+    sources = ("unstated: measured, at most" if fixes_unstated and s.estimate_unknown_noise else "messages (median)",
+               "messages (median)")
+    return [Param(n, s.name, "position_noise", g, base, src, "m", bad, floor=s.position_min_sigma)
+            for n, g, src in zip(names, groups, sources)]
+
+
+def _gps_unstated(m: GpsSample) -> bool:
+    """A fix valid but without a stated accuracy (``GpsPolicy.convert`` takes the unknown default)."""
+    c = m.position_covariance
+    return m.status >= 0 and (m.covariance_type == 0 or (len(c) == 9 and c[0] == 0.0 and c[4] == 0.0 and c[8] == 0.0))
 
 
 def _pose_params(s: PoseSensor, samples: Sequence[object]) -> list[Param]:

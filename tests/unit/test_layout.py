@@ -117,6 +117,18 @@ def test_no_module_outside_the_sensor_kinds_branches_on_a_kind():
     assert found == _KIND_BRANCHES_KEPT
 
 
+# The pose's place in the state is the estimator's to know (fusiond/estimator/state.py POSITION, ATTITUDE,
+# YAW_ROW, ...; ErrorStateEKF.position/attitude/yaw_variance): no bare index into a state or covariance.
+_BARE_POSE_INDEX = re.compile(r"\b(x|x0|x1|P|Q)\[\d+(:\d+)?(, *\d+(:\d+)?)?\]|\.(x|P)\[\d|_covariance\(\[\d")
+
+
+def test_no_bare_pose_index_outside_the_estimator():
+    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
+             for path in PACKAGE.rglob("*.py") if not path.relative_to(PACKAGE).as_posix().startswith("estimator/")
+             for i, line in enumerate(path.read_text().splitlines(), 1) if _BARE_POSE_INDEX.search(line)]
+    assert found == []
+
+
 def test_the_config_never_imports_the_core_and_the_kinds_never_import_the_outer_layers():
     """fusiond.config reads the kinds' tables on first use (the kinds import it); the registry, the kinds
     and the fusion core import nothing of transport, replay, the CLI, the tuner, nor (until a decoder is

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...estimator import mat3
+from ...estimator import attitude_of
 from ...estimator import rotation as rot
 
 if TYPE_CHECKING:
@@ -29,4 +30,4 @@ def new_frame(s: FilterState) -> None:
 
 def lever(x: np.ndarray, t: tuple[float, float, float]) -> tuple[float, float, float]:
     """R(q) t: the sensor's offset from base_link, in the world."""
-    return mat3.apply(rot.matrix9((float(x[3]), float(x[4]), float(x[5]), float(x[6]))), t)
+    return mat3.apply(rot.matrix9(attitude_of(x)), t)

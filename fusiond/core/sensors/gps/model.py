@@ -38,7 +38,7 @@ import msgspec
 import numpy as np
 
 from .... import reasons
-from ....estimator import mat3
+from ....estimator import POSITION_ROWS, YAW_ROW, mat3, position_of
 from ....estimator import observations as obs
 from ....estimator.geodesy import EnuFrame
 from ....estimator.rigid_fit import RigidFit, fit_rigid
@@ -73,6 +73,7 @@ JUMP_AFTER_S = 1.0  # ... "a jump": its first fix within this of an accepted one
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is that fix again, with rounding noise ...
 FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
+NOISE_UPPER_Z = 2.0  # the measured unstated noise is used at its ~98 % upper bound (one-sided, z = 2 sigmas)
 ENU_NAMES = ("east", "north", "up")
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -97,10 +98,12 @@ class GpsTrack:
 
 @dataclass(slots=True)
 class GpsInput:
-    """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2)."""
+    """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2). ``stated``: False
+    when the covariance is the unknown default (the receiver said nothing, and no position_noise)."""
 
     lla: tuple[float, float, float]
     cov: tuple[float, ...]
+    stated: bool = True
 
 
 class GpsPolicy:
@@ -129,7 +132,7 @@ class GpsPolicy:
         if self._override is not None:
             return GpsInput(lla, self._override)
         if s.covariance_type == 0:
-            return GpsInput(lla, self._unknown)
+            return GpsInput(lla, self._unknown, False)
         c = s.position_covariance
         if len(c) != 9 or not finite(c):
             raise Rejected(reasons.BAD_COVARIANCE, "position covariance must be 9 finite numbers")
@@ -138,7 +141,7 @@ class GpsPolicy:
         if c[0] == 0.0 and c[4] == 0.0 and c[8] == 0.0:
             # no receiver is exact on every axis: a driver that did not fill the covariance in (or
             # lost the fix and says so with zeros) states nothing, as covariance_type UNKNOWN
-            return GpsInput(lla, self._unknown)
+            return GpsInput(lla, self._unknown, False)
         if s.covariance_type == 2:  # COVARIANCE_TYPE_DIAGONAL_KNOWN: off-diagonals are not meaningful
             c = mat3.diag(c[0], c[4], c[8])
         f = self._floor
@@ -157,6 +160,10 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
     accepted: tuple[float, float, float] | None = None  # the newest fix the gate let in: (t, innovation east, north)
     unaligned: float = 0.0  # m dead-reckoned since the last fix (they share one heading error)
+    # unstated noise (``_measured_noise``): consecutive fixes' distances against the dead-reckoned ones,
+    # (count, sum of squared differences), and the previous fix: (t, east, north, dead-reckoned east, north)
+    increments: tuple[int, float] = (0, 0.0)
+    last: tuple[float, ...] | None = None
 
 
 class GpsModel(SensorModel):
@@ -201,13 +208,14 @@ class GpsModel(SensorModel):
         if own.track is None:
             return None
         tr = own.travel
-        dx, dy = float(x1[0] - x0[0]), float(x1[1] - x0[1])
+        p0, p1 = position_of(x0), position_of(x1)
+        dx, dy = p1[0] - p0[0], p1[1] - p0[1]
         d = math.hypot(dx, dy)
-        s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + float(x1[2] - x0[2])), own.rejected,
-                                   own.accepted, own.unaligned + d)
+        s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + (p1[2] - p0[2])), own.rejected,
+                                   own.accepted, own.unaligned + d, own.increments, own.last)
         if d == 0.0:
             return None
-        s2 = float(s.ekf.P[5, 5])
+        s2 = s.ekf.yaw_variance()
         along = 1.5 - 2.0 * math.exp(-0.5 * s2) + 0.5 * math.exp(-2.0 * s2)
         var = along * ((own.unaligned + d) ** 2 - own.unaligned**2)
         ux, uy = dx / d, dy / d
@@ -237,6 +245,8 @@ class GpsModel(SensorModel):
                 return []
             return [self.record(stamp, [ENU_NAMES[i] for i in rows], [0.0] * len(rows),
                                 [inp.cov[4 * i] for i in rows], 0.0, len(rows), True, "position_frozen", late)]
+        if not inp.stated and cfg.estimate_unknown_noise:
+            inp = self._measured_noise(s, z, inp, stamp)
         if not rows:
             return []
         horizontal = tuple(r for r in rows if r < 2)
@@ -249,7 +259,7 @@ class GpsModel(SensorModel):
             # modelled wander the fit is already within HEADING_WANDER_READY_SIGMA (module doc). A
             # Gauss-Markov GPS error is a "consider" state here: its variance widens S (H has its
             # columns) but the offset a wrong heading builds up must not be absorbed into it as GPS error.
-            gated = self.wander > 0.0 and float(ekf.P[5, 5]) <= HEADING_WANDER_READY_SIGMA**2
+            gated = self.wander > 0.0 and ekf.yaw_variance() <= HEADING_WANDER_READY_SIGMA**2
             threshold = cfg.mahalanobis_threshold if gated else math.inf
             mask = self.ctx.position_mask
             channel = "position_provisional" if gated else "position_unaligned"
@@ -285,6 +295,34 @@ class GpsModel(SensorModel):
                                            "altitude", late))
         return records
 
+    def _measured_noise(self, s: "FilterState", z, inp: GpsInput, stamp: float) -> GpsInput:
+        """A receiver that states no accuracy: its horizontal white noise, measured. Between two consecutive
+        fixes (within the sensor's timeout) the wheels know how far the antenna went far better than a fix
+        knows where it is, and a distance needs no heading (this works while the heading is searched for):
+        d = |z_k - z_k-1| - |dr_k - dr_k-1| is the difference of the two fixes' noises along the direction
+        of travel, E d^2 = 2 sigma^2, plus what a wheel scale error and a wandering receiver error add over
+        one interval (at rest, the noise's full horizontal norm): the estimate errs large, never small. It
+        is used below the unknown default only, at the upper end of its own uncertainty (``_upper_variance``),
+        floored by position_min_sigma. The sums live in the state's slice: a late fix re-applied counts
+        once. The altitude keeps the default and its wander state."""
+        own: GpsOwn = s.own[self.index]
+        t, b = own.travel, own.track.base
+        dr = (b[0] + t[0], b[1] + t[1])
+        n, sq = own.increments
+        prev = own.last
+        if prev is not None and 0.0 < stamp - prev[0] <= self.cfg.timeout_s:
+            d = math.hypot(z[0] - prev[1], z[1] - prev[2]) - math.hypot(dr[0] - prev[3], dr[1] - prev[4])
+            n, sq = n + 1, sq + d * d
+        s.own[self.index] = msgspec.structs.replace(own, increments=(n, sq), last=(stamp, z[0], z[1], *dr))
+        upper = _upper_variance(sq, n)
+        if upper is None:
+            return inp
+        var = max(self.cfg.position_min_sigma**2, upper)
+        c = inp.cov
+        if var >= c[0] and var >= c[4]:
+            return inp
+        return GpsInput(inp.lla, (min(c[0], var), 0.0, 0.0, 0.0, min(c[4], var), 0.0, 0.0, 0.0, c[8]), False)
+
     def _block(self, ekf, z, cov, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The fix's rows ``rows`` (east north up indices) as a measurement of the state now."""
         y, H, R = obs.position(self.ctx.layout, ekf.x, z, cov, self.cfg.extrinsic_xyz, self.error)
@@ -298,12 +336,12 @@ class GpsModel(SensorModel):
         (unless an absolute IMU yaw is trusted as ENU heading)."""
         ekf = s.ekf
         set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, rows)
-        split = (0, 1, 2)
+        split = POSITION_ROWS
         if self.cfg.datum is None and 2 in rows:
             # The datum's altitude is this fix's: the frame's zero height is where the antenna is
             # now, exactly, whatever this fix's own error. (With a configured datum the first
             # altitude is as uncertain as the fix, slow error included.)
-            ekf.reset_covariance([2], np.zeros((1, 1)))
+            ekf.reset_covariance([POSITION_ROWS[2]], np.zeros((1, 1)))
             split = (0, 1)
         if self.error is not None:
             self._split_first_fix(s, split)
@@ -313,7 +351,7 @@ class GpsModel(SensorModel):
         if self.yaw_given:
             s.heading_ready = True
         else:
-            ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             self._heading(s, z, inp.cov, stamp)
 
     def _locked_out(self, s: "FilterState", rejected: bool, y: np.ndarray, R: np.ndarray, z, stamp: float) -> bool:
@@ -373,16 +411,15 @@ class GpsModel(SensorModel):
                     seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
         set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, tuple(r for r in rows if r < 2))
         if not self.yaw_given:
-            s.ekf.reset_covariance([5], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
+            s.ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             s.heading_ready = False
         new_frame(s)
         self._start_track(s, z, inp.lla, stamp)
 
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
-        x = s.ekf.x
-        base = (float(x[0]), float(x[1]), float(x[2]))
+        base = s.ekf.position()
         s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
-                                                  last_enu=(z[0], z[1])))
+                                                  last_enu=(z[0], z[1])), last=(stamp, z[0], z[1], base[0], base[1]))
 
     def _frozen(self, s: "FilterState", lla: tuple[float, float, float], z) -> bool:
         """Is this fix a repeat of the previous one although the robot has moved since those coordinates
@@ -446,18 +483,19 @@ class GpsModel(SensorModel):
         then re-set to the fit's variance: its old correlations described the wrong heading."""
         ekf = s.ekf
         a = lever(ekf.x, self.cfg.extrinsic_xyz)
-        ekf.rotate_yaw(fit.theta, (float(ekf.x[0]) + a[0], float(ekf.x[1]) + a[1]))
+        p = ekf.position()
+        ekf.rotate_yaw(fit.theta, (p[0] + a[0], p[1] + a[1]))
         if self.ctx.layout.has("yaw_offset"):  # an absolute IMU yaw reads the same: its offset turns the other way
             ekf.shift("yaw_offset", [-fit.theta])
         # While the heading was unknown, the position's correlations with the gyro bias and the scales
         # were built through a heading error of ~1.8 rad: kept, they would feed the next fixes'
         # innovations into those states. They are dropped with the heading's row and column; the
         # position's own covariance and its relation to the GPS error state are what the fixes made them.
-        group = [0, 1, 2]
+        group = list(POSITION_ROWS)
         if self._error_rows is not None:
             group += self._error_rows
         ekf.decorrelate(group)
-        ekf.reset_covariance([5], np.array([[fit.var_theta]]))
+        ekf.reset_covariance([YAW_ROW], np.array([[fit.var_theta]]))
         # the stored track is now seen in the turned frame: the next fit measures what is left
         points = tuple((gx, gy, *fit.apply(px, py), w) for gx, gy, px, py, w in track.points)
         bx, by = fit.apply(track.base[0] + t[0], track.base[1] + t[1])
@@ -485,6 +523,20 @@ class GpsModel(SensorModel):
         for i in rows:
             J[i, eb + i] = -1.0
         s.ekf.map_errors(J)
+
+
+def _upper_variance(sq: float, n: int) -> float | None:
+    """The upper confidence bound (NOISE_UPPER_Z) of sigma^2 from n increments d, E d^2 = 2 sigma^2, whose
+    squares sum to ``sq``: sq / (2 sigma^2) is chi-square with n dof, so sigma^2 <= sq / (2 q) with q its
+    lower quantile, by Wilson and Hilferty's cube-root normal approximation (a few per cent at n >= 5,
+    on the large, safe side below). None while n is too small for any bound (q not positive: n <= 2)."""
+    if n <= 0:
+        return None
+    h = 2.0 / (9.0 * n)
+    root = 1.0 - h - NOISE_UPPER_Z * math.sqrt(h)
+    if root <= 0.0:
+        return None
+    return sq / (2.0 * n * root**3)
 
 
 def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:

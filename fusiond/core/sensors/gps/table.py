@@ -17,6 +17,9 @@ class GpsSensor(SensorTable, tag="gps"):
     position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
     position_min_sigma: float = 0.01  # floor, m
     unknown_position_sigma: Vec3 = (2.5, 2.5, 5.0)  # used when the covariance type is UNKNOWN (0)
+    # a receiver that states no accuracy: its white noise measured from consecutive fixes against the
+    # dead-reckoned motion between them (below unknown_position_sigma, never above); false: that default
+    estimate_unknown_noise: bool = True
     extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # antenna position in base_link, m
     heading_init_m: float = 5.0  # travel (m) over which the initial heading is measured
     error_tau_s: float = 0.0  # > 0: estimate a Gauss-Markov GPS error with this time constant, s

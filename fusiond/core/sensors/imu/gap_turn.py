@@ -81,7 +81,7 @@ def carry_yaw(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float, gyro:
     """Turn the heading across a gap by the IMU's own yaw change, less its drift, weighed against the
     filter's own change (module doc); mark this sample and learn the yaw's drift outside gaps."""
     own: ImuOwn = s.own[imu.index]
-    heading = rot.yaw(tuple(s.ekf.x[3:7].tolist()))
+    heading = rot.yaw(s.ekf.attitude())
     quiet = gyro is not None and abs(gyro[2]) <= quiet_bound(math.sqrt(gyro_cov[8]), imu.bias_sigma)
     mark, live, period, drift = own.yaw_mark, own.yaw_live, 0.0, own.yaw_drift
     if mark is not None:
@@ -105,7 +105,7 @@ def carry_yaw(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float, gyro:
         wheel = _learn_wheel_yaw(wheel, stamp, gyro[2] - bias, s.wheel_angular[2])
     still = quiet and s.still_since is not None
     s.own[imu.index] = msgspec.structs.replace(
-        own, yaw_mark=(stamp, yaw, heading, period, float(s.ekf.P[5, 5]), still, s.wheel_turn), yaw_live=live,
+        own, yaw_mark=(stamp, yaw, heading, period, s.ekf.yaw_variance(), still, s.wheel_turn), yaw_live=live,
         yaw_drift=drift, wheel_yaw=wheel)
 
 
@@ -152,7 +152,7 @@ def _turn_across_gap(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float
         # the wheels' yaw rate drove the heading through the IMU's silence: their turn, rescaled by how
         # they read the gyro's turns before (a skid-steer's reads short), against the IMU's. Beside a
         # heading reference (GPS, pose) the filter's turn holds its corrections too: not rescaled then.
-        wheels_turn, wheels_var = filter_turn, max(float(s.ekf.P[5, 5]) - var0, 0.0)
+        wheels_turn, wheels_var = filter_turn, max(s.ekf.yaw_variance() - var0, 0.0)
         if not s.heading_ready:
             scale, relative_var = wheel_yaw_scale(wheel)
             by_wheels = s.wheel_turn - wheel0  # the part the wheels turned (a held gyro rate turned the rest)

@@ -42,7 +42,11 @@ G_UNITS_BAND = (0.8, 1.2)  # |specific force| in this band: the accelerometer re
 GRAVITY_DYNAMIC_GATE = 0.5  # m/s^2: |specific force| further than this from g is not "low dynamics"
 GRAVITY_AVERAGE_S = 0.1  # s of specific force averaged into one gravity roll/pitch update
 ADAPTIVE_MIN, ADAPTIVE_MAX = 0.1, 100.0
-ORIENTATION_BURST = 3.0  # samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``)
+# Samples' worth of credit ``orientation_rate_hz`` can save up (``_orientation_due``). Derived: an IMU at f
+# arrives with the bucket full, so a sample late by l < 1 period clips l of credit and the next one, early by
+# l, finds 2 - l >= 1: two is the least that loses no sample to jitter under a period; more only fuses more of
+# one AHRS's correlated samples at once after a pause (tests/sensors/test_orientation_rate.py pins both sides).
+ORIENTATION_BURST = 2.0
 YAW_JUMP_GATE = 5.0  # sigma of the sample-to-sample change of an absolute yaw's residual (``_yaw_jump``)
 
 
@@ -223,7 +227,7 @@ class ImuModel(SensorModel):
                 own: ImuOwn = s.own[self.index]
                 off = own.yaw_offset
                 if off is None:
-                    off = rot.wrap(rpy[2] - rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2])
+                    off = rot.wrap(rpy[2] - rot.to_rpy(s.ekf.attitude())[2])
                     s.own[self.index] = msgspec.structs.replace(own, yaw_offset=off)
                 rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] - off))
             if self.offset and 2 in rows:
@@ -292,7 +296,7 @@ class ImuModel(SensorModel):
 
     def _yaw_residual(self, s: "FilterState", yaw: float) -> float:
         o = float(s.ekf.x[self._offset_index])
-        return rot.wrap(yaw - rot.yaw(tuple(s.ekf.x[3:7].tolist())) - o)
+        return rot.wrap(yaw - rot.yaw(s.ekf.attitude()) - o)
 
     def _yaw_jump(self, s: "FilterState", yaw: float, var: float, stamp: float) -> tuple[float, float]:
         """How far the yaw reading jumped against the gyro-carried heading since the previous sample,
@@ -330,7 +334,7 @@ class ImuModel(SensorModel):
         wx, wy, wz = u.angular
         vx, vy, vz = u.linear
         if u.world_frame:  # the twist is in the world: into the body
-            vx, vy, vz = mat3.apply_transposed(rot.matrix9(tuple(s.ekf.x[3:7].tolist())), (vx, vy, vz))
+            vx, vy, vz = mat3.apply_transposed(rot.matrix9(s.ekf.attitude()), (vx, vy, vz))
         n = math.sqrt(accel[0] ** 2 + accel[1] ** 2 + accel[2] ** 2)
         if G_UNITS_BAND[0] < n < G_UNITS_BAND[1]:  # a driver that reports in g, not m/s^2
             accel = (accel[0] * GRAVITY, accel[1] * GRAVITY, accel[2] * GRAVITY)
@@ -373,7 +377,7 @@ class ImuModel(SensorModel):
 
 def initialise_attitude(s: "FilterState", rpy: tuple[float, float, float], with_yaw: bool) -> None:
     """Take roll/pitch (and yaw when absolute) from the first orientation sample."""
-    yaw = rpy[2] if with_yaw else rot.to_rpy(tuple(s.ekf.x[3:7].tolist()))[2]
+    yaw = rpy[2] if with_yaw else rot.to_rpy(s.ekf.attitude())[2]
     s.ekf.set_attitude(rot.from_rpy(rpy[0], rpy[1], yaw))
     s.attitude_ready = True
 

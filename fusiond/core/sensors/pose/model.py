@@ -15,7 +15,7 @@ import msgspec
 import numpy as np
 
 from .... import reasons
-from ....estimator import mat3
+from ....estimator import YAW_ROW, attitude_of, mat3, position_of
 from ....estimator import observations as obs
 from ....estimator import rotation as rot
 from ....samples import PoseSample
@@ -143,7 +143,7 @@ class PoseModel(SensorModel):
         """The first absolute pose defines the world frame: position and heading (and roll/pitch
         when no IMU has set them) are taken from it, with its variances."""
         ekf = s.ekf
-        r, p, y = rot.to_rpy((float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6])))
+        r, p, y = rot.to_rpy(ekf.attitude())
         mr, mp, my = inp.rpy
         rows = inp.rows
         if not s.attitude_ready:
@@ -156,7 +156,7 @@ class PoseModel(SensorModel):
         set_position(s, inp.position, (var[0], 0.0, 0.0, 0.0, var[1], 0.0, 0.0, 0.0, var[2]),
                      self.cfg.extrinsic_xyz, pos_rows)
         if 5 in rows:
-            ekf.reset_covariance([5], np.array([[var[5]]]))
+            ekf.reset_covariance([YAW_ROW], np.array([[var[5]]]))
         s.frame_ready = True
         new_frame(s)  # differential sensors restart in the new frame
 
@@ -176,10 +176,11 @@ class PoseModel(SensorModel):
         # The filter's pose at the previous message, moved along with every correction made
         # since (x_now o D^-1): the delta then checks only the predicted motion D, and does
         # not undo what other sensors (GPS, heading initialisation) corrected meanwhile.
-        qn = (float(ekf.x[3]), float(ekf.x[4]), float(ekf.x[5]), float(ekf.x[6]))
+        qn = ekf.attitude()
         qa = rot.mul(qn, rot.conj(dqf))
         a = mat3.apply(rot.matrix9(qa), dp)
-        x_prev = (float(ekf.x[0]) - a[0], float(ekf.x[1]) - a[1], float(ekf.x[2]) - a[2], *qa)
+        p = ekf.position()
+        x_prev = (p[0] - a[0], p[1] - a[1], p[2] - a[2], *qa)
         dpos, dq = obs.relative_pose(anchor.position, anchor.q, inp.position, inp.q)
         y, H, R = obs.delta_pose(self.ctx.layout, ekf.x, x_prev, dpos, dq, inp.cov, inp.rows, self.cfg.extrinsic_xyz)
         res = ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.delta_mask)
@@ -197,10 +198,8 @@ class PoseModel(SensorModel):
         anchor: PoseAnchor | None = s.own[self.index]
         if anchor is None or anchor.epoch != s.frame_epoch:
             return None
-        q0 = (float(x0[3]), float(x0[4]), float(x0[5]), float(x0[6]))
-        step_p, step_q = obs.relative_pose((float(x0[0]), float(x0[1]), float(x0[2])), q0,
-                                           (float(x1[0]), float(x1[1]), float(x1[2])),
-                                           (float(x1[3]), float(x1[4]), float(x1[5]), float(x1[6])))
+        q0 = attitude_of(x0)
+        step_p, step_q = obs.relative_pose(position_of(x0), q0, position_of(x1), attitude_of(x1))
         dp, dq = anchor.moved
         a = mat3.apply(rot.matrix9(dq), step_p)
         moved = ((dp[0] + a[0], dp[1] + a[1], dp[2] + a[2]), rot.normalize(rot.mul(dq, step_q)))
