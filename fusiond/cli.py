@@ -8,6 +8,7 @@ nor `run` for matplotlib.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -53,6 +54,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if problem:
             print(f"fusiond: {problem}", file=sys.stderr)
             return EXIT_USAGE
+    for option, value in (("--rpe-s", args.rpe_s), ("--segment-gap", args.segment_gap)):
+        if not 0.0 < value < float("inf"):  # a window or a gap of no length scores nothing meaningful
+            print(f"fusiond: {option} {value:g}: must be a positive number of seconds", file=sys.stderr)
+            return EXIT_USAGE
+    if args.fuse_every < 1:
+        print(f"fusiond: --fuse-every {args.fuse_every}: must be 1 (fuse every message) or more", file=sys.stderr)
+        return EXIT_USAGE
     from .errors import ReplayError
     from .replay.run import replay, summary
 
@@ -158,12 +166,13 @@ def _as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespac
 def cmd_doctor(args: argparse.Namespace) -> int:
     """`fusiond doctor BAG --config FILE`: `replay` with the doctor and no output files; prints the
     summary with the doctor's verdicts. Exit codes as replay's."""
-    return cmd_replay(_as_replay(args.bags, args.config))
+    return cmd_replay(_as_replay(args.bags, args.config, "--advice-budget-s", repr(args.advice_budget_s)))
 
 
 def cmd_report(args: argparse.Namespace) -> int:
     """`fusiond report BAG --config FILE --out DIR`: `replay --report DIR`."""
-    return cmd_replay(_as_replay(args.bags, args.config, "--report", args.out, *(["--quiet"] if args.quiet else [])))
+    return cmd_replay(_as_replay(args.bags, args.config, "--report", args.out, "--advice-budget-s",
+                                 repr(args.advice_budget_s), *(["--quiet"] if args.quiet else [])))
 
 
 EXIT_UNHEALTHY = 1
@@ -302,6 +311,19 @@ def cmd_set_pose(args: argparse.Namespace) -> int:
     from .estimator.rotation import from_rpy
     from .transport.session import request_set_pose
 
+    values = {"x": args.x, "y": args.y, "yaw": args.yaw, "--z": args.z, "--roll": args.roll, "--pitch": args.pitch,
+              "--stamp": args.stamp, "--sigma POSITION_M": args.sigma[0], "--sigma ATTITUDE_RAD": args.sigma[1]}
+    for name, value in values.items():  # refused here, before a session, rather than by the daemon (or not at all)
+        if not math.isfinite(value):
+            print(f"fusiond: set-pose {name} {value}: must be a finite number", file=sys.stderr)
+            return EXIT_USAGE
+        if value < 0.0 and name.startswith("--sigma"):  # squared, a typed sign would vanish unseen
+            print(f"fusiond: set-pose {name} {value:g}: a standard deviation must not be negative", file=sys.stderr)
+            return EXIT_USAGE
+        if value < 0.0 and name == "--stamp":
+            print(f"fusiond: set-pose --stamp {value:g}: must not be negative (0: the filter's current time)",
+                  file=sys.stderr)
+            return EXIT_USAGE
     pos_var, att_var = args.sigma[0] ** 2, args.sigma[1] ** 2
     cov = [0.0] * 36
     for i in range(6):
@@ -392,10 +414,15 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
     odom_cfg = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None) if cfg else None
     odom: list = []
     if args.bag:
-        from .replay.bag import BagError, open_bag_samples
+        from .replay.bag import BagError, did_you_mean, open_bag_samples
 
         try:
             with open_bag_samples([Path(args.bag)], [imu] + ([odom_cfg] if odom_cfg else [])) as bag:
+                if imu.name in bag.missing:  # the odometry's topic is there, the IMU's is not
+                    have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items()))
+                    print(f"fusiond: calibrate-imu: the IMU topic /{imu.key} (sensor {imu.name!r}) is not in "
+                          f"{args.bag}{did_you_mean(imu.key, bag.bag_topics)}; the bag has: {have}", file=sys.stderr)
+                    return EXIT_USAGE
                 read = list(bag)
         except BagError as err:
             print(f"fusiond: {err}", file=sys.stderr)
@@ -414,6 +441,11 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
                 samples = record_imu(session, imu, args.duration)
         finally:
             session.close()
+        if not samples:  # nothing answered: say where it listened, not only that it got nothing
+            print(f"fusiond: calibrate-imu: no IMU message on key {imu.key!r} ({imu.encoding}) in {args.duration:g} s; "
+                  "is the IMU publishing there? (--key, or --config and --sensor, name it; --connect reaches its "
+                  "router)", file=sys.stderr)
+            return 1
     try:
         cal = calibrate(samples, imu, odom or None)
     except ValueError as err:
@@ -437,6 +469,23 @@ BENCH_BAG = REPO_ROOT / "data" / "jackal_test2.bag"
 BENCH_CONFIG = REPO_ROOT / "examples" / "jackal.toml"
 
 
+def _bench_input_error(bag: Path, cfg) -> str | None:
+    """Why ``bench`` cannot replay this bag with this config, as ``replay`` would refuse it (no odometry
+    sensor, a file that is no bag, the odometry or world-frame topic not in it), or None."""
+    from .core.sensors.registry import kind_of
+    from .replay.bag import BagError, open_bag_samples
+    from .replay.run import check_topics
+
+    if not any(kind_of(s).drives_prediction for s in cfg.sensors):
+        return "the config has no odometry sensor to replay the bag with (add an odom [[sensors]] table)"
+    try:
+        with open_bag_samples([bag], cfg.sensors) as opened:
+            check_topics(opened, cfg, None)
+    except BagError as err:
+        return str(err)
+    return None
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     import msgspec
 
@@ -444,11 +493,19 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     bag = Path(args.bag) if args.bag else BENCH_BAG
     config = args.config or str(BENCH_CONFIG)
+    if bag.is_dir():  # bench.run replays a bag file only (it skips anything else): say so, not "no such bag"
+        print(f"fusiond: bench: --bag {bag} is a directory (a ROS 2 bag?); bench takes one bag file, a ROS 1 .bag "
+              "or a ROS 2 .mcap", file=sys.stderr)
+        return EXIT_USAGE
     if not bag.is_file():
         default = "" if args.bag else " (the default, data/jackal_test2.bag of the source tree fusiond runs from)"
         print(f"fusiond: bench: no such bag {bag}{default}; give one with --bag", file=sys.stderr)
         return EXIT_USAGE
     cfg = _load_config(config)
+    problem = _bench_input_error(bag, cfg)
+    if problem:  # found now, not after a minute of estimator benchmarks
+        print(f"fusiond: bench: {problem}", file=sys.stderr)
+        return EXIT_USAGE
     result = bench.run(bag, Path(config), cfg, quick=args.quick)
     if args.latency:
         from .transport.bench_latency import run_bench
@@ -506,6 +563,37 @@ class _VersionAction(argparse.Action):
         parser.exit(0)
 
 
+def _number(text: str, *, zero: bool) -> float:
+    """An option's number, finite and positive (or, with ``zero``, also 0): argparse's own error otherwise, so that
+    a duration, timeout or rate of no meaning is refused before anything runs (not as a traceback later)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and (value >= 0.0 if zero else value > 0.0)):
+        raise argparse.ArgumentTypeError(f"{text}: must be {'0 or more' if zero else 'a positive number'}")
+    return value
+
+
+def _positive(text: str) -> float:
+    return _number(text, zero=False)
+
+
+def _non_negative(text: str) -> float:
+    return _number(text, zero=True)
+
+
+# replay, doctor and report: how long the doctor's paste lines may be replayed before they are printed
+ADVICE_BUDGET = dict(type=float, default=60.0, metavar="S",
+                     help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
+                          "seconds (default 60; 0: print them unreplayed)")
+
+# Every command that opens a Zenoh session takes --no-multicast, so that it can be typed on any of them. The
+# latency benchmark's sessions (bench-latency, bench --latency) connect to each other on loopback and never
+# scout (transport/bench_latency.py): for them the flag states what already holds.
+BENCH_NO_MULTICAST = "do not scout for peers by multicast (always so: the benchmark's sessions are on loopback)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fusiond", description="Wheel odometry + IMU EKF fusion over Eclipse Zenoh.")
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default: info for run and play, warning otherwise")
@@ -540,15 +628,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--rpe-s", type=float, default=1.0, metavar="S",
                    help="relative pose error over S seconds (default 1)")
     r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
-    r.add_argument("--advice-budget-s", type=float, default=60.0, metavar="S",
-                   help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
-                        "seconds (default 60; 0: print them unreplayed)")
+    r.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     r.set_defaults(func=cmd_replay)
 
     dr = sub.add_parser("doctor", help="replay bags and print the doctor's verdicts with the summary; writes no file "
                                        "(replay without outputs)")
     dr.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     dr.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    dr.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     dr.set_defaults(func=cmd_doctor)
 
     rp = sub.add_parser("report", help="replay bags and write the HTML report (plots, the doctor's verdicts) into "
@@ -557,6 +644,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--config", required=True, help="TOML config (see config.toml)")
     rp.add_argument("--out", required=True, metavar="DIR", help="directory to write index.html and its images into")
     rp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    rp.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     rp.set_defaults(func=cmd_report)
 
     tu = sub.add_parser("tune", help="fit the configured sensors' and the process's noise to bags by the innovations' "
@@ -575,16 +663,17 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")
     m.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional)")
     m.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    m.add_argument("--timeout", type=float, default=5.0, help="seconds to find a daemon before giving up (default 5)")
-    m.add_argument("--duration", type=float, help="stop after S seconds (default: until Ctrl-C)")
-    m.add_argument("--interval", type=float, default=1.0, help="refresh period in seconds")
+    m.add_argument("--timeout", type=_positive, default=5.0,
+                   help="seconds to find a daemon before giving up (default 5)")
+    m.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
+    m.add_argument("--interval", type=_positive, default=1.0, help="refresh period in seconds")
     m.add_argument("--json", action="store_true", help="stream JSON lines instead of the terminal view")
     m.set_defaults(func=cmd_monitor)
 
     c = sub.add_parser("calibrate-imu", help="measure a static IMU's noise and print it as config")
-    c.add_argument("--duration", type=float, default=60.0, help="seconds to record (default 60)")
+    c.add_argument("--duration", type=_positive, default=60.0, help="seconds to record (default 60)")
     c.add_argument("--bag", help="read the IMU from this bag instead of Zenoh")
-    c.add_argument("--start", type=float, default=0.0, help="with --bag: skip the first S seconds")
+    c.add_argument("--start", type=_non_negative, default=0.0, help="with --bag: skip the first S seconds")
     c.add_argument("--config", help="TOML config naming the IMU sensor (key, encoding, extrinsic_rpy)")
     c.add_argument("--sensor", help="which imu sensor of the config (default: the first)")
     c.add_argument("--key", help="Zenoh key of the IMU without a config (default imu/data, ROS 2 CDR)")
@@ -599,8 +688,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      "the source tree)")
     bb.add_argument("--quick", action="store_true", help="fewer repeats")
     bb.add_argument("--latency", action="store_true", help="also the Zenoh end-to-end latency benchmark")
-    bb.add_argument("--seconds", type=float, default=10.0, help="latency benchmark duration")
+    bb.add_argument("--seconds", type=_positive, default=10.0, help="latency benchmark duration")
     bb.add_argument("--json", action="store_true", help="machine-readable output")
+    bb.add_argument("--no-multicast", action="store_true", help=BENCH_NO_MULTICAST)
     bb.set_defaults(func=cmd_bench)
 
     d = sub.add_parser("run", help="the fusion daemon: subscribe to the sensors on Zenoh, publish the fused pose")
@@ -613,13 +703,13 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     pl.add_argument("--config", required=True, help="TOML config: sensors, keys and the [zenoh] section")
     pl.add_argument("--rate", type=float, default=1.0, help="pace relative to the recording; 0 = as fast as possible")
-    pl.add_argument("--duration", type=float, help="play only the first S seconds of the bag")
+    pl.add_argument("--duration", type=_positive, help="play only the first S seconds of the bag")
     pl.add_argument("--connect", action="append", metavar="ENDPOINT",
                     help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "
                          "endpoints on loopback")
     pl.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
     pl.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    pl.add_argument("--wait", type=float, default=5.0,
+    pl.add_argument("--wait", type=_non_negative, default=5.0,
                     help="wait up to S seconds for the config's daemon to answer on its health key before "
                          "playing, then play anyway (default 5; 0: do not wait)")
     pl.set_defaults(func=cmd_play, default_log_level="info")
@@ -630,7 +720,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Zenoh endpoint of the daemon (repeatable); default: from the config")
     h.add_argument("--key", help="health key (default: output.health_key of the config)")
     h.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    h.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for an answer (default 2)")
+    h.add_argument("--timeout", type=_positive, default=2.0, help="seconds to wait for an answer (default 2)")
     h.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
                    help="worst status that still exits 0 (default degraded; failed = any answer)")
     h.set_defaults(func=cmd_health)
@@ -652,16 +742,17 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Zenoh endpoint of the daemon (repeatable); default: from the config")
     sp.add_argument("--key", help="set_pose key (default: output.set_pose_key of the config)")
     sp.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    sp.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for the answer (default 2)")
+    sp.add_argument("--timeout", type=_positive, default=2.0, help="seconds to wait for the answer (default 2)")
     sp.set_defaults(func=cmd_set_pose)
 
     b = sub.add_parser("bench-latency", help="sensor put -> fused pose latency over Zenoh on loopback")
-    b.add_argument("--seconds", type=float, default=10.0, help="measurement duration (default 10)")
-    b.add_argument("--imu-hz", type=float, default=1000.0, help="IMU messages per second sent (default 1000)")
-    b.add_argument("--odom-hz", type=float, default=100.0,
+    b.add_argument("--seconds", type=_positive, default=10.0, help="measurement duration (default 10)")
+    b.add_argument("--imu-hz", type=_positive, default=1000.0, help="IMU messages per second sent (default 1000)")
+    b.add_argument("--odom-hz", type=_positive, default=100.0,
                    help="odometry messages per second sent; each yields a fused pose (default 100)")
     b.add_argument("--express", action="store_true", help="send the daemon's outputs unbatched (Zenoh express)")
     b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.add_argument("--no-multicast", action="store_true", help=BENCH_NO_MULTICAST)
     b.set_defaults(func=cmd_bench_latency)
     return p
 

@@ -1,11 +1,11 @@
 """One base for every error fusiond raises on purpose, one subclass per layer.
 
 A caller that wants "anything fusiond refused" catches ``FusiondError``; one that
-handles a layer catches its class. The builtin bases the older classes had are kept
-(``ConfigError`` and ``BagError`` are ``ValueError``s, ``SessionError`` a
-``RuntimeError``), so existing ``except ValueError`` sites keep working, and the old
-import paths (``fusiond.config.ConfigError``, ``fusiond.replay.bag.BagError``,
-``fusiond.transport.session.SessionError``) still name these classes.
+handles a layer catches its class. Each also has the builtin base its kind of error
+has (``ConfigError`` and ``BagError`` are ``ValueError``s, ``SessionError`` a
+``RuntimeError``), so an ``except ValueError`` catches a refused value too; the layer
+modules re-export them (``fusiond.config.ConfigError``, ``fusiond.replay.bag.BagError``,
+``fusiond.transport.session.SessionError``) beside the code that raises them.
 """
 
 from __future__ import annotations

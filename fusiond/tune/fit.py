@@ -326,6 +326,11 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
     return rows, config, before, after, comments, replays
 
 
+# why the fit ended, as the table's "fit part" line says it
+STOPPED = {"converged": "the fit converged", "budget": "the fit stopped at --budget-s",
+           "maxfev": "the fit stopped at its replay limit", "nothing to fit": "nothing to fit"}
+
+
 def format_table(result: TuneResult) -> str:
     """The table `fusiond tune` prints: key | before | after | held-back NIS per dof | status."""
     head = ("key", "before", "after", "held-back NIS/dof", "status")
@@ -348,7 +353,7 @@ def format_table(result: TuneResult) -> str:
                    f"{_fmt(a.nis_per_dof.get(''))})")
     if result.fit_before == result.fit_before:
         out.append(f"fit part    -log L {result.fit_before:.1f} -> {result.fit_after:.1f} over "
-                   f"{result.fit_residuals} residuals; {result.stopped}")
+                   f"{result.fit_residuals} residuals; {STOPPED.get(result.stopped, result.stopped)}")
     out.append(f"replays     {result.evaluations} in {result.seconds:.1f} s")
     return "\n".join(out)
 

@@ -16,7 +16,8 @@ import msgspec
 
 from ..config import Config
 
-_TABLES = ("zenoh", "output", "ros", "filter")
+# every table of a Config but its [[sensors]] array, read from the struct: a table added to Config is written too
+_TABLES = tuple(name for name in Config.__struct_fields__ if name != "sensors")
 
 
 def _value(v: object) -> str:
@@ -64,8 +65,8 @@ def _lines(obj: msgspec.Struct, comments: Mapping[str, str], first: tuple[str, .
 
 
 def dumps(cfg: Config, comments: Mapping[tuple[str, str], str] | None = None, header: str = "") -> str:
-    """``cfg`` as TOML. ``comments``: (table, key) -> a comment for that key's line; the table is
-    "zenoh", "output", "ros", "filter", or a sensor's name."""
+    """``cfg`` as TOML. ``comments``: (table, key) -> a comment for that key's line; the table is one of
+    ``_TABLES`` ("zenoh", "output", "ros", "filter", "state"), or a sensor's name."""
     comments = comments or {}
     out = [f"# {line}" if line else "#" for line in header.splitlines()]
     if out:

@@ -144,6 +144,8 @@ SESSION_COMMANDS = {
     "set-pose": ["set-pose", "1", "2"],
     "monitor": ["monitor"],
     "calibrate-imu": ["calibrate-imu"],
+    "bench": ["bench", "--latency"],
+    "bench-latency": ["bench-latency"],
 }
 
 
@@ -180,6 +182,16 @@ def test_tools_no_multicast_reaches_the_zenoh_config(tmp_path, capsys, monkeypat
     monkeypatch.setattr(session, "client_config", spy)
     code, _, err = run_cli(capsys, "health", "--no-multicast", "--timeout", "0.5")
     assert code == 1 and seen == [False]
+
+
+def test_the_latency_benchmarks_sessions_never_scout():
+    """bench-latency and bench --latency take --no-multicast like every session command; their daemon and load
+    generator share the benchmark's config, whose sessions meet on loopback without multicast."""
+    from fusiond.config import loads
+    from fusiond.transport.bench_latency import _config_text, free_port
+
+    zc = loads(_config_text(free_port()), "<bench>").zenoh
+    assert zc.multicast_scouting is False and all(ep.startswith("tcp/127.0.0.1:") for ep in zc.listen)
 
 
 def test_health_with_no_multicast_and_no_daemon_gives_up_quickly(tmp_path, capsys):
@@ -225,6 +237,38 @@ def test_bench_with_a_missing_bag_is_one_line_exit_2(tmp_path, capsys):
     code, out, err = run_cli(capsys, "bench", "--bag", str(missing), "--config", str(JACKAL_TOML))
     assert code == 2 and out == ""
     assert one_line(err) == f"fusiond: bench: no such bag {missing}; give one with --bag"
+
+
+def _no_benchmark(monkeypatch):
+    import fusiond.bench as bench
+
+    monkeypatch.setattr(bench, "run", lambda *a, **k: pytest.fail("benchmarked input that replay refuses"))
+
+
+def test_bench_refuses_a_file_that_is_no_bag_before_benchmarking(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    png = _not_bags(tmp_path)[0]
+    code, out, err = run_cli(capsys, "bench", "--bag", str(png), "--config", str(JACKAL_TOML), "--quick")
+    assert code == 2 and out == ""
+    assert one_line(err).startswith(f"fusiond: bench: {png}: not a readable ROS 1/ROS 2 bag ("), err
+
+
+def test_bench_refuses_a_config_without_odometry(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    for text in ("", '[[sensors]]\nname = "imu"\nkind = "imu"\nkey = "imu/data"\n'):
+        cfg = write_config(tmp_path, text)
+        code, out, err = run_cli(capsys, "bench", "--config", str(cfg), "--quick")
+        assert code == 2 and out == "", err
+        line = one_line(err)
+        assert line.startswith("fusiond: ") and ("no odometry sensor" in line or "exactly one odom" in line), line
+
+
+def test_bench_refuses_a_world_frame_topic_the_bag_lacks(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    cfg = _jackal_config(tmp_path, extra='[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "gps/fix"\n')
+    code, out, err = run_cli(capsys, "bench", "--config", str(cfg), "--quick")
+    assert code == 2 and out == ""
+    assert "fusiond: bench: the topic /gps/fix (sensor 'gps') that defines the world frame" in one_line(err)
 
 
 # -- 3. an absent topic names the bag's topics and the one it was likely meant to be ----------------------
@@ -437,8 +481,8 @@ def _assert_consistent(row):
 
 
 def test_monitor_whole_run_ok_with_a_high_window(capsys):
-    """1000 good updates then 50 whose NIS is 5x: the run is still ok, the window is not. Before, the row
-    printed the window's mean and bounds beside the run's 'ok'."""
+    """1000 good updates then 50 whose NIS is 5x: the run is still ok, the window is not; the row shows the
+    run's mean and bounds beside the run's 'ok', the window's beside the window's verdict."""
     from fusiond.monitor import plain_lines
 
     snap = _view(_records([2.0] * 1000 + [10.0] * 50))
@@ -486,7 +530,7 @@ def test_monitor_rows_are_consistent(values):
 
 def test_monitor_window_mixing_dofs_is_the_doctors_window():
     """A message without its yaw row (dof 2 among dof 3): the window test of the row is the doctor's, which
-    keeps both in the window; the monitor used to start a window of its own at every dof change."""
+    keeps both in the window, rather than a window of the monitor's own restarted at every dof change."""
     records = _records([3.0] * 200, dof=3) + _records([15.0] * 10, dof=2, t0=10.0)
     row = _view(records)["channels"][0]
     stats_mean = (40 * 3.0 + 10 * 15.0) / 50
@@ -633,3 +677,169 @@ def test_a_closed_pipe_is_no_traceback(tmp_path):
     proc.stdout.close()  # the reader (`| head`) left before anything was written
     _, err = proc.communicate(timeout=120)
     assert b"Traceback" not in err and b"BrokenPipe" not in err, err.decode()
+
+
+# -- tune's summary says why the fit ended, in words -----------------------------------------------------------
+
+def test_tune_says_the_fit_stopped_at_its_budget(tmp_path, capsys):
+    """A budget shorter than the first replay of the fit part: the fit stops there, and says so."""
+    out = tmp_path / "tuned.toml"
+    code, text, err = run_cli(capsys, "tune", str(JACKAL), "--config", str(JACKAL_TOML), "--out", str(out),
+                              "--keys", "imu.gyro_noise", "--budget-s", "0.05", "--quiet")
+    assert code == 0, err
+    line = next(ln for ln in text.splitlines() if ln.startswith("fit part "))
+    assert line.endswith("; the fit stopped at --budget-s"), line
+
+
+# -- calibrate-imu that gets no IMU says where it looked ----------------------------------------------------------
+
+def test_calibrate_imu_with_nothing_on_its_key_names_the_key(capsys):
+    code, out, err = run_cli(capsys, "calibrate-imu", "--duration", "0.5", "--no-multicast", "--key", "nobody/imu")
+    assert code == 1 and out == ""
+    line = one_line(err)
+    assert line.startswith("fusiond: calibrate-imu: no IMU message on key 'nobody/imu' (ros2-cdr) in 0.5 s"), line
+
+
+def test_calibrate_imu_on_a_bag_without_the_imu_topic_names_the_bags_topics(tmp_path, capsys):
+    cfg = _jackal_config(tmp_path, imu="imu/dta")
+    code, out, err = run_cli(capsys, "calibrate-imu", "--bag", str(JACKAL), "--config", str(cfg))
+    assert code == 2 and out == ""
+    line = one_line(err)
+    assert "the IMU topic /imu/dta (sensor 'imu') is not in" in line and "(did you mean /imu/data?)" in line, line
+    assert "/jackal_velocity_controller/odom [nav_msgs/msg/Odometry]" in line
+
+
+# -- the README's flags are the CLI's --------------------------------------------------------------------------
+
+def test_every_flag_the_readme_and_migration_guide_show_is_a_fusiond_flag():
+    """A flag the guides show that no command takes would fail a user with argparse's "unrecognized arguments"."""
+    import argparse
+    import re
+
+    from fusiond.cli import build_parser
+
+    flags: set[str] = set()
+    for action in build_parser()._actions:
+        flags.update(action.option_strings)
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                for a in sub._actions:
+                    flags.update(a.option_strings)
+    others = {"--fast": "scripts/test.sh", "--rm": "docker run", "--network": "docker run"}
+    for doc in ("README.md", "docs/MIGRATION.md"):
+        shown = set(re.findall(r"(?<![\w/.-])(--[a-z][a-z0-9-]*)", (ROOT / doc).read_text()))
+        assert shown, doc
+        assert not shown - flags - set(others), f"{doc} shows {sorted(shown - flags - set(others))}"
+
+
+# -- doctor and report take replay's --advice-budget-s (the README names it for the doctor's paste lines) ---------
+
+JACKAL_RL_TOML = ROOT / "examples" / "jackal_rl.toml"
+
+
+def test_doctor_takes_the_advice_budget(capsys):
+    """jackal_rl.toml gets a paste line (fuse the gyro); with budget 0 it is printed unreplayed, by default
+    replayed and scored, as `replay` does."""
+    code, unreplayed, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_RL_TOML),
+                                    "--advice-budget-s", "0")
+    assert code == 0, err
+    assert 'name = "imu": angular_velocity = true' in unreplayed and "(replayed:" not in unreplayed
+    code, replayed, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_RL_TOML))
+    assert code == 0 and "(replayed: likelihood +" in replayed, err
+    code, _, err = run_cli(capsys, "doctor", str(JACKAL), "--config", str(JACKAL_RL_TOML), "--advice-budget-s", "-1")
+    assert code == 2 and "--advice-budget-s -1" in one_line(err)
+
+
+def test_report_takes_the_advice_budget(tmp_path, capsys):
+    out_dir = tmp_path / "report"
+    code, out, err = run_cli(capsys, "report", str(JACKAL), "--config", str(JACKAL_RL_TOML), "--out", str(out_dir),
+                             "--advice-budget-s", "0")
+    assert code == 0, err
+    assert "angular_velocity = true" in out and "(replayed:" not in out
+    assert "angular_velocity = true" in (out_dir / "index.html").read_text()
+
+
+def test_tune_keeps_every_table_of_the_config_it_tunes(tmp_path, capsys):
+    """The tuned config is the user's config with the tuned keys changed: a [state] table (the daemon's
+    persisted state) and every other table come through, so nothing but the noise changes."""
+    from fusiond.config import load
+
+    cfg = write_config(tmp_path, JACKAL_TOML.read_text() + '\n[state]\npath = "state.bin"\nmax_age_s = 10.0\n'
+                       '\n[zenoh]\nmulticast_scouting = false\n\n[ros]\nnode_name = "robot"\n'
+                       '\n[output]\nmap_frame = "world"\n\n[filter]\nnis_window = 40\n')
+    out = tmp_path / "tuned.toml"
+    code, _, err = run_cli(capsys, "tune", str(JACKAL), "--config", str(cfg), "--out", str(out),
+                           "--keys", "imu.gyro_noise", "--budget-s", "0.05", "--quiet")
+    assert code == 0, err
+    before, after = load(cfg), load(out)
+    assert after.state.path == "state.bin" and after.state.max_age_s == 10.0
+    assert after == before  # the budget ran out before any fit: nothing tuned, nothing else lost
+
+
+# -- set-pose refuses what it would send wrong, before any session ------------------------------------------------
+
+@pytest.mark.parametrize("argv, needle", [
+    (["1", "2", "--sigma", "-0.5", "0.1"], "set-pose --sigma POSITION_M -0.5: a standard deviation must not be"),
+    (["1", "2", "--sigma", "0.5", "-0.1"], "set-pose --sigma ATTITUDE_RAD -0.1: a standard deviation must not be"),
+    (["nan", "2"], "set-pose x nan: must be a finite number"),
+    (["1", "2", "inf"], "set-pose yaw inf: must be a finite number"),
+    (["1", "2", "--stamp", "-3"], "set-pose --stamp -3: must not be negative (0: the filter's current time)"),
+])
+def test_set_pose_refuses_a_value_it_cannot_send_as_typed(capsys, monkeypatch, argv, needle):
+    import fusiond.transport.session as session
+
+    monkeypatch.setattr(session, "open_session", lambda *a, **k: pytest.fail("a session was opened"))
+    code, out, err = run_cli(capsys, "set-pose", *argv, "--no-multicast")
+    assert code == 2 and out == ""
+    assert one_line(err).startswith(f"fusiond: {needle}"), err
+
+
+# -- replay's scoring options are refused when they cannot mean anything, with or without --reference -------------
+
+@pytest.mark.parametrize("option, value, needle", [
+    ("--rpe-s", "0", "--rpe-s 0: must be a positive number of seconds"),
+    ("--rpe-s", "-1", "--rpe-s -1: must be a positive number of seconds"),
+    ("--segment-gap", "nan", "--segment-gap nan: must be a positive number of seconds"),
+    ("--segment-gap", "-0.5", "--segment-gap -0.5: must be a positive number of seconds"),
+    ("--fuse-every", "0", "--fuse-every 0: must be 1 (fuse every message) or more"),
+])
+def test_replay_refuses_a_scoring_option_of_no_meaning(tmp_path, capsys, option, value, needle):
+    tum = tmp_path / "t.tum"
+    code, out, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(JACKAL_TOML), "--quiet",
+                             "--tum", str(tum), option, value)
+    assert code == 2 and out == "" and not tum.exists()  # refused before the replay
+    assert one_line(err) == f"fusiond: {needle}"
+
+
+# -- durations, timeouts and rates of no meaning are argparse errors, not tracebacks later -----------------------
+
+@pytest.mark.parametrize("argv", [
+    ["health", "--timeout", "-1"],  # zenoh would raise "ValueError: negative timeout"
+    ["set-pose", "1", "2", "--timeout", "0"],
+    ["monitor", "--interval", "0"],
+    ["monitor", "--timeout", "nan"],
+    ["monitor", "--duration", "-3"],
+    ["calibrate-imu", "--duration", "0"],
+    ["calibrate-imu", "--start", "-5"],
+    ["play", "b.bag", "--config", "c.toml", "--wait", "-1"],
+    ["play", "b.bag", "--config", "c.toml", "--duration", "0"],
+    ["bench", "--latency", "--seconds", "0"],
+    ["bench-latency", "--seconds", "0"],  # the benchmark would end in a KeyError
+    ["bench-latency", "--imu-hz", "0"],
+    ["bench-latency", "--odom-hz", "inf"],
+])
+def test_an_option_of_no_meaning_is_refused_by_the_parser(capsys, argv):
+    code, out, err = run_cli(capsys, *argv, "--no-multicast")
+    option = [a for a in argv if a.startswith("--")][-1]  # the one given a value of no meaning
+    assert code == 2 and out == "" and "Traceback" not in err
+    assert f"error: argument {option}: " in err and ("must be" in err or "is not a number" in err), err
+
+
+def test_bench_with_a_bag_directory_says_it_takes_a_file(tmp_path, capsys, monkeypatch):
+    _no_benchmark(monkeypatch)
+    ros2 = tmp_path / "ros2_bag"
+    ros2.mkdir()
+    code, out, err = run_cli(capsys, "bench", "--bag", str(ros2), "--config", str(JACKAL_TOML))
+    assert code == 2 and out == ""
+    assert one_line(err) == (f"fusiond: bench: --bag {ros2} is a directory (a ROS 2 bag?); bench takes one bag file, "
+                             "a ROS 1 .bag or a ROS 2 .mcap")

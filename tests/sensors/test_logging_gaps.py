@@ -1,8 +1,8 @@
 """Logging gaps: no input outlives its sensor, whatever the length of the gap.
 
-A logger that stops every sensor for tens of seconds used to leave the last twist
-and gyro rate inside one long prediction step: the pose jumped by speed x gap and
-the attitude integrated the last rates. The simulated robot drives at 1 m/s while
+A logger that stops every sensor for tens of seconds must not leave the last twist
+and gyro rate inside one long prediction step: the pose would jump by speed x gap and
+the attitude integrate the last rates. The simulated robot drives at 1 m/s while
 turning; every sensor is silent for 26.4 s.
 """
 

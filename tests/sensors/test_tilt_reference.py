@@ -1,7 +1,7 @@
 """A tilt reference whenever one exists; planar behaviour when none does.
 
-With ``orientation = "off"`` the gyro's x/y biases used to integrate into tens of
-degrees of tilt and metres of z on a flat floor. The simulated robot drives on
+With ``orientation = "off"`` and nothing else observing tilt, the gyro's x/y biases would
+integrate into tens of degrees of tilt and metres of z on a flat floor. The simulated robot drives on
 flat ground for 60 s at 1 m/s with turns of up to 0.3 rad/s (centripetal 0.3 m/s^2,
 which uncompensated would read as 0.03 rad of roll), and its gyro has x/y biases
 of 0.01 rad/s: 0.6 rad of tilt after 60 s if nothing corrects it.

@@ -1,4 +1,4 @@
-"""Faults applied to simulated sample streams after the fact (doctor tests, issue 12 round 2).
+"""Faults applied to simulated sample streams after the fact (the doctor's tests).
 
 Each takes the samples a simulator produced (in arrival order) and returns them as a driver or a
 recorder would have delivered them: a logging gap, a driver's stated gyro covariance, a yaw rate

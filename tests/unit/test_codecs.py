@@ -253,7 +253,7 @@ def test_size_limits(kind: str, encoding: str) -> None:
 
 def test_unknown_kind_or_encoding_is_a_config_error() -> None:
     with pytest.raises(ValueError, match="kind"):
-        make_decoder("lidar", "json", "s")  # (gps and pose became kinds with issue 7)
+        make_decoder("lidar", "json", "s")  # not a registered kind
     with pytest.raises(ValueError, match="encoding"):
         make_decoder("odom", "cbor", "s")
 

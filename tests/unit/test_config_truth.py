@@ -1,8 +1,10 @@
-"""config.toml is the truth: every key it shows carries the code's default.
+"""config.toml is the truth: every key it shows carries the code's default. The README's configuration
+steps and diagnostics schema are held to the code the same way, and the guides to their size and to
+statements of why (no lab notebook).
 
 config.toml says it lists every key with its default; a user who trusts it must get
-what the code does (issue 12: it showed `angular_velocity = true` while the default
-was false, and a user who copied it got no gyro). The test is generic over whatever
+what the code does (a file showing `angular_velocity = true` over a default of false
+would leave whoever copied the rest without a gyro). The test is generic over whatever
 structs and keys exist: it walks the file's tables (active and commented-out
 examples), finds each table's config Struct (a sensor table by its `kind`), and
 compares every `key = value` line with that Struct's field default. A commented
@@ -158,3 +160,55 @@ def test_the_checker_catches_a_wrong_default():
     text = (ROOT / "config.toml").read_text().replace("angular_velocity = false", "angular_velocity = true", 1)
     rows = [r for r in shown_keys(text) if r[2] == "angular_velocity"]
     assert rows and not same(rows[0][4], defaults(C.ImuSensor)["angular_velocity"])
+
+
+def test_the_readme_steps_load_as_configs_one_on_another():
+    """README's "Configure your robot" builds a config step by step: step 1 (odometry + IMU) alone, then with
+    step 2's GPS or step 3's pose added, is each a config the code accepts with the keys the README shows."""
+    blocks = re.findall(r"```toml\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    assert len(blocks) == 3, "README's three configure steps"
+    step1, gps, pose = blocks
+    base = C.loads(step1, "README step 1")
+    assert [s.name for s in base.sensors] == ["wheel", "imu"] and base.sensor("imu").angular_velocity is True
+    with_gps = C.loads(step1 + gps, "README step 2")
+    assert [s.name for s in with_gps.sensors] == ["wheel", "imu", "gps"]
+    with_pose = C.loads(step1 + pose, "README step 3")
+    assert with_pose.sensor("vo").differential is True
+
+
+def test_the_readme_diagnostics_schema_names_every_record_field_and_verdict():
+    """README's "Diagnostics record" is the schema a consumer codes against: every field a record carries and
+    every `consistency` value it can take is named there."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("### Diagnostics record"):]
+    section = section[:section.index("\n### ", 1)]
+    named = set(re.findall(r'"([a-z_]+)":', section)) | set(re.findall(r"`([a-z_]+)`", section))
+    assert set(DiagnosticsRecord.__struct_fields__) <= named, set(DiagnosticsRecord.__struct_fields__) - named
+    assert {"ok", "nis_high", "nis_low", "warming_up"} <= named
+    assert DiagnosticsRecord(0.0, "s", [], [], [], 0.0, 0, False).consistency in named
+
+
+def test_the_readme_is_a_guide_of_at_most_20000_characters():
+    """The README is a user guide (what fusiond is, the quick start, configure your robot, daemon, tools, a
+    short results table); measurements live in docs/RESULTS.md. Counted in bytes, as `wc -c` counts."""
+    size = len((ROOT / "README.md").read_bytes())
+    assert size <= 20_000, f"README.md is {size} bytes: cut as much as is added"
+
+
+# lab-notebook markers: a QA run's name, a session / stop / round number, a "(new)" tag, a commit hash
+NOTEBOOK = re.compile(r"\bQA\b|\b[Ss]ession \d|\b[Ss]top \d|\b[Rr]ound \d|\(new\)"
+                      r"|\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+
+
+def test_no_lab_notebook_lines_in_the_docs_config_examples_or_code():
+    """Git keeps the history; a doc or a comment says why things are as they are."""
+    files = [ROOT / "README.md", ROOT / "config.toml", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "examples").glob("*.toml")), *sorted((ROOT / "fusiond").rglob("*.py")),
+             *sorted((ROOT / "fusiond").rglob("*.c"))]
+    found = [f"{f.relative_to(ROOT)}:{n}: {line.strip()}" for f in files
+             for n, line in enumerate(f.read_text().splitlines(), 1) if NOTEBOOK.search(line)]
+    assert not found, "\n".join(found)
+    assert NOTEBOOK.search("measured in session 12") and NOTEBOOK.search("fixed by 4b3b453")
+    assert not NOTEBOOK.search("a session that cannot open; 1e6 m; jackal_test2.bag")

@@ -5,7 +5,7 @@ the odometry alone does not confirm a standstill: the gyro must be quiet too (ea
 axis within QUIET_SIGMAS of its noise plus the prior bias range, judged on the raw
 reading so that a wrong bias estimate cannot veto it). Samples are averaged over a
 window of ``standstill_s`` and each window makes one scalar update per axis, gated on
-its own: a wrong x/y bias (learned through roll/pitch) no longer blocks the z bias that
+its own, so that a wrong x/y bias (learned through roll/pitch) cannot block the z bias that
 drives heading. When an axis's windows keep being rejected while agreeing with each
 other, the estimate (locked in by an earlier false standstill) is what is wrong: its
 variance is re-opened to the prior and the evidence let in, so one bad update cannot
