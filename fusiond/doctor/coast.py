@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from ...config import Config, ImuSensor, OdomSensor
-from ..sensors.imu.gyro_bias import quiet_bound
+from ..config import Config, ImuSensor, OdomSensor
+from ..core.sensors.imu.gyro_bias import quiet_bound
 from .gyro import Episode
 from .mounting import SMOOTH_BINS, MountYaw
 from .series import BIN_S, Series

@@ -16,7 +16,7 @@ from array import array
 
 import numpy as np
 
-from ... import reasons
+from .. import reasons
 from .verdict import Verdict, sensor_key
 
 MAX_KEPT = 20_000  # offsets kept per sensor (the median of that many is settled; bounded memory)

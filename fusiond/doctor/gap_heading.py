@@ -32,8 +32,8 @@ import math
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
-from ...estimator import rotation as rot
+from ..config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..estimator import rotation as rot
 from .bins import BIN_S
 from .gyro import quiet_episodes
 from .heading import imu_vs_gyro, timed

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ...config import GpsSensor
+from ..config import GpsSensor
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import ImuSensor
+from ..config import ImuSensor
 from .series import BIN_S, Series
 
 # A yaw error delta in the mounting puts sin(delta) of the IMU's roll on base pitch (and of the

@@ -14,7 +14,7 @@ from itertools import chain
 
 import numpy as np
 
-from ...config import ImuSensor, OdomSensor
+from ..config import ImuSensor, OdomSensor
 from .nis import ChannelStats
 from .series import Series
 from .heading import WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, rate_fit_text

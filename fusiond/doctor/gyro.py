@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
-from ..sensors.imu.gyro_bias import _turning, quiet_bound
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key

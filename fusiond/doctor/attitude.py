@@ -21,8 +21,8 @@ from itertools import chain
 
 import numpy as np
 
-from ...config import ImuSensor
-from ...estimator import rotation as rot
+from ..config import ImuSensor
+from ..estimator import rotation as rot
 from .mounting import MountYaw
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key

@@ -8,6 +8,9 @@ at rest; see ``heading``, ``speed``, ``gyro``, ``twist``) and names the one that
 disagrees with the others, with what it measured and the config key to change. It
 never advises trusting a sensor more while another source contradicts it.
 
+A floor above the fusion core: the core never imports it (its diagnostics records are all the
+doctor reads of it), and only the commands that show verdicts do (replay, tune's advice, monitor).
+
 Pure: no I/O. It is fed diagnostics records, samples and estimates (the replay has
 them all; the live monitor only the diagnostics stream) and returns
 :class:`Verdict` structs that the replay summary, the report and the monitor print.
@@ -20,10 +23,10 @@ from collections import defaultdict
 
 import msgspec
 
-from ...config import Config, GpsSensor, ImuSensor, OdomSensor
-from ...samples import OdomSample
-from ..layout import state_layout
-from ..sensors.odom import body_twist
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor
+from ..samples import OdomSample
+from ..core.layout import state_layout
+from ..core.sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
 from .grade import grade_fit, grade_verdict
 from .channels import (UNALIGNED_MIN_FIXES, absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head,

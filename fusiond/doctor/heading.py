@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor
-from ..sensors.gps import HEADING_READY_SIGMA
+from ..config import Config, GpsSensor, ImuSensor
+from ..core.sensors.gps import HEADING_READY_SIGMA
 from .gyro import quiet_episodes
 from .series import Series
 from .verdict import Verdict, sensor_key
@@ -396,7 +396,7 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
 
 def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
-    from ...config import OdomSensor
+    from ..config import OdomSensor
 
     odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
     imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)]

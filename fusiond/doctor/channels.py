@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 
-from ...config import GpsSensor, ImuSensor
-from ..sensors.gps import FROZEN_JITTER
-from ..sensors.imu import YAW_JUMP_GATE
+from ..config import GpsSensor, ImuSensor
+from ..core.sensors.gps import FROZEN_JITTER
+from ..core.sensors.imu import YAW_JUMP_GATE
 from .attitude import noise_suggestion
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key

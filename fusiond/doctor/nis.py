@@ -24,7 +24,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..diagnostics import DiagnosticsRecord, chi2_ppf
+from ..core.diagnostics import DiagnosticsRecord, chi2_ppf
 
 NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): noise understated
 NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated

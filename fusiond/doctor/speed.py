@@ -50,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, OdomSensor
+from ..config import Config, GpsSensor, OdomSensor
 from .heading import gps_sigma, timed
 from .series import Series
 from .verdict import Verdict, sensor_key

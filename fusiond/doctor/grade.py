@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor
-from ..layout import fuses_height
+from ..config import Config, GpsSensor, ImuSensor
+from ..core.layout import fuses_height
 from .attitude import full_mount, paste_mount
 from .heading import gps_sigma
 from .mounting import MountYaw

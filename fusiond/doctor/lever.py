@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from ...config import Config, GpsSensor
+from ..config import Config, GpsSensor
 from .series import Series
 from .verdict import Verdict, sensor_key
 

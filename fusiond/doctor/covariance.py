@@ -8,7 +8,7 @@ integrates into heading and, at speed, into position), or else the process noise
 
 from __future__ import annotations
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config, GpsSensor, ImuSensor, PoseSensor
 from .series import Series
 from .verdict import Verdict, filter_key
 

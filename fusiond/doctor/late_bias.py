@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config, GpsSensor, ImuSensor, PoseSensor
 from .gyro import quiet_episodes
 from .heading import WANDER_RAD, imu_vs_gyro
 from .nis import ChannelStats
