@@ -29,15 +29,15 @@ from ..core.layout import state_layout
 from ..core.sensors.odom import body_twist
 from .attitude import TiltStats, lean_verdict, mount_verdict
 from .grade import grade_fit, grade_verdict
-from .channels import (UNALIGNED_MIN_FIXES, absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head,
-                       orientation_verdicts, reacquired_verdict, unaligned_verdict, yaw_jump_verdict)
+from .channels import (absolute_verdict, applied_verdict, figures, frozen_verdict, nis_head, orientation_verdicts,
+                       reacquired_verdict, unaligned_verdict, yaw_jump_verdict)
 from .clock import ClockOffsets, clock_verdicts
 from .coast import coast_verdict
 from .covariance import cap_verdict
 from .gap_heading import gap_heading_verdict
 from .gps_wander import gps_wander_verdict
 from .gyro import bias_check, quiet_episodes
-from .heading import OFFSET_RAD, heading_check, wheel_heading_check, wheel_yaw_fit
+from .heading import heading_check, wheel_heading_check, wheel_yaw_fit
 from .late_bias import late_bias_verdict
 from .lever import lever_verdict
 from .lost import LostSamples
@@ -47,11 +47,11 @@ from .series import Series, SeriesCollector
 from .speed import speed_check
 from .twist import TwistStats, slip_verdict, twist_frame_verdict, unmeasured_yaw_rate, yaw_rate_not_measured
 from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
+from .thresholds import MIN_UPDATES, TRACK_OFFSET_RAD, UNALIGNED_MIN_FIXES
 
 __all__ = ["Doctor", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
            "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
-MIN_UPDATES = 50  # twist-frame and lean checks need this many samples (not NIS: that uses what there is)
 ABSOLUTE_CHANNELS = ("position", "position_unaligned", "position_provisional", "altitude", "pose", "pose_delta")
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
@@ -215,7 +215,7 @@ def _mount_explains_offset(heading: Verdict, mount: MountYaw, imu: ImuSensor | N
     se = math.hypot(heading.evidence.get("imu_vs_gps_track_offset_se_rad", 0.0), mount.se)
     rest = math.remainder(off - mount.delta, 2.0 * math.pi)
     mounting = f"the mounting yaw the accelerometer measures ({mount.delta:+.3f} rad, see {heading.sensor}/attitude)"
-    if abs(rest) <= max(OFFSET_RAD, 3.0 * se):
+    if abs(rest) <= max(TRACK_OFFSET_RAD, 3.0 * se):
         return Verdict(heading.sensor, heading.channel, "warn",
                        f"the IMU's absolute yaw sits {off:+.3f} rad off the GPS track: that is {mounting}, not a "
                        "declination; set extrinsic_rpy there, not yaw_offset",

@@ -26,8 +26,8 @@ from ..estimator import rotation as rot
 from .mounting import MountYaw
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
+from .thresholds import LEAN_RAD
 
-LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
 CHUNK = 4096  # poses noted before their angles are computed (bounded memory)
 AXES = ("roll", "pitch", "yaw")
 

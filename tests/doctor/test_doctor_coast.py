@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusiond.doctor.coast import DECEL_TOLERANCE, MIN_COAST_DECEL
+from fusiond.doctor.thresholds import DECEL_TOLERANCE, MIN_COAST_DECEL
 from fusiond.core.fusion import FusionCore
 from fusiond.samples import OdomSample
 
