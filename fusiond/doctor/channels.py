@@ -113,6 +113,12 @@ def nis_head(ch: ChannelStats, t0: float | None) -> str:
             f"the {ch.n_nis_kept} applied ones read {ch.kept_nis_per_dof:.2f} per dof")
 
 
+def gated_out(ch: ChannelStats) -> bool:
+    """Whether the gate rejected more of the channel's judged updates than jumps explain (GATED_FRACTION):
+    its verdict (``absolute_verdict``) is then about the gate, not the innovations of what was fused."""
+    return bool(ch.n and ch.n_nis) and ch.rejected / ch.n > GATED_FRACTION
+
+
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
                      up: ChannelStats | None = None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise."""
