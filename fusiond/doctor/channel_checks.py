@@ -9,6 +9,7 @@ cross-source finding (``blame``): a channel's NIS is high because another source
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 
 from ..config import Config, GpsSensor, OdomSensor
 from .channels import (absolute_verdict, applied_verdict, figures, frozen_verdict, gated_out, nis_head,
@@ -48,8 +49,9 @@ def channel_kind(ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> str:
     return "nis"
 
 
-class _PerChannel:
-    """A check run once per channel of its ``kind`` (sorted by sensor and channel)."""
+class _PerChannel(ABC):
+    """A check run once per channel of its ``kind`` (sorted by sensor and channel); what it finds is filed
+    under that channel."""
 
     name = ""
     kind = ""
@@ -64,8 +66,9 @@ class _PerChannel:
                     out.append(v)
         return out
 
+    @abstractmethod
     def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
-        raise NotImplementedError
+        """The findings on channel ``key`` (its statistics ``ch``)."""
 
 
 class OrientationNis(_PerChannel):
