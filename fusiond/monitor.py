@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import msgspec
 
 from .core.diagnostics import DiagnosticsRecord
-from .core.doctor import ChannelStats, Doctor, Verdict, judge_nis, nis_bounds
+from .doctor import ChannelStats, Doctor, Verdict, judge_nis, nis_bounds
 
 ALIVE_SUFFIX = "/alive"
 DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"

@@ -26,7 +26,7 @@ from ..samples import OdomSample, Sample
 from .bag import BagError, BagSamples, did_you_mean, open_bag_samples
 
 if TYPE_CHECKING:  # the doctor is imported only by a replay that runs it (not by --quiet)
-    from ..core.doctor import Doctor, Verdict
+    from ..doctor import Doctor, Verdict
 
 
 @dataclass
@@ -234,7 +234,7 @@ class Runner:
     def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True) -> None:
         self.core = FusionCore(cfg)
         if doctor:
-            from ..core.doctor import Doctor
+            from ..doctor import Doctor
 
             self.doctor: Doctor | None = Doctor(cfg)
         else:
@@ -360,7 +360,7 @@ def summary(result: ReplayResult) -> str:
         out.append(f"time jumps  {core.resets} filter reset(s) on a backwards time jump")
     if core.covariance_resets:
         out.append(f"covariance  {core.covariance_resets} reset(s) after a non-finite value")
-    from ..core.doctor import format_verdicts
+    from ..doctor import format_verdicts
 
     out.append(format_verdicts(result.verdicts()))
     return "\n".join(out)

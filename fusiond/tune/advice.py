@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import msgspec
 
 from ..config import Config, ConfigError, convert, validate
-from ..core.doctor import Proof, Verdict
+from ..doctor import Proof, Verdict
 from ..logs import muted
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
 

@@ -17,7 +17,7 @@ from rosbags.rosbag2 import Writer
 from fusiond.cli import main
 from fusiond.codecs import encode_sample, typestore
 from fusiond.config import ConfigError
-from fusiond.core.doctor import Verdict, format_verdicts
+from fusiond.doctor import Verdict, format_verdicts
 from fusiond.replay.run import run_samples
 from fusiond.samples import ImuSample, OdomSample
 from fusiond.tune.advice import prove_advice, with_suggestion

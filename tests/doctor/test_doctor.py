@@ -13,7 +13,7 @@ import re
 import msgspec
 import pytest
 
-from fusiond.core.doctor import Verdict
+from fusiond.doctor import Verdict
 from fusiond.core.sensors import OdomPolicy
 from fusiond.replay.run import run_samples
 from fusiond.samples import OdomSample
@@ -113,7 +113,7 @@ def test_a_lost_yaw_rate_on_gentle_curves_is_not_measured_either():
     yaw rate as exactly 0 with variance 0: no turn is sharp enough for the in-turns test, but every moving
     sample is an exact zero over a run whose gyro heading spans 0.03 x 40 s = 1.2 rad (over MIN_TURNED_RAD):
     the same verdict, not 'state more noise'. With the yaw rate measured, nothing of the kind."""
-    from fusiond.core.doctor.twist import MIN_TURNED_RAD, TURNING_RAD_S
+    from fusiond.doctor.thresholds import MIN_TURNED_RAD, TURNING_RAD_S
 
     from tests.support.sim_rest import RestWorld, Segment
     from tests.support.sim_rest import simulate as simulate_rest
@@ -420,7 +420,7 @@ def test_mirrored_accelerometer_axis_is_not_read_as_a_mounting_yaw():
     no yaw is named, and no agreement claimed."""
     import msgspec
 
-    from fusiond.core.doctor.mounting import mount_yaw_fit
+    from fusiond.doctor.mounting import mount_yaw_fit
     from fusiond.samples import ImuSample
 
     from tests.support.sim_mount import MountWorld, simulate as simulate_mount
@@ -498,7 +498,7 @@ def test_few_updates_are_judged_with_chi_square_bounds_for_their_count():
     """11 updates with a mean NIS of 51.6 for 3 dof (the issue's 0.2 Hz GPS): far above the chi-square
     bound for 33 dof (about 4.6 per update), so NIS high, not 'too few'."""
     from fusiond.core.diagnostics import DiagnosticsRecord
-    from fusiond.core.doctor import Doctor
+    from fusiond.doctor import Doctor
 
     d = Doctor(None)
     for k in range(11):
@@ -552,7 +552,7 @@ def test_records_of_another_shape_still_count_in_the_channel_verdict():
     """A channel whose records change shape (a message without its yaw row; per-axis bias updates) is
     judged on all of them, each NIS over its own dof; per-component figures keep the first shape."""
     from fusiond.core.diagnostics import DiagnosticsRecord
-    from fusiond.core.doctor import ChannelStats
+    from fusiond.doctor import ChannelStats
 
     def run(scale: float) -> ChannelStats:
         ch = ChannelStats(["roll", "pitch", "yaw"])
@@ -589,7 +589,7 @@ def test_wheels_reading_zero_in_turns_with_the_gyro_not_fused_are_told_to_fuse_i
     the prediction missed: 3.1 rad, less at most a doctor bin (BIN_S) at each of the four edges, where a
     bin's mean wheel rate is not exactly zero (2 x 0.2 s x (1.0 + 0.8) = 0.72 rad): fuse the gyro. The
     same drive without those turns gets no such verdict."""
-    from fusiond.core.doctor.bins import BIN_S
+    from fusiond.doctor.bins import BIN_S
 
     cfg = make_config(gyro=False)
     turns = ((10.0, 11.5, 1.0), (20.0, 22.0, -0.8))

@@ -7,7 +7,8 @@ doctor used to name the first standstill as false and advise ``standstill_s``; a
 
 from __future__ import annotations
 
-from fusiond.core.doctor.gyro import DISAGREE_RAD_S, Episode, bias_drift
+from fusiond.doctor.gyro import Episode, bias_drift
+from fusiond.doctor.thresholds import DISAGREE_RAD_S
 
 from tests.support.configs import robot_config
 from tests.support.sim_rest import RestWorld, Segment, simulate

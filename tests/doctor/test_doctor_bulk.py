@@ -19,13 +19,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusiond.core import doctor as doctor_package
+from fusiond import doctor as doctor_package
 from fusiond.core.diagnostics import DiagnosticsRecord
-from fusiond.core.doctor import ChannelStats, attitude, series, twist
-from fusiond.core.doctor.attitude import TiltStats
-from fusiond.core.doctor.nis import judge_nis
-from fusiond.core.doctor.series import REORDER_S, release_order
-from fusiond.core.doctor.twist import TwistStats
+from fusiond.doctor import ChannelStats, attitude, series, twist
+from fusiond.doctor.attitude import TiltStats
+from fusiond.doctor.nis import judge_nis
+from fusiond.doctor.series import REORDER_S, release_order
+from fusiond.doctor.twist import TwistStats
 from fusiond.estimator.rotation import to_rpy
 from fusiond.replay.run import run_samples
 

@@ -15,9 +15,9 @@ import msgspec
 import numpy as np
 
 from fusiond.core.diagnostics import DiagnosticsRecord
-from fusiond.core.doctor import ChannelStats
-from fusiond.core.doctor.channels import GATED_FRACTION, absolute_verdict
-from fusiond.core.doctor.nis import NIS_HIGH
+from fusiond.doctor import ChannelStats
+from fusiond.doctor.channels import absolute_verdict
+from fusiond.doctor.thresholds import GATED_FRACTION, NIS_HIGH
 from fusiond.samples import GpsSample
 
 from tests.support import sim_gps

@@ -1,5 +1,5 @@
 """The doctor on a vehicle that sets off at once: its gyro's z bias is learned only at the first standstill,
-40 s in, and until then the heading turned with it (``core/doctor/late_bias.py``).
+40 s in, and until then the heading turned with it (``doctor/late_bias.py``).
 
 A car weaving at 2 m/s (yaw rate W sin(2 pi s / P)) with a gyro z bias of 0.004 rad/s, no standstill until
 REST_AT, its IMU publishing an AHRS yaw of its own (truth + a power-on offset + an optional drift + white
@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from fusiond.core.doctor.late_bias import LATE_DRIFT_RAD, RELATIVE_MARGIN
+from fusiond.doctor.thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN
 from fusiond.estimator import rotation as rot
 from fusiond.replay.run import Runner, run_samples
 from fusiond.samples import ImuSample, OdomSample
@@ -205,15 +205,15 @@ def test_a_bias_moved_by_a_drifting_fused_yaw_is_not_put_down_to_the_gyro_noise(
 
 def test_a_car_parked_through_a_gap_is_not_told_its_drifting_imu_turned():
     """A 6-axis AHRS whose yaw drifts 0.03 rad/s, the car parked from 100 s to 130 s with a 25 s logging
-    gap inside the stop: the IMU's yaw moved 0.75 rad across the gap, beyond the allowance (TURN_RAD +
-    DRIFT_RATE x 25 = 0.45 rad), though the car never turned. Its drift, measured against the bias-corrected
+    gap inside the stop: the IMU's yaw moved 0.75 rad across the gap, beyond the allowance (GAP_TURN_RAD +
+    GAP_DRIFT_RATE x 25 = 0.45 rad), though the car never turned. Its drift, measured against the bias-corrected
     gyro over the run, explains it all: no turn is named, and yaw_across_gaps is not advised. Nor does the
     core (yaw_across_gaps on, the default) turn the heading: the car stood still before and after the gap.
     Turned anyway, the heading would be off by the 0.75 rad from the gap on; asserted: the run is exactly
     the one with the feature off."""
-    from fusiond.core.doctor.gap_heading import DRIFT_RATE, TURN_RAD
+    from fusiond.doctor.thresholds import GAP_DRIFT_RATE, GAP_TURN_RAD
 
-    assert 0.03 * 25.0 > TURN_RAD + DRIFT_RATE * 25.0  # the simulation has the trait
+    assert 0.03 * 25.0 > GAP_TURN_RAD + GAP_DRIFT_RATE * 25.0  # the simulation has the trait
     samples = weaving_car(yaw_drift=0.03, rest_at=100.0, rest_s=30.0, gap=(103.0, 128.0), duration=200.0)
     result, err, rel = replay(samples, "roll_pitch")
     assert not [v for v in result.verdicts() if v.channel == "heading_across_gaps"]
@@ -231,7 +231,7 @@ def test_a_drifting_ahrs_yaw_fused_is_named_with_roll_pitch(orientation):
     beyond DRIFT_RAD_S: no heading, take roll/pitch only. The fused yaw dragged the filter's bias estimate
     to b - r (0.001), which is why the bias at rest, not the estimate, is what is subtracted. The AHRS
     that does not drift gets no such verdict."""
-    from fusiond.core.doctor.heading import DRIFT_RAD_S
+    from fusiond.doctor.thresholds import DRIFT_RAD_S
 
     assert 0.003 - 0.0005 > DRIFT_RAD_S  # the whole tolerance band is beyond the threshold
     result, _, _ = replay(weaving_car(yaw_drift=0.003), orientation)

@@ -1,4 +1,4 @@
-"""Lost samples sent as zeros are kept out of the doctor's fits (``core/doctor/lost.py``)."""
+"""Lost samples sent as zeros are kept out of the doctor's fits (``doctor/lost.py``)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import msgspec
 import pytest
 
-from fusiond.core.doctor.lost import LostSamples
+from fusiond.doctor.lost import LostSamples
 from fusiond.samples import ImuSample, OdomSample
 
 from tests.support.configs import robot_config

@@ -7,14 +7,14 @@ many chords run straight, then turn, or turn, then run straight. The chord is th
 by o. The yaw at the chord's middle instant equals its direction only on arcs of constant curvature;
 with the turns mostly to one side it would read a correct magnetometer as 0.13 rad (3 standard errors)
 off, a PROBLEM with a yaw_offset to paste. The thresholds are the verdict's own: an offset is named
-beyond max(OFFSET_RAD, 3 standard errors), and the one measured must lie within 3 of them of the truth.
+beyond max(TRACK_OFFSET_RAD, 3 standard errors), and the one measured must lie within 3 of them of the truth.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from fusiond.core.doctor.heading import OFFSET_RAD
+from fusiond.doctor.thresholds import TRACK_OFFSET_RAD
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config
@@ -38,7 +38,7 @@ def _verdict(offset: float):
 def test_a_correct_absolute_yaw_has_no_offset_against_the_track():
     v = _verdict(0.0)
     se = v.evidence["imu_vs_gps_track_offset_se_rad"]
-    assert abs(v.evidence["imu_vs_gps_track_offset_rad"]) < max(OFFSET_RAD, 3.0 * se), v
+    assert abs(v.evidence["imu_vs_gps_track_offset_rad"]) < max(TRACK_OFFSET_RAD, 3.0 * se), v
     assert "yaw_offset" not in v.suggestion and v.level == "ok", v
 
 
@@ -60,8 +60,8 @@ def test_the_yaw_along_a_chord_is_the_direction_of_its_displacement():
 
     import numpy as np
 
-    from fusiond.core.doctor.heading import yaw_along
-    from fusiond.core.doctor.series import Series
+    from fusiond.doctor.heading import yaw_along
+    from fusiond.doctor.series import Series
 
     t = np.arange(0.1, 8.0, 0.2)  # bin middles
     heading = np.where(t < 4.0, 0.0, 0.4 * (t - 4.0))

@@ -545,7 +545,7 @@ def test_config_toml_documents_the_gps_and_pose_tables_and_their_examples_parse(
 
 
 def test_doctor_flags_an_understated_gps_noise():
-    from fusiond.core.doctor import Doctor
+    from fusiond.doctor import Doctor
 
     w = _gps_world(duration=60.0, gps_sigma=0.3)
     cfg = _gps_config("position_noise = [0.03, 0.03, 0.03]")  # the receiver is ten times noisier than stated

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from fusiond.core.doctor import Verdict
+from fusiond.doctor import Verdict
 from fusiond.replay.run import run_samples
 
 

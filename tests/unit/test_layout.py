@@ -16,7 +16,8 @@ from fusiond import errors, reasons
 PACKAGE = Path(__file__).resolve().parents[2] / "fusiond"
 
 
-@pytest.mark.parametrize("name", ["fusiond.core", "fusiond.transport", "fusiond.replay", "fusiond.estimator"])
+@pytest.mark.parametrize("name", ["fusiond.core", "fusiond.transport", "fusiond.replay", "fusiond.estimator",
+                                  "fusiond.doctor"])
 def test_each_package_declares_a_public_surface_that_resolves(name):
     pkg = importlib.import_module(name)
     assert pkg.__all__ and len(set(pkg.__all__)) == len(pkg.__all__)
@@ -96,7 +97,7 @@ def test_no_reason_code_is_a_literal_outside_reasons_py():
 # no module tests a kind by its config class or tag. What stays says why: the IMU calibration
 # command and the gyro baseline of replay's evaluation are about the IMU itself, and the latency
 # bench's schedule tags its own two streams. The doctor's checks are outside this rule (their own
-# floor of checks, fusiond/core/doctor/).
+# floor of checks, fusiond/doctor/).
 _KIND_BRANCH = re.compile(r"kind *(==|!=|in) *|\.kind\b.*(==|in)|isinstance\([^)]*(Imu|Odom|Gps|Pose)(Config|Sensor|Model)")
 _KIND_BRANCHES_KEPT = {
     "cli.py": 1,  # calibrate-imu picks the configured IMUs
@@ -109,7 +110,7 @@ def test_no_module_outside_the_sensor_kinds_branches_on_a_kind():
     found: dict[str, int] = {}
     for path in PACKAGE.rglob("*.py"):
         rel = path.relative_to(PACKAGE).as_posix()
-        if rel.startswith(("core/sensors/", "core/doctor/", "doctor/")):
+        if rel.startswith(("core/sensors/", "doctor/")):
             continue
         hits = sum(1 for line in path.read_text().splitlines() if _KIND_BRANCH.search(line))
         if hits:
@@ -131,14 +132,47 @@ def test_no_bare_pose_index_outside_the_estimator():
 
 def test_the_config_never_imports_the_core_and_the_kinds_never_import_the_outer_layers():
     """fusiond.config reads the kinds' tables on first use (the kinds import it); the registry, the kinds
-    and the fusion core import nothing of transport, replay, the CLI, the tuner, nor (until a decoder is
-    asked for) the codecs and rosbags."""
+    and the fusion core import nothing of transport, replay, the CLI, the tuner, the doctor, nor (until a
+    decoder is asked for) the codecs and rosbags."""
     code = ("import sys, fusiond.config; a = {m for m in sys.modules if m.startswith('fusiond.core')}; "
             "import fusiond.core.sensors.registry, fusiond.core.fusion; "
             "b = {m for m in sys.modules if m.split('.')[1:2] in (['transport'], ['replay'], ['cli'], ['tune'], "
-            "['codecs']) or m.startswith('rosbags')}; print(sorted(a), sorted(b))")
+            "['codecs'], ['doctor']) or m.startswith('rosbags')}; print(sorted(a), sorted(b))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[] []"
+
+
+def _imported_modules(path: Path) -> set[str]:
+    """The fusiond modules ``path`` imports, relative imports resolved (``from ..doctor import X`` in
+    fusiond/replay/run.py is fusiond.doctor)."""
+    package = ["fusiond", *path.relative_to(PACKAGE).parent.parts]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package[:len(package) - node.level + 1] if node.level else []
+            module = ".".join(base + ([node.module] if node.module else []))
+            found.add(module)
+            found.update(f"{module}.{a.name}" for a in node.names)
+    return {m for m in found if m == "fusiond" or m.startswith("fusiond.")}
+
+
+# The doctor is a floor above the fusion core: it reads the core's diagnostics and the samples, and
+# only the commands that show its verdicts read it.
+_DOCTOR_READERS = {"monitor.py", "replay/run.py", "tune/advice.py"}
+
+
+def test_the_core_never_imports_the_doctor_and_only_its_readers_do():
+    readers = set()
+    for path in PACKAGE.rglob("*.py"):
+        rel = path.relative_to(PACKAGE).as_posix()
+        if rel.startswith("doctor/"):
+            continue
+        if any(m == "fusiond.doctor" or m.startswith("fusiond.doctor.") for m in _imported_modules(path)):
+            readers.add(rel)
+    assert not {r for r in readers if r.startswith("core/")}
+    assert readers == _DOCTOR_READERS
 
 
 def test_a_kind_registers_under_its_tables_tag_and_an_unknown_tag_names_the_known_ones():

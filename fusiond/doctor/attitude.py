@@ -21,13 +21,13 @@ from itertools import chain
 
 import numpy as np
 
-from ...config import ImuSensor
-from ...estimator import rotation as rot
+from ..config import ImuSensor
+from ..estimator import rotation as rot
 from .mounting import MountYaw
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
+from .thresholds import LEAN_RAD
 
-LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
 CHUNK = 4096  # poses noted before their angles are computed (bounded memory)
 AXES = ("roll", "pitch", "yaw")
 

@@ -50,17 +50,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, OdomSensor
+from ..config import Config, GpsSensor, OdomSensor
 from .heading import gps_sigma, timed
 from .series import Series
 from .verdict import Verdict, sensor_key
-
-SCALE_TOLERANCE = 0.02  # a wheel scale within 2 % is not worth a state
-CHORD_M = 10.0  # chords at least this long (or 20 sigma_w): short and consecutive, see above
-CHORD_MAX_S = 60.0  # a chord spans at most this long (slower: the robot is standing or creeping)
-MIN_CHORDS = 3  # the fewest for a residual standard error (2 dof) next to the model's
-ASSUMED_TAU_S = 100.0  # the fast end of receivers' wander times (module docstring)
-Z_SIGMAS = 3.0  # a scale is named beyond this many standard errors (as a normal quantile: 0.27 % two-sided)
+from .thresholds import ASSUMED_TAU_S, CHORD_M, CHORD_MAX_S, MIN_CHORDS, SCALE_TOLERANCE, SCALE_Z_SIGMAS
 
 
 def t_quantile(z: float, dof: int) -> float:
@@ -84,10 +78,10 @@ class ScaleFit:
 
     @property
     def band(self) -> float:
-        """The half-width within which the scale is not named: the tolerance, or Z_SIGMAS of the model's
+        """The half-width within which the scale is not named: the tolerance, or SCALE_Z_SIGMAS of the model's
         standard error (known noise: a normal quantile), or the same quantile of Student's t for the
         residuals' standard error (estimated from the chords themselves)."""
-        return max(SCALE_TOLERANCE, Z_SIGMAS * self.se_model, t_quantile(Z_SIGMAS, self.chords - 1) * self.se_empirical)
+        return max(SCALE_TOLERANCE, SCALE_Z_SIGMAS * self.se_model, t_quantile(SCALE_Z_SIGMAS, self.chords - 1) * self.se_empirical)
 
     def evidence(self) -> dict[str, float]:
         return {"wheel_scale_vs_gps": self.scale, "wheel_scale_se": self.se, "wheel_scale_se_model": self.se_model,

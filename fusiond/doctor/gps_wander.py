@@ -24,21 +24,10 @@ import math
 
 import numpy as np
 
-from ...config import GpsSensor
+from ..config import GpsSensor
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
-
-# "Strongly autocorrelated": at least 15 % of the innovations' variance persists to the next fix. A
-# consistent filter's innovations are white: their lag-1 autocorrelation is ~N(0, 1/n) (0.04 over 750
-# fixes); with the noise misstated the filter's own response adds a little: measured 0.00-0.04 on white
-# fixes at 2 and 10 Hz, 1 to 25 m/s, stated honestly to 3.7x overstated; it must also be beyond
-# 4 / sqrt(n) of zero for short runs. A Gauss-Markov error of 1.2 m (tau 60 s) under 0.6 m of white noise
-# leaves 0.38 (stated honestly) to 0.54 (stated 2.2 m) at 2 Hz, where the filter follows the wander less
-# the more the fixes are distrusted; at 10 Hz on a car at 25 m/s it follows more of it and leaves 0.18-0.25
-# (a highway car: 0.18; a threshold of 0.3 misses it, and the advice would be "lower position_noise").
-PERSISTING_SHARE = 0.15
-MIN_FIXES = 50  # fixes for an autocorrelation: at lag 1 its standard error is ~1/sqrt(50) = 0.14
-MAX_LAG_FRACTION = 0.25  # autocorrelation lags up to this share of the run (beyond, too few pairs)
+from .thresholds import MAX_LAG_FRACTION, PERSISTING_SHARE, WANDER_MIN_FIXES
 
 
 def autocorrelation(y: np.ndarray, max_lag: int) -> np.ndarray:
@@ -61,7 +50,7 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "",
     if gps.error_tau_s > 0.0:
         return None
     rows = [(t, y) for t, y, rej in zip(ch.stamps, ch.innovations, ch.rejected_flags) if not rej and len(y) >= 2]
-    if len(rows) < MIN_FIXES:
+    if len(rows) < WANDER_MIN_FIXES:
         return None
     t = np.array([r[0] for r in rows])
     order = np.argsort(t)
@@ -113,7 +102,7 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "",
 def _up_sigma(innovations: list) -> float | None:
     """The vertical wandering part, split like the horizontal (its own persisting share)."""
     u = np.array([y[2] for y in innovations if len(y) >= 3])
-    if len(u) < MIN_FIXES:
+    if len(u) < WANDER_MIN_FIXES:
         return None
     acf = autocorrelation(u[:, None], 1)
     share = min(max(float(acf[1]), 0.0), 1.0)

@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import math
 
-from ...config import GpsSensor, ImuSensor
-from ..sensors.gps import FROZEN_JITTER
-from ..sensors.imu import YAW_JUMP_GATE
+from ..config import GpsSensor, ImuSensor
+from ..core.sensors.gps import FROZEN_JITTER
+from ..core.sensors.imu import YAW_JUMP_GATE
 from .attitude import noise_suggestion
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
-
-OFFSET_RAD = 0.01  # a mean roll/pitch innovation this large is a mounting error, not noise
-GATED_FRACTION = 0.1  # gated beyond this: the sensor jumps (or its noise is understated) ...
-MOST_GATED = 0.5  # ... and beyond this: its noise is understated (jumps are the exception, not the rule)
+from .thresholds import (GATED_FRACTION, JUMP_NOISE_SHARE, JUMP_NOTE_SHARE, MOST_GATED, ROLL_PITCH_OFFSET_RAD,
+                         UNALIGNED_LARGE)
 
 
 def figures(ch: ChannelStats, t0: float | None) -> str:
@@ -71,7 +69,7 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None,
         out.append(Verdict(imu.name, "orientation", "ok", f"consistent ({figures(ch, t0)})"))
     for i, c in enumerate(comps):
         mean, rms, _ = ch.component(i)
-        if c in ("roll", "pitch") and abs(mean) > OFFSET_RAD and abs(mean) > 0.5 * rms:
+        if c in ("roll", "pitch") and abs(mean) > ROLL_PITCH_OFFSET_RAD and abs(mean) > 0.5 * rms:
             out.append(Verdict(imu.name, "orientation", "warn",
                                f"constant {c} offset of {mean:+.3f} rad in the innovations: a mounting rotation "
                                "not in the config", sensor_key(imu.name, "extrinsic_rpy")))
@@ -113,6 +111,12 @@ def nis_head(ch: ChannelStats, t0: float | None) -> str:
     frac = ch.rejected / ch.n if ch.n else 0.0
     return (f"{head} only because of the {ch.rejected} update(s) the gate rejected ({100 * frac:.1f}%, not fused): "
             f"the {ch.n_nis_kept} applied ones read {ch.kept_nis_per_dof:.2f} per dof")
+
+
+def gated_out(ch: ChannelStats) -> bool:
+    """Whether the gate rejected more of the channel's judged updates than jumps explain (GATED_FRACTION):
+    its verdict (``absolute_verdict``) is then about the gate, not the innovations of what was fused."""
+    return bool(ch.n and ch.n_nis) and ch.rejected / ch.n > GATED_FRACTION
 
 
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
@@ -162,10 +166,6 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)
 
 
-JUMP_NOTE_SHARE = 0.01  # yaw jumps in more than this share of the orientation samples are worth a warning
-JUMP_NOISE_SHARE = 0.2  # ... in more than this, the stated yaw noise is what is wrong (or the yaw is unusable)
-
-
 def yaw_jump_verdict(name: str, ch: ChannelStats, orientation: ChannelStats | None) -> Verdict:
     """The ``yaw_jump`` channel (core/sensors/imu/model.py ``_yaw_jump``): every record is an absolute yaw reading
     that jumped against the gyro-carried heading beyond YAW_JUMP_GATE sigma and was not fused, so its NIS
@@ -201,10 +201,6 @@ def frozen_verdict(name: str, ch: ChannelStats, fixes: int) -> Verdict:
                    "with a fix status. Not fused; the pose was dead-reckoned meanwhile. Nothing to change in the "
                    "config: check the receiver's sky view and antenna, or have its driver publish status NO_FIX",
                    evidence={"frozen_fixes": float(ch.n), "frozen_share": share})
-
-
-UNALIGNED_MIN_FIXES = 50  # fixes before a heading never found is worth a verdict
-UNALIGNED_LARGE = 2.0  # predicted innovation rms this many times the measured one: the stated noise hides the heading
 
 
 def unaligned_verdict(gps: GpsSensor, ch: ChannelStats, up: ChannelStats | None = None) -> Verdict:

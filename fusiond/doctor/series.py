@@ -19,10 +19,10 @@ import math
 import msgspec
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor, OdomSensor
-from ...estimator import rotation as rot
-from ...estimator.geodesy import EnuFrame
-from ...samples import GpsSample, ImuSample, OdomSample
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor
+from ..estimator import rotation as rot
+from ..estimator.geodesy import EnuFrame
+from ..samples import GpsSample, ImuSample, OdomSample
 from .bins import BIN_S
 from .streams import MAX_STEP_S, ImuStream, OdomStream
 

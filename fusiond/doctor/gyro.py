@@ -16,18 +16,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
-from ..sensors.imu.gyro_bias import _turning, quiet_bound
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
-
-MIN_REJECTED_FRACTION = 0.1  # rejected standstill updates beyond a tenth: more than a gate's chance ones
-OVERSTATED_RATIO = 3.0  # a stated gyro noise this many times the measured one at rest is overstated
-# the gyro's noise at rest measured beyond this factor of the stated (either way) explains a NIS high or low;
-# within it, the noise is as stated
-NOISE_RATIO = 1.5
-DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
+from .thresholds import (DISAGREE_RAD_S, DRIFT_WALK_MARGIN, MIN_DRIFT_EPISODES, MIN_REJECTED_FRACTION, NOISE_RATIO,
+                         OVERSTATED_RATIO)
 
 
 @dataclass
@@ -111,10 +106,6 @@ def _coast_note(cfg: Config) -> str:
     return (f"Where the drive dropped to zero faster than a vehicle can stop, the position ran on from the last "
             f"speed, slowing at {odom.coast_decel:g} m/s^2 until it stopped ({sensor_key(odom.name, 'coast_decel')}); "
             "otherwise, and after that, it does not advance while the wheels read zero")
-
-
-MIN_DRIFT_EPISODES = 3  # a drift is told from one odd standstill by its trend, which takes three points
-DRIFT_WALK_MARGIN = 2.0  # a drift is named when the walk it shows exceeds the configured one by this factor
 
 
 def bias_drift(episodes: list[Episode], walk: float) -> tuple[tuple[float, float], tuple[float, float], float] | None:

@@ -23,17 +23,15 @@ from __future__ import annotations
 
 import math
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config, GpsSensor, ImuSensor, PoseSensor
 from .gyro import quiet_episodes
-from .heading import WANDER_RAD, imu_vs_gyro
+from .heading import imu_vs_gyro
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, sensor_key
+from .thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN, WANDER_RAD
 
-__all__ = ["LATE_DRIFT_RAD", "RELATIVE_MARGIN", "late_bias_verdict"]
-
-LATE_DRIFT_RAD = 0.05  # heading drift before the first standstill worth a verdict (3 deg)
-RELATIVE_MARGIN = 0.5  # the relative yaw's mean heading error must stay below this share of the late bias's
+__all__ = ["late_bias_verdict"]
 
 
 def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: ChannelStats | None) -> Verdict | None:

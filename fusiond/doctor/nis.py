@@ -24,10 +24,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..diagnostics import DiagnosticsRecord, chi2_ppf
+from ..core.diagnostics import DiagnosticsRecord, chi2_ppf
+from .thresholds import NIS_HIGH, NIS_LOW
 
-NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): noise understated
-NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
 VERDICTS = ("ok", "nis_high", "nis_low", "no_updates")  # what judge_nis returns
 
 

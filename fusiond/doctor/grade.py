@@ -35,18 +35,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor
-from ..layout import fuses_height
+from ..config import Config, GpsSensor, ImuSensor
+from ..core.layout import fuses_height
 from .attitude import full_mount, paste_mount
 from .heading import gps_sigma
 from .mounting import MountYaw
 from .series import Series
-from .speed import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, Z_SIGMAS, _cumulative, _newey_west, chord_ends, t_quantile
+from .speed import _cumulative, _newey_west, chord_ends, t_quantile
 from .verdict import Verdict, sensor_key
-
-# A pitch error delta sinks or lifts the dead-reckoned z by delta per metre driven: at 0.01 rad, 1 %
-# of the distance, twice the 0.5 % below which mounting.py names no yaw error. Smaller: not named.
-MOUNT_PITCH_RAD = 0.01
+from .thresholds import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, MOUNT_PITCH_RAD, SCALE_Z_SIGMAS
 
 
 @dataclass
@@ -66,9 +63,9 @@ class GradeFit:
 
     @property
     def band(self) -> float:
-        """Within it the pitch is not named: the tolerance, or Z_SIGMAS standard errors of the model (a
+        """Within it the pitch is not named: the tolerance, or SCALE_Z_SIGMAS standard errors of the model (a
         normal quantile), or Student's t of the residuals' (estimated from the chords themselves)."""
-        return max(MOUNT_PITCH_RAD, Z_SIGMAS * self.se_model, t_quantile(Z_SIGMAS, self.chords - 1) * self.se_empirical)
+        return max(MOUNT_PITCH_RAD, SCALE_Z_SIGMAS * self.se_model, t_quantile(SCALE_Z_SIGMAS, self.chords - 1) * self.se_empirical)
 
     @property
     def named(self) -> bool:
@@ -181,4 +178,4 @@ def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw |
     return None
 
 
-__all__ = ["MOUNT_PITCH_RAD", "GradeFit", "grade_fit", "grade_verdict"]
+__all__ = ["GradeFit", "grade_fit", "grade_verdict"]

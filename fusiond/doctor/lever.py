@@ -20,7 +20,7 @@ interval). Least squares over every pair gives dl with its covariance from the r
 scatter (pairs beyond OUTLIER_SIGMAS of it, multipath, are dropped once and the fit redone).
 
 A lever is named when dl is both large (LEVER_TOL) and significant (its chi-square with 2
-dof beyond Z_SIGMAS^2, from a fit within MAX_SE_NAMED): ``extrinsic_xyz`` = the stated lever
+dof beyond LEVER_Z_SIGMAS^2, from a fit within MAX_SE_NAMED): ``extrinsic_xyz`` = the stated lever
 + dl, its height kept (a lever's height moves the fixes only with the tilt); "as stated" needs
 the fit within MAX_SE. Only turns show a lever: a car on a highway, hardly turning, cannot
 tell one: no verdict, measure it.
@@ -32,21 +32,13 @@ import math
 
 import numpy as np
 
-from ...config import Config, GpsSensor
+from ..config import Config, GpsSensor
 from .series import Series
 from .verdict import Verdict, sensor_key
+from .thresholds import (LATENCY_ALONG, LEVER_TOL, LEVER_Z_SIGMAS, MAX_INTERVAL, MAX_SE, MAX_SE_NAMED, MIN_PAIRS,
+                         OUTLIER_SIGMAS, PAIR_S)
 
-__all__ = ["LEVER_TOL", "MAX_SE", "lever_verdict"]
-
-LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change
-MAX_SE = 0.1  # m: "as stated" needs the fit this precise (half LEVER_TOL)
-MAX_SE_NAMED = 0.3  # m: a lever is named only from a fit this precise (a fifth of a 1.5 m mast's offset)
-LATENCY_ALONG = 2.0  # a misfit behind base_link this many times longer than it is wide: also says latency
-Z_SIGMAS = 5.0  # named when the lever's chi-square (2 dof) exceeds Z_SIGMAS^2 = 25 (p ~ 4e-6, module docstring)
-OUTLIER_SIGMAS = 4.0  # a pair beyond 4 sigma of the scatter is multipath (a normal pair: 6e-5 chance)
-MIN_PAIRS = 30  # fix pairs in turns before a fit: its scatter estimate then good to ~13 %
-PAIR_S = 3.0  # s between the two fixes of a pair (module doc)
-MAX_INTERVAL = 1.5  # a pair further apart than this many PAIR_S (fixes missing) is not used
+__all__ = ["lever_verdict"]
 
 
 def _rot(yaw: np.ndarray, l: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +128,7 @@ def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
         chi2 = float(dl @ np.linalg.solve(cov, dl))
     except np.linalg.LinAlgError:
         return None
-    named = math.hypot(*dl) >= LEVER_TOL and chi2 >= Z_SIGMAS**2 and se <= MAX_SE_NAMED
+    named = math.hypot(*dl) >= LEVER_TOL and chi2 >= LEVER_Z_SIGMAS**2 and se <= MAX_SE_NAMED
     if not (named or se <= MAX_SE):
         return None
     lever = (stated[0] + float(dl[0]), stated[1] + float(dl[1]), float(gps.extrinsic_xyz[2]))
@@ -149,7 +141,7 @@ def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
         # 4.2 standard errors is not shown to be what extrinsic_xyz says, only not proven to differ)
         off = math.hypot(*dl)
         why = (f"within {LEVER_TOL:g} m: not worth a change" if off < LEVER_TOL else
-               f"not named: {math.sqrt(chi2):.1f} standard errors, {Z_SIGMAS:g} needed")
+               f"not named: {math.sqrt(chi2):.1f} standard errors, {LEVER_Z_SIGMAS:g} needed")
         return Verdict(gps.name, "lever_arm", "ok",
                        where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, {off:.2f} m from "
                        f"extrinsic_xyz's ({stated[0]:+.2f}, {stated[1]:+.2f}): {why}", evidence=evidence)

@@ -14,23 +14,15 @@ from itertools import chain
 
 import numpy as np
 
-from ...config import ImuSensor, OdomSensor
+from ..config import ImuSensor, OdomSensor
 from .nis import ChannelStats
 from .series import Series
-from .heading import WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, rate_fit_text
+from .heading import rate_fit_text
 from .verdict import Verdict, sensor_key
+from .thresholds import (ALL_ZEROS_FRACTION, ALONG_SIN, MIN_TURNED_RAD, MOVING_M_S, SLIP_FRACTION, TURNED_RAD,
+                         TURNING_RAD_S, UNMEASURED_FRACTION, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE)
 
-TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noise and bias)
-UNMEASURED_FRACTION = 0.5  # in turns, this share of exact zeros is a component the driver does not measure
-ALL_ZEROS_FRACTION = 0.99  # ... and in gentle turns only: (nearly) every moving sample an exact zero
-MIN_TURNED_RAD = 1.0  # ... over a run whose heading the gyro turned by at least this much
-SLIP_FRACTION = 0.2  # samples flagged as slip beyond a fifth: the wheels' yaw rate is not just noisy
 CHUNK = 4096  # twists noted before they are summed (bounded memory)
-
-
-TURNED_RAD = 0.3  # the message's own pose yaw this far from the odom frame's x: a world twist must follow it
-ALONG_SIN = 0.05  # |sin| of the angle between the twist and an axis below this: the twist points along it
-MOVING_M_S = 0.1  # speed above which a twist has a direction
 
 
 class TwistStats:

@@ -15,8 +15,8 @@ parked through a gap shows no turn (a drift of 0.02 rad/s is 0.5 rad over a 25 s
 turn, it sends a parked car's track tens of metres off); a constant yaw (a placeholder) shows nothing.
 
 A gap counts when the IMU's yaw change across it differs from the estimate's by more
-than the IMU's own yaw could drift in that time: TURN_RAD (several times the yaw noise
-of one 0.2 s bin, ~0.01-0.05 rad) plus DRIFT_RATE x the gap (an uncorrected consumer
+than the IMU's own yaw could drift in that time: GAP_TURN_RAD (several times the yaw noise
+of one 0.2 s bin, ~0.01-0.05 rad) plus GAP_DRIFT_RATE x the gap (an uncorrected consumer
 gyro bias, <= 0.01 rad/s, integrated by the IMU through the gap).
 
 Not ``relative``: fused so, the IMU's yaw holds the heading for the whole run, and its own
@@ -32,25 +32,21 @@ import math
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
-from ...estimator import rotation as rot
+from ..config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..estimator import rotation as rot
 from .bins import BIN_S
 from .gyro import quiet_episodes
 from .heading import imu_vs_gyro, timed
 from .series import Series
 from .verdict import Verdict, sensor_key
-
-MIN_GAP_S = 1.0  # shorter silences: the held inputs cover most of them
-TURN_RAD = 0.2  # rad of unexplained turn across a gap: several times the yaw noise (module doc)
-DRIFT_RATE = 0.01  # rad/s
-EDGE_S = 2.0  # the estimates compared lie this close to the gap's ends (a time jump holds poses ~1 s), or it is not judged
+from .thresholds import GAP_DRIFT_RATE, GAP_EDGE_S, GAP_TURN_RAD, MIN_GAP_S
 
 
 def _around(t: np.ndarray, start: float, end: float) -> tuple[int, int] | None:
     """Indices of the bins just before start and just after end, None if none is near."""
     i0 = int(np.searchsorted(t, start, side="right")) - 1
     i1 = int(np.searchsorted(t, end, side="left"))
-    if i0 < 0 or i1 >= len(t) or start - t[i0] > EDGE_S or t[i1] - end > EDGE_S:
+    if i0 < 0 or i1 >= len(t) or start - t[i0] > GAP_EDGE_S or t[i1] - end > GAP_EDGE_S:
         return None
     return i0, i1
 
@@ -59,7 +55,7 @@ def _at(t: np.ndarray, y: np.ndarray, when: float) -> float | None:
     """The IMU's yaw at ``when``: interpolated between the two bins around it (``t``: the instants their
     mean yaws hold at) when they are consecutive (at most 2 BIN_S apart, no silence between), else the
     value nearest ``when``; None if no bin is within BIN_S. The nearest bin alone can be BIN_S / 2 off
-    ``when``: at a race car's 1 rad/s, 0.1 rad of the TURN_RAD allowance."""
+    ``when``: at a race car's 1 rad/s, 0.1 rad of the GAP_TURN_RAD allowance."""
     if not len(t):
         return None
     i = int(np.searchsorted(t, when))
@@ -106,7 +102,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         imu_turn = rot.wrap(after - before - rate * (float(te[e1]) - float(te[e0])))
         est_turn = rot.wrap(float(ye[e1]) - float(ye[e0]))
         miss = rot.wrap(imu_turn - est_turn)
-        if abs(miss) > TURN_RAD + DRIFT_RATE * length:
+        if abs(miss) > GAP_TURN_RAD + GAP_DRIFT_RATE * length:
             missed.append((start, length, imu_turn, est_turn))
     if not missed:
         return None

@@ -29,23 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...config import ImuSensor
+from ..config import ImuSensor
 from .series import BIN_S, Series
-
-# A yaw error delta in the mounting puts sin(delta) of the IMU's roll on base pitch (and of the
-# centripetal tilt correction on the wrong axis): at 0.05 rad (3 degrees) a 0.1 rad side slope
-# becomes a 0.005 rad pitch error, a sixth of the lean check's LEAN_RAD (0.03), i.e. 0.5 % of the
-# distance driven in height. Smaller errors are not worth a verdict.
-MOUNT_YAW_RAD = 0.05
-MIN_SPEED = 0.2  # m/s: slower, dv/dt and v w are too small and the wheels too coarse to compare
-SMOOTH_BINS = 5  # 1 s at 5 Hz: vibration averaged, manoeuvres (seconds long) kept
-MIN_SAMPLES = 20  # decimated driving samples: 20 s of driving
-# |(c, s)| is 1 for an accelerometer that sees the motion turned; at half or twice that it is not a turn
-# (a mirrored axis, e.g. one sign flipped in the driver, fits with |(c, s)| near 0; wrong units near 10):
-# the angle then means nothing and is not named
-GAIN_BAND = (0.5, 2.0)
-MAX_ALIGN_S = 1.5 * BIN_S  # an accelerometer bin with no wheel bin this close is not compared
-Z_SIGMAS = 3.0  # a mounting yaw is named beyond 3 standard errors (0.27 % two-sided)
+from .thresholds import (GAIN_BAND, MAX_ALIGN_S, MOUNT_MIN_SAMPLES, MOUNT_MIN_SPEED, MOUNT_YAW_RAD, MOUNT_Z_SIGMAS,
+                         SMOOTH_BINS)
 
 
 @dataclass
@@ -62,13 +49,13 @@ class MountYaw:
 
     @property
     def named(self) -> bool:
-        """Clearly nonzero: beyond the threshold and beyond Z_SIGMAS standard errors."""
-        return self.turned and abs(self.delta) > max(MOUNT_YAW_RAD, Z_SIGMAS * self.se)
+        """Clearly nonzero: beyond the threshold and beyond MOUNT_Z_SIGMAS standard errors."""
+        return self.turned and abs(self.delta) > max(MOUNT_YAW_RAD, MOUNT_Z_SIGMAS * self.se)
 
     @property
     def resolved(self) -> bool:
         """Known well enough to say the mounting agrees (a 3-sigma band inside the threshold)."""
-        return self.turned and Z_SIGMAS * self.se < MOUNT_YAW_RAD
+        return self.turned and MOUNT_Z_SIGMAS * self.se < MOUNT_YAW_RAD
 
     @property
     def turned(self) -> bool:
@@ -93,7 +80,7 @@ def _near(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
 
 def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     """The fit, or None without an accelerometer, wheels, or enough driving to tell."""
-    if imu is None or len(series.acc_t) < SMOOTH_BINS * MIN_SAMPLES or len(series.odom_t) < 10:
+    if imu is None or len(series.acc_t) < SMOOTH_BINS * MOUNT_MIN_SAMPLES or len(series.odom_t) < 10:
         return None
     ta = np.asarray(series.acc_t)
     mx, my = np.asarray(series.acc_x), np.asarray(series.acc_y)
@@ -105,7 +92,7 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     bad[:-1] |= gaps
     bad[1:] |= gaps
     # ... and beside a bin exactly at rest: a drive dropping to zero at speed (a coast, a lost frame) is no
-    # deceleration (a real stop passes through speeds below MIN_SPEED first, which are not fitted anyway)
+    # deceleration (a real stop passes through speeds below MOUNT_MIN_SPEED first, which are not fitted anyway)
     rest = np.asarray(series.odom_rest, dtype=bool)
     bad[:-1] |= rest[1:]
     bad[1:] |= rest[:-1]
@@ -119,12 +106,12 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     v = np.interp(ta, to, vo)
     ex = np.interp(ta, to, dvdt)
     ey = v * np.interp(ta, tw, ww)
-    valid = _near(ta, to) & ok_w & np.isfinite(ex) & np.isfinite(mx) & np.isfinite(my) & (v > MIN_SPEED)
+    valid = _near(ta, to) & ok_w & np.isfinite(ex) & np.isfinite(mx) & np.isfinite(my) & (v > MOUNT_MIN_SPEED)
     # the same box on both sides keeps m = Rz(-delta) e + b; a window is used only when all of it is valid
     whole = _box(valid.astype(float), SMOOTH_BINS) > 1.0 - 1e-9
     cols = [_box(np.where(valid, a, 0.0), SMOOTH_BINS) for a in (mx, my, ex, ey)]
     idx = np.nonzero(whole)[0][::SMOOTH_BINS]
-    if len(idx) < MIN_SAMPLES:
+    if len(idx) < MOUNT_MIN_SAMPLES:
         return None
     mx, my, ex, ey = (c[idx] for c in cols)
     n = len(idx)

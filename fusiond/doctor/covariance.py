@@ -8,14 +8,10 @@ integrates into heading and, at speed, into position), or else the process noise
 
 from __future__ import annotations
 
-from ...config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config, GpsSensor, ImuSensor, PoseSensor
 from .series import Series
 from .verdict import Verdict, filter_key
-
-# a cap reached after dropouts is blamed on them (gap_inflation) when one silence lasted 10 s or they add up
-# to a tenth of the run; shorter, rarer silences leave the growth to the dead-reckoning between them
-DROPOUT_LONGEST_S = 10.0
-DROPOUT_FRACTION = 0.1
+from .thresholds import DROPOUT_FRACTION, DROPOUT_LONGEST_S
 
 
 def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, standstill_updates: int) -> Verdict | None:

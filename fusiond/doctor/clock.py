@@ -16,11 +16,11 @@ from array import array
 
 import numpy as np
 
-from ... import reasons
+from .. import reasons
 from .verdict import Verdict, sensor_key
+from .thresholds import CLOCK_DROP_SHARE
 
 MAX_KEPT = 20_000  # offsets kept per sensor (the median of that many is settled; bounded memory)
-MOSTLY = 0.5  # this share of a sensor's samples dropped as far from filter time: its clock, not a glitch
 CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
 
 
@@ -86,7 +86,7 @@ def clock_verdicts(stats: dict[str, dict], clocks: ClockOffsets, sensors: dict |
     for name, st in stats.items():
         received = st.get("received", 0)
         far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
-        if received <= 0 or far < MOSTLY * received:
+        if received <= 0 or far < CLOCK_DROP_SHARE * received:
             continue
         offset = clocks.offset(name)
         if offset is None:

@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import math
 
-from ...samples import ImuSample, OdomSample
-from ..inputs import smoothed_period
-from ..sensors.odom import impossible_stop
+from ..samples import ImuSample, OdomSample
+from ..core.inputs import smoothed_period
+from ..core.sensors.odom import impossible_stop
 
 __all__ = ["LostSamples"]
 

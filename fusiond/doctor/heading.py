@@ -18,18 +18,13 @@ import math
 
 import numpy as np
 
-from ...config import Config, GpsSensor, ImuSensor
-from ..sensors.gps import HEADING_READY_SIGMA
+from ..config import Config, GpsSensor, ImuSensor
+from ..core.sensors.gps import HEADING_READY_SIGMA
 from .gyro import quiet_episodes
 from .series import Series
 from .verdict import Verdict, sensor_key
-
-WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
-WANDER_RAD = 0.05  # rms yaw wander (after bias and scale are removed) that is a disturbance, not noise
-OFFSET_RAD = 0.05  # a mean IMU-vs-track offset this large is worth a yaw_offset
-DRIFT_RAD_S = 0.002  # the IMU yaw's own drift (against the gyro, its bias at rest removed) that is no heading:
-# 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)
-MIN_SPAN_S = 10.0
+from .thresholds import (DRIFT_RAD_S, MIN_SPAN_S, MIN_TURN_RAD, MISSED_INTERVAL_S, MISSED_TURN_RAD, TRACK_OFFSET_RAD,
+                         WANDER_RAD, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, WINDOW_S, ZERO_TURNING_RAD_S)
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -245,7 +240,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                 if excess > 0 and np.mean(r * r) / track_var > 1.0 + 3.0 * math.sqrt(2.0 / n):
                     track_wander = math.sqrt(excess)
                     evidence["imu_vs_gps_track_wander_rad"] = track_wander
-                if abs(offset) < max(OFFSET_RAD, 3.0 * se) or imu.orientation == "relative":
+                if abs(offset) < max(TRACK_OFFSET_RAD, 3.0 * se) or imu.orientation == "relative":
                     offset = math.nan  # not significant (or removed by the relative mode anyway)
     disturbed = (math.isfinite(wander) and wander > WANDER_RAD and not culprit_gyro) or (
         not math.isfinite(wander) and math.isfinite(track_wander) and track_wander > WANDER_RAD)
@@ -315,14 +310,6 @@ def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[floa
     if not rest:
         return math.nan
     return compared[1] + float(np.median([e.gyro_mean for e in rest]))
-
-
-WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
-MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
-WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
-ZERO_TURNING_RAD_S = 0.05  # the gyro turning this fast while the wheels read exactly zero: not at rest
-MISSED_INTERVAL_S = 0.5  # s: an odometry interval counts for at most this much turn time (gaps count nothing)
-MISSED_TURN_RAD = 0.2  # rad (11 deg) of turn the wheels missed in all: worth fusing the gyro for
 
 
 def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
@@ -396,7 +383,7 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
 
 def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
-    from ...config import OdomSensor
+    from ..config import OdomSensor
 
     odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
     imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)]

@@ -10,7 +10,7 @@ then -(mean(m_x) - b_x) over the bins in those stretches where the gyro still tu
 moving). Its standard error is the bins' scatter over the number of SMOOTH_BINS-long pieces (vibration
 is correlated over a bin or two, manoeuvres over seconds).
 
-A deceleration clearly off the configured one (beyond DECEL_TOLERANCE and Z_SIGMAS standard errors) is
+A deceleration clearly off the configured one (beyond DECEL_TOLERANCE and COAST_Z_SIGMAS standard errors) is
 named with the value to paste; what it cost is the difference x T^2 / 2 over a coast of T seconds.
 A vehicle that held its speed (the drive's zero a dropout under power) gets the smallest value that
 keeps the coast on (MIN_COAST_DECEL: 0 would stop the position where the drive went quiet).
@@ -22,20 +22,15 @@ import math
 
 import numpy as np
 
-from ...config import Config, ImuSensor, OdomSensor
-from ..sensors.imu.gyro_bias import quiet_bound
+from ..config import Config, ImuSensor, OdomSensor
+from ..core.sensors.imu.gyro_bias import quiet_bound
 from .gyro import Episode
-from .mounting import SMOOTH_BINS, MountYaw
+from .mounting import MountYaw
 from .series import BIN_S, Series
 from .verdict import Verdict, sensor_key
+from .thresholds import COAST_Z_SIGMAS, DECEL_TOLERANCE, LEVEL_SHARE, MIN_COAST_BINS, MIN_COAST_DECEL, SMOOTH_BINS
 
-__all__ = ["DECEL_TOLERANCE", "MIN_COAST_BINS", "MIN_COAST_DECEL", "coast_verdict"]
-
-MIN_COAST_BINS = 2 * SMOOTH_BINS  # 2 s of coasting measured, at least
-DECEL_TOLERANCE = 0.15  # m/s^2: a coast-down constant this close to the measured one is right enough
-MIN_COAST_DECEL = 0.05  # m/s^2: the smallest advised (a 3 m/s coast then runs a minute); 0 turns the coast off
-Z_SIGMAS = 3.0  # a coast-down is named beyond 3 standard errors (0.27 % two-sided for a normal error)
-LEVEL_SHARE = 0.5  # an accelerometer bin counts when gravity was removed with the IMU's attitude in most of it
+__all__ = ["coast_verdict"]
 
 
 def coast_verdict(series: Series, cfg: Config, mount: MountYaw | None, turning: list[Episode],
@@ -73,7 +68,7 @@ def coast_verdict(series: Series, cfg: Config, mount: MountYaw | None, turning: 
                 "accel_bias_x": mount.bias_x}
     where = (f"while the drive read zero and the gyro turned ({len(turning)} stretch(es), {coast_s:.1f} s measured), "
              f"the accelerometer shows the vehicle ")
-    if abs(decel - configured) <= max(DECEL_TOLERANCE, Z_SIGMAS * se):
+    if abs(decel - configured) <= max(DECEL_TOLERANCE, COAST_Z_SIGMAS * se):
         return Verdict(odom.name, "coast", "ok", where + f"slowing at {decel:.2f} m/s^2 (+- {se:.2f}), as coast_decel "
                        f"= {configured:g} assumes", evidence=evidence)
     key = sensor_key(odom.name, "coast_decel")

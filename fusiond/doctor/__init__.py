@@ -1,0 +1,207 @@
+"""The tuning doctor: what the sources say about each other, turned into one verdict per channel.
+
+It encodes the table a practitioner tunes an EKF with, but NIS alone points the
+wrong way when one source is wrong and the filter follows it (a disturbed
+magnetometer yaw makes the GPS look bad). So besides the innovation statistics the
+doctor compares the sources on the quantities they share (heading, speed, the gyro
+at rest; see ``heading``, ``speed``, ``gyro``, ``twist``) and names the one that
+disagrees with the others, with what it measured and the config key to change. It
+never advises trusting a sensor more while another source contradicts it.
+
+How it is built: every check (``registry.CHECKS``) is one class with one interface, run on the
+run's shared ``evidence.Evidence`` and returning its findings as :class:`Verdict` structs; who is to
+blame when findings meet is decided by the rule table in ``blame``; every threshold a check decides
+by is in ``thresholds``, with where it comes from.
+
+A floor above the fusion core: the core never imports it (its diagnostics records are all the
+doctor reads of it), and only the commands that show verdicts do (replay, tune's advice, monitor).
+
+Pure: no I/O. It is fed diagnostics records, samples and estimates (the replay has
+them all; the live monitor only the diagnostics stream) and returns
+:class:`Verdict` structs that the replay summary, the report and the monitor print.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from ..config import Config, OdomSensor
+from ..samples import OdomSample
+from ..core.sensors.odom import body_twist
+from .attitude import TiltStats
+from .blame import Entry, apply_rules
+from .clock import ClockOffsets
+from .evidence import Evidence
+from .lost import LostSamples
+from .nis import ChannelStats, judge_nis, nis_bounds
+from .registry import CHECKS
+from .series import Series, SeriesCollector
+from .twist import TwistStats
+from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
+
+__all__ = ["Doctor", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
+           "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
+
+# channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
+# GPS innovations whose autocorrelation tells a wandering receiver error from white noise
+KEPT_CHANNELS = ("gyro_bias", "position", "altitude")
+GATE_CHANNELS = ("yaw_jump",)  # every record is a reading its gate kept out: no NIS test (ChannelStats.judged)
+CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)
+
+
+class Doctor:
+    """Accumulates what a run showed. ``cfg`` may be None (a remote monitor that only sees the
+    diagnostics stream): sensors are then known by name only, an orientation channel's mode is
+    read from its components, and the cross-source checks have no series to work on."""
+
+    def __init__(self, cfg: Config | None, window: int | None = None, confidence: float | None = None) -> None:
+        self.known = cfg is not None
+        self.cfg = cfg if cfg is not None else Config()
+        self.window = window or self.cfg.filter.nis_window
+        self.confidence = confidence or self.cfg.filter.nis_confidence
+        self._channels: dict[tuple[str, str], ChannelStats] = {}
+        self.twist = TwistStats()
+        self.tilt = TiltStats()
+        self.collector = SeriesCollector(self.cfg) if self.known else None
+        self._clocks = ClockOffsets()
+        self.t0: float | None = None
+        # Fed for every message of a replay, the doctor only notes what it is given; the records and the
+        # samples are folded into the statistics a chunk at a time, and before anything is read.
+        self._records: list = []
+        self._samples: list = []
+        self.lost = LostSamples()  # lost samples left out of the series (``add_sample``)
+        self._stamp_offset = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
+        self._world_twist = {s.name for s in self.cfg.sensors if isinstance(s, OdomSensor) and s.twist_frame == "world"}
+
+    # -- feeding ---------------------------------------------------------------
+    def add(self, record) -> None:
+        """A diagnostics record."""
+        records = self._records
+        records.append(record)
+        if self.t0 is None or record.stamp < self.t0:
+            self.t0 = record.stamp
+        if len(records) >= CHUNK:
+            self._settle_records()
+
+    def add_twist(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
+                  orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
+        """The twist of an accepted odometry message (and the message's own pose orientation)."""
+        self.twist.add(linear, angular, orientation)
+
+    def add_orientation(self, q: tuple[float, float, float, float]) -> None:
+        """The estimate's attitude (x, y, z, w) at a published pose."""
+        self.tilt.add_orientation(q)
+
+    def add_sample(self, sample) -> None:
+        """A raw sample, as the sensor sent it (for the cross-source series), in arrival order; a lost
+        one (``lost.LostSamples``) is left out. Its stamp is shifted by the sensor's ``stamp_offset_s``, as
+        the core shifts it: the sources are compared at the instants the filter takes them for."""
+        offset = self._stamp_offset.get(sample.sensor)
+        if offset:
+            sample = msgspec.structs.replace(sample, stamp=sample.stamp + offset)
+        if sample.sensor in self._world_twist and type(sample) is OdomSample:
+            body = body_twist(sample)  # the twist as the core takes it: turned into the body by the message's pose
+            if body is not None:
+                sample = msgspec.structs.replace(sample, linear=body[0], angular=body[1])
+        for s in self.lost.admit(sample):
+            self._note_sample(s)
+
+    def _note_sample(self, sample) -> None:
+        samples = self._samples
+        samples.append(sample)
+        if self.collector is not None and (self.t0 is None or sample.stamp < self.t0):
+            self.t0 = sample.stamp
+        if len(samples) >= CHUNK:
+            self._settle_samples()
+
+    def add_estimate(self, t: float, q, pos_var: float, att_var: float, bias_z: float) -> None:
+        if self.collector is not None:
+            self.collector.add_estimate(t, q, pos_var, att_var, bias_z)
+
+    def wants_estimate(self, t: float) -> bool:
+        return self.collector is not None and self.collector.wants_estimate(t)
+
+    @property
+    def channels(self) -> dict[tuple[str, str], ChannelStats]:
+        """Per (sensor, channel), the whole run's statistics (every record fed so far)."""
+        self._settle_records()
+        return self._channels
+
+    @property
+    def clocks(self) -> ClockOffsets:
+        """The sensors' stamp offsets at arrival (every sample fed so far)."""
+        self._settle_samples()
+        return self._clocks
+
+    def _settle_records(self) -> None:
+        if not self._records:
+            return
+        by_channel: dict[tuple[str, str], list] = {}
+        for r in self._records:
+            by_channel.setdefault((r.sensor, r.channel), []).append(r)
+        self._records = []
+        for key, records in by_channel.items():
+            ch = self._channels.get(key)
+            if ch is None:
+                first = records[0]
+                ch = self._channels[key] = ChannelStats(list(first.components), self.window, self.confidence,
+                                                        keep=first.channel in KEPT_CHANNELS,
+                                                        judged=first.channel not in GATE_CHANNELS)
+            ch.extend(records)
+
+    def _settle_samples(self) -> None:
+        samples = self._samples
+        if not samples:
+            return
+        self._samples = []
+        self._clocks.extend([s.sensor for s in samples], [s.stamp for s in samples])
+        if self.collector is not None:
+            self.collector.extend(samples)
+
+    # -- results ------------------------------------------------------------------
+    def series(self) -> Series:
+        self.lost.flush()
+        self._settle_samples()
+        return self.collector.finish() if self.collector is not None else Series()
+
+    def channel_summaries(self) -> dict[str, dict]:
+        """Whole-run NIS figures per channel (the summary's and the report's table)."""
+        return {f"{s}/{c}": ch.summary(self.t0) for (s, c), ch in sorted(self.channels.items())}
+
+    def verdicts(self, stats: dict[str, dict] | None = None, at_cap: bool = False, covariance_resets: int = 0,
+                 scales: dict[str, float] | None = None) -> list[Verdict]:
+        """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
+        return diagnose(self.cfg if self.known else None, self.series(), self.channels, self.twist, self.tilt,
+                        stats, at_cap, covariance_resets, scales, self.t0, self.clocks)
+
+
+def _merge(candidates: list[Verdict]) -> Verdict:
+    """One verdict per channel: the most severe finding leads, the others are appended."""
+    ranked = sorted(candidates, key=lambda v: -LEVELS.index(v.level))
+    top = ranked[0]
+    extra = [v.message for v in ranked[1:] if v.level != "ok" and v.message != top.message]
+    if extra:
+        top = Verdict(top.sensor, top.channel, top.level, top.message + "; also: " + "; ".join(extra), top.key,
+                      top.suggestion, top.evidence)
+    return top
+
+
+def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str], ChannelStats],
+             twist: TwistStats, tilt: TiltStats, stats: dict[str, dict] | None = None, at_cap: bool = False,
+             covariance_resets: int = 0, scales: dict[str, float] | None = None,
+             t0: float | None = None, clocks: ClockOffsets | None = None) -> list[Verdict]:
+    """Every check (``registry.CHECKS``, in order) on the run's evidence, the blame rules over what they
+    found (``blame.RULES``), merged into one verdict per (sensor, channel). ``clocks``: the sensors' stamp
+    offsets measured at arrival (the replay has them), to explain samples dropped as far from filter time."""
+    ev = Evidence(cfg, series, channels, twist, tilt, stats, at_cap, covariance_resets, scales, t0, clocks)
+    entries: list[Entry] = []
+    for check in CHECKS:
+        verdicts = check.run(ev)
+        ev.findings.add(check.name, verdicts)
+        entries.extend(Entry(check.name, ev.findings.slot(v), v) for v in verdicts)
+    found: dict[tuple[str, str], list[Verdict]] = {}
+    for e in apply_rules(ev, entries):
+        found.setdefault(e.key, []).append(e.verdict)
+    order = ev.order
+    keys = sorted(found, key=lambda k: (order.get(k[0], len(order)), k[0], k[1]))
+    return [_merge(found[k]) for k in keys]

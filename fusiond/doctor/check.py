@@ -1,0 +1,33 @@
+"""What a check is: a name, and one way to run it on the run's evidence.
+
+Every check, whether it compares the sources (heading, speed, lever arm), reads one channel's
+innovations or judges the whole run, is run the same way: given the shared :class:`Evidence`,
+it returns its findings as :class:`Verdict` structs (none when it has nothing to say). Who is to
+blame when two findings meet is not a check's business: the rule table (``blame``) decides.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+from .evidence import Evidence
+from .verdict import Verdict
+
+__all__ = ["Check", "found"]
+
+
+@runtime_checkable
+class Check(Protocol):
+    """A check. ``name`` is how the blame rules and later checks refer to its findings; ``needs`` names
+    the checks whose findings it reads (``Evidence.findings``): the registry runs those first."""
+
+    name: str
+    needs: tuple[str, ...]
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        ...
+
+
+def found(v: Verdict | None) -> list[Verdict]:
+    """A check function's single verdict (or None) as a finding list."""
+    return [] if v is None else [v]
