@@ -1,4 +1,4 @@
-"""Issue 7: GPS and pose sensors, mounting offsets, scale states; simulated robots with known truth."""
+"""GPS and pose sensors, mounting offsets, scale states; simulated robots with known truth."""
 
 from __future__ import annotations
 
