@@ -190,7 +190,7 @@ def yaw_jump_verdict(name: str, ch: ChannelStats, orientation: ChannelStats | No
 
 
 def frozen_verdict(name: str, ch: ChannelStats, fixes: int) -> Verdict:
-    """The ``position_frozen`` channel (core/sensors/gps.py ``_frozen``): every record is a fix that repeated
+    """The ``position_frozen`` channel (core/sensors/gps/model.py ``_frozen``): every record is a fix that repeated
     an earlier one (bit for bit, or to FROZEN_JITTER) while the wheels moved on, and was not fused, so its
     NIS says nothing. What it says is that the receiver lost its fix and kept publishing it as if it had
     one: a fault of the receiver (or its driver), no key of the config's."""
@@ -234,7 +234,7 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats, up: ChannelStats | None 
 
 
 def reacquired_verdict(name: str, ch: ChannelStats) -> Verdict:
-    """The ``position_reacquired`` channel (core/sensors/gps.py ``_locked_out``): each record is a fix that
+    """The ``position_reacquired`` channel (core/sensors/gps/model.py ``_locked_out``): each record is a fix that
     ended a run of gated-out fixes which agreed with each other and moved with the wheels, the filter's
     position having drifted beyond its gate; the position was taken from it and the heading searched
     again. Its NIS tests the drift, not the receiver (learning): what it says is that the filter lost the

@@ -1,7 +1,7 @@
 """How a vehicle really slowed while its drive read zero: the accelerometer over the coasts.
 
 Where the wheels read exactly zero while the gyro turns, the vehicle moved with its drive silent
-(``core/sensors/odom.py`` rolls the position on from the last speed, slowing at ``coast_decel``, a
+(``core/sensors/odom/model.py`` rolls the position on from the last speed, slowing at ``coast_decel``, a
 coast-down constant). The accelerometer measured what the vehicle did: on base x its specific force
 minus gravity is dv/dt (the centripetal part of a turn is on y). Its own bias b_x (and gravity leaking
 through a tilt the IMU's attitude did not remove) is the constant the mounting fit finds over the

@@ -98,7 +98,7 @@ def _count_updates(episodes: list[Episode], ch: ChannelStats | None) -> None:
 
 
 def _coast_note(cfg: Config) -> str:
-    """What the position does while the drive reads zero and the vehicle moves (core/sensors/odom.py)."""
+    """What the position does while the drive reads zero and the vehicle moves (core/sensors/odom/model.py)."""
     odom = next(s for s in cfg.sensors if isinstance(s, OdomSensor))
     if odom.coast_decel <= 0.0:
         return (f"The position does not advance while the wheels read zero ({sensor_key(odom.name, 'coast_decel')} "

@@ -38,7 +38,7 @@ def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: Channel
     """The verdict on a gyro bias first learned long after the start, without a heading reference (module doc).
 
     ``ch``: the IMU's gyro_bias channel. The bias counts as learned at its first accepted update (the core's
-    own moment: it also waits out a coast, core/sensors/odom.py), or never; what it is, the first
+    own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the first
     standstill's gyro reading says."""
     imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
     if imu is None or not gyro_fused or len(series.odom_t) < 2:

@@ -121,7 +121,7 @@ class OdomStream:
 
     def __init__(self, sensors: list[OdomSensor], gap_s: float) -> None:
         self.index = {s.name: i for i, s in enumerate(sensors)}
-        # the core's "yaw rate not measured" rule per sensor (see core/sensors/odom.py)
+        # the core's "yaw rate not measured" rule per sensor (see core/sensors/odom/model.py)
         self.declared_unmeasured = np.array([not s.twist_measured[5] for s in sensors], dtype=bool)
         self.overridden = np.array([s.twist_noise is not None for s in sensors], dtype=bool)
         self.max_var = np.array([s.twist_max_sigma[1] ** 2 for s in sensors])

@@ -1,7 +1,7 @@
 /*
  * fusiond.estimator._kernels: the error-state EKF's fixed-size linear algebra, compiled.
  *
- * Why C and not numba (issue 13). At the 9-15 dimensional states fusiond runs, a numpy call
+ * Why C and not numba. At the 9-15 dimensional states fusiond runs, a numpy call
  * costs more in dispatch than in arithmetic, so the propagation P' = F P F^T + Q and the masked
  * Kalman update were ~20 us of Python and numpy calls per step. numba compiles the same loops,
  * but importing it and loading its cache costs 0.4 s + ~0.85 s per process (measured on this

@@ -1,13 +1,13 @@
-"""The doctor on an agile vehicle (third QA trial): a race car turning at ~1 rad/s whose IMU reports its own
+"""The doctor on an agile vehicle: a race car turning at ~1 rad/s whose IMU reports its own
 AHRS yaw, relative to power-on, with small white noise and a slow drift.
 
-The doctor once paired each bin's mean IMU yaw (it holds at the bin's middle) with the integrated gyro
-heading reached when the bin closed (its end): a skew of BIN_S / 2 = 0.1 s, which a vehicle turning at
-w reads as w x 0.1 s of yaw "wander" (0.06 rad on QA's F1/10 bag, over WANDER_RAD), so a correct yaw was
-called magnetometer-disturbed and ``orientation = "roll_pitch"`` advised, after the doctor itself had
-advised ``"relative"`` for the heading lost across logging gaps. The comparisons are now made at the
+Pairing each bin's mean IMU yaw (it holds at the bin's middle) with the integrated gyro heading reached
+when the bin closes (its end) is a skew of BIN_S / 2 = 0.1 s, which a vehicle turning at w reads as
+w x 0.1 s of yaw "wander" (0.06 rad on an F1/10 car's bag, over WANDER_RAD): a correct yaw would be
+called magnetometer-disturbed and ``orientation = "roll_pitch"`` advised, against the doctor's own
+advice of ``"relative"`` for the heading lost across logging gaps. So the comparisons are made at the
 instants each value holds at (``Series.*_heading_at``, ``imu_yaw_at``). The simulation has the trait
-(the bin-paired figure exceeds WANDER_RAD), the doctor no longer calls the yaw disturbed, and a yaw
+(the bin-paired figure exceeds WANDER_RAD), the doctor does not call the yaw disturbed, and a yaw
 with tens of degrees of real disturbance is still named.
 """
 
@@ -83,7 +83,7 @@ def race_car(duration: float = 90.0, stated_yaw_sigma: float = YAW_SIGMA, distur
 
 
 def bin_paired_wander(series) -> float:
-    """The wander the doctor used to measure: each bin's closing gyro heading paired with the IMU's mean yaw
+    """The wander a bin-paired comparison measures: each bin's closing gyro heading paired with the IMU's mean yaw
     of the bin at the same index time (both stamped at their bins' middles)."""
     ti, yi = np.array(series.imu_t), np.array(series.imu_yaw)
     tg, hg = np.array(series.gyro_t), np.array(series.gyro_heading)

@@ -1,8 +1,9 @@
 """A gyro bias that drifts with temperature, told from one false standstill (a skid-steer and a race car).
 
 Both show as standstills that disagree and updates rejected. One odd standstill (the vehicle coasting while its
-wheels read zero) sits off the line through the others; a drifting bias puts every standstill on one line. The
-doctor used to name the first standstill as false and advise ``standstill_s``; a drift needs ``gyro_bias_walk``.
+wheels read zero) sits off the line through the others; a drifting bias puts every standstill on one line. A
+doctor that takes the first standstill for a false one would advise ``standstill_s``; a drift needs
+``gyro_bias_walk``.
 """
 
 from __future__ import annotations

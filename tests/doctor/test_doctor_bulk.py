@@ -1,7 +1,7 @@
-"""The doctor folds what it is fed into its statistics in bulk, a chunk at a time (issue 13: the replay feeds
-it every message, and one-at-a-time bookkeeping cost more than half of the fusion core's own time).
+"""The doctor folds what it is fed into its statistics in bulk, a chunk at a time: the replay feeds
+it every message, and one-at-a-time bookkeeping would cost more than half of the fusion core's own time.
 
-The bulk code claims the same floats as the one-at-a-time loop it replaced: running sums are continued
+The bulk code claims the same floats as a one-at-a-time loop: running sums are continued
 across chunks, bins and integrations carry over, the reorder buffer releases samples in the same order.
 So the doctor's whole output must not depend on where the chunks end, and the pieces are held to direct
 one-at-a-time references (a heap for the reorder buffer, a deque for the NIS window, plain sums).

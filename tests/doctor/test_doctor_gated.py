@@ -1,10 +1,10 @@
-"""The doctor's NIS advice on a gated GPS (third QA trial): a fix the Mahalanobis gate rejected was not fused,
-so its NIS says nothing about the stated noise.
+"""The doctor's NIS advice on a gated GPS: a fix the Mahalanobis gate rejected is not fused, so its NIS
+says nothing about the stated noise.
 
-QA: a GPS with ``mahalanobis_threshold = 5`` whose receiver reported a few fixes at 0, 0 (thousands of km off,
-a NIS of ~1e14 each): the gate kept them out, but the whole-run mean NIS counted them, and the doctor
-advised "the stated noise is too small" for a GPS whose applied fixes agreed with it. The summary table still
-prints the whole-run mean (every update, with its rejected count); the doctor judges the applied ones.
+A GPS with ``mahalanobis_threshold = 5`` whose receiver reports a few fixes at 0, 0 (thousands of km off,
+a NIS of ~1e14 each): the gate keeps them out, but the whole-run mean NIS counts them, and a doctor judging
+by it would advise "the stated noise is too small" for a GPS whose applied fixes agree with it. The summary
+table prints the whole-run mean (every update, with its rejected count); the doctor judges the applied ones.
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ def test_a_gps_with_gated_outlier_fixes_end_to_end():
     fixes, NIS ~ (220 / 0.3)^2 = 5e5 each, so the whole-run mean is ~1.3e4 per dof. With the gate at 5 they
     are rejected (sqrt(NIS) ~ 700 >> 5) and the other ~115 fixes are the clean run's (NIS ~1 per dof):
     no "noise too small". Without a gate (``inf``; 5 is the default) they are fused: the doctor's NIS verdict then has them as evidence
-    and names the stated noise (as before)."""
+    and names the stated noise."""
     samples = outliers(sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0)), 40, 0.002)
     gated = one(verdicts_of(robot_config(gps=f"mahalanobis_threshold = {GATE}"), samples), "gps", "position")
     assert "only because of the 3 update(s) the gate rejected" in gated.message, gated
@@ -94,8 +94,8 @@ def test_a_gps_with_gated_outlier_fixes_end_to_end():
 
 
 def test_a_wandering_gps_with_gated_outliers_gets_the_wander_verdict():
-    """The second QA trial's wandering receiver (white 0.6 m plus a Gauss-Markov wander of 1.2 m, tau 60 s,
-    2 Hz for 400 s, stating 2.2 m: the filter follows the wander, NIS low; tests/doctor/test_doctor_qa2.py) with
+    """A real receiver's wander (white 0.6 m plus a Gauss-Markov wander of 1.2 m, tau 60 s,
+    2 Hz for 400 s, stating 2.2 m: the filter follows the wander, NIS low; tests/doctor/test_doctor_faults.py) with
     every 100th fix 220 m off, gated at 5: 8 fixes of NIS ~(220 / 2.2)^2 = 1e4 among 800 make the whole-run
     mean ~50 per dof, "nis_high". The applied ones read low, as without the outliers, so the verdict is the
     wander's (error_tau_s), not "noise too small" and not "lower position_noise"."""

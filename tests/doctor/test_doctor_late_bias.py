@@ -33,7 +33,7 @@ GYRO_SIGMA = 0.004  # rad/s
 WHEEL_SIGMA = 0.03
 YAW_SIGMA = 0.005  # rad: the AHRS yaw's white noise
 REST_AT, REST_S = 40.0, 3.0  # the first standstill
-BRAKE_S = 1.0  # s of braking before it (2 m/s^2: a stop, not the drive dropping out, see core/sensors/odom.py)
+BRAKE_S = 1.0  # s of braking before it (2 m/s^2: a stop, not the drive dropping out, see core/sensors/odom/model.py)
 DURATION = 70.0
 STANDSTILL_S = 0.3  # the filter's default standstill_s (the first window closes this long after REST_AT)
 LEARNED_AT = REST_AT + STANDSTILL_S
@@ -193,7 +193,7 @@ def test_a_bias_moved_by_a_drifting_fused_yaw_is_not_put_down_to_the_gyro_noise(
     gyro, pulls the bias estimate towards 0 while the car drives, and the first standstill's windows (2 s
     at 30 s) find the gyro reading 0.004 at rest: NIS high. The gyro's noise at rest measures what is
     stated (GYRO_SIGMA, within its sampling error over ~200 samples a window: well inside 1.5x), so
-    "gyro_noise = <the same value>" was no advice: the verdict names the bias being moved, and the yaw."""
+    "gyro_noise = <the same value>" would be no advice: the verdict names the bias being moved, and the yaw."""
     samples = weaving_car(yaw_drift=GYRO_BIAS, rest_at=30.0, rest_s=2.0, duration=52.0)
     result, _, _ = replay(samples, "relative")
     assert result.doctor.channels[("imu", "gyro_bias")].verdict() == "nis_high"  # the simulation has the trait

@@ -1,4 +1,4 @@
-"""What a new user hit (issue 28), each through the real CLI: `fusiond.cli.main([...])` in-process with
+"""What a new user runs into, each through the real CLI: `fusiond.cli.main([...])` in-process with
 the captured output, or the installed `fusiond` in a process where one is needed (the daemon)."""
 
 from __future__ import annotations

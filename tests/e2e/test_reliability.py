@@ -1,4 +1,4 @@
-"""Reliability of `fusiond run` (issue 5): bad input and faults against a live daemon.
+"""Reliability of `fusiond run`: bad input and faults against a live daemon.
 
 Real `fusiond run` subprocesses on real Zenoh sessions over loopback, no mocks.
 Every wait has a deadline, every process is killed in a `finally`, and no

@@ -132,7 +132,7 @@ def test_missing_bag_is_a_clear_error(tmp_path):
     assert proc.returncode == 2 and "nope.bag" in proc.stderr
 
 
-# -- issue 12: errors instead of silent empty runs ---------------------------------------------------------
+# -- errors instead of silent empty runs -------------------------------------------------------------------
 def _config_with_keys(tmp_path, odom_key: str, imu_key: str) -> Path:
     text = (ROOT / "examples/jackal.toml").read_text()
     text = text.replace('key = "jackal_velocity_controller/odom"', f'key = "{odom_key}"')

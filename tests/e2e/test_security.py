@@ -1,4 +1,4 @@
-"""Security of `fusiond run` (issue 5): Zenoh mutual TLS and access control, configured through
+"""Security of `fusiond run`: Zenoh mutual TLS and access control, configured through
 `zenoh.config_file` (native Zenoh JSON5), against real daemon subprocesses on loopback.
 
 Certificates are generated in the test with the `openssl` CLI (skipped without it). The JSON5

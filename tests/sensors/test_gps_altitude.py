@@ -1,4 +1,4 @@
-"""Issue 11 item 8: a receiver whose altitude wanders far beyond its stated sigma must not lift a
+"""A receiver whose altitude wanders far beyond its stated sigma must not lift a
 flat-lot robot; axes stated as "not measured" are not fused."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 11 items 5 and 6: GPS that corrects along the track, and a heading initialisation that converges.
+"""GPS that corrects along the track, and a heading initialisation that converges.
 
 Simulated drives with known truth (tests/support/sim_gps.py): the wheels read 1 % slow (speed scale 0.99),
 the filter starts 2 rad off the true heading, fixes carry 2.1 m white noise per axis (a consumer

@@ -1,4 +1,4 @@
-"""Issue 7: GPS and pose sensors, mounting offsets, scale states; simulated robots with known truth."""
+"""GPS and pose sensors, mounting offsets, scale states; simulated robots with known truth."""
 
 from __future__ import annotations
 
@@ -591,7 +591,7 @@ def test_gps_error_keys_are_validated(gps, needle):
 
 
 def test_gps_error_state_is_vertical_only_by_default_and_a_block_when_configured():
-    default = FusionCore(_gps_config())  # the altitude's wander only (issue 11): horizontal stays white
+    default = FusionCore(_gps_config())  # the altitude's wander only: horizontal stays white
     assert default.layout.blocks[-1].name == "gps_error" and default.layout.blocks[-1].sigma == (0.0, 0.0, 5.0)
     assert not FusionCore(_gps_config("vertical_error_sigma = 0.0")).layout.has("gps_error")
     off = FusionCore(_gps_config("error_tau_s = 0.0\nerror_sigma = [1.0, 1.0, 1.0]\nvertical_error_sigma = 0.0"))
@@ -609,7 +609,7 @@ def test_gauss_markov_gps_error_state_tracks_truth_better_through_wander_and_fro
     The receiver reports only its white noise (as real ones do). Without the state the filter
     follows each fix's slow error; with it the odometry-tied track averages the error over tau.
     Measured on this world (seed 8, 6000 poses): RMS vs truth 1.49 m without, 0.94 m with (0.63x); the
-    frozen stretches are recognised and not fused either way (issue 11).
+    frozen stretches are recognised and not fused either way.
     """
     w = _gps_world(duration=360.0, gps_sigma=0.3, gps_error_tau=30.0, gps_error_sigma=1.0,
                    gps_freeze=((50.0, 54.0), (150.0, 153.0), (250.0, 256.0)), seed=8)

@@ -1,4 +1,4 @@
-"""Issue 11 item 5: odometry noise per second of travel, not per message; wheel scale on with GPS."""
+"""Odometry noise per second of travel, not per message; wheel scale on with GPS."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 13: sensor kinds are models behind one interface, built from their config and a narrow context.
+"""Sensor kinds are models behind one interface, built from their config and a narrow context.
 
 A model never sees the core: these tests drive models with a context built by hand (plain
 functions for its two queries) and a fresh FilterState, and check that what a model keeps

@@ -1,4 +1,4 @@
-"""Issue 11 item 7: an absolute (magnetometer) yaw that can be wrong, beside a GPS.
+"""An absolute (magnetometer) yaw that can be wrong, beside a GPS.
 
 The IMU's yaw is heading + offset: an estimated offset block (constant + random walk),
 made observable by the GPS track, with navsat_transform's yaw_offset / magnetic_declination

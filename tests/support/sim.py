@@ -30,7 +30,7 @@ class SimConfig:
     imu_yaw_offset: float = 0.0  # the IMU's own yaw reference (magnetic north, ...)
     imu_yaw_wander: float = 0.0  # amplitude (rad) of a slow magnetic disturbance of the IMU's yaw
     seed: int = 3
-    # traits for the doctor's tests (issue 12); the defaults leave every other simulation unchanged
+    # traits for the doctor's tests; the defaults leave every other simulation unchanged
     speed: float = 1.0  # m/s while driving
     stops: tuple[tuple[float, float], ...] = ()  # (t0, t1) relative: genuine standstills
     false_stops: tuple[tuple[float, float, float], ...] = ()  # (t0, t1, yaw rate): wheels read 0, robot turns

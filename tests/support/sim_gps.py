@@ -1,4 +1,4 @@
-"""A wheeled robot with GPS and pose sensors, with known truth (issue 7 tests).
+"""A wheeled robot with GPS and pose sensors, with known truth.
 
 Planar robot in an ENU world starting at an unknown position and heading. The
 wheels misread distance (``wheel_scale``: true speed = wheel_scale * reported),
@@ -68,7 +68,7 @@ class World:
     pose_origin_drift: float = 0.0  # the pose sensor's origin creeps along x, m/s
     pose_origin_jump: tuple[float, float, float, float] | None = None  # (t, dx, dy, dyaw): a relocalisation
     pose_increment_noise: bool = False  # visual odometry: pose_sigma is per message increment, and accumulates
-    # an IMU that also reports an absolute (magnetometer) yaw: offset + slow disturbance (issue 12)
+    # an IMU that also reports an absolute (magnetometer) yaw: offset + slow disturbance
     seed: int = 5
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw (every odom stamp)
     fixes: list[tuple[float, float, float]] = field(default_factory=list)  # t east north of every valid fix

@@ -245,7 +245,7 @@ def test_cholesky_whitening_matches_numpy(m, seed):
     assert whiten((-S).tolist(), y.tolist()) is None
 
 
-# -- scale states (issue 7) -------------------------------------------------------------------------------------
+# -- scale states -----------------------------------------------------------------------------------------------
 
 def _scale_layout(bias: bool = True) -> StateLayout:
     from fusiond.estimator import GyroScaleBlock, WheelScaleBlock

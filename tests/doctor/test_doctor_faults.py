@@ -1,4 +1,4 @@
-"""The doctor on the faults of the second QA trial (issue 12 follow-up): a logging gap, a wandering
+"""The doctor on five real-robot faults: a logging gap, a wandering
 GPS error, an overstated gyro noise, a yaw rate nobody measures, a sensor on another clock.
 
 Each fault is applied to a simulation (tests/support/sim_faults.py) and run through `run_samples`, the
@@ -44,8 +44,9 @@ def test_a_logging_gap_does_not_make_a_correct_imu_yaw_look_disturbed(gap):
     """The IMU's yaw (noise 0.002 rad) and the integrated gyro (0.002 rad/s at 100 Hz: a random walk of
     0.0002 rad/sqrt(s), 0.0015 rad over a 60 s window) agree to a few milli-radians: far below
     WANDER_RAD (0.05). Across the gap the gyro is not integrated while the IMU yaw turns on by
-    missed_turn (1.12 rad, over 20 x WANDER_RAD): a 60 s window spanning it read that step as 0.3 rad
-    of wander (QA: race car, 25 s gap, 0.32 rad, 'magnetometer-disturbed'). Windows restart at a gap."""
+    missed_turn (1.12 rad, over 20 x WANDER_RAD): a 60 s window spanning it would read that step as 0.3 rad
+    of wander (a race car's 25 s gap read as 0.32 rad of wander: 'magnetometer-disturbed'). Windows restart
+    at a gap."""
     cfg = SimConfig(duration=90.0, standstill=2.0)
     samples = simulate(cfg)
     assert abs(missed_turn(cfg)) > 20 * WANDER_RAD  # the fault is real: the gap hides a large turn
@@ -147,8 +148,8 @@ def test_wheel_scale_chords_do_not_span_a_logging_gap():
     """The wheels read the true speed. GPS 0.3 m white on chords of 10 m: each chord's ratio scatters by
     sqrt(2) x 0.3 / 10 = 4.2 %, over the ~9 chords of 120 s at 1 m/s the scale is known to ~1.4 %: its
     standard error stays below 2 % and the scale within 3 of them of 1. A chord across the 10 s gap
-    compared 10 m of GPS travel more than of wheel travel (the wheels were not logged): it read 1.108
-    +- 0.078 before such chords were left out."""
+    would compare 10 m of GPS travel more than of wheel travel (the wheels are not logged): with such
+    chords the scale reads 1.108 +- 0.078, so they are left out."""
     samples = drop_span(sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0)), T0 + 60.0, T0 + 70.0)
     v = one(verdicts_of(robot_config(gps="", odom="scale_estimation = false"), samples), "wheel", "speed")
     se = v.evidence["wheel_scale_se"]
@@ -157,7 +158,7 @@ def test_wheel_scale_chords_do_not_span_a_logging_gap():
 
 
 # -- 2. a wandering GPS error is named as such, not "lower position_noise" ----------------------------------
-# The QA receiver: white 0.6 m plus a Gauss-Markov wander of 1.2 m (tau 60 s), 2 Hz, stating 2.2 m (HDOP).
+# A real receiver's error: white 0.6 m plus a Gauss-Markov wander of 1.2 m (tau 60 s), 2 Hz, stating 2.2 m (HDOP).
 # 400 s is ~7 correlation times: the wander decorrelates within the lags the doctor looks at (a quarter
 # of the run, 100 s).
 def test_wandering_gps_error_names_error_tau_and_sigma_not_position_noise():
@@ -165,7 +166,7 @@ def test_wandering_gps_error_names_error_tau_and_sigma_not_position_noise():
     result = run_samples(samples, robot_config(gps=STATED_HDOP))
     verdicts = result.verdicts()
     agree(result.doctor, verdicts)
-    assert result.doctor.channels[("gps", "position")].verdict() == "nis_low"  # the QA's symptom
+    assert result.doctor.channels[("gps", "position")].verdict() == "nis_low"  # the symptom a user sees
     v = one(verdicts, "gps", "position")
     assert v.key == "sensors.gps.error_tau_s" and v.level == "warn", v
     assert "position_noise" not in v.key and "error_sigma = [" in v.suggestion, v
