@@ -102,15 +102,10 @@ class BagSamples:
     def _messages(self) -> Iterator[tuple[Connection, int, bytes]]:
         """The reader's messages; what rosbags raises on a damaged chunk (a corrupt compressed block,
         a truncated record) becomes a BagError naming the bag, not a traceback halfway through."""
-        messages = iter(bag1_records.messages(self._reader, self._connections))
-        while True:
-            try:
-                item = next(messages)
-            except StopIteration:
-                return
-            except Exception as err:  # noqa: BLE001 - rosbags raises builtins (OSError, AssertionError) on garbage
-                raise BagError(unreadable(self._names, err)) from None
-            yield item
+        try:  # delegated: what the reader raises reaches here, what the consumer raises does not
+            yield from bag1_records.messages(self._reader, self._connections)
+        except Exception as err:  # noqa: BLE001 - rosbags raises builtins (OSError, AssertionError) on garbage
+            raise BagError(unreadable(self._names, err)) from None
 
     def close(self) -> None:
         if self._reader.stack is not None:

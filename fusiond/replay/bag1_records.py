@@ -61,8 +61,18 @@ def messages(reader: AnyReader, connections: Sequence[Connection]) -> Iterator[t
     return merge(*generators, key=lambda m: m[1])
 
 
+# A message record's header as rosbag (C++) writes it: the fields time, conn and op in that order
+# (its sorted map); a header with exactly these bytes around the values reads as the loop below reads it
+_TIME_CONN_OP = struct.Struct("<II5sIII5sII3sB")
+
+
 def _header(buf: bytes, pos: int) -> tuple[int, Any, Any, int]:
     """(op, conn, time ns, end of the header) of the record at ``pos``; conn and time None if absent."""
+    if len(buf) >= pos + 42:
+        size, f1, n1, sec, nsec, f2, n2, conn, f3, n3, op = _TIME_CONN_OP.unpack_from(buf, pos)
+        if (size == 38 and f1 == 13 and n1 == b"time=" and f2 == 9 and n2 == b"conn=" and f3 == 4
+                and n3 == b"op="):
+            return op, conn, sec * 1_000_000_000 + nsec, pos + 42
     (size,) = _U32(buf, pos)
     p = pos + 4
     end = p + size

@@ -87,3 +87,30 @@ def test_a_record_whose_time_is_not_the_index_time_is_refused() -> None:
     assert bag1_records._header(record, 0) == (2, 0, 0, 4 + len(header))
     with pytest.raises(bag1_records.RecordError):
         bag1_records._header(record[:20], 0)
+
+
+def test_rosbags_c_plus_plus_header_layout_reads_as_the_general_parser_reads_it(jackal_bag: Path) -> None:
+    """The time, conn, op header rosbag (C++) writes takes one struct read; any other byte in its
+    frame (a field length, a name) sends it through the general parser, which reads the same."""
+    def field(name: bytes, value: bytes) -> bytes:
+        return len(name + b"=" + value).to_bytes(4, "little") + name + b"=" + value
+
+    def record(*fields: bytes) -> bytes:
+        header = b"".join(fields)
+        return len(header).to_bytes(4, "little") + header + (1).to_bytes(4, "little") + b"x"
+
+    time = (47).to_bytes(4, "little") + (5_000_000).to_bytes(4, "little")
+    cpp = record(field(b"time", time), field(b"conn", (3).to_bytes(4, "little")), field(b"op", b"\x02"))
+    other = record(field(b"conn", (3).to_bytes(4, "little")), field(b"time", time), field(b"op", b"\x02"))
+    longer = record(field(b"time", time), field(b"conn", (3).to_bytes(4, "little")), field(b"op", b"\x02\x00"))
+    assert bag1_records._header(b"pad" + cpp, 3) == (2, 3, 47_005_000_000, 3 + 42)
+    assert bag1_records._header(other, 0) == (2, 3, 47_005_000_000, 42)
+    assert bag1_records._header(longer, 0) == (2, 3, 47_005_000_000, 43)
+    with AnyReader([jackal_bag]) as reader:  # the Jackal bag's records have the C++ layout
+        r = reader.readers[0]
+        entry = r.indexes[reader.connections[0].id][0]
+        chunk = r.chunks[entry.chunk_pos]
+        r.bio.seek(chunk.datapos)
+        buf = chunk.decompressor(r.bio.read(chunk.datasize))
+    assert buf[entry.offset + 8 : entry.offset + 13] == b"time="
+    assert bag1_records._header(buf, entry.offset)[2] == entry.time
