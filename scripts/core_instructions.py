@@ -4,7 +4,8 @@ Wall and CPU times on a shared machine move with its load; an instruction count 
 runs the `FusionCore` loop of `fusiond bench` (samples decoded beforehand, then ingested, a pose
 read after each odometry sample) under `valgrind --tool=callgrind` twice, over the first N and the
 first 2N samples of a workload, and prints the difference per message: the interpreter's start,
-the imports and the bag reading cancel out.
+the imports and the bag reading cancel out. The garbage collector is off while the samples are
+fused (the count is the core's own work; the collector's is the replay's and the daemon's).
 
     .venv/bin/python scripts/core_instructions.py [--workload jackal|synthetic] [--messages 1000]
 
@@ -57,12 +58,19 @@ def _synthetic(messages: int):
 
 def _child(workload: str, count: int) -> None:
     """Fuse WARM_UP samples, then the first ``count`` of the workload in a fresh core."""
+    import gc
+
     import structlog
 
     from fusiond.core.fusion import FusionCore
 
     structlog.configure(logger_factory=structlog.ReturnLoggerFactory())  # the core's logs cost nothing here
     cfg, samples = _jackal() if workload == "jackal" else _synthetic(count + WARM_UP)
+    # The collector off while fusing: when its runs come depends on everything the process allocated
+    # before (the bag reading, the workload's size), so one more or one fewer full collection in either
+    # count moved the figure by thousands of instructions a message, or made it negative.
+    gc.collect()
+    gc.disable()
     for part in (samples[:WARM_UP], samples[:count]):
         core = FusionCore(cfg)
         for s in part:
