@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import subprocess
 import sys
@@ -25,6 +26,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 WARM_UP = 200  # samples fused first in each count: imports and first allocations, alike in both runs
+# numpy's BLAS threads, started at import, spin for a while in their wait; callgrind counts every thread's
+# instructions, and how long they spin depends on how valgrind schedules them: with them the same count
+# came out 174,000 one run and 201,000 the next, without them within 1 % (the core's matrices have a
+# few dozen rows at most: one thread is what its products use anyway).
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def _jackal():
@@ -83,7 +89,8 @@ def _count(workload: str, count: int) -> tuple[int, int]:
     """(samples fused, instructions) of one child under callgrind."""
     proc = subprocess.run(
         ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, __file__,
-         "--child", workload, str(count)], capture_output=True, text=True, check=True, cwd=ROOT)
+         "--child", workload, str(count)], capture_output=True, text=True, check=True, cwd=ROOT,
+        env={**os.environ, **ONE_THREAD})
     collected = re.search(r"Collected\s*:\s*([\d,]+)", proc.stderr)
     if collected is None:
         raise SystemExit(f"no instruction count in valgrind's output:\n{proc.stderr[-2000:]}")
