@@ -4,7 +4,8 @@ Wall and CPU times on a shared machine move with its load; an instruction count 
 runs the `FusionCore` loop of `fusiond bench` (samples decoded beforehand, then ingested, a pose
 read after each odometry sample) under `valgrind --tool=callgrind` twice, over the first N and the
 first 2N samples of a workload, and prints the difference per message: the interpreter's start,
-the imports and the bag reading cancel out.
+the imports and the bag reading cancel out. The garbage collector is off while the samples are
+fused (the count is the core's own work; the collector's is the replay's and the daemon's).
 
     .venv/bin/python scripts/core_instructions.py [--workload jackal|synthetic] [--messages 1000]
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import subprocess
 import sys
@@ -24,6 +26,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 WARM_UP = 200  # samples fused first in each count: imports and first allocations, alike in both runs
+# numpy's BLAS threads, started at import, spin for a while in their wait; callgrind counts every thread's
+# instructions, and how long they spin depends on how valgrind schedules them: with them the same count
+# came out 174,000 one run and 201,000 the next, without them within 1 % (the core's matrices have a
+# few dozen rows at most: one thread is what its products use anyway).
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def _jackal():
@@ -57,12 +64,19 @@ def _synthetic(messages: int):
 
 def _child(workload: str, count: int) -> None:
     """Fuse WARM_UP samples, then the first ``count`` of the workload in a fresh core."""
+    import gc
+
     import structlog
 
     from fusiond.core.fusion import FusionCore
 
     structlog.configure(logger_factory=structlog.ReturnLoggerFactory())  # the core's logs cost nothing here
     cfg, samples = _jackal() if workload == "jackal" else _synthetic(count + WARM_UP)
+    # The collector off while fusing: when its runs come depends on everything the process allocated
+    # before (the bag reading, the workload's size), so one more or one fewer full collection in either
+    # count moved the figure by thousands of instructions a message, or made it negative.
+    gc.collect()
+    gc.disable()
     for part in (samples[:WARM_UP], samples[:count]):
         core = FusionCore(cfg)
         for s in part:
@@ -75,7 +89,8 @@ def _count(workload: str, count: int) -> tuple[int, int]:
     """(samples fused, instructions) of one child under callgrind."""
     proc = subprocess.run(
         ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, __file__,
-         "--child", workload, str(count)], capture_output=True, text=True, check=True, cwd=ROOT)
+         "--child", workload, str(count)], capture_output=True, text=True, check=True, cwd=ROOT,
+        env={**os.environ, **ONE_THREAD})
     collected = re.search(r"Collected\s*:\s*([\d,]+)", proc.stderr)
     if collected is None:
         raise SystemExit(f"no instruction count in valgrind's output:\n{proc.stderr[-2000:]}")

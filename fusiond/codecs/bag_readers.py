@@ -49,12 +49,31 @@ def _ros1_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> Bl
         return None
 
 
-def _fast_odom_ros1(buf: Payload, sensor: str) -> OdomSample | None:
-    return odom_from_block(_ros1_block(buf, True, ODOM_BLOCK), sensor)
+class _Ros1Stream:
+    """One topic's ROS 1 reader, skipping what repeats from message to message (as
+    `cdr_fast_path.RepeatedLayout` does for CDR): a topic's messages carry the same frame ids,
+    so they have the same length and the same bytes from the end of the header's stamp (offset
+    12) to the float64 block. A message with the length and those bytes of the last one
+    `_ros1_block` accepted passes every check it would make, byte for byte the same: its block
+    is unpacked at once. Anything else takes `_ros1_block`'s full checks."""
 
+    __slots__ = ("has_child_frame", "block", "make", "length", "middle")
 
-def _fast_imu_ros1(buf: Payload, sensor: str) -> ImuSample | None:
-    return imu_from_block(_ros1_block(buf, False, IMU_BLOCK), sensor)
+    def __init__(self, has_child_frame: bool, block: struct.Struct, make: Callable) -> None:
+        self.has_child_frame, self.block, self.make = has_child_frame, block, make
+        self.length = -1  # length of the remembered message (-1: none yet)
+        self.middle = b""  # its bytes [12, length - block size)
+
+    def __call__(self, buf: Payload, sensor: str) -> Sample | None:
+        n = len(buf)
+        at = n - self.block.size
+        if n == self.length and buf[12:at] == self.middle:
+            _, sec, nanosec = _ROS1_HEAD(buf, 0)
+            return self.make((sec + nanosec * 1e-9, self.block.unpack_from(buf, at)), sensor)
+        got = _ros1_block(buf, self.has_child_frame, self.block)
+        if got is not None:
+            self.length, self.middle = n, bytes(buf[12:at])
+        return self.make(got, sensor)
 
 
 _HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id
@@ -63,8 +82,8 @@ _FAST_LAYOUTS: Final = {
     IMU: (*_HEADER_LAYOUT, *("float64",) * 37),
 }
 _FAST_PATHS: Final = {
-    (ODOMETRY, False): fast_odom, (ODOMETRY, True): _fast_odom_ros1,
-    (IMU, False): fast_imu, (IMU, True): _fast_imu_ros1,
+    (ODOMETRY, False): fast_odom, (ODOMETRY, True): lambda: _Ros1Stream(True, ODOM_BLOCK, odom_from_block),
+    (IMU, False): fast_imu, (IMU, True): lambda: _Ros1Stream(False, IMU_BLOCK, imu_from_block),
 }
 
 
@@ -103,7 +122,8 @@ def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Paylo
     """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR), when the
     bag's definition of it (in ``store``, the bag reader's type store) has the standard layout.
 
-    It returns the sample, or None for a message it does not read exactly as rosbags would
+    A ROS 1 reader remembers its stream's layout (`_Ros1Stream`): one per topic. It returns the
+    sample, or None for a message it does not read exactly as rosbags would
     (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority
     on errors. None when ``msgtype`` has no fast path or the bag defines it differently.
     """
@@ -112,4 +132,6 @@ def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Paylo
         return None
     if ros1:
         want = ("uint32", *want)  # header.seq
-    return _FAST_PATHS[msgtype, ros1] if flat_layout(store, msgtype) == want else None
+    if flat_layout(store, msgtype) != want:
+        return None
+    return _FAST_PATHS[msgtype, ros1]() if ros1 else _FAST_PATHS[msgtype, ros1]

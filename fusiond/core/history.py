@@ -23,20 +23,30 @@ from .state import FilterState
 
 Key = tuple[float, int]  # (stamp, sensor index): ties broken by sensor, never by arrival
 SCAN = 8  # ``trim`` steps over this many keys before it bisects
+COMPACT = 256  # dropped entries deleted from the lists' front at once
 
 
 class History:
+    """``keys[start:]``, ``events[start:]`` and ``after[start:]`` are the history, oldest first: ``trim``
+    drops from the front by moving ``start`` (deleting one entry at the front of a list moves all the
+    others: at 1 kHz, a second of history moved once a message), and the dropped entries are deleted
+    in one block once COMPACT of them have gathered."""
+
     def __init__(self, base: FilterState | None) -> None:
         self.keys: list[Key] = []
         self.events: list[tuple[int, Any, float]] = []
         self.after: list[FilterState] = []
+        self.start = 0  # entries before it are dropped (the snapshots among them are in _free or the base)
         self.base = base.copy() if base is not None else None
         self._free: list[FilterState] = []  # snapshots no longer referenced, to be overwritten
 
     def slot(self, key: Key) -> tuple[int, bool]:
         """(insert position, is a duplicate of an applied sample)."""
-        pos = bisect.bisect_right(self.keys, key)
-        return pos, pos > 0 and self.keys[pos - 1] == key
+        keys = self.keys
+        if keys and key > keys[-1]:  # the newest sample (nearly every one): after all, equal to none
+            return len(keys), False
+        pos = bisect.bisect_right(keys, key, self.start)
+        return pos, pos > self.start and keys[pos - 1] == key
 
     def is_late(self, pos: int) -> bool:
         return pos < len(self.keys)
@@ -46,7 +56,7 @@ class History:
 
     def state_before(self, pos: int) -> FilterState:
         """A copy the caller owns (it becomes the live state)."""
-        return (self.after[pos - 1] if pos > 0 else self.base).copy()
+        return (self.after[pos - 1] if pos > self.start else self.base).copy()
 
     def insert(self, pos: int, key: Key, event: tuple[int, Any, float], state: FilterState) -> None:
         self.keys.insert(pos, key)
@@ -65,21 +75,27 @@ class History:
     def trim(self, history_s: float, history_max: int) -> None:
         """Drop the samples older than ``history_s`` before the newest, and beyond ``history_max``."""
         keys = self.keys
+        start = self.start
         horizon = keys[-1][0] - history_s
-        if keys[0][0] >= horizon and len(keys) <= history_max:
+        size = len(keys) - start
+        if keys[start][0] >= horizon and size <= history_max:
             return
         # keys are sorted: the first one stamped at or after the horizon. A stream trims one or two a message:
         # found by stepping from the front (a bisection over a second of 1 kHz IMU cost more than the rest of
         # the trim); a longer run (after a pause) by bisection ((t,) sorts before any (t, i))
         n = 0
-        while n < SCAN and n < len(keys) and keys[n][0] < horizon:
+        while n < SCAN and n < size and keys[start + n][0] < horizon:
             n += 1
         if n == SCAN:
-            n = bisect.bisect_left(keys, (horizon,))
-        n = max(n, len(keys) - history_max)
+            n = bisect.bisect_left(keys, (horizon,), start) - start
+        n = max(n, size - history_max)
         if n:
             if self.base is not None:
                 self._free.append(self.base)
-            self.base = self.after[n - 1]
-            self._free.extend(self.after[: n - 1])
-            del keys[:n], self.events[:n], self.after[:n]
+            end = start + n
+            self.base = self.after[end - 1]
+            self._free.extend(self.after[start : end - 1])
+            if end >= COMPACT:
+                del keys[:end], self.events[:end], self.after[:end]
+                end = 0
+            self.start = end

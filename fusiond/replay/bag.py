@@ -17,6 +17,7 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from fusiond.codecs import bag_fast_path, typestore
 from fusiond.core.sensors.registry import KINDS, kind_of
 from fusiond.samples import Sample
+from fusiond.replay import bag1_records
 from fusiond.errors import BagError  # importable from here, as before
 
 if TYPE_CHECKING:
@@ -101,15 +102,10 @@ class BagSamples:
     def _messages(self) -> Iterator[tuple[Connection, int, bytes]]:
         """The reader's messages; what rosbags raises on a damaged chunk (a corrupt compressed block,
         a truncated record) becomes a BagError naming the bag, not a traceback halfway through."""
-        messages = iter(self._reader.messages(connections=self._connections))
-        while True:
-            try:
-                item = next(messages)
-            except StopIteration:
-                return
-            except Exception as err:  # noqa: BLE001 - rosbags raises builtins (OSError, AssertionError) on garbage
-                raise BagError(unreadable(self._names, err)) from None
-            yield item
+        try:  # delegated: what the reader raises reaches here, what the consumer raises does not
+            yield from bag1_records.messages(self._reader, self._connections)
+        except Exception as err:  # noqa: BLE001 - rosbags raises builtins (OSError, AssertionError) on garbage
+            raise BagError(unreadable(self._names, err)) from None
 
     def close(self) -> None:
         if self._reader.stack is not None:

@@ -90,6 +90,28 @@ def test_mutated_ros1_messages_read_as_rosbags_or_not_at_all(jackal_raw) -> None
     check()
 
 
+def test_a_ros1_stream_that_remembers_its_layout_reads_mutations_as_rosbags(jackal_raw) -> None:
+    """One reader per type for every case, each mutated message after an intact one of its type: the
+    remembered layout meets changed lengths, strings and string lengths, and still answers as rosbags."""
+    store, raw = jackal_raw
+    fast = {t: bag_fast_path(store, t, ros1=True) for t in (ODOMETRY, IMU)}
+    intact = {t: next(d for m, d in raw if m == t) for t in (ODOMETRY, IMU)}
+
+    @given(case=mutated_ros1(raw))
+    @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+    def check(case: tuple[str, bytes]) -> None:
+        msgtype, data = case
+        assert fast[msgtype](intact[msgtype], "s") == _reference(store, msgtype, intact[msgtype], ros1=True)
+        got = fast[msgtype](data, "s")
+        expected = _reference(store, msgtype, data, ros1=True)
+        if got is not None:
+            assert got == expected or msgspec.msgpack.encode(got) == msgspec.msgpack.encode(expected)
+        if expected is None:
+            assert got is None
+
+    check()
+
+
 def test_cdr_fast_path_of_a_ros2_bag_reads_as_rosbags() -> None:
     store = typestore()
     odom = encode_odom_sample(OdomSample("s", 12.25, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1), tuple(range(36))), "ros2-cdr")

@@ -3,6 +3,8 @@ full, and a recycled snapshot never shares an array with the live state or anoth
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -14,7 +16,7 @@ from tests.support.core_samples import imu, make_config, odom
 
 def _snapshots(core: FusionCore) -> list:
     h = core.history
-    return [h.base, *h.after, *h._free]
+    return [h.base, *h.after[h.start:], *h._free]
 
 
 def test_steady_stream_reuses_the_same_snapshots():
@@ -76,6 +78,47 @@ def test_trim_keeps_exactly_the_samples_within_the_window_and_the_count(stamps, 
     h.trim(history_s, history_max)
     newest = keys[-1][0]
     expected = [k for k in keys[-history_max:] if k[0] >= newest - history_s]
-    assert h.keys == expected and len(h.after) == len(expected) == len(h.events)
+    assert h.keys[h.start:] == expected and len(h.after) - h.start == len(expected) == len(h.events) - h.start
     dropped = len(keys) - len(expected)
     assert h.base is (states[dropped - 1] if dropped else None)
+
+
+@settings(max_examples=30, deadline=None)
+@given(steps=st.lists(st.tuples(st.floats(-0.3, 0.05), st.integers(0, 2)), min_size=300, max_size=1200),
+       history_s=st.floats(0.05, 0.5), history_max=st.integers(20, 400))
+def test_a_long_stream_keeps_what_plain_lists_would_keep(steps, history_s, history_max):
+    """Across many trims (the dropped front deleted in blocks of COMPACT), the history holds exactly
+    what lists trimmed one entry at a time would hold: the same keys, events, snapshots and base,
+    and a new key finds the same place and the same duplicate."""
+    from fusiond.core.history import History
+    from fusiond.core.state import FilterState
+
+    h = History(None)
+    keys: list = []  # the model: plain lists, entries deleted from the front as they are dropped
+    after: list = []
+    base = None
+    newest = 0.0
+    for k, (back, sensor) in enumerate(steps):
+        newest += 0.01
+        key = (round(newest + back, 3) if back < 0.0 else newest, sensor)  # some late, some duplicates
+        pos = bisect.bisect_right(keys, key)
+        duplicate = pos > 0 and keys[pos - 1] == key
+        got_pos, got_duplicate = h.slot(key)
+        assert (got_pos - h.start, got_duplicate) == (pos, duplicate)
+        if duplicate or (base is not None and key[0] < base.t):
+            continue
+        s = FilterState.__new__(FilterState)
+        s.t = key[0]
+        h.keys.insert(got_pos, key)
+        h.events.insert(got_pos, (sensor, k, key[0]))
+        h.after.insert(got_pos, s)
+        keys.insert(pos, key)
+        after.insert(pos, s)
+        h.trim(history_s, history_max)
+        horizon = keys[-1][0] - history_s
+        drop = max(sum(1 for kk in keys if kk[0] < horizon), len(keys) - history_max)
+        if drop:
+            base = after[drop - 1]
+            del keys[:drop], after[:drop]
+        assert h.keys[h.start:] == keys and h.after[h.start:] == after and h.base is base
+        assert [e[2] for e in h.events[h.start:]] == [kk[0] for kk in keys]
