@@ -168,6 +168,12 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        "with its drive reporting zero. Those are rightly not taken as standstills (the gyro bias is "
                        f"not learned there). {_coast_note(cfg)}",
                        evidence={"turning_at_rest": float(len(turning)), "turning_rate_rad_s": worst.gyro_mean})
+    if not series.gyro_t and (ch is None or ch.n == 0) and len(series.odom_t) > 1:
+        # the odometry ran and this IMU sent nothing: "never learned" would blame the driving, not the topic
+        return Verdict(imu.name, "gyro_bias", "warn",
+                       "no gyro sample from this IMU in the recording while the odometry ran (its topic absent, or "
+                       "every sample lost): the gyro drove nothing and its bias was never learned; check its key",
+                       sensor_key(imu.name, "key"), evidence={"gyro_samples": 0.0})
     heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
         isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
     duration = (series.odom_t[-1] - series.odom_t[0]) if len(series.odom_t) > 1 else 0.0

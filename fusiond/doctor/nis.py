@@ -270,12 +270,12 @@ class ChannelStats:
         return [[v / n for v in row] for row in self.outer]
 
     def now_note(self, t0: float | None) -> str:
-        """' (now: nis_high since 312 s)' when the latest window differs from the whole run, else ''."""
+        """' (now: nis_high since 312 s into the run)' when the latest window differs from the whole run, else ''."""
         whole = self.verdict()
         if self.now_verdict in ("no_updates", whole) or self.now_since is None:
             return ""
         since = self.now_since - (t0 if t0 is not None else self.first_stamp or 0.0)
-        return f"now: {self.now_verdict} since {since:.0f} s"
+        return f"now: {self.now_verdict} since {since:.0f} s into the run"
 
     @property
     def learning_only(self) -> bool:

@@ -622,3 +622,13 @@ def test_world_twist_setting_on_gentle_curves_is_found_from_the_message_pose():
     assert v.level == "problem" and v.key == "sensors.wheel.twist_frame" and "body" in v.suggestion, v
     assert not [w for w in verdicts if w.key.endswith("extrinsic_rpy") and w.suggestion], verdicts
     assert not [w for w in verdicts_of(robot_config(), samples) if w.channel == "twist"]
+
+
+def test_an_imu_that_sent_nothing_is_named_as_such_not_as_a_bias_never_learned():
+    """The IMU's topic absent from the recording: the odometry drove the whole run, no gyro sample came.
+    The verdict points at the IMU's key, not at the driving (no standstill) nor at gyro_bias_sigma."""
+    from fusiond.samples import ImuSample
+
+    samples = [s for s in simulate(SimConfig(duration=30.0)) if not isinstance(s, ImuSample)]
+    v = one(verdicts_of(make_config(), samples), "imu", "gyro_bias")
+    assert v.level == "warn" and v.key == "sensors.imu.key" and "no gyro sample" in v.message, v
