@@ -34,6 +34,7 @@ from .clock import ClockOffsets
 from .evidence import Evidence
 from .lost import LostSamples
 from .nis import ChannelStats, judge_nis, nis_bounds
+from .check import run_check
 from .registry import CHECKS
 from .series import Series, SeriesCollector
 from .twist import TwistStats
@@ -196,7 +197,7 @@ def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str],
     ev = Evidence(cfg, series, channels, twist, tilt, stats, at_cap, covariance_resets, scales, t0, clocks)
     entries: list[Entry] = []
     for check in CHECKS:
-        verdicts = check.run(ev)
+        verdicts = run_check(check, ev)
         ev.findings.add(check.name, verdicts)
         entries.extend(Entry(check.name, ev.findings.slot(v), v) for v in verdicts)
     found: dict[tuple[str, str], list[Verdict]] = {}

@@ -56,6 +56,7 @@ class _PerChannel(ABC):
     name = ""
     kind = ""
     needs: tuple[str, ...] = ()
+    needs_config = False  # a channel's innovations are judged without the config (a remote monitor)
 
     def run(self, ev: Evidence) -> list[Verdict]:
         out: list[Verdict] = []

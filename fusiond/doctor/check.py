@@ -13,7 +13,7 @@ from typing import Protocol, runtime_checkable
 from .evidence import Evidence
 from .verdict import Verdict
 
-__all__ = ["Check", "found"]
+__all__ = ["BaseCheck", "Check", "found", "run_check"]
 
 
 @runtime_checkable
@@ -23,9 +23,25 @@ class Check(Protocol):
 
     name: str
     needs: tuple[str, ...]
+    needs_config: bool
 
     def run(self, ev: Evidence) -> list[Verdict]:
         ...
+
+
+class BaseCheck:
+    """What most checks share: they read no other check's findings, and they need the config (the
+    cross-source series are built from it, the sensors' tables name the keys)."""
+
+    name = ""
+    needs: tuple[str, ...] = ()
+    needs_config = True
+
+
+def run_check(check: Check, ev: Evidence) -> list[Verdict]:
+    """What ``check`` finds in ``ev``: nothing from a check that needs the config when there is none (a
+    remote monitor, which sees only the diagnostics stream), so no check has to ask."""
+    return check.run(ev) if ev.known or not check.needs_config else []
 
 
 def found(v: Verdict | None) -> list[Verdict]:

@@ -8,7 +8,7 @@ no disturbance whatever its NIS says (``channel_checks.OrientationNis``). Each n
 
 from __future__ import annotations
 
-from .check import found
+from .check import BaseCheck, found
 from .evidence import Evidence
 from .heading import heading_check, wheel_heading_check
 from .lever import lever_verdict
@@ -19,41 +19,38 @@ from .verdict import Verdict
 __all__ = ["LeverArm", "UnmeasuredYawRate", "YawRateNotMeasured", "WheelHeading", "Heading", "Speed"]
 
 
-class LeverArm:
+class LeverArm(BaseCheck):
     """The GPS antenna's lever arm, from how the fixes swing as the vehicle turns."""
 
     name = "lever"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(lever_verdict(ev.series, ev.config)) if ev.known else []
+        return found(lever_verdict(ev.series, ev.config))
 
 
-class UnmeasuredYawRate:
+class UnmeasuredYawRate(BaseCheck):
     """A wheel yaw rate the odometry driver does not measure (exact zeros while the gyro turns)."""
 
     name = "unmeasured_yaw_rate"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known or ev.odom is None:
+        if ev.odom is None:
             return []
         return found(unmeasured_yaw_rate(ev.series, ev.odom))
 
 
-class YawRateNotMeasured:
+class YawRateNotMeasured(BaseCheck):
     """No source of yaw rate fused at all while the odometry says the vehicle turns."""
 
     name = "yaw_rate_not_measured"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known or ev.odom is None:
+        if ev.odom is None:
             return []
         return found(yaw_rate_not_measured(ev.series, ev.odom, ev.imu, ev.gyro_fused))
 
 
-class WheelHeading:
+class WheelHeading(BaseCheck):
     """The wheels' yaw rate against the gyro's; not asked when the wheels' yaw rate is known unmeasured
     (either check above already says so)."""
 
@@ -61,26 +58,24 @@ class WheelHeading:
     needs = ("unmeasured_yaw_rate", "yaw_rate_not_measured")
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known or any(ev.findings.first(n) is not None for n in self.needs):
+        if any(ev.findings.first(n) is not None for n in self.needs):
             return []
         return found(wheel_heading_check(ev.series, ev.config))
 
 
-class Heading:
+class Heading(BaseCheck):
     """An IMU's fused yaw against the gyro, the wheels and the GPS track."""
 
     name = "heading"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(heading_check(ev.series, ev.config)) if ev.known else []
+        return found(heading_check(ev.series, ev.config))
 
 
-class Speed:
+class Speed(BaseCheck):
     """The wheel speed's scale against the GPS chords."""
 
     name = "speed"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(speed_check(ev.series, ev.config, ev.scales)) if ev.known else []
+        return found(speed_check(ev.series, ev.config, ev.scales))

@@ -11,7 +11,7 @@ import math
 
 from ..core.layout import state_layout
 from .attitude import lean_verdict, mount_verdict
-from .check import found
+from .check import BaseCheck, found
 from .clock import ClockOffsets, clock_verdicts
 from .coast import coast_verdict
 from .covariance import cap_verdict
@@ -28,117 +28,103 @@ __all__ = ["GyroBiasUnseen", "Lean", "Mounting", "GapHeading", "LateBias", "Coas
            "Drops", "Clocks", "CovarianceResets"]
 
 
-class GyroBiasUnseen:
+class GyroBiasUnseen(BaseCheck):
     """The gyro bias when no standstill update was ever made (no gyro-bias channel)."""
 
     name = "gyro_bias_unseen"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known or ev.gyro_bias_stats is not None:
+        if ev.gyro_bias_stats is not None:
             return []
         return found(bias_check(ev.series, ev.config, None, ev.gyro_fused))
 
 
-class Lean:
+class Lean(BaseCheck):
     """The estimate's lean: against the grade the GPS altitude measures when there is enough driving to
     tell (it replaces "on level ground"), else its mean over the run."""
 
     name = "lean"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known:
-            return []
         graded = grade_verdict(grade_fit(ev.series, ev.config), ev.run_imu, ev.mount,
                                state_layout(ev.config).has("twist_pitch"))
         return found(graded if graded is not None else lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount))
 
 
-class Mounting:
+class Mounting(BaseCheck):
     """The IMU's mounting yaw the accelerometer measures against the wheels."""
 
     name = "mounting"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(mount_verdict(ev.run_imu, ev.mount, ev.tilt, MIN_UPDATES)) if ev.known else []
+        return found(mount_verdict(ev.run_imu, ev.mount, ev.tilt, MIN_UPDATES))
 
 
-class GapHeading:
+class GapHeading(BaseCheck):
     """The IMU's yaw against the estimate's across logging gaps."""
 
     name = "gap_heading"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(gap_heading_verdict(ev.series, ev.config, ev.run_imu, ev.t0)) if ev.known else []
+        return found(gap_heading_verdict(ev.series, ev.config, ev.run_imu, ev.t0))
 
 
-class LateBias:
+class LateBias(BaseCheck):
     """A gyro bias first learned late, after the heading drifted with it."""
 
     name = "late_bias"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known:
-            return []
         return found(late_bias_verdict(ev.series, ev.config, ev.gyro_fused, ev.gyro_bias_stats))
 
 
-class Coast:
+class Coast(BaseCheck):
     """How the vehicle slowed while its drive read zero, against the configured coast-down."""
 
     name = "coast"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known or ev.run_imu is None:
+        if ev.run_imu is None:
             return []
         standstills, turning = quiet_episodes(ev.series, ev.config, ev.run_imu)
         return found(coast_verdict(ev.series, ev.config, ev.mount, turning, standstills))
 
 
-class TwistFrame:
+class TwistFrame(BaseCheck):
     """Whether the odometry twist is in the frame the config says (body or world)."""
 
     name = "twist_frame"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known or ev.odom is None:
+        if ev.odom is None:
             return []
         return found(twist_frame_verdict(ev.odom, ev.twist, MIN_UPDATES))
 
 
-class CovarianceCap:
+class CovarianceCap(BaseCheck):
     """A covariance left at its cap: what kept it growing."""
 
     name = "covariance_cap"
-    needs: tuple[str, ...] = ()
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        if not ev.known:
-            return []
         return found(cap_verdict(ev.series, ev.config, ev.at_cap, ev.gyro_fused, ev.standstill_updates))
 
 
-class Drops:
+class Drops(BaseCheck):
     """Samples the core dropped: too old for the history, or for another reason."""
 
     name = "drops"
-    needs: tuple[str, ...] = ()
+    needs_config = False  # the core's counters, which a run without a config has too
 
     def run(self, ev: Evidence) -> list[Verdict]:
         return _drops(ev.stats, ev.clocks) if ev.stats else []
 
 
-class Clocks:
+class Clocks(BaseCheck):
     """Samples dropped as far from filter time, explained by their sensor's clock."""
 
     name = "clocks"
-    needs: tuple[str, ...] = ()
+    needs_config = False  # the core's counters, which a run without a config has too
 
     def run(self, ev: Evidence) -> list[Verdict]:
         if not ev.stats or ev.clocks is None:
@@ -146,11 +132,11 @@ class Clocks:
         return clock_verdicts(ev.stats, ev.clocks, ev.sensors)
 
 
-class CovarianceResets:
+class CovarianceResets(BaseCheck):
     """A covariance that went non-finite and was reset."""
 
     name = "covariance_resets"
-    needs: tuple[str, ...] = ()
+    needs_config = False  # the core's counters, which a run without a config has too
 
     def run(self, ev: Evidence) -> list[Verdict]:
         n = ev.covariance_resets

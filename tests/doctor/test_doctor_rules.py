@@ -17,7 +17,7 @@ from fusiond.doctor import ChannelStats, Series, Verdict
 from fusiond.doctor.attitude import TiltStats
 from fusiond.doctor.blame import CANDIDATES, RULES, Entry, apply_rules
 from fusiond.doctor.channels import absolute_verdict, gated_out
-from fusiond.doctor.check import Check
+from fusiond.doctor.check import Check, run_check
 from fusiond.doctor.evidence import Evidence
 from fusiond.doctor.registry import CHECKS
 from fusiond.doctor.thresholds import GATED_FRACTION
@@ -38,7 +38,7 @@ def test_every_check_has_one_interface_and_runs_after_what_it_reads():
 
 def test_with_no_config_and_no_channels_no_check_speaks():
     ev = _evidence()
-    assert all(check.run(ev) == [] for check in CHECKS)
+    assert all(run_check(check, ev) == [] for check in CHECKS)
 
 
 def _evidence(channels: dict | None = None) -> Evidence:
