@@ -257,7 +257,7 @@ class ErrorStateEKF:
         state held at a value is known exactly, and nothing can be inferred through it.
         """
         x = self.x
-        qx, qy, qz, qw = float(x[3]), float(x[4]), float(x[5]), float(x[6])
+        qx, qy, qz, qw = attitude_of(x)
         if qx != 0.0 or qy != 0.0:
             half = 0.5 * math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
             qx, qy, qz, qw = 0.0, 0.0, math.sin(half), math.cos(half)
@@ -389,7 +389,7 @@ class ErrorStateEKF:
         for the caller to complete and apply as P' = J P J^T."""
         c, s = math.cos(angle), math.sin(angle)
         x = self.x
-        q = rot.mul(rot.exp(0.0, 0.0, angle), (float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+        q = rot.mul(rot.exp(0.0, 0.0, angle), attitude_of(x))
         x[3:7] = rot.normalize(q)
         J = np.eye(self.layout.error_dim)
         J[3:5, 3:5] = ((c, -s), (s, c))

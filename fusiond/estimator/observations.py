@@ -15,7 +15,7 @@ import numpy as np
 
 from . import kernels
 from . import rotation as rot
-from .state import StateLayout
+from .state import StateLayout, attitude_of
 
 # Roll/pitch/yaw rows used by each IMU orientation mode.
 ORIENTATION_ROWS: dict[str, tuple[int, ...]] = {
@@ -163,7 +163,7 @@ def position(
     an additive 3-block of the state the sensor's reading carries (the GPS Gauss-Markov
     error): h gains + b and H an identity on its columns.
     """
-    q = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
+    q = attitude_of(x)
     a0, a1, a2 = _lever(q, lever)
     if error is not None:
         b0 = layout.nominal[error].start
@@ -194,7 +194,7 @@ def pose(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Position (lever arm) and roll/pitch/yaw of a rigidly mounted sensor; ``rows`` of the 6; cov 6x6 row-major."""
     yp, Hp, _ = position(layout, x, z_pos, (0.0,) * 9, lever)
-    h_rpy, Hrpy = rpy_jacobian((float(x[3]), float(x[4]), float(x[5]), float(x[6])))
+    h_rpy, Hrpy = rpy_jacobian(attitude_of(x))
     y6 = (*yp.tolist(), *(rot.wrap(z_rpy[i] - h_rpy[i]) for i in range(3)))
     H6 = np.zeros((6, layout.error_dim))
     H6[0:3] = Hp
@@ -224,7 +224,7 @@ def delta_pose(
     dtheta through Exp(R0^T dtheta): both rows of H carry R0^T.
     """
     q0 = (float(x_prev[3]), float(x_prev[4]), float(x_prev[5]), float(x_prev[6]))
-    q1 = (float(x[3]), float(x[4]), float(x[5]), float(x[6]))
+    q1 = attitude_of(x)
     l0, l1 = _lever(q0, lever), _lever(q1, lever)
     s0 = (float(x_prev[0]) + l0[0], float(x_prev[1]) + l0[1], float(x_prev[2]) + l0[2])
     s1 = (float(x[0]) + l1[0], float(x[1]) + l1[1], float(x[2]) + l1[2])
