@@ -8,6 +8,12 @@ the imports and the bag reading cancel out. The garbage collector is off while t
 fused (the count is the core's own work; the collector's is the replay's and the daemon's).
 
     .venv/bin/python scripts/core_instructions.py [--workload jackal|synthetic] [--messages 1000]
+        [--loop core|replay|doctor]
+
+`--loop`: `core` (the default) counts `FusionCore` alone; `replay` the replay's loop (`replay.run.Runner`)
+without the doctor, as `replay --quiet` runs it; `doctor` the same loop with the doctor fed, and what it
+was fed folded into its statistics at the end (`Doctor.series`, `Doctor.channels`), as a replay that
+prints verdicts does; the difference of the last two is what the doctor costs a message.
 
 `jackal`: data/jackal_test2.bag with examples/jackal.toml (up to its 6,121 messages).
 `synthetic`: the traffic of `fusiond bench-latency` (1 kHz IMU with roll/pitch and gyro, 100 Hz
@@ -62,13 +68,15 @@ def _synthetic(messages: int):
     return cfg, out
 
 
-def _child(workload: str, count: int) -> None:
-    """Fuse WARM_UP samples, then the first ``count`` of the workload in a fresh core."""
+def _child(workload: str, count: int, loop: str) -> None:
+    """Fuse WARM_UP samples, then the first ``count`` of the workload in a fresh core (``loop``: see
+    the module's docstring)."""
     import gc
 
     import structlog
 
     from fusiond.core.fusion import FusionCore
+    from fusiond.replay.run import Runner
 
     structlog.configure(logger_factory=structlog.ReturnLoggerFactory())  # the core's logs cost nothing here
     cfg, samples = _jackal() if workload == "jackal" else _synthetic(count + WARM_UP)
@@ -78,18 +86,26 @@ def _child(workload: str, count: int) -> None:
     gc.collect()
     gc.disable()
     for part in (samples[:WARM_UP], samples[:count]):
-        core = FusionCore(cfg)
+        if loop == "core":
+            core = FusionCore(cfg)
+            for s in part:
+                if core.ingest(s).publish:
+                    core.pose()
+            continue
+        runner = Runner(cfg, keep_trace=False, doctor=loop == "doctor")
         for s in part:
-            if core.ingest(s).publish:
-                core.pose()
+            runner.feed(s)
+        if runner.doctor is not None:
+            runner.doctor.series()
+            runner.doctor.channels
     print(min(count, len(samples)))
 
 
-def _count(workload: str, count: int) -> tuple[int, int]:
+def _count(workload: str, count: int, loop: str) -> tuple[int, int]:
     """(samples fused, instructions) of one child under callgrind."""
     proc = subprocess.run(
         ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable, __file__,
-         "--child", workload, str(count)], capture_output=True, text=True, check=True, cwd=ROOT,
+         "--child", workload, str(count), loop], capture_output=True, text=True, check=True, cwd=ROOT,
         env={**os.environ, **ONE_THREAD})
     collected = re.search(r"Collected\s*:\s*([\d,]+)", proc.stderr)
     if collected is None:
@@ -101,14 +117,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workload", choices=("jackal", "synthetic"), default="jackal")
     ap.add_argument("--messages", type=int, default=1000, help="N: the runs fuse N and 2N samples")
-    ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
+    ap.add_argument("--loop", choices=("core", "replay", "doctor"), default="core")
+    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        _child(args.child[0], int(args.child[1]))
+        _child(args.child[0], int(args.child[1]), args.child[2])
         return
-    n1, i1 = _count(args.workload, args.messages)
-    n2, i2 = _count(args.workload, 2 * args.messages)
-    print(f"{args.workload}: {(i2 - i1) / (n2 - n1):,.0f} instructions per message "
+    n1, i1 = _count(args.workload, args.messages, args.loop)
+    n2, i2 = _count(args.workload, 2 * args.messages, args.loop)
+    print(f"{args.workload} {args.loop}: {(i2 - i1) / (n2 - n1):,.0f} instructions per message "
           f"(callgrind, {n2 - n1} messages)")
 
 
