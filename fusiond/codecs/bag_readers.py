@@ -15,7 +15,7 @@ import struct
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Final
 
-from fusiond.samples import ImuSample, OdomSample, Sample
+from fusiond.samples import Sample
 
 from .cdr_fast_path import IMU_BLOCK, ODOM_BLOCK, U32, Block, fast_imu, fast_odom, imu_from_block, odom_from_block
 from .wire import IMU, ODOMETRY, Payload

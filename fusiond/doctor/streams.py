@@ -21,7 +21,7 @@ from ..config import ImuSensor, OdomSensor
 from ..estimator import rotation as rot
 from ..samples import ImuSample, OdomSample
 from ..core.sensors.imu import G_UNITS_BAND, GRAVITY
-from .bins import BIN_S, Binned, OpenBin, bin_rows
+from .bins import Binned, OpenBin, bin_rows
 
 MAX_STEP_S = 1.0  # an integration step longer than this is a gap: not integrated across
 _ZERO3 = (0.0, 0.0, 0.0)

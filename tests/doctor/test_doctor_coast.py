@@ -19,7 +19,7 @@ from fusiond.samples import OdomSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_rest import T0, RestWorld, Segment, simulate
-from tests.support.verdicts import agree, one, verdicts_of
+from tests.support.verdicts import one, verdicts_of
 
 V0 = 4.0  # m/s when the drive goes quiet
 W = 0.2  # rad/s: turning through the coast

@@ -49,7 +49,7 @@ def test_while_the_heading_is_unknown_the_position_covariance_covers_the_wrong_w
     core = FusionCore(robot_config(gps="position_noise = [0.5, 0.5, 1.0]"))
     outside, checked = 0, 0
     for s in simulate(w):
-        step = core.ingest(s)
+        core.ingest(s)
         if isinstance(s, GpsSample) and core.ready and not core.heading_known:
             t, x = core.pose()
             tx, ty, _ = truth_at(w, t)
