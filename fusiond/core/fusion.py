@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import msgspec
 import numpy as np
 
-from ..config import Config
+from ..config_tables import Config
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import (POSE, POSE_ERR, POSITION, POSITION_ERR, ErrorStateEKF, PredictWorkspace, add_motion_noise,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config
+from ..config_tables import Config
 from ..estimator import PoseBlock, StateBlock, StateLayout
 from .sensors.kind import LayoutView
 from .sensors.registry import kind_of

@@ -23,7 +23,7 @@ import hashlib
 
 import msgspec
 
-from ..config import Config
+from ..config_tables import Config
 from .layout import state_layout
 from .sensors.registry import kind_of
 

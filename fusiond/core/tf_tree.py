@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from ..config import Config
+from ..config_tables import Config
 from ..errors import CoreError
 from ..estimator import rotation as rot
 from .layout import absolute_sensor

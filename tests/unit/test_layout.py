@@ -130,16 +130,26 @@ def test_no_bare_pose_index_outside_the_estimator():
     assert found == []
 
 
-def test_the_config_never_imports_the_core_and_the_kinds_never_import_the_outer_layers():
-    """fusiond.config reads the kinds' tables on first use (the kinds import it); the registry, the kinds
-    and the fusion core import nothing of transport, replay, the CLI, the tuner, the doctor, nor (until a
-    decoder is asked for) the codecs and rosbags."""
-    code = ("import sys, fusiond.config; a = {m for m in sys.modules if m.startswith('fusiond.core')}; "
+def test_the_kinds_never_import_the_outer_layers():
+    """The registry, the kinds and the fusion core import nothing of transport, replay, the CLI, the tuner,
+    the doctor, nor (until a decoder is asked for) the codecs and rosbags; the config's shared tables
+    (``config_tables``) import nothing of fusiond at all."""
+    code = ("import sys, fusiond.config_tables; a = {m for m in sys.modules if m.startswith('fusiond.')}; "
             "import fusiond.core.sensors.registry, fusiond.core.fusion; "
             "b = {m for m in sys.modules if m.split('.')[1:2] in (['transport'], ['replay'], ['cli'], ['tune'], "
             "['codecs'], ['doctor']) or m.startswith('rosbags')}; print(sorted(a), sorted(b))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "[] []"
+    assert out.strip() == "['fusiond.config_tables'] []"
+
+
+def test_the_config_stands_above_the_kinds_it_assembles():
+    """A kind's table subclasses the shared ``SensorTable`` and its model reads ``FilterConfig`` from
+    ``config_tables``; ``config``, which decodes a whole document as the registered kinds' tables,
+    imports the kinds. No module under core/sensors/ imports ``config``: no import runs back up."""
+    upward = sorted(path.relative_to(PACKAGE).as_posix() for path in (PACKAGE / "core" / "sensors").rglob("*.py")
+                    if any(m == "fusiond.config" or m.startswith("fusiond.config.") for m in _imported_modules(path)))
+    assert upward == []
+    assert "fusiond.core.sensors" in _imported_modules(PACKAGE / "config.py")
 
 
 def _imported_modules(path: Path) -> set[str]:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ...config import FilterConfig
+from ...config_tables import FilterConfig
 from ..diagnostics import DiagnosticsRecord
 
 if TYPE_CHECKING:

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from ...errors import ConfigError
 
 if TYPE_CHECKING:
-    from ...config import FilterConfig
+    from ...config_tables import FilterConfig
     from ...estimator import StateBlock
     from .base import SensorModel
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ....config import SensorTable, Vec3
+from ....config_tables import SensorTable, Vec3
 
 
 class GpsSensor(SensorTable, tag="gps"):

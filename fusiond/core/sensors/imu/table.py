@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from ....config import SensorTable, Vec3
+from ....config_tables import SensorTable, Vec3
 
 
 class ImuSensor(SensorTable, tag="imu"):

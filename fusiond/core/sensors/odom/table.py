@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from ....config import SensorTable, Vec2, Vec6
+from ....config_tables import SensorTable, Vec2, Vec6
 
 
 class OdomSensor(SensorTable, tag="odom"):

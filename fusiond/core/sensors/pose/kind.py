@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from ....config import FilterConfig
+from ....config_tables import FilterConfig
 from ....samples import PoseSample
 from ..kind import SensorKind
 from .model import PoseModel

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from ....config import SensorTable, Vec2, Vec3
+from ....config_tables import SensorTable, Vec2, Vec3
 
 
 POSE_MSGTYPES = (
