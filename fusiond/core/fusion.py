@@ -140,6 +140,7 @@ class FusionCore:
             rest_mask=self.rest_mask, timeout=self.inputs.timeout, inputs_at=self.inputs.at, forward_accel=self._forward_accel)
         self.models = build_models(self.sensors, self.context)
         self._predicting = [m for m in self.models if m.predicts]  # on_predict hooks (GPS track, pose anchors)
+        self._showing = [m for m in self.models if m.shows_position]  # shown_position hooks (GPS heading search)
         if self.two_d:
             for m in self.models:
                 m.planar()
@@ -253,7 +254,7 @@ class FusionCore:
         for stamp, i, inp in cluster.in_order():
             steps.append(self._place(i, inp, stamp))
             if steps[-1].publish:
-                poses.append((self.state.t, self.state.ekf.x[POSE].copy()))
+                poses.append((self.state.t, self._shown_pose()))
         last = steps[-1]
         return Step(last.sensor, last.accepted, last.reason, late=any(s.late for s in steps),
                     publish=bool(poses), records=[r for s in steps for r in s.records], poses=poses)
@@ -325,9 +326,10 @@ class FusionCore:
         twist_cov = np.zeros((6, 6))
         twist_cov[0:3, 0:3] = np.reshape(u.linear_cov, (3, 3))
         twist_cov[3:6, 3:6] = np.reshape(u.angular_cov, (3, 3))
+        shown = self._shown_position() if self._showing else None
         return Estimate(
             stamp=s.t,
-            position=s.ekf.position(),
+            position=s.ekf.position() if shown is None else shown,
             orientation=s.ekf.attitude(),
             pose_covariance=P[POSE_ERR, POSE_ERR].ravel().tolist(),
             linear=tuple(linear),
@@ -341,14 +343,35 @@ class FusionCore:
         s = self.state
         if s is None or s.t is None or s.enu is None or not s.frame_ready:
             return None
-        lat, lon, alt = enu_to_geodetic(s.enu, *s.ekf.position())
+        shown = self._shown_position() if self._showing else None
+        lat, lon, alt = enu_to_geodetic(s.enu, *(s.ekf.position() if shown is None else shown))
         return lat, lon, alt, s.ekf.P[POSITION_ERR, POSITION_ERR].ravel().tolist()
 
     def pose(self) -> tuple[float, np.ndarray]:
         """(filter time, nominal [x y z qx qy qz qw]) without building a full Estimate."""
         if not self.initialised:
             raise CoreError("no sample has been fused yet")
-        return self.state.t, self.state.ekf.x[POSE]
+        return self.state.t, self._shown_pose()
+
+    def _shown_position(self) -> tuple[float, float, float] | None:
+        """The position to publish when a sensor model says the state's is not it (``shown_position``:
+        the GPS while the heading is searched for), else None."""
+        for m in self._showing:
+            shown = m.shown_position(self.state)
+            if shown is not None:
+                return shown[0], shown[1], self.state.ekf.position()[2]
+        return None
+
+    def _shown_pose(self) -> np.ndarray:
+        """The state's nominal pose [x y z qx qy qz qw], its position as ``_shown_position`` says (a
+        copy then; else a view of the state)."""
+        x = self.state.ekf.x[POSE]
+        shown = self._shown_position() if self._showing else None
+        if shown is None:
+            return x
+        x = x.copy()
+        x[POSITION] = shown
+        return x
 
     @property
     def gyro_bias(self) -> np.ndarray | None:

@@ -73,6 +73,7 @@ class SensorModel:
     sample_type: ClassVar[type]  # the sample the transports decode for it
     policy_type: ClassVar[type]  # raw sample -> input, or Rejected
     predicts: ClassVar[bool] = False  # has an ``on_predict`` hook (called on every prediction step)
+    shows_position: ClassVar[bool] = False  # has a ``shown_position`` hook (asked at every published pose)
 
     def __init__(self, cfg: Any, index: int, ctx: SensorContext) -> None:
         self.cfg = cfg
@@ -97,6 +98,12 @@ class SensorModel:
         """One prediction step moved the nominal state from x0 to x1 (only when ``predicts``). Returns
         a horizontal position covariance (m^2: xx, xy, yy) to add for that step, what the linearised
         motion model leaves out of it, or None."""
+        return None
+
+    def shown_position(self, s: "FilterState") -> tuple[float, float] | None:
+        """The horizontal position to publish instead of the state's (only when ``shows_position``), or
+        None: the state's. For a sensor whose frame leaves the state's position a device of the
+        computation for a while (the GPS while the heading is searched for)."""
         return None
 
     def apply(self, s: "FilterState", inp: Any, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:

@@ -164,6 +164,8 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     # (count, sum of squared differences), and the previous fix: (t, east, north, dead-reckoned east, north)
     increments: tuple[int, float] = (0, 0.0)
     last: tuple[float, ...] | None = None
+    # the state's horizontal position after the newest fix applied (``shown_position``)
+    anchor: tuple[float, float] | None = None
 
 
 class GpsModel(SensorModel):
@@ -171,6 +173,7 @@ class GpsModel(SensorModel):
     sample_type = GpsSample
     policy_type = GpsPolicy
     predicts = True  # accumulates the dead-reckoned travel between fixes
+    shows_position = True  # publishes the expected position while the heading is searched for
 
     def __init__(self, cfg: GpsSensor, index: int, ctx: SensorContext) -> None:
         super().__init__(cfg, index, ctx)
@@ -212,7 +215,7 @@ class GpsModel(SensorModel):
         dx, dy = p1[0] - p0[0], p1[1] - p0[1]
         d = math.hypot(dx, dy)
         s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + (p1[2] - p0[2])), own.rejected,
-                                   own.accepted, own.unaligned + d, own.increments, own.last)
+                                   own.accepted, own.unaligned + d, own.increments, own.last, own.anchor)
         if d == 0.0:
             return None
         s2 = s.ekf.yaw_variance()
@@ -220,6 +223,23 @@ class GpsModel(SensorModel):
         var = along * ((own.unaligned + d) ** 2 - own.unaligned**2)
         ux, uy = dx / d, dy / d
         return var * ux * ux, var * ux * uy, var * uy * uy
+
+    def shown_position(self, s: "FilterState") -> tuple[float, float] | None:
+        """While the heading is searched for, the expected position: the state dead-reckons from the
+        newest fix along a placeholder heading whose error psi is as wide as the filter's yaw variance
+        s2 (pi/sqrt 3 while unknown), and the mean of a displacement D turned by psi ~ N(0, s2) is
+        E[R(psi)] D = exp(-s2/2) D. So the published position moves from that fix by a fifth of the
+        dead-reckoning while nothing is known of the heading (a car doing 20 m/s north is not
+        published driving east), and by all of it as the fits narrow the heading. None (the state's
+        position) once the heading is known."""
+        if s.heading_ready:
+            return None
+        anchor = s.own[self.index].anchor
+        if anchor is None:
+            return None
+        k = math.exp(-0.5 * s.ekf.yaw_variance())
+        p = s.ekf.position()
+        return anchor[0] + k * (p[0] - anchor[0]), anchor[1] + k * (p[1] - anchor[1])
 
     def apply(self, s: "FilterState", inp: GpsInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         cfg = self.cfg
@@ -279,6 +299,9 @@ class GpsModel(SensorModel):
             elif channel == "position_unaligned" or (channel == "position_provisional" and not res.rejected):
                 if not res.rejected:
                     self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
+            if not res.rejected and not s.heading_ready:
+                p = ekf.position()
+                s.own[self.index] = msgspec.structs.replace(s.own[self.index], anchor=(p[0], p[1]))
             if emit:
                 # While the heading is unknown, the innovation carries the dead-reckoning along a wrong
                 # heading: its NIS tests the heading search, not the receiver's noise (learning); so
@@ -419,7 +442,8 @@ class GpsModel(SensorModel):
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
         base = s.ekf.position()
         s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
-                                                  last_enu=(z[0], z[1])), last=(stamp, z[0], z[1], base[0], base[1]))
+                                                  last_enu=(z[0], z[1])), last=(stamp, z[0], z[1], base[0], base[1]),
+                                   anchor=(base[0], base[1]))
 
     def _frozen(self, s: "FilterState", lla: tuple[float, float, float], z) -> bool:
         """Is this fix a repeat of the previous one although the robot has moved since those coordinates

@@ -1,0 +1,50 @@
+"""While the GPS heading is searched for, the published position is the expected one, not the state's
+dead-reckoning along a placeholder heading (``GpsModel.shown_position``).
+
+Thresholds from the simulation's physics: a car already driving at v when the first fix comes, fixes
+every T = 1 / gps_rate with white noise sigma per axis, the filter's placeholder heading 90 deg off the
+truth (it starts east, the car drives north). A pose comes with each odometry message, the fixes'
+stamps among theirs, so it is at most D <= v T beyond the newest fix fused. The state dead-reckons D along the
+placeholder, so its position is off by |D_placeholder - D_true| = sqrt(2) D; the published one moves
+k D along it, k = exp(-s2 / 2) with s2 = HEADING_UNKNOWN_SIGMA^2, off by sqrt(1 + k^2) D. Both start
+from where the newest fix put the base, within 4 sqrt(2) sigma of the truth.
+"""
+
+from __future__ import annotations
+
+import math
+
+from fusiond.core.fusion import FusionCore
+from fusiond.core.sensors.gps import HEADING_UNKNOWN_SIGMA
+
+from tests.support.configs import robot_config
+from tests.support.sim_gps import World, simulate, truth_at
+
+SPEED = 30.0  # m/s: a car on a highway when the recording starts
+GPS_RATE = 10.0
+GPS_SIGMA = 0.1
+
+
+def test_a_moving_car_is_published_where_it_may_be_while_its_heading_is_unknown() -> None:
+    w = World(duration=6.0, standstill=0.0, speed=SPEED, start=(0.0, 0.0, math.pi / 2), gps_rate=GPS_RATE,
+              gps_sigma=GPS_SIGMA, seed=3)
+    core = FusionCore(robot_config(gps=""))
+    shown, state = [], []
+    for s in simulate(w):
+        step = core.ingest(s)
+        if step.publish and core.ready and not core.heading_known:
+            t, x = core.pose()
+            tx, ty, _ = truth_at(w, t)
+            p = core.state.ekf.position()
+            shown.append(math.hypot(x[0] - tx, x[1] - ty))
+            state.append(math.hypot(p[0] - tx, p[1] - ty))
+            assert core.estimate().position[:2] == (x[0], x[1])  # the daemon publishes the same position
+    assert len(shown) >= 4, "the heading was found before the search could be watched"
+    k = math.exp(-0.5 * HEADING_UNKNOWN_SIGMA**2)
+    travel = SPEED / GPS_RATE
+    anchor = 4.0 * math.sqrt(2.0) * GPS_SIGMA
+    bound = math.sqrt(1.0 + k * k) * travel + anchor
+    assert max(shown) <= bound, (max(shown), bound)
+    # the bound tells the two apart: the state's own position, published as it was, exceeds it
+    assert max(state) > bound, (max(state), bound)
+    assert core.heading_known  # and the search still ends: the fixes found the heading
