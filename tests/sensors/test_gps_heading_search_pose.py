@@ -1,5 +1,5 @@
 """While the GPS heading is searched for, the published position is the expected one, not the state's
-dead-reckoning along a placeholder heading (``GpsModel.shown_position``).
+dead-reckoning along a placeholder heading (``GpsModel.shown_position``); and the search's end is said once.
 
 Thresholds from the simulation's physics: a car already driving at v when the first fix comes, fixes
 every T = 1 / gps_rate with white noise sigma per axis, the filter's placeholder heading 90 deg off the
@@ -14,8 +14,12 @@ from __future__ import annotations
 
 import math
 
+import msgspec
+import structlog
+
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.gps import HEADING_UNKNOWN_SIGMA
+from fusiond.samples import GpsSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_gps import World, simulate, truth_at
@@ -48,3 +52,20 @@ def test_a_moving_car_is_published_where_it_may_be_while_its_heading_is_unknown(
     # the bound tells the two apart: the state's own position, published as it was, exceeds it
     assert max(state) > bound, (max(state), bound)
     assert core.heading_known  # and the search still ends: the fixes found the heading
+
+
+def test_the_end_of_the_heading_search_is_logged_once_when_fixes_are_re_applied() -> None:
+    """Fixes stamped ahead of the odometry (a receiver clock 0.15 s early) are re-applied at every
+    odometry message stamped before them (late data); the search's end is one event, not one per
+    re-application."""
+    w = World(duration=8.0, standstill=0.0, speed=5.0, gps_rate=10.0, gps_sigma=0.1, seed=4)
+    samples = [msgspec.structs.replace(s, stamp=s.stamp + 0.15) if isinstance(s, GpsSample) else s
+               for s in simulate(w)]
+    core = FusionCore(robot_config(gps=""))
+    with structlog.testing.capture_logs() as logged:
+        late = sum(core.ingest(s).late for s in samples)
+    assert late > 10  # the odometry behind the fixes was applied from the history
+    assert core.heading_known
+    events = [e["event"] for e in logged]
+    assert events.count("gps_heading_initialised") == 1, events
+    assert events.count("gps_heading_provisional") <= 1, events

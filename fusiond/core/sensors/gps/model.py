@@ -179,6 +179,7 @@ class GpsModel(SensorModel):
         super().__init__(cfg, index, ctx)
         layout = ctx.layout
         self.error = "gps_error" if layout.has("gps_error") else None
+        self._said_ready = False  # "gps_heading_initialised" logged for the current search (``_apply_fit``)
         self._error_rows = None
         if self.error is not None:
             e = layout.error["gps_error"]
@@ -251,14 +252,14 @@ class GpsModel(SensorModel):
         if self.ctx.two_d:  # altitude is not fused: z is held at 0
             rows = tuple(r for r in rows if r != 2)
         if not s.frame_ready:
-            self._first_fix(s, z, inp, rows, stamp)
+            self._first_fix(s, z, inp, rows, stamp, emit)
             return []
         if s.own[self.index].track is None:
             # The world frame is defined but this GPS keeps no track (set_pose restarted it): start
             # one at this fix, and look for the heading again if it is not known.
             self._start_track(s, z, inp.lla, stamp)
             if not s.heading_ready:
-                self._heading(s, z, inp.cov, stamp)
+                self._heading(s, z, inp.cov, stamp, emit)
         if self._frozen(s, inp.lla, z):
             # A receiver repeating its last fix with a new stamp while the wheels moved: not a measurement.
             if not emit:
@@ -294,11 +295,11 @@ class GpsModel(SensorModel):
             if own.unaligned and not res.rejected:  # the fix bounds the displacement again
                 s.own[self.index] = msgspec.structs.replace(own, unaligned=0.0)
             if channel != "position_unaligned" and self._locked_out(s, res.rejected, y, R, z, stamp):
-                self._reacquire(s, z, inp, horizontal, stamp)
+                self._reacquire(s, z, inp, horizontal, stamp, emit)
                 channel = "position_reacquired"
             elif channel == "position_unaligned" or (channel == "position_provisional" and not res.rejected):
                 if not res.rejected:
-                    self._heading(s, z, inp.cov, stamp)  # after the fix has put the antenna where it is
+                    self._heading(s, z, inp.cov, stamp, emit)  # after the fix has put the antenna where it is
             if not res.rejected and not s.heading_ready:
                 p = ekf.position()
                 s.own[self.index] = msgspec.structs.replace(s.own[self.index], anchor=(p[0], p[1]))
@@ -354,7 +355,8 @@ class GpsModel(SensorModel):
             y, H, R = y[idx], H[idx], R[np.ix_(idx, idx)]
         return y, H, R
 
-    def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
+    def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
+                   emit: bool) -> None:
         """The first fix defines the world frame: the base goes where it says, heading unknown
         (unless an absolute IMU yaw is trusted as ENU heading)."""
         ekf = s.ekf
@@ -375,7 +377,7 @@ class GpsModel(SensorModel):
             s.heading_ready = True
         else:
             ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
-            self._heading(s, z, inp.cov, stamp)
+            self._heading(s, z, inp.cov, stamp, emit)
 
     def _locked_out(self, s: "FilterState", rejected: bool, y: np.ndarray, R: np.ndarray, z, stamp: float) -> bool:
         """Is the filter locked out of the GPS? A gate protects against outliers, but once the
@@ -425,13 +427,15 @@ class GpsModel(SensorModel):
         new_part = math.hypot(first[1] - last[1], first[2] - last[2])
         return REACQUIRE_JUMP_S if new_part > 0.5 * math.hypot(first[1], first[2]) else REACQUIRE_S
 
-    def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float) -> None:
+    def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
+                   emit: bool) -> None:
         """Put the base where the fix says and look for the heading again (it may be as wrong as the
         position was), as at the first fix but in the frame already defined."""
         own: GpsOwn = s.own[self.index]
         last = own.rejected[-1]
-        log.warning("gps_reacquired", sensor=self.name, stamp=stamp, rejected=len(own.rejected),
-                    seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
+        if emit:  # once: not again for each re-application after a late sample
+            log.warning("gps_reacquired", sensor=self.name, stamp=stamp, rejected=len(own.rejected),
+                        seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
         set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, tuple(r for r in rows if r < 2))
         if not self.yaw_given:
             s.ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
@@ -440,6 +444,7 @@ class GpsModel(SensorModel):
         self._start_track(s, z, inp.lla, stamp)
 
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
+        self._said_ready = False  # a new track: a new search, whose end is said again
         base = s.ekf.position()
         s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
                                                   last_enu=(z[0], z[1])), last=(stamp, z[0], z[1], base[0], base[1]),
@@ -465,7 +470,7 @@ class GpsModel(SensorModel):
             own, track=replace(track, last_lla=lla, last_dr=dr, last_enu=(z[0], z[1])))
         return False
 
-    def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float) -> None:
+    def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float, emit: bool) -> None:
         """Add this fix to the track and fit; apply the fit once it is good enough (module doc)."""
         cfg = self.cfg
         own: GpsOwn = s.own[self.index]
@@ -498,9 +503,10 @@ class GpsModel(SensorModel):
             fit = replace(fit, var_theta=fit.var_theta + drift / (extent * extent))
         if fit.var_theta > HEADING_PROVISIONAL_SIGMA**2:
             return
-        self._apply_fit(s, fit, track, t)
+        self._apply_fit(s, fit, track, t, emit)
 
-    def _apply_fit(self, s: "FilterState", fit: RigidFit, track: GpsTrack, t: tuple[float, float, float]) -> None:
+    def _apply_fit(self, s: "FilterState", fit: RigidFit, track: GpsTrack, t: tuple[float, float, float],
+                   emit: bool) -> None:
         """Turn the state by the fit's angle about the antenna, which this fix has just put where the
         GPS says: the position dead-reckoned along the wrong heading since the previous fix turns with
         the heading, and P turns with both (``ErrorStateEKF.rotate_yaw``). The heading's row of P is
@@ -530,10 +536,14 @@ class GpsModel(SensorModel):
         s.own[self.index] = GpsOwn(replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
                                            applied=True, last_dr=fit.apply(*track.last_dr)),
                                    accepted=s.own[self.index].accepted)  # the jump check's reference stays
-        if ready:
+        # Said once a search, not again at each re-application after a late sample (the search may also
+        # end first in a re-application: fixes stamped ahead of the odometry are re-applied at its every
+        # message), so the flag lives on the model, outside the state the history rewinds.
+        if ready and not self._said_ready:
+            self._said_ready = True
             log.info("gps_heading_initialised", sensor=self.name, yaw_correction=fit.theta, sigma=sigma,
                      fixes=len(points))
-        elif not track.applied:
+        elif not ready and emit and not track.applied:
             log.info("gps_heading_provisional", sensor=self.name, yaw_correction=fit.theta, sigma=sigma,
                      fixes=len(points))
 

@@ -101,7 +101,8 @@ def learn_bias_at_rest(imu: "SensorModel", s: "FilterState", inp: "ImuInput", st
     if _turning(w, fc.gyro_bias_sigma, imu.cfg.gyro_min_sigma):
         # Quiet by the stated noise, but a steady turn by the gyro's own scatter (a driver stating
         # 0.14 rad/s of noise for a 0.004 rad/s gyro, the vehicle coasting round a bend).
-        log.info("standstill_turning", sensor=imu.name, stamp=stamp, rate=[w[2 + i] / n for i in range(3)])
+        if emit:  # not again at each re-application after a late sample
+            log.info("standstill_turning", sensor=imu.name, stamp=stamp, rate=[w[2 + i] / n for i in range(3)])
         s.own[imu.index] = msgspec.structs.replace(own, bias=msgspec.structs.replace(learning_state, window=None))
         return []
     rejects = list(learning_state.rejects)
@@ -121,8 +122,9 @@ def learn_bias_at_rest(imu: "SensorModel", s: "FilterState", inp: "ImuInput", st
         if res.rejected:
             recent = (rejects[axis] + (mean,))[-REOPEN_AFTER:]
             if len(recent) == REOPEN_AFTER and max(recent) - min(recent) <= AGREE_SIGMAS * math.sqrt(var):
-                log.warning("gyro_bias_reopened", sensor=imu.name, axis=GYRO_COMPONENTS[axis], stamp=stamp,
-                            estimate=float(s.ekf.x[layout.nominal["gyro_bias"].start + axis]), at_rest=mean)
+                if emit:  # not again at each re-application after a late sample
+                    log.warning("gyro_bias_reopened", sensor=imu.name, axis=GYRO_COMPONENTS[axis], stamp=stamp,
+                                estimate=float(s.ekf.x[layout.nominal["gyro_bias"].start + axis]), at_rest=mean)
                 s.ekf.reset_variance(e0 + axis, fc.gyro_bias_sigma**2)
                 y, H, R = obs.bias_axis(layout, s.ekf.x, axis, mean, var)
                 res = s.ekf.update(y, H, R, ZERO_RATE_GATE, ctx.rest_mask)
