@@ -18,8 +18,8 @@ Rz(delta) composed before the configured one, so the key to paste is the configu
 triple with delta added to its yaw.
 
 Both series are smoothed over SMOOTH_BINS bins (the same box for both, so the
-relation stays linear) and decimated by it, so the samples in the fit are nearly
-independent and the standard error is honest.
+relation stays linear); every window is fitted, and the standard error counts the
+n / SMOOTH_BINS independent samples they hold.
 """
 
 from __future__ import annotations
@@ -110,8 +110,8 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     # the same box on both sides keeps m = Rz(-delta) e + b; a window is used only when all of it is valid
     whole = _box(valid.astype(float), SMOOTH_BINS) > 1.0 - 1e-9
     cols = [_box(np.where(valid, a, 0.0), SMOOTH_BINS) for a in (mx, my, ex, ey)]
-    idx = np.nonzero(whole)[0][::SMOOTH_BINS]
-    if len(idx) < MOUNT_MIN_SAMPLES:
+    idx = np.nonzero(whole)[0]
+    if len(idx) < SMOOTH_BINS * MOUNT_MIN_SAMPLES:
         return None
     mx, my, ex, ey = (c[idx] for c in cols)
     n = len(idx)
@@ -128,11 +128,15 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
         return None
     resid = y - A @ coef
     sigma2 = float(resid @ resid) / max(2 * n - 4, 1)
+    # Every window is fitted (one every SMOOTH_BINS-th would make the angle depend on which bin the
+    # recording happens to start at), but neighbouring windows share SMOOTH_BINS - 1 of their bins: the
+    # fit holds n / SMOOTH_BINS independent samples' information, so the covariance as if they were
+    # independent is scaled by SMOOTH_BINS.
     try:
-        cov = sigma2 * np.linalg.inv(A.T @ A)
+        cov = SMOOTH_BINS * sigma2 * np.linalg.inv(A.T @ A)
     except np.linalg.LinAlgError:
         return None
     # delta = atan2(s, c): gradient (-s, c) / r2
     var = (s * s * cov[0, 0] + c * c * cov[1, 1] - 2.0 * c * s * cov[0, 1]) / (r2 * r2)
-    return MountYaw(math.atan2(s, c), math.sqrt(max(var, 0.0)), math.sqrt(r2), n, expected_rms,
+    return MountYaw(math.atan2(s, c), math.sqrt(max(var, 0.0)), math.sqrt(r2), n // SMOOTH_BINS, expected_rms,
                     math.sqrt(sigma2), float(coef[2]))
