@@ -16,14 +16,21 @@ from pathlib import Path
 EXIT_USAGE = 2
 
 
-def _load_config(path: str):
+def _load_config(path: str, needs: str = ""):
+    """The config, or exit 2 with one line. ``needs``: what the command does with its sensors (a config
+    without any is refused, naming that, instead of failing later on what it cannot find)."""
     from .config import ConfigError, load
 
     try:
-        return load(path)
+        cfg = load(path)
     except ConfigError as err:
         print(f"fusiond: config error: {err}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
+    if needs and not cfg.sensors:
+        print(f"fusiond: config error: {path}: no [[sensors]] configured: nothing to {needs}; add at least the "
+              "odometry sensor (see config.toml)", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE)
+    return cfg
 
 
 def _output_error(path: str, option: str, directory: bool = False) -> str | None:
@@ -46,7 +53,7 @@ def _output_error(path: str, option: str, directory: bool = False) -> str | None
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    cfg = _load_config(args.config)
+    cfg = _load_config(args.config, needs="replay")
     for option, value, directory in (("--tum", args.tum, False), ("--diagnostics", args.diagnostics, False),
                                      ("--plot", args.plot, False), ("--report", args.report, True),
                                      ("--evaluation", args.evaluation, False)):
@@ -181,7 +188,7 @@ _STATUS_RANK = {"failed": 0, "starting": 1, "degraded": 1, "ok": 2}
 
 def cmd_tune(args: argparse.Namespace) -> int:
     """Fit the configured noise to the bags (fusiond/tune) and write the complete tuned config."""
-    cfg = _load_config(args.config)
+    cfg = _load_config(args.config, needs="tune")
     problem = _output_error(args.out, "--out")
     if problem:
         print(f"fusiond: {problem}", file=sys.stderr)
@@ -250,10 +257,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     from .replay.bag import BagError, open_bag_samples
     from .transport.player import play
 
-    if args.rate < 0:
-        print("fusiond: --rate must be >= 0", file=sys.stderr)
-        return EXIT_USAGE
-    cfg = _load_config(args.config)
+    cfg = _load_config(args.config, needs="play")
     try:  # the bag first: a file that is no bag is refused before a session is opened or a daemon awaited
         bag = open_bag_samples([Path(b) for b in args.bags], cfg.sensors)
     except BagError as err:
@@ -277,6 +281,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     per = " ".join(f"{k}={v}" for k, v in result.per_sensor.items())
     print(f"played {result.messages} messages ({per}), {result.bag_seconds:.3f} s of bag in {result.seconds:.3f} s"
           + (" (interrupted)" if result.interrupted else ""))
+    if result.daemon_dropped:
+        print(f"fusiond: the daemon dropped {result.daemon_dropped} of these samples, its input queue full "
+              f"(health: queue.dropped): it did not keep up with --rate {args.rate:g}; play slower", file=sys.stderr)
     return 0
 
 
@@ -666,7 +673,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--timeout", type=_positive, default=5.0,
                    help="seconds to find a daemon before giving up (default 5)")
     m.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
-    m.add_argument("--interval", type=_positive, default=1.0, help="refresh period in seconds")
+    m.add_argument("--interval", type=_positive, default=1.0, help="refresh period in seconds (default 1)")
     m.add_argument("--json", action="store_true", help="stream JSON lines instead of the terminal view")
     m.set_defaults(func=cmd_monitor)
 
@@ -702,7 +709,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("play", help="publish a bag's sensor topics onto Zenoh as zenoh-bridge-ros2dds would")
     pl.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     pl.add_argument("--config", required=True, help="TOML config: sensors, keys and the [zenoh] section")
-    pl.add_argument("--rate", type=float, default=1.0, help="pace relative to the recording; 0 = as fast as possible")
+    pl.add_argument("--rate", type=_non_negative, default=1.0,
+                    help="pace relative to the recording (default 1: the recorded pace); 0 = as fast as possible, "
+                         "which a daemon may not keep up with (play reports what its queue dropped)")
     pl.add_argument("--duration", type=_positive, help="play only the first S seconds of the bag")
     pl.add_argument("--connect", action="append", metavar="ENDPOINT",
                     help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "

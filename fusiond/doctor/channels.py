@@ -129,14 +129,17 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     ev = {"nis_per_dof": ch.nis_per_dof, "gated_fraction": frac}
     if ch.n and not ch.n_nis:
         return Verdict(name, channel, "ok", figures(ch, t0), evidence=ev)
+    line = _measured_noise(ch, up)
+    # the innovations' rms as a pasteable line when it covers every axis of the key, else said in the text
+    rms = "the value below" if line else "their rms per axis (" + ", ".join(
+        f"{c} {ch.component(i)[1]:.2g} m" for i, c in enumerate(ch.components)) + ")"
     if frac > MOST_GATED:
         # Jumps (multipath, relocalisation) come in bursts among good fixes; a gate that rejects most
         # of them is cutting into the ordinary noise, which is then larger than stated.
-        line = _measured_noise(ch, up)
         return Verdict(name, channel, "problem",
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): too many for jumps, "
                        "which come in bursts among good fixes: the stated noise is too small, and the innovations "
-                       "(an upper bound: they include the filter's own uncertainty) suggest the value below",
+                       f"(an upper bound: they include the filter's own uncertainty) suggest {rms}",
                        key, line, evidence=ev)
     if frac > GATED_FRACTION:
         return Verdict(name, channel, "warn",
@@ -156,13 +159,11 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
         return Verdict(name, channel, "problem",
                        f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "
                        "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation); "
-                       "if it is the noise, the innovations (an upper bound) suggest the value below",
-                       key, _measured_noise(ch, up), evidence=ev)
+                       f"if it is the noise, the innovations (an upper bound) suggest {rms}", key, line, evidence=ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
                        f"NIS low ({figures(ch, t0)}; {detail}): the stated noise is larger than the innovations show "
-                       "(the value below: their rms, an upper bound of the sensor's own noise)",
-                       key, _measured_noise(ch, up), evidence=ev)
+                       f"({rms}: an upper bound of the sensor's own noise)", key, line, evidence=ev)
     return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)
 
 

@@ -119,6 +119,17 @@ class BagSamples:
         self.close()
 
 
+ROS1_MAGIC = b"#ROSBAG V2.0\n"  # the first line of every ROS 1 bag (format 2.0, the one rosbag writes)
+
+
+def _starts_as_ros1(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(len(ROS1_MAGIC)) == ROS1_MAGIC
+    except OSError:
+        return True  # unreadable for another reason: rosbags says which
+
+
 def _open_reader(paths: Sequence[Path]) -> AnyReader:
     if not paths:
         raise BagError("no bag given")
@@ -137,6 +148,13 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
         raise BagError("cannot mix ROS 1 .bag files and ROS 2 bags in one replay")
     if len(paths) > 1 and not any(ros1):
         raise BagError("give one ROS 2 bag (directory) at a time; several ROS 1 .bag files can be merged")
+    for p in paths:  # what rosbags would say in its own words, said in the user's
+        if p.is_dir() and not (p / "metadata.yaml").exists() and not any(p.glob("*.mcap")):
+            raise BagError(f"{p}: not a readable ROS 1/ROS 2 bag (a ROS 2 bag directory holds metadata.yaml and "
+                           "its .db3 or .mcap files: this one has no metadata.yaml)")
+        if p.is_file() and p.suffix == ".bag" and not _starts_as_ros1(p):
+            raise BagError(f"{p}: not a readable ROS 1/ROS 2 bag (a ROS 1 bag starts with "
+                           f"{ROS1_MAGIC.decode().strip()!r}: this file does not)")
     try:
         return _opened(paths, None)
     except AnyReaderError as err:

@@ -463,7 +463,8 @@ def format_evaluation(ev: Evaluation) -> str:
     """The evaluation as a plain-text table (the replay summary prints it)."""
     out = [f"reference   {ev.reference} ({ev.reference_type}), scored at {ev.scored_at}"
            + (f", fixes fused 1 in {ev.fuse_every}" if ev.fuse_every > 1 else "")
-           + ("; world frame: the filter's" if ev.world else "; no world frame: aligned errors only")]
+           + ("; unaligned errors in the filter's world frame" if ev.world
+              else "; no world frame: aligned errors only")]
     out += [f"note        {n}" for n in ev.notes]
     header = f"{'segment':<14} {'method':<26} {'n':>6} {'world m':>8} {'up m':>7} {'aligned m':>9} " \
              f"{'head deg':>8} {'RPE/' + format(ev.rpe_s, 'g') + 's m':>10}"

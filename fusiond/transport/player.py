@@ -22,11 +22,13 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import msgspec
 import zenoh
 
 from ..codecs import encode_sample, make_decoder
 from ..config import Config
 from ..errors import PlaybackError
+from ..health import decode_report
 from ..logs import get_logger
 from .daemon import sensor_kind
 from .session import query_health
@@ -34,6 +36,7 @@ from .session import query_health
 log = get_logger("fusiond.play")
 
 LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
+HEALTH_QUERY_S = 1.0  # how long the daemon's drop count is waited for, before and after playing
 
 
 class RawSource(Protocol):
@@ -54,6 +57,9 @@ class PlayResult:
     bag_seconds: float = 0.0  # bag time span played
     seconds: float = 0.0  # wall time
     interrupted: bool = False
+    # samples the daemon's full input queue dropped while this played (its health's queue.dropped before
+    # and after); None without exactly one daemon answering on the health key
+    daemon_dropped: int | None = None
 
 
 def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> bool:
@@ -99,9 +105,12 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             for s in cfg.sensors if s.name not in bag.missing}
     transcode = {s.name: _transcoder(s) for s in cfg.sensors}
     try:
+        dropped_before = None
         if wait_s > 0 and not wait_for_daemon(session, cfg.output.health_key, wait_s):
             log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
                         keys=[s.key for s in cfg.sensors if s.name in pubs])
+        elif wait_s > 0:
+            dropped_before = _queue_dropped(session, cfg.output.health_key)
         log.info("play_started", bag=list(names), rate=rate, messages=bag.total)
         t0_bag: int | None = None
         t0 = clock()
@@ -126,12 +135,28 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             result.bag_seconds = offset
         result.seconds = clock() - t0
         stop.wait(LINGER_S)
+        if dropped_before is not None:  # a daemon that could not keep up says so in its health: nothing lost silently
+            dropped_after = _queue_dropped(session, cfg.output.health_key)
+            if dropped_after is not None:
+                result.daemon_dropped = dropped_after - dropped_before
     finally:
         for p in pubs.values():
             p.undeclare()
     log.info("play_finished", messages=result.messages, per_sensor=result.per_sensor,
-             seconds=round(result.seconds, 3), interrupted=result.interrupted)
+             seconds=round(result.seconds, 3), interrupted=result.interrupted, daemon_dropped=result.daemon_dropped)
     return result
+
+
+def _queue_dropped(session: zenoh.Session, health_key: str) -> int | None:
+    """The daemon's count of samples its full input queue dropped, or None unless exactly one daemon
+    answers with a readable health report."""
+    answers = query_health(session, health_key, HEALTH_QUERY_S)
+    if len(answers) != 1:
+        return None
+    try:
+        return decode_report(answers[0]).queue.dropped
+    except msgspec.DecodeError:
+        return None
 
 
 def _encoding(name: str) -> zenoh.Encoding:

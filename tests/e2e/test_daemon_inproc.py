@@ -142,6 +142,46 @@ angular_velocity = true
         daemon.stop()
 
 
+@pytest.mark.e2e
+def test_play_reports_what_a_daemon_that_cannot_keep_up_dropped(sessions, jackal_bag):
+    """`play --rate 0` outruns a daemon whose worker is slow (each sample held 2 ms: 2 s of the bag,
+    ~200 samples, put in well under their 0.4 s of fusing) with a queue of 8: what its full queue
+    dropped is read back from its health and reported, not lost silently."""
+    from fusiond.replay.bag import open_bag_samples
+    from fusiond.transport.player import play
+
+    dsession, client = sessions
+    cfg = loads("""
+[output]
+health_key = "t/health"
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "jackal_velocity_controller/odom"
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu/data"
+angular_velocity = true
+""")
+    daemon = Daemon(cfg, dsession, monitor=False, queue_size=8)
+    ingest = daemon.core.ingest
+
+    def slow(sample):
+        time.sleep(0.002)
+        return ingest(sample)
+
+    daemon.core.ingest = slow
+    daemon.start()
+    try:
+        with open_bag_samples([jackal_bag], cfg.sensors) as bag:
+            result = play(bag, cfg, client, rate=0.0, duration=2.0, wait_s=5.0)
+        rep = wait_until(lambda: (r := report(client)) and r.queue.depth == 0 and r, 10, "the queue drained")
+        assert result.daemon_dropped == rep.queue.dropped > 0, (result, rep.queue)
+    finally:
+        daemon.stop()
+
+
 def test_fused_position_is_published_as_navsatfix(sessions):
     """With a GPS and `output.navsat_key`, the daemon publishes the fused base position in WGS84."""
     from fusiond.samples import GpsSample, ImuSample

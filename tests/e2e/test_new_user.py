@@ -135,6 +135,16 @@ def test_run_without_sensors_does_not_import_zenoh(tmp_path, capsys, monkeypatch
     assert code == 2 and "no [[sensors]] configured" in one_line(err)
 
 
+@pytest.mark.parametrize("command,verb", [("replay", "replay"), ("doctor", "replay"), ("tune", "tune"),
+                                          ("play", "play")])
+def test_a_bag_command_without_sensors_says_so(tmp_path, capsys, command, verb):
+    cfg = write_config(tmp_path, "")
+    extra = ["--out", str(tmp_path / "t.toml")] if command == "tune" else ["--no-multicast"] if command == "play" else []
+    code, out, err = run_cli(capsys, command, str(JACKAL), "--config", str(cfg), *extra)
+    assert code == 2 and out == ""
+    assert one_line(err).startswith(f"fusiond: config error: {cfg}: no [[sensors]] configured: nothing to {verb}")
+
+
 # -- 6. --no-multicast on every command that opens a session ----------------------------------------------
 
 SESSION_COMMANDS = {
@@ -823,6 +833,8 @@ def test_replay_refuses_a_scoring_option_of_no_meaning(tmp_path, capsys, option,
     ["calibrate-imu", "--start", "-5"],
     ["play", "b.bag", "--config", "c.toml", "--wait", "-1"],
     ["play", "b.bag", "--config", "c.toml", "--duration", "0"],
+    ["play", "b.bag", "--config", "c.toml", "--rate", "nan"],  # NaN is no pace
+    ["play", "b.bag", "--config", "c.toml", "--rate", "-1"],
     ["bench", "--latency", "--seconds", "0"],
     ["bench-latency", "--seconds", "0"],  # the benchmark would end in a KeyError
     ["bench-latency", "--imu-hz", "0"],

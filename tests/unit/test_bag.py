@@ -158,3 +158,13 @@ def test_a_ros2_bag_directory_named_dot_bag(tmp_path: Path) -> None:
     with pytest.raises(BagError, match="named \\*.bag"):
         with open_bag_samples([named], sensors):
             pass
+
+
+def test_what_is_no_bag_is_said_in_the_users_words(tmp_path: Path) -> None:
+    """An empty directory is no ROS 2 bag for want of metadata.yaml; a .bag file that does not start as
+    one is no ROS 1 bag: each said as such, not as rosbags' own exception."""
+    with pytest.raises(BagError, match="not a readable ROS 1/ROS 2 bag .a ROS 2 bag directory holds metadata.yaml"):
+        open_bag_samples([tmp_path], SENSORS)
+    (tmp_path / "photo.bag").write_bytes(bytes(range(200)))
+    with pytest.raises(BagError, match="not a readable ROS 1/ROS 2 bag .a ROS 1 bag starts with '#ROSBAG V2.0'"):
+        open_bag_samples([tmp_path / "photo.bag"], SENSORS)
