@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+import re
 import statistics
 import subprocess
 import sys
@@ -478,6 +479,9 @@ def targets(result: dict[str, dict[str, float]]) -> dict[str, float]:
             out[f"replay_process_vs_bare_{name}_wall (<=1.0)"] = f / b
             out[f"replay_process_vs_bare_{name}_cpu (<=1.0)"] = (proc[f"fusiond_replay{sfx}_cpu_s"]
                                                                  / proc[f"bare_numpy_script{sfx}_cpu_s"])
+    lat = result.get("latency", {})
+    if "cpu_ratio" in lat:
+        out["daemon_cpu_vs_bare_subscriber (<=2.0)"] = lat["cpu_ratio"]
     return out
 
 
@@ -505,8 +509,15 @@ def run(bag: Path, config: Path, cfg: Config, quick: bool = False) -> dict[str, 
 
 
 def format_table(result: dict[str, dict[str, float]]) -> str:
+    """One line a figure; a target's line says whether this run met its goal (the goal is in its name)."""
     lines = []
     for section, values in result.items():
+        width = max((len(k) for k in values), default=0)
         for k, v in values.items():
-            lines.append(f"{section:<10} {k:<52} {v:>12,.2f}")
+            line = f"{section:<10} {k:<{max(width, 52)}} {v:>12,.2f}"
+            goal = re.search(r"\((<=|>=)([0-9.]+)\)$", k) if section == "targets" else None
+            if goal:
+                met = v <= float(goal.group(2)) if goal.group(1) == "<=" else v >= float(goal.group(2))
+                line += "  met" if met else "  missed"
+            lines.append(line)
     return "\n".join(lines)

@@ -299,7 +299,8 @@ def cmd_health(args: argparse.Namespace) -> int:
     finally:
         session.close()
     if not answers:
-        print(f"fusiond: no health answer on {key!r} within {args.timeout} s", file=sys.stderr)
+        print(f"fusiond: no health answer on {key!r} within {args.timeout} s ({_reached(args, cfg)})",
+              file=sys.stderr)
         return EXIT_UNHEALTHY
     worst = None
     for raw in answers:
@@ -389,6 +390,21 @@ def _tool_session(args: argparse.Namespace, listen: list[str] | None = None, unr
         raise SystemExit(unreachable_exit) from None
 
 
+def _reached(args: argparse.Namespace, cfg) -> str:
+    """Where a tool's session looked for the daemon, for a "no answer" line: an operator reads whether
+    it dialled the wrong endpoint or had nothing to dial at all."""
+    from .transport.session import client_endpoints
+
+    endpoints = client_endpoints(cfg.zenoh, getattr(args, "connect", None))
+    scouting = cfg.zenoh.multicast_scouting and not getattr(args, "no_multicast", False)
+    if endpoints:
+        return "dialled " + ", ".join(endpoints) + (" and scouted by multicast" if scouting else "")
+    if scouting:
+        return "scouted by multicast only: give --connect ENDPOINT to dial the daemon"
+    return ("nothing to reach: no --connect, no [zenoh] connect or listen endpoint in the config, and multicast "
+            "scouting off")
+
+
 def cmd_monitor(args: argparse.Namespace) -> int:
     from . import monitor
 
@@ -405,8 +421,8 @@ def cmd_calibrate_imu(args: argparse.Namespace) -> int:
     from .calibrate import calibrate, record_imu
     from .config import ImuSensor
 
-    if args.bag and not args.config:
-        print("fusiond: calibrate-imu --bag needs --config (which topic is the IMU)", file=sys.stderr)
+    if args.bag and not args.config and not args.key:
+        print("fusiond: calibrate-imu --bag needs --config or --key (which topic is the IMU)", file=sys.stderr)
         return EXIT_USAGE
     cfg = _load_config(args.config) if args.config else None
     imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)] if cfg else []
@@ -525,6 +541,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             elif isinstance(v, (int, float)):
                 flat[k] = v
         result["latency"] = flat
+        result["targets"] = bench.targets(result)  # with the daemon's CPU ratio now
     if args.json:
         print(msgspec.json.encode(result).decode())
     else:
@@ -683,7 +700,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--start", type=_non_negative, default=0.0, help="with --bag: skip the first S seconds")
     c.add_argument("--config", help="TOML config naming the IMU sensor (key, encoding, extrinsic_rpy)")
     c.add_argument("--sensor", help="which imu sensor of the config (default: the first)")
-    c.add_argument("--key", help="Zenoh key of the IMU without a config (default imu/data, ROS 2 CDR)")
+    c.add_argument("--key", help="the IMU without a config: its Zenoh key (default imu/data, ROS 2 CDR), or with "
+                                 "--bag its topic without the leading slash (the wheels then unread: a recording "
+                                 "that moved is told by the IMU alone)")
     c.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
     c.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
     c.set_defaults(func=cmd_calibrate_imu)

@@ -182,7 +182,8 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
             return None
         drift = fc.gyro_bias_sigma * duration
         return Verdict(imu.name, "gyro_bias", "warn",
-                       f"the gyro bias was never learned: no standstill of {fc.standstill_s:g} s in {duration:.0f} s "
+                       "the gyro's z bias, which turns the heading, was never learned (a tilt reference learns "
+                       f"x and y only): no standstill of {fc.standstill_s:g} s in {duration:.0f} s "
                        f"and no heading reference, so heading uncertainty grows by gyro_bias_sigma x t "
                        f"({fc.gyro_bias_sigma:g} rad/s -> {drift:.2f} rad over the run). Stop the robot now and then, "
                        "or state the bias spread measured by `fusiond calibrate-imu`",

@@ -67,6 +67,14 @@ def test_targets_are_ratios_of_the_same_run():
     assert t["replay_process_vs_bare_jackal_wall (<=1.0)"] == pytest.approx(1.25)
     assert t["replay_process_vs_bare_jackal_cpu (<=1.0)"] == pytest.approx(1.5)
     assert not any("synthetic" in k for k in t)
+    result["latency"] = {"cpu_ratio": 2.1}
+    t = bench.targets(result)
+    assert t["daemon_cpu_vs_bare_subscriber (<=2.0)"] == pytest.approx(2.1)
+    lines = bench.format_table({"targets": t}).splitlines()
+    said = {line.split()[1]: line.split()[-1] for line in lines}
+    assert said == {"estimator_step_vs_tight_numpy": "met", "replay_in_process_vs_rosbags_decode": "missed",
+                    "replay_process_vs_bare_jackal_wall": "missed", "replay_process_vs_bare_jackal_cpu": "missed",
+                    "daemon_cpu_vs_bare_subscriber": "missed"}
 
 
 def test_process_benchmark_runs_fusiond_byte_compiled_as_installed():
