@@ -105,6 +105,25 @@ def test_liveliness_token_and_a_clean_stop(sessions):
     pose_sub.undeclare()
 
 
+def _jackal_bag_config(wheel: str = "", imu: str = ""):
+    """A daemon on the Jackal bag's topics (health on t/health), plus lines for each sensor's table."""
+    return loads(f"""
+[output]
+health_key = "t/health"
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "jackal_velocity_controller/odom"
+{wheel}
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu/data"
+angular_velocity = true
+{imu}
+""")
+
+
 @pytest.mark.e2e
 def test_play_transcodes_for_json_and_msgpack_sensors(sessions, jackal_bag):
     """`play` feeds a daemon whose sensors are configured as json/msgpack: the same samples arrive."""
@@ -112,21 +131,7 @@ def test_play_transcodes_for_json_and_msgpack_sensors(sessions, jackal_bag):
     from fusiond.transport.player import play
 
     dsession, client = sessions
-    cfg = loads("""
-[output]
-health_key = "t/health"
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "jackal_velocity_controller/odom"
-encoding = "json"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-encoding = "msgpack"
-angular_velocity = true
-""")
+    cfg = _jackal_bag_config(wheel='encoding = "json"', imu='encoding = "msgpack"')
     daemon = Daemon(cfg, dsession, monitor=False)
     daemon.start()
     try:
@@ -151,19 +156,7 @@ def test_play_reports_what_a_daemon_that_cannot_keep_up_dropped(sessions, jackal
     from fusiond.transport.player import play
 
     dsession, client = sessions
-    cfg = loads("""
-[output]
-health_key = "t/health"
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "jackal_velocity_controller/odom"
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu/data"
-angular_velocity = true
-""")
+    cfg = _jackal_bag_config()
     daemon = Daemon(cfg, dsession, monitor=False, queue_size=8)
     ingest = daemon.core.ingest
 
