@@ -40,7 +40,9 @@ class Variant:
     edit: Callable[[str, float, object], object | None]
     edits: tuple[str, ...] = ()
     metrics: tuple[str, ...] = ("world_h", "aligned_h")
-    baselines: tuple[str, ...] = ("raw fixes",)
+    # the raw fixes know the next fix (read between two) and are scored only where there are fixes; holding
+    # or extrapolating the last one is what a GPS-only user has at each moment, through an outage too
+    baselines: tuple[str, ...] = ("raw fixes", "hold last fused fix", "fixes at constant velocity")
     segment: str = "all"
     keep_datum: bool = False  # name the original's first fix as the datum (a variant that starts later)
 
@@ -134,8 +136,9 @@ def write_variant(src: Path, out: Path, v: Variant) -> tuple[float, float, float
     return first_fix
 
 
-def score(data: Path, v: Variant, work: Path) -> dict[str, tuple[float | None, tuple[float, str] | None]]:
-    """Per metric: (fusiond, (best baseline, its name)) on the variant's segment."""
+def score(data: Path, v: Variant, work: Path) -> dict[str, tuple[tuple[float, int] | None, list]]:
+    """Per metric: fusiond's (value, points scored), and each baseline's (name, value, points scored),
+    on the variant's segment."""
     import msgspec
 
     from fusiond.config import GpsSensor, load
@@ -154,9 +157,10 @@ def score(data: Path, v: Variant, work: Path) -> dict[str, tuple[float | None, t
     by = {sc.method: sc for sc in ev.scores if sc.segment == v.segment}
     out = {}
     for metric in v.metrics:
-        ours = getattr(by["fusiond"], metric) if "fusiond" in by else None
-        base = [(getattr(by[m], metric), m) for m in v.baselines if m in by and getattr(by[m], metric) is not None]
-        out[metric] = (ours, min(base) if base else None)
+        ours = (getattr(by["fusiond"], metric), by["fusiond"].n) if "fusiond" in by else None
+        base = [(m, getattr(by[m], metric), by[m].n) for m in v.baselines
+                if m in by and getattr(by[m], metric) is not None]
+        out[metric] = (ours, base)
     return out
 
 
@@ -178,14 +182,14 @@ def main() -> int:
               file=sys.stderr)
         return 2
     started = time.perf_counter()
-    print("| variant | case | segment | metric | fusiond | best plain baseline |")
+    print("| variant | case | segment | metric | fusiond (points scored) | plain baselines (points scored) |")
     print("|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory(prefix="fusiond-variants-") as tmp:
         for v in chosen:
-            for metric, (ours, best) in score(data, v, Path(tmp)).items():
-                ours_s = "-" if ours is None else f"{ours:.3f} {UNITS[metric]}"
-                best_s = "-" if best is None else f"{best[0]:.3f} ({best[1]})"
-                print(f"| {v.name} | {v.what} | {v.segment} | {metric} | {ours_s} | {best_s} |", flush=True)
+            for metric, (ours, base) in score(data, v, Path(tmp)).items():
+                ours_s = "-" if ours is None else f"{ours[0]:.3f} {UNITS[metric]} ({ours[1]})"
+                base_s = "; ".join(f"{name} {value:.3f} ({n})" for name, value, n in base) or "-"
+                print(f"| {v.name} | {v.what} | {v.segment} | {metric} | {ours_s} | {base_s} |", flush=True)
     print(f"({time.perf_counter() - started:.0f} s)", file=sys.stderr)
     return 0
 

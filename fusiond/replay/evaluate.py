@@ -2,9 +2,10 @@
 never fused, beside the baselines a user could have had with no filter at all.
 
 A filter earns its place only where it beats those baselines on the same recording and the same scorer:
-raw wheel odometry, the gyro's heading with the wheels' speed, the raw fixes, and, with fixes thinned by
-``--fuse-every N``, holding the last fused fix or extrapolating the last two (scored on the fixes that
-were not fused). Alignment and RPE use evo's implementations (Umeyama, relative pose error); this module
+raw wheel odometry, the gyro's heading with the wheels' speed, the raw fixes (interpolated between a fix
+and the next, so they know the next one), holding the last fused fix or extrapolating the last two (what
+a GPS-only user has at each moment, through an outage too; with fixes thinned by ``--fuse-every N``
+scored on the fixes that were not fused). Alignment and RPE use evo's implementations (Umeyama, relative pose error); this module
 only reads the bag, builds the tracks and splits the recording into the segments its gaps leave.
 
 Scoring times: every reference stamp, or with ``--fuse-every N`` the stamps of the absolute sensor's
@@ -297,7 +298,7 @@ def baseline_tracks(rec: Recorder, frame: EnuFrame | None, max_gap: float) -> li
         if every:
             tracks.append(Track.build("raw fixes", [f[0] for f in every], _enu(frame, [f[1:4] for f in every]),
                                       world=True))
-        if rec.fuse_every > 1 and fused:
+        if fused:  # causal, unlike the raw fixes (read between a fix and the next): what a GPS-only user has
             ft = np.array([f[0] for f in fused])
             fx = _enu(frame, [f[1:4] for f in fused])
             tracks.append(Track.build("hold last fused fix", ft, fx, world=True, held=True))
@@ -306,7 +307,7 @@ def baseline_tracks(rec: Recorder, frame: EnuFrame | None, max_gap: float) -> li
     if poses and rec.absolute is not None and not rec.geodetic:
         p = np.array(poses)
         tracks.append(Track.build("raw poses", p[:, 0], p[:, 1:4], p[:, 4], world=True))
-        if rec.fuse_every > 1 and rec.fused_poses:
+        if rec.fused_poses:
             q = np.array(sorted(rec.fused_poses))
             tracks.append(Track.build("hold last fused pose", q[:, 0], q[:, 1:4], q[:, 4], world=True, held=True))
     return tracks
