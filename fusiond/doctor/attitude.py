@@ -25,6 +25,7 @@ from ..config import ImuSensor
 from ..estimator import rotation as rot
 from .mounting import MountYaw
 from .nis import ChannelStats
+from .settled import Settled
 from .verdict import Verdict, sensor_key
 from .thresholds import LEAN_RAD
 
@@ -52,25 +53,10 @@ class TiltStats:
         if len(self._pending) >= CHUNK:
             self._settle()
 
-    @property
-    def n(self) -> int:
-        self._settle()
-        return self._n
-
-    @property
-    def sums(self) -> list[float]:
-        self._settle()
-        return self._sums
-
-    @property
-    def squares(self) -> list[float]:
-        self._settle()
-        return self._squares
-
-    @property
-    def up(self) -> list[float]:
-        self._settle()
-        return self._up
+    n = Settled("_n")
+    sums = Settled("_sums")
+    squares = Settled("_squares")
+    up = Settled("_up")
 
     def _settle(self) -> None:
         pending, n = self._pending, len(self._pending)

@@ -17,6 +17,7 @@ import numpy as np
 from ..config import ImuSensor, OdomSensor
 from .nis import ChannelStats
 from .series import Series
+from .settled import Settled
 from .heading import rate_fit_text
 from .verdict import Verdict, sensor_key
 from .thresholds import (ALL_ZEROS_FRACTION, ALONG_SIN, MIN_TURNED_RAD, MOVING_M_S, SLIP_FRACTION, TURNED_RAD,
@@ -39,8 +40,8 @@ class TwistStats:
         self._orientation: list[tuple[float, float, float, float]] = []
         self._n = 0
         self._sums = [0.0, 0.0, 0.0]
-        self.turned = 0  # moving messages whose pose yaw is beyond TURNED_RAD ...
-        self.along_x = 0  # ... whose twist points along the odom frame's x (body-frame, or the robot heads x)
+        self._turned = 0
+        self._along_x = 0
 
     def add(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
             orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
@@ -50,25 +51,12 @@ class TwistStats:
         if len(self._linear) >= CHUNK:
             self._settle()
 
-    @property
-    def n(self) -> int:
-        self._settle()
-        return self._n
-
-    @property
-    def abs_vx(self) -> float:
-        self._settle()
-        return self._sums[0]
-
-    @property
-    def abs_vy(self) -> float:
-        self._settle()
-        return self._sums[1]
-
-    @property
-    def abs_wz(self) -> float:
-        self._settle()
-        return self._sums[2]
+    n = Settled("_n")
+    abs_vx = Settled("_sums", 0)
+    abs_vy = Settled("_sums", 1)
+    abs_wz = Settled("_sums", 2)
+    turned = Settled("_turned")  # moving messages whose pose yaw is beyond TURNED_RAD ...
+    along_x = Settled("_along_x")  # ... whose twist points along the odom frame's x (body-frame, or the robot heads x)
 
     def _settle(self) -> None:
         n = len(self._linear)
@@ -82,8 +70,8 @@ class TwistStats:
         pose_yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         direction = np.arctan2(linear[:, 1], linear[:, 0])
         turned = (np.hypot(linear[:, 0], linear[:, 1]) > MOVING_M_S) & (np.abs(np.sin(pose_yaw)) > math.sin(TURNED_RAD))
-        self.turned += int(turned.sum())
-        self.along_x += int((turned & (np.abs(np.sin(direction)) < ALONG_SIN)).sum())
+        self._turned += int(turned.sum())
+        self._along_x += int((turned & (np.abs(np.sin(direction)) < ALONG_SIN)).sum())
         rows = np.abs(np.column_stack((linear[:, 0], linear[:, 1], angular[:, 2])))
         self._n += n
         self._sums = np.cumsum(np.concatenate(([self._sums], rows)), axis=0)[-1].tolist()
