@@ -326,10 +326,9 @@ class FusionCore:
         twist_cov = np.zeros((6, 6))
         twist_cov[0:3, 0:3] = np.reshape(u.linear_cov, (3, 3))
         twist_cov[3:6, 3:6] = np.reshape(u.angular_cov, (3, 3))
-        shown = self._shown_position() if self._showing else None
         return Estimate(
             stamp=s.t,
-            position=s.ekf.position() if shown is None else shown,
+            position=self._published_position(),
             orientation=s.ekf.attitude(),
             pose_covariance=P[POSE_ERR, POSE_ERR].ravel().tolist(),
             linear=tuple(linear),
@@ -343,8 +342,7 @@ class FusionCore:
         s = self.state
         if s is None or s.t is None or s.enu is None or not s.frame_ready:
             return None
-        shown = self._shown_position() if self._showing else None
-        lat, lon, alt = enu_to_geodetic(s.enu, *(s.ekf.position() if shown is None else shown))
+        lat, lon, alt = enu_to_geodetic(s.enu, *self._published_position())
         return lat, lon, alt, s.ekf.P[POSITION_ERR, POSITION_ERR].ravel().tolist()
 
     def pose(self) -> tuple[float, np.ndarray]:
@@ -361,6 +359,11 @@ class FusionCore:
             if shown is not None:
                 return shown[0], shown[1], self.state.ekf.position()[2]
         return None
+
+    def _published_position(self) -> tuple[float, float, float]:
+        """The state's position, or the one ``_shown_position`` publishes instead."""
+        shown = self._shown_position() if self._showing else None
+        return self.state.ekf.position() if shown is None else shown
 
     def _shown_pose(self) -> np.ndarray:
         """The state's nominal pose [x y z qx qy qz qw], its position as ``_shown_position`` says (a

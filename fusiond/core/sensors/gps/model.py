@@ -215,8 +215,8 @@ class GpsModel(SensorModel):
         p0, p1 = position_of(x0), position_of(x1)
         dx, dy = p1[0] - p0[0], p1[1] - p0[1]
         d = math.hypot(dx, dy)
-        s.own[self.index] = GpsOwn(own.track, (tr[0] + dx, tr[1] + dy, tr[2] + (p1[2] - p0[2])), own.rejected,
-                                   own.accepted, own.unaligned + d, own.increments, own.last, own.anchor)
+        s.own[self.index] = msgspec.structs.replace(own, travel=(tr[0] + dx, tr[1] + dy, tr[2] + (p1[2] - p0[2])),
+                                                    unaligned=own.unaligned + d)
         if d == 0.0:
             return None
         s2 = s.ekf.yaw_variance()
