@@ -228,11 +228,7 @@ def _zenoh_errors():
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    cfg = _load_config(args.config)
-    if not cfg.sensors:  # nothing to subscribe to: the daemon would wait for input forever
-        print(f"fusiond: config error: {args.config}: no [[sensors]] configured: the daemon would wait forever "
-              "for input; add at least the odometry sensor (see config.toml)", file=sys.stderr)
-        return EXIT_USAGE
+    cfg = _load_config(args.config, needs="subscribe to: the daemon would wait forever for input")
     if getattr(args, "no_multicast", False):
         import msgspec
 

@@ -36,7 +36,7 @@ from .session import query_health
 log = get_logger("fusiond.play")
 
 LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
-HEALTH_QUERY_S = 1.0  # how long the daemon's drop count is waited for, before and after playing
+HEALTH_QUERY_S = 1.0  # how long the daemon's drop count is waited for after playing
 
 
 class RawSource(Protocol):
@@ -62,8 +62,8 @@ class PlayResult:
     daemon_dropped: int | None = None
 
 
-def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> bool:
-    """Wait until the daemon answers on its health key.
+def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> list[bytes]:
+    """Wait until the daemon answers on its health key; its answers (empty: none within ``timeout``).
 
     The daemon declares its queryable after its subscribers, and declarations
     reach us in order on the link, so an answer proves our first message will be
@@ -74,9 +74,10 @@ def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> 
     while True:
         left = deadline - time.monotonic()
         if left <= 0:
-            return False
-        if query_health(session, health_key, min(0.5, left)):
-            return True
+            return []
+        answers = query_health(session, health_key, min(0.5, left))
+        if answers:
+            return answers
         time.sleep(min(0.05, max(deadline - time.monotonic(), 0.0)))
 
 
@@ -105,12 +106,11 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             for s in cfg.sensors if s.name not in bag.missing}
     transcode = {s.name: _transcoder(s) for s in cfg.sensors}
     try:
-        dropped_before = None
-        if wait_s > 0 and not wait_for_daemon(session, cfg.output.health_key, wait_s):
+        answers = wait_for_daemon(session, cfg.output.health_key, wait_s) if wait_s > 0 else []
+        if wait_s > 0 and not answers:
             log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
                         keys=[s.key for s in cfg.sensors if s.name in pubs])
-        elif wait_s > 0:
-            dropped_before = _queue_dropped(session, cfg.output.health_key)
+        dropped_before = _queue_dropped(answers)
         log.info("play_started", bag=list(names), rate=rate, messages=bag.total)
         t0_bag: int | None = None
         t0 = clock()
@@ -136,7 +136,7 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
         result.seconds = clock() - t0
         stop.wait(LINGER_S)
         if dropped_before is not None:  # a daemon that could not keep up says so in its health: nothing lost silently
-            dropped_after = _queue_dropped(session, cfg.output.health_key)
+            dropped_after = _queue_dropped(query_health(session, cfg.output.health_key, HEALTH_QUERY_S))
             if dropped_after is not None:
                 result.daemon_dropped = dropped_after - dropped_before
     finally:
@@ -147,10 +147,9 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
     return result
 
 
-def _queue_dropped(session: zenoh.Session, health_key: str) -> int | None:
-    """The daemon's count of samples its full input queue dropped, or None unless exactly one daemon
-    answers with a readable health report."""
-    answers = query_health(session, health_key, HEALTH_QUERY_S)
+def _queue_dropped(answers: list[bytes]) -> int | None:
+    """The daemon's count of samples its full input queue dropped, from the health answers, or None
+    unless exactly one daemon answered with a readable report."""
     if len(answers) != 1:
         return None
     try:
