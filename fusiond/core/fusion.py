@@ -38,7 +38,7 @@ from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History
-from .inputs import HeldInputs, note_period
+from .inputs import HeldInputs, next_expiry, note_period
 from .layout import absolute_sensor, state_layout, update_masks
 from .resume import RESUME_VERSION, ResumeState, state_fingerprint
 from .time_jumps import HeldTimeline
@@ -155,6 +155,7 @@ class FusionCore:
         self.state: FilterState | None = None
         self._reset_history()
         self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max)
+        self._history_s, self._history_max = fc.history_s, fc.history_max
         self.fingerprint = state_fingerprint(cfg)  # which saved states fit this config (core/resume.py)
         self.resets = 0
         self.covariance_resets = 0
@@ -168,7 +169,7 @@ class FusionCore:
         st = self.stats[idx]
         st.received += 1
         stamp = sample.stamp + self._stamp_offset[idx]  # the sensor's stamp_offset_s (0.0: the same float)
-        if not (math.isfinite(stamp) and stamp > 0.0):
+        if not 0.0 < stamp < math.inf:  # NaN fails it too
             return self._drop(idx, reasons.INVALID_STAMP, stamp)
         model = self.models[idx]
         try:
@@ -197,7 +198,7 @@ class FusionCore:
         pos, duplicate = h.slot(key)
         if duplicate:
             return self._drop(idx, reasons.DUPLICATE_STAMP, stamp)
-        late = h.is_late(pos)
+        late = pos < len(h.keys)  # placed before the newest applied sample
         if late:
             if h.too_old(stamp):
                 return self._drop(idx, reasons.TOO_OLD, stamp)
@@ -206,7 +207,7 @@ class FusionCore:
         h.insert(pos, key, (idx, inp, stamp), self.state)
         if late:
             h.reapply_after(pos, self.state, self._reapply)
-        h.trim(self.cfg.filter.history_s, self.cfg.filter.history_max)
+        h.trim(self._history_s, self._history_max)
         if self.state.ekf.resets > resets:
             self._covariance_reset(self.state.ekf.resets - resets)
         st.applied += 1
@@ -215,7 +216,7 @@ class FusionCore:
         if st.newest_stamp is None or stamp > st.newest_stamp:
             st.newest_stamp = stamp
         for r in records:
-            w = self._window(idx, r.channel)
+            w = self.windows.get((idx, r.channel)) or self._window(idx, r.channel)
             if not r.learning:
                 r.consistency = w.add(r.nis, r.dof, r.rejected)
             if r.rejected and r.channel != "yaw_rate":
@@ -335,6 +336,14 @@ class FusionCore:
             angular=tuple(angular),
             twist_covariance=twist_cov.ravel().tolist(),
         )
+
+    def pose_variances(self) -> list[float]:
+        """The variances of the newest estimate's x y z roll pitch yaw: ``estimate().pose_covariance``'s
+        diagonal, without building the estimate."""
+        s = self.state
+        if s is None or s.t is None:
+            raise CoreError("no sample has been fused yet")
+        return s.ekf.P.diagonal()[POSE_ERR].tolist()
 
     def geodetic(self) -> tuple[float, float, float, list[float]] | None:
         """The fused base position in WGS84 (lat, lon, alt) with its ENU covariance (row-major 3x3),
@@ -572,8 +581,9 @@ class FusionCore:
         gap = dt > self.cfg.filter.gap_s
         held = self.inputs
         timeouts = held.timeouts(s)
+        expiries = held.expiries(s, timeouts)  # fixed while predicting: nothing here moves a sensor's newest stamp
         while True:
-            t1 = min(t_end, held.next_expiry(s, t0, timeouts))
+            t1 = next_expiry(expiries, t0, t_end)
             seg = t1 - t0
             u = held.at(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
             x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)

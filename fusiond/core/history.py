@@ -48,9 +48,6 @@ class History:
         pos = bisect.bisect_right(keys, key, self.start)
         return pos, pos > self.start and keys[pos - 1] == key
 
-    def is_late(self, pos: int) -> bool:
-        return pos < len(self.keys)
-
     def too_old(self, stamp: float) -> bool:
         return self.base is not None and self.base.t is not None and stamp < self.base.t
 
@@ -88,13 +85,16 @@ class History:
             n += 1
         if n == SCAN:
             n = bisect.bisect_left(keys, (horizon,), start) - start
-        n = max(n, size - history_max)
+        if size - history_max > n:
+            n = size - history_max
         if n:
+            after = self.after
             if self.base is not None:
                 self._free.append(self.base)
             end = start + n
-            self.base = self.after[end - 1]
-            self._free.extend(self.after[start : end - 1])
+            self.base = after[end - 1]
+            if n > 1:
+                self._free.extend(after[start : end - 1])
             if end >= COMPACT:
                 del keys[:end], self.events[:end], self.after[:end]
                 end = 0

@@ -49,10 +49,20 @@ class HeldInputs:
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
-        during a prediction, so it reads them once for all its segments."""
+        during a prediction, so it reads them once for all its segments. ``timeout`` written out
+        twice: this runs before every prediction, and the two calls cost as much as the rest."""
         odom = self.odom_index
-        odom_timeout = self.timeout(odom, s) if odom >= 0 and s.last[odom] is not None else 0.0
-        gyro_timeout = self.timeout(s.gyro_last[0], s) if s.gyro is not None else 0.0
+        base, period = self._timeout_base, s.period
+        odom_timeout = gyro_timeout = 0.0
+        if odom >= 0 and s.last[odom] is not None:
+            odom_timeout = base[odom]
+            if period[odom] > 0.0:
+                odom_timeout = max(odom_timeout, TIMEOUT_PERIODS * period[odom])
+        if s.gyro is not None:
+            gyro = s.gyro_last[0]
+            gyro_timeout = base[gyro]
+            if period[gyro] > 0.0:
+                gyro_timeout = max(gyro_timeout, TIMEOUT_PERIODS * period[gyro])
         return odom_timeout, gyro_timeout
 
     def at(self, s: FilterState, t: float | None = None,
@@ -99,11 +109,7 @@ class HeldInputs:
 
     def next_expiry(self, s: FilterState, t: float, timeouts: tuple[float, float]) -> float:
         """The first moment after t at which a held input's sensor times out (inf if none)."""
-        nxt = math.inf
-        for e in self.expiries(s, timeouts):
-            if t < e < nxt:
-                nxt = e
-        return nxt
+        return next_expiry(self.expiries(s, timeouts), t, math.inf)
 
     def unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float]) -> tuple[float, float]:
         """Variance of the motion a logging gap hides: (horizontal position per axis m^2, yaw rad^2).
@@ -130,6 +136,17 @@ class HeldInputs:
         return (v * unheld_linear) ** 2, (w * unheld_angular) ** 2
 
 
+def next_expiry(expiries: tuple[float, float], t: float, end: float) -> float:
+    """The first of ``expiries`` (``HeldInputs.expiries``) after t and before ``end``, else ``end``: where a
+    prediction from t to ``end`` ends its segment."""
+    odom_expiry, gyro_expiry = expiries
+    if t < odom_expiry < end:
+        end = odom_expiry
+    if t < gyro_expiry < end:
+        end = gyro_expiry
+    return end
+
+
 def smoothed_period(period: float, interval: float) -> float:
     """A typical message period (0: none yet) after one more interval between messages: an EMA of the
     intervals, each capped at 1 s so that a gap does not make the sensor's timeout long."""
@@ -140,9 +157,11 @@ def smoothed_period(period: float, interval: float) -> float:
 def note_period(s: FilterState, idx: int, stamp: float) -> None:
     """Sensor idx's newest stamp and its typical message period (``smoothed_period``)."""
     last = s.last[idx]
-    if last is not None and stamp > last:
+    if last is None:
+        s.last[idx] = stamp
+    elif stamp > last:
         s.period[idx] = smoothed_period(s.period[idx], stamp - last)
-    s.last[idx] = stamp if last is None else max(last, stamp)
+        s.last[idx] = stamp
 
 
-__all__ = ["HeldInputs", "note_period", "smoothed_period", "TIMEOUT_PERIODS", "TILT_STALE_S"]
+__all__ = ["HeldInputs", "next_expiry", "note_period", "smoothed_period", "TIMEOUT_PERIODS", "TILT_STALE_S"]

@@ -23,6 +23,8 @@ them all; the live monitor only the diagnostics stream) and returns
 
 from __future__ import annotations
 
+from operator import attrgetter
+
 import msgspec
 
 from ..config import Config, OdomSensor
@@ -47,6 +49,7 @@ __all__ = ["Doctor", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelSt
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
 KEPT_CHANNELS = ("gyro_bias", "position", "altitude")
 GATE_CHANNELS = ("yaw_jump",)  # every record is a reading its gate kept out: no NIS test (ChannelStats.judged)
+_SENSOR, _STAMP = attrgetter("sensor"), attrgetter("stamp")
 CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)
 
 
@@ -104,16 +107,14 @@ class Doctor:
             body = body_twist(sample)  # the twist as the core takes it: turned into the body by the message's pose
             if body is not None:
                 sample = msgspec.structs.replace(sample, linear=body[0], angular=body[1])
+        samples, starts = self._samples, self.collector is not None  # the series' start: the first sample's stamp
         for s in self.lost.admit(sample):
-            self._note_sample(s)
-
-    def _note_sample(self, sample) -> None:
-        samples = self._samples
-        samples.append(sample)
-        if self.collector is not None and (self.t0 is None or sample.stamp < self.t0):
-            self.t0 = sample.stamp
-        if len(samples) >= CHUNK:
-            self._settle_samples()
+            samples.append(s)
+            if starts and (self.t0 is None or s.stamp < self.t0):
+                self.t0 = s.stamp
+            if len(samples) >= CHUNK:
+                self._settle_samples()
+                samples = self._samples
 
     def add_estimate(self, t: float, q, pos_var: float, att_var: float, bias_z: float) -> None:
         if self.collector is not None:
@@ -155,7 +156,7 @@ class Doctor:
         if not samples:
             return
         self._samples = []
-        self._clocks.extend([s.sensor for s in samples], [s.stamp for s in samples])
+        self._clocks.extend(list(map(_SENSOR, samples)), list(map(_STAMP, samples)))
         if self.collector is not None:
             self.collector.extend(samples)
 

@@ -20,12 +20,17 @@ from collections import deque
 from dataclasses import dataclass, field
 from functools import lru_cache
 from itertools import chain
+from operator import attrgetter
 from typing import Sequence
 
 import numpy as np
 
 from ..core.diagnostics import DiagnosticsRecord, chi2_ppf
 from .thresholds import NIS_HIGH, NIS_LOW
+
+# a record's fields, read off a chunk of records by map (no Python frame per record, as a generator has)
+_STAMP, _NIS, _DOF = attrgetter("stamp"), attrgetter("nis"), attrgetter("dof")
+_INNOVATION, _INNOVATION_VAR = attrgetter("innovation"), attrgetter("innovation_var")
 
 VERDICTS = ("ok", "nis_high", "nis_low", "no_updates")  # what judge_nis returns
 
@@ -108,7 +113,7 @@ class ChannelStats:
         loop would give."""
         if not records:
             return
-        stamps = [r.stamp for r in records]
+        stamps = list(map(_STAMP, records))
         self.n += len(records)
         rejected = [bool(r.rejected) for r in records]
         self.rejected += sum(rejected)
@@ -122,8 +127,8 @@ class ChannelStats:
         # a learning update tests the prior, not the sensor: counted, kept as an episode, not judged
         learning_flags = [bool(getattr(r, "learning", False)) for r in records]
         learning = np.array(learning_flags, dtype=bool)
-        nis = np.fromiter((r.nis for r in records), dtype=float, count=len(records))
-        dof = np.fromiter((r.dof for r in records), dtype=np.int64, count=len(records))
+        nis = np.fromiter(map(_NIS, records), dtype=float, count=len(records))
+        dof = np.fromiter(map(_DOF, records), dtype=np.int64, count=len(records))
         judged = ~learning & np.isfinite(nis) & (dof > 0)
         self._count_dof(learning, judged, dof)
         kept = judged & ~np.array(rejected, dtype=bool)
@@ -197,8 +202,8 @@ class ChannelStats:
             self.learning_squares, self.learning_variances = [0.0] * k, [0.0] * k
         n = len(records)
         self.n_learning_comp += n
-        y = np.fromiter(chain.from_iterable(r.innovation for r in records), dtype=float, count=n * k).reshape(n, k)
-        v = np.fromiter(chain.from_iterable(r.innovation_var for r in records), dtype=float, count=n * k).reshape(n, k)
+        y = np.fromiter(chain.from_iterable(map(_INNOVATION, records)), dtype=float, count=n * k).reshape(n, k)
+        v = np.fromiter(chain.from_iterable(map(_INNOVATION_VAR, records)), dtype=float, count=n * k).reshape(n, k)
         self.learning_squares = _running_sum(np.array(self.learning_squares), y * y).tolist()
         self.learning_variances = _running_sum(np.array(self.learning_variances), v).tolist()
 
@@ -217,8 +222,8 @@ class ChannelStats:
             self.outer = [[0.0] * k for _ in range(k)]
         self.n_comp += len(records)
         n = len(records)
-        y = np.fromiter(chain.from_iterable(r.innovation for r in records), dtype=float, count=n * k).reshape(n, k)
-        v = np.fromiter(chain.from_iterable(r.innovation_var for r in records), dtype=float, count=n * k).reshape(n, k)
+        y = np.fromiter(chain.from_iterable(map(_INNOVATION, records)), dtype=float, count=n * k).reshape(n, k)
+        v = np.fromiter(chain.from_iterable(map(_INNOVATION_VAR, records)), dtype=float, count=n * k).reshape(n, k)
         self.sums = _running_sum(np.array(self.sums), y).tolist()
         self.variances = _running_sum(np.array(self.variances), v).tolist()
         self.outer = _running_sum(np.array(self.outer), y[:, :, None] * y[:, None, :]).tolist()

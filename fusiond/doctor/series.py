@@ -15,6 +15,7 @@ reorder buffer sorts them by stamp before integrating) and returns a
 from __future__ import annotations
 
 import math
+from operator import attrgetter
 
 import msgspec
 import numpy as np
@@ -25,6 +26,8 @@ from ..estimator.geodesy import EnuFrame
 from ..samples import GpsSample, ImuSample, OdomSample
 from .bins import BIN_S
 from .streams import MAX_STEP_S, ImuStream, OdomStream
+
+_STAMP = attrgetter("stamp")
 
 __all__ = ["BIN_S", "MAX_STEP_S", "REORDER_S", "Series", "SeriesCollector"]
 
@@ -176,7 +179,7 @@ class SeriesCollector:
         """Integrates the pending samples the reorder buffer has released, in its release order; the
         others stay pending."""
         rows = self._pending
-        stamps = np.fromiter((s.stamp for s in rows), dtype=float, count=len(rows))
+        stamps = np.fromiter(map(_STAMP, rows), dtype=float, count=len(rows))
         order, held, self._newest = release_order(stamps, self._newest, final)
         self._pending = [s for s, h in zip(rows, held.tolist()) if h]
         self._due = len(self._pending) + CHUNK

@@ -82,8 +82,8 @@ class ReplayResult:
 
 def _variances(core: FusionCore) -> tuple[float, float]:
     """Largest position and attitude variance of the newest estimate (public Estimate only)."""
-    c = core.estimate().pose_covariance
-    return max(c[0], c[7], c[14]), max(c[21], c[28], c[35])
+    v = core.pose_variances()
+    return max(v[0], v[1], v[2]), max(v[3], v[4], v[5])
 
 
 def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | None) -> None:

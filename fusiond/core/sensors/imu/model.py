@@ -151,9 +151,10 @@ class ImuPolicy:
             # drivers mark the covariance unknown that way while publishing the rates; the override says fuse them
             if gc[0] != -1.0 or self._gyro_override is not None:
                 known = gc == self._gyro_seen
-                if not (finite(s.angular_velocity) and (known or finite(gc))):
+                plausible_rate = plausible(s.angular_velocity, MAX_RATE)  # NaN and inf fail it too
+                if not ((plausible_rate or finite(s.angular_velocity)) and (known or finite(gc))):
                     raise Rejected(reasons.NON_FINITE, "angular_velocity")
-                if not plausible(s.angular_velocity, MAX_RATE):
+                if not plausible_rate:
                     raise Rejected(reasons.IMPLAUSIBLE_VALUE, "angular velocity beyond 100 rad/s")
                 gyro_cov = self._gyro_resolved if known else self._gyro_noise(gc)
                 w = s.angular_velocity

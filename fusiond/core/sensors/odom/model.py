@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import TYPE_CHECKING
 
 import msgspec
@@ -128,11 +129,11 @@ class OdomPolicy:
         self._declared = tuple(cfg.twist_measured)
         self._all_measured = all(self._declared)
         self._seen: tuple | None = None  # the last twist covariance and its ``_twist_noise``
-        self._resolved: tuple = ((), (), ())
+        self._resolved: tuple = ((), (), (), None)
         self._world = cfg.twist_frame == "world"
 
-    def _twist_noise(self, cov) -> tuple[mat3.Mat3, mat3.Mat3, tuple[bool, ...]]:
-        """(linear, angular covariance, measured per component vx vy vz wx wy wz) of a covariance not seen
+    def _twist_noise(self, cov) -> tuple[mat3.Mat3, mat3.Mat3, tuple[bool, ...], itemgetter]:
+        """(linear, angular covariance, measured per component vx vy vz wx wy wz, its picker) of a covariance not seen
         just before: the user's noise for the components declared measured, else the driver's
         (floored; huge, non-finite or undeclared: "not measured", default noise, value unused)."""
         if self._override is not None and self._all_measured:
@@ -155,21 +156,24 @@ class OdomPolicy:
                     measured.append(True)
         # the covariances as the motion model takes them, the same tuples while the covariance
         # repeats (the prediction recognises a tuple it has seen and reuses its factorisation)
+        # and the twist's components as the prediction takes them: the unmeasured ones 0.0 (index 6 of the
+        # twist with a 0.0 appended)
         resolved = (mat3.diag(var[0], var[1], var[2]), mat3.diag(var[3], var[4], var[5]),
-                    _ALL_MEASURED if all(measured) else tuple(measured))
+                    _ALL_MEASURED if all(measured) else tuple(measured),
+                    itemgetter(*(i if m else 6 for i, m in enumerate(measured))))
         if type(cov) is tuple:  # the same covariance in every message: resolved once (kept only if immutable)
             self._seen, self._resolved = cov, resolved
         return resolved
 
     def convert(self, s: OdomSample) -> OdomInput:
-        if not (finite(s.linear) and finite(s.angular)):
-            raise Rejected(reasons.NON_FINITE, "twist")
-        if not (plausible(s.linear, MAX_SPEED) and plausible(s.angular, MAX_RATE)):
+        if not (plausible(s.linear, MAX_SPEED) and plausible(s.angular, MAX_RATE)):  # NaN and inf fail it too
+            if not (finite(s.linear) and finite(s.angular)):
+                raise Rejected(reasons.NON_FINITE, "twist")
             raise Rejected(reasons.IMPLAUSIBLE_VALUE, "twist beyond 100 m/s or 100 rad/s")
         cov = s.twist_covariance
         if len(cov) != 36:
             raise Rejected(reasons.BAD_COVARIANCE, "twist covariance must have 36 entries")
-        linear_cov, angular_cov, measured = self._resolved if cov == self._seen else self._twist_noise(cov)
+        linear_cov, angular_cov, measured, pick = self._resolved if cov == self._seen else self._twist_noise(cov)
         linear, angular, world = s.linear, s.angular, False
         if self._world:
             body = body_twist(s)
@@ -179,10 +183,8 @@ class OdomPolicy:
                 linear, angular, R_t = body
                 linear_cov = mat3.flat(mat3.sandwich(R_t, linear_cov))
                 angular_cov = mat3.flat(mat3.sandwich(R_t, angular_cov))
-        twist = (*linear, *angular)
-        values = twist if measured is _ALL_MEASURED else tuple(v if m else 0.0 for v, m in zip(twist, measured))
         lin, ang = self.STATIONARY_LINEAR, self.STATIONARY_ANGULAR
-        v0, v1, v2, w0, w1, w2 = values
+        v0, v1, v2, w0, w1, w2 = pick((*linear, *angular, 0.0))
         stationary = (
             -lin <= v0 <= lin and -lin <= v1 <= lin and -lin <= v2 <= lin
             and -ang <= w0 <= ang and -ang <= w1 <= ang and -ang <= w2 <= ang

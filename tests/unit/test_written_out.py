@@ -1,0 +1,56 @@
+"""Where the per-message path writes a helper out instead of calling it, the two stay one formula:
+the held inputs' timeouts against ``HeldInputs.timeout``, the segment end against the expiries, the
+pose variances against the published estimate's covariance."""
+
+from __future__ import annotations
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fusiond.core.fusion import FusionCore
+from fusiond.core.inputs import next_expiry
+
+from tests.support.core_samples import imu, make_config, odom
+
+
+def _driven(periods: tuple[float, float], n: int) -> FusionCore:
+    core = FusionCore(make_config())
+    t = 1.0
+    for k in range(n):
+        core.ingest(odom(t + k * periods[0], v=0.4, w=0.1))
+        core.ingest(imu(t + k * periods[1] + 1e-4, gyro=(0.0, 0.0, 0.1)))
+    return core
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.005, 2.0), st.floats(0.001, 2.0), st.integers(1, 6))
+def test_timeouts_are_the_timeout_of_the_odometry_and_of_the_gyro(odom_period, imu_period, n):
+    core = _driven((odom_period, imu_period), n)
+    s, held = core.state, core.inputs
+    odom_timeout, gyro_timeout = held.timeouts(s)
+    assert odom_timeout == held.timeout(held.odom_index, s)
+    assert gyro_timeout == held.timeout(s.gyro_last[0], s)
+
+
+def test_timeouts_are_zero_for_inputs_not_yet_held():
+    core = FusionCore(make_config())
+    core.ingest(imu(1.0))  # a gyro rate, no odometry yet
+    s = core.state
+    assert core.inputs.timeouts(s)[0] == 0.0
+    assert core.inputs.timeouts(s)[1] == core.inputs.timeout(s.gyro_last[0], s)
+
+
+@given(st.floats(-10.0, 10.0), st.floats(-10.0, 10.0), st.floats(-10.0, 10.0), st.floats(0.0, 10.0))
+def test_next_expiry_is_the_first_expiry_after_t_and_before_the_end(odom_e, gyro_e, t, span):
+    end = t + span
+    later = [e for e in (odom_e, gyro_e) if t < e]
+    assert next_expiry((odom_e, gyro_e), t, end) == min([end, *later])
+    assert next_expiry((-math.inf, -math.inf), t, end) == end
+
+
+def test_pose_variances_are_the_published_covariance_diagonal():
+    core = _driven((0.02, 0.01), 50)
+    c = core.estimate().pose_covariance
+    assert core.pose_variances() == [c[7 * i] for i in range(6)]
