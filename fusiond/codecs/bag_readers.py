@@ -3,8 +3,8 @@ a bag defines those types with the standard layout before they are used (`bag_fa
 
 A bag replay reads the same two messages thousands of times a second. ROS 2 bags hold the CDR
 of `cdr_fast_path`; ROS 1 bags hold ROS 1 serialisation: the same fields with a `seq` in the
-header, strings without a terminator and no alignment, so one struct call reads the float64
-block as well. A bag carries its own message definitions, which may differ from the standard
+header, strings without a terminator and no alignment, before the same float64 block, read as
+`cdr_fast_path` reads it. A bag carries its own message definitions, which may differ from the standard
 ones under the same name: a fast path is used only for a type whose definition in the bag's
 store (rosbags parsed it) has exactly the layout it reads.
 """
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Final
 
 from fusiond.samples import Sample
 
-from .cdr_fast_path import IMU_BLOCK, ODOM_BLOCK, U32, Block, fast_imu, fast_odom, imu_from_block, odom_from_block
+from .cdr_fast_path import U32, Fields, ImuFields, OdomFields, RepeatedLayout
 from .wire import IMU, ODOMETRY, Payload
 
 if TYPE_CHECKING:
@@ -36,17 +36,18 @@ def _ros1_string_end(buf: Payload, pos: int) -> int:
     return end
 
 
-def _ros1_block(buf: Payload, has_child_frame: bool, block: struct.Struct) -> Block | None:
+def _ros1_offset(buf: Payload, has_child_frame: bool, size: int) -> int:
+    """Offset of the float64 block after the ROS 1 header (and child frame id), -1 where rosbags would
+    reject the message."""
     try:
-        _, sec, nanosec = _ROS1_HEAD(buf, 0)
         pos = _ros1_string_end(buf, 12)
         if pos >= 0 and has_child_frame:
             pos = _ros1_string_end(buf, pos)
-        if pos < 0 or pos + block.size != len(buf):  # rosbags rejects any size mismatch in ROS 1
-            return None
-        return sec + nanosec * 1e-9, block.unpack_from(buf, pos)
     except (struct.error, UnicodeDecodeError):
-        return None
+        return -1
+    if pos < 0 or pos + size != len(buf):  # rosbags rejects any size mismatch in ROS 1
+        return -1
+    return pos
 
 
 class _Ros1Stream:
@@ -54,26 +55,26 @@ class _Ros1Stream:
     `cdr_fast_path.RepeatedLayout` does for CDR): a topic's messages carry the same frame ids,
     so they have the same length and the same bytes from the end of the header's stamp (offset
     12) to the float64 block. A message with the length and those bytes of the last one
-    `_ros1_block` accepted passes every check it would make, byte for byte the same: its block
-    is unpacked at once. Anything else takes `_ros1_block`'s full checks."""
+    `_ros1_offset` accepted passes every check it would make, byte for byte the same: its block
+    is read at once (``fields``: the covariances shared while they repeat). Anything else takes
+    `_ros1_offset`'s full checks."""
 
-    __slots__ = ("has_child_frame", "block", "make", "length", "middle")
+    __slots__ = ("has_child_frame", "fields", "length", "middle")
 
-    def __init__(self, has_child_frame: bool, block: struct.Struct, make: Callable) -> None:
-        self.has_child_frame, self.block, self.make = has_child_frame, block, make
+    def __init__(self, has_child_frame: bool, fields: Fields) -> None:
+        self.has_child_frame, self.fields = has_child_frame, fields
         self.length = -1  # length of the remembered message (-1: none yet)
         self.middle = b""  # its bytes [12, length - block size)
 
     def __call__(self, buf: Payload, sensor: str) -> Sample | None:
         n = len(buf)
-        at = n - self.block.size
-        if n == self.length and buf[12:at] == self.middle:
-            _, sec, nanosec = _ROS1_HEAD(buf, 0)
-            return self.make((sec + nanosec * 1e-9, self.block.unpack_from(buf, at)), sensor)
-        got = _ros1_block(buf, self.has_child_frame, self.block)
-        if got is not None:
+        at = n - self.fields.size
+        if not (n == self.length and buf[12:at] == self.middle):
+            if n < 12 or _ros1_offset(buf, self.has_child_frame, self.fields.size) < 0:
+                return None
             self.length, self.middle = n, bytes(buf[12:at])
-        return self.make(got, sensor)
+        _, sec, nanosec = _ROS1_HEAD(buf, 0)
+        return self.fields.sample(buf, at, sec + nanosec * 1e-9, sensor)
 
 
 _HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id
@@ -81,9 +82,11 @@ _FAST_LAYOUTS: Final = {
     ODOMETRY: (*_HEADER_LAYOUT, "string", *("float64",) * 85),  # + child_frame_id, pose, twist
     IMU: (*_HEADER_LAYOUT, *("float64",) * 37),
 }
-_FAST_PATHS: Final = {
-    (ODOMETRY, False): fast_odom, (ODOMETRY, True): lambda: _Ros1Stream(True, ODOM_BLOCK, odom_from_block),
-    (IMU, False): fast_imu, (IMU, True): lambda: _Ros1Stream(False, IMU_BLOCK, imu_from_block),
+_FAST_PATHS: Final = {  # one reader per topic: each remembers its stream's layout and covariances
+    (ODOMETRY, False): lambda: RepeatedLayout(True, OdomFields()).sample,
+    (ODOMETRY, True): lambda: _Ros1Stream(True, OdomFields()),
+    (IMU, False): lambda: RepeatedLayout(False, ImuFields()).sample,
+    (IMU, True): lambda: _Ros1Stream(False, ImuFields()),
 }
 
 
@@ -122,7 +125,8 @@ def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Paylo
     """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR), when the
     bag's definition of it (in ``store``, the bag reader's type store) has the standard layout.
 
-    A ROS 1 reader remembers its stream's layout (`_Ros1Stream`): one per topic. It returns the
+    A reader remembers its stream's layout and covariances (`_Ros1Stream`, `RepeatedLayout`): one per
+    topic. It returns the
     sample, or None for a message it does not read exactly as rosbags would
     (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority
     on errors. None when ``msgtype`` has no fast path or the bag defines it differently.
@@ -134,4 +138,4 @@ def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Paylo
         want = ("uint32", *want)  # header.seq
     if flat_layout(store, msgtype) != want:
         return None
-    return _FAST_PATHS[msgtype, ros1]() if ros1 else _FAST_PATHS[msgtype, ros1]
+    return _FAST_PATHS[msgtype, ros1]()

@@ -14,7 +14,7 @@ from typing import Any, Final
 
 from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
 
-from .cdr_fast_path import IMU_BLOCK, ODOM_BLOCK, RepeatedLayout, imu_from_block, odom_from_block
+from .cdr_fast_path import ImuFields, OdomFields, RepeatedLayout
 from .from_ros import gps_from_ros, imu_from_ros, odom_from_ros, pose_from_ros
 from .json_msgpack import structured_decoder
 from .rosbags_cdr import deserialize, typestore
@@ -30,9 +30,9 @@ _KINDS: Final[dict[str, tuple[tuple[str, ...], Callable[[Any, str], Sample]]]] =
     "pose": (POSE_TYPES, pose_from_ros),
 }
 # GPS and pose sensors run at 1-100 Hz: rosbags' generic path is fast enough for them.
-_REPEATED: Final = {  # kind -> (child frame id?, float64 block, sample builder) of `RepeatedLayout`
-    "odom": (True, ODOM_BLOCK, odom_from_block),
-    "imu": (False, IMU_BLOCK, imu_from_block),
+_REPEATED: Final = {  # kind -> (child frame id?, the block's reader) of `RepeatedLayout`
+    "odom": (True, OdomFields),
+    "imu": (False, ImuFields),
 }
 
 
@@ -88,14 +88,14 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
     _warm(msgtype)
     repeated = _REPEATED.get(kind)
     if repeated is not None:  # odometry and IMU: the hot path of the daemon
-        has_child_frame, block, from_block = repeated
-        layout = RepeatedLayout(has_child_frame, block)
-        unpack = layout.decode
+        has_child_frame, fields = repeated
+        layout = RepeatedLayout(has_child_frame, fields())
+        read = layout.sample
 
         def decode_repeated(payload: Payload) -> Sample:
             if len(payload) != layout.length:  # the remembered length passed the size checks
                 check_size(payload)
-            sample = from_block(unpack(payload), sensor)
+            sample = read(payload, sensor)
             if sample is not None:
                 return sample
             return from_ros(deserialize(payload, msgtype), sensor)

@@ -30,6 +30,7 @@ from .thresholds import NIS_HIGH, NIS_LOW
 
 # a record's fields, read off a chunk of records by map (no Python frame per record, as a generator has)
 _STAMP, _NIS, _DOF = attrgetter("stamp"), attrgetter("nis"), attrgetter("dof")
+_REJECTED, _LEARNING = attrgetter("rejected"), attrgetter("learning")
 _INNOVATION, _INNOVATION_VAR = attrgetter("innovation"), attrgetter("innovation_var")
 
 VERDICTS = ("ok", "nis_high", "nis_low", "no_updates")  # what judge_nis returns
@@ -115,7 +116,7 @@ class ChannelStats:
             return
         stamps = list(map(_STAMP, records))
         self.n += len(records)
-        rejected = [bool(r.rejected) for r in records]
+        rejected = list(map(bool, map(_REJECTED, records)))
         self.rejected += sum(rejected)
         if self.first_stamp is None:
             self.first_stamp = stamps[0]
@@ -125,7 +126,7 @@ class ChannelStats:
             self.rejected_flags.extend(rejected)
             self.innovations.extend(list(r.innovation) for r in records)
         # a learning update tests the prior, not the sensor: counted, kept as an episode, not judged
-        learning_flags = [bool(getattr(r, "learning", False)) for r in records]
+        learning_flags = list(map(bool, map(_LEARNING, records)))
         learning = np.array(learning_flags, dtype=bool)
         nis = np.fromiter(map(_NIS, records), dtype=float, count=len(records))
         dof = np.fromiter(map(_DOF, records), dtype=np.int64, count=len(records))

@@ -14,6 +14,7 @@ reads (`supported`).
 from __future__ import annotations
 
 import struct
+import threading
 from collections.abc import Iterator, Sequence
 from heapq import merge
 from itertools import groupby
@@ -108,34 +109,90 @@ def _header(buf: bytes, pos: int) -> tuple[int, Any, Any, int]:
     return op, conn, time, end
 
 
+def _chunk_order(entries: list) -> list[int]:
+    """The chunks' positions in the order the (time-sorted) index entries first reach them."""
+    order: list[int] = []
+    for _, pos, _ in entries:
+        if not order or order[-1] != pos:
+            order.append(pos)
+    return order
+
+
+class _Ahead:
+    """``fn(arg)`` computed on a thread of its own; ``result()`` waits for it, then returns what it returned
+    or raises what it raised. (A thread, not concurrent.futures: that imports logging, which a replay
+    that logs nothing does not load.)"""
+
+    __slots__ = ("_thread", "_value", "_error")
+
+    def __init__(self, fn: Any, arg: Any) -> None:
+        self._value: Any = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(fn, arg), name="bag-chunks", daemon=True)
+        self._thread.start()
+
+    def _run(self, fn: Any, arg: Any) -> None:
+        try:
+            self._value = fn(arg)
+        except BaseException as err:  # noqa: BLE001 - handed to the reader's thread, raised there
+            self._error = err
+
+    def result(self) -> Any:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+    def wait(self) -> None:
+        self._thread.join()
+
+
 def _one_bag(reader: Any, connections: list[Connection]) -> Iterator[tuple[Connection, int, bytes]]:
+    """The messages of one bag. Its chunks are read and decompressed one ahead on a thread of their own
+    (``_Ahead``): bz2 and lz4 release the GIL, so on a second core the next chunk is ready when the
+    messages of this one have been used (a replay's wall time; its CPU time is about the same). One chunk
+    is read at a time, in chunk order, so the file is never read by two threads at once; what a read
+    raises (a chunk cut short, a corrupt block) is raised here when the messages reach that chunk, as
+    without the thread."""
     connmap = {c.id: c for c in reader.connections}
     entries = sorted([e for c in connections for e in reader.indexes[c.id]], key=_by_time)
     chunks, bio = reader.chunks, reader.bio
+
+    def decompressed(pos: int) -> bytes:
+        chunk = chunks[pos]
+        bio.seek(chunk.datapos)
+        raw = bio.read(chunk.datasize)
+        if len(raw) != chunk.datasize:
+            raise RecordError("chunk cut short")
+        return bytes(chunk.decompressor(raw))
+
+    order = _chunk_order(entries)
     U32 = _U32
-    chunk_pos, buf = -1, b""
-    for entry in entries:
-        t, pos, offset = entry
-        if pos != chunk_pos:
-            chunk = chunks[pos]
-            bio.seek(chunk.datapos)
-            raw = bio.read(chunk.datasize)
-            if len(raw) != chunk.datasize:
-                raise RecordError("chunk cut short")
-            buf = bytes(chunk.decompressor(raw))
-            chunk_pos = pos
-        while True:
-            op, conn, time, p = _header(buf, offset)
-            (size,) = U32(buf, p)
-            p += 4
-            if op != _CONNECTION:
-                break
-            offset = p + size
-        if op != _MSGDATA:
-            raise RecordError("expected to find message data")
-        end = p + size
-        if end > len(buf):
-            raise RecordError("message data beyond the chunk")
-        if time != t:
-            raise RecordError("message time differs from the index")
-        yield connmap[conn], t, buf[p:end]
+    chunk_pos, buf, k = -1, b"", -1
+    ahead = _Ahead(decompressed, order[0]) if order else None
+    try:
+        for entry in entries:
+            t, pos, offset = entry
+            if pos != chunk_pos:
+                k += 1
+                buf = ahead.result()  # chunk order[k]: the one reached now
+                ahead = _Ahead(decompressed, order[k + 1]) if k + 1 < len(order) else None
+                chunk_pos = pos
+            while True:
+                op, conn, time, p = _header(buf, offset)
+                (size,) = U32(buf, p)
+                p += 4
+                if op != _CONNECTION:
+                    break
+                offset = p + size
+            if op != _MSGDATA:
+                raise RecordError("expected to find message data")
+            end = p + size
+            if end > len(buf):
+                raise RecordError("message data beyond the chunk")
+            if time != t:
+                raise RecordError("message time differs from the index")
+            yield connmap[conn], t, buf[p:end]
+    finally:
+        if ahead is not None:
+            ahead.wait()  # stopped early or failed: the chunk read ahead must be done before the bag closes

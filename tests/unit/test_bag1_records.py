@@ -5,6 +5,7 @@ damaged chunk is still an error."""
 from __future__ import annotations
 
 import shutil
+import threading
 from pathlib import Path
 
 import pytest
@@ -75,6 +76,47 @@ def test_a_damaged_chunk_is_a_bag_error(jackal_bag: Path, tmp_path: Path) -> Non
     with pytest.raises(BagError, match="not a readable ROS 1/ROS 2 bag"):
         with open_bag_samples([damaged], sensors) as bag:
             list(bag)
+
+
+def _damaged_chunk(jackal_bag: Path, tmp_path: Path, k: int) -> tuple[Path, int]:
+    """The bag with the compressed data of its k-th chunk (in read order) overwritten, and how many of
+    its messages come before that chunk."""
+    with AnyReader([jackal_bag]) as reader:
+        r = reader.readers[0]
+        entries = sorted([e for c in reader.connections for e in r.indexes[c.id]], key=lambda e: e.time)
+        order = bag1_records._chunk_order(entries)
+        chunk = r.chunks[order[k]]
+        before = next(i for i, e in enumerate(entries) if e.chunk_pos == order[k])
+    data = bytearray(jackal_bag.read_bytes())
+    data[chunk.datapos + 100 : chunk.datapos + 600] = bytes(500)
+    damaged = tmp_path / "damaged_chunk.bag"
+    damaged.write_bytes(bytes(data))
+    return damaged, before
+
+
+def test_chunks_read_ahead_raise_where_their_messages_begin(jackal_bag: Path, tmp_path: Path) -> None:
+    """The next chunk is decompressed on a thread while this one's messages are used: a chunk that does
+    not decompress is still an error only once every message before it has been yielded."""
+    damaged, before = _damaged_chunk(jackal_bag, tmp_path, 3)
+    got = []
+    with AnyReader([damaged]) as reader:
+        with pytest.raises(Exception) as err:
+            for message in bag1_records.messages(reader, list(reader.connections)):
+                got.append(message)
+    assert len(got) == before > 0
+    assert not isinstance(err.value, AssertionError)
+    with pytest.raises(BagError, match="not a readable ROS 1/ROS 2 bag"):
+        with open_bag_samples([damaged], [ImuSensor(name="imu", key="imu/data")]) as bag:
+            list(bag)
+
+
+def test_an_iteration_stopped_early_leaves_no_reading_thread(jackal_bag: Path) -> None:
+    with AnyReader([jackal_bag]) as reader:
+        messages = bag1_records.messages(reader, list(reader.connections))
+        first = [next(messages) for _ in range(10)]
+        messages.close()  # the thread reading ahead is waited for here, before the bag closes
+        assert len(first) == 10
+        assert not [t for t in threading.enumerate() if t.name.startswith("bag-chunks")]
 
 
 def test_a_record_whose_time_is_not_the_index_time_is_refused() -> None:

@@ -409,3 +409,31 @@ def test_cdr_header_values_pass_through() -> None:
     s = make_decoder("imu", "ros2-cdr", "imu")(bytes(raw))
     assert s.stamp == -3 + 0.5
     assert math.isnan(s.linear_acceleration_covariance[-1])
+
+
+@given(kind=st.sampled_from(KINDS), data=st.data())
+@settings(max_examples=60, deadline=None)
+def test_repeated_covariances_are_read_once_and_shared_only_while_their_bytes_repeat(kind: str, data) -> None:
+    """A driver's covariances are constants: the decoder keeps the previous message's covariance tuples
+    while their bytes repeat (``ImuFields``, ``OdomFields``), and reads them anew when any changes. Over
+    a stream whose covariances switch between two sets (and a value that moves in every message), each
+    payload still decodes exactly as rosbags does, and a covariance tuple is the previous one's object
+    exactly when its message repeated the previous covariance bytes."""
+    samples = odom_samples if kind == "odom" else imu_samples
+    pool = [data.draw(samples), data.draw(samples)]
+    fields = ("twist_covariance",) if kind == "odom" else (
+        "orientation_covariance", "angular_velocity_covariance", "linear_acceleration_covariance")
+    decode = make_decoder(kind, "ros2-cdr", "s")
+    previous = previous_cov = None
+    for k, which in enumerate(data.draw(st.lists(st.integers(0, 1), min_size=2, max_size=10))):
+        moving = "linear" if kind == "odom" else "angular_velocity"
+        sample = msgspec.structs.replace(pool[which], stamp=1.0 + k, **{moving: (float(k), -0.5, 0.25)})
+        payload = _cdr_of(kind, sample, "base_link")
+        got = decode(payload)
+        assert _same(got, _reference(kind, payload))
+        covs = tuple(getattr(got, f) for f in fields)
+        repeated = previous is not None and all(
+            msgspec.msgpack.encode(getattr(sample, f)) == msgspec.msgpack.encode(getattr(previous, f)) for f in fields)
+        if previous_cov is not None:
+            assert all(a is b for a, b in zip(covs, previous_cov)) == repeated
+        previous, previous_cov = sample, covs
