@@ -107,10 +107,6 @@ class HeldInputs:
         gyro_expiry = s.gyro_last[1] + timeouts[1] if s.gyro_last is not None else -math.inf
         return odom_expiry, gyro_expiry
 
-    def next_expiry(self, s: FilterState, t: float, timeouts: tuple[float, float]) -> float:
-        """The first moment after t at which a held input's sensor times out (inf if none)."""
-        return next_expiry(self.expiries(s, timeouts), t, math.inf)
-
     def unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float]) -> tuple[float, float]:
         """Variance of the motion a logging gap hides: (horizontal position per axis m^2, yaw rad^2).
 
