@@ -54,3 +54,24 @@ def test_pose_variances_are_the_published_covariance_diagonal():
     core = _driven((0.02, 0.01), 50)
     c = core.estimate().pose_covariance
     assert core.pose_variances() == [c[7 * i] for i in range(6)]
+
+
+@given(st.tuples(*[st.floats(allow_nan=True, allow_infinity=True, width=64)] * 4)
+       | st.tuples(*[st.floats(-1.05, 1.05)] * 4))
+def test_near_unit_is_unit_quaternion_where_it_answers_and_covers_every_finite_refusal(q):
+    """The IMU's one check of the usual message: a quaternion ``near_unit`` accepts is finite and
+    normalised to the bit as ``unit_quaternion`` normalises it; one it declines is refused by
+    ``unit_quaternion`` or is not finite (the core's NON_FINITE check says so first)."""
+    from fusiond.core.sensors.checks import Rejected, finite, near_unit, unit_quaternion
+
+    got = near_unit(q)
+    if got is not None:
+        assert finite(q)
+        assert got == unit_quaternion(q)
+    elif finite(q):
+        try:
+            unit_quaternion(q)
+        except Rejected:
+            pass
+        else:
+            raise AssertionError(f"near_unit declined {q}, which unit_quaternion accepts")

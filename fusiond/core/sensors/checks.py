@@ -32,13 +32,24 @@ class Rejected(Exception):
 
 def unit_quaternion(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
     """q normalised; a zero or clearly non-unit quaternion (beyond driver rounding) is refused."""
+    unit = near_unit(q)
+    if unit is not None:
+        return unit
     x, y, z, w = q
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if n < 1e-6:
         raise Rejected(reasons.ZERO_QUATERNION)
-    if abs(n - 1.0) > _QUAT_NORM_TOLERANCE:
-        raise Rejected(reasons.NON_UNIT_QUATERNION, f"norm {n:.3f}")
-    return (x / n, y / n, z / n, w / n)
+    raise Rejected(reasons.NON_UNIT_QUATERNION, f"norm {n:.3f}")
+
+
+def near_unit(q: tuple[float, float, float, float]) -> tuple[float, float, float, float] | None:
+    """q normalised when its norm is 1 to driver rounding, else None (``unit_quaternion`` says why). Such a
+    q is finite too (a NaN or infinite component makes the norm NaN or infinite): one test for both."""
+    x, y, z, w = q
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if abs(n - 1.0) <= _QUAT_NORM_TOLERANCE:
+        return (x / n, y / n, z / n, w / n)
+    return None
 
 
 def finite(values) -> bool:

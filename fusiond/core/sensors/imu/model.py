@@ -24,7 +24,7 @@ from ....logs import get_logger
 from ....samples import ImuSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
-from ..checks import MAX_RATE, Rejected, finite, plausible, resolve_variances, unit_quaternion
+from ..checks import MAX_RATE, Rejected, finite, near_unit, plausible, resolve_variances, unit_quaternion
 from .gap_turn import carry_yaw
 from .gyro_bias import learn_bias_at_rest
 from .inputs import ImuInput
@@ -132,9 +132,11 @@ class ImuPolicy:
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             oc = s.orientation_covariance
             known = oc == self._ori_seen
-            if not (finite(s.orientation) and (known or finite(oc))):
-                raise Rejected(reasons.NON_FINITE, "orientation")
-            q_imu = unit_quaternion(s.orientation)
+            q_imu = near_unit(s.orientation)  # a unit quaternion is finite: the usual message's one check
+            if q_imu is None or not (known or finite(oc)):
+                if not (finite(s.orientation) and (known or finite(oc))):
+                    raise Rejected(reasons.NON_FINITE, "orientation")
+                q_imu = unit_quaternion(s.orientation)
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
             rows, rpy_cov, yaw_measured = self._ori_resolved if known else self._orientation_noise(oc)
         elif len(s.orientation_covariance) != 9:

@@ -27,7 +27,6 @@ reports its commanded speed and drops it to zero at once, 0.25 m from 0.5 m/s.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from operator import itemgetter
 from typing import TYPE_CHECKING
 
@@ -75,9 +74,9 @@ _NO_OWN = OdomOwn()
 log = get_logger("fusiond.core")
 
 
-@dataclass(slots=True)
-class OdomInput:
-    """Body (or world) twist with per-sample covariances (row-major 9-tuples), ready for the motion model."""
+class OdomInput(msgspec.Struct, gc=False):
+    """Body (or world) twist with per-sample covariances (row-major 9-tuples), ready for the motion model
+    (a Struct, as ``ImuInput``)."""
 
     linear: tuple[float, float, float]
     linear_cov: tuple[float, ...]
