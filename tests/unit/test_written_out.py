@@ -75,3 +75,15 @@ def test_near_unit_is_unit_quaternion_where_it_answers_and_covers_every_finite_r
             pass
         else:
             raise AssertionError(f"near_unit declined {q}, which unit_quaternion accepts")
+
+
+@given(st.tuples(*[st.floats(-1e3, 1e3)] * 9), st.tuples(*[st.floats(-1e3, 1e3)] * 9))
+def test_the_published_twist_covariance_is_the_two_blocks_on_the_diagonal(linear, angular):
+    import numpy as np
+
+    from fusiond.core.fusion import _twist_covariance
+
+    full = np.zeros((6, 6))
+    full[0:3, 0:3] = np.reshape(linear, (3, 3))
+    full[3:6, 3:6] = np.reshape(angular, (3, 3))
+    assert _twist_covariance(linear, angular) == full.ravel().tolist()
