@@ -1,0 +1,42 @@
+"""A replay freezes the objects that were alive before it (the collector walks only what the replay
+allocates) and hands them back after; a caller's own freeze is left as it is."""
+
+from __future__ import annotations
+
+import gc
+from pathlib import Path
+
+from fusiond.config import load
+from fusiond.replay import run
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_replay_freezes_what_existed_and_unfreezes_it_after(jackal_bag: Path, monkeypatch) -> None:
+    cfg = load(ROOT / "examples" / "jackal.toml")
+    seen: list[int] = []
+    real_feed = run.Runner.feed
+
+    def feed(self, sample) -> None:
+        if not seen:
+            seen.append(gc.get_freeze_count())
+        real_feed(self, sample)
+
+    monkeypatch.setattr(run.Runner, "feed", feed)
+    assert gc.get_freeze_count() == 0
+    kept_before = [[]]  # a tracked container alive before the replay: frozen during it
+    run.replay([jackal_bag], cfg, keep_trace=False, progress=False, doctor=False)
+    assert seen and seen[0] > 0  # frozen while the samples were fused
+    assert gc.get_freeze_count() == 0  # and handed back to the collector
+    assert gc.is_tracked(kept_before)
+
+
+def test_a_callers_freeze_is_left_to_the_caller(jackal_bag: Path) -> None:
+    cfg = load(ROOT / "examples" / "jackal.toml")
+    gc.freeze()
+    try:
+        assert gc.get_freeze_count() > 0
+        run.replay([jackal_bag], cfg, keep_trace=False, progress=False, doctor=False)
+        assert gc.get_freeze_count() > 0  # not unfrozen by the replay (only freed objects leave the count)
+    finally:
+        gc.unfreeze()
