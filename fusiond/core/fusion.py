@@ -163,7 +163,7 @@ class FusionCore:
         self.state: FilterState | None = None
         self._reset_history()
         self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max)
-        self._history_s, self._history_max = fc.history_s, fc.history_max
+        self._history_s, self._history_max, self._gap_s = fc.history_s, fc.history_max, fc.gap_s
         self.fingerprint = state_fingerprint(cfg)  # which saved states fit this config (core/resume.py)
         self.resets = 0
         self.covariance_resets = 0
@@ -583,7 +583,7 @@ class FusionCore:
         """
         t0 = s.t
         t_end = t0 + dt
-        gap = dt > self.cfg.filter.gap_s
+        gap = dt > self._gap_s
         held = self.inputs
         timeouts = held.timeouts(s)
         expiries = held.expiries(s, timeouts)  # fixed while predicting: nothing here moves a sensor's newest stamp

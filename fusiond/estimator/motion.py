@@ -243,8 +243,9 @@ def _predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt:
     ``transition``/``process_noise``: x' = a x and F's diagonal a are written after the call."""
     dynamic = layout.dynamic_blocks
     extra = None
-    decay: list[float] = []
+    decay: list[float] | tuple = ()
     if dynamic:
+        decay = []
         extra = np.zeros(len(noise_density))
         for blk, _, e0 in dynamic:
             decay += blk.transition(dt)

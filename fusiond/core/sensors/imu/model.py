@@ -195,6 +195,7 @@ class ImuModel(SensorModel):
         self.learns_bias = cfg.angular_velocity and ctx.layout.has("gyro_bias")
         self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
         self.orientation_period = 1.0 / cfg.orientation_rate_hz if cfg.orientation_rate_hz > 0.0 else 0.0
+        self.orientation_rate_hz = cfg.orientation_rate_hz
         self.thinned = 0  # orientations not fused for ``orientation_rate_hz`` (the gyro of the sample is)
         self.carries_yaw = cfg.yaw_across_gaps and cfg.orientation == "roll_pitch" and not ctx.two_d
         self.gap_s = ctx.filter.gap_s
@@ -263,8 +264,13 @@ class ImuModel(SensorModel):
             return True
         own: ImuOwn = s.own[self.index]
         bucket = own.orientation_credit
-        credit = ORIENTATION_BURST if bucket is None else min(
-            ORIENTATION_BURST, bucket[0] + max(stamp - bucket[1], 0.0) * self.cfg.orientation_rate_hz)
+        if bucket is None:
+            credit = ORIENTATION_BURST
+        else:  # min(BURST, credit + max(elapsed, 0) * rate), as comparisons: this runs at the IMU's rate
+            elapsed = stamp - bucket[1]
+            credit = bucket[0] + (elapsed if elapsed >= 0.0 else 0.0) * self.orientation_rate_hz
+            if not credit < ORIENTATION_BURST:
+                credit = ORIENTATION_BURST
         due = credit >= 1.0
         s.own[self.index] = msgspec.structs.replace(own, orientation_credit=(credit - 1.0 if due else credit, stamp))
         if not due and emit:
