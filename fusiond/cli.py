@@ -529,7 +529,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.latency:
         from .transport.bench_latency import run_bench
 
-        lat = run_bench(seconds=args.seconds, imu_hz=1000.0, odom_hz=100.0, express=True)
+        # The daemon as `fusiond run` runs it: outputs batched, not express (transport/outputs.py); its CPU
+        # is the target's. `bench-latency --express` measures the express variant.
+        lat = run_bench(seconds=args.seconds, imu_hz=1000.0, odom_hz=100.0, express=False)
         flat: dict[str, float] = {}
         for k, v in msgspec.to_builtins(lat).items():
             if isinstance(v, dict):  # latency statistics: pose, raw_hop, ... -> pose_p50_us, ...
