@@ -2,9 +2,10 @@
 
 Odometry and Imu are a Header (+ child_frame_id) followed by one run of float64s with no
 padding inside it, so a little-endian payload unpacks with struct calls, several times faster
-than the generic rosbags path (and a stream's repeated covariances are read once: ``ImuFields``). Anything the fast path does not accept exactly as rosbags
-would is left to rosbags (`rosbags_cdr.deserialize`), which stays the authority on errors;
-tests check both paths agree on arbitrary bytes.
+than the generic rosbags path (a stream's repeated covariances read once: ``_Covariances``).
+Anything the fast path does not accept exactly as rosbags would is left to rosbags
+(`rosbags_cdr.deserialize`), which stays the authority on errors; tests check both paths agree on
+arbitrary bytes.
 """
 
 from __future__ import annotations
@@ -20,8 +21,6 @@ U32: Final = struct.Struct("<I").unpack_from
 _STAMP: Final = struct.Struct("<iI").unpack_from
 _CDR_LE: Final = b"\x00\x01"
 
-_D9: Final = struct.Struct("<9d").unpack_from
-_D36: Final = struct.Struct("<36d").unpack_from
 # the values of a block that move from message to message, the covariances between them skipped
 _IMU_MOVING: Final = struct.Struct("<4d72x3d72x3d72x").unpack_from  # orientation, angular velocity, acceleration
 _ODOM_MOVING: Final = struct.Struct("<3d4d288x3d3d288x").unpack_from  # position, orientation, linear, angular
@@ -57,53 +56,61 @@ def _block_offset(buf: Payload, has_child_frame: bool, size: int) -> int:
     return pos + 4
 
 
+class _Covariances:
+    """The covariance blocks of one stream's messages (``starts``: their byte offsets in the float64 block,
+    ``size`` float64s each), read once while their bytes repeat.
+
+    A driver's covariances are its constants: the same bytes in every message. When all of them are the
+    bytes of the previous message read, its tuples are returned again: equal values, one object. The
+    samples a replay's doctor keeps for its end-of-run series then hold only the values that move, and
+    the core's own "same covariance as before" checks compare an object with itself."""
+
+    __slots__ = ("_spans", "_unpack", "_bytes", "_tuples")
+
+    def __init__(self, starts: tuple[int, ...], size: int) -> None:
+        self._spans = tuple((start, start + 8 * size) for start in starts)
+        self._unpack = struct.Struct(f"<{size}d").unpack_from
+        self._bytes: tuple[bytes, ...] | None = None
+        self._tuples: tuple[tuple[float, ...], ...] = ()
+
+    def read(self, buf: Payload, at: int) -> tuple[tuple[float, ...], ...]:
+        blocks = tuple(buf[at + a : at + b] for a, b in self._spans)
+        if blocks != self._bytes:
+            unpack = self._unpack
+            self._bytes, self._tuples = blocks, tuple(unpack(buf, at + a) for a, _ in self._spans)
+        return self._tuples
+
+
 class ImuFields:
     """An Imu float64 block (at offset ``at`` of a payload) as an ImuSample: orientation and its covariance,
-    angular velocity and its, linear acceleration and its.
+    angular velocity and its, linear acceleration and its; the three covariances read once while they
+    repeat (``_Covariances``), so only ten of the 37 values are unpacked a message. One reader per stream."""
 
-    A driver's covariances are its constants: the same bytes in every message. When all three are the
-    bytes of the previous message read, their tuples are that message's, and only the ten values that
-    move are unpacked. Equal values, one object: the samples a replay's doctor keeps for its end-of-run
-    series hold ten floats each instead of 37, and the core's own "same covariance as before" checks
-    compare an object with itself. One reader per stream (it remembers that stream's covariances)."""
-
-    __slots__ = ("_bytes", "_tuples")
+    __slots__ = ("_covariances",)
     size: Final = 37 * 8  # bytes: 37 float64s
 
     def __init__(self) -> None:
-        self._bytes: tuple[bytes, ...] | None = None
-        self._tuples: tuple[tuple[float, ...], ...] = ((), (), ())
+        self._covariances = _Covariances((32, 128, 224), 9)
 
     def sample(self, buf: Payload, at: int, stamp: float, sensor: str) -> ImuSample:
-        covariances = (buf[at + 32 : at + 104], buf[at + 128 : at + 200], buf[at + 224 : at + 296])
-        if covariances == self._bytes:
-            oc, gc, ac = self._tuples
-        else:
-            oc, gc, ac = _D9(buf, at + 32), _D9(buf, at + 128), _D9(buf, at + 224)
-            self._bytes, self._tuples = covariances, (oc, gc, ac)
+        oc, gc, ac = self._covariances.read(buf, at)
         v = _IMU_MOVING(buf, at)
         return ImuSample(sensor, stamp, v[0:4], oc, v[4:7], gc, v[7:10], ac)
 
 
 class OdomFields:
     """An Odometry float64 block as an OdomSample: pose position, orientation (its covariance is not
-    read), twist linear, angular and covariance; the twist covariance shared with the previous message's
-    when its bytes are the same (``ImuFields``): 13 values unpacked instead of 85."""
+    read), twist linear, angular and covariance; the twist covariance read once while it repeats
+    (``_Covariances``): 13 values unpacked a message instead of 85."""
 
-    __slots__ = ("_bytes", "_tuple")
+    __slots__ = ("_covariances",)
     size: Final = 85 * 8  # bytes: pose position, orientation, covariance (0:43), twist (43:85)
 
     def __init__(self) -> None:
-        self._bytes: bytes | None = None
-        self._tuple: tuple[float, ...] = ()
+        self._covariances = _Covariances((392,), 36)
 
     def sample(self, buf: Payload, at: int, stamp: float, sensor: str) -> OdomSample:
-        covariance = buf[at + 392 : at + 680]
-        if covariance == self._bytes:
-            tc = self._tuple
-        else:
-            tc = _D36(buf, at + 392)
-            self._bytes, self._tuple = covariance, tc
+        (tc,) = self._covariances.read(buf, at)
         v = _ODOM_MOVING(buf, at)
         return OdomSample(sensor, stamp, v[7:10], v[10:13], tc, v[0:3], v[3:7])
 

@@ -415,7 +415,7 @@ def test_cdr_header_values_pass_through() -> None:
 @settings(max_examples=60, deadline=None)
 def test_repeated_covariances_are_read_once_and_shared_only_while_their_bytes_repeat(kind: str, data) -> None:
     """A driver's covariances are constants: the decoder keeps the previous message's covariance tuples
-    while their bytes repeat (``ImuFields``, ``OdomFields``), and reads them anew when any changes. Over
+    while their bytes repeat (``cdr_fast_path._Covariances``), and reads them anew when any changes. Over
     a stream whose covariances switch between two sets (and a value that moves in every message), each
     payload still decodes exactly as rosbags does, and a covariance tuple is the previous one's object
     exactly when its message repeated the previous covariance bytes."""
