@@ -74,7 +74,6 @@ class NisWindow:
         self.recent_rejected = 0  # True in ``flags``
         self.dof = 0
         self._bounds: dict[int, tuple[float, float]] = {}
-        self._dof_bounds = (0.0, math.inf)  # ``bounds(self.dof)``, read by every verdict
         self.total = 0
         self.rejected = 0
         self._sum = 0.0  # of the finite values in the window
@@ -98,7 +97,6 @@ class NisWindow:
             values.clear()
             flags.clear()
             self.dof = dof
-            self._dof_bounds = self.bounds(dof)
             self._sum, self._infinite, self._since_exact = 0.0, 0, 0
             self.recent_rejected = 0
         if len(flags) == self.window and flags[0]:
@@ -139,7 +137,7 @@ class NisWindow:
         n = len(self.values)
         if n < self.window:
             return "warming_up"
-        lo, hi = self._dof_bounds if self.dof else self.bounds(self.dof)
+        lo, hi = self.bounds(self.dof)
         m = math.inf if self._infinite else self._sum / n
         return "nis_high" if m > hi else "nis_low" if m < lo else "ok"
 

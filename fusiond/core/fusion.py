@@ -224,7 +224,7 @@ class FusionCore:
         if st.newest_stamp is None or stamp > st.newest_stamp:
             st.newest_stamp = stamp
         for r in records:
-            w = self.windows.get((idx, r.channel)) or self._window(idx, r.channel)
+            w = self._window(idx, r.channel)
             if not r.learning:
                 r.consistency = w.add(r.nis, r.dof, r.rejected)
             if r.rejected and r.channel != "yaw_rate":

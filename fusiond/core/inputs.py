@@ -49,20 +49,10 @@ class HeldInputs:
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
-        during a prediction, so it reads them once for all its segments. ``timeout`` written out
-        twice: this runs before every prediction, and the two calls cost as much as the rest."""
+        during a prediction, so it reads them once for all its segments."""
         odom = self.odom_index
-        base, period = self._timeout_base, s.period
-        odom_timeout = gyro_timeout = 0.0
-        if odom >= 0 and s.last[odom] is not None:
-            odom_timeout = base[odom]
-            if period[odom] > 0.0:
-                odom_timeout = max(odom_timeout, TIMEOUT_PERIODS * period[odom])
-        if s.gyro is not None:
-            gyro = s.gyro_last[0]
-            gyro_timeout = base[gyro]
-            if period[gyro] > 0.0:
-                gyro_timeout = max(gyro_timeout, TIMEOUT_PERIODS * period[gyro])
+        odom_timeout = self.timeout(odom, s) if odom >= 0 and s.last[odom] is not None else 0.0
+        gyro_timeout = self.timeout(s.gyro_last[0], s) if s.gyro is not None else 0.0
         return odom_timeout, gyro_timeout
 
     def at(self, s: FilterState, t: float | None = None,

@@ -107,14 +107,16 @@ class Doctor:
             body = body_twist(sample)  # the twist as the core takes it: turned into the body by the message's pose
             if body is not None:
                 sample = msgspec.structs.replace(sample, linear=body[0], angular=body[1])
-        samples, starts = self._samples, self.collector is not None  # the series' start: the first sample's stamp
         for s in self.lost.admit(sample):
-            samples.append(s)
-            if starts and (self.t0 is None or s.stamp < self.t0):
-                self.t0 = s.stamp
-            if len(samples) >= CHUNK:
-                self._settle_samples()
-                samples = self._samples
+            self._note_sample(s)
+
+    def _note_sample(self, sample) -> None:
+        samples = self._samples
+        samples.append(sample)
+        if self.collector is not None and (self.t0 is None or sample.stamp < self.t0):
+            self.t0 = sample.stamp
+        if len(samples) >= CHUNK:
+            self._settle_samples()
 
     def add_estimate(self, t: float, q, pos_var: float, att_var: float, bias_z: float) -> None:
         if self.collector is not None:

@@ -1,6 +1,7 @@
-"""Where the per-message path writes a helper out instead of calling it, the two stay one formula:
-the held inputs' timeouts against ``HeldInputs.timeout``, the segment end against the expiries, the
-pose variances against the published estimate's covariance."""
+"""The per-message path's shortcuts against the forms they stand for: the held inputs' timeouts (one per
+input: the odometry's and the gyro's sensor), the segment end against the expiries, the pose variances
+against the published estimate's covariance, ``near_unit`` against ``unit_quaternion``, the written-out
+twist covariance against numpy's 6x6."""
 
 from __future__ import annotations
 

@@ -132,11 +132,13 @@ class ImuPolicy:
         if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             oc = s.orientation_covariance
             known = oc == self._ori_seen
+            if not (known or finite(oc)):
+                raise Rejected(reasons.NON_FINITE, "orientation")
             q_imu = near_unit(s.orientation)  # a unit quaternion is finite: the usual message's one check
-            if q_imu is None or not (known or finite(oc)):
-                if not (finite(s.orientation) and (known or finite(oc))):
+            if q_imu is None:
+                if not finite(s.orientation):
                     raise Rejected(reasons.NON_FINITE, "orientation")
-                q_imu = unit_quaternion(s.orientation)
+                q_imu = unit_quaternion(s.orientation)  # raises: zero or not of unit norm
             q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
             rows, rpy_cov, yaw_measured = self._ori_resolved if known else self._orientation_noise(oc)
         elif len(s.orientation_covariance) != 9:
@@ -153,10 +155,11 @@ class ImuPolicy:
             # drivers mark the covariance unknown that way while publishing the rates; the override says fuse them
             if gc[0] != -1.0 or self._gyro_override is not None:
                 known = gc == self._gyro_seen
-                plausible_rate = plausible(s.angular_velocity, MAX_RATE)  # NaN and inf fail it too
-                if not ((plausible_rate or finite(s.angular_velocity)) and (known or finite(gc))):
+                if not (known or finite(gc)):
                     raise Rejected(reasons.NON_FINITE, "angular_velocity")
-                if not plausible_rate:
+                if not plausible(s.angular_velocity, MAX_RATE):  # NaN and inf fail it too
+                    if not finite(s.angular_velocity):
+                        raise Rejected(reasons.NON_FINITE, "angular_velocity")
                     raise Rejected(reasons.IMPLAUSIBLE_VALUE, "angular velocity beyond 100 rad/s")
                 gyro_cov = self._gyro_resolved if known else self._gyro_noise(gc)
                 w = s.angular_velocity
@@ -195,7 +198,6 @@ class ImuModel(SensorModel):
         self.learns_bias = cfg.angular_velocity and ctx.layout.has("gyro_bias")
         self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
         self.orientation_period = 1.0 / cfg.orientation_rate_hz if cfg.orientation_rate_hz > 0.0 else 0.0
-        self.orientation_rate_hz = cfg.orientation_rate_hz
         self.thinned = 0  # orientations not fused for ``orientation_rate_hz`` (the gyro of the sample is)
         self.carries_yaw = cfg.yaw_across_gaps and cfg.orientation == "roll_pitch" and not ctx.two_d
         self.gap_s = ctx.filter.gap_s
@@ -264,13 +266,8 @@ class ImuModel(SensorModel):
             return True
         own: ImuOwn = s.own[self.index]
         bucket = own.orientation_credit
-        if bucket is None:
-            credit = ORIENTATION_BURST
-        else:  # min(BURST, credit + max(elapsed, 0) * rate), as comparisons: this runs at the IMU's rate
-            elapsed = stamp - bucket[1]
-            credit = bucket[0] + (elapsed if elapsed >= 0.0 else 0.0) * self.orientation_rate_hz
-            if not credit < ORIENTATION_BURST:
-                credit = ORIENTATION_BURST
+        credit = ORIENTATION_BURST if bucket is None else min(
+            ORIENTATION_BURST, bucket[0] + max(stamp - bucket[1], 0.0) * self.cfg.orientation_rate_hz)
         due = credit >= 1.0
         s.own[self.index] = msgspec.structs.replace(own, orientation_credit=(credit - 1.0 if due else credit, stamp))
         if not due and emit:
