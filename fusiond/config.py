@@ -86,6 +86,8 @@ def validate(cfg: Config) -> Config:
     _check_struct(cfg.state, lambda field: f"state.{field}")
     if cfg.state.save_interval_s <= 0.0:
         raise ConfigError(f"state.save_interval_s: must be positive, got {cfg.state.save_interval_s}")
+    if not 0.0 < cfg.filter.standstill_alpha < 0.5:
+        raise ConfigError("filter.standstill_alpha: must be between 0 and 0.5")
     if not 0.0 < cfg.filter.nis_confidence < 1.0:
         raise ConfigError("filter.nis_confidence: must be between 0 and 1")
     if cfg.filter.nis_window < 2:

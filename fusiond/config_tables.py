@@ -88,7 +88,8 @@ class FilterConfig(_Table):
     initial_sigma: Vec2 = (0.0, 0.1)  # initial position m, attitude rad
     gyro_bias_sigma: float = 0.01  # initial gyro-bias uncertainty, rad/s
     gyro_bias_walk: float = 2.0e-5  # gyro-bias random walk, rad/s/sqrt(s)
-    standstill_s: float = 0.3  # odometry at zero this long before the gyro bias is learned
+    standstill_s: float = 0.3  # odometry at rest this long before the gyro bias is learned
+    standstill_alpha: float = 0.01  # size of the odometry's rest test: a true standstill window refused this often
     wheel_scale_sigma: float = 0.1  # initial wheel speed scale uncertainty (scale_estimation)
     wheel_scale_walk: float = 1.0e-4  # its random walk, 1/sqrt(s)
     gyro_scale_sigma: float = 0.05  # initial gyro (yaw axis) scale uncertainty (gyro_scale_estimation)

@@ -42,6 +42,16 @@ def chi2_ppf(p: float, dof: float) -> float:
     return dof * max(1.0 - h + z * h**0.5, 0.0) ** 3
 
 
+def t_quantile(z: float, dof: float) -> float:
+    """Student's t quantile matching the normal quantile z (Cornish-Fisher, two terms: 3.0 -> 3.75 at 12 dof,
+    3.27 at 30, 3.0 for many). A standard error estimated from dof residuals is itself uncertain (by ~20 %
+    with a dozen), which the wider quantile covers."""
+    if dof <= 0:
+        return math.inf
+    z3, z5 = z**3, z**5
+    return z + (z3 + z) / (4.0 * dof) + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * dof * dof)
+
+
 # More of a window's updates rejected (gated out, or flagged as slip) than this share: the stated noise
 # does not describe the sensor, whatever the NIS of the applied ones. A consistent sensor behind a
 # gate of g sigma is rejected with probability P(chi2_dof > g^2): 2.9 % for dof 3 at g = 3, far less

@@ -51,20 +51,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config, GpsSensor, OdomSensor
+from ..core.diagnostics import t_quantile
 from .heading import gps_sigma, timed
 from .series import Series
 from .verdict import Verdict, sensor_key
 from .thresholds import ASSUMED_TAU_S, CHORD_M, CHORD_MAX_S, MIN_CHORDS, SCALE_TOLERANCE, SCALE_Z_SIGMAS
-
-
-def t_quantile(z: float, dof: int) -> float:
-    """Student's t quantile matching the normal quantile z (Cornish-Fisher, two terms: 3.0 -> 3.75 at 12 dof,
-    3.27 at 30, 3.0 for many). The residual-based standard error is itself estimated from dof = n - 1 chords:
-    with a dozen chords it is uncertain by ~20 %, which the wider quantile covers."""
-    if dof <= 0:
-        return math.inf
-    z3, z5 = z**3, z**5
-    return z + (z3 + z) / (4.0 * dof) + (5.0 * z5 + 16.0 * z3 + 3.0 * z) / (96.0 * dof * dof)
 
 
 @dataclass

@@ -44,6 +44,7 @@ class RestWorld:
     orientation_sigma: float = 0.002
     roll_drift: float = 0.0  # rad/s: the IMU's reported roll wanders away from the truth
     wheel_sigma: float = 0.01
+    rest_noise: float = 0.0  # > 0: at rest the odometry reads white noise of this sigma, not exactly 0 (a car's wheels)
     accel_sigma: float | None = None  # the IMU reports its specific force with this noise (m/s^2)
     orientation_absent: bool = False  # orientation_covariance[0] = -1: the IMU gives no orientation
     accel_scale: float = 1.0  # 1 / 9.80665: a driver reporting in g
@@ -79,6 +80,8 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 moving = (speed != 0.0 or seg.yaw_rate != 0.0) and not seg.odom_reads_zero
                 v = speed + rng.normal(0, ws) if moving else 0.0
                 wz = seg.yaw_rate + rng.normal(0, ws) if moving else 0.0
+                if w.rest_noise > 0.0 and not moving and not seg.odom_reads_zero:
+                    v, wz = rng.normal(0, w.rest_noise), rng.normal(0, w.rest_noise)
                 if w.wheel_yaw_lost:
                     wz = 0.0
                 out.append(OdomSample("wheel", T0 + t, (v, 0.0, 0.0), (0.0, 0.0, wz), odom_cov))

@@ -69,6 +69,17 @@ def _turning(w: tuple, bias_sigma: float, min_sigma: float) -> bool:
     return False
 
 
+def _measured_variance(w: tuple, axis: int, min_sigma: float) -> float:
+    """One gyro reading's variance on ``axis`` as the window shows it (its sample variance, floored at
+    ``gyro_min_sigma``), not as the driver states it: a window at rest is where the gyro's own noise is
+    measured, and a driver stating 0.14 rad/s for a 0.003 rad/s gyro would make every standstill's
+    update ~50 times too weak to teach the bias (one stating too little, too strong)."""
+    n = w[1]
+    mean = w[2 + axis] / n
+    var = max(w[8 + axis] - n * mean * mean, 0.0) / (n - 1)
+    return var if var > min_sigma * min_sigma else min_sigma * min_sigma
+
+
 def learn_bias_at_rest(imu: "SensorModel", s: "FilterState", inp: "ImuInput", stamp: float, emit: bool,
                        late: bool) -> list[DiagnosticsRecord]:
     """One gyro sample at a possible standstill (module doc): extend the window, or close it with
@@ -112,7 +123,7 @@ def learn_bias_at_rest(imu: "SensorModel", s: "FilterState", inp: "ImuInput", st
     ys, svars, nis, rejected, learning = [], [], 0.0, False, False
     for axis in axes:
         mean = w[2 + axis] / n
-        var = max(w[5 + axis] / (n * n), BIAS_MEAN_FLOOR**2)
+        var = max(_measured_variance(w, axis, imu.cfg.gyro_min_sigma) / n, BIAS_MEAN_FLOOR**2)
         # An update whose prior is far wider than the window's noise mostly learns the bias: its
         # NIS tests the prior (gyro_bias_sigma), not the gyro's noise, so it is marked as learning
         # and left out of the consistency tests.

@@ -41,6 +41,8 @@ from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
 from ..imu.gyro_bias import quiet_bound
+from . import lost_channel
+from .rest import NoiseTrack, rest_window
 from .table import OdomSensor
 
 if TYPE_CHECKING:
@@ -67,6 +69,9 @@ class OdomOwn(msgspec.Struct, frozen=True, gc=False):
     previous_stamp: float = 0.0  # ... its stamp ...
     previous_moving: bool = False  # ... and whether it read motion (not stationary)
     coast: tuple | None = None  # (since, linear twist and covariance when the drive went quiet) while coasting
+    rest: tuple = ()  # the standstill test's window (``rest.rest_window``)
+    noise: tuple | None = None  # the twist's noise measured from the stream (``rest.NoiseTrack``)
+    watched: tuple | None = None  # angular components that may not be measurements (``lost_channel``)
 
 
 _NO_OWN = OdomOwn()
@@ -85,6 +90,7 @@ class OdomInput(msgspec.Struct, gc=False):
     yaw_rate_measured: bool
     stationary: bool
     world: bool = False  # ``linear`` is in the world frame (twist_frame = "world" and the message gave no pose)
+    measured: tuple[bool, ...] = (True,) * 6  # which of vx vy vz wx wy wz the message measures
 
 
 _ALL_MEASURED = (True,) * 6
@@ -196,6 +202,7 @@ class OdomPolicy:
             measured[5],
             stationary,
             world,
+            measured,
         )
 
 
@@ -212,9 +219,16 @@ class OdomModel(SensorModel):
         self._bias_z_error = layout.index("gyro_bias", 2, error=True)
         self._gyro_scale = layout.index("gyro_scale")
         self._coast_decel = cfg.coast_decel
+        self._bias = tuple(layout.index("gyro_bias", i) for i in range(3))
+        self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN
+        watched = own.watched
+        if lost_channel.candidates(watched):
+            watched = self._watch(s, watched, inp, stamp, emit)
+        if watched[1] != (-1, -1, -1):
+            inp = self._without_lost(inp, lost_channel.lost(watched))
         coast = self._coast(s, own, inp, stamp)
         if coast is None:
             s.linear, s.linear_cov, s.linear_world = inp.linear, inp.linear_cov, inp.world
@@ -229,12 +243,15 @@ class OdomModel(SensorModel):
                          coast_s=speed / self._coast_decel)
         # the forward speeds for ``forward_accel``: in a coast, the coasting speed, not the drive's zero
         window = self._speeds(own.window, s.linear[0], stamp) if self.ctx.track_acceleration else ()
-        s.own[self.index] = OdomOwn(window, inp.linear, inp.linear_cov, stamp, not inp.stationary, coast)
+        rest, noise, at_rest = self._rest(s, own, inp, stamp)
+        s.own[self.index] = OdomOwn(window, inp.linear, inp.linear_cov, stamp, not inp.stationary, coast, rest, noise,
+                                    watched)
         s.wheel_angular, s.wheel_angular_cov = inp.angular, inp.angular_cov
         s.wheel_yaw_measured = inp.yaw_rate_measured
-        if inp.stationary and coast is None:
+        if (at_rest or inp.stationary) and coast is None:
+            # a drive reading zero says so itself; a noisy one is at rest since its window's first message
             if s.still_since is None:
-                s.still_since = stamp
+                s.still_since = rest[0][0] if at_rest else stamp
         else:
             s.still_since = None
         if not emit or not inp.yaw_rate_measured:
@@ -253,6 +270,48 @@ class OdomModel(SensorModel):
         quiet = quiet_bound(math.sqrt(s.gyro_cov[8]), self.ctx.filter.gyro_bias_sigma)
         slip = abs(r) > self.cfg.slip_threshold or (inp.stationary and abs(gyro_z) > quiet)
         return [self.record(stamp, ["yaw_rate"], [r], [var], r * r / var, 1, slip, "yaw_rate", late)]
+
+    def _watch(self, s: "FilterState", watched: tuple | None, inp: OdomInput, stamp: float, emit: bool) -> tuple:
+        """``lost_channel.watch`` with the gyro as the filter corrects it now (None when stale or not fused),
+        logging a component the moment it is found lost."""
+        gyro = bounds = None
+        if s.gyro is not None and stamp - s.gyro_last[1] <= self.ctx.timeout(s.gyro_last[0], s):
+            x, cov, bias_sigma = s.ekf.x, s.gyro_cov, self.ctx.filter.gyro_bias_sigma
+            gyro = tuple(s.gyro[i] - (float(x[b]) if b >= 0 else 0.0) for i, b in enumerate(self._bias))
+            bounds = tuple(quiet_bound(math.sqrt(cov[4 * i]), bias_sigma) for i in range(3))
+        before = lost_channel.lost(watched)
+        watched = lost_channel.watch(watched, inp.angular, inp.measured, gyro, bounds)
+        if emit:
+            for i, (was, now) in enumerate(zip(before, lost_channel.lost(watched))):
+                if now and not was:
+                    log.warning("twist_component_lost", sensor=self.cfg.name, stamp=stamp,
+                                component=lost_channel.ANGULAR[i], value=inp.angular[i],
+                                advice="declare it in twist_measured")
+        return watched
+
+    def _without_lost(self, inp: OdomInput, lost: tuple[bool, bool, bool]) -> OdomInput:
+        """The input with the lost angular components taken as not measured: zero, the unmeasured noise."""
+        if not any(lost):
+            return inp
+        angular = tuple(0.0 if gone else w for w, gone in zip(inp.angular, lost))
+        cov = list(inp.angular_cov)
+        for i, gone in enumerate(lost):
+            if gone:
+                cov[4 * i] = self._unmeasured_var
+        measured = inp.measured[:3] + tuple(m and not gone for m, gone in zip(inp.measured[3:], lost))
+        lin, ang = OdomPolicy.STATIONARY_LINEAR, OdomPolicy.STATIONARY_ANGULAR
+        stationary = all(-lin <= v <= lin for v in inp.linear) and all(-ang <= w <= ang for w in angular)
+        return OdomInput(inp.linear, inp.linear_cov, angular, tuple(cov), measured[5], stationary, inp.world, measured)
+
+    def _rest(self, s: "FilterState", own: OdomOwn, inp: OdomInput, stamp: float) -> tuple[tuple, tuple, bool]:
+        """The standstill test after this message (``rest.py``): its window, the running noise, and whether
+        the wheels are at rest, judged on the noise the stream shows, not the stated one."""
+        values = (*inp.linear, *inp.angular)
+        noise = NoiseTrack.step(own.noise, values, stamp, s.period[self.index])
+        fc = self.ctx.filter
+        window, at_rest = rest_window(own.rest, values, inp.measured, noise[1], stamp, fc.standstill_s,
+                                      fc.standstill_alpha)
+        return window, noise, at_rest
 
     @staticmethod
     def _speeds(window: tuple, speed: float, stamp: float) -> tuple:
