@@ -4,8 +4,9 @@ Every case is `fusiond replay BAG --config CFG --reference TOPIC [--fuse-every N
 (the same replay and evaluation a user runs), and the row compares fusiond with the best baseline
 that needs no filter on the metric that case is judged by. Beside them, the plain EKF
 (scripts/plain_ekf.py: a textbook error-state EKF with the messages' covariances, the same config)
-is scored by the same evaluation on the same samples (with --fuse-every N it fuses the same fixes). A benchmark, not a test: it asserts
-nothing; it prints the table and, with --write, puts it into docs/RESULTS.md between its markers.
+is scored by the same evaluation on the same samples (with --fuse-every N it fuses the same fixes).
+A benchmark, not a test: it asserts nothing; it prints the table and, with --write, puts it into
+docs/RESULTS.md between its markers.
 
     .venv/bin/python scripts/real_recordings.py [--data ../shared/data] [--write]
 """
@@ -232,8 +233,8 @@ def table(data: Path) -> str:
         plain_s = "-" if r.plain is None else f"{r.plain:.3f}"
         lines.append(f"| {case.recording} | {case.config}"
                      f"{f' --fuse-every {case.fuse_every}' if case.fuse_every > 1 else ''} | {case.what} | "
-                     f"{r.segment} ({r.span[0]:.0f}-{r.span[1]:.0f} s) | {ours_s} | {best_s} | {plain_s} | {r.noise:.3f} | "
-                     f"{r.verdict} |")
+                     f"{r.segment} ({r.span[0]:.0f}-{r.span[1]:.0f} s) | {ours_s} | {best_s} | {plain_s} | "
+                     f"{r.noise:.3f} | {r.verdict} |")
     return "\n".join(lines)
 
 
