@@ -291,12 +291,10 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
         for order, (c, _, raw) in enumerate(reader.messages(connections=conns)):
             kind, _s = by_topic[c.topic]
             msg = reader.deserialize(raw, c.msgtype)
-            if kind == "gps":
-                if msg.status.status < 0:
-                    continue
+            if kind == "gps":  # counted in bag order, every fix (as fusiond's --fuse-every counts them)
                 keep = fuse_fix(_stamp(msg), fixes) if fuse_fix is not None else True
                 fixes += 1
-                if not keep:
+                if not keep or msg.status.status < 0:  # STATUS_NO_FIX: no position
                     continue
             events.append((_stamp(msg), order, kind, msg))
     events.sort(key=lambda e: (e[0], e[1]))  # header-stamp order
@@ -356,7 +354,8 @@ def main() -> int:
     ap.add_argument("bags", nargs="+")
     ap.add_argument("--config", required=True, help="fusiond's TOML config (topics, kinds, modes, extrinsics)")
     ap.add_argument("--tum", help="write the trajectory as TUM lines (stamp x y z qx qy qz qw)")
-    ap.add_argument("--fuse-every", type=int, default=1, help="fuse only every Nth GPS fix (bag order)")
+    ap.add_argument("--fuse-every", type=int, default=1,
+                    help="fuse only every Nth GPS fix (bag order, the first one fused)")
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from fusiond.config import load
