@@ -50,6 +50,7 @@ class Variant:
     segment: str = "all"
     segments: tuple[str, ...] = ()  # several segments scored (default: ``segment`` alone)
     keep_datum: bool = False  # name the original's first fix as the datum (a variant that starts later)
+    fuse_every: int = 1  # as `replay --fuse-every N`: every Nth fix fused, scored at the others
 
 
 def _keep(topic: str, rel: float, msg: object) -> object:
@@ -182,6 +183,10 @@ VARIANTS = (
     Variant("comma_step_north", COMMA, "comma2k19.toml",
             "highway car, every fix from 20 s on 7 m north (the receiver's error steps and stays)",
             _step(20.0, 0.0, 7.0), edits=("/fix",), segments=("all", "a", "b")),
+    Variant("comma_step_east_1in10", COMMA, "comma2k19.toml",
+            "the same step, 1 fix in 10 fused (scored at the other 9, against the reference)",
+            _step(30.0, 7.0, 0.0), edits=("/fix",), segments=("all", "a", "b"), fuse_every=10,
+            baselines=("hold last fused fix", "fixes at constant velocity")),
     Variant("f110_copy", F110, "f110.toml", "F1/10 car, orientation off, as recorded (the control)", _keep,
             metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
     Variant("f110_noisy_rest", F110, "f110.toml",
@@ -252,7 +257,7 @@ def score(data: Path, v: Variant, work: Path) -> list[tuple[str, str, tuple | No
     if v.keep_datum and first_fix is not None:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, datum=first_fix)
                                                     if isinstance(s, GpsSensor) else s for s in cfg.sensors])
-    rec = Recorder(cfg)
+    rec = Recorder(cfg, v.fuse_every)
     result = replay([bag], cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
     ev = evaluate([bag], cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
     pev = _plain_evaluation(bag, cfg, rec)
