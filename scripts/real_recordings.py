@@ -2,8 +2,11 @@
 
 Every case is `fusiond replay BAG --config CFG --reference TOPIC [--fuse-every N]` run in-process
 (the same replay and evaluation a user runs), and the row compares fusiond with the best baseline
-that needs no filter on the metric that case is judged by. A benchmark, not a test: it asserts
-nothing; it prints the table and, with --write, puts it into docs/RESULTS.md between its markers.
+that needs no filter on the metric that case is judged by. Beside them, the plain EKF
+(scripts/plain_ekf.py: a textbook error-state EKF with the messages' covariances, the same config)
+is scored by the same evaluation on the same samples (with --fuse-every N it fuses the same fixes).
+A benchmark, not a test: it asserts nothing; it prints the table and, with --write, puts it into
+docs/RESULTS.md between its markers.
 
     .venv/bin/python scripts/real_recordings.py [--data ../shared/data] [--write]
 """
@@ -70,7 +73,33 @@ CASES = (
 UNITS = {"world_h": "m world", "world_up": "m up", "aligned_h": "m aligned", "heading_deg": "deg heading"}
 
 
-def _evaluate(data: Path, case: Case):
+def plain_ekf_module():
+    """scripts/plain_ekf.py as a module (this script is also loaded by file, off sys.path)."""
+    import importlib.util
+
+    if "plain_ekf" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("plain_ekf", ROOT / "scripts" / "plain_ekf.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # its dataclasses look their module up there
+        spec.loader.exec_module(module)
+    return sys.modules["plain_ekf"]
+
+
+def plain_evaluation(bag: list[Path], cfg, rec):
+    """The plain EKF's trajectory scored by the very evaluation fusiond's is (``evaluate``, the same
+    Recorder: the same scoring times, world frame and baselines); it fuses exactly the GPS fixes the
+    Recorder let through to fusiond. In the returned Evaluation the method "fusiond" is the plain EKF."""
+    from fusiond.replay.evaluate import evaluate
+
+    offset = next((s.stamp_offset_s for s in cfg.sensors if s.name == rec.absolute), 0.0)
+    fused = {round(f[0] - offset, 6) for f in rec.fused_fixes}
+    keep = None if rec.fuse_every == 1 else (lambda stamp, i: round(stamp, 6) in fused)
+    trajectory = plain_ekf_module().run(bag, cfg, fuse_fix=keep)
+    return evaluate(bag, cfg, "/ground_truth", trajectory, rec)
+
+
+def _evaluate(data: Path, case: Case, plain: bool = False):
+    """fusiond's evaluation of the case, and the plain EKF's (None unless ``plain``)."""
     from fusiond.config import load
     from fusiond.replay.evaluate import Recorder, evaluate
     from fusiond.replay.run import replay
@@ -79,10 +108,12 @@ def _evaluate(data: Path, case: Case):
     rec = Recorder(cfg, case.fuse_every)
     bag = [data / case.recording]
     result = replay(bag, cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
-    return evaluate(bag, cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
+    ev = evaluate(bag, cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
+    return ev, plain_evaluation(bag, cfg, rec) if plain else None
 
 
 def _jackal_row(data: Path) -> list[str]:
+    plain = plain_ekf_module()
     from fusiond.config import load
     from fusiond.replay.run import replay
 
@@ -96,15 +127,18 @@ def _jackal_row(data: Path) -> list[str]:
     for config, turned in (("jackal_rl.toml", False), ("jackal.toml", True)):
         cfg = load(ROOT / "examples" / config)
         result = replay([bag], cfg, keep_trace=False, progress=False, doctor=False)
-        _, x, y, z = result.final[:4]
         case = "Jackal, final pose vs robot_localization's"
+        yaw = _first_imu_yaw(bag, cfg) if turned else 0.0
         if turned:
-            yaw = _first_imu_yaw(bag, cfg)
-            x, y = math.cos(yaw) * x - math.sin(yaw) * y, math.sin(yaw) * x + math.cos(yaw) * y
             case += f", turned by the IMU's first yaw ({math.degrees(yaw):.1f} deg)"
-        d = math.dist((x, y, z), JACKAL_FINAL)
+
+        def off(x: float, y: float, z: float) -> float:
+            x, y = math.cos(yaw) * x - math.sin(yaw) * y, math.sin(yaw) * x + math.cos(yaw) * y  # noqa: B023
+            return math.dist((x, y, z), JACKAL_FINAL)
+        d = off(*result.final[1:4])
+        d_plain = off(*plain.run([bag], cfg)[-1, 1:4])
         rows.append(f"| jackal_test2.bag | {config} | {case} | all | "
-                    f"{d:.3f} m | robot_localization's test tolerance | {JACKAL_TOLERANCE} m | "
+                    f"{d:.3f} m | robot_localization's test tolerance | {d_plain:.3f} m | {JACKAL_TOLERANCE} m | "
                     f"{'yes' if d <= JACKAL_TOLERANCE else 'NO'} |")
     return rows
 
@@ -150,6 +184,7 @@ class Row:
     ours: float | None
     best: tuple[float, str] | None
     noise: float
+    plain: float | None = None  # the plain EKF (scripts/plain_ekf.py) on the same metric, when asked for
 
     @property
     def verdict(self) -> str:
@@ -162,15 +197,16 @@ class Row:
         return verdict if self.case.acceptance else f"{verdict} (shown, not judged)"
 
 
-def rows(data: Path) -> list[Row]:
-    """Every case's rows: fusiond and its best plain baseline on the case's metric, per segment."""
+def rows(data: Path, plain: bool = False) -> list[Row]:
+    """Every case's rows: fusiond and its best plain baseline on the case's metric, per segment; with
+    ``plain``, the plain EKF's score too."""
     out: list[Row] = []
     cache: dict[tuple[str, str, int], object] = {}
     for case in CASES:
         key = (case.recording, case.config, case.fuse_every)
         if key not in cache:
-            cache[key] = _evaluate(data, case)
-        ev = cache[key]
+            cache[key] = _evaluate(data, case, plain)
+        ev, pev = cache[key]
         noise_m, noise_deg, speed = reference_noise(data, case.recording)
         noise = noise_deg if case.metric == "heading_deg" else max(noise_m, case.time_base_s * speed)
         segments = [s.name for s in ev.segments if (s.name != "all") == case.segments] or ["all"]
@@ -180,22 +216,25 @@ def rows(data: Path) -> list[Row]:
             base = [(getattr(by[m], case.metric), m) for m in case.baselines
                     if m in by and getattr(by[m], case.metric) is not None]
             span = next(s for s in ev.segments if s.name == seg)
-            out.append(Row(case, seg, (span.start, span.end), ours, min(base) if base else None, noise))
+            p = next((getattr(sc, case.metric) for sc in pev.scores if sc.segment == seg and sc.method == "fusiond"),
+                     None) if pev is not None else None
+            out.append(Row(case, seg, (span.start, span.end), ours, min(base) if base else None, noise, p))
     return out
 
 
 def table(data: Path) -> str:
-    lines = ["| recording | config | case | segment | fusiond | best plain baseline | reference noise | "
-             "fusiond not worse |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["| recording | config | case | segment | fusiond | best plain baseline | plain EKF | reference noise | "
+             "fusiond not worse |", "|---|---|---|---|---|---|---|---|---|"]
     lines += _jackal_row(data)
-    for r in rows(data):
+    for r in rows(data, plain=True):
         case = r.case
         ours_s = "-" if r.ours is None else f"{r.ours:.3f} {UNITS[case.metric]}"
         best_s = "-" if r.best is None else f"{r.best[0]:.3f} ({r.best[1]})"
+        plain_s = "-" if r.plain is None else f"{r.plain:.3f}"
         lines.append(f"| {case.recording} | {case.config}"
                      f"{f' --fuse-every {case.fuse_every}' if case.fuse_every > 1 else ''} | {case.what} | "
-                     f"{r.segment} ({r.span[0]:.0f}-{r.span[1]:.0f} s) | {ours_s} | {best_s} | {r.noise:.3f} | "
-                     f"{r.verdict} |")
+                     f"{r.segment} ({r.span[0]:.0f}-{r.span[1]:.0f} s) | {ours_s} | {best_s} | {plain_s} | "
+                     f"{r.noise:.3f} | {r.verdict} |")
     return "\n".join(lines)
 
 

@@ -6,9 +6,11 @@ searched for), loses its GPS for a while, gets its fixes less often, or sees a m
 Each variant here is written from a recording in ../shared/data (a ROS 2 bag: its messages are
 copied, the fixes edited through rosbags' own CDR codec), then replayed and scored exactly as
 `fusiond replay BAG --config CFG --reference /ground_truth` does. A benchmark, not a test: it
-asserts nothing and prints the table (docs/RESULTS.md, "Variants of the real recordings").
+asserts nothing and prints the table; with --write it puts it into docs/RESULTS.md between its
+markers ("Variants of the real recordings"). Beside fusiond, the plain EKF (scripts/plain_ekf.py) is
+scored on every variant by the same evaluation.
 
-    .venv/bin/python scripts/recording_variants.py [--data ../shared/data] [--only NAME]
+    .venv/bin/python scripts/recording_variants.py [--data ../shared/data] [--only NAME] [--write]
 
 A variant that starts later keeps the original's world frame (the reference is ENU at the
 original first fix): its config names that fix as the GPS datum.
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import tempfile
 import time
@@ -26,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+BEGIN, END = "<!-- variants table: begin -->", "<!-- variants table: end -->"
 EARTH_RADIUS = 6378137.0  # m, WGS84 equatorial: a burst's metres turned into degrees
 
 
@@ -44,7 +48,9 @@ class Variant:
     # or extrapolating the last one is what a GPS-only user has at each moment, through an outage too
     baselines: tuple[str, ...] = ("raw fixes", "hold last fused fix", "fixes at constant velocity")
     segment: str = "all"
+    segments: tuple[str, ...] = ()  # several segments scored (default: ``segment`` alone)
     keep_datum: bool = False  # name the original's first fix as the datum (a variant that starts later)
+    fuse_every: int = 1  # as `replay --fuse-every N`: every Nth fix fused, scored at the others
 
 
 def _keep(topic: str, rel: float, msg: object) -> object:
@@ -87,6 +93,72 @@ def _burst(t0: float, fixes: int, east: float, north: float) -> Callable:
     return edit
 
 
+def _shift(msg, east: float, north: float) -> None:
+    msg.latitude += math.degrees(north / EARTH_RADIUS)
+    msg.longitude += math.degrees(east / (EARTH_RADIUS * math.cos(math.radians(msg.latitude))))
+
+
+def _step(t0: float, east: float, north: float) -> Callable:
+    """Every fix from t0 on moved by (east, north) m: a persistent shift of the receiver's error (a
+    re-acquisition, or a multipath lock), to the end of the run. The reference is cut for the 1.5 s
+    before t0, so that the evaluation's segments are a (before the step) and b (from the step on)."""
+    def edit(topic: str, rel: float, msg) -> object | None:
+        if topic == "/ground_truth" and t0 - 1.5 <= rel < t0:
+            return None
+        if topic == "/fix" and rel >= t0:
+            _shift(msg, east, north)
+        return msg
+    return edit
+
+
+class _NoisyRest:
+    """Gaussian noise (sigma m/s, seeded) added to the wheel speed (twist.linear.x) of every odometry
+    message stamped where the reference says the vehicle is at rest: the reference's displacement between
+    0.25 s before and after the stamp below 0.05 m/s (read across the reference's own pauses of up to 2 s:
+    the F1/10 car's particle filter stops publishing while the car stands, and resumes where it stopped).
+    A drive whose speed reads a few cm/s at rest, never exactly 0."""
+
+    def __init__(self, sigma: float, seed: int, rest_speed: float = 0.05, half: float = 0.25,
+                 max_gap: float = 2.0) -> None:
+        self.sigma, self.seed, self.rest_speed, self.half, self.max_gap = sigma, seed, rest_speed, half, max_gap
+        self.noised = 0
+
+    def prepare(self, src: Path) -> None:
+        import numpy as np
+        from rosbags.highlevel import AnyReader
+
+        rows = []
+        with AnyReader([src]) as reader:
+            conns = [c for c in reader.connections if c.topic == "/ground_truth"]
+            for c, _, raw in reader.messages(connections=conns):
+                m = reader.deserialize(raw, c.msgtype)
+                pose = m.pose.pose if hasattr(m.pose, "pose") else m.pose
+                rows.append((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, pose.position.x, pose.position.y))
+        self.ref = np.array(sorted(rows))
+        self.rng = np.random.default_rng(self.seed)
+        self.noised = 0
+
+    def at_rest(self, t: float) -> bool:
+        import numpy as np
+
+        rt = self.ref[:, 0]
+        a, b = t - self.half, t + self.half
+        if a < rt[0] or b > rt[-1]:
+            return False
+        lo, hi = np.searchsorted(rt, a, side="right") - 1, np.searchsorted(rt, b, side="left")
+        if np.max(np.diff(rt[lo:hi + 1]), initial=0.0) > self.max_gap:
+            return False
+        pa = [np.interp(a, rt, self.ref[:, k]) for k in (1, 2)]
+        pb = [np.interp(b, rt, self.ref[:, k]) for k in (1, 2)]
+        return math.hypot(pb[0] - pa[0], pb[1] - pa[1]) / (b - a) < self.rest_speed
+
+    def __call__(self, topic: str, rel: float, msg) -> object | None:
+        if topic == "/odom" and self.at_rest(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec):
+            msg.twist.twist.linear.x += float(self.rng.normal(0.0, self.sigma))
+            self.noised += 1
+        return msg
+
+
 COMMA, F110 = "comma2k19_ex1", "f110_ds2"
 F110_BASELINES = ("gyro + wheel speed", "wheel odometry")
 VARIANTS = (
@@ -103,6 +175,27 @@ VARIANTS = (
             edits=("/fix",)),
     Variant("comma_burst_early", COMMA, "comma2k19.toml", "highway car, 5 fixes 15 m east from 0.5 s (heading unknown)",
             _burst(0.5, 5, 15.0, 0.0), edits=("/fix",)),
+    Variant("comma_burst3", COMMA, "comma2k19.toml", "highway car, 3 fixes 7 m east from 30 s (an outlier burst)",
+            _burst(30.0, 3, 7.0, 0.0), edits=("/fix",)),
+    Variant("comma_step_east", COMMA, "comma2k19.toml",
+            "highway car, every fix from 30 s on 7 m east (the receiver's error steps and stays)",
+            _step(30.0, 7.0, 0.0), edits=("/fix",), segments=("all", "a", "b")),
+    Variant("comma_step_north", COMMA, "comma2k19.toml",
+            "highway car, every fix from 20 s on 7 m north (the receiver's error steps and stays)",
+            _step(20.0, 0.0, 7.0), edits=("/fix",), segments=("all", "a", "b")),
+    Variant("comma_step_east_1in10", COMMA, "comma2k19.toml",
+            "the same step, 1 fix in 10 fused (scored at the other 9, against the reference)",
+            _step(30.0, 7.0, 0.0), edits=("/fix",), segments=("all", "a", "b"), fuse_every=10,
+            baselines=("hold last fused fix", "fixes at constant velocity")),
+    Variant("f110_copy", F110, "f110.toml", "F1/10 car, orientation off, as recorded (the control)", _keep,
+            metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
+    Variant("f110_noisy_rest", F110, "f110.toml",
+            "F1/10 car, orientation off, wheel speed + N(0, 0.03 m/s) where the reference is at rest",
+            _NoisyRest(0.03, seed=0), edits=("/odom",), metrics=("aligned_h", "heading_deg"),
+            baselines=F110_BASELINES, segments=("a", "c", "d")),
+    Variant("f110_new_user", F110, "f110_new_user.toml",
+            "F1/10 car, the config a new user writes (no twist_measured, no [filter])", _keep,
+            metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
     Variant("f110_start20", F110, "f110_imu_yaw.toml", "F1/10 car, IMU yaw relative, starting 20 s in",
             _start_at(20.0), metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segment="a"),
     Variant("f110_start60", F110, "f110_imu_yaw.toml", "F1/10 car, IMU yaw relative, starting 60 s in",
@@ -119,6 +212,8 @@ def write_variant(src: Path, out: Path, v: Variant) -> tuple[float, float, float
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)
+    if hasattr(v.edit, "prepare"):
+        v.edit.prepare(src)
     first_fix = None
     with Reader(src) as reader, Writer(out, version=8) as writer:
         conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
@@ -136,9 +231,20 @@ def write_variant(src: Path, out: Path, v: Variant) -> tuple[float, float, float
     return first_fix
 
 
-def score(data: Path, v: Variant, work: Path) -> dict[str, tuple[tuple[float, int] | None, list]]:
-    """Per metric: fusiond's (value, points scored), and each baseline's (name, value, points scored),
-    on the variant's segment."""
+def _plain_evaluation(bag: Path, cfg, rec):
+    import importlib.util
+
+    if "real_recordings" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("real_recordings", ROOT / "scripts" / "real_recordings.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+    return sys.modules["real_recordings"].plain_evaluation([bag], cfg, rec)
+
+
+def score(data: Path, v: Variant, work: Path) -> list[tuple[str, str, tuple | None, tuple | None, list]]:
+    """Per segment and metric: fusiond's (value, points scored), the plain EKF's, and each baseline's
+    (name, value, points scored)."""
     import msgspec
 
     from fusiond.config import GpsSensor, load
@@ -151,23 +257,29 @@ def score(data: Path, v: Variant, work: Path) -> dict[str, tuple[tuple[float, in
     if v.keep_datum and first_fix is not None:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, datum=first_fix)
                                                     if isinstance(s, GpsSensor) else s for s in cfg.sensors])
-    rec = Recorder(cfg)
+    rec = Recorder(cfg, v.fuse_every)
     result = replay([bag], cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
     ev = evaluate([bag], cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
-    by = {sc.method: sc for sc in ev.scores if sc.segment == v.segment}
-    out = {}
-    for metric in v.metrics:
-        ours = (getattr(by["fusiond"], metric), by["fusiond"].n) if "fusiond" in by else None
-        base = [(m, getattr(by[m], metric), by[m].n) for m in v.baselines
-                if m in by and getattr(by[m], metric) is not None]
-        out[metric] = (ours, base)
+    pev = _plain_evaluation(bag, cfg, rec)
+    out = []
+    for segment in v.segments or (v.segment,):
+        by = {sc.method: sc for sc in ev.scores if sc.segment == segment}
+        pby = {sc.method: sc for sc in pev.scores if sc.segment == segment}
+        span = next((f"{s.start:.0f}-{s.end:.0f} s" for s in ev.segments if s.name == segment), "")
+        for metric in v.metrics:
+            ours = (getattr(by["fusiond"], metric), by["fusiond"].n) if "fusiond" in by else None
+            plain = (getattr(pby["fusiond"], metric), pby["fusiond"].n) if "fusiond" in pby else None
+            base = [(m, getattr(by[m], metric), by[m].n) for m in v.baselines
+                    if m in by and getattr(by[m], metric) is not None]
+            out.append((f"{segment} ({span})" if span else segment, metric, ours, plain, base))
     return out
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"), help="the recordings' folder")
-    ap.add_argument("--only", help="one variant by name")
+    ap.add_argument("--only", help="variants by name (a regular expression matched in full)")
+    ap.add_argument("--write", action="store_true", help="write the table into docs/RESULTS.md")
     args = ap.parse_args()
     data = Path(args.data)
     from fusiond.logs import configure
@@ -176,21 +288,38 @@ def main() -> int:
     if not (data / COMMA).exists():
         print(f"recording_variants: no recordings in {data}", file=sys.stderr)
         return 2
-    chosen = [v for v in VARIANTS if args.only in (None, v.name)]
+    chosen = [v for v in VARIANTS if args.only is None or re.fullmatch(args.only, v.name)]
     if not chosen:
         print(f"recording_variants: no variant {args.only!r}; one of {', '.join(v.name for v in VARIANTS)}",
               file=sys.stderr)
         return 2
     started = time.perf_counter()
-    print("| variant | case | segment | metric | fusiond (points scored) | plain baselines (points scored) |")
-    print("|---|---|---|---|---|---|")
+    lines = ["| variant | case | segment | metric | fusiond (points scored) | plain EKF (points scored) | "
+             "plain baselines (points scored) |", "|---|---|---|---|---|---|---|"]
+    print("\n".join(lines))
     with tempfile.TemporaryDirectory(prefix="fusiond-variants-") as tmp:
         for v in chosen:
-            for metric, (ours, base) in score(data, v, Path(tmp)).items():
+            for segment, metric, ours, plain, base in score(data, v, Path(tmp)):
                 ours_s = "-" if ours is None else f"{ours[0]:.3f} {UNITS[metric]} ({ours[1]})"
+                plain_s = "-" if plain is None or plain[0] is None else f"{plain[0]:.3f} ({plain[1]})"
                 base_s = "; ".join(f"{name} {value:.3f} ({n})" for name, value, n in base) or "-"
-                print(f"| {v.name} | {v.what} | {v.segment} | {metric} | {ours_s} | {base_s} |", flush=True)
+                lines.append(f"| {v.name} | {v.what} | {segment} | {metric} | {ours_s} | {plain_s} | {base_s} |")
+                print(lines[-1], flush=True)
+            if hasattr(v.edit, "noised"):
+                print(f"({v.name}: {v.edit.noised} odometry messages noised)", file=sys.stderr)
     print(f"({time.perf_counter() - started:.0f} s)", file=sys.stderr)
+    if args.write:
+        if args.only is not None:
+            print("recording_variants: --write writes the whole table; run it without --only", file=sys.stderr)
+            return 2
+        path = ROOT / "docs" / "RESULTS.md"
+        doc = path.read_text()
+        if BEGIN not in doc:
+            print(f"recording_variants: no {BEGIN} in {path}", file=sys.stderr)
+            return 2
+        head, rest = doc.split(BEGIN, 1)
+        _, tail = rest.split(END, 1)
+        path.write_text(head + BEGIN + "\n" + "\n".join(lines) + "\n" + END + tail)
     return 0
 
 
