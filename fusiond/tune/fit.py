@@ -12,6 +12,13 @@
    the updates stamped after the split: each changed key is dropped back to its original in turn
    and stays dropped when that scores the held-back part no worse; if what is left does not beat
    the original config there, nothing is changed.
+5. Validate by prediction (``prediction``), where an absolute GPS gives positions: every 5th fix is
+   held back from a replay of the whole recording and the filter's position at its stamp scored,
+   horizontally and vertically apart. A key whose change makes either worse is dropped back, and the
+   tuned config is kept only if it predicts no worse than the original on both: a coloured GPS error
+   rewards a too-small white noise in likelihood while the positions get worse, and a user asked
+   for better positions, not a better likelihood. (The fit saw those fixes; a handful of noise
+   figures cannot fit individual fixes, and what the check catches is the filter drifting off.)
 
 Why derivative-free. The likelihood of this filter is not a smooth function of its noise: the
 Mahalanobis gates switch updates between applied and rejected, the standstill detection and the
@@ -36,6 +43,8 @@ from ..errors import ReplayError
 from ..logs import muted
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
+from .prediction import HOLD_EVERY, Prediction, predict
+from .prediction import split as split_fixes
 
 PROBE = math.log(2.0)  # the informedness probe and the first simplex step: a factor of 2
 INFORMED = 1.0  # -log L must change by at least this over a factor of 2
@@ -77,6 +86,8 @@ class TuneResult:
     seconds: float
     stopped: str  # converged | budget | maxfev | nothing to fit
     fit_residuals: int = 0  # scalar innovations in the fit part's terms
+    prediction_before: Prediction | None = None  # the original config at the held-back fixes ...
+    prediction_after: Prediction | None = None  # ... and the tuned one (None: no absolute GPS to hold back)
     comments: dict[tuple[str, str], str] = field(default_factory=dict)  # (table, key) -> its TOML comment
 
     @property
@@ -221,7 +232,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     lo = min(s.stamp for s in samples)
     split = lo + fit_fraction * (max(s.stamp for s in samples) - lo)
     fit_part = [s for s in samples if s.stamp <= split]
-    bar = _Progress(progress, total=2 * n + maxfev + 2 + n)
+    bar = _Progress(progress, total=2 * n + maxfev + 2 * (2 + n))
     try:
         obj = _Objective(cfg, active, fit_part, t_start + budget_s, maxfev, bar)
         informed = [False] * n
@@ -245,14 +256,15 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
         result = _validate(cfg, samples, active, theta, informed, split, bar, floored)
     finally:
         bar.close()
-    rows, config, before, after, comments, replays = result
+    rows, config, before, after, comments, replays, predicted = result
     skipped = [Row(p, value(cfg, p), value(cfg, p), "skipped", p.skipped) for p in params if p.skipped]
     rows = rows + skipped
     order = {p.name: i for i, p in enumerate(params)}
     rows.sort(key=lambda r: order[r.param.name])
     return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays,
                       time.perf_counter() - t_start, stopped,
-                      residuals(obj.ref) if n and obj.ref is not None else 0, comments)
+                      residuals(obj.ref) if n and obj.ref is not None else 0, comments=comments,
+                      prediction_before=predicted[0], prediction_after=predicted[1])
 
 
 def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
@@ -269,9 +281,22 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         with muted():
             return replay_records(c, samples)
 
+    kept_samples, held = split_fixes(samples, cfg)
+
+    def predicted(c: Config) -> Prediction | None:
+        nonlocal replays
+        if not held:
+            return None
+        replays += 1
+        bar.step("held-back fixes")
+        with muted():
+            return predict(c, kept_samples, held)
+
     original = run(cfg)
     ref = reference(original, cfg, after=split)
     before = score(original, ref)
+    pred_before = predicted(cfg)
+    pred_after = pred_before
     start = apply(cfg, active, [0.0] * len(active))
     kept: list[float | None] = [None] * len(active)
     for i, p in enumerate(active):
@@ -283,6 +308,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
     if any(t is not None for t in kept):
         config = apply(cfg, active, kept)
         after = score(run(config), ref)
+        pred_after = predicted(config)
         for i in range(len(active)):
             if kept[i] is None:
                 continue
@@ -290,18 +316,30 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
             trial[i] = None
             trial_cfg = apply(cfg, active, trial)
             trial_score = score(run(trial_cfg), ref)
+            trial_pred = predicted(trial_cfg)
+            fitted = _fmt(value(apply(cfg, active, kept), active[i]))
             if trial_score.neg_loglik <= after.neg_loglik:
-                status[i] = "refused"
-                notes[i] = (f"fitted {_fmt(value(apply(cfg, active, kept), active[i]))}; held-back -log L "
-                            f"{trial_score.neg_loglik:.1f} without it, {after.neg_loglik:.1f} with it")
-                kept, config, after = trial, trial_cfg, trial_score
-        if after.neg_loglik >= before.neg_loglik and any(t is not None for t in kept):
+                notes[i] = (f"fitted {fitted}; held-back -log L {trial_score.neg_loglik:.1f} without it, "
+                            f"{after.neg_loglik:.1f} with it")
+            elif pred_after is not None and trial_pred is not None and pred_after.worse_than(trial_pred):
+                notes[i] = (f"fitted {fitted}; the held-back fixes are predicted worse with it "
+                            f"({pred_after.describe()}) than without ({trial_pred.describe()})")
+            else:
+                continue
+            status[i] = "refused"
+            kept, config, after, pred_after = trial, trial_cfg, trial_score, trial_pred
+        worse_fit = after.neg_loglik >= before.neg_loglik
+        worse_pred = pred_after is not None and pred_before is not None and pred_after.worse_than(pred_before)
+        if (worse_fit or worse_pred) and any(t is not None for t in kept):
             for i in range(len(active)):
                 if kept[i] is not None:
                     status[i] = "refused"
-                    notes[i] = (f"fitted {_fmt(value(config, active[i]))}; the tuned config's held-back -log L "
-                                f"{after.neg_loglik:.1f} is not below the original's {before.neg_loglik:.1f}")
-            kept, config, after = [None] * len(active), cfg, before
+                    notes[i] = (f"fitted {_fmt(value(config, active[i]))}; " + (
+                        f"the tuned config's held-back -log L {after.neg_loglik:.1f} is not below the original's "
+                        f"{before.neg_loglik:.1f}" if worse_fit else
+                        f"the tuned config predicts the held-back fixes worse ({pred_after.describe()}) than the "
+                        f"original ({pred_before.describe()})"))
+            kept, config, after, pred_after = [None] * len(active), cfg, before, pred_before
     for i, p in enumerate(active):
         if kept[i] is not None:
             status[i] = "tuned"
@@ -312,6 +350,8 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
             was_text = _fmt(was) if was is not None else "unset (the messages' covariances)"
             comments[p.group] = (f"tuned: was {was_text}; held-back -log L {before.neg_loglik:.1f} -> "
                                  f"{after.neg_loglik:.1f}")
+            if pred_before is not None and pred_after is not None and pred_before.fixes:
+                comments[p.group] += f"; held-back fixes {pred_before.describe()} -> {pred_after.describe()}"
             for name, _ in p.companions:
                 comments[(p.table, name)] = f"tuned: set with {p.key} (the components the messages state as not measured)"
     rows = []
@@ -323,7 +363,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
             note = f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower"
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
                         after.nis_per_dof.get(s)))
-    return rows, config, before, after, comments, replays
+    return rows, config, before, after, comments, replays, (pred_before, pred_after)
 
 
 # why the fit ended, as the table's "fit part" line says it
@@ -351,6 +391,10 @@ def format_table(result: TuneResult) -> str:
         out.append(f"held-back   -log L {b.neg_loglik:.1f} -> {a.neg_loglik:.1f} over {b.terms} updates after stamp "
                    f"{result.split:.3f} (mean NIS/dof {_fmt(b.nis_per_dof.get(''))} -> "
                    f"{_fmt(a.nis_per_dof.get(''))})")
+    pb, pa = result.prediction_before, result.prediction_after
+    if pb is not None and pa is not None and pb.fixes:
+        out.append(f"held-back fixes (every {HOLD_EVERY}th, not fused): {pb.describe()} -> {pa.describe()} RMS over "
+                   f"{pb.fixes} fixes")
     if result.fit_before == result.fit_before:
         out.append(f"fit part    -log L {result.fit_before:.1f} -> {result.fit_after:.1f} over "
                    f"{result.fit_residuals} residuals; {STOPPED.get(result.stopped, result.stopped)}")
