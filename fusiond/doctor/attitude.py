@@ -22,6 +22,7 @@ from itertools import chain
 import numpy as np
 
 from ..config import ImuSensor
+from ..core.sensors.imu.axes import seen_axes, weights
 from ..estimator import rotation as rot
 from .mounting import MountYaw
 from .nis import ChannelStats
@@ -83,9 +84,9 @@ def imu_axis_sigmas(ch: ChannelStats, imu: ImuSensor) -> tuple[list[float], list
     R = rot.matrix(rot.from_rpy(*imu.extrinsic_rpy))  # IMU -> base
     rows = [AXES.index(c) for c in ch.components]
     M = ch.second_moment()
-    W = np.array([[R[k, j] ** 2 for j in range(3)] for k in rows])
+    W = np.array(weights(imu.extrinsic_rpy))[rows]
     var_base = np.array([M[i][i] for i in range(len(rows))])
-    seen = [j for j in range(3) if W[:, j].sum() > 0.5]
+    seen = list(seen_axes(imu.extrinsic_rpy, tuple(rows)))
     configured = list(imu.orientation_noise) if imu.orientation_noise is not None else [math.nan] * 3
     out = list(configured)
     if seen:

@@ -45,6 +45,7 @@ import msgspec
 
 from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from ..core.layout import state_layout
+from ..core.sensors.imu.axes import seen_axes
 from ..core.sensors.registry import kind_of
 from ..errors import ConfigError
 from ..samples import GpsSample, ImuSample, OdomSample, PoseSample
@@ -154,7 +155,8 @@ def _imu_params(s: ImuSensor, samples: Sequence[object]) -> list[Param]:
                                  "messages (median)", "rad/s", floor=s.gyro_min_sigma))
     if s.orientation != "off":
         name = f"{s.name}.orientation_noise"
-        rows = (0, 1) if s.orientation == "roll_pitch" else (0, 1, 2)  # the rows the mode fuses
+        # the IMU axes (the key's own, before extrinsic_rpy) that land on the base rows the mode fuses
+        rows = seen_axes(s.extrinsic_rpy, (0, 1) if s.orientation == "roll_pitch" else (0, 1, 2))
         if s.orientation_noise is not None:
             base = tuple(s.orientation_noise)
             out.append(Param(name, s.name, "orientation_noise", rows, base, unit="rad",
