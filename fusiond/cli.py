@@ -1,5 +1,5 @@
-"""Command line: `fusiond run | play | replay | doctor | report | tune | monitor | health | set-pose | calibrate-imu |
-bench | bench-latency`.
+"""Command line: `fusiond run | play | replay | doctor | init | info | report | tune | monitor | health | set-pose |
+calibrate-imu | bench | bench-latency`.
 
 Each command imports what it needs when it runs, so `replay` does not pay for Zenoh
 nor `run` for matplotlib.
@@ -176,6 +176,22 @@ def cmd_doctor(args: argparse.Namespace) -> int:
     summary with the doctor's verdicts. Exit codes as replay's."""
     return cmd_replay(_as_replay(args.bags, args.config, "--advice-budget-s", repr(args.advice_budget_s),
                                  *(["--allow-missing"] if args.allow_missing else [])))
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    """`fusiond init BAG --out FILE`: a commented starting config from the bags (init_config.py), then the
+    doctor's replay of it."""
+    from .init_config import write_init
+
+    code = write_init(args.bags, args.out, force=args.force)
+    return code or cmd_replay(_as_replay(args.bags, args.out, "--advice-budget-s", "0"))
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """`fusiond info BAG`: topics, types, counts, rates, stated covariances, what fusiond would use (bag_info.py)."""
+    from .bag_info import print_info
+
+    return print_info(args.bags)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -674,6 +690,18 @@ def build_parser() -> argparse.ArgumentParser:
     dr.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     dr.add_argument("--allow-missing", **ALLOW_MISSING)
     dr.set_defaults(func=cmd_doctor)
+
+    it = sub.add_parser("init", help="write a starting config from a bag (topics, types, mounts), each choice "
+                                     "commented, then replay it with the doctor")
+    it.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    it.add_argument("--out", required=True, metavar="FILE", help="the config to write")
+    it.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    it.set_defaults(func=cmd_init)
+
+    inf = sub.add_parser("info", help="a bag's topics, types, counts, rates, stated covariances and what fusiond "
+                                      "would use each for")
+    inf.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    inf.set_defaults(func=cmd_info)
 
     rp = sub.add_parser("report", help="replay bags and write the HTML report (plots, the doctor's verdicts) into "
                                        "DIR (replay --report DIR)")
