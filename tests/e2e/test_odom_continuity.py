@@ -56,6 +56,14 @@ def _replay_steps(bag: Path, tmp_path: Path, odom: str, imu: str, filt: str = ""
     return excess_steps(track, odom_speeds([bag], load(config))), proc.stdout
 
 
+@pytest.mark.parametrize("name", ["f110_ds2", "comma2k19_ex1"])
+def test_the_shared_recordings_with_step_1_keep_their_odom_frame_continuous(name, tmp_path):
+    if not (DATA / name).exists():
+        pytest.skip(f"the recording is not in {DATA / name} (see docs/RESULTS.md)")
+    steps, _ = _replay_steps(DATA / name, tmp_path, "odom", "imu")
+    assert not steps, steps[:5]
+
+
 @pytest.mark.skipif(not F110.exists(), reason=f"the F1/10 recording is not in {F110} (see docs/RESULTS.md)")
 def test_a_gyro_bias_learned_at_a_standstill_never_steps_the_published_pose(tmp_path):
     steps, out = _replay_steps(F110, tmp_path, "odom", "imu")
@@ -73,4 +81,37 @@ def test_the_control_the_jumping_correction_is_still_there_when_asked_for(tmp_pa
 
 def test_the_jackal_bag_with_step_1_keeps_its_odom_frame_continuous(jackal_bag, tmp_path):
     steps, _ = _replay_steps(jackal_bag, tmp_path, "jackal_velocity_controller/odom", "imu/data")
+    assert not steps, steps[:5]
+
+
+@pytest.mark.skipif(not F110.exists(), reason=f"the F1/10 recording is not in {F110} (see docs/RESULTS.md)")
+def test_the_daemon_fed_the_recording_publishes_the_same_continuous_odom_frame(tmp_path):
+    """`fusiond play` of the F1/10 recording into `fusiond run` (README step 1, loopback Zenoh): the poses on
+    odom_combined keep the same bound as replay's."""
+    from fusiond.codecs import decode_pose_cdr
+    from tests.support.daemon import (
+        client_session, daemon_process, free_port, fusiond_cmd, health, wait_daemon_ready, wait_until,
+    )
+
+    port = free_port()
+    config = tmp_path / "step1.toml"
+    config.write_text(f'[zenoh]\nmode = "peer"\nlisten = ["tcp/127.0.0.1:{port}"]\nmulticast_scouting = false\n'
+                      + STEP1.format(filt="", odom="odom", imu="imu"))
+    log = tmp_path / "daemon.log"
+    poses: list[tuple[float, tuple[float, float, float]]] = []
+
+    def on_pose(sample) -> None:
+        msg = decode_pose_cdr(sample.payload.to_bytes())
+        p = msg.pose.pose.position
+        poses.append((msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, (p.x, p.y, p.z)))
+
+    with daemon_process(config, log) as proc, client_session(port) as session:
+        session.declare_subscriber("odom_combined", on_pose)
+        wait_daemon_ready(session, proc, log)
+        play = subprocess.run(fusiond_cmd("play", str(F110), "--config", str(config), "--rate", "10", "--connect",
+                                          f"tcp/127.0.0.1:{port}"), capture_output=True, text=True, timeout=300,
+                              cwd=ROOT)
+        assert play.returncode == 0, play.stderr  # everything sent was fused
+        wait_until(lambda: (h := health(session)) and h["published"] == len(poses) > 1000, 20, "every pose")
+    steps = excess_steps(poses, odom_speeds([F110], load(config)))
     assert not steps, steps[:5]
