@@ -16,8 +16,8 @@ from ..core.sensors.imu import YAW_JUMP_GATE
 from .attitude import noise_suggestion
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
-from .thresholds import (GATED_FRACTION, JUMP_NOISE_SHARE, JUMP_NOTE_SHARE, MOST_GATED, ROLL_PITCH_OFFSET_RAD,
-                         UNALIGNED_LARGE)
+from .thresholds import (GATED_FRACTION, JUMP_NOISE_SHARE, JUMP_NOTE_SHARE, MOST_GATED, REACQUIRE_AFTER_GAP_S,
+                         ROLL_PITCH_OFFSET_RAD, UNALIGNED_LARGE)
 
 
 def figures(ch: ChannelStats, t0: float | None) -> str:
@@ -234,9 +234,6 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats, up: ChannelStats | None 
                    sensor_key(gps.name, "heading_init_m"), evidence=ev)
 
 
-REACQUIRE_AFTER_GAP_S = 30.0  # a reacquisition this soon after a logging gap ended is blamed on the gap
-
-
 def reacquired_verdict(name: str, ch: ChannelStats, gaps: list[tuple[float, float]] | None = None) -> Verdict:
     """The ``position_reacquired`` channel (core/sensors/gps/model.py ``_locked_out``): each record is a fix that
     ended a run of gated-out fixes which agreed with each other and moved with the wheels, the filter's
@@ -256,7 +253,8 @@ def reacquired_verdict(name: str, ch: ChannelStats, gaps: list[tuple[float, floa
                        "and stamps to look for gaps in)", evidence=evidence)
     after_gap = []
     for t in stamps:
-        ends = [(start + length, length) for start, length in gaps if 0.0 <= t - (start + length) <= REACQUIRE_AFTER_GAP_S]
+        ends = [(start + length, length) for start, length in gaps
+                if 0.0 <= t - (start + length) <= REACQUIRE_AFTER_GAP_S]
         after_gap.append(max((length for _, length in ends), default=0.0))
     blamed = sum(length > 0.0 for length in after_gap)
     evidence["after_logging_gap"] = float(blamed)
