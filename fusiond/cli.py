@@ -797,7 +797,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.set_defaults(func=cmd_health)
 
     sp = sub.add_parser("set-pose", help="re-initialise a running daemon's filter at a pose (robot_localization's "
-                                         "set_pose); prints the new health")
+                                         "set_pose); prints the new health, whose pose is the one set")
     sp.add_argument("x", type=float, help="position x in the output frame, m")
     sp.add_argument("y", type=float, help="position y, m")
     sp.add_argument("yaw", type=float, nargs="?", default=0.0, help="heading, rad (default 0)")
