@@ -1,5 +1,5 @@
-"""Command line: `fusiond run | play | replay | doctor | report | tune | monitor | health | set-pose | calibrate-imu |
-bench | bench-latency`.
+"""Command line: `fusiond run | play | replay | doctor | init | info | report | tune | monitor | health | set-pose |
+calibrate-imu | bench | bench-latency`.
 
 Each command imports what it needs when it runs, so `replay` does not pay for Zenoh
 nor `run` for matplotlib.
@@ -110,6 +110,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             doctor=doctor,
             through=through,
             records=records,
+            allow_missing=args.allow_missing,
         )
         if fused:
             from .tune.advice import prove_advice
@@ -173,13 +174,31 @@ def _as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespac
 def cmd_doctor(args: argparse.Namespace) -> int:
     """`fusiond doctor BAG --config FILE`: `replay` with the doctor and no output files; prints the
     summary with the doctor's verdicts. Exit codes as replay's."""
-    return cmd_replay(_as_replay(args.bags, args.config, "--advice-budget-s", repr(args.advice_budget_s)))
+    return cmd_replay(_as_replay(args.bags, args.config, "--advice-budget-s", repr(args.advice_budget_s),
+                                 *(["--allow-missing"] if args.allow_missing else [])))
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    """`fusiond init BAG --out FILE`: a commented starting config from the bags (init_config.py), then the
+    doctor's replay of it."""
+    from .init_config import write_init
+
+    code = write_init(args.bags, args.out, force=args.force)
+    return code or cmd_replay(_as_replay(args.bags, args.out, "--advice-budget-s", "0"))
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """`fusiond info BAG`: topics, types, counts, rates, stated covariances, what fusiond would use (bag_info.py)."""
+    from .bag_info import print_info
+
+    return print_info(args.bags)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
     """`fusiond report BAG --config FILE --out DIR`: `replay --report DIR`."""
     return cmd_replay(_as_replay(args.bags, args.config, "--report", args.out, "--advice-budget-s",
-                                 repr(args.advice_budget_s), *(["--quiet"] if args.quiet else [])))
+                                 repr(args.advice_budget_s), *(["--quiet"] if args.quiet else []),
+                                 *(["--allow-missing"] if args.allow_missing else [])))
 
 
 EXIT_UNHEALTHY = 1
@@ -204,7 +223,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
         if keys is not None:
             select(tunable_params(cfg), keys)  # an unknown key fails before the bags are read
         samples = read_samples([Path(b) for b in args.bags], cfg,
-                               warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr))
+                               warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
+                               allow_missing=args.allow_missing)
         result = tune(samples, cfg, keys, budget_s=args.budget_s, progress=not args.quiet)
     except (ConfigError, ReplayError) as err:
         print(f"fusiond: {err}", file=sys.stderr)
@@ -280,7 +300,11 @@ def cmd_play(args: argparse.Namespace) -> int:
     if result.daemon_dropped:
         print(f"fusiond: the daemon dropped {result.daemon_dropped} of these samples, its input queue full "
               f"(health: queue.dropped): it did not keep up with --rate {args.rate:g}; play slower", file=sys.stderr)
-    return 0
+    for name, why in result.unfused.items():
+        counts = ", ".join(f"{n} {reason}" for reason, n in sorted(why.items()))
+        print(f"fusiond: sensor {name!r}: {sum(why.values())} of {result.per_sensor[name]} samples sent were not "
+              f"fused ({counts}; health: sensors.{name}.dropped_by_reason)", file=sys.stderr)
+    return 1 if result.daemon_dropped or result.unfused else 0
 
 
 def cmd_health(args: argparse.Namespace) -> int:
@@ -616,6 +640,11 @@ ADVICE_BUDGET = dict(type=float, default=60.0, metavar="S",
 BENCH_NO_MULTICAST = "do not scout for peers by multicast (always so: the benchmark's sessions are on loopback)"
 
 
+ALLOW_MISSING = {"action": "store_true",
+                 "help": "replay without a configured sensor whose topic is not in the bag (a warning); "
+                         "default: that is an error naming the topic"}
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fusiond", description="Wheel odometry + IMU EKF fusion over Eclipse Zenoh.")
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default: info for run and play, warning otherwise")
@@ -651,6 +680,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="relative pose error over S seconds (default 1)")
     r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
     r.add_argument("--advice-budget-s", **ADVICE_BUDGET)
+    r.add_argument("--allow-missing", **ALLOW_MISSING)
     r.set_defaults(func=cmd_replay)
 
     dr = sub.add_parser("doctor", help="replay bags and print the doctor's verdicts with the summary; writes no file "
@@ -658,7 +688,20 @@ def build_parser() -> argparse.ArgumentParser:
     dr.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     dr.add_argument("--config", required=True, help="TOML config (see config.toml)")
     dr.add_argument("--advice-budget-s", **ADVICE_BUDGET)
+    dr.add_argument("--allow-missing", **ALLOW_MISSING)
     dr.set_defaults(func=cmd_doctor)
+
+    it = sub.add_parser("init", help="write a starting config from a bag (topics, types, mounts), each choice "
+                                     "commented, then replay it with the doctor")
+    it.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    it.add_argument("--out", required=True, metavar="FILE", help="the config to write")
+    it.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    it.set_defaults(func=cmd_init)
+
+    inf = sub.add_parser("info", help="a bag's topics, types, counts, rates, stated covariances and what fusiond "
+                                      "would use each for")
+    inf.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    inf.set_defaults(func=cmd_info)
 
     rp = sub.add_parser("report", help="replay bags and write the HTML report (plots, the doctor's verdicts) into "
                                        "DIR (replay --report DIR)")
@@ -667,6 +710,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", required=True, metavar="DIR", help="directory to write index.html and its images into")
     rp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     rp.add_argument("--advice-budget-s", **ADVICE_BUDGET)
+    rp.add_argument("--allow-missing", **ALLOW_MISSING)
     rp.set_defaults(func=cmd_report)
 
     tu = sub.add_parser("tune", help="fit the configured sensors' and the process's noise to bags by the innovations' "
@@ -679,6 +723,7 @@ def build_parser() -> argparse.ArgumentParser:
     tu.add_argument("--budget-s", type=float, default=120.0, metavar="S",
                     help="stop the fit after S seconds of replays (default 120; the held-back check runs after)")
     tu.add_argument("--quiet", action="store_true", help="no progress bar")
+    tu.add_argument("--allow-missing", **ALLOW_MISSING)
     tu.set_defaults(func=cmd_tune)
 
     m = sub.add_parser("monitor", help="live per-sensor innovation/NIS view of running daemons")
@@ -752,7 +797,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.set_defaults(func=cmd_health)
 
     sp = sub.add_parser("set-pose", help="re-initialise a running daemon's filter at a pose (robot_localization's "
-                                         "set_pose); prints the new health")
+                                         "set_pose); prints the new health, whose pose is the one set")
     sp.add_argument("x", type=float, help="position x in the output frame, m")
     sp.add_argument("y", type=float, help="position y, m")
     sp.add_argument("yaw", type=float, nargs="?", default=0.0, help="heading, rad (default 0)")

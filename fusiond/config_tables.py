@@ -97,7 +97,9 @@ class FilterConfig(_Table):
     twist_pitch_sigma: float = 0.1  # initial uncertainty of the twist's pitch in the body, rad (pitch_estimation)
     twist_pitch_walk: float = 1.0e-5  # its random walk, rad/sqrt(s)
     two_d_mode: bool = False  # planar robot (robot_localization's meaning): z, roll, pitch held at 0
-    continuous_odom: bool = False  # no heading reference: a bias learned at rest never turns the pose (REP-105)
+    # No heading reference: a bias learned at rest never turns the pose (REP-105's continuous odom frame).
+    # false is for offline analysis only: the correlated correction then turns heading and position at once.
+    continuous_odom: bool = True
     nis_window: int = 50  # updates per windowed NIS consistency test
     nis_confidence: float = 0.95  # two-sided chi-square confidence of that test
 

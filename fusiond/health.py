@@ -30,6 +30,7 @@ from typing import Any, Literal
 
 import msgspec
 
+from .health_pose import PoseHealth, pose_health
 from .reasons import QUEUE_FULL
 from .codecs.ros_messages import ERROR, OK, WARN, DiagnosticStatus
 
@@ -86,6 +87,7 @@ class HealthReport(msgspec.Struct, kw_only=True):
     consistency: dict[str, dict[str, Any]]  # windowed NIS verdict per sensor channel (core.consistency())
     published: int = 0  # fused poses published
     uptime_s: float = 0.0
+    pose: PoseHealth | None = None  # the latest published pose (health_pose.py); null before the first
 
 
 class CoreCounters(msgspec.Struct, kw_only=True):
@@ -99,6 +101,7 @@ class CoreCounters(msgspec.Struct, kw_only=True):
     filter: FilterHealth
     consistency: dict[str, dict[str, Any]]
     published: int = 0
+    pose: PoseHealth | None = None
 
 
 def core_counters(core: Any, published: int = 0) -> CoreCounters:
@@ -119,6 +122,7 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
                             heading_known=core.heading_known, scales=core.scales),
         consistency=core.consistency(),
         published=published,
+        pose=pose_health(core) if finite else None,
     )
 
 
@@ -278,6 +282,7 @@ class Health:
                 consistency=core.consistency if core is not None else {},
                 published=core.published if core is not None else 0,
                 uptime_s=max(now - self._started, 0.0),
+                pose=core.pose if core is not None else None,
             )
 
 

@@ -130,7 +130,7 @@ class Reacquired(_PerChannel):
     name = kind = "reacquired"
 
     def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
-        return [reacquired_verdict(key[0], ch)]
+        return [reacquired_verdict(key[0], ch, ev.series.odom_gaps if ev.known else None)]
 
 
 class Frozen(_PerChannel):

@@ -16,8 +16,8 @@ from ..core.sensors.imu import YAW_JUMP_GATE
 from .attitude import noise_suggestion
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
-from .thresholds import (GATED_FRACTION, JUMP_NOISE_SHARE, JUMP_NOTE_SHARE, MOST_GATED, ROLL_PITCH_OFFSET_RAD,
-                         UNALIGNED_LARGE)
+from .thresholds import (GATED_FRACTION, JUMP_NOISE_SHARE, JUMP_NOTE_SHARE, MOST_GATED, REACQUIRE_AFTER_GAP_S,
+                         ROLL_PITCH_OFFSET_RAD, UNALIGNED_LARGE)
 
 
 def figures(ch: ChannelStats, t0: float | None) -> str:
@@ -234,15 +234,43 @@ def unaligned_verdict(gps: GpsSensor, ch: ChannelStats, up: ChannelStats | None 
                    sensor_key(gps.name, "heading_init_m"), evidence=ev)
 
 
-def reacquired_verdict(name: str, ch: ChannelStats) -> Verdict:
+def reacquired_verdict(name: str, ch: ChannelStats, gaps: list[tuple[float, float]] | None = None) -> Verdict:
     """The ``position_reacquired`` channel (core/sensors/gps/model.py ``_locked_out``): each record is a fix that
     ended a run of gated-out fixes which agreed with each other and moved with the wheels, the filter's
     position having drifted beyond its gate; the position was taken from it and the heading searched
     again. Its NIS tests the drift, not the receiver (learning): what it says is that the filter lost the
-    GPS, which a cross-source verdict (the wheels, the twist frame, the heading) usually explains."""
+    GPS. One cause is named: a logging gap (``gaps``: the odometry's silences, (stamp, length s)) that ended
+    within REACQUIRE_AFTER_GAP_S before every reacquisition, or, with none before any, the motion model; with
+    some of each, or without the gaps to look at, the verdict says it cannot tell."""
+    head = (f"the filter lost this GPS {ch.n} time(s): its fixes were gated out for seconds while agreeing with "
+            "each other and moving with the wheels, so the position was taken from the fix again and the heading "
+            "searched anew. The estimate had drifted beyond its own uncertainty")
+    evidence = {"reacquired": float(ch.n)}
+    stamps = ch.stamps if len(ch.stamps) == ch.n else [ch.first_stamp] if ch.n == 1 and ch.first_stamp else None
+    if gaps is None or not stamps:
+        return Verdict(name, "position_reacquired", "warn",
+                       head + "; whether a logging gap or the motion model cannot be told here (no odometry series "
+                       "and stamps to look for gaps in)", evidence=evidence)
+    after_gap = []
+    for t in stamps:
+        ends = [(start + length, length) for start, length in gaps
+                if 0.0 <= t - (start + length) <= REACQUIRE_AFTER_GAP_S]
+        after_gap.append(max((length for _, length in ends), default=0.0))
+    blamed = sum(length > 0.0 for length in after_gap)
+    evidence["after_logging_gap"] = float(blamed)
+    if blamed == len(after_gap):
+        longest = max(after_gap)
+        return Verdict(name, "position_reacquired", "warn",
+                       head + f": each time just after a logging gap (the longest {longest:.1f} s), which the "
+                       "dead reckoning crossed without input further than the position's uncertainty allowed "
+                       "(bounded by filter.covariance_cap); the fixes after it put the position back",
+                       evidence={**evidence, "longest_gap_s": longest})
+    if blamed == 0:
+        return Verdict(name, "position_reacquired", "warn",
+                       head + ": with no logging gap before it, so the motion model drifted: see the wheel "
+                       "(twist_frame, the wheels' scale) and imu (gyro bias, mounting) verdicts",
+                       evidence=evidence)
     return Verdict(name, "position_reacquired", "warn",
-                   f"the filter lost this GPS {ch.n} time(s): its fixes were gated out for seconds while agreeing "
-                   "with each other and moving with the wheels, so the position was taken from the fix again and "
-                   "the heading searched anew. The estimate had drifted beyond its own uncertainty: a logging gap "
-                   "longer than the covariance allowed, or the motion model wrong (see the wheel and imu verdicts)",
-                   evidence={"reacquired": float(ch.n)})
+                   head + f": {blamed} time(s) just after a logging gap and {len(after_gap) - blamed} without one; "
+                   "which one cause explains them cannot be told: see the wheel and imu verdicts for the latter",
+                   evidence=evidence)

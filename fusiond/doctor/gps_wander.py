@@ -90,8 +90,8 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "",
                 "fix_interval_s": dt}
     msg = head + (f"the innovations are strongly autocorrelated from fix to fix ({100 * share:.0f}% of their variance "
            f"persists to the next fix, correlation time ~{tau:.0f} s over {n} fixes): the receiver's error wanders "
-           f"(multipath, atmosphere), it is not white noise. The filter follows the wander, so its "
-           "NIS reads low and its covariance is overconfident: do not lower position_noise; model the wander "
+           f"(multipath, atmosphere), it is not white noise. The filter follows the wander, so the NIS "
+           "understates the error and the covariance is overconfident: do not lower position_noise; model the wander "
            f"(error_tau_s, error_sigma), leaving position_noise ~{max(white):.2f} m for the white part. Estimated "
            "from the innovations, which the filter already smooths: lower bounds")
     return Verdict(gps.name, "position", "warn", msg, sensor_key(gps.name, "error_tau_s"),

@@ -5,10 +5,13 @@ not fused), the gyro's z bias b is learned only at standstills. Until the first 
 integrates it with its prior (zero), so the heading turns by b x t, and the track with it: a race
 car that sets off at once with b = 0.004 rad/s has turned 0.24 rad (14 deg) when it first stops a
 minute later. The first standstill measures b directly (the gyro at rest), so the drift is known
-after the fact: |b| x (time until the core's first accepted bias update). That update also turns
-the heading back, through the covariance of heading and bias the filter built while integrating
-(as far as the stated gyro noise lets it: overstated, the correlation is weak); the track driven in
-the meantime stays bent. Averaged over a run of T seconds the heading was off by ~|b| T_b^2 / (2 T).
+after the fact: |b| x (time until the core's first accepted bias update, T_b). With the odom frame
+continuous (``filter.continuous_odom``, the default: REP-105) that update corrects the heading's rate
+from then on and leaves the heading where the old bias bent it, so averaged over a run of T seconds
+the heading is off by ~|b| T_b^2 / (2 T) + |b| T_b (T - T_b) / T. With ``continuous_odom = false`` it
+also turns the heading back, through the covariance of heading and bias the filter built while
+integrating (as far as the stated gyro noise lets it); the track driven in the meantime stays bent,
+and the heading was off by ~|b| T_b^2 / (2 T).
 
 Many IMUs publish a yaw of their own (an AHRS integrating its gyro with its own bias estimate). In
 ``roll_pitch`` mode it is not fused, yet it may be good: its yaw minus the gyro heading corrected by
@@ -62,15 +65,19 @@ def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: Channel
     msg = (f"the gyro's z bias was unknown {unknown}: the first standstill, at "
            f"{first.t0 - t_start:.0f} s, shows the gyro reading {b:+.4f} rad/s at rest, so until then the heading "
            f"turned by up to {drift:.2f} rad ({math.degrees(drift):.0f} deg) that the vehicle did not, and the "
-           "track with it; nothing configured holds the heading (no GPS or pose, the IMU's yaw not fused). The "
-           "bias update turns the heading back as far as the filter's correlations allow; the track driven "
-           "meanwhile stays bent")
+           "track with it; nothing configured holds the heading (no GPS or pose, the IMU's yaw not fused). "
+           + ("The odom frame being continuous (filter.continuous_odom), the heading stays off by that from then on"
+              if cfg.filter.continuous_odom else
+              "The bias update turns the heading back as far as the filter's correlations allow; the track driven "
+              "meanwhile stays bent"))
     wander, slope = imu_vs_gyro(series) or (math.nan, math.nan)
     if math.isfinite(wander) and math.isfinite(slope):
         # yaw - raw gyro heading drifts at r - b: the IMU's own drift against the bias-corrected gyro is r
         rate = slope + b
         run = t_end - t_start
-        late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured
+        late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured ...
+        if cfg.filter.continuous_odom:  # ... plus the drift left in the heading after the update
+            late_cost += abs(b) * before * max(run - before, 0.0) / run
         relative_cost = abs(rate) * run / 2.0  # ... with the IMU's yaw fused as relative
         evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
                          "mean_heading_error_rad": late_cost, "relative_mean_heading_error_rad": relative_cost})

@@ -29,7 +29,7 @@ __all__ = [
     "WINDOW_S", "WANDER_RAD", "TRACK_OFFSET_RAD", "DRIFT_RAD_S", "MIN_SPAN_S",
     "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "WHEEL_OFFSET_RAD_S", "ZERO_TURNING_RAD_S", "MISSED_INTERVAL_S",
     "MISSED_TURN_RAD",
-    "LATE_DRIFT_RAD", "RELATIVE_MARGIN",
+    "LATE_DRIFT_RAD", "RELATIVE_MARGIN", "REACQUIRE_AFTER_GAP_S",
     "LEVER_TOL", "MAX_SE", "MAX_SE_NAMED", "LATENCY_ALONG", "LEVER_Z_SIGMAS", "OUTLIER_SIGMAS", "MIN_PAIRS", "PAIR_S",
     "MAX_INTERVAL",
     "MOUNT_YAW_RAD", "MOUNT_MIN_SPEED", "SMOOTH_BINS", "MOUNT_MIN_SAMPLES", "GAIN_BAND", "MAX_ALIGN_S",
@@ -142,6 +142,7 @@ MISSED_TURN_RAD = 0.2  # rad (11 deg) of turn the wheels missed in all: worth fu
 # -- a gyro bias learned late (late_bias.py) -----------------------------------------------------------------------
 LATE_DRIFT_RAD = 0.05  # heading drift before the first standstill worth a verdict (3 deg)
 RELATIVE_MARGIN = 0.5  # the relative yaw's mean heading error must stay below this share of the late bias's
+REACQUIRE_AFTER_GAP_S = 30.0  # a GPS reacquired this soon after a logging gap ended is blamed on the gap
 
 # -- the GPS lever arm (lever.py) ------------------------------------------------------------------------------------
 LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change

@@ -105,7 +105,7 @@ class BagSamples:
         try:  # delegated: what the reader raises reaches here, what the consumer raises does not
             yield from bag1_records.messages(self._reader, self._connections)
         except Exception as err:  # noqa: BLE001 - rosbags raises builtins (OSError, AssertionError) on garbage
-            raise BagError(unreadable(self._names, err)) from None
+            raise BagError(damaged_ros2(self._names, err) or unreadable(self._names, err)) from None
 
     def close(self) -> None:
         if self._reader.stack is not None:
@@ -161,7 +161,8 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
         # rosbags' answer to a ROS 2 bag recorded without message definitions (before Iron): "Bag
         # contains no type definitions. Instantiate AnyReader with a default_typestore argument."
         if "default_typestore" not in str(err):
-            raise BagError(unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
+            raise BagError(damaged_ros2(_names(paths), err, paths)
+                           or unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
     return _opened(paths, typestore())  # the standard (Humble) definitions
 
 
@@ -187,6 +188,41 @@ def did_you_mean(wanted: str, topics: Iterable[str]) -> str:
     return f" (did you mean {names[close[0]]}?)" if close else ""
 
 
+SQLITE_DAMAGE = "database disk image is malformed"  # SQLite's words for a file cut short or overwritten
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _mcap_cut_short(paths: Sequence[Path]) -> bool:
+    """An .mcap file that starts as one (its magic) and does not end as one: a recording stopped mid-write."""
+    files = [f for p in paths for f in ([p] if p.is_file() else sorted(p.glob("*.mcap"))) if f.suffix == ".mcap"]
+    for f in files:
+        try:
+            with f.open("rb") as fh:
+                head = fh.read(len(MCAP_MAGIC))
+                fh.seek(max(f.stat().st_size - len(MCAP_MAGIC), 0))
+                tail = fh.read()
+        except OSError:
+            continue
+        if head == MCAP_MAGIC and tail != MCAP_MAGIC:
+            return True
+    return False
+
+
+def damaged_ros2(names: str, err: BaseException, paths: Sequence[Path] = ()) -> str | None:
+    """One plain sentence for a ROS 2 bag whose storage is damaged or cut short (the recorder killed, the disk
+    full), naming the tool that recovers it, or None when ``err`` is not that. rosbag's ``reindex`` is ROS 1's
+    (an index at the end of the file); a ROS 2 .db3 is an SQLite database and an .mcap file has its own tool."""
+    if SQLITE_DAMAGE in str(err):
+        return (f"{names}: the ROS 2 bag's SQLite file is damaged or cut short (recording stopped mid-write), so it "
+                "cannot be replayed as it is; recover what it holds with `sqlite3 IN.db3 .recover | sqlite3 "
+                "OUT.db3`, then `ros2 bag reindex` on a folder holding OUT.db3, and replay that folder")
+    if _mcap_cut_short(paths):
+        return (f"{names}: the ROS 2 bag's MCAP file is cut short (recording stopped mid-write, no footer), so it "
+                "cannot be replayed as it is; `mcap recover IN.mcap -o OUT.mcap` (the mcap CLI) rewrites what "
+                "survives, then replay OUT.mcap")
+    return None
+
+
 def _repair_hint(paths: Sequence[Path], err: Exception) -> str:
     """How to repair a ROS 1 bag whose index is damaged (a recording cut short: the recorder killed,
     the disk full): ROS 1 keeps the index at the end of the file, and ``rosbag reindex`` rebuilds it."""
@@ -204,9 +240,10 @@ def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
         reader.open()
     except Exception as err:  # noqa: BLE001 - on garbage rosbags raises builtins too (UnicodeDecodeError
         # on a PNG named .bag, AssertionError on a damaged ROS 1 index, FileNotFoundError without metadata)
-        if default is None and isinstance(err, AnyReaderError):
+        if default is None and isinstance(err, AnyReaderError) and not damaged_ros2("", err):
             raise
-        raise BagError(unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
+        raise BagError(damaged_ros2(_names(paths), err, paths)
+                       or unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
     return reader
 
 
@@ -252,6 +289,12 @@ def open_bag_samples(paths: Sequence[Path | str], sensors: Sequence[SensorConfig
         reader.close()
         raise
     return BagSamples(reader, selected, missing, _names([Path(p) for p in paths]))
+
+
+def open_reader(paths: Sequence[Path | str]) -> AnyReader:
+    """An open rosbags reader of the bags, refused as ``open_bag_samples`` refuses them (BagError, one line);
+    for tools that read every topic (``fusiond info`` / ``init``). The caller closes it."""
+    return _open_reader([Path(p) for p in paths])
 
 
 def iter_raw_cdr(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]

@@ -88,12 +88,14 @@ def _variances(core: FusionCore) -> tuple[float, float]:
     return max(v[0], v[1], v[2]), max(v[3], v[4], v[5])
 
 
-def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | None) -> None:
+def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | None,
+                 allow_missing: bool = True) -> None:
     """Before anything is fused: the odometry drives the prediction, and a GPS or absolute pose
     defines the world frame (nothing is published before it), so a config whose odometry topic,
     or every one of whose frame-defining topics, is not in the bag would only produce an empty
-    run; that is an error naming them. Other absent topics are a warning (a replay without a
-    second pose sensor is still a replay)."""
+    run; that is an error naming them. Any other absent topic is an error too unless
+    ``allow_missing`` (the CLI's --allow-missing): a misspelt IMU topic would otherwise give a run,
+    a doctor's verdict or a "tuned" config that never saw the IMU; allowed, it is a warning."""
     have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items())) or "none"
     for s in cfg.sensors:
         if s.name in bag.missing and kind_of(s).drives_prediction:
@@ -106,6 +108,11 @@ def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | Non
         names = " or ".join(f"/{s.key} (sensor {s.name!r}){did_you_mean(s.key, bag.bag_topics)}" for s in frame)
         raise BagError(f"the topic {names} that defines the world frame is not in the bag: nothing would be "
                        f"published; the bag has: {have}")
+    if bag.missing and not allow_missing:
+        absent = "; ".join(f"sensor {name!r}: topic /{cfg.sensor(name).key} is not in the bag"
+                           f"{did_you_mean(cfg.sensor(name).key, bag.bag_topics)}" for name in bag.missing)
+        raise BagError(f"{absent}; the bag has: {have}. Fix the key in the config, or pass --allow-missing to "
+                       "replay without it")
     if bag.missing and warn is not None:
         for name in bag.missing:
             s = cfg.sensor(name)
@@ -210,18 +217,20 @@ def replay(
     doctor: bool = True,
     through: Callable[[Iterator[Sample]], Iterator[Sample]] | None = None,
     records: list | None = None,
+    allow_missing: bool = True,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
     its series); a replay whose only output is files (``--quiet`` without plot or report) skips it.
     ``through``: the bag's samples pass through it on their way to the core (the evaluation's
     recorder sees every one and holds back the fixes it scores on). ``records``: every diagnostics
-    record of the replay is appended to it (the advice's proof scores them as its reference run)."""
+    record of the replay is appended to it (the advice's proof scores them as its reference run).
+    ``allow_missing``: a configured topic absent from the bags is a warning, not an error (``check_topics``)."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with _collector_skips_the_caller(), open_bag_samples(paths, cfg.sensors) as bag:
-            check_topics(bag, cfg, warn)
+            check_topics(bag, cfg, warn, allow_missing)
             runner = Runner(cfg, keep_trace, doctor)
             if diag_out is not None and records is not None:
                 def keep(r, add=diag_out.add, append=records.append) -> None:

@@ -183,6 +183,7 @@ class Daemon:
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
         self.outputs = Outputs(self.cfg, s, self.node, self._express)
+        self._refresh()  # health says what the core knows from the start (heading_known false before a GPS fix)
         self._worker = threading.Thread(target=self._work, name="fusiond-worker", daemon=True)
         self._worker.start()
         for idx, sensor in enumerate(self.cfg.sensors):

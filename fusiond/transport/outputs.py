@@ -98,7 +98,7 @@ class Outputs:
             if fix is not None:
                 self.navsat.put(encode_navsat_cdr(est.stamp, out.child_frame_id, *fix))
         if self.tf_pub is not None:
-            tf = self.tf.message(est)
+            tf = self.tf.message(est, core.resets)
             if tf is not None:
                 self.tf_pub.put(tf)
         self.published += 1

@@ -37,6 +37,8 @@ log = get_logger("fusiond.play")
 
 LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
 HEALTH_QUERY_S = 1.0  # how long the daemon's drop count is waited for after playing
+SETTLE_S = 10.0  # after playing, how long the daemon gets to account for every sample sent (fused or dropped)
+SETTLE_POLL_S = 0.1
 
 
 class RawSource(Protocol):
@@ -60,6 +62,9 @@ class PlayResult:
     # samples the daemon's full input queue dropped while this played (its health's queue.dropped before
     # and after); None without exactly one daemon answering on the health key
     daemon_dropped: int | None = None
+    # per sensor, the samples sent that the daemon did not fuse, by reason (its health's counts before and
+    # after; "unaccounted": neither fused nor dropped when it settled); empty: all fused, or no daemon to ask
+    unfused: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> list[bytes]:
@@ -111,6 +116,7 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
                         keys=[s.key for s in cfg.sensors if s.name in pubs])
         dropped_before = _queue_dropped(answers)
+        counts_before = _sensor_counts(answers)
         log.info("play_started", bag=list(names), rate=rate, messages=bag.total)
         t0_bag: int | None = None
         t0 = clock()
@@ -139,6 +145,8 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             dropped_after = _queue_dropped(query_health(session, cfg.output.health_key, HEALTH_QUERY_S))
             if dropped_after is not None:
                 result.daemon_dropped = dropped_after - dropped_before
+        if counts_before is not None and not result.interrupted:
+            result.unfused = _unfused(session, cfg.output.health_key, counts_before, result.per_sensor, stop)
     finally:
         for p in pubs.values():
             p.undeclare()
@@ -156,6 +164,49 @@ def _queue_dropped(answers: list[bytes]) -> int | None:
         return decode_report(answers[0]).queue.dropped
     except msgspec.DecodeError:
         return None
+
+
+Counts = dict[str, tuple[int, dict[str, int]]]  # per sensor: (applied, dropped by reason)
+
+
+def _sensor_counts(answers: list[bytes]) -> Counts | None:
+    """Per sensor, the daemon's applied count and drops by reason, from exactly one readable health answer."""
+    if len(answers) != 1:
+        return None
+    try:
+        report = decode_report(answers[0])
+    except msgspec.DecodeError:
+        return None
+    return {name: (h.applied, dict(h.dropped_by_reason)) for name, h in report.sensors.items()}
+
+
+def _unfused(session: zenoh.Session, health_key: str, before: Counts, sent: dict[str, int],
+             stop: threading.Event) -> dict[str, dict[str, int]]:
+    """What the daemon did not fuse of what was sent, per sensor and reason: its health is asked until every
+    sample sent is counted as applied or dropped (its queue worked through) or SETTLE_S passed; what is
+    then neither is "unaccounted" (held for a time jump, lost on the way, or still queued)."""
+    deadline = time.monotonic() + SETTLE_S
+    while True:
+        after = _sensor_counts(query_health(session, health_key, HEALTH_QUERY_S))
+        if after is None:
+            return {}
+        missing: dict[str, dict[str, int]] = {}
+        for name, n in sent.items():
+            if not n or name not in before or name not in after:
+                continue
+            applied = after[name][0] - before[name][0]
+            if applied >= n:
+                continue
+            reasons = {k: v - before[name][1].get(k, 0) for k, v in after[name][1].items()}
+            reasons = {k: v for k, v in reasons.items() if v > 0}
+            left = n - applied - sum(reasons.values())
+            if left > 0:
+                reasons["unaccounted"] = left
+            missing[name] = reasons
+        if not any("unaccounted" in r for r in missing.values()) or time.monotonic() > deadline:
+            return missing
+        if stop.wait(SETTLE_POLL_S):
+            return missing
 
 
 def _encoding(name: str) -> zenoh.Encoding:

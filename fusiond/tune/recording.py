@@ -16,11 +16,13 @@ from ..replay.bag import open_bag_samples
 from ..replay.run import check_topics
 
 
-def read_samples(paths: Sequence[Path | str], cfg: Config, warn: Callable[[str], None] | None = None) -> list:
+def read_samples(paths: Sequence[Path | str], cfg: Config, warn: Callable[[str], None] | None = None,
+                 allow_missing: bool = True) -> list:
     """The configured sensors' samples of the bags, in bag order. BagError (a ReplayError) for a bag
-    that cannot be replayed as configured, or one without a single sample of them."""
+    that cannot be replayed as configured, or one without a single sample of them (or, unless
+    ``allow_missing``, without a configured sensor's topic)."""
     with open_bag_samples([Path(p) for p in paths], cfg.sensors) as bag:
-        check_topics(bag, cfg, warn)
+        check_topics(bag, cfg, warn, allow_missing)
         samples = list(bag)
     if not samples:
         raise BagError(f"{', '.join(str(p) for p in paths)}: no message of a configured sensor could be read")

@@ -170,6 +170,8 @@ def test_wandering_gps_error_names_error_tau_and_sigma_not_position_noise():
     v = one(verdicts, "gps", "position")
     assert v.key == "sensors.gps.error_tau_s" and v.level == "warn", v
     assert "position_noise" not in v.key and "error_sigma = [" in v.suggestion, v
+    # one reading of the NIS, whatever its verdict (ok or low): the wander hides from it
+    assert "NIS reads low" not in v.message and "the NIS understates the error" in v.message, v
     # The filter follows part of the wander, so the innovations decorrelate faster and spread less than
     # the error itself: the estimates are lower bounds. Above: tau beyond a few fix intervals (it is a
     # wander, 1.5 s), the wandering sigma beyond a third of the true one; below: neither beyond the truth

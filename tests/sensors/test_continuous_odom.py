@@ -1,6 +1,6 @@
-"""filter.continuous_odom: with nothing observing heading, a gyro bias learned at the first standstill
-corrects the heading's rate from then on and never turns the published pose at once (REP-105's odom
-frame); without the key the correlated correction turns it.
+"""filter.continuous_odom (true by default): with nothing observing heading, a gyro bias learned at the first
+standstill corrects the heading's rate from then on and never turns the published pose at once (REP-105's
+odom frame); with the key false the correlated correction turns it.
 
 The simulation: a robot drives 60 s on a gyro biased by b = 0.005 rad/s (unknown: the bias prior is
 0.01 rad/s), then stops. Driving, the heading drifts by b t = 0.3 rad; the standstill measures the bias,
@@ -39,13 +39,17 @@ def _largest_step_at_rest(filt: str) -> tuple[float, float]:
     return largest, float(core.gyro_bias[2])
 
 
-def test_a_bias_learned_at_rest_never_turns_a_continuous_odom_frame() -> None:
-    step, bias = _largest_step_at_rest("continuous_odom = true")
+def test_a_bias_learned_at_rest_never_turns_the_default_odom_frame() -> None:
+    step, bias = _largest_step_at_rest("")
     assert abs(bias - BIAS) < 0.2 * BIAS  # the standstill did learn the bias
     assert step < JUMP_RAD
 
 
-def test_without_it_the_correlated_correction_turns_the_heading() -> None:
-    step, bias = _largest_step_at_rest("")
+def test_an_explicit_true_is_the_default() -> None:
+    assert _largest_step_at_rest("continuous_odom = true") == _largest_step_at_rest("")
+
+
+def test_with_it_false_the_correlated_correction_turns_the_heading() -> None:
+    step, bias = _largest_step_at_rest("continuous_odom = false")
     assert abs(bias - BIAS) < 0.2 * BIAS
     assert step > JUMP_RAD  # the trait the key is for: the heading turned at once

@@ -142,6 +142,8 @@ def test_a_gps_locked_out_by_its_gate_is_reacquired():
 
     v = one(verdicts_of(core.cfg, samples), "gps", "position_reacquired")
     assert v.level == "warn" and "lost this GPS 1 time" in v.message and v.evidence["reacquired"] == 1.0, v
+    # one cause named: the logging gap just before it, not "a gap or the motion model"
+    assert "just after a logging gap (the longest 20.0 s)" in v.message and "motion model" not in v.message, v
 
 
 def test_after_a_long_gap_every_odometry_message_still_gets_its_pose():

@@ -1,0 +1,38 @@
+"""`fusiond play` exits non-zero when the daemon did not fuse everything it was sent, naming the sensor,
+how many and why (from the daemon's health); through the real `fusiond run` and `fusiond play` on loopback.
+
+The daemon here expects its IMU as JSON while play sends the bag's CDR (a mismatched `encoding`): every
+IMU sample is dropped undecoded. A daemon that fuses everything makes play exit 0 (tests/e2e/test_daemon.py's
+play test)."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+
+import pytest
+
+from tests.support.daemon import (
+    ROOT, client_session, daemon_process, free_port, fusiond_cmd, wait_daemon_ready, write_config,
+)
+
+pytestmark = pytest.mark.e2e
+
+
+def test_play_exits_1_naming_what_the_daemon_did_not_fuse(jackal_bag, tmp_path):
+    port = free_port()
+    config = write_config(tmp_path / "jackal.toml", port)
+    daemon_config = tmp_path / "imu_json.toml"
+    daemon_config.write_text(config.read_text().replace('key = "imu/data"', 'key = "imu/data"\nencoding = "json"'))
+    log = tmp_path / "daemon.log"
+    with daemon_process(daemon_config, log) as proc, client_session(port) as session:
+        wait_daemon_ready(session, proc, log)
+        play = subprocess.run(fusiond_cmd("play", str(jackal_bag), "--config", str(config), "--rate", "0",
+                                          "--duration", "5", "--connect", f"tcp/127.0.0.1:{port}"),
+                              capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert play.returncode == 1, (play.stdout, play.stderr)
+    m = re.search(r"sensor 'imu': (\d+) of (\d+) samples sent were not fused \((\d+) ", play.stderr)
+    assert m, play.stderr
+    assert 0 < int(m.group(1)) == int(m.group(2)) == int(m.group(3))
+    assert "sensor 'wheel'" not in play.stderr.split("play_finished")[-1]  # the odometry was all fused
+    assert re.search(r"played \d+ messages", play.stdout)  # the summary still on stdout
