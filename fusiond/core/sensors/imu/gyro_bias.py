@@ -21,7 +21,7 @@ import msgspec
 
 from ....estimator import observations as obs
 from ....logs import get_logger
-from ...diagnostics import DiagnosticsRecord
+from ...diagnostics import DiagnosticsRecord, chi2_ppf
 
 if TYPE_CHECKING:
     from ...state import FilterState
@@ -37,6 +37,7 @@ MIN_WINDOW_SAMPLES = 5  # gyro samples averaged into one standstill update, at l
 BIAS_MEAN_FLOOR = 1e-4  # rad/s: the mean of a window is no better than this (quantisation, vibration)
 REOPEN_AFTER = 4  # consecutive rejected windows of one axis that agree: the bias estimate is what is wrong
 AGREE_SIGMAS = 4.0  # ... "agree": their spread within this many sigma of one window's mean
+STATED_REFUTED = 0.01  # size of the test that refutes the stated gyro noise by a window's scatter
 LEARNING_PRIOR_RATIO = 10.0  # prior variance this many times the window's: the update learns, it does not test
 
 
@@ -70,14 +71,21 @@ def _turning(w: tuple, bias_sigma: float, min_sigma: float) -> bool:
 
 
 def _measured_variance(w: tuple, axis: int, min_sigma: float) -> float:
-    """One gyro reading's variance on ``axis`` as the window shows it (its sample variance, floored at
-    ``gyro_min_sigma``), not as the driver states it: a window at rest is where the gyro's own noise is
-    measured, and a driver stating 0.14 rad/s for a 0.003 rad/s gyro would make every standstill's
-    update ~50 times too weak to teach the bias (one stating too little, too strong)."""
+    """One gyro reading's variance on ``axis``: the stated one unless the window's own scatter refutes it,
+    then the scatter (floored at ``gyro_min_sigma``). A window at rest is where the gyro's noise shows: a
+    driver stating 0.14 rad/s for a 0.003 rad/s gyro would make every standstill's update ~50 times too
+    weak to teach the bias (one stating too little, too strong). Refuted: (n - 1) s^2 / sigma^2 outside
+    the two-sided STATED_REFUTED chi-square interval on n - 1 degrees of freedom (a sample variance of 30
+    readings is itself uncertain by a quarter, within which the stated noise stands)."""
     n = w[1]
     mean = w[2 + axis] / n
-    var = max(w[8 + axis] - n * mean * mean, 0.0) / (n - 1)
-    return var if var > min_sigma * min_sigma else min_sigma * min_sigma
+    measured = max(w[8 + axis] - n * mean * mean, 0.0) / (n - 1)
+    stated = w[5 + axis] / n
+    if stated > 0.0:
+        ratio = (n - 1) * measured / stated
+        if chi2_ppf(0.5 * STATED_REFUTED, n - 1) <= ratio <= chi2_ppf(1.0 - 0.5 * STATED_REFUTED, n - 1):
+            return stated
+    return measured if measured > min_sigma * min_sigma else min_sigma * min_sigma
 
 
 def learn_bias_at_rest(imu: "SensorModel", s: "FilterState", inp: "ImuInput", stamp: float, emit: bool,
