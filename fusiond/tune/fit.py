@@ -19,6 +19,8 @@
    rewards a too-small white noise in likelihood while the positions get worse, and a user asked
    for better positions, not a better likelihood. (The fit saw those fixes; a handful of noise
    figures cannot fit individual fixes, and what the check catches is the filter drifting off.)
+6. The doctor's measured value of each key (``doctor_values``) is tried in place of the fit's and
+   judged the same way; it is taken when no worse, else the table says what it measured and why not.
 
 Why derivative-free. The likelihood of this filter is not a smooth function of its noise: the
 Mahalanobis gates switch updates between applied and rejected, the standstill detection and the
@@ -38,9 +40,11 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from ..config import Config
+from ..config import Config, ConfigError
 from ..errors import ReplayError
 from ..logs import muted
+from .advice import with_suggestion
+from .doctor_values import doctor_lines
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
 from .prediction import HOLD_EVERY, Prediction, predict
@@ -70,6 +74,7 @@ class Row:
     note: str = ""
     nis_before: float | None = None  # held-back mean NIS per dof of the updates it is judged by
     nis_after: float | None = None
+    doctor: object = None  # the doctor's measured value for these components (None: it gave no paste line)
 
 
 @dataclass
@@ -343,6 +348,36 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
     for i, p in enumerate(active):
         if kept[i] is not None:
             status[i] = "tuned"
+    # the doctor's measured values, each a candidate in place of tune's (doctor_values.py)
+    doctor = doctor_lines(cfg, samples, active)
+    measured: list[object] = [None] * len(active)
+    for group, line in doctor.items():
+        idx = [i for i, p in enumerate(active) if p.group == group]
+        for i in idx:
+            measured[i] = value(line.config, active[i])
+        if all(measured[i] == value(config, active[i]) for i in idx):
+            continue
+        try:
+            trial_cfg, _ = with_suggestion(config, line.verdict)
+        except ConfigError:
+            continue
+        trial_score = score(run(trial_cfg), ref)
+        trial_pred = predicted(trial_cfg)
+        loses = trial_score.neg_loglik > after.neg_loglik + INFORMED
+        mispredicts = trial_pred is not None and pred_after is not None and trial_pred.worse_than(pred_after)
+        if not loses and not mispredicts:
+            for i in idx:
+                changed = value(trial_cfg, active[i]) != value(cfg, active[i])
+                status[i] = "tuned" if changed else "unchanged"
+                notes[i] = f"the doctor's measured value (held-back -log L {trial_score.neg_loglik:.1f} against " \
+                           f"the fit's {after.neg_loglik:.1f})"
+            config, after, pred_after = trial_cfg, trial_score, trial_pred
+        else:
+            why = (f"held-back -log L {trial_score.neg_loglik:.1f} with it, {after.neg_loglik:.1f} without" if loses
+                   else f"it predicts the held-back fixes worse ({trial_pred.describe()} against "
+                        f"{pred_after.describe()})")
+            for i in idx:
+                notes[i] = (notes[i] + "; " if notes[i] else "") + f"the doctor measured {_fmt(measured[i])}: {why}"
     comments: dict[tuple[str, str], str] = {}
     for i, p in enumerate(active):
         if status[i] == "tuned":
@@ -362,7 +397,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         if floored[i] and status[i] in ("tuned", "unchanged"):
             note = f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower"
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
-                        after.nis_per_dof.get(s)))
+                        after.nis_per_dof.get(s), measured[i]))
     return rows, config, before, after, comments, replays, (pred_before, pred_after)
 
 
@@ -372,8 +407,8 @@ STOPPED = {"converged": "the fit converged", "budget": "the fit stopped at --bud
 
 
 def format_table(result: TuneResult) -> str:
-    """The table `fusiond tune` prints: key | before | after | held-back NIS per dof | status."""
-    head = ("key", "before", "after", "held-back NIS/dof", "status")
+    """The table `fusiond tune` prints: key | before | after | the doctor's value | held-back NIS per dof | status."""
+    head = ("key", "before", "after", "doctor", "held-back NIS/dof", "status")
     lines = []
     for r in result.rows:
         said = "messages ~" if r.param.source == "messages (median)" else r.param.source + " "
@@ -382,10 +417,11 @@ def format_table(result: TuneResult) -> str:
         nis = "" if r.nis_before is None else f"{r.nis_before:.3g} -> {r.nis_after:.3g}" \
             if r.nis_after is not None else f"{r.nis_before:.3g} -> n/a"
         status = r.status + (f": {r.note}" if r.note else "")
-        lines.append((r.param.name, before, _fmt(r.after), nis, status))
-    widths = [max(len(x[k]) for x in [head, *lines]) for k in range(4)]
-    out = ["  ".join(h.ljust(w) for h, w in zip(head[:4], widths)) + "  " + head[4]]
-    out += ["  ".join(c.ljust(w) for c, w in zip(line[:4], widths)) + "  " + line[4] for line in lines]
+        doctor = "-" if r.doctor is None else _fmt(r.doctor)
+        lines.append((r.param.name, before, _fmt(r.after), doctor, nis, status))
+    widths = [max(len(x[k]) for x in [head, *lines]) for k in range(5)]
+    out = ["  ".join(h.ljust(w) for h, w in zip(head[:5], widths)) + "  " + head[5]]
+    out += ["  ".join(c.ljust(w) for c, w in zip(line[:5], widths)) + "  " + line[5] for line in lines]
     b, a = result.heldback_before, result.heldback_after
     if b is not None and a is not None:
         out.append(f"held-back   -log L {b.neg_loglik:.1f} -> {a.neg_loglik:.1f} over {b.terms} updates after stamp "

@@ -88,3 +88,21 @@ def test_tune_shows_and_keeps_to_the_held_back_prediction(wander):
     assert "held-back fixes (every 5th, not fused)" in format_table(result)
     # and against the truth, which tune never sees: no worse than the config it started from (within 2 %)
     assert _truth_rms(world, samples, result.config) <= 1.02 * _truth_rms(world, samples, cfg)
+
+
+def test_tune_and_the_doctor_give_one_number_or_say_why_not():
+    """An IMU stating 0.14 rad/s for a 0.003 rad/s gyro: the doctor measures the noise at rest and prints
+    gyro_noise = ~0.003; tune takes that value when it scores no worse than its own fit, and otherwise
+    says what the doctor measured and why it was not taken."""
+    from tests.support.sim_rest import RestWorld, Segment
+    from tests.support.sim_rest import simulate as simulate_rest
+
+    segments = [Segment(5.0), Segment(20.0, speed=0.5, yaw_rate=0.2), Segment(3.0),
+                Segment(20.0, speed=0.5, yaw_rate=-0.2), Segment(3.0)]
+    world = RestWorld(segments, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=0.003, gyro_stated_sigma=0.14,
+                      ramp_s=0.5)
+    result = tune(simulate_rest(world), robot_config(), keys=["imu.gyro_noise"], budget_s=300.0)
+    r = next(r for r in result.rows if r.param.name == "imu.gyro_noise")
+    assert r.doctor is not None and 0.002 < r.doctor < 0.004  # the doctor measured it at rest
+    assert r.after == r.doctor or "the doctor measured" in r.note, (r.after, r.doctor, r.note)
+    assert "doctor" in format_table(result).splitlines()[0]

@@ -1,0 +1,65 @@
+"""The doctor's measured values as tune's candidates: one number per key, or the reason why not.
+
+The doctor and tune read the same recording two ways. The doctor measures a figure directly (the
+gyro's scatter at rest, the GPS's scatter, a chord scale, the innovations' second moment through the
+mount) and prints it as a paste line; tune fits the innovations' likelihood. Two tools that disagree
+on one key leave the user to pick. So tune takes the doctor's line as a second candidate for each
+key it fits: after the fit is validated, the doctor's value is put in place of tune's for that key,
+and the config so changed is judged the way the fit was (the held-back updates' -log L, the
+held-back fixes' prediction). The doctor's value wins when it scores no worse than the fit (within
+INFORMED, the likelihood difference the fit itself cannot resolve) and predicts the held-back fixes
+no worse: a direct measurement needs no optimiser to be believed. Otherwise tune's value stands and
+the table says what the doctor measured and by how much it lost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ..config import Config, ConfigError
+from ..doctor import Verdict
+from ..logs import muted
+from .advice import with_suggestion
+from .params import FILTER, Param
+
+
+@dataclass(frozen=True)
+class DoctorLine:
+    """The doctor's paste line for one of tune's keys, with the config it makes from the original."""
+
+    verdict: Verdict
+    config: Config
+
+
+def _group(key: str) -> tuple[str, str] | None:
+    """(table, key) of a verdict's dotted key: "sensors.imu.gyro_noise" -> ("imu", "gyro_noise")."""
+    parts = key.split(".")
+    if parts[0] == "sensors" and len(parts) >= 3:
+        return ".".join(parts[1:-1]), parts[-1]
+    if parts[0] == FILTER and len(parts) == 2:
+        return FILTER, parts[1]
+    return None
+
+
+def doctor_lines(cfg: Config, samples: Sequence[object], params: Sequence[Param]) -> dict[tuple[str, str], DoctorLine]:
+    """The doctor's paste lines for the keys of ``params``, by (table, key): one replay with the doctor."""
+    from ..replay.run import run_samples
+
+    groups = {p.group for p in params}
+    with muted():
+        verdicts = run_samples(samples, cfg).verdicts()
+    out: dict[tuple[str, str], DoctorLine] = {}
+    for v in verdicts:
+        group = _group(v.key) if v.suggestion else None
+        if group is None or group not in groups or group in out:
+            continue
+        try:
+            changed, _ = with_suggestion(cfg, v)
+        except ConfigError:
+            continue  # a line that does not apply to this config is not a value for this key
+        out[group] = DoctorLine(v, changed)
+    return out
+
+
+__all__ = ["DoctorLine", "doctor_lines"]
