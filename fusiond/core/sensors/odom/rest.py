@@ -76,12 +76,16 @@ class NoiseTrack:
         if period > 0.0 and stamp - track[3] > GAP_FACTOR * period:
             return (values, var, weight, stamp)
         weight = weight + 1.0 if weight < NOISE_MEMORY else NOISE_MEMORY
-        g = 1.0 / weight
+        a0, a1, a2, a3, a4, a5 = values
+        b0, b1, b2, b3, b4, b5 = prev
+        d = (0.5 * (a0 - b0) ** 2, 0.5 * (a1 - b1) ** 2, 0.5 * (a2 - b2) ** 2,
+             0.5 * (a3 - b3) ** 2, 0.5 * (a4 - b4) ** 2, 0.5 * (a5 - b5) ** 2)
         if var is None:
-            var = tuple(0.5 * (a - b) ** 2 for a, b in zip(values, prev))
-        else:
-            var = tuple(v + g * (0.5 * (a - b) ** 2 - v) for v, a, b in zip(var, values, prev))
-        return (values, var, weight, stamp)
+            return (values, d, weight, stamp)
+        g = 1.0 / weight
+        v0, v1, v2, v3, v4, v5 = var
+        return (values, (v0 + g * (d[0] - v0), v1 + g * (d[1] - v1), v2 + g * (d[2] - v2),
+                         v3 + g * (d[3] - v3), v4 + g * (d[4] - v4), v5 + g * (d[5] - v5)), weight, stamp)
 
 
 def rest_window(window: tuple, values: tuple, measured: tuple, running: tuple | None, stamp: float, span: float,
