@@ -26,11 +26,12 @@ ANGULAR = ("wx", "wy", "wz")
 def watch(watched: tuple | None, angular: tuple, measured: tuple, gyro: tuple | None,
           bounds: tuple | None) -> tuple:
     """(first values, per component: the run of turning messages, -1 when no longer a candidate, or -2 when
-    lost) after one message. ``gyro``: the bias-corrected gyro rates now (None: not fused or stale);
-    ``bounds``: each axis's quiet bound."""
+    lost; whether any is still a candidate; whether any is lost) after one message. ``gyro``: the
+    bias-corrected gyro rates now (None: not fused or stale); ``bounds``: each axis's quiet bound."""
     if watched is None:
-        return (angular, tuple(0 if measured[3 + i] else -1 for i in range(3)))
-    first, runs = watched
+        runs = tuple(0 if measured[3 + i] else -1 for i in range(3))
+        return (angular, runs, any(r >= 0 for r in runs), False)
+    first, runs = watched[0], watched[1]
     out = list(runs)
     for i in range(3):
         r = runs[i]
@@ -42,7 +43,7 @@ def watch(watched: tuple | None, angular: tuple, measured: tuple, gyro: tuple | 
             out[i] = -2 if r + 1 >= LOST_AFTER else r + 1
         else:
             out[i] = 0
-    return (first, tuple(out))
+    return (first, tuple(out), any(r >= 0 for r in out), any(r == -2 for r in out))
 
 
 def lost(watched: tuple | None) -> tuple[bool, bool, bool]:
@@ -53,9 +54,4 @@ def lost(watched: tuple | None) -> tuple[bool, bool, bool]:
     return (runs[0] == -2, runs[1] == -2, runs[2] == -2)
 
 
-def candidates(watched: tuple | None) -> bool:
-    """Is any component still being watched (one that has never moved and is not lost yet)?"""
-    return watched is None or any(r >= 0 for r in watched[1])
-
-
-__all__ = ["ANGULAR", "LOST_AFTER", "candidates", "lost", "watch"]
+__all__ = ["ANGULAR", "LOST_AFTER", "lost", "watch"]

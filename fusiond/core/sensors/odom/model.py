@@ -225,9 +225,9 @@ class OdomModel(SensorModel):
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN
         watched = own.watched
-        if lost_channel.candidates(watched):
+        if watched is None or watched[2]:  # a component still under watch
             watched = self._watch(s, watched, inp, stamp, emit)
-        if watched[1] != (-1, -1, -1):
+        if watched[3]:  # a component found lost
             inp = self._without_lost(inp, lost_channel.lost(watched))
         coast = self._coast(s, own, inp, stamp)
         if coast is None:
