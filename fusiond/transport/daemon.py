@@ -185,7 +185,8 @@ class Daemon:
         s = self.session
         self.zid = str(s.zid())
         self._start_metrics()  # first: an address in use fails the start before anything is declared
-        self.link = LinkWatch(s)
+        z = self.cfg.zenoh  # a link the config asks for is announced and counted (link.py)
+        self.link = LinkWatch(s, watched=z.mode == "client" or bool(z.connect))
         self.link.start()
         if self.state_path is not None:
             self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s) is None

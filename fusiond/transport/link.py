@@ -8,6 +8,10 @@ is lost and regained: a log line each way (``zenoh_link_lost``, ``zenoh_link_res
 the outage's length) and the figures the health answer and the metrics carry (state, losses,
 reconnections). Connected means at least one router or peer session is open.
 
+Only a link the config asks for is announced and counted (``watched``: client mode, or `connect`
+endpoints): a peer daemon that merely listens sees tools dial it and leave (`fusiond health`
+every 30 s from a Docker HEALTHCHECK), which is no loss of anything; its state is still reported.
+
 Polled rather than driven by Zenoh's transport events: the poll costs two short calls per
 period and holds on every zenoh-python 1.x; its period bounds how late a change is seen.
 """
@@ -52,9 +56,11 @@ def link_counts(session: Any) -> tuple[int, int]:
 class LinkWatch:
     """Follows a session's link on a thread; ``health()`` is its state now (thread-safe)."""
 
-    def __init__(self, session: Any, *, poll_s: float = POLL_S, clock: Callable[[], float] = time.monotonic,
+    def __init__(self, session: Any, *, watched: bool = True, poll_s: float = POLL_S,
+                 clock: Callable[[], float] = time.monotonic,
                  counts: Callable[[Any], tuple[int, int]] = link_counts) -> None:
         self._session = session
+        self._watched = watched
         self._poll_s = poll_s
         self._clock = clock
         self._counts = counts
@@ -98,6 +104,8 @@ class LinkWatch:
                 return
             lasted = now - self._since
             self._connected, self._since = connected, now
+            if not self._watched:
+                return
             if connected:
                 reconnect = self._ever
                 self._ever = True

@@ -51,7 +51,11 @@ def test_a_killed_daemon_reads_lost_within_the_bound_never_ok_again_and_comes_ba
         fleet = MonitorLines("--connect", f"tcp/127.0.0.1:{port}", "--no-multicast", "--interval", "0.5",
                              "--timeout", "20", "--fleet")
         started.append(fleet)
+        plain = MonitorLines("--connect", f"tcp/127.0.0.1:{port}", "--no-multicast", "--interval", "0.5",
+                             "--timeout", "20", json_lines=False)  # the terminal view's text, into a pipe
+        started.append(plain)
         for name in ("robot1", "robot2"):
+            plain.wait_line(f"daemon {name} status ok", 30)
             fleet.wait(name, "ok", 30)
             _, rec = mon.wait(name, "ok", 30)
             assert rec["namespace"] == name and rec["zid"] and rec["health"]["namespace"] == name
@@ -64,11 +68,16 @@ def test_a_killed_daemon_reads_lost_within_the_bound_never_ok_again_and_comes_ba
         assert seen - killed <= LOST_WITHIN_S, f"lost shown {seen - killed:.1f} s after the kill"
         assert lost["health"] is None and lost["channels"] == [] and lost["since"] is not None
         assert "token" in lost["reason"] or "no health answer" in lost["reason"], lost
+        shown, line = plain.wait_line("daemon robot2 status lost since", LOST_WITHIN_S + 5, after=killed)
+        assert shown - killed <= LOST_WITHIN_S, line
         # never ok again while it is dead: a few more refreshes, every one of them lost, robot1 still ok
         later = time.monotonic()
         wait_until(lambda: len(mon.of("robot2", after=later)) >= 4, 10, "more records of robot2")
         after_kill = mon.of("robot2", after=seen)
         assert after_kill and all(r["status"] == "lost" and r["health"] is None for r in after_kill), after_kill
+        with plain.lock:
+            printed = [ln for t, ln in plain.lines if t >= shown and "daemon robot2 status" in ln]
+        assert printed and all("status lost since" in ln for ln in printed), printed
         assert mon.of("robot1", after=later)[-1]["status"] == "ok"
 
         # the fleet view (started before the kill) puts it first; --namespace watches one robot only

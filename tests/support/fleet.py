@@ -91,21 +91,33 @@ class Feeder:
 
 
 class MonitorLines:
-    """`fusiond monitor ... --json` as a process; its records, each with the monotonic time it was read."""
+    """`fusiond monitor ... --json` as a process; its records, each with the monotonic time it was read
+    (``json_lines=False``: the plain text lines it prints into a pipe, in ``lines``)."""
 
-    def __init__(self, *args: str) -> None:
-        self.proc = subprocess.Popen(fusiond_cmd("monitor", "--json", *args), cwd=ROOT, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True)
+    def __init__(self, *args: str, json_lines: bool = True) -> None:
+        self.proc = subprocess.Popen(fusiond_cmd("monitor", *(["--json"] if json_lines else []), *args), cwd=ROOT,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.json_lines = json_lines
         self.records: list[tuple[float, dict]] = []
+        self.lines: list[tuple[float, str]] = []
         self.lock = threading.Lock()
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
 
     def _read(self) -> None:
         for line in self.proc.stdout:
-            if line.startswith("{"):
-                with self.lock:
+            with self.lock:
+                if self.json_lines and line.startswith("{"):
                     self.records.append((time.monotonic(), json.loads(line)))
+                elif not self.json_lines:
+                    self.lines.append((time.monotonic(), line.rstrip("\n")))
+
+    def wait_line(self, text: str, timeout: float, after: float = 0.0) -> tuple[float, str]:
+        """The first plain line holding ``text`` read after ``after`` (monotonic), and when."""
+        def found():
+            with self.lock:
+                return next(((t, ln) for t, ln in self.lines if t >= after and text in ln), None)
+        return wait_until(found, timeout, f"{text!r} in the monitor's lines", step=0.05)
 
     def of(self, daemon: str, after: float = 0.0) -> list[dict]:
         with self.lock:

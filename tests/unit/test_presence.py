@@ -127,3 +127,32 @@ def test_metrics_listen_and_the_retry_keys_are_checked_and_reach_zenoh():
 
     retry = json.loads(build_config(cfg.zenoh).get_json("connect/retry"))
     assert retry == {"period_init_ms": 100, "period_max_ms": 2000, "period_increase_factor": 3.0}
+
+
+def test_the_terminal_view_of_a_lost_daemon_says_lost_and_since_and_shows_no_table():
+    from rich.console import Console
+
+    from fusiond.monitor import DaemonView, render
+
+    view = DaemonView("robot2")
+    view.presence.token_up(10.0, 1000.0)
+    view.on_health({"status": "ok", "zid": "a", "sensors": {"wheel": {"alive": True, "received": 5}}}, 10.1, 1000.1)
+    assert view.snapshot(10.2, 1000.2, 5.0)["status"] == "ok"
+    view.presence.token_down(1000.3)
+    snap = view.snapshot(10.4, 1000.4, 5.0)
+    assert (snap["status"], snap["health"], snap["channels"]) == ("lost", None, [])
+    console = Console(record=True, width=200, force_terminal=False)
+    console.print(render([snap]))
+    text = console.export_text()
+    assert "daemon robot2  status lost since" in text and "token" in text
+    assert "wheel" not in text and " ok" not in text
+
+
+def test_a_listening_peer_reports_its_sessions_but_counts_no_tool_leaving_as_a_loss():
+    counts = _Counts()
+    w = LinkWatch(None, watched=False, counts=counts)
+    for value in ((1, 0), (0, 0), (0, 1), (0, 0)):  # tools dialling the daemon and leaving
+        counts.value = value
+        w.poll()
+    h = w.health()
+    assert (h.state, h.losses, h.reconnections) == ("disconnected", 0, 0)
