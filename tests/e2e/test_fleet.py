@@ -164,3 +164,29 @@ def test_every_health_answer_and_log_line_names_its_robot(tmp_path):
             events = log_events(tmp_path / f"{name}.log")
             assert len(events) > 3 and {e.get("namespace") for e in events} == {name}, \
                 [e for e in events if e.get("namespace") != name]
+
+
+def test_a_frozen_daemon_whose_answers_stopped_reads_lost_before_its_lease_ends_and_comes_back(tmp_path):
+    """SIGSTOP: the token stays up until Zenoh's lease (10 s) ends, but no answer comes: the last one is
+    not shown as current past --stale; SIGCONT and it is back, the same session."""
+    port = free_port()
+    with processes() as started:
+        started.append(start_router(port, tmp_path / "router.log"))
+        _, procs, _ = _robots(tmp_path, started, port, names=("robot1",))
+        mon = MonitorLines("--connect", f"tcp/127.0.0.1:{port}", "--no-multicast", "--interval", "0.5",
+                           "--timeout", "20", "--stale", "1.5")
+        started.append(mon)
+        _, before = mon.wait("robot1", "ok", 30)
+        proc = procs["robot1"]
+        proc.send_signal(signal.SIGSTOP)
+        try:
+            frozen = time.monotonic()
+            seen, lost = mon.wait("robot1", "lost", 8, after=frozen)
+            assert seen - frozen < 5.0 and lost["health"] is None, lost
+            assert "no health answer" in lost["reason"], lost  # the token is still up: the answers said it
+            assert all(r["health"] is None or r["health_age_s"] <= 1.5 for r in mon.of("robot1", after=frozen))
+        finally:
+            proc.send_signal(signal.SIGCONT)
+        thawed = time.monotonic()
+        _, back = mon.wait("robot1", "ok", 30, after=thawed)
+        assert back["zid"] == before["zid"] and proc.poll() is None
