@@ -156,3 +156,22 @@ def test_a_listening_peer_reports_its_sessions_but_counts_no_tool_leaving_as_a_l
         w.poll()
     h = w.health()
     assert (h.state, h.losses, h.reconnections) == ("disconnected", 0, 0)
+
+
+def test_the_fleet_lines_and_table_say_lost_with_since_and_the_rest_with_their_figures():
+    from rich.console import Console
+
+    from fusiond.fleet import fleet_lines, render_fleet
+
+    high = {"imu/orientation": {"nis_mean": 9.0, "nis_bounds": [1.5, 2.6], "verdict": "nis_high"}}
+    lost = _snap("robot2", "lost")
+    lost["since"] = 1000.0
+    rows = fleet_rows([_snap("robot1", "ok", high, dropped=4), lost])
+    lines = fleet_lines(rows, 1001.0)
+    assert lines[0].split()[1:3] == ["robot2", "lost"] and "since" in lines[0] and ": gone" in lines[0]
+    assert "link=connected" in lines[1] and "nis=imu/orientation 9.00 [1.50, 2.60] nis_high" in lines[1]
+    assert "dropped=4" in lines[1] and "sensors=2/2" in lines[1]
+    console = Console(record=True, width=200, force_terminal=False)
+    console.print(render_fleet(rows))
+    text = console.export_text().splitlines()
+    assert text[1].split()[:2] == ["robot2", "lost"] and text[2].split()[:3] == ["robot1", "ok", "connected"]
