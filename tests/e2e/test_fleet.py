@@ -10,7 +10,7 @@ import json
 import signal
 import subprocess
 import time
-import urllib.request
+from pathlib import Path
 
 import pytest
 
@@ -190,3 +190,27 @@ def test_a_frozen_daemon_whose_answers_stopped_reads_lost_before_its_lease_ends_
         thawed = time.monotonic()
         _, back = mon.wait("robot1", "ok", 30, after=thawed)
         assert back["zid"] == before["zid"] and proc.poll() is None
+
+
+def test_the_router_unit_runs_fusiond_router_as_its_command_line_reads_it(tmp_path):
+    """deploy/fusiond-router.service's ExecStart, parsed by fusiond's own parser, and that command on loopback
+    serving a daemon-to-tool route (a health answer crosses it)."""
+    import shlex
+
+    from fusiond.cli import build_parser
+
+    text = (ROOT / "deploy" / "fusiond-router.service").read_text()
+    keys = dict(line.split("=", 1) for line in text.splitlines() if "=" in line and not line.startswith("#"))
+    argv = shlex.split(keys["ExecStart"])
+    args = build_parser().parse_args(argv[1:])
+    assert Path(argv[0]).name == "fusiond" and args.command == "router" and args.listen == ["tcp/0.0.0.0:7447"]
+    assert keys["KillSignal"] == "SIGTERM" and keys.get("DynamicUser") == "yes"
+    port = free_port()
+    with processes() as started:
+        router = start_router(port, tmp_path / "router.log")
+        started.append(router)
+        _robots(tmp_path, started, port, names=("robot1",))
+        with client(port) as session:
+            wait_until(lambda: _health(session, "robot1/fusiond/health", 0.5), 30, "an answer across the router")
+        router.send_signal(signal.SIGTERM)
+        assert router.wait(15) == 0
