@@ -172,7 +172,7 @@ class DaemonView:
                 verdicts = self.doctor.verdicts()
             health = self.health if current else None
         namespace = health.get("namespace", self.prefix) if health else self.prefix
-        link = (health.get("link") or {}).get("state") if health else None
+        link = (health or {}).get("link") or None
         return {"daemon": self.prefix or "(no namespace)", "namespace": namespace,
                 "zid": (health or {}).get("zid") or None, "status": state.status, "since": state.since,
                 "reason": state.reason, "link": link, "health_age_s": state.health_age_s, "health": health,

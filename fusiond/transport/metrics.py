@@ -108,8 +108,8 @@ def families(a: HealthAnswer) -> list[Any]:
     gauge("queue_depth", "samples waiting for the worker").add_metric([ns], q.depth)
     gauge("queue_capacity", "input queue capacity").add_metric([ns], q.capacity)
 
-    if a.link is not None:
-        link = a.link
+    if a.link_stats is not None:
+        link = a.link_stats
         gauge("zenoh_link_up", "1 while at least one router or peer session is open").add_metric(
             [ns], 1.0 if link.state == "connected" else 0.0)
         gauge("zenoh_routers", "router sessions open").add_metric([ns], link.routers)

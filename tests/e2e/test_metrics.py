@@ -116,8 +116,8 @@ def test_the_metrics_say_what_the_health_answer_says(tmp_path):
     assert h["consistency"], "no NIS channel to compare"
     assert v("fusiond_filter_finite") == float(h["filter"]["finite"])
     assert v("fusiond_filter_heading_known") == float(h["filter"]["heading_known"])
-    assert v("fusiond_zenoh_link_up") == float(h["link"]["state"] == "connected") == 1.0
-    assert v("fusiond_zenoh_reconnections_total") == h["link"]["reconnections"]
+    assert v("fusiond_zenoh_link_up") == float(h["link"] == "connected") == 1.0
+    assert v("fusiond_zenoh_reconnections_total") == h["link_stats"]["reconnections"]
     assert all(k.startswith("fusiond_") and dict(labels).get("namespace") == "robot7" for k, labels in m)
     events = log_events(log)
     assert any(e["event"] == "metrics_listening" and str(metrics_port) in e["url"] for e in events)
