@@ -37,7 +37,7 @@ def fleet_rows(snapshots: list[dict]) -> list[dict]:
     """One summary per daemon snapshot (``Monitor.snapshot``), worst first."""
     rows = []
     for snap in snapshots:
-        health = snap.get("health") or {}
+        health = (snap.get("health") or {}) if snap.get("current", True) else {}
         sensors = health.get("sensors") or {}
         rows.append({
             "daemon": snap["daemon"], "namespace": snap.get("namespace"), "zid": snap.get("zid"),

@@ -156,8 +156,10 @@ class DaemonView:
 
     def snapshot(self, now: float, wall: float | None = None, stale_s: float = math.inf,
                  link_up: bool = True) -> dict:
-        """What is known of the daemon now: its state (``Presence.state``), the health answer only while it
-        is current, the channels and verdicts unless the daemon is lost or out of reach (then none)."""
+        """What is known of the daemon now: its state (``Presence.state``); as ``health`` its answer while it
+        is current, else only ``{"status", "since", "reason"}`` of that state (`lost`, ...: never its last
+        answer, and a reader of ``health["status"]`` reads the state); the channels and verdicts unless the
+        daemon is lost or out of reach (then none)."""
         wall = time.time() if wall is None else wall
         with self.lock:
             state = self.presence.state(now, wall, stale_s, link_up, self.health)
@@ -170,13 +172,12 @@ class DaemonView:
                     row.update(nis_figures(self.doctor.channels[key]))  # every record reached both
                     rows.append(row)
                 verdicts = self.doctor.verdicts()
-            health = self.health if current else None
-        namespace = health.get("namespace", self.prefix) if health else self.prefix
-        link = (health or {}).get("link") or None
-        return {"daemon": self.prefix or "(no namespace)", "namespace": namespace,
-                "zid": (health or {}).get("zid") or None, "status": state.status, "since": state.since,
-                "reason": state.reason, "link": link, "health_age_s": state.health_age_s, "health": health,
-                "channels": rows, "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
+            answer = (self.health or {}) if current else {}
+        health = answer if current else {"status": state.status, "since": state.since, "reason": state.reason}
+        return {"daemon": self.prefix or "(no namespace)", "namespace": answer.get("namespace", self.prefix),
+                "zid": answer.get("zid") or None, "status": state.status, "current": current, "since": state.since,
+                "reason": state.reason, "link": answer.get("link") or None, "health_age_s": state.health_age_s,
+                "health": health, "channels": rows, "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
 
 
 def prefix_of(key: str, suffix: str) -> str:

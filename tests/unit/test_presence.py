@@ -140,7 +140,8 @@ def test_the_terminal_view_of_a_lost_daemon_says_lost_and_since_and_shows_no_tab
     assert view.snapshot(10.2, 1000.2, 5.0)["status"] == "ok"
     view.presence.token_down(1000.3)
     snap = view.snapshot(10.4, 1000.4, 5.0)
-    assert (snap["status"], snap["health"], snap["channels"]) == ("lost", None, [])
+    assert (snap["status"], snap["current"], snap["channels"]) == ("lost", False, [])
+    assert snap["health"] == {"status": "lost", "since": 1000.3, "reason": snap["reason"]}
     console = Console(record=True, width=200, force_terminal=False)
     console.print(render([snap]))
     text = console.export_text()
