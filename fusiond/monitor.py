@@ -9,8 +9,9 @@ its output not a terminal (a pipe, a log file) it streams plain text lines as it
 
 A daemon is shown from what is known NOW, never from its last answer: its liveliness token
 (followed by a liveliness subscriber) gone, or no health answer for `stale_s`, and it reads
-`lost` (with since when and why) with no health and no figures; the monitor's own Zenoh link
-gone (its router died), and every daemon reads `disconnected`. A restarted daemon comes back
+`lost` (with since when and why; its record's health is that state, never the last answer) and
+shows no figures; the monitor's own Zenoh link gone (its router died), and every daemon reads
+`disconnected`. A restarted daemon comes back
 by itself: its token returns, its next answer is shown, and a new Zenoh id restarts its
 channel statistics. Health is asked of every daemon by one wildcard query per refresh whose
 answers arrive on a callback, so a dead daemon delays nothing. `--fleet` shows one line per
