@@ -297,6 +297,10 @@ def cmd_play(args: argparse.Namespace) -> int:
     per = " ".join(f"{k}={v}" for k, v in result.per_sensor.items())
     print(f"played {result.messages} messages ({per}), {result.bag_seconds:.3f} s of bag in {result.seconds:.3f} s"
           + (" (interrupted)" if result.interrupted else ""))
+    if result.daemon_stopped:
+        print(f"fusiond: the daemon stopped answering on {cfg.output.health_key!r}{_in_namespace(cfg)} while this "
+              f"played ({result.daemon_stopped}): what it was sent after that went nowhere", file=sys.stderr)
+        return 1
     if result.daemon_dropped:
         print(f"fusiond: the daemon dropped {result.daemon_dropped} of these samples, its input queue full "
               f"(health: queue.dropped): it did not keep up with --rate {args.rate:g}; play slower", file=sys.stderr)
@@ -319,8 +323,8 @@ def cmd_health(args: argparse.Namespace) -> int:
     finally:
         session.close()
     if not answers:
-        print(f"fusiond: no health answer on {key!r} within {args.timeout} s ({_reached(args, cfg)})",
-              file=sys.stderr)
+        print(f"fusiond: no health answer on {key!r}{_in_namespace(cfg)} within {args.timeout} s "
+              f"({_reached(args, cfg)})", file=sys.stderr)
         return EXIT_UNHEALTHY
     worst = None
     for raw in answers:
@@ -425,6 +429,43 @@ def _reached(args: argparse.Namespace, cfg) -> str:
             "scouting off")
 
 
+def _in_namespace(cfg) -> str:
+    """How a tool's message names the robot it asked: its namespace (the key on the wire), if any."""
+    ns = cfg.zenoh.namespace
+    return f" in namespace {ns!r}" if ns else " (no namespace)"
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    from .transport.router import router_config, run_router
+
+    ConfigError, SessionError = _zenoh_errors()
+    from .config import check_endpoint
+
+    listen = args.listen or ["tcp/0.0.0.0:7447"]
+    try:
+        for option, endpoints in (("--listen", listen), ("--connect", args.connect or [])):
+            for ep in endpoints:
+                check_endpoint(ep, option)
+        conf = router_config(listen, args.connect or [], multicast_scouting=args.multicast)
+        return run_router(conf, ready=lambda session: print(f"router {session.zid()} listening on "
+                                                            f"{', '.join(listen)}", flush=True))
+    except ConfigError as err:
+        print(f"fusiond: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except SessionError as err:
+        print(f"fusiond: router: {err}", file=sys.stderr)
+        return 1
+
+
+def _add_router_parser(sub) -> None:
+    ro = sub.add_parser("router", help="a Zenoh router for a fleet's daemons and monitors (as zenohd)")
+    ro.add_argument("--listen", action="append", metavar="ENDPOINT", default=None,
+                    help="endpoint to listen on (repeatable; default tcp/0.0.0.0:7447)")
+    ro.add_argument("--connect", action="append", metavar="ENDPOINT", help="another router to connect to")
+    ro.add_argument("--multicast", action="store_true", help="scout for and answer peers by multicast (off)")
+    ro.set_defaults(func=cmd_router, default_log_level="info")
+
+
 def cmd_monitor(args: argparse.Namespace) -> int:
     from . import monitor
 
@@ -432,7 +473,8 @@ def cmd_monitor(args: argparse.Namespace) -> int:
     try:
         return monitor.run(session, timeout=args.timeout, duration=args.duration, as_json=args.json,
                            interval=args.interval, health_key=cfg.output.health_key,
-                           diagnostics_key=cfg.output.diagnostics_key, window=cfg.filter.nis_window)
+                           diagnostics_key=cfg.output.diagnostics_key, window=cfg.filter.nis_window,
+                           fleet=args.fleet, namespace=args.namespace or "", stale_s=args.stale)
     finally:
         session.close()
 
@@ -735,7 +777,13 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--duration", type=_positive, help="stop after S seconds (default: until Ctrl-C)")
     m.add_argument("--interval", type=_positive, default=1.0, help="refresh period in seconds (default 1)")
     m.add_argument("--json", action="store_true", help="stream JSON lines instead of the terminal view")
+    m.add_argument("--fleet", action="store_true", help="one line per daemon (status, link, worst NIS, drops, age), "
+                                                        "worst first")
+    m.add_argument("--namespace", metavar="NS", help="watch the daemon of this Zenoh namespace only")
+    m.add_argument("--stale", type=_positive, metavar="S", help="a daemon whose newest health answer is older "
+                   "than S seconds reads lost (default: 3 x --interval, at least 2)")
     m.set_defaults(func=cmd_monitor)
+    _add_router_parser(sub)
 
     c = sub.add_parser("calibrate-imu", help="measure a static IMU's noise and print it as config")
     c.add_argument("--duration", type=_positive, default=60.0, help="seconds to record (default 60)")

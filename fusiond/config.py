@@ -20,17 +20,17 @@ from typing import Final, Literal
 
 import msgspec
 
-from .config_tables import (Config, FilterConfig, OutputConfig, RosConfig, SensorTable, StateConfig, Vec2, Vec3,
-                            Vec6, ZenohConfig)
+from .config_tables import (Config, FilterConfig, MetricsConfig, OutputConfig, RosConfig, SensorTable, StateConfig,
+                            Vec2, Vec3, Vec6, ZenohConfig)
 from .core.sensors import POSE_MSGTYPES, GpsSensor, ImuSensor, OdomSensor, PoseSensor
 from .core.sensors.registry import config_types, kind_of
 from .errors import ConfigError  # defined with the other layers' errors; importable from here
 
 __all__ = [
     # the loader
-    "load", "loads", "convert", "validate", "check_endpoint", "sensor_key", "ConfigError",
+    "load", "loads", "convert", "validate", "check_endpoint", "sensor_key", "ConfigError", "metrics_address",
     # the shared tables (config_tables) and the built-in kinds' tables (core/sensors), as the contract names them
-    "Config", "ZenohConfig", "OutputConfig", "RosConfig", "StateConfig", "FilterConfig", "SensorTable",
+    "Config", "ZenohConfig", "OutputConfig", "RosConfig", "StateConfig", "FilterConfig", "MetricsConfig", "SensorTable",
     "Vec2", "Vec3", "Vec6", "OdomSensor", "ImuSensor", "GpsSensor", "PoseSensor", "POSE_MSGTYPES", "SensorConfig",
 ]
 
@@ -77,11 +77,36 @@ def check_endpoint(endpoint: str, where: str) -> None:
         raise ConfigError(f"{where}: unknown protocol {proto!r} in {endpoint!r}; valid: {', '.join(ZENOH_PROTOCOLS)}")
 
 
+def metrics_address(listen: str, where: str = "metrics.listen") -> tuple[str, int]:
+    """``"HOST:PORT"`` (``[::1]:9108`` for IPv6) as (host, port); ConfigError naming ``where`` otherwise."""
+    host, sep, port = listen.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ConfigError(f"{where}: must be \"HOST:PORT\" (e.g. \"127.0.0.1:9108\"; port 0: any free port), "
+                          f"got {listen!r}")
+    return host, int(port)
+
+
+def _check_zenoh_retry(z: ZenohConfig) -> None:
+    for name in ("connect_retry_init_s", "connect_retry_max_s"):
+        value = getattr(z, name)
+        if not 0.0 < value < math.inf:
+            raise ConfigError(f"zenoh.{name}: must be a positive number of seconds, got {value}")
+    if z.connect_retry_max_s < z.connect_retry_init_s:
+        raise ConfigError(f"zenoh.connect_retry_max_s: {z.connect_retry_max_s} is below connect_retry_init_s "
+                          f"({z.connect_retry_init_s})")
+    if not 1.0 <= z.connect_retry_factor < math.inf:
+        raise ConfigError(f"zenoh.connect_retry_factor: must be 1 or more, got {z.connect_retry_factor}")
+
+
 def validate(cfg: Config) -> Config:
     """Checks msgspec cannot express: vector lengths, signs, unique names and keys."""
     for table in ("connect", "listen"):
         for ep in getattr(cfg.zenoh, table):
             check_endpoint(ep, f"zenoh.{table}")
+    _check_zenoh_retry(cfg.zenoh)
+    if cfg.metrics.listen:
+        metrics_address(cfg.metrics.listen)
     _check_struct(cfg.filter, lambda field: f"filter.{field}")
     _check_struct(cfg.state, lambda field: f"state.{field}")
     if cfg.state.save_interval_s <= 0.0:

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Any
 
-__all__ = ["configure", "get_logger", "muted"]
+__all__ = ["bind_process", "configure", "get_logger", "muted"]
 
 # logging's level names (``logging.getLevelNamesMapping()``), spelled out: importing logging to check
 # a name costs ~10 ms of a replay that logs nothing (a test holds the two equal)
@@ -24,6 +24,11 @@ LEVELS = ("CRITICAL", "FATAL", "ERROR", "WARN", "WARNING", "INFO", "DEBUG", "NOT
 # Inside ``muted()``: events are dropped. A processor reads it at each event, so it holds for loggers
 # that structlog has already cached (a level change through ``configure`` would not reach those).
 _MUTED: ContextVar[bool] = ContextVar("fusiond_logs_muted", default=False)
+
+# Fields every event of this process carries (``bind_process``): the daemon's namespace, so that each of a
+# fleet's log lines names its robot. A module dict, not structlog's contextvars: those do not reach the
+# worker, health and Zenoh threads, which start with a context of their own.
+_PROCESS: dict[str, Any] = {}
 
 # configure()'s settings, waiting for structlog's import (None: nothing asked, structlog's defaults)
 _pending: tuple[str, bool | None] | None = None
@@ -56,6 +61,7 @@ def _apply() -> None:
     structlog.configure(
         processors=[
             _drop_when_muted,
+            _add_process_fields,
             structlog.processors.add_log_level,
             structlog.processors.TimeStamper(fmt="iso", utc=True),
             renderer,
@@ -71,6 +77,17 @@ def _drop_when_muted(logger: Any, method: str, event: dict) -> dict:
         import structlog
 
         raise structlog.DropEvent
+    return event
+
+
+def bind_process(**fields: Any) -> None:
+    """Add ``fields`` to every event logged from now on, by any thread (an event's own value wins)."""
+    _PROCESS.update(fields)
+
+
+def _add_process_fields(logger: Any, method: str, event: dict) -> dict:
+    for key, value in _PROCESS.items():
+        event.setdefault(key, value)
     return event
 
 

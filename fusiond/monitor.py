@@ -7,6 +7,16 @@ bounds, the innovation RMS per component and the gated count; the doctor turns
 it into a verdict line in plain words. `--json` prints the same as JSON lines; with
 its output not a terminal (a pipe, a log file) it streams plain text lines as it goes.
 
+A daemon is shown from what is known NOW, never from its last answer: its liveliness token
+(followed by a liveliness subscriber) gone, or no health answer for `stale_s`, and it reads
+`lost` (with since when and why; its record's health is that state, never the last answer) and
+shows no figures; the monitor's own Zenoh link gone (its router died), and every daemon reads
+`disconnected`. A restarted daemon comes back
+by itself: its token returns, its next answer is shown, and a new Zenoh id restarts its
+channel statistics. Health is asked of every daemon by one wildcard query per refresh whose
+answers arrive on a callback, so a dead daemon delays nothing. `--fleet` shows one line per
+daemon, worst first (``fleet.py``).
+
 A channel's verdict is judged over everything seen since the monitor started (the
 doctor's whole-run rule, chi-square bounds for that count) and says when the latest
 window differs, exactly as the replay summary does. Every NIS figure of a row comes from
@@ -29,6 +39,7 @@ import msgspec
 
 from .core.diagnostics import DiagnosticsRecord
 from .doctor import ChannelStats, Doctor, Verdict, judge_nis, nis_bounds
+from .presence import Presence, withdrawn
 
 ALIVE_SUFFIX = "/alive"
 DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"
@@ -110,7 +121,8 @@ def nis_figures(stats: ChannelStats) -> dict:
 
 
 class DaemonView:
-    """One daemon (one namespace prefix): its channels and a doctor fed from the stream."""
+    """One daemon (one namespace prefix): its channels and a doctor fed from the stream, and whether it
+    is there (``presence``)."""
 
     def __init__(self, prefix: str, window: int = 50, confidence: float = 0.95) -> None:
         self.prefix = prefix
@@ -118,8 +130,20 @@ class DaemonView:
         self.confidence = confidence
         self.channels: dict[tuple[str, str], ChannelView] = {}
         self.doctor = Doctor(None, window, confidence)
-        self.health: dict | None = None
+        self.health: dict | None = None  # the latest health answer (shown only while presence says current)
+        self.presence = Presence()
         self.lock = threading.Lock()
+
+    def on_health(self, health: dict, now: float, wall: float) -> None:
+        """A health answer arrived: a daemon with a new Zenoh id is a new run (restarted): its channel
+        statistics start again."""
+        with self.lock:
+            zid = health.get("zid") if isinstance(health, dict) else None
+            if zid and self.health is not None and self.health.get("zid") not in (None, "", zid):
+                self.channels.clear()
+                self.doctor = Doctor(None, self.window, self.confidence)
+            self.health = health
+            self.presence.answered(now, wall)
 
     def add(self, r: DiagnosticsRecord, now: float) -> None:
         with self.lock:
@@ -131,16 +155,30 @@ class DaemonView:
             ch.add(r, now)
             self.doctor.add(r)
 
-    def snapshot(self, now: float) -> dict:
+    def snapshot(self, now: float, wall: float | None = None, stale_s: float = math.inf,
+                 link_up: bool = True) -> dict:
+        """What is known of the daemon now: its state (``Presence.state``); as ``health`` its answer while it
+        is current, else only ``{"status", "since", "reason"}`` of that state (`lost`, ...: never its last
+        answer, and a reader of ``health["status"]`` reads the state); the channels and verdicts unless the
+        daemon is lost or out of reach (then none)."""
+        wall = time.time() if wall is None else wall
         with self.lock:
+            state = self.presence.state(now, wall, stale_s, link_up, self.health)
+            current = state.current
             rows = []
-            for key, ch in sorted(self.channels.items()):
-                row = ch.row(now)
-                row.update(nis_figures(self.doctor.channels[key]))  # every record reached both
-                rows.append(row)
-            verdicts = self.doctor.verdicts()
-        return {"daemon": self.prefix or "(no namespace)", "health": self.health, "channels": rows,
-                "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
+            verdicts: list = []
+            if state.status not in ("lost", "disconnected"):  # the stream's figures carry their own ages
+                for key, ch in sorted(self.channels.items()):
+                    row = ch.row(now)
+                    row.update(nis_figures(self.doctor.channels[key]))  # every record reached both
+                    rows.append(row)
+                verdicts = self.doctor.verdicts()
+            answer = (self.health or {}) if current else {}
+        health = answer if current else {"status": state.status, "since": state.since, "reason": state.reason}
+        return {"daemon": self.prefix or "(no namespace)", "namespace": answer.get("namespace", self.prefix),
+                "zid": answer.get("zid") or None, "status": state.status, "current": current, "since": state.since,
+                "reason": state.reason, "link": answer.get("link") or None, "health_age_s": state.health_age_s,
+                "health": health, "channels": rows, "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
 
 
 def prefix_of(key: str, suffix: str) -> str:
@@ -150,18 +188,26 @@ def prefix_of(key: str, suffix: str) -> str:
 
 
 class Monitor:
-    """Zenoh side: liveliness discovery, diagnostics subscription, periodic health queries."""
+    """Zenoh side: liveliness discovery and its changes, the diagnostics subscription, health queries.
+
+    ``namespace`` (a prefix) watches that daemon alone; by default every daemon in any namespace.
+    """
 
     def __init__(self, session, health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX,
-                 window: int = 50) -> None:
+                 window: int = 50, namespace: str = "") -> None:
         self.session = session
         self.health_key = health_key
         self.diagnostics_key = diagnostics_key
         self.window = window
+        self.namespace = namespace.strip("/")
         self.daemons: dict[str, DaemonView] = {}
         self.undecodable = 0
         self._lock = threading.Lock()
         self._subs = []
+
+    def _scope(self, key: str) -> str:
+        """A key of every daemon (``**/key``), or of the one namespace watched."""
+        return f"{self.namespace}/{key}" if self.namespace else f"**/{key}"
 
     def _daemon(self, prefix: str) -> DaemonView:
         with self._lock:
@@ -172,7 +218,10 @@ class Monitor:
 
     def start(self) -> None:
         # `**` also matches no chunk at all: one subscriber sees every namespace and none
-        self._subs.append(self.session.declare_subscriber(f"**/{self.diagnostics_key}", self._on_diagnostics))
+        self._subs.append(self.session.declare_subscriber(self._scope(self.diagnostics_key), self._on_diagnostics))
+        # the tokens now (history) and every change after: a daemon's death is seen as it happens
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            self._scope(f"{self.health_key}{ALIVE_SUFFIX}"), self._on_token, history=True))
 
     def _on_diagnostics(self, sample) -> None:
         try:
@@ -184,30 +233,60 @@ class Monitor:
         for rec in records:
             view.add(rec, now)
 
+    def _on_token(self, sample) -> None:
+        view = self._daemon(prefix_of(sample.key_expr, f"{self.health_key}{ALIVE_SUFFIX}"))
+        with view.lock:
+            if withdrawn(sample):
+                view.presence.token_down(time.time())
+            else:
+                view.presence.token_up(time.monotonic(), time.time())
+
     def discover(self, timeout: float) -> list[str]:
         """Prefixes of the daemons whose liveliness token is up."""
         found = set()
         alive = f"{self.health_key}{ALIVE_SUFFIX}"
-        for reply in self.session.liveliness().get(f"**/{alive}", timeout=timeout):
+        for reply in self.session.liveliness().get(self._scope(alive), timeout=timeout):
             if reply.ok is not None:
                 found.add(prefix_of(reply.ok.key_expr, alive))
         for p in found:
-            self._daemon(p)
+            view = self._daemon(p)
+            with view.lock:
+                if view.presence.token is None:  # the subscriber has not spoken of it yet
+                    view.presence.token_up(time.monotonic(), time.time())
         return sorted(found)
 
-    def refresh_health(self, timeout: float = 1.0) -> None:
-        for prefix, d in list(self.daemons.items()):
-            key = f"{prefix}/{self.health_key}" if prefix else self.health_key
-            for reply in self.session.get(key, timeout=timeout):
-                if reply.ok is not None:
-                    try:
-                        d.health = msgspec.json.decode(reply.ok.payload.to_bytes())
-                    except msgspec.DecodeError:
-                        self.undecodable += 1
+    def query_health(self, timeout: float = 1.0) -> None:
+        """Ask every watched daemon for its health, once; the answers arrive on a Zenoh thread."""
+        self.session.get(self._scope(self.health_key), self._on_health, timeout=timeout)
 
-    def snapshot(self) -> list[dict]:
-        now = time.monotonic()
-        return [d.snapshot(now) for _, d in sorted(self.daemons.items())]
+    def _on_health(self, reply) -> None:
+        if reply.ok is None:
+            return
+        try:
+            health = msgspec.json.decode(reply.ok.payload.to_bytes())
+        except msgspec.DecodeError:
+            self.undecodable += 1
+            return
+        if not isinstance(health, dict):
+            self.undecodable += 1
+            return
+        self._daemon(prefix_of(reply.ok.key_expr, self.health_key)).on_health(health, time.monotonic(), time.time())
+
+    def refresh_health(self, timeout: float = 1.0) -> None:
+        """Ask, and wait for the answers (up to ``timeout``)."""
+        for reply in self.session.get(self._scope(self.health_key), timeout=timeout):
+            self._on_health(reply)
+
+    def link_up(self) -> bool:
+        """This monitor's own session has a router or a peer."""
+        info = self.session.info
+        return bool(list(info.routers_zid()) or list(info.peers_zid()))
+
+    def snapshot(self, stale_s: float = math.inf, link_up: bool = True) -> list[dict]:
+        now, wall = time.monotonic(), time.time()
+        with self._lock:
+            views = sorted(self.daemons.items())
+        return [d.snapshot(now, wall, stale_s, link_up) for _, d in views]
 
     def close(self) -> None:
         for s in self._subs:
@@ -229,6 +308,23 @@ def _bounds(b: list[float] | None) -> str:
     return f"[{b[0]:{NIS_FORMAT}}, {b[1]:{NIS_FORMAT}}]" if b else "-"
 
 
+_STATUS_STYLE = {"ok": "green", "degraded": "yellow", "starting": "yellow", "waiting": "yellow", "failed": "red",
+                 "lost": "bold red", "disconnected": "bold red"}
+
+
+def _clock(wall: float | None) -> str:
+    return "-" if wall is None else time.strftime("%H:%M:%S", time.localtime(wall))
+
+
+def state_note(snap: dict) -> str:
+    """What follows the status word: since when and why it is not the daemon's own status, or its link."""
+    if snap.get("reason") and snap.get("since") is not None:
+        return f" since {_clock(snap['since'])} ({snap['reason']})"
+    if snap.get("reason"):
+        return f" ({snap['reason']})"
+    return f"  link {snap['link']}" if snap.get("link") else ""
+
+
 def render(snapshots: list[dict]):
     """A rich renderable of the snapshots (imported lazily: --json needs no rich)."""
     from rich.console import Group
@@ -238,9 +334,10 @@ def render(snapshots: list[dict]):
     parts = []
     for snap in snapshots:
         health = snap.get("health") or {}
-        status = health.get("status", "?")
-        colour = {"ok": "green", "degraded": "yellow", "failed": "red"}.get(status, "white")
-        parts.append(Text(f"daemon {snap['daemon']}  status ", style="bold") + Text(status, style=f"bold {colour}"))
+        status = snap.get("status") or health.get("status", "?")
+        colour = _STATUS_STYLE.get(status, "white")
+        parts.append(Text(f"daemon {snap['daemon']}  status ", style="bold") + Text(status, style=f"bold {colour}")
+                     + Text(state_note(snap)))
         sensors = health.get("sensors", {})
         if sensors:
             t = Table(show_header=True, header_style="bold", box=None)
@@ -278,7 +375,8 @@ def plain_lines(snapshots: list[dict], wall: float) -> list[str]:
     out = []
     for snap in snapshots:
         health = snap.get("health") or {}
-        out.append(f"{stamp} daemon {snap['daemon']} status {health.get('status', '?')}")
+        out.append(f"{stamp} daemon {snap['daemon']} status {snap.get('status') or health.get('status', '?')}"
+                   f"{state_note(snap)}")
         for name, s in health.get("sensors", {}).items():
             out.append(f"{stamp}   sensor {name} alive={'yes' if s.get('alive') else 'NO'} age={_fmt(s.get('age_s'))}s "
                        f"rate={_fmt(s.get('rate_hz'), '.1f')}Hz received={s.get('received')} "
@@ -298,13 +396,19 @@ def plain_lines(snapshots: list[dict], wall: float) -> list[str]:
 
 def run(session, *, timeout: float, duration: float | None, as_json: bool, interval: float = 1.0,
         health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX, window: int = 50,
-        stop: threading.Event | None = None, out=sys.stdout) -> int:
+        stop: threading.Event | None = None, out=sys.stdout, fleet: bool = False, namespace: str = "",
+        stale_s: float | None = None) -> int:
     """Discover daemons (up to ``timeout``), then show them until ``duration`` or Ctrl-C.
 
+    ``stale_s`` (default ``max(3 x interval, 2 s)``): a health answer older than this is not current and
+    the daemon reads `lost`. ``fleet``: one line per daemon, worst first. ``namespace``: that daemon only.
     Exit 1, with a message naming what was looked for, when no daemon answers.
     """
-    mon = Monitor(session, health_key, diagnostics_key, window)
+    from .fleet import fleet_lines, fleet_rows, render_fleet
+
+    mon = Monitor(session, health_key, diagnostics_key, window, namespace=namespace)
     mon.start()
+    stale = max(3.0 * interval, 2.0) if stale_s is None else stale_s
     stop = stop or threading.Event()
     deadline = time.monotonic() + timeout
     found: list[str] = []
@@ -312,9 +416,10 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
         found = mon.discover(timeout=min(1.0, max(deadline - time.monotonic(), 0.1)))
     if not found:
         mon.close()
+        where = f"{namespace}/{health_key}{ALIVE_SUFFIX}" if namespace else \
+            f"{health_key}{ALIVE_SUFFIX} in any namespace"
         print(f"fusiond monitor: no fusiond daemon reachable within {timeout:g} s "
-              f"(no liveliness token on {health_key}{ALIVE_SUFFIX} in any namespace); "
-              "check --connect and that `fusiond run` is up", file=sys.stderr)
+              f"(no liveliness token on {where}); check --connect and that `fusiond run` is up", file=sys.stderr)
         return 1
     end = None if duration is None else time.monotonic() + duration
     enc = msgspec.json.Encoder()
@@ -327,20 +432,33 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
         live = Live(render([]), console=Console(file=out), refresh_per_second=4, transient=False)
         live.start()
     try:
+        mon.refresh_health(timeout=min(interval, 1.0))  # the first view with answers in, not "waiting"
         while not stop.is_set() and (end is None or time.monotonic() < end):
-            mon.discover(timeout=0.5)
-            mon.refresh_health(timeout=min(interval, 1.0))
-            snaps = mon.snapshot()
-            if as_json:
+            snaps = mon.snapshot(stale, mon.link_up())
+            wall = time.time()
+            if fleet:
+                rows = fleet_rows(snaps)
+                if as_json:
+                    for r in rows:
+                        out.write(enc.encode({"time": wall, **r}).decode() + "\n")
+                    out.flush()
+                elif plain:
+                    out.write("\n".join(fleet_lines(rows, wall)) + "\n")
+                    out.flush()
+                else:
+                    live.update(render_fleet(rows))
+            elif as_json:
                 for s in snaps:
-                    out.write(enc.encode({"time": time.time(), **s}).decode() + "\n")
+                    out.write(enc.encode({"time": wall, **s}).decode() + "\n")
                 out.flush()
             elif plain:
-                out.write("\n".join(plain_lines(snaps, time.time())) + "\n")
+                out.write("\n".join(plain_lines(snaps, wall)) + "\n")
                 out.flush()
             else:
                 live.update(render(snaps))
-            stop.wait(interval)
+            mon.query_health(timeout=max(min(interval, stale), 0.1))
+            if stop.wait(interval):
+                break
     except KeyboardInterrupt:
         pass
     finally:
@@ -351,4 +469,4 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
 
 
 __all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "decode_diagnostics", "nis_figures", "plain_lines",
-           "render", "run"]
+           "render", "run", "state_note"]

@@ -69,10 +69,19 @@ def render(data: dict) -> str:
     return "\n".join(out)
 
 
+def written_after(text: str) -> str:
+    """What a document holds after its generated part (the line "Tests: ..." ends it): sections written
+    by hand (restarts, soak), kept when the tables are rendered again."""
+    lines = text.splitlines(keepends=True)
+    end = next((i for i, line in enumerate(lines) if line.startswith("Tests: ")), None)
+    return "" if end is None else "".join(lines[end + 1:]).lstrip("\n")
+
+
 def render_file(src: Path, dest: Path = ROOT / "docs" / "RELIABILITY.md") -> Path:
     data = json.loads(Path(src).read_text())
     dest.parent.mkdir(parents=True, exist_ok=True)
-    dest.write_text(render(data))
+    kept = written_after(dest.read_text()) if dest.exists() else ""
+    dest.write_text(render(data) + ("\n" + kept if kept else ""))
     return dest
 
 

@@ -79,8 +79,11 @@ from .. import reasons
 from ..core.fusion import FusionCore
 from ..core.sensors.registry import kind_of
 from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
-from ..logs import get_logger
+from ..errors import SessionError
+from ..logs import bind_process, get_logger
+from .answer import HealthAnswer, answer, encode_answer
 from .drain_schedule import DrainSchedule
+from .link import LinkWatch
 from .outputs import Outputs
 from .rmw_zenoh import RmwNode, topic_name
 from .session import build_config, open_session
@@ -172,11 +175,19 @@ class Daemon:
             self.state_path = path if path.is_absolute() else (base_dir or Path.cwd()) / path
         self._saver: StateSaver | None = None
         self.resumed = False
+        self.link: LinkWatch | None = None  # the session's link to routers and peers (link.py), from start
+        self.metrics: Any = None  # the /metrics server (metrics.py) when [metrics] listen is set
+        self.zid = ""
 
     # -- life cycle ----------------------------------------------------------------------
     def start(self) -> None:
         out = self.cfg.output
         s = self.session
+        self.zid = str(s.zid())
+        self._start_metrics()  # first: an address in use fails the start before anything is declared
+        z = self.cfg.zenoh  # a link the config asks for is announced and counted (link.py)
+        self.link = LinkWatch(s, watched=z.mode == "client" or bool(z.connect))
+        self.link.start()
         if self.state_path is not None:
             self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s) is None
             self._saver = StateSaver(self.state_path, time.time)
@@ -210,6 +221,25 @@ class Daemon:
         if self._monitor_on or self.outputs.ros_diagnostics is not None:
             self._monitor = threading.Thread(target=self._watch, name="fusiond-health", daemon=True)
             self._monitor.start()
+
+    def _start_metrics(self) -> None:
+        listen = self.cfg.metrics.listen
+        if not listen:
+            return
+        from ..config import metrics_address
+        from .metrics import MetricsServer
+
+        host, port = metrics_address(listen)
+        try:
+            self.metrics = MetricsServer(self.answer, host, port)
+        except OSError as err:
+            raise SessionError(f"metrics.listen {listen}: cannot serve /metrics there: {err.strerror or err}") from None
+        log.info("metrics_listening", url=f"http://{listen.rpartition(':')[0]}:{self.metrics.port}/metrics")
+
+    def answer(self) -> HealthAnswer:
+        """The health answer: the report, the daemon's namespace and Zenoh id, its link (answer.py)."""
+        return answer(self.health.report(), self.cfg.zenoh.namespace, self.zid,
+                      self.link.health() if self.link is not None else None)
 
     def _save_state(self) -> None:
         """Worker (or after it ended): hand the core's state to the saver thread."""
@@ -245,6 +275,11 @@ class Daemon:
             except zenoh.ZError:
                 pass
         self._declared.clear()
+        if self.link is not None:
+            self.link.stop()
+        if self.metrics is not None:
+            self.metrics.stop()
+            self.metrics = None
 
     @property
     def published(self) -> int:
@@ -262,7 +297,7 @@ class Daemon:
         return self.outputs.tf_published if self.outputs is not None else 0
 
     def report(self) -> HealthReport:
-        return self.health.report()
+        return self.answer()
 
     def queued(self) -> int:
         """Samples and requests waiting for the worker."""
@@ -303,8 +338,7 @@ class Daemon:
         self._wake.put(None)
 
     def _on_query(self, query: zenoh.Query) -> None:
-        query.reply(self.cfg.output.health_key, encode_report(self.health.report()),
-                    encoding=zenoh.Encoding.APPLICATION_JSON)
+        query.reply(self.cfg.output.health_key, encode_answer(self.answer()), encoding=zenoh.Encoding.APPLICATION_JSON)
 
     def _on_set_pose_query(self, query: zenoh.Query) -> None:
         """Decode here (no core access); the worker applies it and replies."""
@@ -500,7 +534,7 @@ class Daemon:
             self._publish_estimate()
         self._refresh()
         if item.query is not None:
-            item.query.reply(self.cfg.output.set_pose_key, encode_report(self.health.report()),
+            item.query.reply(self.cfg.output.set_pose_key, encode_answer(self.answer()),
                              encoding=zenoh.Encoding.APPLICATION_JSON)
             item.query.drop()
 
@@ -554,10 +588,15 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, on_signal)
+    bind_process(namespace=cfg.zenoh.namespace)  # every line of the daemon names its robot
     session = open_session(conf)
     try:
         daemon = Daemon(cfg, session, base_dir=base_dir)
-        daemon.start()
+        try:
+            daemon.start()
+        except SessionError:
+            daemon.stop(0.5)
+            raise
         z = cfg.zenoh
         log.info("daemon_started", zid=str(session.zid()), mode=z.mode, listen=z.listen, connect=z.connect,
                  namespace=z.namespace or None, sensors=[s.name for s in cfg.sensors],

@@ -6,6 +6,11 @@ paced by bag (receive) time at `rate` (1.0 recorded pace, 0 as fast as possible)
 A sensor configured with `json` or `msgpack` gets that encoding instead, so the
 daemon of the same config can be fed without a robot.
 
+A daemon that answered before playing and stops answering (killed, crashed, its link
+gone) is said so (``daemon_stopped``: its liveliness token's withdrawal is watched while
+playing, its health asked again at the end): messages put after that went nowhere, and
+`fusiond play` exits non-zero instead of reporting a clean run.
+
 Publishers use reliable, blocking congestion control: a replay tool should not
 lose messages to its own speed (the daemon's queue still counts its own drops).
 
@@ -29,8 +34,9 @@ from ..codecs import encode_sample, make_decoder
 from ..config import Config
 from ..errors import PlaybackError
 from ..health import decode_report
+from ..presence import withdrawn
 from ..logs import get_logger
-from .daemon import sensor_kind
+from .daemon import alive_key, sensor_kind
 from .session import query_health
 
 log = get_logger("fusiond.play")
@@ -65,6 +71,8 @@ class PlayResult:
     # per sensor, the samples sent that the daemon did not fuse, by reason (its health's counts before and
     # after; "unaccounted": neither fused nor dropped when it settled); empty: all fused, or no daemon to ask
     unfused: dict[str, dict[str, int]] = field(default_factory=dict)
+    # why the daemon(s) that answered before playing did not after (None: they did, or none was awaited)
+    daemon_stopped: str | None = None
 
 
 def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> list[bytes]:
@@ -110,6 +118,7 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
                                               congestion_control=zenoh.CongestionControl.BLOCK)
             for s in cfg.sensors if s.name not in bag.missing}
     transcode = {s.name: _transcoder(s) for s in cfg.sensors}
+    watch = None
     try:
         answers = wait_for_daemon(session, cfg.output.health_key, wait_s) if wait_s > 0 else []
         if wait_s > 0 and not answers:
@@ -120,6 +129,10 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
         log.info("play_started", bag=list(names), rate=rate, messages=bag.total)
         t0_bag: int | None = None
         t0 = clock()
+        gone: list[float] = []  # wall seconds into the play when a daemon's liveliness token went
+        if answers:
+            watch = session.liveliness().declare_subscriber(
+                alive_key(cfg.output.health_key), lambda s: gone.append(clock() - t0) if withdrawn(s) else None)
         for bag_ns, sensor, raw in bag.raw_cdr():
             if stop.is_set():
                 result.interrupted = True
@@ -141,13 +154,21 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             result.bag_seconds = offset
         result.seconds = clock() - t0
         stop.wait(LINGER_S)
+        after = query_health(session, cfg.output.health_key, HEALTH_QUERY_S) if answers else []
         if dropped_before is not None:  # a daemon that could not keep up says so in its health: nothing lost silently
-            dropped_after = _queue_dropped(query_health(session, cfg.output.health_key, HEALTH_QUERY_S))
+            dropped_after = _queue_dropped(after)
             if dropped_after is not None:
                 result.daemon_dropped = dropped_after - dropped_before
-        if counts_before is not None and not result.interrupted:
+        if len(after) < len(answers):
+            went = f"; its liveliness token went {gone[0]:.1f} s into the play" if gone else ""
+            result.daemon_stopped = (f"{len(answers)} answered before playing, {len(after)} after "
+                                     f"{result.messages} messages{went}")
+            log.error("play_daemon_stopped", detail=result.daemon_stopped, health_key=cfg.output.health_key)
+        elif counts_before is not None and not result.interrupted:
             result.unfused = _unfused(session, cfg.output.health_key, counts_before, result.per_sensor, stop)
     finally:
+        if watch is not None:
+            watch.undeclare()
         for p in pubs.values():
             p.undeclare()
     log.info("play_finished", messages=result.messages, per_sensor=result.per_sensor,

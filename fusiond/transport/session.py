@@ -14,6 +14,7 @@ Rules (config.toml documents them):
 - Empty `connect` / `listen` lists leave Zenoh's defaults (a peer listens on a
   random TCP port, which is how peers found by scouting reach each other).
 - `namespace` is Zenoh's own key prefix: local keys stay unprefixed.
+- `connect_retry_*` are Zenoh's `connect/retry` (how soon a lost router is dialled again).
 """
 
 from __future__ import annotations
@@ -93,6 +94,10 @@ def build_config(
         _insert(conf, "listen/endpoints", zc.listen, "zenoh.listen")
     if zc.namespace:
         _insert(conf, "namespace", zc.namespace, "zenoh.namespace")
+    if any(wanted(f) for f in ("connect_retry_init_s", "connect_retry_max_s", "connect_retry_factor")):
+        _insert(conf, "connect/retry", {"period_init_ms": round(zc.connect_retry_init_s * 1000),
+                                        "period_max_ms": round(zc.connect_retry_max_s * 1000),
+                                        "period_increase_factor": zc.connect_retry_factor}, "zenoh.connect_retry_*")
     return conf
 
 

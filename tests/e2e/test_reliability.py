@@ -814,3 +814,94 @@ def test_burst_far_above_rate_is_bounded_counted_and_recovers(tmp_path, reliabil
         assert h["filter"]["finite"] and poses.non_finite() == 0
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(15) == 0
+
+
+# --------------------------------------------------------------------------- router outages of 1, 3 and 10 s
+
+OUTAGE_RATE_HZ = 50.0  # odometry put through the router, as `fusiond play` of a 50 Hz robot would
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("outage_s", [1.0, 3.0, 10.0])
+def test_router_outage_loses_about_the_outage(tmp_path, reliability_log, outage_s):
+    """The router between a player and the daemon (both clients, the config's retry defaults) is down for
+    ``outage_s``: what the daemon never received, in seconds of data, and how soon poses resumed."""
+    from tests.support.fleet import client, robot_config, start_daemon, start_router
+
+    port = free_port()
+    router = start_router(port, tmp_path / "router.log")
+    routers = [router]
+    log = tmp_path / "robot.log"
+    proc = start_daemon(robot_config(tmp_path / "robot.toml", port, "robot1"), log)
+    sessions = []
+    try:
+        feed = client(port, "robot1")
+        sessions.append(feed)
+        poses = Poses(feed)
+        wait_daemon_ready(feed, proc, log)
+        pub = feed.declare_publisher(WHEEL_KEY)
+        sent: list[tuple[float, float]] = []  # (wall, stamp)
+        stop = threading.Event()
+
+        def put_odometry() -> None:
+            t0, k = time.monotonic(), 0
+            while not stop.wait(max(t0 + k / OUTAGE_RATE_HZ - time.monotonic(), 0.0)):
+                stamp = 2000.0 + k / OUTAGE_RATE_HZ
+                pub.put(odom_payload(stamp))
+                sent.append((time.monotonic(), stamp))
+                k += 1
+
+        feeder = threading.Thread(target=put_odometry, daemon=True)
+        feeder.start()
+        wait_until(lambda: len(poses) > 25, 10, "poses before the outage")
+        before = health(feed)["sensors"]["wheel"]["received"]
+        n_before = len(sent)
+        router.kill()
+        router.wait(5)
+        stop.wait(outage_s)  # the fault's length, not a wait for a result
+        routers.append(start_router(port, tmp_path / "router.log"))
+        restarted = time.monotonic()
+        n_at_restart = len(sent)
+
+        def first_pose_after() -> float | None:
+            with poses.lock:
+                return next((arrival for arrival, *_ in poses.items if arrival > restarted), None)
+
+        resumed = wait_until(first_pose_after, 20, "poses after the outage")
+        resume_s = resumed - restarted
+        wait_until(lambda: len(sent) >= n_at_restart + 2 * OUTAGE_RATE_HZ, 10, "2 s more of odometry")
+        stop.set()
+        feeder.join(5)
+        n_sent = len(sent) - n_before
+        h = wait_until(lambda: (lambda x: x if x and x["sensors"]["wheel"]["received"] >= before else None)(
+            health(feed)), 10, "the daemon's health after the outage")
+        lost = n_sent - (h["sensors"]["wheel"]["received"] - before)
+        lost_s = lost / OUTAGE_RATE_HZ
+        events = [e["event"] for e in log_events(log)]
+        seen = "zenoh_link_lost" in events and "zenoh_link_restored" in events
+        reliability_log.record(
+            group="fault", sensor="zenoh",
+            input=f"the router between player and daemon (both clients) down {outage_s:g} s, odometry put at "
+                  f"{OUTAGE_RATE_HZ:g} Hz through it",
+            expected="the daemon logs the link lost and restored; data lost about the outage (connect_retry "
+                     "0.25 s growing to 0.5 s), not seconds more",
+            observed=(f"{lost} of {n_sent} odometry messages never received ({lost_s:.1f} s of data); poses "
+                      f"resumed {resume_s:.1f} s after the restart; link reconnections "
+                      f"{h['link_stats']['reconnections']}"),
+            passed=seen and lost_s <= outage_s + 1.5 and h["link_stats"]["reconnections"] >= 1,
+            crashed=proc.poll() is not None, non_finite=not h["filter"]["finite"], test="test_router_outage")
+        assert seen, events
+        assert lost_s <= outage_s + 1.5, (lost, n_sent)
+        assert h["link_stats"]["reconnections"] >= 1 and h["link"] == "connected"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(15) == 0
+    finally:
+        for s in sessions:
+            s.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)
+        for r in routers:
+            if r.poll() is None:
+                r.kill()
+                r.wait(5)
