@@ -29,9 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config, GpsSensor
+from ..config import Config
 from ..core.fusion import FusionCore
 from ..core.layout import absolute_sensor, fuses_height
+from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from ..samples import GpsSample
 
@@ -81,9 +82,10 @@ class Prediction:
 
 
 def gps_sensor(cfg: Config):
-    """The GPS that defines the world frame, or None (a pose sensor's or no absolute sensor)."""
+    """The GPS that defines the world frame (an absolute sensor whose kind is geodetic), or None (a pose
+    sensor's or no absolute sensor)."""
     for s in cfg.sensors:
-        if isinstance(s, GpsSensor) and absolute_sensor(s):
+        if absolute_sensor(s) and kind_of(s).geodetic:
             return s
     return None
 
