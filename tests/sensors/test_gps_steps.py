@@ -121,6 +121,22 @@ def test_outlier_bursts_stay_rejected(offsets):
     assert max(e for t, e in errors if t <= STEP_AT + 3.0) < 3 * SIGMA
 
 
+def test_a_burst_that_holds_its_offset_past_the_minimum_is_followed_and_left_at_once_when_it_ends():
+    """12 fixes (1.2 s) at one 7 m offset, then back: indistinguishable from a step until it ends, so it is
+    taken at its 6th fix. When it ends the fixes return to the level the step left, a known level (no
+    offset to estimate, no cap on the evidence): back within 2 fixes, not 6, and then within 3 sigma of
+    the truth again."""
+    w = _car()
+    samples = _edited(simulate(w), [(7.0, 0.0)] * 12)
+    _, records, errors, heading_lost = _run(w, samples, _config())
+    taken = [i for i, r in enumerate(records) if r.channel == "position_reacquired"]
+    assert len(taken) == 2 and taken[0] == 5
+    assert 12 <= taken[1] <= 13  # the 1st or 2nd fix after the burst
+    assert not heading_lost
+    back = records[taken[1]].stamp
+    assert max(e for t, e in errors if t >= back + 0.05) < 3 * SIGMA
+
+
 def _scattered(samples: list, share: float, seed: int) -> tuple[list, int]:
     """From STEP_AT on, each fix an outlier with probability ``share``: 3-30 m in a uniform direction."""
     rng = np.random.default_rng(seed)

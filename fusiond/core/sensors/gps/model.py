@@ -36,10 +36,12 @@ fixes 1..k-1 (``_step_llr``):
 - H1, "the error stepped by one offset d": y_k ~ N(d_k, R_k + C_k + G_k), with d_k the R-weighted mean
   of the run's earlier innovations, C_k its covariance (sum R_j^-1)^-1, and G_k what the dead-reckoning
   added to the filter's own error H P H^T since the run began (the filter is not updated meanwhile);
-- H0, "outliers": the fix is an independent outlier of the run's size in any direction, y_k ~ N(0,
-  S_k + m_k^2 I) with m_k^2 the run's mean squared innovation per axis, or, with probability BURST_REPEAT,
-  a burst that repeats its offset (then distributed as under H1: a burst that holds one offset can not
-  be told from a step until it ends, so this term is what makes it last).
+- H0, "outliers / the old position": the fix is, with equal odds, an independent outlier of the run's
+  size in any direction, y_k ~ N(0, S_k + m_k^2 I) with m_k^2 the run's mean squared innovation per axis,
+  or an ordinary fix at the filter's position that the gate caught, y_k ~ N(0, S_k) (a gate set within
+  the noise rejects runs of those); or, with probability BURST_REPEAT, a burst that repeats its offset
+  (then distributed as under H1: a burst that holds one offset can not be told from a step until it
+  ends, so this term is what makes it last).
 With p1, p0 these densities, fix k adds lambda_k = log p1 - log((1 - rho) p0' + rho p1), rho =
 BURST_REPEAT and p0' the independent-outlier density: lambda_k <= log(1 / rho) however well the fixes
 agree, and negative when fix k lands farther from d_k than from the outliers' spread. The statistic is
@@ -55,7 +57,9 @@ CUSUM's mean run length, >= 1 / alpha tests). The cap sets the fewest fixes a st
 noise, and a 7 m step in 0.5 m fixes (each increment ~1.5) is taken at its 6th fix, 0.5 s at 10 Hz.
 Taken, the state's horizontal position moves by the run's mean offset and its covariance grows by that
 mean's (``_take_step``); the heading, the scales and their correlations stay: the receiver moved, not
-the robot. A run that did not begin with a jump (the filter drifting off through a gap, a wrong heading)
+the robot. A burst that holds one offset for more than 5 fixes is taken so, and when it ends the fixes
+return to the level it left: for REACQUIRE_JUMP_S after a step that level is a known hypothesis
+(``_back_llr``, no offset to estimate, no cap), which one or two fixes decide at the same threshold. A run that did not begin with a jump (the filter drifting off through a gap, a wrong heading)
 keeps the REACQUIRE_S rule with its new heading search, and so does a run while the heading is only
 provisional (its dead-reckoned track may bend by what the heading is not sure of).
 """
@@ -196,6 +200,7 @@ class StepRun(msgspec.Struct, frozen=True, gc=False):
     sq: float
     hp0: tuple[float, float, float, float]
     llr: float = 0.0
+    back: float = 0.0  # the CUSUM of "back at the level the last step left" (``_back_llr``)
 
 
 class GpsOwn(msgspec.Struct, frozen=True, gc=False):
@@ -207,6 +212,7 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
     accepted: tuple[float, float, float] | None = None  # the newest fix the gate let in: (t, innovation east, north)
     step: StepRun | None = None  # the step test over a run of gated-out fixes that began with a jump (module doc)
+    left: tuple[float, float, float] | None = None  # the last step taken: (t, east, north), the level it left
     unaligned: float = 0.0  # m dead-reckoned since the last fix (they share one heading error)
     # unstated noise (``_measured_noise``): consecutive fixes' distances against the dead-reckoned ones,
     # (count, sum of squared differences), and the previous fix: (t, east, north, dead-reckoned east, north)
@@ -482,24 +488,31 @@ class GpsModel(SensorModel):
             return None
         hp = H.dot(s.ekf.P).dot(H.T)
         st = own.step
+        left = own.left
+        if left is not None and own.rejected and own.rejected[0][0] - left[0] > REACQUIRE_JUMP_S:
+            left = None  # long enough at the new level: a return is a step like any other
+        h = -math.log(alpha)
         if st is None:
             if len(own.rejected) != 1 or not _jumped(own, own.rejected[0]):
                 return None  # not the first fix of a run, or no jump: the REACQUIRE_S rule alone
-            s.own[self.index] = msgspec.structs.replace(own, step=_step_start(y, R, hp))
-            return None
-        llr = st.llr + _step_llr(st, y, R, hp)
-        if llr <= 0.0:  # the run so far does not hold one offset: start over at this fix
-            s.own[self.index] = msgspec.structs.replace(own, step=_step_start(y, R, hp))
-            return None
-        Ri = np.linalg.inv(R)
-        i0, i1, i2, i3 = (Ri + np.array(st.info).reshape(2, 2)).ravel().tolist()
-        iy = Ri.dot(y) + np.array(st.info_y)
-        st = StepRun(st.n + 1, (i0, i1, i2, i3), (float(iy[0]), float(iy[1])), st.sq + float(y.dot(y)), st.hp0, llr)
-        s.own[self.index] = msgspec.structs.replace(own, step=st)
-        if llr < -math.log(alpha):
+            st = _step_start(y, R, hp)
+        else:
+            llr = st.llr + _step_llr(st, y, R, hp)
+            if llr <= 0.0:  # the run so far does not hold one offset: start over at this fix
+                st = msgspec.structs.replace(_step_start(y, R, hp), back=st.back)
+            else:
+                Ri = np.linalg.inv(R)
+                i0, i1, i2, i3 = (Ri + np.array(st.info).reshape(2, 2)).ravel().tolist()
+                iy = Ri.dot(y) + np.array(st.info_y)
+                st = StepRun(st.n + 1, (i0, i1, i2, i3), (float(iy[0]), float(iy[1])), st.sq + float(y.dot(y)),
+                             st.hp0, llr, st.back)
+        if left is not None:
+            st = msgspec.structs.replace(st, back=max(0.0, st.back + _back_llr(st, y, R, hp, left)))
+        s.own[self.index] = msgspec.structs.replace(own, step=st, left=left)
+        if st.llr < h and st.back < h:
             return None
         C = np.linalg.inv(np.array(st.info).reshape(2, 2))
-        return C.dot(iy), C
+        return C.dot(np.array(st.info_y)), C
 
     def _take_step(self, s: "FilterState", step: tuple[np.ndarray, np.ndarray], stamp: float, emit: bool) -> None:
         """The receiver's error stepped by d (module doc, "Steps"): the horizontal position moves by d, the
@@ -522,7 +535,9 @@ class GpsModel(SensorModel):
         new_frame(s)  # the position moved under the differential pose sensors: their deltas restart
         last = own.rejected[-1] if own.rejected else None
         accepted = None if last is None else (stamp, last[1] - float(d[0]), last[2] - float(d[1]))
-        s.own[self.index] = msgspec.structs.replace(own, rejected=(), step=None, accepted=accepted)
+        back = own.left is not None and own.step.back >= own.step.llr
+        left = None if back else (stamp, float(d[0]), float(d[1]))
+        s.own[self.index] = msgspec.structs.replace(own, rejected=(), step=None, accepted=accepted, left=left)
 
     @staticmethod
     def _reacquire_after(own: GpsOwn, first: tuple) -> float:
@@ -704,13 +719,28 @@ def _step_llr(st: StepRun, y: np.ndarray, R: np.ndarray, hp: np.ndarray) -> floa
     G = (v * np.maximum(w, 0.0)).dot(v.T)  # through a correlated update of another sensor)
     l1 = _log_normal2(y - d, R + C + G)
     m2 = st.sq / (2.0 * st.n)
-    l0 = _log_normal2(y, hp + R + m2 * np.eye(2))
+    S = hp + R
+    # an outlier of the run's size, or an ordinary fix at the filter's position that the gate caught (a
+    # gate set within the noise rejects those in runs, scattered about the old position, not a new one)
+    a, b = _log_normal2(y, S + m2 * np.eye(2)), _log_normal2(y, S)
+    l0 = max(a, b) + math.log1p(math.exp(-abs(a - b))) - math.log(2.0)
     if l1 == -math.inf:
         return -math.inf
     e = l0 - l1
     if e > 700.0:  # exp would overflow: the (1 - rho) p0 term alone
         return -e - math.log1p(-BURST_REPEAT)
     return -math.log((1.0 - BURST_REPEAT) * math.exp(e) + BURST_REPEAT)
+
+
+def _back_llr(st: StepRun, y: np.ndarray, R: np.ndarray, hp: np.ndarray, left: tuple[float, float, float]) -> float:
+    """What a gated-out fix says for "back at the level the last step left" (module doc, "Steps"): the
+    innovation seen from that level, y + d_left ~ N(0, H P H^T + R), against an outlier of the run's size
+    (``st`` includes this fix). A known level has no offset to estimate and a burst that ends returns to
+    it: no cap, one or two fixes decide."""
+    S = hp + R
+    l1 = _log_normal2(y + np.array(left[1:]), S)
+    l0 = _log_normal2(y, S + (st.sq / (2.0 * st.n)) * np.eye(2))
+    return l1 - l0
 
 
 def _upper_variance(sq: float, n: int) -> float | None:
