@@ -50,7 +50,7 @@ first of the new level). The step is taken when L_k >= log(1 / alpha), alpha = `
 Threshold: the product of one-step predictive likelihood ratios is a non-negative martingale of mean 1
 under H0 (each factor's H0-expectation is 1, whatever the earlier fixes estimated), so by Ville's
 inequality P(it ever reaches 1 / alpha | H0) <= alpha: at most a fraction alpha of the runs (and
-restarts) that are outliers is taken for a step (Wald's bound for the open-ended test; Lorden's for the
+restarts) that are outliers as H0 describes them is taken for a step (Wald's bound for the open-ended test; Lorden's for the
 CUSUM's mean run length, >= 1 / alpha tests). The cap sets the fewest fixes a step needs:
 1 + ceil(log(1 / alpha) / log(1 / rho)), 6 at the defaults (5 agreeing increments of at most log 5 =
 1.61 against log 1000 = 6.91): bursts of up to 5 fixes at one offset stay rejected whatever their
