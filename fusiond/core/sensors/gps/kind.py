@@ -29,6 +29,8 @@ class GpsKind(SensorKind):
     def validate(self, cfg: GpsSensor, at: Callable[[str], str]) -> None:
         if cfg.datum is not None and not (-90.0 <= cfg.datum[0] <= 90.0 and -180.0 <= cfg.datum[1] <= 180.0):
             raise ConfigError(f"{at('datum')}: latitude must be in [-90, 90] and longitude in [-180, 180]")
+        if not 0.0 <= cfg.step_false_alarm < 1.0:
+            raise ConfigError(f"{at('step_false_alarm')}: must be in [0, 1)")
         if cfg.heading_init_m <= 0.0:
             raise ConfigError(f"{at('heading_init_m')}: must be positive")
         if cfg.error_tau_s > 0.0 and cfg.error_sigma is None:

@@ -26,6 +26,44 @@ so the fixes pull z only as far as that wander and the odometry allow.
 
 Axes. A fix axis whose stated variance exceeds ``max_sigma``^2 is not measured and not
 fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitude).
+
+Steps. A receiver's error can step and stay (a re-acquisition, a multipath lock that ends): the fixes
+jump by d from one epoch to the next and keep the new level. The gate rejects them as it rejects an
+outlier, and waiting REACQUIRE_JUMP_S before believing them costs |d| for that long. Once the heading is
+known, a run of gated-out fixes that began with a jump (its first fix within JUMP_AFTER_S of one the gate
+let in) is judged by a sequential probability-ratio test of two hypotheses about fix k of the run, given
+fixes 1..k-1 (``_step_llr``):
+- H1, "the error stepped by one offset d": y_k ~ N(d_k, R_k + C_k + G_k), with d_k the R-weighted mean
+  of the run's earlier innovations, C_k its covariance (sum R_j^-1)^-1, and G_k what the dead-reckoning
+  added to the filter's own error H P H^T since the run began (the filter is not updated meanwhile);
+- H0, "outliers / the old position": the fix is, with equal odds, an independent outlier of the run's
+  size in any direction, y_k ~ N(0, S_k + m_k^2 I) with m_k^2 the run's mean squared innovation per axis,
+  or an ordinary fix at the filter's position that the gate caught, y_k ~ N(0, S_k) (a gate set within
+  the noise rejects runs of those); or, with probability BURST_REPEAT, a burst that repeats its offset
+  (then distributed as under H1: a burst that holds one offset can not be told from a step until it
+  ends, so this term is what makes it last).
+With p1, p0 these densities, fix k adds lambda_k = log p1 - log((1 - rho) p0' + rho p1), rho =
+BURST_REPEAT and p0' the independent-outlier density: lambda_k <= log(1 / rho) however well the fixes
+agree, and negative when fix k lands farther from d_k than from the outliers' spread. The statistic is
+Page's CUSUM, L_k = max(0, L_k-1 + lambda_k): at 0 the run starts over at the newest fix (it may be the
+first of the new level). The step is taken when L_k >= log(1 / alpha), alpha = ``step_false_alarm``.
+Threshold: the product of one-step predictive likelihood ratios is a non-negative martingale of mean 1
+under H0 (each factor's H0-expectation is 1, whatever the earlier fixes estimated), so by Ville's
+inequality P(it ever reaches 1 / alpha | H0) <= alpha: at most a fraction alpha of the runs (and
+restarts) that are outliers as H0 describes them is taken for a step (Wald's bound for the open-ended test; Lorden's for the
+CUSUM's mean run length, >= 1 / alpha tests). The cap sets the fewest fixes a step needs:
+1 + ceil(log(1 / alpha) / log(1 / rho)), 6 at the defaults (5 agreeing increments of at most log 5 =
+1.61 against log 1000 = 6.91): bursts of up to 5 fixes at one offset stay rejected whatever their
+noise, and a 7 m step in 0.5 m fixes (each increment ~1.5) is taken at its 6th fix, 0.5 s at 10 Hz.
+Taken, the state's horizontal position moves by the run's mean offset and its covariance grows by that
+mean's (``_take_step``); the heading, the scales and their correlations stay: the receiver moved, not
+the robot (the fix's record: channel position_reacquired; the log line: gps_step_taken). A burst
+that holds one offset for more than 5 fixes is taken so, and when it ends the fixes return to the
+level it left: for REACQUIRE_JUMP_S after a step that level is a known hypothesis (``_back_llr``, no
+offset to estimate, no cap), which one or two fixes decide at the same threshold. A run that did not
+begin with a jump (the filter drifting off through a gap, a wrong heading)
+keeps the REACQUIRE_S rule with its new heading search, and so does a run while the heading is only
+provisional (its dead-reckoned track may bend by what the heading is not sure of).
 """
 
 from __future__ import annotations
@@ -70,6 +108,8 @@ REACQUIRE_AGREE = 0.1  # "agreeing": spread of their innovations within this fra
 REACQUIRE_SIGMAS = 3.0  # ... or within this many fix sigmas
 REACQUIRE_JUMP_S = 10.0  # s instead of REACQUIRE_S when the run began with a jump of the fixes (``_locked_out``)
 JUMP_AFTER_S = 1.0  # ... "a jump": its first fix within this of an accepted one, and most of its offset new
+BURST_REPEAT = 0.2  # the outlier model's statement: a burst repeats its previous fix's offset with this probability
+# per fix. It caps what one agreeing fix can say for a step at log(1 / BURST_REPEAT) (module doc, "Steps")
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
 FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is that fix again, with rounding noise ...
 FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
@@ -151,6 +191,20 @@ class GpsPolicy:
 
 
 
+class StepRun(msgspec.Struct, frozen=True, gc=False):
+    """The step test's sums over the run since its (re)start (module doc, "Steps"): the innovations'
+    information ``info`` = sum R^-1 and ``info_y`` = sum R^-1 y (row-major 2x2 and 2), their squared norms
+    ``sq`` over ``n`` fixes, H P H^T at the run's first fix ``hp0``, and the CUSUM ``llr``."""
+
+    n: int
+    info: tuple[float, float, float, float]
+    info_y: tuple[float, float]
+    sq: float
+    hp0: tuple[float, float, float, float]
+    llr: float = 0.0
+    back: float = 0.0  # the CUSUM of "back at the level the last step left" (``_back_llr``)
+
+
 class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     """The GPS's slice of the filter state (immutable: history snapshots share it)."""
 
@@ -159,6 +213,8 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     # consecutive gated-out fixes: (t, innovation east, north, variance, fix east, north, dead-reckoned east, north)
     rejected: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
     accepted: tuple[float, float, float] | None = None  # the newest fix the gate let in: (t, innovation east, north)
+    step: StepRun | None = None  # the step test over a run of gated-out fixes that began with a jump (module doc)
+    left: tuple[float, float, float] | None = None  # the last step taken: (t, east, north), the level it left
     unaligned: float = 0.0  # m dead-reckoned since the last fix (they share one heading error)
     # unstated noise (``_measured_noise``): consecutive fixes' distances against the dead-reckoned ones,
     # (count, sum of squared differences), and the previous fix: (t, east, north, dead-reckoned east, north)
@@ -294,10 +350,18 @@ class GpsModel(SensorModel):
             own = s.own[self.index]
             if own.unaligned and not res.rejected:  # the fix bounds the displacement again
                 s.own[self.index] = msgspec.structs.replace(own, unaligned=0.0)
-            if channel != "position_unaligned" and self._locked_out(s, res.rejected, y, R, z, stamp):
-                self._reacquire(s, z, inp, horizontal, stamp, emit)
-                channel = "position_reacquired"
-            elif channel == "position_unaligned" or (channel == "position_provisional" and not res.rejected):
+            if channel != "position_unaligned":
+                lost = self._locked_out(s, res.rejected, y, R, z, stamp)
+                step = None
+                if not lost and channel == "position" and len(horizontal) == 2:
+                    step = self._step_test(s, res.rejected, y, H, R)
+                if step is not None:
+                    self._take_step(s, step, stamp, emit)
+                    channel = "position_reacquired"
+                elif lost:
+                    self._reacquire(s, z, inp, horizontal, stamp, emit)
+                    channel = "position_reacquired"
+            if channel == "position_unaligned" or (channel == "position_provisional" and not res.rejected):
                 if not res.rejected:
                     self._heading(s, z, inp.cov, stamp, emit)  # after the fix has put the antenna where it is
             if not res.rejected and not s.heading_ready:
@@ -413,6 +477,70 @@ class GpsModel(SensorModel):
             return False
         return True
 
+    def _step_test(self, s: "FilterState", rejected: bool, y: np.ndarray, H: np.ndarray,
+                   R: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The step test (module doc, "Steps") after this fix's horizontal update: started at the first
+        gated-out fix of a run that began with a jump, fed every further one, dropped at an accepted fix.
+        The step (d, C) once the CUSUM reaches log(1 / step_false_alarm), else None."""
+        own: GpsOwn = s.own[self.index]
+        alpha = self.cfg.step_false_alarm
+        if not rejected or alpha <= 0.0:
+            if own.step is not None:
+                s.own[self.index] = msgspec.structs.replace(own, step=None)
+            return None
+        hp = H.dot(s.ekf.P).dot(H.T)
+        st = own.step
+        left = own.left
+        if left is not None and own.rejected and own.rejected[0][0] - left[0] > REACQUIRE_JUMP_S:
+            left = None  # long enough at the new level: a return is a step like any other
+        h = -math.log(alpha)
+        if st is None:
+            if len(own.rejected) != 1 or not _jumped(own, own.rejected[0]):
+                return None  # not the first fix of a run, or no jump: the REACQUIRE_S rule alone
+            st = _step_start(y, R, hp)
+        else:
+            llr = st.llr + _step_llr(st, y, R, hp)
+            if llr <= 0.0:  # the run so far does not hold one offset: start over at this fix
+                st = msgspec.structs.replace(_step_start(y, R, hp), back=st.back)
+            else:
+                Ri = np.linalg.inv(R)
+                i0, i1, i2, i3 = (Ri + np.array(st.info).reshape(2, 2)).ravel().tolist()
+                iy = Ri.dot(y) + np.array(st.info_y)
+                st = StepRun(st.n + 1, (i0, i1, i2, i3), (float(iy[0]), float(iy[1])), st.sq + float(y.dot(y)),
+                             st.hp0, llr, st.back)
+        if left is not None:
+            st = msgspec.structs.replace(st, back=max(0.0, st.back + _back_llr(st, y, R, hp, left)))
+        s.own[self.index] = msgspec.structs.replace(own, step=st, left=left)
+        if st.llr < h and st.back < h:
+            return None
+        C = np.linalg.inv(np.array(st.info).reshape(2, 2))
+        return C.dot(np.array(st.info_y)), C
+
+    def _take_step(self, s: "FilterState", step: tuple[np.ndarray, np.ndarray], stamp: float, emit: bool) -> None:
+        """The receiver's error stepped by d (module doc, "Steps"): the horizontal position moves by d, the
+        run's mean offset, and its covariance grows by C, that mean's own; what P says about the heading,
+        the scales and their relation to the position stays (a constant shift changes none of it). The
+        newest fix, at the new level, becomes the reference of the next jump check."""
+        d, C = step
+        own: GpsOwn = s.own[self.index]
+        ekf = s.ekf
+        if emit:  # once: not again for each re-application after a late sample
+            log.warning("gps_step_taken", sensor=self.name, stamp=stamp, fixes=own.step.n,
+                        seconds=stamp - own.rejected[0][0] if own.rejected else 0.0,
+                        east=float(d[0]), north=float(d[1]), llr=own.step.llr)
+        p = ekf.position()
+        ekf.set_position((p[0] + float(d[0]), p[1] + float(d[1]), p[2]), (0, 1))
+        P = ekf.P.copy()
+        rows = np.ix_(POSITION_ROWS[0:2], POSITION_ROWS[0:2])
+        P[rows] += C
+        ekf.P = P
+        new_frame(s)  # the position moved under the differential pose sensors: their deltas restart
+        last = own.rejected[-1] if own.rejected else None
+        accepted = None if last is None else (stamp, last[1] - float(d[0]), last[2] - float(d[1]))
+        back = own.left is not None and own.step.back >= own.step.llr
+        left = None if back else (stamp, float(d[0]), float(d[1]))
+        s.own[self.index] = msgspec.structs.replace(own, rejected=(), step=None, accepted=accepted, left=left)
+
     @staticmethod
     def _reacquire_after(own: GpsOwn, first: tuple) -> float:
         """How long a run of gated-out fixes must last to say the filter is lost: REACQUIRE_S, or
@@ -421,11 +549,7 @@ class GpsModel(SensorModel):
         through a gap or a tunnel, a wrong heading); a receiver jumps: multipath (a 4 s burst 18 m
         off would be taken in after 3 s and left again 1 s later), a reset. Its new fixes may be right, but
         they have to keep saying so for longer."""
-        last = own.accepted
-        if last is None or first[0] - last[0] > JUMP_AFTER_S:
-            return REACQUIRE_S
-        new_part = math.hypot(first[1] - last[1], first[2] - last[2])
-        return REACQUIRE_JUMP_S if new_part > 0.5 * math.hypot(first[1], first[2]) else REACQUIRE_S
+        return REACQUIRE_JUMP_S if _jumped(own, first) else REACQUIRE_S
 
     def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
                    emit: bool) -> None:
@@ -559,6 +683,68 @@ class GpsModel(SensorModel):
         s.ekf.map_errors(J)
 
 
+def _jumped(own: GpsOwn, first: tuple) -> bool:
+    """Did the run of gated-out fixes that begins with ``first`` begin with a jump of the fixes: its first
+    fix within JUMP_AFTER_S of one the gate let in, and most of its offset new (``_reacquire_after``)?"""
+    last = own.accepted
+    if last is None or first[0] - last[0] > JUMP_AFTER_S:
+        return False
+    return math.hypot(first[1] - last[1], first[2] - last[2]) > 0.5 * math.hypot(first[1], first[2])
+
+
+def _step_start(y: np.ndarray, R: np.ndarray, hp: np.ndarray) -> StepRun:
+    """The step test's sums over one fix: innovation ``y``, fix covariance ``R``, filter's H P H^T ``hp``."""
+    Ri = np.linalg.inv(R)
+    iy = Ri.dot(y)
+    i0, i1, i2, i3 = Ri.ravel().tolist()
+    h0, h1, h2, h3 = hp.ravel().tolist()
+    return StepRun(1, (i0, i1, i2, i3), (float(iy[0]), float(iy[1])), float(y.dot(y)), (h0, h1, h2, h3))
+
+
+def _log_normal2(r: np.ndarray, cov: np.ndarray) -> float:
+    """log N(r; 0, cov) of a 2-vector."""
+    a, b, c = float(cov[0, 0]), 0.5 * float(cov[0, 1] + cov[1, 0]), float(cov[1, 1])
+    det = a * c - b * b
+    if det <= 0.0:
+        return -math.inf
+    q = (c * r[0] * r[0] - 2.0 * b * r[0] * r[1] + a * r[1] * r[1]) / det
+    return -0.5 * q - 0.5 * math.log(det) - math.log(2.0 * math.pi)
+
+
+def _step_llr(st: StepRun, y: np.ndarray, R: np.ndarray, hp: np.ndarray) -> float:
+    """lambda_k of the module doc ("Steps"): what fix k (innovation ``y``, fix covariance ``R``, filter's
+    H P H^T ``hp``) says for "one offset since the run began" against "an outlier", given the run's sums."""
+    C = np.linalg.inv(np.array(st.info).reshape(2, 2))
+    d = C.dot(np.array(st.info_y))
+    grown = hp - np.array(st.hp0).reshape(2, 2)  # the dead-reckoning's growth of the filter's error since
+    w, v = np.linalg.eigh(0.5 * (grown + grown.T))  # the run began (its positive part: P may also shrink
+    G = (v * np.maximum(w, 0.0)).dot(v.T)  # through a correlated update of another sensor)
+    l1 = _log_normal2(y - d, R + C + G)
+    m2 = st.sq / (2.0 * st.n)
+    S = hp + R
+    # an outlier of the run's size, or an ordinary fix at the filter's position that the gate caught (a
+    # gate set within the noise rejects those in runs, scattered about the old position, not a new one)
+    a, b = _log_normal2(y, S + m2 * np.eye(2)), _log_normal2(y, S)
+    l0 = max(a, b) + math.log1p(math.exp(-abs(a - b))) - math.log(2.0)
+    if l1 == -math.inf:
+        return -math.inf
+    e = l0 - l1
+    if e > 700.0:  # exp would overflow: the (1 - rho) p0 term alone
+        return -e - math.log1p(-BURST_REPEAT)
+    return -math.log((1.0 - BURST_REPEAT) * math.exp(e) + BURST_REPEAT)
+
+
+def _back_llr(st: StepRun, y: np.ndarray, R: np.ndarray, hp: np.ndarray, left: tuple[float, float, float]) -> float:
+    """What a gated-out fix says for "back at the level the last step left" (module doc, "Steps"): the
+    innovation seen from that level, y + d_left ~ N(0, H P H^T + R), against an outlier of the run's size
+    (``st`` includes this fix). A known level has no offset to estimate and a burst that ends returns to
+    it: no cap, one or two fixes decide."""
+    S = hp + R
+    l1 = _log_normal2(y + np.array(left[1:]), S)
+    l0 = _log_normal2(y, S + (st.sq / (2.0 * st.n)) * np.eye(2))
+    return l1 - l0
+
+
 def _upper_variance(sq: float, n: int) -> float | None:
     """The upper confidence bound (NOISE_UPPER_Z) of sigma^2 from n increments d, E d^2 = 2 sigma^2, whose
     squares sum to ``sq``: sq / (2 sigma^2) is chi-square with n dof, so sigma^2 <= sq / (2 q) with q its
@@ -579,4 +765,4 @@ def measured_axes(cfg: GpsSensor, cov) -> tuple[int, ...]:
     return tuple(i for i in range(3) if cov[4 * i] <= limit)
 
 
-__all__ = ["GpsInput", "GpsModel", "GpsOwn", "GpsPolicy", "GpsTrack"]
+__all__ = ["GpsInput", "GpsModel", "GpsOwn", "GpsPolicy", "GpsTrack", "StepRun"]

@@ -13,6 +13,10 @@ class GpsSensor(SensorTable, tag="gps"):
     # receiver's ordinary noise (a consistent filter rejects ~1 fix in 10^5); a run of agreeing
     # rejected fixes re-acquires (core/sensors/gps/model.py), so the gate cannot lock the filter out
     mahalanobis_threshold: float = 5.0
+    # a run of gated-out fixes that began with a jump of the fixes and keeps one common offset is a step
+    # of the receiver's error, taken within a few fixes by a sequential test whose false alarms (steps
+    # taken from outliers) stay below this probability per run; 0: no such test (model.py, module doc)
+    step_false_alarm: float = 1.0e-3
     datum: Vec3 | None = None  # [lat deg, lon deg, alt m]; default: the first valid fix
     position_noise: Vec3 | None = None  # std devs east north up, m; replaces position_covariance
     position_min_sigma: float = 0.01  # floor, m
