@@ -14,7 +14,23 @@ from .verdict import Verdict, filter_key
 from .thresholds import DROPOUT_FRACTION, DROPOUT_LONGEST_S
 
 
-def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, standstill_updates: int) -> Verdict | None:
+def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
+    """Does a sensor that observes heading (a GPS, a pose, an IMU's absolute or relative yaw) take part: one
+    configured and, when the per-sensor counts are known, one that delivered a sample (a configured sensor
+    that stayed silent, replayed with --allow-missing, references nothing)."""
+    def delivered(name: str) -> bool:
+        return stats is None or stats.get(name, {}).get("received", 0) > 0
+
+    return any(isinstance(s, (GpsSensor, PoseSensor)) and delivered(s.name) for s in cfg.sensors) or any(
+        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") and delivered(s.name)
+        for s in cfg.sensors)
+
+
+def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, standstill_updates: int,
+                stats: dict[str, dict] | None = None) -> Verdict | None:
+    """The covariance reached its cap: after dropouts, or because the gyro bias is unobservable (no
+    standstill, no heading reference that delivered a sample: a configured sensor that stayed silent,
+    replayed with --allow-missing, references nothing), or otherwise."""
     fc = cfg.filter
     pos_cap, att_cap = fc.covariance_cap
     reached = at_cap or any(v >= 0.999 * pos_cap for v in series.est_pos_var) or any(
@@ -35,8 +51,7 @@ def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, sta
                        f"{longest:.1f} s; each inflates the covariance by gap_inflation per sqrt(s)",
                        filter_key("gap_inflation"), evidence={"gaps": float(len(gaps)), "gap_total_s": total,
                                                              "gap_longest_s": longest})
-    heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
-        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
+    heading_ref = has_heading_reference(cfg, stats)
     if gyro_fused and standstill_updates == 0 and not heading_ref:
         return Verdict("filter", "covariance", "warn",
                        f"position uncertainty reached filter.covariance_cap{when} because the gyro bias is "

@@ -129,7 +129,7 @@ class Evidence:
         """The cross-source gyro-bias verdict with ``key``'s standstill statistics (None: not judged so)."""
         cache = self._bias_verdicts
         if key not in cache:
-            cache[key] = bias_check(self.series, self.config, self.channels[key], self.gyro_fused) if self.known else None
+            cache[key] = bias_check(self.series, self.config, self.channels[key], self.gyro_fused, self.stats) if self.known else None
         return cache[key]
 
     def channel_imu(self, key: tuple[str, str]) -> ImuSensor:

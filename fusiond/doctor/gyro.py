@@ -16,8 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, OdomSensor, PoseSensor
+from ..config import Config, ImuSensor, OdomSensor
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
+from .covariance import has_heading_reference
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
@@ -153,7 +154,8 @@ def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Ep
     return [e for e, f in zip(episodes, turns) if not f], [e for e, f in zip(episodes, turns) if f]
 
 
-def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool) -> Verdict | None:
+def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool,
+               stats: dict[str, dict] | None = None) -> Verdict | None:
     imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
     if imu is None or not gyro_fused:
         return None
@@ -174,8 +176,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        "no gyro sample from this IMU in the recording while the odometry ran (its topic absent, or "
                        "every sample lost): the gyro drove nothing and its bias was never learned; check its key",
                        sensor_key(imu.name, "key"), evidence={"gyro_samples": 0.0})
-    heading_ref = any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors) or any(
-        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") for s in cfg.sensors)
+    heading_ref = has_heading_reference(cfg, stats)
     duration = (series.odom_t[-1] - series.odom_t[0]) if len(series.odom_t) > 1 else 0.0
     if not episodes and (ch is None or ch.n == 0):
         if heading_ref or duration <= 0.0:

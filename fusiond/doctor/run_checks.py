@@ -36,7 +36,7 @@ class GyroBiasUnseen(BaseCheck):
     def run(self, ev: Evidence) -> list[Verdict]:
         if ev.gyro_bias_stats is not None:
             return []
-        return found(bias_check(ev.series, ev.config, None, ev.gyro_fused))
+        return found(bias_check(ev.series, ev.config, None, ev.gyro_fused, ev.stats))
 
 
 class Lean(BaseCheck):
@@ -107,7 +107,7 @@ class CovarianceCap(BaseCheck):
     name = "covariance_cap"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(cap_verdict(ev.series, ev.config, ev.at_cap, ev.gyro_fused, ev.standstill_updates))
+        return found(cap_verdict(ev.series, ev.config, ev.at_cap, ev.gyro_fused, ev.standstill_updates, ev.stats))
 
 
 class Drops(BaseCheck):

@@ -61,3 +61,14 @@ def test_allow_missing_replays_without_it_and_says_so(jackal_bag, tmp_path):
     assert "topic /imu/dta is not in the bag (did you mean /imu/data?); replaying without it" in proc.stderr
     assert "missing     no bag topic for sensor(s): imu" in proc.stdout
     assert len(tum.read_text().splitlines()) == 3060
+
+
+def test_a_silent_heading_reference_is_no_reference_to_the_doctor(tmp_path):
+    """A differential pose configured but absent from the bag, replayed with --allow-missing: it delivered no
+    heading, so the doctor still says the gyro's z bias was never learned on the Jackal bag (no standstill)."""
+    config = tmp_path / "robot.toml"
+    config.write_text(CONFIG.replace("imu/dta", "imu/data")
+                      + '\n[[sensors]]\nname = "vo"\nkind = "pose"\nkey = "vo/odom"\ndifferential = true\n')
+    proc = fusiond("doctor", str(ROOT / "data" / "jackal_test2.bag"), "--config", str(config), "--allow-missing")
+    assert proc.returncode == 0, proc.stderr
+    assert "was never learned" in proc.stdout
