@@ -373,8 +373,8 @@ def cmd_set_pose(args: argparse.Namespace) -> int:
     for text in errors:
         print(f"fusiond: {text}", file=sys.stderr)
     if not answers and not errors:
-        print(f"fusiond: no daemon answered on {key!r} within {args.timeout} s (not running, or not allowed)",
-              file=sys.stderr)
+        print(f"fusiond: no daemon answered on {key!r}{_in_namespace(cfg)} within {args.timeout} s (not running, "
+              "or not allowed)", file=sys.stderr)
     return 0 if answers and not errors else EXIT_UNHEALTHY
 
 

@@ -78,7 +78,7 @@ from ..config import Config
 from .. import reasons
 from ..core.fusion import FusionCore
 from ..core.sensors.registry import kind_of
-from ..health import Health, HealthReport, core_counters, encode_report, ros_statuses
+from ..health import Health, HealthReport, core_counters, ros_statuses
 from ..errors import SessionError
 from ..logs import bind_process, get_logger
 from .answer import HealthAnswer, answer, encode_answer
