@@ -30,13 +30,11 @@ from typing import Any, Literal
 
 import msgspec
 
+from .core.inputs import silent_after, smoothed_period
 from .health_pose import PoseHealth, pose_health
 from .reasons import QUEUE_FULL
 from .codecs.ros_messages import ERROR, OK, WARN, DiagnosticStatus
 
-TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many observed periods)
-PERIOD_SMOOTHING = 0.1  # EMA weight of a new wall-clock arrival interval
-MAX_INTERVAL = 1.0  # a longer gap counts as this much in the period EMA (a pause must not stretch it for minutes)
 
 Status = Literal["ok", "degraded", "starting", "failed"]
 
@@ -139,7 +137,7 @@ class _Tracker:
         self.floored = 0  # accepted samples whose covariance was floored (all-zero covariances of real drivers)
 
     def timeout(self) -> float:
-        return max(self.timeout_s, TIMEOUT_PERIODS * self.period)
+        return silent_after(self.timeout_s, self.period)
 
 
 def _accept(s: _Tracker, arrival: float) -> None:
@@ -148,8 +146,7 @@ def _accept(s: _Tracker, arrival: float) -> None:
     if last is not None:
         if arrival <= last:
             return
-        d = min(arrival - last, MAX_INTERVAL)
-        s.period = d if s.period <= 0.0 else s.period + PERIOD_SMOOTHING * (d - s.period)
+        s.period = smoothed_period(s.period, arrival - last)
     s.last = arrival
 
 

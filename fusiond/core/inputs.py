@@ -42,10 +42,7 @@ class HeldInputs:
         base = self._timeout_base[idx]
         if s is None:
             return base
-        period = s.period[idx]
-        if period <= 0.0:
-            return base
-        return max(base, TIMEOUT_PERIODS * period)
+        return silent_after(base, s.period[idx])
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
@@ -133,6 +130,13 @@ def next_expiry(expiries: tuple[float, float], t: float, end: float) -> float:
     return end
 
 
+def silent_after(timeout_s: float, period: float) -> float:
+    """How long after its last message a sensor is silent: its ``timeout_s``, or TIMEOUT_PERIODS of its
+    typical period (0: none yet) when that is longer. The core's held inputs (message time) and the
+    service's liveness (wall time) both use it."""
+    return timeout_s if period <= 0.0 else max(timeout_s, TIMEOUT_PERIODS * period)
+
+
 def smoothed_period(period: float, interval: float) -> float:
     """A typical message period (0: none yet) after one more interval between messages: an EMA of the
     intervals, each capped at 1 s so that a gap does not make the sensor's timeout long."""
@@ -150,4 +154,5 @@ def note_period(s: FilterState, idx: int, stamp: float) -> None:
         s.last[idx] = stamp
 
 
-__all__ = ["HeldInputs", "next_expiry", "note_period", "smoothed_period", "TIMEOUT_PERIODS", "TILT_STALE_S"]
+__all__ = ["HeldInputs", "next_expiry", "note_period", "silent_after", "smoothed_period", "TIMEOUT_PERIODS",
+           "TILT_STALE_S"]
