@@ -8,12 +8,24 @@ is scored by the same evaluation on the same samples (with --fuse-every N it fus
 A benchmark, not a test: it asserts nothing; it prints the table and, with --write, puts it into
 docs/RESULTS.md between its markers.
 
-    .venv/bin/python scripts/real_recordings.py [--data ../shared/data] [--write]
+"fusiond tuned": the same replay and evaluation with the config `fusiond tune` fits to that very
+recording (``fusiond.tune.tune`` in-process on the samples ``read_samples`` reads, as `fusiond tune
+BAG --config CFG` does), once per distinct (recording, config, --fuse-every). The fit is bounded by
+its number of replays alone (``maxfev`` = --maxfev-per-param times the parameters it fits, a wall-time
+budget far beyond it): `fusiond tune`'s own --budget-s is wall time, which would make the tuned config
+depend on the machine's load. The tuned configs are cached as TOML under out/tuned/ (git-ignored),
+beside the table tune printed and its replays and seconds; a cache written from another config text
+or replay bound is tuned again, and --retune tunes every one again.
+
+    .venv/bin/python scripts/real_recordings.py [--data ../shared/data] [--write] [--retune]
+        [--maxfev-per-param N] [--no-tuned]
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import math
 import sys
 import time
@@ -28,6 +40,12 @@ BEGIN, END = "<!-- real-recordings table: begin -->", "<!-- real-recordings tabl
 # robot_localization's EKF on this bag (its test suite): the final pose and its test tolerance
 JACKAL_FINAL = (1.0206, 3.4292, 0.7419)
 JACKAL_TOLERANCE = 0.1383
+
+TUNED_DIR = ROOT / "out" / "tuned"
+# tune's replays of the fit part per fitted parameter (`fusiond tune`'s own default bound is 60 per
+# parameter, reached first only when its wall-time budget is not)
+MAXFEV_PER_PARAM = 60
+BUDGET_S = 1e9  # wall time never bounds the fit here: the replay count does
 
 
 @dataclass(frozen=True)
@@ -98,21 +116,114 @@ def plain_evaluation(bag: list[Path], cfg, rec):
     return evaluate(bag, cfg, "/ground_truth", trajectory, rec)
 
 
-def _evaluate(data: Path, case: Case, plain: bool = False):
-    """fusiond's evaluation of the case, and the plain EKF's (None unless ``plain``)."""
-    from fusiond.config import load
+def fusiond_evaluation(bag: list[Path], cfg, fuse_every: int):
+    """``fusiond replay BAG --config CFG --reference /ground_truth [--fuse-every N]``'s evaluation, and
+    its Recorder."""
     from fusiond.replay.evaluate import Recorder, evaluate
     from fusiond.replay.run import replay
 
-    cfg = load(ROOT / "examples" / case.config)
-    rec = Recorder(cfg, case.fuse_every)
-    bag = [data / case.recording]
+    rec = Recorder(cfg, fuse_every)
     result = replay(bag, cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
-    ev = evaluate(bag, cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
-    return ev, plain_evaluation(bag, cfg, rec) if plain else None
+    return evaluate(bag, cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known), rec
 
 
-def _jackal_row(data: Path) -> list[str]:
+def _evaluate(data: Path, case: Case, plain: bool = False, tuned: dict | None = None):
+    """fusiond's evaluation of the case, the plain EKF's (None unless ``plain``) and the tuned
+    config's (None unless ``tuned``: the Tuned configs by (recording, config, fuse_every), filled in)."""
+    from fusiond.config import load
+
+    cfg = load(ROOT / "examples" / case.config)
+    bag = [data / case.recording]
+    ev, rec = fusiond_evaluation(bag, cfg, case.fuse_every)
+    tev = None
+    if tuned is not None:
+        every = f", --fuse-every {case.fuse_every}" if case.fuse_every > 1 else ""
+        t = tune_cached(bag, cfg, (ROOT / "examples" / case.config).read_text(),
+                        f"{case.recording}, {case.config}{every}",
+                        f"{case.recording}__{Path(case.config).stem}" +
+                        (f"__every{case.fuse_every}" if case.fuse_every > 1 else ""),
+                        fuse_every=case.fuse_every, **tuned_options(tuned))
+        tuned[(case.recording, case.config, case.fuse_every)] = t
+        tev, _ = fusiond_evaluation(bag, t.cfg, case.fuse_every)
+    return ev, plain_evaluation(bag, cfg, rec) if plain else None, tev
+
+
+def tuned_options(tuned: dict) -> dict:
+    """The tune options a ``tuned`` dict carries (under the key "options")."""
+    return dict(tuned.get("options", {}))
+
+
+def not_worse(tuned: float | None, default: float | None, noise: float) -> str:
+    """The tuned config against the default: "yes" (no worse), "within noise" (worse by less than the
+    reference's own noise) or "NO"."""
+    if tuned is None or default is None:
+        return "-"
+    return "yes" if tuned <= default else "within noise" if tuned <= default + noise else "NO"
+
+
+@dataclass(frozen=True)
+class Tuned:
+    """A config as `fusiond tune` fits it to one recording, read back from its cached TOML."""
+
+    label: str  # recording, config[, --fuse-every N]
+    cfg: object  # the tuned Config (loaded from ``path``)
+    path: Path
+    replays: int
+    seconds: float
+    stopped: str
+    params: int  # parameters fitted (not skipped)
+    maxfev: int
+    changed: tuple[str, ...]  # "key: before -> after" of every tuned key
+    table: str  # what `fusiond tune` printed
+
+
+def tune_cached(bags: list[Path], cfg, source: str, label: str, name: str, retune: bool = False,
+                maxfev_per_param: int = MAXFEV_PER_PARAM, fuse_every: int = 1, cache: Path = TUNED_DIR) -> Tuned:
+    """``cfg`` tuned on ``bags`` (`fusiond tune`'s fit, bounded by replays: the module doc), cached as
+    ``cache/name.toml`` with ``name.json`` (replays, seconds, the printed table). ``source``: the text
+    the config was read from (with anything the caller changed in it), so that a cache of another
+    config is not taken for this one. With ``fuse_every`` > 1 tune sees the recording thinned as
+    `replay --fuse-every N` thins it (the fixes the Recorder lets through): what a user whose robot
+    has 1 fix in N would record and tune on."""
+    from fusiond.config import load
+    from fusiond.replay.evaluate import Recorder
+    from fusiond.tune import dumps, format_table, read_samples, select, tunable_params, tune
+    from fusiond.tune.fit import _fmt
+
+    toml, meta_path = cache / f"{name}.toml", cache / f"{name}.json"
+    key = hashlib.sha256(f"{source}\n{maxfev_per_param}\n{fuse_every}".encode()).hexdigest()
+    meta = json.loads(meta_path.read_text()) if meta_path.exists() and toml.exists() else None
+    if retune or meta is None or meta.get("key") != key:
+        samples = read_samples(bags, cfg)
+        if fuse_every > 1:
+            samples = list(Recorder(cfg, fuse_every).filter(iter(samples)))
+        params = [p for p in select(tunable_params(cfg, samples), None) if not p.skipped]
+        maxfev = maxfev_per_param * max(len(params), 1)
+        result = tune(samples, cfg, budget_s=BUDGET_S, maxfev=maxfev)
+        header = (f"fusiond tune of {label} (scripts/real_recordings.py, maxfev {maxfev}): "
+                  f"{len(result.changed)} key(s) tuned.")
+        cache.mkdir(parents=True, exist_ok=True)
+        toml.write_text(dumps(result.config, result.comments, header))
+        meta = {"key": key, "label": label, "replays": result.evaluations, "seconds": round(result.seconds, 1),
+                "stopped": result.stopped, "params": len(params), "maxfev": maxfev,
+                "changed": [f"{r.param.name}: {_fmt(r.before)} -> {_fmt(r.after)}" for r in result.changed],
+                "table": format_table(result)}
+        meta_path.write_text(json.dumps(meta, indent=1) + "\n")
+    return Tuned(label, load(toml), toml, meta["replays"], meta["seconds"], meta["stopped"], meta["params"],
+                 meta["maxfev"], tuple(meta["changed"]), meta["table"])
+
+
+def tune_lines(tuned: list[Tuned]) -> list[str]:
+    """The table of tune's runs: replays and seconds per recording, what it changed."""
+    lines = ["| recording, config | parameters fitted | replays (the fit's bound) | seconds | fit ended | keys tuned |",
+             "|---|---|---|---|---|---|"]
+    for t in tuned:
+        lines.append(f"| {t.label} | {t.params} | {t.replays} ({t.maxfev}) | {t.seconds:.1f} | {t.stopped} | "
+                     f"{'; '.join(t.changed) or 'none'} |")
+    return lines
+
+
+def _jackal_row(data: Path, tuned: dict | None = None) -> list[str]:
     plain = plain_ekf_module()
     from fusiond.config import load
     from fusiond.replay.run import replay
@@ -127,6 +238,11 @@ def _jackal_row(data: Path) -> list[str]:
     for config, turned in (("jackal_rl.toml", False), ("jackal.toml", True)):
         cfg = load(ROOT / "examples" / config)
         result = replay([bag], cfg, keep_trace=False, progress=False, doctor=False)
+        t = None
+        if tuned is not None:
+            t = tuned.setdefault(("jackal_test2.bag", config, 1), tune_cached(
+                [bag], cfg, (ROOT / "examples" / config).read_text(), f"jackal_test2.bag, {config}",
+                f"jackal_test2__{Path(config).stem}", **tuned_options(tuned)))
         case = "Jackal, final pose vs robot_localization's"
         yaw = _first_imu_yaw(bag, cfg) if turned else 0.0
         if turned:
@@ -137,9 +253,15 @@ def _jackal_row(data: Path) -> list[str]:
             return math.dist((x, y, z), JACKAL_FINAL)
         d = off(*result.final[1:4])
         d_plain = off(*plain.run([bag], cfg)[-1, 1:4])
+        tuned_s, tuned_verdict = "-", "-"
+        if t is not None:
+            d_tuned = off(*replay([bag], t.cfg, keep_trace=False, progress=False, doctor=False).final[1:4])
+            tuned_s = f"{d_tuned:.3f} m"
+            # the reference's own uncertainty here: robot_localization's test tolerance
+            tuned_verdict = not_worse(d_tuned, d, JACKAL_TOLERANCE)
         rows.append(f"| jackal_test2.bag | {config} | {case} | all | "
-                    f"{d:.3f} m | robot_localization's test tolerance | {d_plain:.3f} m | {JACKAL_TOLERANCE} m | "
-                    f"{'yes' if d <= JACKAL_TOLERANCE else 'NO'} |")
+                    f"{d:.3f} m | {tuned_s} | robot_localization's test tolerance | {d_plain:.3f} m | "
+                    f"{JACKAL_TOLERANCE} m | {'yes' if d <= JACKAL_TOLERANCE else 'NO'} | {tuned_verdict} |")
     return rows
 
 
@@ -185,6 +307,11 @@ class Row:
     best: tuple[float, str] | None
     noise: float
     plain: float | None = None  # the plain EKF (scripts/plain_ekf.py) on the same metric, when asked for
+    tuned: float | None = None  # fusiond with the config `fusiond tune` fits to the recording, when asked for
+
+    @property
+    def tuned_verdict(self) -> str:
+        return not_worse(self.tuned, self.ours, self.noise)
 
     @property
     def verdict(self) -> str:
@@ -197,16 +324,17 @@ class Row:
         return verdict if self.case.acceptance else f"{verdict} (shown, not judged)"
 
 
-def rows(data: Path, plain: bool = False) -> list[Row]:
+def rows(data: Path, plain: bool = False, tuned: dict | None = None) -> list[Row]:
     """Every case's rows: fusiond and its best plain baseline on the case's metric, per segment; with
-    ``plain``, the plain EKF's score too."""
+    ``plain``, the plain EKF's score too; with ``tuned`` (a dict, filled in with the Tuned configs by
+    (recording, config, fuse_every); its "options" are tune_cached's), the tuned config's."""
     out: list[Row] = []
     cache: dict[tuple[str, str, int], object] = {}
     for case in CASES:
         key = (case.recording, case.config, case.fuse_every)
         if key not in cache:
-            cache[key] = _evaluate(data, case, plain)
-        ev, pev = cache[key]
+            cache[key] = _evaluate(data, case, plain, tuned)
+        ev, pev, tev = cache[key]
         noise_m, noise_deg, speed = reference_noise(data, case.recording)
         noise = noise_deg if case.metric == "heading_deg" else max(noise_m, case.time_base_s * speed)
         segments = [s.name for s in ev.segments if (s.name != "all") == case.segments] or ["all"]
@@ -218,23 +346,34 @@ def rows(data: Path, plain: bool = False) -> list[Row]:
             span = next(s for s in ev.segments if s.name == seg)
             p = next((getattr(sc, case.metric) for sc in pev.scores if sc.segment == seg and sc.method == "fusiond"),
                      None) if pev is not None else None
-            out.append(Row(case, seg, (span.start, span.end), ours, min(base) if base else None, noise, p))
+            tv = next((getattr(sc, case.metric) for sc in tev.scores if sc.segment == seg and sc.method == "fusiond"),
+                      None) if tev is not None else None
+            out.append(Row(case, seg, (span.start, span.end), ours, min(base) if base else None, noise, p, tv))
     return out
 
 
-def table(data: Path) -> str:
-    lines = ["| recording | config | case | segment | fusiond | best plain baseline | plain EKF | reference noise | "
-             "fusiond not worse |", "|---|---|---|---|---|---|---|---|---|"]
-    lines += _jackal_row(data)
-    for r in rows(data, plain=True):
+def table(data: Path, tuned: dict | None = None) -> str:
+    """The table; with ``tuned`` (see ``rows``), its tuned column and, below it, the table of tune's runs."""
+    lines = ["| recording | config | case | segment | fusiond | fusiond tuned | best plain baseline | plain EKF | "
+             "reference noise | fusiond not worse | tuned not worse than default (within reference noise) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += _jackal_row(data, tuned)
+    for r in rows(data, plain=True, tuned=tuned):
         case = r.case
         ours_s = "-" if r.ours is None else f"{r.ours:.3f} {UNITS[case.metric]}"
+        tuned_s = "-" if r.tuned is None else f"{r.tuned:.3f}"
         best_s = "-" if r.best is None else f"{r.best[0]:.3f} ({r.best[1]})"
         plain_s = "-" if r.plain is None else f"{r.plain:.3f}"
         lines.append(f"| {case.recording} | {case.config}"
                      f"{f' --fuse-every {case.fuse_every}' if case.fuse_every > 1 else ''} | {case.what} | "
-                     f"{r.segment} ({r.span[0]:.0f}-{r.span[1]:.0f} s) | {ours_s} | {best_s} | {plain_s} | "
-                     f"{r.noise:.3f} | {r.verdict} |")
+                     f"{r.segment} ({r.span[0]:.0f}-{r.span[1]:.0f} s) | {ours_s} | {tuned_s} | {best_s} | {plain_s} | "
+                     f"{r.noise:.3f} | {r.verdict} | {r.tuned_verdict} |")
+    if tuned is not None:
+        runs = [t for k, t in tuned.items() if k != "options"]
+        lines += ["", f"`fusiond tune` per recording (scripts/real_recordings.py: maxfev "
+                  f"{tuned_options(tuned).get('maxfev_per_param', MAXFEV_PER_PARAM)} replays per fitted parameter, "
+                  "no wall-time bound; seconds on this shared machine):", ""]
+        lines += tune_lines(runs)
     return "\n".join(lines)
 
 
@@ -242,6 +381,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"), help="the recordings' folder")
     ap.add_argument("--write", action="store_true", help="write the table into docs/RESULTS.md")
+    ap.add_argument("--retune", action="store_true", help="tune every config again (ignore out/tuned/)")
+    ap.add_argument("--maxfev-per-param", type=int, default=MAXFEV_PER_PARAM,
+                    help=f"tune's fit replays per fitted parameter (default {MAXFEV_PER_PARAM})")
+    ap.add_argument("--no-tuned", action="store_true", help="no tuned column (no tune run)")
     args = ap.parse_args()
     data = Path(args.data)
     from fusiond.logs import configure
@@ -251,8 +394,14 @@ def main() -> int:
         print(f"real_recordings: no recordings in {data}", file=sys.stderr)
         return 2
     t0 = time.perf_counter()
-    text = table(data)
+    tuned = None if args.no_tuned else {"options": {"retune": args.retune,
+                                                    "maxfev_per_param": args.maxfev_per_param}}
+    text = table(data, tuned)
     print(text)
+    if tuned is not None:
+        for k, t in tuned.items():
+            if k != "options":
+                print(f"\n{t.label} ({t.path}):\n{t.table}", file=sys.stderr)
     print(f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
     if args.write:
         path = ROOT / "docs" / "RESULTS.md"

@@ -10,7 +10,17 @@ asserts nothing and prints the table; with --write it puts it into docs/RESULTS.
 markers ("Variants of the real recordings"). Beside fusiond, the plain EKF (scripts/plain_ekf.py) is
 scored on every variant by the same evaluation.
 
+"fusiond tuned": on the variants --tuned names, the same replay and evaluation with the config
+`fusiond tune` fits to that variant's bag (scripts/real_recordings.py's ``tune_cached``: the fit
+bounded by --maxfev-per-param replays per fitted parameter, never by wall time, cached under
+out/tuned/variants/, --retune to refresh; a variant with --fuse-every N is tuned on the fixes the
+Recorder lets through, what a robot with 1 fix in N records). Its verdict column compares it with
+fusiond's default config, allowing the reference's own noise (scripts/real_recordings.py's
+``reference_noise``, with 0.1 s of clock difference at the median speed for an unaligned error on
+the highway car, as there).
+
     .venv/bin/python scripts/recording_variants.py [--data ../shared/data] [--only NAME] [--write]
+        [--tuned REGEX] [--retune] [--maxfev-per-param N]
 
 A variant that starts later keeps the original's world frame (the reference is ENU at the
 original first fix): its config names that fix as the GPS datum.
@@ -204,6 +214,10 @@ VARIANTS = (
             _start_at(60.0), metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segment="a"),
 )
 UNITS = {"world_h": "m world", "aligned_h": "m aligned", "heading_deg": "deg heading"}
+# the variants given a tuned column by default (--tuned): the F1/10 car's faults and the GPS steps
+TUNED = "f110_copy|f110_noisy_rest|f110_new_user|comma_step_.*"
+# how far the reference's clock may be from the sensors' (the recordings' README), as in real_recordings.py
+TIME_BASE_S = {COMMA: 0.1, F110: 0.0}
 
 
 def write_variant(src: Path, out: Path, v: Variant) -> tuple[float, float, float] | None:
@@ -231,7 +245,8 @@ def write_variant(src: Path, out: Path, v: Variant) -> tuple[float, float, float
     return first_fix
 
 
-def _plain_evaluation(bag: Path, cfg, rec):
+def _real_recordings():
+    """scripts/real_recordings.py as a module (this script is also loaded by file, off sys.path)."""
     import importlib.util
 
     if "real_recordings" not in sys.modules:
@@ -239,12 +254,18 @@ def _plain_evaluation(bag: Path, cfg, rec):
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module
         spec.loader.exec_module(module)
-    return sys.modules["real_recordings"].plain_evaluation([bag], cfg, rec)
+    return sys.modules["real_recordings"]
 
 
-def score(data: Path, v: Variant, work: Path) -> list[tuple[str, str, tuple | None, tuple | None, list]]:
-    """Per segment and metric: fusiond's (value, points scored), the plain EKF's, and each baseline's
-    (name, value, points scored)."""
+def _plain_evaluation(bag: Path, cfg, rec):
+    return _real_recordings().plain_evaluation([bag], cfg, rec)
+
+
+def score(data: Path, v: Variant, work: Path, tuned: dict | None = None
+          ) -> list[tuple[str, str, tuple | None, tuple | None, list, tuple | None]]:
+    """Per segment and metric: fusiond's (value, points scored), the plain EKF's, each baseline's
+    (name, value, points scored), and the tuned config's (value, points scored; None unless ``tuned``,
+    a dict of tune_cached's options to which the Tuned config is added under the variant's name)."""
     import msgspec
 
     from fusiond.config import GpsSensor, load
@@ -261,17 +282,31 @@ def score(data: Path, v: Variant, work: Path) -> list[tuple[str, str, tuple | No
     result = replay([bag], cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
     ev = evaluate([bag], cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)
     pev = _plain_evaluation(bag, cfg, rec)
+    tev = None
+    if tuned is not None:
+        rr = _real_recordings()
+        # the cache is that of this variant of this config: the variant's edit is named by its name and
+        # description, the config by its full encoding (the datum a later start names is in it)
+        source = f"{v.name}\n{v.what}\n{msgspec.json.encode(cfg).decode()}"
+        options = {k: val for k, val in tuned.items() if k in ("retune", "maxfev_per_param")}
+        t = rr.tune_cached([bag], cfg, source, f"{v.name} ({v.recording}, {v.config}"
+                           f"{f', --fuse-every {v.fuse_every}' if v.fuse_every > 1 else ''})", v.name,
+                           fuse_every=v.fuse_every, cache=rr.TUNED_DIR / "variants", **options)
+        tuned.setdefault("runs", []).append(t)
+        tev, _ = rr.fusiond_evaluation([bag], t.cfg, v.fuse_every)
     out = []
     for segment in v.segments or (v.segment,):
         by = {sc.method: sc for sc in ev.scores if sc.segment == segment}
         pby = {sc.method: sc for sc in pev.scores if sc.segment == segment}
+        tby = {sc.method: sc for sc in tev.scores if sc.segment == segment} if tev is not None else {}
         span = next((f"{s.start:.0f}-{s.end:.0f} s" for s in ev.segments if s.name == segment), "")
         for metric in v.metrics:
             ours = (getattr(by["fusiond"], metric), by["fusiond"].n) if "fusiond" in by else None
             plain = (getattr(pby["fusiond"], metric), pby["fusiond"].n) if "fusiond" in pby else None
             base = [(m, getattr(by[m], metric), by[m].n) for m in v.baselines
                     if m in by and getattr(by[m], metric) is not None]
-            out.append((f"{segment} ({span})" if span else segment, metric, ours, plain, base))
+            tv = (getattr(tby["fusiond"], metric), tby["fusiond"].n) if "fusiond" in tby else None
+            out.append((f"{segment} ({span})" if span else segment, metric, ours, plain, base, tv))
     return out
 
 
@@ -280,6 +315,11 @@ def main() -> int:
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"), help="the recordings' folder")
     ap.add_argument("--only", help="variants by name (a regular expression matched in full)")
     ap.add_argument("--write", action="store_true", help="write the table into docs/RESULTS.md")
+    ap.add_argument("--tuned", default=TUNED, help=f"variants given a tuned column (a regular expression matched "
+                    f"in full; default {TUNED!r}; '' for none)")
+    ap.add_argument("--retune", action="store_true", help="tune every variant again (ignore out/tuned/variants/)")
+    ap.add_argument("--maxfev-per-param", type=int, default=None,
+                    help="tune's fit replays per fitted parameter (default: scripts/real_recordings.py's)")
     args = ap.parse_args()
     data = Path(args.data)
     from fusiond.logs import configure
@@ -294,19 +334,40 @@ def main() -> int:
               file=sys.stderr)
         return 2
     started = time.perf_counter()
-    lines = ["| variant | case | segment | metric | fusiond (points scored) | plain EKF (points scored) | "
-             "plain baselines (points scored) |", "|---|---|---|---|---|---|---|"]
+    rr = _real_recordings()
+    per_param = args.maxfev_per_param or rr.MAXFEV_PER_PARAM
+    options = {"retune": args.retune, "maxfev_per_param": per_param}
+    runs: list = []
+    lines = ["| variant | case | segment | metric | fusiond (points scored) | fusiond tuned (points scored) | "
+             "plain EKF (points scored) | plain baselines (points scored) | reference noise | "
+             "tuned not worse than default (within reference noise) |", "|---|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines))
     with tempfile.TemporaryDirectory(prefix="fusiond-variants-") as tmp:
         for v in chosen:
-            for segment, metric, ours, plain, base in score(data, v, Path(tmp)):
+            tuned = dict(options) if args.tuned and re.fullmatch(args.tuned, v.name) else None
+            noise_m, noise_deg, speed = rr.reference_noise(data, v.recording)
+            for segment, metric, ours, plain, base, tv in score(data, v, Path(tmp), tuned):
+                noise = noise_deg if metric == "heading_deg" else \
+                    max(noise_m, TIME_BASE_S[v.recording] * speed if metric == "world_h" else 0.0)
                 ours_s = "-" if ours is None else f"{ours[0]:.3f} {UNITS[metric]} ({ours[1]})"
+                tuned_s = "-" if tv is None or tv[0] is None else f"{tv[0]:.3f} ({tv[1]})"
                 plain_s = "-" if plain is None or plain[0] is None else f"{plain[0]:.3f} ({plain[1]})"
                 base_s = "; ".join(f"{name} {value:.3f} ({n})" for name, value, n in base) or "-"
-                lines.append(f"| {v.name} | {v.what} | {segment} | {metric} | {ours_s} | {plain_s} | {base_s} |")
+                verdict = rr.not_worse(None if tv is None else tv[0], None if ours is None else ours[0], noise)
+                lines.append(f"| {v.name} | {v.what} | {segment} | {metric} | {ours_s} | {tuned_s} | {plain_s} | "
+                             f"{base_s} | {noise:.3f} | {verdict} |")
                 print(lines[-1], flush=True)
             if hasattr(v.edit, "noised"):
                 print(f"({v.name}: {v.edit.noised} odometry messages noised)", file=sys.stderr)
+            if tuned is not None:
+                runs += tuned["runs"]
+                t = tuned["runs"][-1]
+                print(f"\n{t.label} ({t.path}):\n{t.table}\n", file=sys.stderr, flush=True)
+    if runs:
+        lines += ["", f"`fusiond tune` per variant (maxfev {per_param} replays per fitted parameter, no wall-time "
+                  "bound; seconds on this shared machine):", ""]
+        lines += rr.tune_lines(runs)
+        print("\n" + "\n".join(lines[-len(runs) - 4:]))
     print(f"({time.perf_counter() - started:.0f} s)", file=sys.stderr)
     if args.write:
         if args.only is not None:
