@@ -106,3 +106,20 @@ def test_tune_and_the_doctor_give_one_number_or_say_why_not():
     assert r.doctor is not None and 0.002 < r.doctor < 0.004  # the doctor measured it at rest
     assert r.after == r.doctor or "the doctor measured" in r.note, (r.after, r.doctor, r.note)
     assert "doctor" in format_table(result).splitlines()[0]
+
+
+@pytest.mark.parametrize("minutes, skipped", [(1.0, True), (20.0, False)])
+def test_a_gps_error_slower_than_the_recording_is_not_fitted(minutes, skipped):
+    """The altitude's Gauss-Markov error (tau 300 s by default) is identified by its innovations only over
+    several time constants: a minute of fixes shares one slow offset, which tune would take for the truth."""
+    from fusiond.tune.params import tunable_params
+
+    cfg = robot_config(gps="")
+    n = int(minutes * 60)
+    fixes = [GpsSample("gps", 100.0 + k, 48.0, 11.0, 500.0, 0, (1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0), 2)
+             for k in range(n)]
+    by_name = {p.name: p for p in tunable_params(cfg, fixes)}
+    vertical = [by_name[k] for k in ("gps.position_noise.vertical", "gps.vertical_error_sigma",
+                                     "gps.vertical_error_tau_s")]
+    assert all(bool(p.skipped) == skipped for p in vertical), [(p.name, p.skipped) for p in vertical]
+    assert not by_name["gps.position_noise.horizontal"].skipped  # no horizontal error model: its white noise fits
