@@ -1,5 +1,6 @@
 """The wheel-odometry sensor kind: its [[sensors]] table (``table``), its model, policy and coast
-(``model``) and its descriptor (``kind``)."""
+(``model``), its standstill test (``rest``), the watch for a twist component that is no measurement
+(``lost_channel``) and its descriptor (``kind``)."""
 
 from __future__ import annotations
 
