@@ -104,8 +104,8 @@ def unmeasured_yaw_rate(series: Series, odom: OdomSensor) -> Verdict | None:
     measured[5] = "false"
     return Verdict(odom.name, "yaw_rate", "problem",
                    f"the wheel yaw rate reads exactly 0 with variance 0 in {100 * frac:.0f}% of the {int(n)} samples "
-                   f"{where}: the driver does not measure it (not slip). Declare it not measured, so it is neither "
-                   "used nor checked",
+                   f"{where}: the driver does not measure it (not slip). A fused gyro makes the filter take it as "
+                   "not measured (log twist_component_lost); declare it so that it is never used nor checked",
                    sensor_key(odom.name, "twist_measured"), f"twist_measured = [{', '.join(measured)}]",
                    {"zero_fraction_in_turns": float(frac), "turning_samples": float(n)})
 
