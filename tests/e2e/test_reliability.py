@@ -754,22 +754,31 @@ def test_burst_far_above_rate_is_bounded_counted_and_recovers(tmp_path, reliabil
             pubs["wheel"].put(gen.odom(stamps[-1]))
             time.sleep(0.02)
         wait_until(lambda: len(poses) >= 50, 10, "the first poses")
-        # the burst: 30000 IMU messages (10 kHz of stamps) as fast as the client can put them
+        # the burst: 30000 IMU messages (10 kHz of stamps) as fast as the client can put them. Whether the
+        # queue overflows is a race between this client and the daemon's worker on a shared machine: a burst
+        # the worker kept up with (every message applied, none lost) is followed by another, up to three, so
+        # that the overflow this test is about is met, and counted, in the same run.
         template = bytearray(gen.imu(stamps[-1]))
         n_burst, t_burst0 = 30000, stamps[-1] + 0.0061  # after the last IMU stamp (+5 ms)
-        t0 = time.monotonic()
-        for k in range(n_burst):
-            stamp = t_burst0 + k * 1e-4
-            sec = math.floor(stamp)
-            struct.pack_into("<iI", template, 4, sec, round((stamp - sec) * 1e9))
-            pubs["imu"].put(bytes(template))
-        burst_s = time.monotonic() - t0
+        sent = {"wheel": 50, "imu": 100}
+        for attempt in range(3):
+            start = t_burst0 + attempt * n_burst * 1e-4
+            t0 = time.monotonic()
+            for k in range(n_burst):
+                stamp = start + k * 1e-4
+                sec = math.floor(stamp)
+                struct.pack_into("<iI", template, 4, sec, round((stamp - sec) * 1e9))
+                pubs["imu"].put(bytes(template))
+            burst_s = time.monotonic() - t0
+            sent["imu"] += n_burst
+            h0 = settle(session, proc, sent, poses, timeout=30)
+            if h0["sensors"]["imu"]["dropped_by_reason"].get("queue_full", 0) > 0:
+                break
         # recovery, measured by poses arriving: odometry resumes at 50 Hz after the burst's stamps. The
         # first of it may still meet a full queue (counted); once drained, every message gets its pose.
-        base = t_burst0 + n_burst * 1e-4 + 0.01
+        base = start + n_burst * 1e-4 + 0.01
         tail = [base + 0.02 * k for k in range(25)]
         again = [tail[-1] + 0.02 * (k + 1) for k in range(25)]
-        sent = {"wheel": 50, "imu": 100 + n_burst}
 
         def steady(stamps_: list[float]) -> None:
             for s in stamps_:
