@@ -4,13 +4,13 @@ final pose. Skipped without the shared recordings (../shared/data), as the real-
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.support.scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data"
@@ -23,12 +23,7 @@ pytestmark = [
 
 
 def _plain():
-    if "plain_ekf" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("plain_ekf", ROOT / "scripts" / "plain_ekf.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module
-        spec.loader.exec_module(module)
-    return sys.modules["plain_ekf"]
+    return load_script("plain_ekf")
 
 
 def test_plain_ekf_ends_near_robot_localizations_final_pose_on_the_jackal_bag():

@@ -3,24 +3,16 @@ and its analytic error-state Jacobians against central differences of exactly th
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.support.scripts import load_script
 
 
 def _plain():
-    if "plain_ekf" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("plain_ekf", ROOT / "scripts" / "plain_ekf.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module
-        spec.loader.exec_module(module)
-    return sys.modules["plain_ekf"]
+    return load_script("plain_ekf")
 
 
 pe = _plain()
