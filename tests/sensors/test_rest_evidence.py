@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fusiond.core.fusion import FusionCore
-from fusiond.core.sensors.odom.rest import NoiseTrack, rest_window
+from fusiond.core.sensors.odom.rest import rest_window, running_noise
 
 from tests.support.core_samples import make_config
 from tests.support.sim_rest import RestWorld, Segment, simulate
@@ -34,7 +34,7 @@ def _rest_share(speed: float, sigma: float, yaw_rate: float = 0.0, yaw_sigma: fl
     for k in range(n):
         stamp = k / rate
         values = (speed + rng.normal(0.0, sigma), 0.0, 0.0, 0.0, 0.0, yaw_rate + rng.normal(0.0, yaw_sigma))
-        track = NoiseTrack.step(track, values, stamp, 1.0 / rate)
+        track = running_noise(track, values, stamp, 1.0 / rate)
         window, at_rest = rest_window(window, values, FORWARD_AND_YAW, track[1], stamp, SPAN, ALPHA)
         rest += at_rest and k >= 100
     return rest / (n - 100)
@@ -60,7 +60,7 @@ def test_exact_zeros_are_rest_at_once():
     window, track = (), None
     for k, v in enumerate((0.5, 0.5, 0.0)):
         values = (v, 0.0, 0.0, 0.0, 0.0, 0.0)
-        track = NoiseTrack.step(track, values, k * 0.02, 0.02)
+        track = running_noise(track, values, k * 0.02, 0.02)
         window, at_rest = rest_window(window, values, FORWARD_AND_YAW, track[1], k * 0.02, SPAN, ALPHA)
     assert not at_rest  # a window of one reading decides nothing ...
     core = FusionCore(make_config("roll_pitch"))

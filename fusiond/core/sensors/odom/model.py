@@ -42,7 +42,7 @@ from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
 from ..imu.gyro_bias import quiet_bound
 from . import lost_channel
-from .rest import NoiseTrack, rest_window
+from .rest import rest_window, running_noise
 from .table import OdomSensor
 
 if TYPE_CHECKING:
@@ -70,7 +70,7 @@ class OdomOwn(msgspec.Struct, frozen=True, gc=False):
     previous_moving: bool = False  # ... and whether it read motion (not stationary)
     coast: tuple | None = None  # (since, linear twist and covariance when the drive went quiet) while coasting
     rest: tuple = ()  # the standstill test's window (``rest.rest_window``)
-    noise: tuple | None = None  # the twist's noise measured from the stream (``rest.NoiseTrack``)
+    noise: tuple | None = None  # the twist's noise measured from the stream (``rest.running_noise``)
     watched: tuple | None = None  # angular components that may not be measurements (``lost_channel``)
 
 
@@ -116,10 +116,18 @@ def body_twist(s: OdomSample) -> tuple[tuple, tuple, mat3.Mat3] | None:
     return mat3.apply(R_t, s.linear), mat3.apply(R_t, s.angular), R_t
 
 
-class OdomPolicy:
-    STATIONARY_LINEAR = 1e-3  # m/s
-    STATIONARY_ANGULAR = 1e-3  # rad/s
+STATIONARY_LINEAR = 1e-3  # m/s: a twist within these of zero is the drive reading "stopped"
+STATIONARY_ANGULAR = 1e-3  # rad/s
 
+
+def stationary(linear: tuple, angular: tuple) -> bool:
+    """Does the drive read itself stopped (every component within STATIONARY_* of zero)?"""
+    lin, ang = STATIONARY_LINEAR, STATIONARY_ANGULAR
+    return (-lin <= linear[0] <= lin and -lin <= linear[1] <= lin and -lin <= linear[2] <= lin
+            and -ang <= angular[0] <= ang and -ang <= angular[1] <= ang and -ang <= angular[2] <= ang)
+
+
+class OdomPolicy:
     def __init__(self, cfg: OdomSensor) -> None:
         self.cfg = cfg
         lin_min, ang_min = cfg.twist_min_sigma
@@ -188,22 +196,10 @@ class OdomPolicy:
                 linear, angular, R_t = body
                 linear_cov = mat3.flat(mat3.sandwich(R_t, linear_cov))
                 angular_cov = mat3.flat(mat3.sandwich(R_t, angular_cov))
-        lin, ang = self.STATIONARY_LINEAR, self.STATIONARY_ANGULAR
         v0, v1, v2, w0, w1, w2 = pick((*linear, *angular, 0.0))
-        stationary = (
-            -lin <= v0 <= lin and -lin <= v1 <= lin and -lin <= v2 <= lin
-            and -ang <= w0 <= ang and -ang <= w1 <= ang and -ang <= w2 <= ang
-        )
-        return OdomInput(
-            (v0, v1, v2),
-            linear_cov,
-            (w0, w1, w2),
-            angular_cov,
-            measured[5],
-            stationary,
-            world,
-            measured,
-        )
+        linear, angular = (v0, v1, v2), (w0, w1, w2)
+        return OdomInput(linear, linear_cov, angular, angular_cov, measured[5], stationary(linear, angular), world,
+                         measured)
 
 
 class OdomModel(SensorModel):
@@ -215,11 +211,11 @@ class OdomModel(SensorModel):
         super().__init__(cfg, index, ctx)
         layout = ctx.layout
         # the gyro's z rate as the filter corrects it (bias, scale): what the wheels' yaw rate checks
-        self._bias_z = layout.index("gyro_bias", 2)
         self._bias_z_error = layout.index("gyro_bias", 2, error=True)
         self._gyro_scale = layout.index("gyro_scale")
         self._coast_decel = cfg.coast_decel
-        self._bias = tuple(layout.index("gyro_bias", i) for i in range(3))
+        self._bias = tuple(layout.index("gyro_bias", i) for i in range(3))  # -1: no bias state
+        self._bias_z = self._bias[2]
         self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
@@ -291,23 +287,20 @@ class OdomModel(SensorModel):
 
     def _without_lost(self, inp: OdomInput, lost: tuple[bool, bool, bool]) -> OdomInput:
         """The input with the lost angular components taken as not measured: zero, the unmeasured noise."""
-        if not any(lost):
-            return inp
         angular = tuple(0.0 if gone else w for w, gone in zip(inp.angular, lost))
         cov = list(inp.angular_cov)
         for i, gone in enumerate(lost):
             if gone:
                 cov[4 * i] = self._unmeasured_var
         measured = inp.measured[:3] + tuple(m and not gone for m, gone in zip(inp.measured[3:], lost))
-        lin, ang = OdomPolicy.STATIONARY_LINEAR, OdomPolicy.STATIONARY_ANGULAR
-        stationary = all(-lin <= v <= lin for v in inp.linear) and all(-ang <= w <= ang for w in angular)
-        return OdomInput(inp.linear, inp.linear_cov, angular, tuple(cov), measured[5], stationary, inp.world, measured)
+        return OdomInput(inp.linear, inp.linear_cov, angular, tuple(cov), measured[5],
+                         stationary(inp.linear, angular), inp.world, measured)
 
     def _rest(self, s: "FilterState", own: OdomOwn, inp: OdomInput, stamp: float) -> tuple[tuple, tuple, bool]:
         """The standstill test after this message (``rest.py``): its window, the running noise, and whether
         the wheels are at rest, judged on the noise the stream shows, not the stated one."""
         values = (*inp.linear, *inp.angular)
-        noise = NoiseTrack.step(own.noise, values, stamp, s.period[self.index])
+        noise = running_noise(own.noise, values, stamp, s.period[self.index])
         fc = self.ctx.filter
         window, at_rest = rest_window(own.rest, values, inp.measured, noise[1], stamp, fc.standstill_s,
                                       fc.standstill_alpha)

@@ -28,7 +28,7 @@ A missed creep costs little: the gyro's bias is learned only where the gyro is q
 (``imu/gyro_bias.py``), and a robot creeping straight has a true turn rate of zero anyway.
 
 Cost. While the robot moves the window is emptied by one comparison per component: a reading
-beyond ``z(1 - alpha / (2 k))`` of the stream's running noise (``NoiseTrack``, which motion only
+beyond ``z(1 - alpha / (2 k))`` of the stream's running noise (``running_noise``, which motion only
 raises) is not rest noise, and no window holding it could pass.
 """
 
@@ -58,34 +58,28 @@ def t2_bound(alpha: float, k: int, n: int) -> float:
     return t_quantile(normal_bound(alpha, k), 2.0 * (n - 1) / 3.0) ** 2
 
 
-class NoiseTrack:
-    """The twist's running noise per component: an exponentially weighted mean of the squared first
-    differences over ~NOISE_MEMORY messages, halved (a difference of two white readings has twice the
-    variance). Motion only raises it, so it bounds the rest noise from above. Immutable tuples (the
-    state is snapshotted)."""
-
-    __slots__ = ()
-
-    @staticmethod
-    def step(track: tuple | None, values: tuple, stamp: float, period: float) -> tuple:
-        """(values, the running variance per component or None, weight, stamp) after ``values``; a message
-        after a gap starts the differences again (a gap's jump is not noise)."""
-        if track is None:
-            return (values, None, 0.0, stamp)
-        prev, var, weight = track[0], track[1], track[2]
-        if period > 0.0 and stamp - track[3] > GAP_FACTOR * period:
-            return (values, var, weight, stamp)
-        weight = weight + 1.0 if weight < NOISE_MEMORY else NOISE_MEMORY
-        a0, a1, a2, a3, a4, a5 = values
-        b0, b1, b2, b3, b4, b5 = prev
-        d = (0.5 * (a0 - b0) ** 2, 0.5 * (a1 - b1) ** 2, 0.5 * (a2 - b2) ** 2,
-             0.5 * (a3 - b3) ** 2, 0.5 * (a4 - b4) ** 2, 0.5 * (a5 - b5) ** 2)
-        if var is None:
-            return (values, d, weight, stamp)
-        g = 1.0 / weight
-        v0, v1, v2, v3, v4, v5 = var
-        return (values, (v0 + g * (d[0] - v0), v1 + g * (d[1] - v1), v2 + g * (d[2] - v2),
-                         v3 + g * (d[3] - v3), v4 + g * (d[4] - v4), v5 + g * (d[5] - v5)), weight, stamp)
+def running_noise(track: tuple | None, values: tuple, stamp: float, period: float) -> tuple:
+    """The twist's running noise per component after ``values``: (values, the variance per component or None,
+    weight, stamp). An exponentially weighted mean of the squared first differences over ~NOISE_MEMORY
+    messages, halved (a difference of two white readings has twice the variance); motion only raises it, so
+    it bounds the rest noise from above. A message after a gap starts the differences again (a gap's jump is
+    not noise). Immutable tuples: the state is snapshotted."""
+    if track is None:
+        return (values, None, 0.0, stamp)
+    prev, var, weight = track[0], track[1], track[2]
+    if period > 0.0 and stamp - track[3] > GAP_FACTOR * period:
+        return (values, var, weight, stamp)
+    weight = weight + 1.0 if weight < NOISE_MEMORY else NOISE_MEMORY
+    a0, a1, a2, a3, a4, a5 = values
+    b0, b1, b2, b3, b4, b5 = prev
+    d = (0.5 * (a0 - b0) ** 2, 0.5 * (a1 - b1) ** 2, 0.5 * (a2 - b2) ** 2,
+         0.5 * (a3 - b3) ** 2, 0.5 * (a4 - b4) ** 2, 0.5 * (a5 - b5) ** 2)
+    if var is None:
+        return (values, d, weight, stamp)
+    g = 1.0 / weight
+    v0, v1, v2, v3, v4, v5 = var
+    return (values, (v0 + g * (d[0] - v0), v1 + g * (d[1] - v1), v2 + g * (d[2] - v2),
+                     v3 + g * (d[3] - v3), v4 + g * (d[4] - v4), v5 + g * (d[5] - v5)), weight, stamp)
 
 
 def rest_window(window: tuple, values: tuple, measured: tuple, running: tuple | None, stamp: float, span: float,
@@ -93,7 +87,7 @@ def rest_window(window: tuple, values: tuple, measured: tuple, running: tuple | 
     """The rest window after one message, and whether the wheels are at rest now (module doc).
 
     ``window`` holds the six twist components (unmeasured ones 0) and stamps of the last ``span``
-    seconds, at least MIN_WINDOW messages; ``running`` is ``NoiseTrack``'s variance per component."""
+    seconds, at least MIN_WINDOW messages; ``running`` is ``running_noise``'s variance per component."""
     k = 0
     for used in measured:
         k += used
@@ -132,4 +126,4 @@ def rest_window(window: tuple, values: tuple, measured: tuple, running: tuple | 
     return window, True
 
 
-__all__ = ["MIN_WINDOW", "NoiseTrack", "RESOLUTION", "normal_bound", "rest_window", "t2_bound"]
+__all__ = ["MIN_WINDOW", "RESOLUTION", "normal_bound", "rest_window", "running_noise", "t2_bound"]
