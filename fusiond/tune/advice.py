@@ -29,7 +29,19 @@ from ..doctor import Proof, Verdict
 from ..logs import muted
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
 
-__all__ = ["prove_advice", "with_suggestion"]
+__all__ = ["prove_advice", "split_key", "with_suggestion"]
+
+
+def split_key(key: str) -> tuple[str, str, str] | None:
+    """(section, sensor name, field) of a verdict's dotted key: "sensors.imu.gyro_noise" -> ("sensors",
+    "imu", "gyro_noise") (a sensor's name may hold dots), "filter.gyro_bias_sigma" -> ("filter", "",
+    "gyro_bias_sigma"); None for a key that names no table's field."""
+    parts = key.split(".")
+    if parts[0] == "sensors" and len(parts) >= 3:
+        return "sensors", ".".join(parts[1:-1]), parts[-1]
+    if len(parts) == 2:
+        return parts[0], "", parts[1]
+    return None
 
 
 def with_suggestion(cfg: Config, verdict: Verdict) -> tuple[Config, int]:
@@ -39,16 +51,16 @@ def with_suggestion(cfg: Config, verdict: Verdict) -> tuple[Config, int]:
         values = tomllib.loads(verdict.suggestion)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{verdict.suggestion!r}: not a TOML line: {err}") from None
-    parts = verdict.key.split(".")
+    where = split_key(verdict.key)
     raw = msgspec.to_builtins(cfg)
-    if parts[0] == "sensors" and len(parts) >= 3:
-        name = ".".join(parts[1:-1])
+    if where is not None and where[0] == "sensors":
+        name = where[1]
         tables = [t for t in raw["sensors"] if t.get("name") == name]
         if not tables:
             raise ConfigError(f"{verdict.key}: no sensor named {name!r} in the config")
         table = tables[0]
-    elif len(parts) == 2 and isinstance(raw.get(parts[0]), dict):
-        table = raw[parts[0]]
+    elif where is not None and isinstance(raw.get(where[0]), dict):
+        table = raw[where[0]]
     else:
         raise ConfigError(f"{verdict.key}: not a key of a config table")
     table.update(values)

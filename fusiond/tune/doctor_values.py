@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from ..config import Config, ConfigError
 from ..doctor import Verdict
 from ..logs import muted
-from .advice import with_suggestion
+from .advice import split_key, with_suggestion
 from .params import FILTER, Param
 
 
@@ -33,13 +33,12 @@ class DoctorLine:
 
 
 def _group(key: str) -> tuple[str, str] | None:
-    """(table, key) of a verdict's dotted key: "sensors.imu.gyro_noise" -> ("imu", "gyro_noise")."""
-    parts = key.split(".")
-    if parts[0] == "sensors" and len(parts) >= 3:
-        return ".".join(parts[1:-1]), parts[-1]
-    if parts[0] == FILTER and len(parts) == 2:
-        return FILTER, parts[1]
-    return None
+    """(table, key) of a verdict's dotted key as tune's parameters name it: "sensors.imu.gyro_noise" ->
+    ("imu", "gyro_noise"), "filter.process_noise" -> ("filter", "process_noise")."""
+    where = split_key(key)
+    if where is None or where[0] not in ("sensors", FILTER):
+        return None
+    return (where[1], where[2]) if where[0] == "sensors" else (FILTER, where[2])
 
 
 def doctor_lines(cfg: Config, samples: Sequence[object], params: Sequence[Param]) -> dict[tuple[str, str], DoctorLine]:
