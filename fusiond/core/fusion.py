@@ -319,6 +319,11 @@ class FusionCore:
                 for n in ("wheel_scale", "gyro_scale") if self.layout.has(n)}
 
     @property
+    def still_since(self) -> float | None:
+        """The stamp since which the filter takes the robot for standing still (None: moving, or not started)."""
+        return None if self.state is None else self.state.still_since
+
+    @property
     def time(self) -> float | None:
         return None if self.state is None else self.state.t
 

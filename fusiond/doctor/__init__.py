@@ -118,6 +118,12 @@ class Doctor:
         if len(samples) >= CHUNK:
             self._settle_samples()
 
+    def add_rest(self, sample, since: float) -> None:
+        """An odometry sample the filter took at rest, since ``since`` (filter time). The standstills the gyro
+        is judged over are then the filter's own, not only the bins reading exactly zero."""
+        if self.collector is not None:
+            self.collector.add_rest(sample.stamp + self._stamp_offset.get(sample.sensor, 0.0), since)
+
     def add_estimate(self, t: float, q, pos_var: float, att_var: float, bias_z: float) -> None:
         if self.collector is not None:
             self.collector.add_estimate(t, q, pos_var, att_var, bias_z)

@@ -1,6 +1,7 @@
 """The gyro at standstill against the filter's bias estimate.
 
-While the wheels read exactly zero, the gyro should read its bias. Each standstill
+While the robot stands (the wheels reading exactly zero, or the filter's rest test passing on a drive
+that reads noise at rest), the gyro should read its bias. Each standstill
 episode gives the gyro's mean there; genuine standstills agree with each other to
 the gyro noise over the episode (sigma / sqrt(n)). An episode that reads clearly
 differently from the others is a false standstill (the vehicle coasting or turning
@@ -19,6 +20,7 @@ import numpy as np
 from ..config import Config, ImuSensor, OdomSensor
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from .covariance import has_heading_reference
+from .bins import BIN_S
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
@@ -43,18 +45,17 @@ class Episode:
 
 
 def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
-    """Runs of odometry exactly at rest lasting at least standstill_s, with the gyro over them."""
-    t = series.odom_t
-    out: list[Episode] = []
-    start = None
-    for i, rest in enumerate(series.odom_rest):
-        if rest and start is None:
-            start = t[i]
-        if (not rest or i == len(t) - 1) and start is not None:
-            end = t[i] if rest else t[i - 1]
-            if end - start >= standstill_s:
-                out.append(Episode(start, end))
-            start = None
+    """The standstills lasting at least standstill_s, with the gyro over them: the runs of bins reading
+    exactly zero, and the filter's own where a replay reported them (``Series.rest_spans``: its odometry
+    rest test, which also finds a drive reading noise at rest). A zero run the filter did not take for rest
+    (a coast) stays: ``quiet_episodes`` tells it by its gyro."""
+    out = _zero_runs(series, standstill_s)
+    if series.rest_spans:
+        # bounds on the bins' middles: a gyro bin is taken whole inside the standstill, never half in the drive
+        half = BIN_S / 2
+        spans = [Episode(t0 + half, t1 - half) for t0, t1 in series.rest_spans if t1 - t0 >= standstill_s + BIN_S]
+        out = sorted(spans + [e for e in out if not any(e.t0 <= s.t1 and s.t0 <= e.t1 for s in spans)],
+                     key=lambda e: e.t0)
     if not out or not series.gyro_t:
         return out
     tg, z, var, n = (np.array(series.gyro_t), np.array(series.gyro_z), np.array(series.gyro_var),
@@ -69,6 +70,22 @@ def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
         within = np.sum(var[m] * np.maximum(w - 1, 0))
         between = np.sum(w * (z[m] - e.gyro_mean) ** 2)
         e.gyro_sigma = float(math.sqrt((within + between) / max(e.samples - 1, 1)))
+    return out
+
+
+def _zero_runs(series: Series, standstill_s: float) -> list[Episode]:
+    """Runs of odometry bins exactly at rest lasting at least standstill_s."""
+    t = series.odom_t
+    out: list[Episode] = []
+    start = None
+    for i, rest in enumerate(series.odom_rest):
+        if rest and start is None:
+            start = t[i]
+        if (not rest or i == len(t) - 1) and start is not None:
+            end = t[i] if rest else t[i - 1]
+            if end - start >= standstill_s:
+                out.append(Episode(start, end))
+            start = None
     return out
 
 
@@ -138,7 +155,7 @@ def bias_drift(episodes: list[Episode], walk: float) -> tuple[tuple[float, float
 
 
 def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Episode], list[Episode]]:
-    """(standstills, stretches that only look like one): the wheels' runs exactly at rest, split by the gyro.
+    """(standstills, stretches that only look like one): the standstill episodes, split by the gyro.
 
     The core confirms a standstill only while the gyro is quiet (each axis within quiet_bound: its noise
     plus the prior bias range, core/sensors/imu/gyro_bias.py): an episode whose gyro turns is the vehicle

@@ -57,6 +57,10 @@ class Series(msgspec.Struct):
     odom_wz_floored: int = 0
     odom_wz_floored_sigma_sum: float = 0.0
     odom_rest: list[bool] = []  # every sample of the bin exactly at rest
+    # The filter's own standstills, (first, last stamp), as a replay reports them (``Doctor.add_rest``; a
+    # live doctor has none): the odometry's rest test (core/sensors/odom/rest.py), which also finds a drive
+    # that reads noise at rest
+    rest_spans: list[tuple[float, float]] = []
     odom_gaps: list[tuple[float, float]] = []  # (stamp, length s) of silences longer than gap_s
     # Where an integrated heading was NOT integrated (a step longer than MAX_STEP_S): the stamp of the
     # first sample after the silence. A comparison of integrated headings must not span one (the turn
@@ -148,6 +152,16 @@ class SeriesCollector:
         pending.extend(s for s in samples if type(s) in _KINDS and math.isfinite(s.stamp))
         if len(pending) >= self._due:
             self._integrate(final=False)
+
+    def add_rest(self, stamp: float, since: float) -> None:
+        """An odometry message the filter took at rest, since ``since`` (``Series.rest_spans``): one span per
+        value of ``since``, reaching the last message at rest."""
+        spans = self.series.rest_spans
+        if spans and spans[-1][0] == since:
+            if stamp > spans[-1][1]:
+                spans[-1] = (since, stamp)
+        else:
+            spans.append((since, stamp))
 
     def add_estimate(self, t: float, q: tuple[float, float, float, float], pos_var: float, att_var: float,
                      bias_z: float) -> None:

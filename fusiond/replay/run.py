@@ -306,6 +306,10 @@ class Runner:
                     doctor.add_estimate(t, q, pos_var, att_var, float(bias[2]) if bias is not None else 0.0)
             if keep_trace:
                 trace.fused.append((t, p[0], p[1], p[2]))
+        if doctor is not None and type(sample) is OdomSample:
+            since = core.still_since
+            if since is not None:
+                doctor.add_rest(sample, since)
         if isinstance(sample, OdomSample) and step.accepted:
             if doctor is not None:
                 doctor.add_twist(sample.linear, sample.angular, sample.orientation)
