@@ -213,6 +213,23 @@ def _gps_error_params(s: GpsSensor) -> list[Param]:
 SPAN_TAUS = 3.0  # time constants a recording must span for a Gauss-Markov error to be fitted (below)
 
 
+def gps_span(s: GpsSensor, samples: Sequence[object]) -> float:
+    """The time the GPS's fixes span in the recording, s (0: fewer than two)."""
+    stamps = [m.stamp for m in _sensor_samples(samples, s.name, GpsSample)]
+    return max(stamps) - min(stamps) if len(stamps) > 1 else 0.0
+
+
+def slow_errors(s: GpsSensor, span: float) -> dict[str, float]:
+    """The parts ("horizontal", "vertical") of the GPS's error whose Gauss-Markov time constant is too long
+    for a recording of ``span`` seconds to identify (fewer than SPAN_TAUS of them), with that constant."""
+    taus = {}
+    if s.error_tau_s > 0.0 and s.error_sigma is not None:
+        taus = {"horizontal": s.error_tau_s, "vertical": s.error_tau_s}
+    elif s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s > 0.0:
+        taus = {"vertical": s.vertical_error_tau_s}
+    return {part: tau for part, tau in taus.items() if span < SPAN_TAUS * tau} if span > 0.0 else {}
+
+
 def _gps_params(s: GpsSensor, samples: Sequence[object]) -> list[Param]:
     """The GPS's noise and error-model parameters, less those of an axis whose error the recording cannot
     identify. A Gauss-Markov error decorrelates over its time constant tau: a recording shorter than
@@ -222,16 +239,8 @@ def _gps_params(s: GpsSensor, samples: Sequence[object]) -> list[Param]:
     white noise went to 0.01 m and the error to 5 mm, and z followed the fixes' altitude (1.14 m off the
     reference, against 0.54 m as configured), which no held-back fix shows (they share the offset)."""
     params = _gps_noise_params(s, samples) + _gps_error_params(s)
-    stamps = [m.stamp for m in _sensor_samples(samples, s.name, GpsSample)]
-    if len(stamps) < 2:
-        return params
-    span = max(stamps) - min(stamps)
-    taus = {}
-    if s.error_tau_s > 0.0 and s.error_sigma is not None:
-        taus = {"horizontal": s.error_tau_s, "vertical": s.error_tau_s}
-    elif s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s > 0.0:
-        taus = {"vertical": s.vertical_error_tau_s}
-    slow = {part: tau for part, tau in taus.items() if span < SPAN_TAUS * tau}
+    span = gps_span(s, samples)
+    slow = slow_errors(s, span)
     if not slow:
         return params
     out = []

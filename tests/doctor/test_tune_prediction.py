@@ -123,3 +123,20 @@ def test_a_gps_error_slower_than_the_recording_is_not_fitted(minutes, skipped):
                                      "gps.vertical_error_tau_s")]
     assert all(bool(p.skipped) == skipped for p in vertical), [(p.name, p.skipped) for p in vertical]
     assert not by_name["gps.position_noise.horizontal"].skipped  # no horizontal error model: its white noise fits
+
+
+def test_an_axis_whose_error_is_slower_than_the_recording_is_not_scored(wander):
+    """The held fixes share a slow error with their fused neighbours: scored, a config that follows it would
+    look better. 200 s of fixes: the altitude's default error (tau 300 s) leaves the vertical unscored, none
+    (vertical_error_sigma = 0) scores it; a horizontal error of tau 100 s leaves both unscored."""
+    _, samples = wander
+    default = robot_config(gps="position_noise = [1.5, 1.5, 3.0]")
+    kept, held = split(samples, default)
+    slow_up = predict(default, kept, held)
+    assert slow_up.horizontal is not None and slow_up.vertical is None
+    white = predict(robot_config(gps="position_noise = [1.5, 1.5, 3.0]\nvertical_error_sigma = 0.0"), kept, held)
+    assert white.horizontal is not None and white.vertical is not None
+    slow_all = predict(robot_config(gps="position_noise = [1.5, 1.5, 3.0]\nerror_tau_s = 100.0\nerror_sigma = [1.5, 1.5, 3.0]"),
+                       kept, held)
+    assert slow_all.horizontal is None and slow_all.vertical is None
+    assert not slow_all.worse_than(white) and not white.worse_than(slow_all)  # nothing scored both ways
