@@ -22,6 +22,10 @@
 6. The doctor's measured value of each key (``doctor_values``) is tried in place of the fit's and
    judged the same way; it is taken when no worse, else the table says what it measured and why not.
 
+No fitted white noise goes below what the recording shows at rest (``floors``): the scatter of each
+sensor's readings over the filter's own standstills bounds the fit from below, beside the sensors'
+``*_min_sigma`` constants.
+
 Why derivative-free. The likelihood of this filter is not a smooth function of its noise: the
 Mahalanobis gates switch updates between applied and rejected, the standstill detection and the
 gyro-bias windows open and close on thresholds of the stated noise, the GPS heading search is
@@ -45,6 +49,7 @@ from ..errors import ReplayError
 from ..logs import muted
 from .advice import with_suggestion
 from .doctor_values import doctor_lines
+from .floors import measured_floors, with_floors
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
 from .prediction import HOLD_EVERY, Prediction, predict
@@ -230,6 +235,9 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     if not samples:
         raise ReplayError("nothing to tune: the recording has no sample of a configured sensor")
     params = select(tunable_params(cfg, samples), keys)
+    floor_replays = int(any(not p.skipped for p in params))  # the standstills' replay (floors.rest_spans)
+    with muted():
+        params = with_floors(params, measured_floors(cfg, samples, params))
     active = [p for p in params if not p.skipped]
     n = len(active)
     if maxfev is None:
@@ -266,7 +274,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     rows = rows + skipped
     order = {p.name: i for i, p in enumerate(params)}
     rows.sort(key=lambda r: order[r.param.name])
-    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays,
+    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays + floor_replays,
                       time.perf_counter() - t_start, stopped,
                       residuals(obj.ref) if n and obj.ref is not None else 0, comments=comments,
                       prediction_before=predicted[0], prediction_after=predicted[1])
@@ -395,7 +403,9 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         note = notes[i] or ("the likelihood changes by less than 1 over a factor of 2" if status[i] == "not informed"
                             else "")
         if floored[i] and status[i] in ("tuned", "unchanged"):
-            note = f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower"
+            note = (f"held at the noise the recording shows at rest, {p.measured.describe()}: the fit would go lower"
+                    if p.held_by_measured() and p.measured is not None else
+                    f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower")
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
                         after.nis_per_dof.get(s), measured[i]))
     return rows, config, before, after, comments, replays, (pred_before, pred_after)

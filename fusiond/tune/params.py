@@ -39,7 +39,7 @@ import math
 import statistics
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 
@@ -49,6 +49,9 @@ from ..core.sensors.imu.axes import seen_axes
 from ..core.sensors.registry import kind_of
 from ..errors import ConfigError
 from ..samples import GpsSample, ImuSample, OdomSample, PoseSample
+
+if TYPE_CHECKING:
+    from .floors import Floor
 
 FILTER = "filter"  # the table name of filter.* parameters (sensor parameters use the sensor's name)
 SIGNIFICANT = 4  # digits of a tuned value
@@ -70,15 +73,29 @@ class Param:
     # other keys of the same table set together with this one when it changes
     companions: tuple[tuple[str, object], ...] = field(default=())
     floor: float = 0.0  # the sensor's floor on this noise (``*_min_sigma``): no fitted value goes below it
+    measured: Floor | None = None  # the floors the recording's standstills set (``floors.py``)
 
     def lowest(self) -> float:
-        """The smallest log-scale the fit may take: down to the floor (never above 0: a start the
-        user put below the floor may stay there)."""
+        """The smallest log-scale the fit may take: down to the sensor's floor and to the noise the
+        recording shows at rest (never above 0: a start the user put below them may stay there)."""
         start = self.start()
-        smallest = min(start) if isinstance(start, tuple) else start
-        if self.floor <= 0.0 or not smallest > 0.0:
-            return -math.inf
-        return min(0.0, math.log(self.floor / smallest))
+        components = start if isinstance(start, tuple) else (start,)
+        smallest = min(components) if components else 0.0
+        low = -math.inf
+        if self.floor > 0.0 and smallest > 0.0:
+            low = math.log(self.floor / smallest)
+        if self.measured is not None:
+            low = max(low, self.measured.lowest(components))
+        return min(0.0, low)
+
+    def held_by_measured(self) -> bool:
+        """Is the floor the fit stops at the one measured at rest rather than the sensor's constant?"""
+        if self.measured is None:
+            return False
+        start = self.start()
+        components = start if isinstance(start, tuple) else (start,)
+        constant = math.log(self.floor / min(components)) if self.floor > 0.0 and min(components) > 0.0 else -math.inf
+        return self.measured.lowest(components) > constant
 
     @property
     def group(self) -> tuple[str, str]:

@@ -1,0 +1,67 @@
+"""Floors from the data (tune/floors.py): no fitted white noise below what the standstills show."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from fusiond.tune.floors import FLOOR_ALPHA, Floor, measured_floors, rest_spans
+from fusiond.tune.params import Param, tunable_params
+
+from tests.support.configs import robot_config
+from tests.support.sim_rest import RestWorld, Segment, simulate
+
+GYRO_SIGMA = 0.003
+REST_NOISE = 0.02
+
+
+@pytest.fixture(scope="module")
+def noisy_rest():
+    """Three standstills (5, 3, 3 s) between drives; the wheels read 0.02 of noise at rest, the gyro 0.003 while
+    its messages state 0.14."""
+    segments = [Segment(5.0), Segment(20.0, speed=0.5, yaw_rate=0.2), Segment(3.0),
+                Segment(20.0, speed=0.5, yaw_rate=-0.2), Segment(3.0), Segment(5.0, speed=0.5)]
+    world = RestWorld(segments, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=GYRO_SIGMA, gyro_stated_sigma=0.14,
+                      ramp_s=0.5, rest_noise=REST_NOISE)
+    return simulate(world)
+
+
+def test_the_standstills_measure_each_noise_from_below(noisy_rest):
+    """The gyro's floor and the wheels' forward-speed and yaw-rate floors sit just under the simulated noise
+    (a lower bound of size 1 %: over ~1,000 differences, within 10 % below it); the components the wheels read
+    exactly 0 at rest set none."""
+    cfg = robot_config()
+    assert len(rest_spans(cfg, noisy_rest)) == 3
+    params = tunable_params(cfg, noisy_rest)
+    floors = measured_floors(cfg, noisy_rest, params)
+    gyro = floors["imu.gyro_noise"].sigmas[0]
+    assert 0.9 * GYRO_SIGMA < gyro < GYRO_SIGMA, gyro
+    twist = {p.name: p for p in params}
+    linear = floors["wheel.twist_noise.linear"]
+    by_index = dict(zip(twist["wheel.twist_noise.linear"].indices, linear.sigmas))
+    assert 0.9 * REST_NOISE < by_index[0] < REST_NOISE, by_index
+    assert all(v == 0.0 for i, v in by_index.items() if i != 0)
+    angular = dict(zip(twist["wheel.twist_noise.angular"].indices, floors["wheel.twist_noise.angular"].sigmas))
+    assert 0.9 * REST_NOISE < angular[5] < REST_NOISE, angular
+    assert FLOOR_ALPHA == 0.01
+
+
+def test_a_floor_bounds_the_fit_from_below_and_never_lifts_a_start():
+    """lowest() is the log-scale at which the highest-bound component reaches its floor; a start already below
+    the measured noise may stay (0: the fit keeps it), as with the sensor's constant floor."""
+    p = Param("imu.orientation_noise", "imu", "orientation_noise", (0, 1, 2), (0.02, 0.01, 0.04), floor=0.001,
+              measured=Floor((0.002, 0.004, 0.001), 100, 2))
+    assert p.lowest() == pytest.approx(math.log(0.4))  # the y axis: 0.01 x 0.4 = its floor 0.004
+    assert p.held_by_measured()
+    below = Param("imu.gyro_noise", "imu", "gyro_noise", None, 0.001, floor=0.0001, measured=Floor((0.003,), 100, 1))
+    assert below.lowest() == 0.0
+    plain = Param("imu.gyro_noise", "imu", "gyro_noise", None, 0.01, floor=0.001)
+    assert plain.lowest() == pytest.approx(math.log(0.1)) and not plain.held_by_measured()
+
+
+def test_a_robot_that_never_stands_sets_no_floor():
+    world = RestWorld([Segment(20.0, speed=0.5, yaw_rate=0.2)], gyro_sigma=GYRO_SIGMA, ramp_s=0.5)
+    samples = simulate(world)
+    cfg = robot_config()
+    assert measured_floors(cfg, samples, tunable_params(cfg, samples)) == {}
