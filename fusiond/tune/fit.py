@@ -12,7 +12,7 @@
    the updates stamped after the split: each changed key is dropped back to its original in turn
    and stays dropped when that scores the held-back part no worse; if what is left does not beat
    the original config there, nothing is changed.
-5. Validate by prediction (``prediction``), where an absolute GPS gives positions: every 5th fix is
+5. Validate by prediction (``prediction``), where an absolute GPS or pose gives positions: every 5th is
    held back from a replay of the whole recording and the filter's position at its stamp scored,
    horizontally and vertically apart. A key whose change makes either worse is dropped back, and the
    tuned config is kept only if it predicts no worse than the original on both: a coloured GPS error

@@ -1,4 +1,4 @@
-"""Held-back fixes: how well a config predicts the absolute positions it was not given.
+"""Held-back fixes (or poses): how well a config predicts the absolute positions it was not given.
 
 The likelihood judges a noise by how well the filter predicts its own innovations. That can
 reward the wrong thing: a GPS whose error is coloured (multipath, a receiver's slow wander) has
@@ -6,10 +6,11 @@ innovations that a too-small white noise "explains" better, while the positions 
 held-out skid-steer, a fit on the likelihood alone took `position_noise` from the stated 0.8 m to
 0.04 m, after which the gate rejected 263 fixes and the altitude ran to -21 m. What a user cares
 about is where the robot is. So a change of noise is also judged where the truth is known best:
-every HOLD_EVERY-th fix of the absolute sensor is held back from the replay, and the filter's
-position at its stamp (interpolated between the published poses around it, the antenna's lever
-arm applied) is compared with it, horizontally and vertically apart (a consumer receiver's
-altitude is a different sensor from its horizontal position). The filter has not seen that fix;
+every HOLD_EVERY-th fix of the absolute sensor (a GPS, or an absolute pose: motion capture, a
+ceiling camera) is held back from the replay, and the filter's position at its stamp (interpolated
+between the published poses around it, the antenna's or marker's lever arm applied) is compared
+with it, horizontally and vertically apart (a consumer receiver's altitude is a different sensor
+from its horizontal position). The filter has not seen that fix;
 it has seen the ones around it, which is how it runs.
 
 An axis whose GPS error is slow against the recording (a Gauss-Markov time constant the recording
@@ -41,7 +42,6 @@ from ..core.fusion import FusionCore
 from ..core.layout import absolute_sensor, fuses_height
 from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
-from ..samples import GpsSample
 from .params import slow_errors
 
 HOLD_EVERY = 5  # every 5th fix held back: a fifth of the fixes scored, four fifths still fused
@@ -93,23 +93,31 @@ class Prediction:
 def gps_sensor(cfg: Config):
     """The GPS that defines the world frame (an absolute sensor whose kind is geodetic), or None (a pose
     sensor's or no absolute sensor)."""
+    s = world_sensor(cfg)
+    return s if s is not None and kind_of(s).geodetic else None
+
+
+def world_sensor(cfg: Config):
+    """The absolute sensor whose positions the held-back check scores: the first that defines the world
+    frame (a GPS, or a pose that is not differential), or None."""
     for s in cfg.sensors:
-        if absolute_sensor(s) and kind_of(s).geodetic:
+        if absolute_sensor(s):
             return s
     return None
 
 
-def split(samples: Sequence[object], cfg: Config, every: int = HOLD_EVERY) -> tuple[list, list[GpsSample]]:
-    """(the samples with every ``every``-th fix of the world's GPS held back, those fixes). Fixes without a fix
-    (status -1) are counted neither way: they are not positions."""
-    gps = gps_sensor(cfg)
-    if gps is None:
+def split(samples: Sequence[object], cfg: Config, every: int = HOLD_EVERY) -> tuple[list, list]:
+    """(the samples with every ``every``-th fix or pose of the world's absolute sensor held back, those). GPS
+    messages without a fix (status -1) are counted neither way: they are not positions."""
+    world = world_sensor(cfg)
+    if world is None:
         return list(samples), []
+    sample_type = kind_of(world).sample_type
     kept: list = []
-    held: list[GpsSample] = []
+    held: list = []
     n = 0
     for s in samples:
-        if type(s) is GpsSample and s.sensor == gps.name and s.status != NO_FIX:
+        if type(s) is sample_type and s.sensor == world.name and getattr(s, "status", 0) != NO_FIX:
             n += 1
             if n % every == 0:
                 held.append(s)
@@ -118,11 +126,12 @@ def split(samples: Sequence[object], cfg: Config, every: int = HOLD_EVERY) -> tu
     return kept, held
 
 
-def predict(cfg: Config, kept: Sequence[object], held: Sequence[GpsSample]) -> Prediction:
-    """Replay ``kept`` through a fresh core and score its position at the ``held`` fixes (module doc)."""
-    gps = gps_sensor(cfg)
-    if gps is None or len(held) < MIN_FIXES:
+def predict(cfg: Config, kept: Sequence[object], held: Sequence[object]) -> Prediction:
+    """Replay ``kept`` through a fresh core and score its position at the ``held`` fixes or poses (module doc)."""
+    world = world_sensor(cfg)
+    if world is None or len(held) < MIN_FIXES:
         return Prediction(None, None, 0)
+    geodetic = kind_of(world).geodetic
     core = FusionCore(cfg)
     ingest = core.ingest
     stamps: list[float] = []
@@ -141,11 +150,11 @@ def predict(cfg: Config, kept: Sequence[object], held: Sequence[GpsSample]) -> P
             stamps.append(t)
             poses.append(pose.copy())
     frame = core.state.enu if core.state is not None else None
-    if frame is None or len(stamps) < 2:
+    if (geodetic and frame is None) or len(stamps) < 2:
         return Prediction(None, None, 0)
     t = np.asarray(stamps)
     p = np.asarray(poses)
-    lever = np.asarray(gps.extrinsic_xyz, dtype=float)
+    lever = np.asarray(world.extrinsic_xyz, dtype=float)
     antenna = p[:, :3] if not lever.any() else p[:, :3] + np.array([rot.matrix(q) @ lever for q in p[:, 3:7]])
     dh, dv = [], []
     squared: dict[int, tuple[float, float]] = {}
@@ -155,16 +164,16 @@ def predict(cfg: Config, kept: Sequence[object], held: Sequence[GpsSample]) -> P
             continue
         w = (fix.stamp - t[k - 1]) / (t[k] - t[k - 1])
         at = (1.0 - w) * antenna[k - 1] + w * antenna[k]
-        e, n, u = frame.enu(fix.latitude, fix.longitude, fix.altitude)
+        e, n, u = frame.enu(fix.latitude, fix.longitude, fix.altitude) if geodetic else fix.position
         dh.append((at[0] - e) ** 2 + (at[1] - n) ** 2)
         dv.append((at[2] - u) ** 2)
         squared[index] = (dh[-1], dv[-1])
     if len(dh) < MIN_FIXES:
         return Prediction(None, None, len(dh))
-    slow = slow_errors(gps, held[-1].stamp - held[0].stamp)
+    slow = slow_errors(world, held[-1].stamp - held[0].stamp) if geodetic else {}
     horizontal = None if "horizontal" in slow else math.sqrt(sum(dh) / len(dh))
-    vertical = None if "vertical" in slow or not fuses_height(cfg, gps) else math.sqrt(sum(dv) / len(dv))
+    vertical = None if "vertical" in slow or not fuses_height(cfg, world) else math.sqrt(sum(dv) / len(dv))
     return Prediction(horizontal, vertical, len(dh), squared)
 
 
-__all__ = ["HOLD_EVERY", "Prediction", "RELEVANT", "WORSE_Z", "gps_sensor", "predict", "split"]
+__all__ = ["HOLD_EVERY", "Prediction", "RELEVANT", "WORSE_Z", "gps_sensor", "predict", "split", "world_sensor"]
