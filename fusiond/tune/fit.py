@@ -403,8 +403,8 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         note = notes[i] or ("the likelihood changes by less than 1 over a factor of 2" if status[i] == "not informed"
                             else "")
         if floored[i] and status[i] in ("tuned", "unchanged"):
-            note = (f"held at the noise the recording shows at rest, {p.measured.describe()}: the fit would go lower"
-                    if p.held_by_measured() and p.measured is not None else
+            note = (f"held at the noise the recording shows at rest, {p.measured_note}: the fit would go lower"
+                    if p.held_by_measured() else
                     f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower")
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
                         after.nis_per_dof.get(s), measured[i]))

@@ -50,11 +50,6 @@ class Floor:
     differences: int
     standstills: int
 
-    def lowest(self, start: tuple[float, ...]) -> float:
-        """The smallest log-scale of ``start`` that keeps every component at or above its floor."""
-        ratios = [math.log(f / c) for f, c in zip(self.sigmas, start) if f > 0.0 and c > 0.0]
-        return max(ratios) if ratios else -math.inf
-
     def describe(self) -> str:
         shown = ", ".join(f"{f:.3g}" for f in self.sigmas if f > 0.0)
         return f"{shown} (measured at rest: {self.differences} differences over {self.standstills} standstill(s))"
@@ -198,8 +193,9 @@ def measured_floors(cfg: Config, samples: Sequence[object], params: Sequence[Par
 
 
 def with_floors(params: Sequence[Param], floors: dict[str, Floor]) -> list[Param]:
-    """``params`` with the measured floors attached (``Param.measured``)."""
-    return [replace(p, measured=floors[p.name]) if p.name in floors else p for p in params]
+    """``params`` with the measured floors attached (``Param.measured``, ``Param.measured_note``)."""
+    return [replace(p, measured=floors[p.name].sigmas, measured_note=floors[p.name].describe()) if p.name in floors
+            else p for p in params]
 
 
 __all__ = ["FLOOR_ALPHA", "Floor", "MIN_DIFFERENCES", "measured_floors", "rest_spans", "with_floors"]

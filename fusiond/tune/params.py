@@ -39,7 +39,7 @@ import math
 import statistics
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgspec
 
@@ -49,9 +49,6 @@ from ..core.sensors.imu.axes import seen_axes
 from ..core.sensors.registry import kind_of
 from ..errors import ConfigError
 from ..samples import GpsSample, ImuSample, OdomSample, PoseSample
-
-if TYPE_CHECKING:
-    from .floors import Floor
 
 FILTER = "filter"  # the table name of filter.* parameters (sensor parameters use the sensor's name)
 SIGNIFICANT = 4  # digits of a tuned value
@@ -73,29 +70,32 @@ class Param:
     # other keys of the same table set together with this one when it changes
     companions: tuple[tuple[str, object], ...] = field(default=())
     floor: float = 0.0  # the sensor's floor on this noise (``*_min_sigma``): no fitted value goes below it
-    measured: Floor | None = None  # the floors the recording's standstills set (``floors.py``)
+    # the floors the recording's standstills set on the components ``start()`` lists (0: none), and how they
+    # were measured (``floors.py``)
+    measured: tuple[float, ...] = ()
+    measured_note: str = ""
 
     def lowest(self) -> float:
         """The smallest log-scale the fit may take: down to the sensor's floor and to the noise the
         recording shows at rest (never above 0: a start the user put below them may stay there)."""
-        start = self.start()
-        components = start if isinstance(start, tuple) else (start,)
-        smallest = min(components) if components else 0.0
-        low = -math.inf
-        if self.floor > 0.0 and smallest > 0.0:
-            low = math.log(self.floor / smallest)
-        if self.measured is not None:
-            low = max(low, self.measured.lowest(components))
-        return min(0.0, low)
+        return min(0.0, max(self._constant_low(), self._measured_low()))
 
     def held_by_measured(self) -> bool:
         """Is the floor the fit stops at the one measured at rest rather than the sensor's constant?"""
-        if self.measured is None:
-            return False
+        return self._measured_low() > self._constant_low()
+
+    def _components(self) -> tuple[float, ...]:
         start = self.start()
-        components = start if isinstance(start, tuple) else (start,)
-        constant = math.log(self.floor / min(components)) if self.floor > 0.0 and min(components) > 0.0 else -math.inf
-        return self.measured.lowest(components) > constant
+        return start if isinstance(start, tuple) else (start,)
+
+    def _constant_low(self) -> float:
+        components = self._components()
+        smallest = min(components) if components else 0.0
+        return math.log(self.floor / smallest) if self.floor > 0.0 and smallest > 0.0 else -math.inf
+
+    def _measured_low(self) -> float:
+        ratios = [math.log(f / c) for f, c in zip(self.measured, self._components()) if f > 0.0 and c > 0.0]
+        return max(ratios) if ratios else -math.inf
 
     @property
     def group(self) -> tuple[str, str]:

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from fusiond.tune.floors import FLOOR_ALPHA, Floor, measured_floors, rest_spans
+from fusiond.tune.floors import FLOOR_ALPHA, measured_floors, rest_spans
 from fusiond.tune.params import Param, tunable_params
 
 from tests.support.configs import robot_config
@@ -51,10 +51,10 @@ def test_a_floor_bounds_the_fit_from_below_and_never_lifts_a_start():
     """lowest() is the log-scale at which the highest-bound component reaches its floor; a start already below
     the measured noise may stay (0: the fit keeps it), as with the sensor's constant floor."""
     p = Param("imu.orientation_noise", "imu", "orientation_noise", (0, 1, 2), (0.02, 0.01, 0.04), floor=0.001,
-              measured=Floor((0.002, 0.004, 0.001), 100, 2))
+              measured=(0.002, 0.004, 0.001))
     assert p.lowest() == pytest.approx(math.log(0.4))  # the y axis: 0.01 x 0.4 = its floor 0.004
     assert p.held_by_measured()
-    below = Param("imu.gyro_noise", "imu", "gyro_noise", None, 0.001, floor=0.0001, measured=Floor((0.003,), 100, 1))
+    below = Param("imu.gyro_noise", "imu", "gyro_noise", None, 0.001, floor=0.0001, measured=(0.003,))
     assert below.lowest() == 0.0
     plain = Param("imu.gyro_noise", "imu", "gyro_noise", None, 0.01, floor=0.001)
     assert plain.lowest() == pytest.approx(math.log(0.1)) and not plain.held_by_measured()
