@@ -1,4 +1,8 @@
-"""`fusiond bench`: the estimator, core and replay benchmarks on a bag, optionally with the latency one."""
+"""`fusiond bench`: the estimator, core and replay benchmarks on a bag, optionally with the latency one.
+
+The benchmarks themselves are benchmarks/bench.py and benchmarks/bench_latency.py of the source tree
+(cli/benchmarks.py finds them); this module checks the inputs first, so that a wrong bag or config is
+refused before a minute of estimator benchmarks."""
 
 from __future__ import annotations
 
@@ -6,6 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from .benchmarks import REPO_ROOT, load
 from .common import BENCH_NO_MULTICAST, EXIT_USAGE, load_config, positive
 
 __all__ = ["add_arguments", "run"]
@@ -23,9 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-multicast", action="store_true", help=BENCH_NO_MULTICAST)
 
 
-# The source tree fusiond runs from (an editable install, a clone): `bench`'s defaults are found there,
-# not beside the current directory.
-REPO_ROOT = Path(__file__).resolve().parents[2]
+# `bench`'s defaults: the Jackal bag and its config of the source tree fusiond runs from
 BENCH_BAG = REPO_ROOT / "data" / "jackal_test2.bag"
 BENCH_CONFIG = REPO_ROOT / "examples" / "jackal.toml"
 
@@ -50,8 +53,7 @@ def _bench_input_error(bag: Path, cfg) -> str | None:
 def run(args: argparse.Namespace) -> int:
     import msgspec
 
-    from .. import bench
-
+    bench = load("bench")
     bag = Path(args.bag) if args.bag else BENCH_BAG
     config = args.config or str(BENCH_CONFIG)
     if bag.is_dir():  # bench.run replays a bag file only (it skips anything else): say so, not "no such bag"
@@ -69,11 +71,9 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     result = bench.run(bag, Path(config), cfg, quick=args.quick)
     if args.latency:
-        from ..transport.bench_latency import run_bench
-
         # The daemon as `fusiond run` runs it: outputs batched, not express (transport/outputs.py); its CPU
         # is the target's. `bench-latency --express` measures the express variant.
-        lat = run_bench(seconds=args.seconds, imu_hz=1000.0, odom_hz=100.0, express=False)
+        lat = load("bench_latency").run_bench(seconds=args.seconds, imu_hz=1000.0, odom_hz=100.0, express=False)
         flat: dict[str, float] = {}
         for k, v in msgspec.to_builtins(lat).items():
             if isinstance(v, dict):  # latency statistics: pose, raw_hop, ... -> pose_p50_us, ...
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             elif isinstance(v, (int, float)):
                 flat[k] = v
         result["latency"] = flat
-        result["targets"] = bench.targets(result)  # with the daemon's CPU ratio now
+        result["targets"] = bench.targets(result)  # with the daemon's CPU ratio as well
     if args.json:
         print(msgspec.json.encode(result).decode())
     else:

@@ -1,9 +1,12 @@
-"""`fusiond bench-latency`: sensor put -> fused pose latency and the daemon's CPU over Zenoh on loopback."""
+"""`fusiond bench-latency`: sensor put -> fused pose latency and the daemon's CPU over Zenoh on loopback.
+
+The benchmark is benchmarks/bench_latency.py of the source tree (cli/benchmarks.py finds it)."""
 
 from __future__ import annotations
 
 import argparse
 
+from .benchmarks import load
 from .common import BENCH_NO_MULTICAST, positive
 
 __all__ = ["add_arguments", "run"]
@@ -20,13 +23,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..transport.bench_latency import format_table, run_bench
-
-    result = run_bench(seconds=args.seconds, imu_hz=args.imu_hz, odom_hz=args.odom_hz, express=args.express)
+    bench_latency = load("bench_latency")
+    result = bench_latency.run_bench(seconds=args.seconds, imu_hz=args.imu_hz, odom_hz=args.odom_hz,
+                                     express=args.express)
     if args.json:
         import msgspec
 
         print(msgspec.json.encode(result).decode())
     else:
-        print(format_table(result))
+        print(bench_latency.format_table(result))
     return 0

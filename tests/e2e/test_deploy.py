@@ -138,6 +138,7 @@ def test_dockerfile_install_steps_without_docker(tmp_path):
     for module in ("cli/__init__.py", "cli/run.py", "health.py", "transport/daemon.py", "transport/player.py",
                    "transport/session.py", "core/fusion.py", "estimator/ekf.py"):
         assert f"fusiond/{module}" in names
+    assert not any(n.startswith("benchmarks/") for n in names)  # the benchmarks stay in the source tree
     if shutil.which("gcc") or shutil.which("cc"):  # the compiled kernels are built where a compiler is
         assert any(n.startswith("fusiond/estimator/_kernels.") and n.endswith((".so", ".pyd")) for n in names)
 
