@@ -214,3 +214,17 @@ def test_the_installed_package_holds_no_benchmark():
     assert importers == []
     assert (PACKAGE.parent / "benchmarks" / "bench.py").is_file()
     assert 'include = ["fusiond*"]' in (PACKAGE.parent / "pyproject.toml").read_text()
+
+
+# A sensor's typical period (an average of its intervals) and when it reads silent (its timeout, or a few
+# periods when that is longer) are core/inputs.py's smoothed_period and silent_after: the core's held
+# inputs, the service's liveness, the doctor, the IMU's gap rule and the daemon's drain schedule call them.
+_PERIOD_RULE = re.compile(r"max\([^()]*(\* *[\w.]*period[\w.]*\)|, *\w*PERIODS *\*)"
+                          r"|[\w.]*period[\w.]* *\+ *\w+ *\* *\([^()]*- *[\w.]*period[\w.]*\)")
+
+
+def test_the_period_average_and_the_silence_rule_are_written_once():
+    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
+             for path in PACKAGE.rglob("*.py") if path.relative_to(PACKAGE).as_posix() != "core/inputs.py"
+             for i, line in enumerate(path.read_text().splitlines(), 1) if _PERIOD_RULE.search(line)]
+    assert found == []
