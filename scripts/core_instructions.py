@@ -31,6 +31,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # benchmarks/ of the source tree
 WARM_UP = 200  # samples fused first in each count: imports and first allocations, alike in both runs
 # numpy's BLAS threads, started at import, spin for a while in their wait; callgrind counts every thread's
 # instructions, and how long they spin depends on how valgrind schedules them: with them the same count
@@ -51,7 +52,7 @@ def _jackal():
 def _synthetic(messages: int):
     from fusiond.config import loads
     from fusiond.samples import ImuSample, OdomSample
-    from fusiond.transport import bench_latency
+    from benchmarks import bench_latency
 
     cfg = loads(bench_latency._config_text(bench_latency.free_port()), "<core_instructions>")
     cov_o = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)

@@ -16,9 +16,12 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
+from pathlib import Path
 from typing import Any
 
-from fusiond.transport import bench_latency
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ of the source tree
+from benchmarks import bench_latency  # noqa: E402
 
 
 def _floor_child(conn: Any, config_text: str, express: bool) -> None:

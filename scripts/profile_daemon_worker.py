@@ -16,17 +16,21 @@ import argparse
 import cProfile
 import io
 import pstats
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import msgspec
 import zenoh
 
 from fusiond.config import loads
-from fusiond.transport import bench_latency as bench
 from fusiond.transport.daemon import Daemon
 from fusiond.transport.session import build_config, open_session, query_health
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ of the source tree
+from benchmarks import bench_latency as bench  # noqa: E402
 
 
 def timed(fn: Callable[..., Any], acc: dict[str, float], key: str) -> Callable[..., Any]:

@@ -130,11 +130,12 @@ def next_expiry(expiries: tuple[float, float], t: float, end: float) -> float:
     return end
 
 
-def silent_after(timeout_s: float, period: float) -> float:
-    """How long after its last message a sensor is silent: its ``timeout_s``, or TIMEOUT_PERIODS of its
+def silent_after(timeout_s: float, period: float, periods: float = TIMEOUT_PERIODS) -> float:
+    """How long after its last message a sensor is silent: its ``timeout_s``, or ``periods`` of its
     typical period (0: none yet) when that is longer. The core's held inputs (message time) and the
-    service's liveness (wall time) both use it."""
-    return timeout_s if period <= 0.0 else max(timeout_s, TIMEOUT_PERIODS * period)
+    service's liveness (wall time) both use it with TIMEOUT_PERIODS; the IMU's gap rule with its own
+    count (core/sensors/imu/gap_turn.py)."""
+    return timeout_s if period <= 0.0 else max(timeout_s, periods * period)
 
 
 def smoothed_period(period: float, interval: float) -> float:

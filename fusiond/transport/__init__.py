@@ -1,5 +1,4 @@
-"""Zenoh I/O: the daemon, sessions, bag playback onto Zenoh, the latency benchmark and the daemon's
-state file.
+"""Zenoh I/O: the daemon, sessions, bag playback onto Zenoh and the daemon's state file.
 Its public surface is ``__all__``; the rest are this package's internals.
 """
 
@@ -18,8 +17,6 @@ _EXPORTS = {
     "SessionError": "session",
     "play": "player",
     "PlayResult": "player",
-    "run_bench": "bench_latency",
-    "BenchResult": "bench_latency",
     "StateFile": "state_file",
     "StateRefused": "state_file",
     "StateSaver": "state_file",

@@ -30,10 +30,11 @@ from __future__ import annotations
 
 import math
 
+from ..core.inputs import smoothed_period
+
 __all__ = ["LEAD_S", "DrainSchedule"]
 
 LEAD_S = 0.001  # the window before (and after) an expected odometry sample in which every arrival wakes the worker
-PERIOD_SMOOTHING = 0.1  # EMA weight of a new interval between odometry arrivals
 MAX_INTERVAL = 1.0  # a longer gap between odometry samples is a pause, not a period: not averaged in
 
 
@@ -63,7 +64,7 @@ class DrainSchedule:
                 return
             d = arrival - last
             if d <= MAX_INTERVAL:
-                self.period = d if self.period <= 0.0 else self.period + PERIOD_SMOOTHING * (d - self.period)
+                self.period = smoothed_period(self.period, d)  # the sensors' own average (core/inputs.py)
         self.last = arrival
 
     def on_backlog(self, seconds: float) -> None:

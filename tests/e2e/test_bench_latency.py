@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from fusiond.transport.bench_latency import format_table, run_bench
+from benchmarks.bench_latency import format_table, run_bench
 
 
 def test_the_bench_feeds_the_daemon_and_the_bare_subscriber_the_same_traffic():

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from fusiond import bench
+from benchmarks import bench
 from fusiond.config import load
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import predict
@@ -83,8 +83,10 @@ def test_process_benchmark_runs_fusiond_byte_compiled_as_installed():
     import importlib.util
     from pathlib import Path
 
+    import fusiond
+
     bench._compile_package()
-    package = Path(bench.__file__).resolve().parent
+    package = Path(fusiond.__file__).resolve().parent
     sources = sorted(package.rglob("*.py"))
     assert len(sources) > 40
     for src in sources:

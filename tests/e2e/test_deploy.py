@@ -69,7 +69,7 @@ def test_dockerfile_contract():
     args = build_parser().parse_args(argv[1:])  # the CLI accepts exactly this command line
     assert args.config == "/etc/fusiond/config.toml" and args.timeout < 8
     run = build_parser().parse_args(exec_form(first("CMD"))[1:])
-    assert run.func.__name__ == "cmd_run"
+    assert run.func.__module__ == "fusiond.cli.run"
 
 
 def _replay_copies(ctx: Path, root: Path) -> None:
@@ -135,9 +135,10 @@ def test_dockerfile_install_steps_without_docker(tmp_path):
         names = set(z.namelist())
         entry_points = next(z.read(n).decode() for n in names if n.endswith("entry_points.txt"))
     assert "fusiond = fusiond.cli:main" in entry_points
-    for module in ("cli.py", "health.py", "transport/daemon.py", "transport/player.py", "transport/session.py",
-                   "core/fusion.py", "estimator/ekf.py"):
+    for module in ("cli/__init__.py", "cli/run.py", "health.py", "transport/daemon.py", "transport/player.py",
+                   "transport/session.py", "core/fusion.py", "estimator/ekf.py"):
         assert f"fusiond/{module}" in names
+    assert not any(n.startswith("benchmarks/") for n in names)  # the benchmarks stay in the source tree
     if shutil.which("gcc") or shutil.which("cc"):  # the compiled kernels are built where a compiler is
         assert any(n.startswith("fusiond/estimator/_kernels.") and n.endswith((".so", ".pyd")) for n in names)
 

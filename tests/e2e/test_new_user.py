@@ -198,7 +198,7 @@ def test_the_latency_benchmarks_sessions_never_scout():
     """bench-latency and bench --latency take --no-multicast like every session command; their daemon and load
     generator share the benchmark's config, whose sessions meet on loopback without multicast."""
     from fusiond.config import loads
-    from fusiond.transport.bench_latency import _config_text, free_port
+    from benchmarks.bench_latency import _config_text, free_port
 
     zc = loads(_config_text(free_port()), "<bench>").zenoh
     assert zc.multicast_scouting is False and all(ep.startswith("tcp/127.0.0.1:") for ep in zc.listen)
@@ -231,7 +231,7 @@ def test_version_from_the_installed_script():
 # -- 11. bench's default bag is the repo's own -------------------------------------------------------------
 
 def test_bench_defaults_to_the_bag_in_the_repo_from_any_directory(tmp_path, capsys, monkeypatch):
-    import fusiond.bench as bench
+    import benchmarks.bench as bench
 
     seen = []
     monkeypatch.setattr(bench, "run", lambda bag, config, cfg, quick=False: seen.append((bag, config)) or {})
@@ -250,7 +250,7 @@ def test_bench_with_a_missing_bag_is_one_line_exit_2(tmp_path, capsys):
 
 
 def _no_benchmark(monkeypatch):
-    import fusiond.bench as bench
+    import benchmarks.bench as bench
 
     monkeypatch.setattr(bench, "run", lambda *a, **k: pytest.fail("benchmarked input that replay refuses"))
 

@@ -37,7 +37,7 @@ import msgspec
 
 from ....estimator import rotation as rot
 from ....logs import get_logger
-from ...inputs import smoothed_period
+from ...inputs import silent_after, smoothed_period
 from .gyro_bias import quiet_bound
 from .own import ImuOwn
 
@@ -91,7 +91,7 @@ def carry_yaw(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float, gyro:
         # the fused orientations' period: as they came (an EMA of the intervals, gaps left out), and at
         # least orientation_rate_hz's (a bucket's burst of samples does not make it short); none yet, no gap
         typical = max(period, imu.orientation_period)
-        if typical > 0.0 and silent > max(imu.gap_s, GAP_PERIODS * typical):
+        if typical > 0.0 and silent > silent_after(imu.gap_s, typical, GAP_PERIODS):
             heading = _turn_across_gap(imu, s, yaw, var, heading, stamp, emit, silent, mark, live,
                                        still0 and quiet and s.still_since is not None, drift, own.wheel_yaw)
             drift = _restart_drift(drift, stamp, yaw - heading)  # the gap's own change is no drift

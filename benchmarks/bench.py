@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import Config
+from fusiond.config import Config
 
 # In-process timings are CPU time of this thread, not wall time: on a shared machine other
 # processes' load stretches wall time but not the work this thread does (both sides of a
@@ -46,7 +46,7 @@ def estimator_model():
     ekf, u, noise, cov (the update's covariance), mask."""
     from types import SimpleNamespace
 
-    from .estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout
+    from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout
 
     layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5)])
     u = MotionInput()
@@ -68,9 +68,9 @@ def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
     with the yardstick (``tight_step``), a repeat of each in turn, so that a load spike on this shared
     machine slows both sides of the ratio alike; ``step_vs_tight_median`` is the median of the
     per-repeat ratios, the figure least moved by one noisy repeat."""
-    from .estimator import kernels
-    from .estimator import observations as obs
-    from .estimator import predict
+    from fusiond.estimator import kernels
+    from fusiond.estimator import observations as obs
+    from fusiond.estimator import predict
 
     m = estimator_model()
     layout, ws, ekf, u, noise, cov, mask = m.layout, m.ws, m.ekf, m.u, m.noise, m.cov, m.mask
@@ -121,7 +121,7 @@ def tight_step(dt: float = 0.01) -> Callable[[], None]:
     `bench_estimator`: the same maths, none of the generality (layouts, input blocks, gating,
     diagnostics, covariance checks)."""
 
-    from .estimator import rotation as rot
+    from fusiond.estimator import rotation as rot
 
     wx, wy, wz = 0.01, -0.02, 0.2
     period = 0.02
@@ -187,13 +187,14 @@ def tight_step(dt: float = 0.01) -> Callable[[], None]:
 def bench_sensors(repeat: int = 5, number: int = 2000, seconds: float = 20.0) -> dict[str, float]:
     """us per update of the GPS and pose sensors (estimator level, then through the core)."""
 
-    from .config import loads
-    from .core.fusion import FusionCore
-    from .estimator import ErrorStateEKF, GyroBiasBlock, GyroScaleBlock, PoseBlock, StateLayout, WheelScaleBlock
-    from .estimator import observations as obs
-    from .estimator import rotation as rot
-    from .estimator.geodesy import EnuFrame, enu_to_geodetic
-    from .samples import GpsSample, ImuSample, OdomSample, PoseSample
+    from fusiond.config import loads
+    from fusiond.core.fusion import FusionCore
+    from fusiond.estimator import (ErrorStateEKF, GyroBiasBlock, GyroScaleBlock, PoseBlock, StateLayout,
+                                   WheelScaleBlock)
+    from fusiond.estimator import observations as obs
+    from fusiond.estimator import rotation as rot
+    from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
+    from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample
 
     layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5), GyroScaleBlock(0.05, 1e-5),
                           WheelScaleBlock(0.1, 1e-4)])
@@ -304,9 +305,9 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
     alone can reach."""
     from rosbags.highlevel import AnyReader
 
-    from .core.fusion import FusionCore
-    from .replay.bag import open_bag_samples
-    from .replay.run import replay
+    from fusiond.core.fusion import FusionCore
+    from fusiond.replay.bag import open_bag_samples
+    from fusiond.replay.run import replay
 
     topics = {"/" + s.key for s in cfg.sensors}
 
@@ -399,7 +400,9 @@ def _compile_package() -> None:
     caches `__main__`)."""
     import compileall
 
-    compileall.compile_dir(str(Path(__file__).resolve().parent), quiet=1)
+    import fusiond
+
+    compileall.compile_dir(str(Path(fusiond.__file__).resolve().parent), quiet=1)
 
 
 def bench_process(bag: Path, config: Path, topics: tuple[str, str], repeat: int = 3,
@@ -431,9 +434,9 @@ def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: i
 
     from rosbags.rosbag2 import Writer
 
-    from .estimator import rotation as rot
-    from .samples import ImuSample, OdomSample
-    from .codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, encode_odom_sample
+    from fusiond.estimator import rotation as rot
+    from fusiond.samples import ImuSample, OdomSample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, encode_odom_sample
 
     cov36 = tuple(1e-3 if i % 7 == 0 else 0.0 for i in range(36))
     ocov = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)

@@ -45,15 +45,15 @@ import msgspec
 import numpy as np
 import zenoh
 
-from ..codecs import encode_imu_sample, encode_odom_sample
-from ..config import ZenohConfig, loads
-from ..errors import TransportError
-from ..estimator import kernels
-from ..samples import ImuSample, OdomSample
-from ..health import decode_report, encode_report
-from ..logs import configure
-from .daemon import Daemon, direct
-from .session import build_config, open_session, query_health
+from fusiond.codecs import encode_imu_sample, encode_odom_sample
+from fusiond.config import ZenohConfig, loads
+from fusiond.errors import TransportError
+from fusiond.estimator import kernels
+from fusiond.samples import ImuSample, OdomSample
+from fusiond.health import decode_report, encode_report
+from fusiond.logs import configure
+from fusiond.transport.daemon import Daemon, direct
+from fusiond.transport.session import build_config, open_session, query_health
 
 _STAMP = struct.Struct("<iI").unpack_from
 _F64 = struct.Struct("<d")

@@ -1,0 +1,112 @@
+"""What several commands share: exit codes, loading the config as a one-line error, checking an output path
+before a long run, argparse types for numbers, and the option specs that more than one command takes.
+
+Imports only the standard library at module level: every command, ``--help`` included, reads this module.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from pathlib import Path
+
+__all__ = ["ADVICE_BUDGET", "ALLOW_MISSING", "BENCH_NO_MULTICAST", "EXIT_UNHEALTHY", "EXIT_USAGE", "LOG_LEVELS",
+           "VersionAction", "load_config", "non_negative", "output_error", "positive"]
+
+EXIT_USAGE = 2
+EXIT_UNHEALTHY = 1
+LOG_LEVELS = ["debug", "info", "warning", "error"]
+
+
+def load_config(path: str, needs: str = ""):
+    """The config, or exit 2 with one line. ``needs``: what the command does with its sensors (a config
+    without any is refused, naming that, instead of failing later on what it cannot find)."""
+    from ..config import ConfigError, load
+
+    try:
+        cfg = load(path)
+    except ConfigError as err:
+        print(f"fusiond: config error: {err}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE) from None
+    if needs and not cfg.sensors:
+        print(f"fusiond: config error: {path}: no [[sensors]] configured: nothing to {needs}; add at least the "
+              "odometry sensor (see config.toml)", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE)
+    return cfg
+
+
+def output_error(path: str, option: str, directory: bool = False) -> str | None:
+    """Why an output path cannot be written (checked before a long replay, not after it), or None."""
+    p = Path(path)
+    if directory and p.exists() and not p.is_dir():
+        return f"{option} {path}: names an existing file; --report writes a directory (index.html and images)"
+    if not directory and p.is_dir():
+        return f"{option} {path}: is a directory"
+    if p.exists():
+        return None if os.access(p, os.W_OK) else f"{option} {path}: not writable"
+    parent = p.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{option} {path}: {parent} is a file, not a directory"
+    return None if os.access(parent, os.W_OK) else f"{option} {path}: cannot create it ({parent} is not writable)"
+
+
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml), read only when asked for."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("fusiond")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
+class VersionAction(argparse.Action):
+    """`fusiond --version`: "fusiond <version>" on stdout, exit 0 (argparse's own action would read the
+    version when the parser is built, i.e. on every command)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        print(f"fusiond {_version()}")
+        parser.exit(0)
+
+
+def _number(text: str, *, zero: bool) -> float:
+    """An option's number, finite and positive (or, with ``zero``, also 0): argparse's own error otherwise, so that
+    a duration, timeout or rate of no meaning is refused before anything runs (not as a traceback later)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and (value >= 0.0 if zero else value > 0.0)):
+        raise argparse.ArgumentTypeError(f"{text}: must be {'0 or more' if zero else 'a positive number'}")
+    return value
+
+
+def positive(text: str) -> float:
+    return _number(text, zero=False)
+
+
+def non_negative(text: str) -> float:
+    return _number(text, zero=True)
+
+
+# replay, doctor and report: how long the doctor's paste lines may be replayed before they are printed
+ADVICE_BUDGET = dict(type=float, default=60.0, metavar="S",
+                     help="replay each of the doctor's paste lines on the bags before printing it, for up to S "
+                          "seconds (default 60; 0: print them unreplayed)")
+
+# Every command that opens a Zenoh session takes --no-multicast, so that it can be typed on any of them. The
+# latency benchmark's sessions (bench-latency, bench --latency) connect to each other on loopback and never
+# scout: for them the flag states what already holds.
+BENCH_NO_MULTICAST = "do not scout for peers by multicast (always so: the benchmark's sessions are on loopback)"
+
+
+ALLOW_MISSING = {"action": "store_true",
+                 "help": "replay without a configured sensor whose topic is not in the bag (a warning); "
+                         "default: that is an error naming the topic"}

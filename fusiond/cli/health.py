@@ -1,0 +1,50 @@
+"""`fusiond health`: a running daemon's health answer; the exit code says whether it is good enough, for a
+container's HEALTHCHECK or a systemd watchdog."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .common import EXIT_UNHEALTHY, positive
+from .tool_session import in_namespace, reached, tool_session
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", help="TOML config of the daemon (health key, namespace, endpoints)")
+    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="Zenoh endpoint of the daemon (repeatable); default: from the config")
+    p.add_argument("--key", help="health key (default: output.health_key of the config)")
+    p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
+    p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for an answer (default 2)")
+    p.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
+                   help="worst status that still exits 0 (default degraded; failed = any answer)")
+
+
+_STATUS_RANK = {"failed": 0, "starting": 1, "degraded": 1, "ok": 2}
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from ..transport.session import query_health
+
+    cfg, session = tool_session(args, unreachable_exit=EXIT_UNHEALTHY)
+    key = args.key or cfg.output.health_key
+    try:
+        answers = query_health(session, key, args.timeout)
+    finally:
+        session.close()
+    if not answers:
+        print(f"fusiond: no health answer on {key!r}{in_namespace(cfg)} within {args.timeout} s "
+              f"({reached(args, cfg)})", file=sys.stderr)
+        return EXIT_UNHEALTHY
+    worst = None
+    for raw in answers:
+        print(raw.decode())
+        status = json.loads(raw).get("status")
+        rank = _STATUS_RANK.get(status, -1)
+        worst = rank if worst is None else min(worst, rank)
+    return 0 if worst is not None and worst >= _STATUS_RANK[args.min_status] else EXIT_UNHEALTHY

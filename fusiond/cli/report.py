@@ -1,0 +1,27 @@
+"""`fusiond report BAG --config FILE --out DIR`: `replay --report DIR` under its own name."""
+
+from __future__ import annotations
+
+import argparse
+
+from .common import ADVICE_BUDGET, ALLOW_MISSING
+from .replay import as_replay
+from .replay import run as run_replay
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
+    p.add_argument("--config", required=True, help="TOML config (see config.toml)")
+    p.add_argument("--out", required=True, metavar="DIR", help="directory to write index.html and its images into")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    p.add_argument("--advice-budget-s", **ADVICE_BUDGET)
+    p.add_argument("--allow-missing", **ALLOW_MISSING)
+
+
+def run(args: argparse.Namespace) -> int:
+    """`fusiond report BAG --config FILE --out DIR`: `replay --report DIR`."""
+    return run_replay(as_replay(args.bags, args.config, "--report", args.out, "--advice-budget-s",
+                                 repr(args.advice_budget_s), *(["--quiet"] if args.quiet else []),
+                                 *(["--allow-missing"] if args.allow_missing else [])))
