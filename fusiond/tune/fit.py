@@ -406,9 +406,29 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
             note = (f"held at the noise the recording shows at rest, {p.measured_note}: the fit would go lower"
                     if p.held_by_measured() else
                     f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower")
+        below = _below_measured(p, value(config, p))
+        if below:
+            note = f"{note}; {below}" if note else below
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
                         after.nis_per_dof.get(s), measured[i]))
     return rows, config, before, after, comments, replays, (pred_before, pred_after)
+
+
+def _below_measured(p: Param, v: object) -> str:
+    """What the table says of a value that ends below the noise the recording shows at rest (a start the user
+    or the messages put there, which the fit does not lift: whether to is the user's call)."""
+    if not p.measured:
+        return ""
+    if v is None:
+        start = p.start()
+        components = start if isinstance(start, tuple) else (start,)
+    elif isinstance(v, tuple):
+        components = tuple(v[i] for i in p.indices) if p.indices is not None else v  # type: ignore[index]
+    else:
+        components = (v,)  # type: ignore[assignment]
+    if any(f > c for f, c in zip(p.measured, components) if f > 0.0):
+        return f"below the noise the recording shows at rest, {p.measured_note}"
+    return ""
 
 
 # why the fit ended, as the table's "fit part" line says it

@@ -65,3 +65,17 @@ def test_a_robot_that_never_stands_sets_no_floor():
     samples = simulate(world)
     cfg = robot_config()
     assert measured_floors(cfg, samples, tunable_params(cfg, samples)) == {}
+
+
+def test_the_table_says_when_a_value_stays_below_what_the_standstills_show(noisy_rest):
+    """A gyro_noise the user set at 0.001 for a gyro reading 0.003 at rest: the fit may move it, but where it
+    ends below the measured floor the table says so."""
+    from fusiond.tune import tune
+    from fusiond.tune.fit import format_table
+
+    cfg = robot_config(imu="gyro_noise = 0.0005")
+    result = tune(noisy_rest, cfg, keys=["imu.gyro_noise"], budget_s=300.0)
+    row = next(r for r in result.rows if r.param.name == "imu.gyro_noise")
+    after = row.after if row.after is not None else row.param.start()
+    assert (after < 0.9 * GYRO_SIGMA) == ("below the noise the recording shows at rest" in row.note), (after, row.note)
+    assert "measured at rest" in format_table(result) or after >= 0.9 * GYRO_SIGMA
