@@ -22,7 +22,7 @@ def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
         return stats is None or stats.get(name, {}).get("received", 0) > 0
 
     return any(isinstance(s, (GpsSensor, PoseSensor)) and delivered(s.name) for s in cfg.sensors) or any(
-        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") and delivered(s.name)
+        isinstance(s, ImuSensor) and s.fuses_yaw and delivered(s.name)
         for s in cfg.sensors)
 
 

@@ -97,7 +97,7 @@ def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float
 
 
 def _tilt_from_imu(imu: ImuSensor) -> bool:
-    return imu.orientation != "off" or imu.tilt_from_gravity
+    return imu.tilt_from_imu
 
 
 def grade_fit(series: Series, cfg: Config) -> GradeFit | None:

@@ -285,7 +285,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         # the noise at rest is what is stated (within NOISE_RATIO, as "understated" above): what the standstills
         # disagree with is the bias estimate, moved between them by something else; pasting the measured
         # noise would change nothing (it would tell the user to paste the gyro_noise already configured)
-        yaw = imu.orientation in ("absolute", "relative")
+        yaw = imu.fuses_yaw
         est = evidence.get("bias_estimate_rad_s", math.nan)
         at_rest = f", {est:+.5f} estimated against {episodes[-1].gyro_mean:+.5f} at rest" if (
             episodes and math.isfinite(est)) else ""

@@ -170,7 +170,7 @@ def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
 
 def heading_check(series: Series, cfg: Config) -> Verdict | None:
     """The verdict on an IMU whose absolute yaw is fused, from the other heading sources."""
-    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative")),
+    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.fuses_yaw),
                None)
     if imu is None or len(series.imu_t) < 10:
         return None
@@ -240,7 +240,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                 if excess > 0 and np.mean(r * r) / track_var > 1.0 + 3.0 * math.sqrt(2.0 / n):
                     track_wander = math.sqrt(excess)
                     evidence["imu_vs_gps_track_wander_rad"] = track_wander
-                if abs(offset) < max(TRACK_OFFSET_RAD, 3.0 * se) or imu.orientation == "relative":
+                if abs(offset) < max(TRACK_OFFSET_RAD, 3.0 * se) or imu.relative_yaw:
                     offset = math.nan  # not significant (or removed by the relative mode anyway)
     disturbed = (math.isfinite(wander) and wander > WANDER_RAD and not culprit_gyro) or (
         not math.isfinite(wander) and math.isfinite(track_wander) and track_wander > WANDER_RAD)
@@ -259,7 +259,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                "magnetometer-disturbed yaw (motors, steel)")
         if notes:
             msg += "; " + "; ".join(notes)
-        held = estimate_vs_gyro(series) if (gps is not None and imu.orientation == "absolute"
+        held = estimate_vs_gyro(series) if (gps is not None and imu.absolute_yaw
                                             and imu.yaw_offset_sigma > 0.0) else math.nan
         if math.isfinite(held):
             evidence["estimate_vs_gyro_wander_rad"] = held

@@ -46,8 +46,8 @@ def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: Channel
     imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
     if imu is None or not gyro_fused or len(series.odom_t) < 2:
         return None
-    if any(isinstance(s, (GpsSensor, PoseSensor)) or (isinstance(s, ImuSensor) and s.orientation in (
-            "absolute", "relative")) for s in cfg.sensors):
+    if any(isinstance(s, (GpsSensor, PoseSensor)) or (isinstance(s, ImuSensor) and s.fuses_yaw)
+           for s in cfg.sensors):
         return None  # a heading reference corrects the drift as it happens
     episodes, _ = quiet_episodes(series, cfg, imu)
     if not episodes or not math.isfinite(episodes[0].gyro_mean):

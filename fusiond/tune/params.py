@@ -153,10 +153,10 @@ def _imu_params(s: ImuSensor, samples: Sequence[object]) -> list[Param]:
             else:
                 out.append(Param(name, s.name, "gyro_noise", None, max(math.sqrt(var), s.gyro_min_sigma),
                                  "messages (median)", "rad/s", floor=s.gyro_min_sigma))
-    if s.orientation != "off":
+    if s.fuses_orientation:
         name = f"{s.name}.orientation_noise"
         # the IMU axes (the key's own, before extrinsic_rpy) that land on the base rows the mode fuses
-        rows = seen_axes(s.extrinsic_rpy, (0, 1) if s.orientation == "roll_pitch" else (0, 1, 2))
+        rows = seen_axes(s.extrinsic_rpy, s.orientation_rows)
         if s.orientation_noise is not None:
             base = tuple(s.orientation_noise)
             out.append(Param(name, s.name, "orientation_noise", rows, base, unit="rad",

@@ -32,10 +32,10 @@ class ImuKind(SensorKind):
             raise ConfigError(f"{at('orientation_rate_hz')}: must be >= 0 and finite (0: every sample)")
 
     def fuses_yaw(self, cfg: ImuSensor) -> bool:
-        return cfg.orientation in ("absolute", "relative")
+        return cfg.fuses_yaw
 
     def absolute_yaw(self, cfg: ImuSensor) -> bool:
-        return cfg.orientation == "absolute"
+        return cfg.absolute_yaw
 
     def tracks_acceleration(self, cfg: ImuSensor) -> bool:
         return cfg.tilt_from_gravity
@@ -48,7 +48,7 @@ class ImuKind(SensorKind):
         if cfg.gyro_scale_estimation:
             blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
         # An absolute yaw beside an absolute position or pose: heading + an estimated offset.
-        if cfg.orientation == "absolute" and cfg.yaw_offset_sigma > 0.0 and view.absolute:
+        if cfg.absolute_yaw and cfg.yaw_offset_sigma > 0.0 and view.absolute:
             blocks.append(YawOffsetBlock(cfg.yaw_offset_sigma, cfg.yaw_offset_walk))
         return blocks
 
@@ -60,7 +60,7 @@ class ImuKind(SensorKind):
     decoder = codecs_decoder
 
     def zero_covariance(self, cfg: ImuSensor) -> Callable[[Any], bool] | None:
-        use_orientation = cfg.orientation != "off" and cfg.orientation_noise is None
+        use_orientation = cfg.fuses_orientation and cfg.orientation_noise is None
         use_gyro = cfg.angular_velocity and cfg.gyro_noise is None
         if not (use_orientation or use_gyro):
             return None
