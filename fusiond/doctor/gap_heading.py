@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config, ImuSensor
+from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from .bins import BIN_S
 from .gyro import quiet_episodes
@@ -72,7 +73,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
     run's first stamp (the gap is then placed in seconds from it)."""
     if imu is None or imu.fuses_yaw:
         return None
-    if any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors):
+    if any(kind_of(s).measures_position for s in cfg.sensors):
         return None  # an absolute position/pose finds the heading again
     gaps = [(start, length) for start, length in series.odom_gaps if length >= MIN_GAP_S]
     if not gaps:

@@ -22,3 +22,54 @@ def test_the_imu_table_names_what_its_orientation_mode_fuses(orientation, fused,
     # roll and pitch come from the IMU in every mode while gravity gives them; "off" without it gives none
     assert imu.tilt_from_imu
     assert ImuSensor(name="imu", key="imu", orientation=orientation, tilt_from_gravity=False).tilt_from_imu == fused
+
+
+TOML = """
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+orientation = "{orientation}"
+angular_velocity = {gyro}
+
+[[sensors]]
+name = "fix"
+kind = "gps"
+key = "fix"
+
+[[sensors]]
+name = "vo"
+kind = "pose"
+key = "vo"
+differential = true
+"""
+
+
+@pytest.mark.parametrize("orientation, gyro", [("roll_pitch", "true"), ("absolute", "false"), ("off", "true")])
+def test_each_kind_answers_the_doctors_questions_about_it(orientation, gyro):
+    from fusiond.config import loads
+    from fusiond.core.sensors import kind_of
+
+    cfg = loads(TOML.format(orientation=orientation, gyro=gyro))
+    answers = {s.name: (kind_of(s).drives_prediction, kind_of(s).inertial, kind_of(s).geodetic,
+                        kind_of(s).measures_position, kind_of(s).heading_reference(s), kind_of(s).fuses_gyro(s))
+               for s in cfg.sensors}
+    assert answers == {
+        "wheel": (True, False, False, False, False, False),
+        "imu": (False, True, False, False, orientation == "absolute", gyro == "true"),
+        "fix": (False, False, True, True, True, False),
+        "vo": (False, False, False, True, True, False),  # a differential pose's deltas reference heading too
+    }
+
+
+def test_a_kind_that_says_nothing_is_no_reference_of_any_kind():
+    from tests.support.altimeter import AltimeterKind, AltimeterSensor
+
+    kind, cfg = AltimeterKind(), AltimeterSensor(name="sonar", key="range")
+    assert not (kind.inertial or kind.geodetic or kind.measures_position or kind.drives_prediction)
+    assert not kind.heading_reference(cfg) and not kind.fuses_gyro(cfg)

@@ -59,6 +59,12 @@ class SensorKind:
     geodetic: ClassVar[bool] = False
     # what "waiting for the first ... to define the world frame" names
     frame_message: ClassVar[str] = "message"
+    # it measures the body's own rotation in its axes (an IMU: orientation, gyro, gravity): the one the
+    # doctor's cross-source checks hold against the wheels, and `calibrate-imu` measures at rest
+    inertial: ClassVar[bool] = False
+    # it measures where the robot is, or how far it moved (a GPS fix, a pose): after a gap of the other
+    # sensors it finds the robot, and its heading, again
+    measures_position: ClassVar[bool] = False
 
     # -- config -------------------------------------------------------------------------------------
     def validate(self, cfg: Any, at: Callable[[str], str]) -> None:
@@ -79,6 +85,15 @@ class SensorKind:
 
     def absolute_yaw(self, cfg: Any) -> bool:
         """Is its yaw absolute (REP-103 ENU), a heading reference beside a GPS?"""
+        return False
+
+    def heading_reference(self, cfg: Any) -> bool:
+        """Does it tell the filter where it heads (from the positions it measures, or a yaw it observes),
+        so that a gyro bias and a wheel yaw error do not accumulate into heading unchecked?"""
+        return self.measures_position or self.fuses_yaw(cfg)
+
+    def fuses_gyro(self, cfg: Any) -> bool:
+        """Does it give the prediction a measured yaw rate (a gyro, whose bias the filter learns)?"""
         return False
 
     def tracks_acceleration(self, cfg: Any) -> bool:

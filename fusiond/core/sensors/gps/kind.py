@@ -25,6 +25,7 @@ class GpsKind(SensorKind):
     ros_types = ("sensor_msgs/msg/NavSatFix",)
     geodetic = True
     frame_message = "GPS fix"
+    measures_position = True
 
     def validate(self, cfg: GpsSensor, at: Callable[[str], str]) -> None:
         if cfg.datum is not None and not (-90.0 <= cfg.datum[0] <= 90.0 and -180.0 <= cfg.datum[1] <= 180.0):

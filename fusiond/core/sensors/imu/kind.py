@@ -24,6 +24,7 @@ class ImuKind(SensorKind):
     sample_type = ImuSample
     model_type = ImuModel
     ros_types = ("sensor_msgs/msg/Imu",)
+    inertial = True
 
     def validate(self, cfg: ImuSensor, at: Callable[[str], str]) -> None:
         if cfg.gyro_scale_estimation and not cfg.angular_velocity:
@@ -36,6 +37,9 @@ class ImuKind(SensorKind):
 
     def absolute_yaw(self, cfg: ImuSensor) -> bool:
         return cfg.absolute_yaw
+
+    def fuses_gyro(self, cfg: ImuSensor) -> bool:
+        return cfg.angular_velocity
 
     def tracks_acceleration(self, cfg: ImuSensor) -> bool:
         return cfg.tilt_from_gravity

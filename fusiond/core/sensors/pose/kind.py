@@ -22,6 +22,7 @@ class PoseKind(SensorKind):
     model_type = PoseModel
     ros_types = POSE_MSGTYPES
     frame_message = "pose"
+    measures_position = True
 
     def defines_frame(self, cfg: PoseSensor) -> bool:
         return not cfg.differential
