@@ -73,3 +73,30 @@ def test_a_kind_that_says_nothing_is_no_reference_of_any_kind():
     kind, cfg = AltimeterKind(), AltimeterSensor(name="sonar", key="range")
     assert not (kind.inertial or kind.geodetic or kind.measures_position or kind.drives_prediction)
     assert not kind.heading_reference(cfg) and not kind.fuses_gyro(cfg)
+
+
+def test_tune_fits_what_each_kind_declares_and_nothing_of_a_kind_that_declares_nothing():
+    from fusiond.config import loads
+    from fusiond.core.sensors import kind_of, register, unregister
+    from fusiond.core.sensors.tunable import Param
+    from fusiond.tune.params import tunable_params
+    from tests.support.altimeter import AltimeterKind
+
+    toml = '[[sensors]]\nname = "wheel"\nkind = "odom"\nkey = "odom"\n\n' \
+           '[[sensors]]\nname = "sonar"\nkind = "altimeter"\nkey = "range"\n'
+    register(AltimeterKind())
+    try:
+        cfg = loads(toml)
+        names = [p.name for p in tunable_params(cfg)]
+        assert [n for n in names if n.startswith("sonar.")] == []  # the default: nothing to tune
+        assert names[:2] == ["wheel.twist_noise.linear", "wheel.twist_noise.angular"]
+        assert kind_of(cfg.sensors[0]).tunables(cfg.sensors[0], ()) == tunable_params(cfg)[:2]
+
+        class TunedAltimeter(AltimeterKind):
+            def tunables(self, cfg, samples):
+                return [Param(f"{cfg.name}.range_sigma", cfg.name, "range_sigma", None, cfg.range_sigma, unit="m")]
+
+        register(TunedAltimeter())
+        assert "sonar.range_sigma" in [p.name for p in tunable_params(loads(toml))]
+    finally:
+        unregister("altimeter")

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from ...config_tables import FilterConfig
     from ...estimator import StateBlock
     from .base import SensorModel
+    from .tunable import Param
 
 
 class LayoutView:
@@ -108,6 +109,12 @@ class SensorKind:
     def datum(self, cfg: Any) -> tuple[float, float, float] | None:
         """A configured geodetic origin (lat deg, lon deg, alt m) of the world frame, if any."""
         return None
+
+    # -- tuning -------------------------------------------------------------------------------------------
+    def tunables(self, cfg: Any, samples: Sequence[object]) -> list["Param"]:
+        """The keys of its table `fusiond tune` may fit on ``samples``, and where each starts
+        (``tunable.py``); those that cannot be fitted carry the reason. None by default."""
+        return []
 
     # -- decoding ---------------------------------------------------------------------------------------
     def ros_type(self, cfg: Any) -> str:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ....config_tables import FilterConfig
@@ -10,8 +10,10 @@ from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
 from ....samples import GpsSample
 from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..tunable import Param
 from .model import GpsModel
 from .table import GpsSensor
+from .tunables import gps_tunables
 
 
 class GpsKind(SensorKind):
@@ -54,6 +56,9 @@ class GpsKind(SensorKind):
 
     def datum(self, cfg: GpsSensor) -> tuple[float, float, float] | None:
         return cfg.datum
+
+    def tunables(self, cfg: GpsSensor, samples: Sequence[object]) -> list[Param]:
+        return gps_tunables(cfg, samples)
 
     def from_ros(self) -> Callable[[Any, str], Any]:
         from ....codecs.from_ros import gps_from_ros

@@ -5,15 +5,17 @@ forward acceleration."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ....errors import ConfigError
 from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
 from ....samples import ImuSample
 from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..tunable import Param
 from .model import ImuModel
 from .table import ImuSensor
+from .tunables import imu_tunables
 
 
 class ImuKind(SensorKind):
@@ -55,6 +57,9 @@ class ImuKind(SensorKind):
         if cfg.absolute_yaw and cfg.yaw_offset_sigma > 0.0 and view.absolute:
             blocks.append(YawOffsetBlock(cfg.yaw_offset_sigma, cfg.yaw_offset_walk))
         return blocks
+
+    def tunables(self, cfg: ImuSensor, samples: Sequence[object]) -> list[Param]:
+        return imu_tunables(cfg, samples)
 
     def from_ros(self) -> Callable[[Any, str], Any]:
         from ....codecs.from_ros import imu_from_ros
