@@ -100,3 +100,53 @@ def test_tune_fits_what_each_kind_declares_and_nothing_of_a_kind_that_declares_n
         assert "sonar.range_sigma" in [p.name for p in tunable_params(loads(toml))]
     finally:
         unregister("altimeter")
+
+
+def test_an_installed_package_adds_a_kind_through_its_entry_point(tmp_path):
+    """A third party's package names its descriptor under the ``fusiond.sensor_kinds`` entry point group:
+    a config naming its tag loads with nothing in fusiond touched (here the toy altimeter, declared by a
+    distribution's metadata on sys.path), and a run naming only built-in kinds never looks."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    dist = tmp_path / "site" / "fusiond_altimeter-0.1.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: fusiond-altimeter\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[fusiond.sensor_kinds]\naltimeter = tests.support.altimeter:AltimeterKind\n"
+                                           "broken = tests.support.no_such_module:Kind\n")
+    code = ("import json, sys, warnings\n"
+            "warnings.simplefilter('ignore')\n"
+            "from fusiond.config import loads\n"
+            "from fusiond.core.sensors import KINDS\n"
+            "plain = loads('[[sensors]]\\nname = \"wheel\"\\nkind = \"odom\"\\nkey = \"odom\"\\n')\n"
+            "before = sorted(KINDS), 'importlib.metadata' in sys.modules\n"
+            "cfg = loads('[[sensors]]\\nname = \"wheel\"\\nkind = \"odom\"\\nkey = \"odom\"\\n\\n'\n"
+            "            '[[sensors]]\\nname = \"sonar\"\\nkind = \"altimeter\"\\nkey = \"range\"\\nrange_sigma = 0.2\\n')\n"
+            "print(json.dumps([before, sorted(KINDS), type(cfg.sensors[1]).__name__, cfg.sensors[1].range_sigma]))\n")
+    env = {"PYTHONPATH": f"{tmp_path / 'site'}:{root}", "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, env=env, check=True)
+    before, after, table, sigma = json.loads(out.stdout)
+    assert before == [["gps", "imu", "odom", "pose"], False]
+    assert after == ["altimeter", "gps", "imu", "odom", "pose"]  # the broken entry is skipped with a warning
+    assert (table, sigma) == ("AltimeterSensor", 0.2)
+
+
+def test_an_entry_point_cannot_replace_a_built_in_kind_nor_name_another_tag():
+    from importlib.metadata import EntryPoint
+
+    from fusiond.core.sensors import KINDS, discover, unregister
+
+    imu = KINDS["imu"]
+    eps = [EntryPoint("imu", "tests.support.altimeter:AltimeterKind", "fusiond.sensor_kinds"),
+           EntryPoint("sonar", "tests.support.altimeter:AltimeterKind", "fusiond.sensor_kinds")]
+    try:
+        with pytest.warns(RuntimeWarning, match="not a SensorKind named 'sonar'"):
+            assert discover(eps) == []
+        assert KINDS["imu"] is imu and "sonar" not in KINDS
+        added = discover([EntryPoint("altimeter", "tests.support.altimeter:AltimeterKind", "fusiond.sensor_kinds")])
+        assert [k.name for k in added] == ["altimeter"] and KINDS["altimeter"] is added[0]
+    finally:
+        unregister("altimeter")
