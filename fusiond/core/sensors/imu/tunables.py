@@ -14,6 +14,8 @@ from .table import ImuSensor
 
 
 def imu_tunables(s: ImuSensor, samples: Sequence[object]) -> list[Param]:
+    """``gyro_noise`` (the gyro fused) and ``orientation_noise`` (an orientation fused): from the config,
+    else from the messages' median variances, through the floors and "not measured" rules of ``ImuPolicy``."""
     out = []
     mine = own_samples(samples, s.name, ImuSample)
     if s.angular_velocity:

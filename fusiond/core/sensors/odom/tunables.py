@@ -15,6 +15,8 @@ from .table import OdomSensor
 
 
 def odom_tunables(s: OdomSensor, samples: Sequence[object]) -> list[Param]:
+    """The two parts of ``twist_noise``: from the config, else from the messages' median variances of the
+    components they measure (the floors and caps of ``OdomPolicy``)."""
     names = (f"{s.name}.twist_noise.linear", f"{s.name}.twist_noise.angular")
     groups = ((0, 1, 2), (3, 4, 5))
     if s.twist_noise is not None:
