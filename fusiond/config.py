@@ -23,7 +23,7 @@ import msgspec
 from .config_tables import (Config, FilterConfig, MetricsConfig, OutputConfig, RosConfig, SensorTable, StateConfig,
                             Vec2, Vec3, Vec6, ZenohConfig)
 from .core.sensors import POSE_MSGTYPES, GpsSensor, ImuSensor, OdomSensor, PoseSensor
-from .core.sensors.registry import config_types, kind_of
+from .core.sensors.registry import config_types, kind_of, require
 from .errors import ConfigError  # defined with the other layers' errors; importable from here
 
 __all__ = [
@@ -291,6 +291,7 @@ def convert(raw: object) -> Config:
     cfg = msgspec.convert(raw, type=Config)
     if not cfg.sensors:
         return cfg
+    require(t.get("kind") for t in cfg.sensors if isinstance(t, dict))  # an installed package's kind
     tables = _sensor_tables()
     union = typing.Union[tables] if len(tables) > 1 else tables[0]  # noqa: UP007 - built at run time
     try:

@@ -268,7 +268,8 @@ def score(data: Path, v: Variant, work: Path, tuned: dict | None = None
     a dict of tune_cached's options to which the Tuned config is added under the variant's name)."""
     import msgspec
 
-    from fusiond.config import GpsSensor, load
+    from fusiond.config import load
+    from fusiond.core.sensors import kind_of
     from fusiond.replay.evaluate import Recorder, evaluate
     from fusiond.replay.run import replay
 
@@ -277,7 +278,7 @@ def score(data: Path, v: Variant, work: Path, tuned: dict | None = None
     cfg = load(ROOT / "examples" / v.config)
     if v.keep_datum and first_fix is not None:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, datum=first_fix)
-                                                    if isinstance(s, GpsSensor) else s for s in cfg.sensors])
+                                                    if kind_of(s).geodetic else s for s in cfg.sensors])
     rec = Recorder(cfg, v.fuse_every)
     result = replay([bag], cfg, keep_trace=False, progress=False, doctor=False, through=rec.filter)
     ev = evaluate([bag], cfg, "/ground_truth", result.trajectory, rec, heading_known=result.heading_known)

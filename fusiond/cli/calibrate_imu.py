@@ -30,20 +30,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..calibrate import calibrate, record_imu
     from ..config import ImuSensor
+    from ..core.sensors.registry import kind_of
 
     if args.bag and not args.config and not args.key:
         print("fusiond: calibrate-imu --bag needs --config or --key (which topic is the IMU)", file=sys.stderr)
         return EXIT_USAGE
     cfg = load_config(args.config) if args.config else None
-    imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)] if cfg else []
+    imus = [s for s in cfg.sensors if kind_of(s).inertial] if cfg else []
     if args.sensor:
         imus = [s for s in imus if s.name == args.sensor]
     if cfg is not None and not imus:
         print(f"fusiond: no imu sensor {args.sensor or ''} in {args.config}".replace("  ", " "), file=sys.stderr)
         return EXIT_USAGE
     imu = imus[0] if imus else ImuSensor(name="imu", key=args.key or "imu/data")
-    from ..core.sensors.registry import kind_of
-
     odom_cfg = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None) if cfg else None
     odom: list = []
     if args.bag:

@@ -27,7 +27,8 @@ from operator import attrgetter
 
 import msgspec
 
-from ..config import Config, OdomSensor
+from ..config import Config
+from ..core.sensors.registry import kind_of
 from ..samples import OdomSample
 from ..core.sensors.odom import body_twist
 from .attitude import TiltStats
@@ -75,7 +76,7 @@ class Doctor:
         self._samples: list = []
         self.lost = LostSamples()  # lost samples left out of the series (``add_sample``)
         self._stamp_offset = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
-        self._world_twist = {s.name for s in self.cfg.sensors if isinstance(s, OdomSensor) and s.twist_frame == "world"}
+        self._world_twist = {s.name for s in self.cfg.sensors if kind_of(s).drives_prediction and s.twist_frame == "world"}
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:

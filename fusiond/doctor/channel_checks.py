@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 
-from ..config import Config, GpsSensor, OdomSensor
+from ..config import Config, OdomSensor
+from ..core.sensors.registry import kind_of
 from .channels import (absolute_verdict, applied_verdict, figures, frozen_verdict, gated_out, nis_head,
                        orientation_verdicts, reacquired_verdict, unaligned_verdict, yaw_jump_verdict)
 from .evidence import Evidence
@@ -29,17 +30,22 @@ __all__ = ["ABSOLUTE_CHANNELS", "channel_kind", "OrientationNis", "YawRateSlip",
 ABSOLUTE_CHANNELS = ("position", "position_unaligned", "position_provisional", "altitude", "pose", "pose_delta")
 
 
+def _geodetic(s: object | None) -> bool:
+    """Is ``s`` a configured sensor whose fixes are geodetic (a GPS: its re-acquisitions, its heading search)?"""
+    return s is not None and kind_of(s).geodetic
+
+
 def channel_kind(ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> str:
     """Which check judges channel ``key``: the ``kind`` of one of the checks below."""
     name, channel = key
     s = ev.sensors.get(name)
     if channel in ("orientation", "yaw_rate", "gyro_bias", "yaw_jump"):
         return channel
-    if channel == "position_reacquired" and isinstance(s, GpsSensor):
+    if channel == "position_reacquired" and _geodetic(s):
         return "reacquired"
     if channel == "position_frozen":
         return "frozen"
-    if (channel == "position_unaligned" and isinstance(s, GpsSensor) and ch.n >= UNALIGNED_MIN_FIXES
+    if (channel == "position_unaligned" and _geodetic(s) and ch.n >= UNALIGNED_MIN_FIXES
             and not any(n == name and c in ("position", "position_provisional", "position_reacquired") and c_.n
                         for (n, c), c_ in ev.channels.items())):
         # a heading never found is worth a verdict of its own only when no fix was ever judged
@@ -98,7 +104,7 @@ class YawRateSlip(_PerChannel):
         if ev.findings.first("unmeasured_yaw_rate") is not None:
             return []
         s = ev.sensors.get(key[0])
-        odom = s if isinstance(s, OdomSensor) else OdomSensor(name=key[0], key=key[0])
+        odom = s if s is not None and kind_of(s).drives_prediction else OdomSensor(name=key[0], key=key[0])
         return [slip_verdict(odom, ch, ev.wheel_yaw, ev.odom_floored)]
 
 
@@ -176,7 +182,7 @@ class GpsWander(_PerChannel):
 
     def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
         s = ev.sensors.get(key[0])
-        if key[1] != "position" or not isinstance(s, GpsSensor) or gated_out(ch):
+        if key[1] != "position" or not _geodetic(s) or gated_out(ch):
             return []
         if applied_verdict(ch) not in ("nis_low", "ok"):
             return []

@@ -46,7 +46,7 @@ def orientation_verdicts(imu: ImuSensor, ch: ChannelStats, t0: float | None,
             comp_nis.append((rms / pred) ** 2 if pred > 0 else math.nan)
         yaw_dominates = "yaw" in comps and comp_nis[comps.index("yaw")] > 3.0 * max(
             [v for c, v in zip(comps, comp_nis) if c != "yaw"] or [0.0])
-        if yaw_dominates and imu.orientation in ("absolute", "relative") and yaw_vs_gyro is None:
+        if yaw_dominates and imu.fuses_yaw and yaw_vs_gyro is None:
             out.append(Verdict(imu.name, "orientation", "problem",
                                f"NIS high ({figures(ch, t0)}; {detail}). The IMU yaw disagrees with the predicted "
                                "heading: a magnetometer-disturbed IMU yaw, or (without the gyro) wheels whose yaw "

@@ -22,7 +22,8 @@ import math
 
 import numpy as np
 
-from ..config import Config, ImuSensor, OdomSensor
+from ..config import Config
+from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import quiet_bound
 from .gyro import Episode
 from .mounting import MountYaw
@@ -37,8 +38,8 @@ def coast_verdict(series: Series, cfg: Config, mount: MountYaw | None, turning: 
                   quiet: list[Episode]) -> Verdict | None:
     """The verdict on ``coast_decel`` from the coasts (``turning``: the wheels at rest while the gyro turns;
     ``quiet``: the standstills, whose gyro scatter is the gyro's real noise, where there are any)."""
-    odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
-    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
+    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
     if odom is None or imu is None or not turning or mount is None or not mount.turned or mount.named:
         return None  # no coast, or an accelerometer whose axes or size are not yet right (the mounting verdict)
     if len(series.acc_t) < MIN_COAST_BINS or len(series.gyro_t) < 2:

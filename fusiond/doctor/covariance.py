@@ -8,7 +8,8 @@ integrates into heading and, at speed, into position), or else the process noise
 
 from __future__ import annotations
 
-from ..config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config
+from ..core.sensors.registry import kind_of
 from .series import Series
 from .verdict import Verdict, filter_key
 from .thresholds import DROPOUT_FRACTION, DROPOUT_LONGEST_S
@@ -21,9 +22,7 @@ def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
     def delivered(name: str) -> bool:
         return stats is None or stats.get(name, {}).get("received", 0) > 0
 
-    return any(isinstance(s, (GpsSensor, PoseSensor)) and delivered(s.name) for s in cfg.sensors) or any(
-        isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative") and delivered(s.name)
-        for s in cfg.sensors)
+    return any(kind_of(s).heading_reference(s) and delivered(s.name) for s in cfg.sensors)
 
 
 def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, standstill_updates: int,

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 from ..config import Config, ImuSensor, OdomSensor
+from ..core.sensors.registry import kind_of
 from .attitude import TiltStats
 from .clock import ClockOffsets
 from .gyro import bias_check
@@ -94,16 +95,16 @@ class Evidence:
 
     @cached_property
     def odom(self) -> OdomSensor | None:
-        return next((s for s in self.config.sensors if isinstance(s, OdomSensor)), None)
+        return next((s for s in self.config.sensors if kind_of(s).drives_prediction), None)
 
     @cached_property
     def imu(self) -> ImuSensor | None:
         """The first configured IMU: the one the cross-source checks compare."""
-        return next((s for s in self.config.sensors if isinstance(s, ImuSensor)), None)
+        return next((s for s in self.config.sensors if kind_of(s).inertial), None)
 
     @cached_property
     def gyro_fused(self) -> bool:
-        return any(isinstance(s, ImuSensor) and s.angular_velocity for s in self.config.sensors)
+        return any(kind_of(s).fuses_gyro(s) for s in self.config.sensors)
 
     @cached_property
     def mount(self) -> MountYaw | None:
@@ -137,7 +138,7 @@ class Evidence:
         what the channel shows."""
         name, channel = key
         s = self.sensors.get(name)
-        if isinstance(s, ImuSensor):
+        if s is not None and kind_of(s).inertial:
             return s
         if channel == "orientation":
             return ImuSensor(name=name, key=name,

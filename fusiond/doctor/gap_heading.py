@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config, ImuSensor
+from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from .bins import BIN_S
 from .gyro import quiet_episodes
@@ -70,9 +71,9 @@ def _at(t: np.ndarray, y: np.ndarray, when: float) -> float | None:
 def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: float | None = None) -> Verdict | None:
     """A verdict when the IMU's unfused yaw turned across logging gaps more than the estimate did. ``t0``: the
     run's first stamp (the gap is then placed in seconds from it)."""
-    if imu is None or imu.orientation in ("absolute", "relative"):
+    if imu is None or imu.fuses_yaw:
         return None
-    if any(isinstance(s, (GpsSensor, PoseSensor)) for s in cfg.sensors):
+    if any(kind_of(s).measures_position for s in cfg.sensors):
         return None  # an absolute position/pose finds the heading again
     gaps = [(start, length) for start, length in series.odom_gaps if length >= MIN_GAP_S]
     if not gaps:
@@ -116,7 +117,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
            f"{math.degrees(est_turn):+.0f} deg): nothing "
            "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused), so it drives "
            "on along the heading it had")
-    if imu.orientation == "roll_pitch" and imu.yaw_across_gaps:
+    if imu.roll_pitch_only and imu.yaw_across_gaps:
         # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
         return Verdict(imu.name, "heading_across_gaps", "warn",
                        msg + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
@@ -129,7 +130,7 @@ def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: 
         evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate})
         cost = (f"; it drifts {rate:+.5f} rad/s against the bias-corrected gyro, ~{abs(rate) * length:.3f} rad over "
                 f"the largest gap, turned in with the turn (fused as relative, over the whole run)")
-    if imu.orientation == "roll_pitch":
+    if imu.roll_pitch_only:
         return Verdict(imu.name, "heading_across_gaps", "warn",
                        msg + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
                        f"heading{cost}", sensor_key(imu.name, "yaw_across_gaps"), "yaw_across_gaps = true", evidence)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config, GpsSensor, ImuSensor
+from ..core.sensors.registry import kind_of
 from ..core.layout import fuses_height
 from .attitude import full_mount, paste_mount
 from .heading import gps_sigma
@@ -97,13 +98,13 @@ def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float
 
 
 def _tilt_from_imu(imu: ImuSensor) -> bool:
-    return imu.orientation != "off" or imu.tilt_from_gravity
+    return imu.tilt_from_imu
 
 
 def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     """The chord fit of the mounting pitch, or None without a GPS altitude, an IMU tilt or enough chords."""
-    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
-    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor)), None)
+    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
     if gps is None or imu is None or not fuses_height(cfg, gps) or not _tilt_from_imu(imu):
         return None
     if len(series.gps_t) < 5 or len(series.odom_t) < 10 or len(series.est_t) < 10:

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config, ImuSensor, OdomSensor
+from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from .covariance import has_heading_reference
 from .bins import BIN_S
@@ -117,7 +118,7 @@ def _count_updates(episodes: list[Episode], ch: ChannelStats | None) -> None:
 
 def _coast_note(cfg: Config) -> str:
     """What the position does while the drive reads zero and the vehicle moves (core/sensors/odom/model.py)."""
-    odom = next(s for s in cfg.sensors if isinstance(s, OdomSensor))
+    odom = next(s for s in cfg.sensors if kind_of(s).drives_prediction)
     if odom.coast_decel <= 0.0:
         return (f"The position does not advance while the wheels read zero ({sensor_key(odom.name, 'coast_decel')} "
                 "= 0: a coast is not held)")
@@ -173,7 +174,7 @@ def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Ep
 
 def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool,
                stats: dict[str, dict] | None = None) -> Verdict | None:
-    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
     if imu is None or not gyro_fused:
         return None
     fc = cfg.filter
@@ -302,7 +303,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         # the noise at rest is what is stated (within NOISE_RATIO, as "understated" above): what the standstills
         # disagree with is the bias estimate, moved between them by something else; pasting the measured
         # noise would change nothing (it would tell the user to paste the gyro_noise already configured)
-        yaw = imu.orientation in ("absolute", "relative")
+        yaw = imu.fuses_yaw
         est = evidence.get("bias_estimate_rad_s", math.nan)
         at_rest = f", {est:+.5f} estimated against {episodes[-1].gyro_mean:+.5f} at rest" if (
             episodes and math.isfinite(est)) else ""

@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from ..config import Config, GpsSensor, ImuSensor
+from ..core.sensors.registry import kind_of
 from ..core.sensors.gps import HEADING_READY_SIGMA
 from .gyro import quiet_episodes
 from .series import Series
@@ -170,11 +171,11 @@ def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
 
 def heading_check(series: Series, cfg: Config) -> Verdict | None:
     """The verdict on an IMU whose absolute yaw is fused, from the other heading sources."""
-    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.orientation in ("absolute", "relative")),
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_yaw(s)),
                None)
     if imu is None or len(series.imu_t) < 10:
         return None
-    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
     if len(ti) < 10:
         return None
@@ -240,7 +241,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                 if excess > 0 and np.mean(r * r) / track_var > 1.0 + 3.0 * math.sqrt(2.0 / n):
                     track_wander = math.sqrt(excess)
                     evidence["imu_vs_gps_track_wander_rad"] = track_wander
-                if abs(offset) < max(TRACK_OFFSET_RAD, 3.0 * se) or imu.orientation == "relative":
+                if abs(offset) < max(TRACK_OFFSET_RAD, 3.0 * se) or imu.relative_yaw:
                     offset = math.nan  # not significant (or removed by the relative mode anyway)
     disturbed = (math.isfinite(wander) and wander > WANDER_RAD and not culprit_gyro) or (
         not math.isfinite(wander) and math.isfinite(track_wander) and track_wander > WANDER_RAD)
@@ -259,7 +260,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                "magnetometer-disturbed yaw (motors, steel)")
         if notes:
             msg += "; " + "; ".join(notes)
-        held = estimate_vs_gyro(series) if (gps is not None and imu.orientation == "absolute"
+        held = estimate_vs_gyro(series) if (gps is not None and imu.absolute_yaw
                                             and imu.yaw_offset_sigma > 0.0) else math.nan
         if math.isfinite(held):
             evidence["estimate_vs_gyro_wander_rad"] = held
@@ -383,11 +384,8 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
 
 def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
     """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
-    from ..config import OdomSensor
-
-    odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
-    imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)]
-    if odom is None or any(s.angular_velocity for s in imus) or not odom.twist_measured[5]:
+    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+    if odom is None or any(kind_of(s).fuses_gyro(s) for s in cfg.sensors) or not odom.twist_measured[5]:
         return None
     if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
         return None
@@ -402,7 +400,7 @@ def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
              else math.nan)
     if math.isfinite(k_imu):
         evidence["imu_vs_gyro_yaw_scale"] = k_imu
-    imu = imus[0] if imus else None
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
     missed, seconds = _missed_turn(series)
     if missed > MISSED_TURN_RAD and imu is not None:
         evidence.update({"turn_missed_rad": missed, "zero_while_turning_s": seconds})

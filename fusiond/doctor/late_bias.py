@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import math
 
-from ..config import Config, GpsSensor, ImuSensor, PoseSensor
+from ..config import Config
+from ..core.sensors.registry import kind_of
 from .gyro import quiet_episodes
 from .heading import imu_vs_gyro
 from .nis import ChannelStats
@@ -43,11 +44,10 @@ def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: Channel
     ``ch``: the IMU's gyro_bias channel. The bias counts as learned at its first accepted update (the core's
     own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the first
     standstill's gyro reading says."""
-    imu = next((s for s in cfg.sensors if isinstance(s, ImuSensor) and s.angular_velocity), None)
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
     if imu is None or not gyro_fused or len(series.odom_t) < 2:
         return None
-    if any(isinstance(s, (GpsSensor, PoseSensor)) or (isinstance(s, ImuSensor) and s.orientation in (
-            "absolute", "relative")) for s in cfg.sensors):
+    if any(kind_of(s).heading_reference(s) for s in cfg.sensors):
         return None  # a heading reference corrects the drift as it happens
     episodes, _ = quiet_episodes(series, cfg, imu)
     if not episodes or not math.isfinite(episodes[0].gyro_mean):

@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 
-from ..config import Config, GpsSensor
+from ..config import Config
+from ..core.sensors.registry import kind_of
 from .series import Series
 from .verdict import Verdict, sensor_key
 from .thresholds import (LATENCY_ALONG, LEVER_TOL, LEVER_Z_SIGMAS, MAX_INTERVAL, MAX_SE, MAX_SE_NAMED, MIN_PAIRS,
@@ -115,7 +116,7 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
 
 def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
     """A verdict on the first GPS's ``extrinsic_xyz`` (module doc), or None when the run cannot tell."""
-    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
     if gps is None:
         return None
     stated = (float(gps.extrinsic_xyz[0]), float(gps.extrinsic_xyz[1]))

@@ -20,7 +20,8 @@ from operator import attrgetter
 import msgspec
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor, OdomSensor
+from ..config import Config
+from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from ..estimator.geodesy import EnuFrame
 from ..samples import GpsSample, ImuSample, OdomSample
@@ -127,9 +128,10 @@ class SeriesCollector:
     def __init__(self, cfg: Config) -> None:
         self.cfg = cfg
         self.series = Series()
-        imus = [s for s in cfg.sensors if isinstance(s, ImuSensor)]
-        odoms = [s for s in cfg.sensors if isinstance(s, OdomSensor)]
-        gps = [s for s in cfg.sensors if isinstance(s, GpsSensor)]
+        # the streams the cross-source checks compare: the wheels', the IMUs' and the fixes'
+        imus = [s for s in cfg.sensors if kind_of(s).inertial]
+        odoms = [s for s in cfg.sensors if kind_of(s).drives_prediction]
+        gps = [s for s in cfg.sensors if kind_of(s).geodetic]
         self._odom = OdomStream(odoms, cfg.filter.gap_s)
         self._imu = ImuStream(imus)
         self._names = {OdomSample: set(self._odom.index), ImuSample: set(self._imu.index),

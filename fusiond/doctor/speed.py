@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config, GpsSensor, OdomSensor
+from ..core.sensors.registry import kind_of
 from ..core.diagnostics import t_quantile
 from .heading import gps_sigma, timed
 from .series import Series
@@ -97,7 +98,7 @@ def wander(gps: GpsSensor | None, sigma_w: float) -> tuple[float, float]:
 
 def wheel_scale_fit(series: Series, cfg: Config) -> ScaleFit | None:
     """The weighted chord fit of the wheel scale, or None without enough chords."""
-    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
     if len(series.gps_t) < 5 or len(series.odom_t) < 10:
         return None
     sigma_w = gps_sigma(series, gps)
@@ -209,8 +210,8 @@ def _newey_west(score: np.ndarray) -> float:
 
 
 def speed_check(series: Series, cfg: Config, scales: dict[str, float] | None = None) -> Verdict | None:
-    odom = next((s for s in cfg.sensors if isinstance(s, OdomSensor)), None)
-    gps = next((s for s in cfg.sensors if isinstance(s, GpsSensor)), None)
+    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
     if odom is None or gps is None:
         return None
     fit = wheel_scale_fit(series, cfg)

@@ -25,7 +25,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from ..config import Config, ImuSensor
+from ..config import Config
 from ..core.layout import absolute_sensor
 from ..core.sensors.registry import kind_of
 from ..errors import ReplayError
@@ -173,7 +173,7 @@ class Recorder:
         sensors = {s.name: s for s in self.cfg.sensors}
         self._odom_world = {n for n, s in sensors.items() if kind_of(s).drives_prediction and s.twist_frame == "world"}
         self._imu_rot = {n: matrix(from_rpy(*s.extrinsic_rpy)) for n, s in sensors.items()
-                         if isinstance(s, ImuSensor) and s.angular_velocity}
+                         if kind_of(s).fuses_gyro(s)}
         self._absolute = next((s.name for s in self.cfg.sensors if absolute_sensor(s)), None)
         # the world frame's sensor is a GPS (fixes in WGS84, their status scored) rather than a pose sensor
         self.geodetic = self._absolute is not None and kind_of(sensors[self._absolute]).geodetic

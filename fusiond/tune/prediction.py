@@ -14,7 +14,7 @@ from its horizontal position). The filter has not seen that fix;
 it has seen the ones around it, which is how it runs.
 
 An axis whose GPS error is slow against the recording (a Gauss-Markov time constant the recording
-spans fewer than SPAN_TAUS of, ``params.slow_errors``) is not scored: the held fixes share that error
+spans fewer than SPAN_TAUS of, the kind's ``slow_errors``) is not scored: the held fixes share that error
 with their fused neighbours, so a config that follows the receiver's wander predicts them better while
 it moves away from the truth. On the highway car's 60 s (altitude tau 300 s), a tighter horizontal noise
 put z 0.66 m RMS from the held fixes' altitude (1.30 m as configured) and 0.71 m from the reference's
@@ -42,7 +42,6 @@ from ..core.fusion import FusionCore
 from ..core.layout import absolute_sensor, fuses_height
 from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
-from .params import slow_errors
 
 HOLD_EVERY = 5  # every 5th fix held back: a fifth of the fixes scored, four fifths still fused
 MAX_GAP_S = 0.5  # a held fix is scored only between published poses at most this far from its stamp
@@ -170,7 +169,7 @@ def predict(cfg: Config, kept: Sequence[object], held: Sequence[object]) -> Pred
         squared[index] = (dh[-1], dv[-1])
     if len(dh) < MIN_FIXES:
         return Prediction(None, None, len(dh))
-    slow = slow_errors(world, held[-1].stamp - held[0].stamp) if geodetic else {}
+    slow = kind_of(world).slow_errors(world, held[-1].stamp - held[0].stamp)
     horizontal = None if "horizontal" in slow else math.sqrt(sum(dh) / len(dh))
     vertical = None if "vertical" in slow or not fuses_height(cfg, world) else math.sqrt(sum(dv) / len(dv))
     return Prediction(horizontal, vertical, len(dh), squared)

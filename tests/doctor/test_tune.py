@@ -182,15 +182,15 @@ def test_tune_cli_bad_inputs_exit_2_in_one_line(tmp_path):
 
 
 def test_the_table_says_an_unstated_gps_noise_is_measured_and_the_default_only_its_bound():
-    from fusiond.tune.params import _gps_noise_params
+    from fusiond.core.sensors.gps.tunables import noise_params
 
     fix = GpsSample("gps", 1.0, 48.1, 11.5, 520.0, 0, (0.0,) * 9, 0)  # covariance type UNKNOWN
     cfg = robot_config(gps="")
     gps = cfg.sensors[-1]
-    horizontal, vertical = _gps_noise_params(gps, [fix, fix])
+    horizontal, vertical = noise_params(gps, [fix, fix])
     assert horizontal.source == "unstated: measured, at most" and horizontal.start() == (2.5, 2.5)
     assert vertical.source == "messages (median)"  # the altitude keeps the default and its wander state
-    off = _gps_noise_params(msgspec.structs.replace(gps, estimate_unknown_noise=False), [fix])
+    off = noise_params(msgspec.structs.replace(gps, estimate_unknown_noise=False), [fix])
     assert off[0].source == "messages (median)"
     stated = msgspec.structs.replace(fix, position_covariance=(0.04, 0, 0, 0, 0.04, 0, 0, 0, 0.09), covariance_type=2)
-    assert _gps_noise_params(gps, [stated])[0].source == "messages (median)"
+    assert noise_params(gps, [stated])[0].source == "messages (median)"

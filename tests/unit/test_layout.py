@@ -94,21 +94,18 @@ def test_no_reason_code_is_a_literal_outside_reasons_py():
 
 
 # What a sensor's kind means is its descriptor's to say (core/sensors/kind.py): outside core/sensors/
-# no module tests a kind by its config class or tag. What stays says why: the IMU calibration
-# command and the gyro baseline of replay's evaluation are about the IMU itself. The doctor's checks
-# are outside this rule (their own floor of checks, fusiond/doctor/).
-_KIND_BRANCH = re.compile(r"kind *(==|!=|in) *|\.kind\b.*(==|in)|isinstance\([^)]*(Imu|Odom|Gps|Pose)(Config|Sensor|Model)")
-_KIND_BRANCHES_KEPT = {
-    "cli/calibrate_imu.py": 1,  # calibrate-imu picks the configured IMUs
-    "replay/evaluate.py": 1,  # the "gyro + wheel speed" baseline reads an IMU's gyro through its mounting
-}
+# no module, the doctor's checks included, tests a kind by its config class or tag, nor reads an IMU's
+# orientation mode as a string (``ImuSensor.fuses_yaw`` and its siblings name it).
+_KIND_BRANCH = re.compile(r"kind *(==|!=|in) *|\.kind\b.*(==|in)|isinstance\([^)]*(Imu|Odom|Gps|Pose)(Config|Sensor|Model)"
+                          r"|\.orientation *(==|!=|in\b|not in\b)")
+_KIND_BRANCHES_KEPT: dict[str, int] = {}
 
 
 def test_no_module_outside_the_sensor_kinds_branches_on_a_kind():
     found: dict[str, int] = {}
     for path in PACKAGE.rglob("*.py"):
         rel = path.relative_to(PACKAGE).as_posix()
-        if rel.startswith(("core/sensors/", "doctor/")):
+        if rel.startswith("core/sensors/"):
             continue
         hits = sum(1 for line in path.read_text().splitlines() if _KIND_BRANCH.search(line))
         if hits:
@@ -198,33 +195,3 @@ def test_a_kind_registers_under_its_tables_tag_and_an_unknown_tag_names_the_know
         register(Misnamed())
     with pytest.raises(ValueError, match=r"unknown sensor kind 'tagged', expected one of \['gps', 'imu', 'odom', 'pose'"):
         kind_named("tagged")
-
-
-def test_the_installed_package_holds_no_benchmark():
-    """The benchmarks are measurement code of the source tree (benchmarks/), not installed: no module of the
-    package imports them by name; `fusiond bench` and `bench-latency` load them from the tree they run from
-    (cli/benchmarks.py), and the package's modules are found by ``fusiond*`` only."""
-    importers = []
-    for path in PACKAGE.rglob("*.py"):
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
-            if any(n == "benchmarks" or n.startswith("benchmarks.") for n in names):
-                importers.append(path.relative_to(PACKAGE).as_posix())
-    assert importers == []
-    assert (PACKAGE.parent / "benchmarks" / "bench.py").is_file()
-    assert 'include = ["fusiond*"]' in (PACKAGE.parent / "pyproject.toml").read_text()
-
-
-# A sensor's typical period (an average of its intervals) and when it reads silent (its timeout, or a few
-# periods when that is longer) are core/inputs.py's smoothed_period and silent_after: the core's held
-# inputs, the service's liveness, the doctor, the IMU's gap rule and the daemon's drain schedule call them.
-_PERIOD_RULE = re.compile(r"max\([^()]*(\* *[\w.]*period[\w.]*\)|, *\w*PERIODS *\*)"
-                          r"|[\w.]*period[\w.]* *\+ *\w+ *\* *\([^()]*- *[\w.]*period[\w.]*\)")
-
-
-def test_the_period_average_and_the_silence_rule_are_written_once():
-    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
-             for path in PACKAGE.rglob("*.py") if path.relative_to(PACKAGE).as_posix() != "core/inputs.py"
-             for i, line in enumerate(path.read_text().splitlines(), 1) if _PERIOD_RULE.search(line)]
-    assert found == []

@@ -21,7 +21,8 @@ from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSensor, quiet_bound
 from .kind import LayoutView, SensorKind
 from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSensor
 from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSensor
-from .registry import KINDS, config_types, kind_named, kind_of, register, unregister
+from .registry import (ENTRY_POINT_GROUP, KINDS, config_types, discover, kind_named, kind_of, register, require,
+                       unregister)
 
 
 def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
@@ -30,9 +31,9 @@ def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
 
 
 __all__ = [
-    "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSensor", "ImuInput", "ImuKind",
+    "ENTRY_POINT_GROUP", "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSensor", "ImuInput", "ImuKind",
     "ImuModel", "ImuPolicy", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
     "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor", "Rejected", "SensorContext",
-    "SensorKind", "SensorModel", "build_models", "config_types", "kind_named", "kind_of", "quiet_bound", "register",
-    "unregister",
+    "SensorKind", "SensorModel", "build_models", "config_types", "discover", "kind_named", "kind_of", "quiet_bound",
+    "register", "require", "unregister",
 ]

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from ...config_tables import FilterConfig
     from ...estimator import StateBlock
     from .base import SensorModel
+    from .tunable import Param
 
 
 class LayoutView:
@@ -59,6 +60,12 @@ class SensorKind:
     geodetic: ClassVar[bool] = False
     # what "waiting for the first ... to define the world frame" names
     frame_message: ClassVar[str] = "message"
+    # it measures the body's own rotation in its axes (an IMU: orientation, gyro, gravity): the one the
+    # doctor's cross-source checks hold against the wheels, and `calibrate-imu` measures at rest
+    inertial: ClassVar[bool] = False
+    # it measures where the robot is, or how far it moved (a GPS fix, a pose): after a gap of the other
+    # sensors it finds the robot, and its heading, again
+    measures_position: ClassVar[bool] = False
 
     # -- config -------------------------------------------------------------------------------------
     def validate(self, cfg: Any, at: Callable[[str], str]) -> None:
@@ -81,6 +88,15 @@ class SensorKind:
         """Is its yaw absolute (REP-103 ENU), a heading reference beside a GPS?"""
         return False
 
+    def heading_reference(self, cfg: Any) -> bool:
+        """Does it tell the filter where it heads (from the positions it measures, or a yaw it observes),
+        so that a gyro bias and a wheel yaw error do not accumulate into heading unchecked?"""
+        return self.measures_position or self.fuses_yaw(cfg)
+
+    def fuses_gyro(self, cfg: Any) -> bool:
+        """Does it give the prediction a measured yaw rate (a gyro, whose bias the filter learns)?"""
+        return False
+
     def tracks_acceleration(self, cfg: Any) -> bool:
         """Does its model need the odometry's forward acceleration (tilt from gravity)?"""
         return False
@@ -93,6 +109,18 @@ class SensorKind:
     def datum(self, cfg: Any) -> tuple[float, float, float] | None:
         """A configured geodetic origin (lat deg, lon deg, alt m) of the world frame, if any."""
         return None
+
+    # -- tuning -------------------------------------------------------------------------------------------
+    def slow_errors(self, cfg: Any, span: float) -> dict[str, float]:
+        """The parts of its error ("horizontal", "vertical") modelled as slower than a recording of ``span``
+        seconds can identify, with their time constants: held-back positions score none of them (they
+        share that error with their fused neighbours). None by default."""
+        return {}
+
+    def tunables(self, cfg: Any, samples: Sequence[object]) -> list["Param"]:
+        """The keys of its table `fusiond tune` may fit on ``samples``, and where each starts
+        (``tunable.py``); those that cannot be fitted carry the reason. None by default."""
+        return []
 
     # -- decoding ---------------------------------------------------------------------------------------
     def ros_type(self, cfg: Any) -> str:

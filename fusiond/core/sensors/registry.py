@@ -3,11 +3,16 @@
 Everything outside ``core/sensors/`` that depends on a sensor's kind asks here (``kind_of``)
 rather than testing config classes: the config's [[sensors]] union (``config_types``), the state
 layout, the fusion core, the decoders, the bag reader, the daemon, replay and the tuner. A new
-kind is a module (or package) beside the others with its descriptor, and one ``register`` call.
+kind is a module (or package) beside the others with its descriptor, and one ``register`` call;
+an installed package adds one by naming its descriptor under the ``fusiond.sensor_kinds`` entry
+point group (``discover``), found when a config names a kind not registered yet, so that a run
+that names only the built-in kinds never scans the installed packages.
 """
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Iterable
 from typing import Any
 
 from .gps import GpsKind
@@ -17,6 +22,8 @@ from .odom import OdomKind
 from .pose import PoseKind
 
 KINDS: dict[str, SensorKind] = {}
+ENTRY_POINT_GROUP = "fusiond.sensor_kinds"  # name = the kind's tag, value = its SensorKind (class or instance)
+_discovered = False
 
 
 def register(kind: SensorKind) -> SensorKind:
@@ -40,11 +47,47 @@ def kind_of(cfg: Any) -> SensorKind:
 
 
 def kind_named(name: str) -> SensorKind:
-    """The descriptor of a `kind` tag; a ValueError listing the known ones for another."""
+    """The descriptor of a `kind` tag (an installed package's, ``discover``); a ValueError listing the
+    known ones for another."""
+    require((name,))
     try:
         return KINDS[name]
     except KeyError:
         raise ValueError(f"unknown sensor kind {name!r}, expected one of {sorted(KINDS)}") from None
+
+
+def require(names: Iterable[object]) -> None:
+    """Make the kinds ``names`` tags known if an installed package offers them: ``discover`` once, the
+    first time a tag is not registered (names that are not strings are left to the config's checks)."""
+    if not _discovered and any(isinstance(n, str) and n not in KINDS for n in names):
+        discover()
+
+
+def discover(entry_points: Iterable[Any] | None = None) -> list[SensorKind]:
+    """Register the kinds installed packages declare under ``ENTRY_POINT_GROUP`` (``entry_points``: those
+    of ``importlib.metadata`` by default), each a ``SensorKind`` subclass or instance named by its tag;
+    returns the kinds registered. A tag already registered keeps its descriptor (a package does not
+    replace a built-in kind); an entry that fails to load, or names another tag than its kind's, is a
+    warning and is skipped, so that one broken package leaves the others usable."""
+    global _discovered
+    if entry_points is None:
+        from importlib.metadata import entry_points as installed
+
+        _discovered = True
+        entry_points = installed(group=ENTRY_POINT_GROUP)
+    added = []
+    for ep in entry_points:
+        if ep.name in KINDS:
+            continue
+        try:
+            found = ep.load()
+            kind = found() if isinstance(found, type) else found
+            if not isinstance(kind, SensorKind) or kind.name != ep.name:
+                raise TypeError(f"{ep.value} is not a SensorKind named {ep.name!r}")
+            added.append(register(kind))
+        except Exception as err:  # noqa: BLE001 - a third party's package: any failure is its own
+            warnings.warn(f"sensor kind {ep.name!r} from {ep.value}: not loaded: {err}", RuntimeWarning, stacklevel=2)
+    return added
 
 
 def config_types() -> tuple[type, ...]:
@@ -55,4 +98,5 @@ def config_types() -> tuple[type, ...]:
 for _kind in (OdomKind(), ImuKind(), GpsKind(), PoseKind()):
     register(_kind)
 
-__all__ = ["KINDS", "config_types", "kind_named", "kind_of", "register", "unregister"]
+__all__ = ["ENTRY_POINT_GROUP", "KINDS", "config_types", "discover", "kind_named", "kind_of", "register", "require",
+           "unregister"]

@@ -1,5 +1,5 @@
 """The GPS sensor kind: its [[sensors]] table (``table``), its model with the heading search, the gate
-and its re-acquisition (``model``) and its descriptor (``kind``)."""
+and its re-acquisition (``model``), the keys tune may fit (``tunables``) and its descriptor (``kind``)."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ....config_tables import FilterConfig
@@ -10,8 +10,10 @@ from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
 from ....samples import GpsSample
 from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..tunable import Param
 from .model import GpsModel
 from .table import GpsSensor
+from .tunables import gps_tunables, slow_errors
 
 
 class GpsKind(SensorKind):
@@ -25,6 +27,7 @@ class GpsKind(SensorKind):
     ros_types = ("sensor_msgs/msg/NavSatFix",)
     geodetic = True
     frame_message = "GPS fix"
+    measures_position = True
 
     def validate(self, cfg: GpsSensor, at: Callable[[str], str]) -> None:
         if cfg.datum is not None and not (-90.0 <= cfg.datum[0] <= 90.0 and -180.0 <= cfg.datum[1] <= 180.0):
@@ -53,6 +56,12 @@ class GpsKind(SensorKind):
 
     def datum(self, cfg: GpsSensor) -> tuple[float, float, float] | None:
         return cfg.datum
+
+    def tunables(self, cfg: GpsSensor, samples: Sequence[object]) -> list[Param]:
+        return gps_tunables(cfg, samples)
+
+    def slow_errors(self, cfg: GpsSensor, span: float) -> dict[str, float]:
+        return slow_errors(cfg, span)
 
     def from_ros(self) -> Callable[[Any, str], Any]:
         from ....codecs.from_ros import gps_from_ros

@@ -1,7 +1,7 @@
 """The IMU sensor kind: its descriptor (``kind``), its model (``model``), the filter input a message
 becomes (``inputs``), its [[sensors]] table (``table``), its slice of the filter state (``own``), the gyro bias learned at standstills
 (``gyro_bias``), the heading carried across logging gaps by the IMU's own yaw (``gap_turn``) and where a
-noise stated in the IMU's axes lands in base_link's (``axes``)."""
+noise stated in the IMU's axes lands in base_link's (``axes``), and the keys tune may fit (``tunables``)."""
 
 from __future__ import annotations
 

@@ -5,15 +5,17 @@ forward acceleration."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ....errors import ConfigError
 from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
 from ....samples import ImuSample
 from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..tunable import Param
 from .model import ImuModel
 from .table import ImuSensor
+from .tunables import imu_tunables
 
 
 class ImuKind(SensorKind):
@@ -24,6 +26,7 @@ class ImuKind(SensorKind):
     sample_type = ImuSample
     model_type = ImuModel
     ros_types = ("sensor_msgs/msg/Imu",)
+    inertial = True
 
     def validate(self, cfg: ImuSensor, at: Callable[[str], str]) -> None:
         if cfg.gyro_scale_estimation and not cfg.angular_velocity:
@@ -32,10 +35,13 @@ class ImuKind(SensorKind):
             raise ConfigError(f"{at('orientation_rate_hz')}: must be >= 0 and finite (0: every sample)")
 
     def fuses_yaw(self, cfg: ImuSensor) -> bool:
-        return cfg.orientation in ("absolute", "relative")
+        return cfg.fuses_yaw
 
     def absolute_yaw(self, cfg: ImuSensor) -> bool:
-        return cfg.orientation == "absolute"
+        return cfg.absolute_yaw
+
+    def fuses_gyro(self, cfg: ImuSensor) -> bool:
+        return cfg.angular_velocity
 
     def tracks_acceleration(self, cfg: ImuSensor) -> bool:
         return cfg.tilt_from_gravity
@@ -48,9 +54,12 @@ class ImuKind(SensorKind):
         if cfg.gyro_scale_estimation:
             blocks.append(GyroScaleBlock(fc.gyro_scale_sigma, fc.gyro_scale_walk))
         # An absolute yaw beside an absolute position or pose: heading + an estimated offset.
-        if cfg.orientation == "absolute" and cfg.yaw_offset_sigma > 0.0 and view.absolute:
+        if cfg.absolute_yaw and cfg.yaw_offset_sigma > 0.0 and view.absolute:
             blocks.append(YawOffsetBlock(cfg.yaw_offset_sigma, cfg.yaw_offset_walk))
         return blocks
+
+    def tunables(self, cfg: ImuSensor, samples: Sequence[object]) -> list[Param]:
+        return imu_tunables(cfg, samples)
 
     def from_ros(self) -> Callable[[Any, str], Any]:
         from ....codecs.from_ros import imu_from_ros
@@ -60,7 +69,7 @@ class ImuKind(SensorKind):
     decoder = codecs_decoder
 
     def zero_covariance(self, cfg: ImuSensor) -> Callable[[Any], bool] | None:
-        use_orientation = cfg.orientation != "off" and cfg.orientation_noise is None
+        use_orientation = cfg.fuses_orientation and cfg.orientation_noise is None
         use_gyro = cfg.angular_velocity and cfg.gyro_noise is None
         if not (use_orientation or use_gyro):
             return None

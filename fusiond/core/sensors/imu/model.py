@@ -190,8 +190,8 @@ class ImuModel(SensorModel):
 
     def __init__(self, cfg: ImuSensor, index: int, ctx: SensorContext) -> None:
         super().__init__(cfg, index, ctx)
-        self.absolute = cfg.orientation == "absolute"
-        self.relative = cfg.orientation == "relative"
+        self.absolute = cfg.absolute_yaw
+        self.relative = cfg.relative_yaw
         # absolute yaw read as heading + an estimated offset (the core adds the yaw_offset block)
         self.offset = self.absolute and ctx.layout.has("yaw_offset")
         self._offset_index = ctx.layout.nominal["yaw_offset"].start if self.offset else -1
@@ -199,7 +199,7 @@ class ImuModel(SensorModel):
         self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
         self.orientation_period = 1.0 / cfg.orientation_rate_hz if cfg.orientation_rate_hz > 0.0 else 0.0
         self.thinned = 0  # orientations not fused for ``orientation_rate_hz`` (the gyro of the sample is)
-        self.carries_yaw = cfg.yaw_across_gaps and cfg.orientation == "roll_pitch" and not ctx.two_d
+        self.carries_yaw = cfg.yaw_across_gaps and cfg.roll_pitch_only and not ctx.two_d
         self.gap_s = ctx.filter.gap_s
         self.bias_sigma = ctx.filter.gyro_bias_sigma
         self.bias_z = ctx.layout.index("gyro_bias", 2)

@@ -37,5 +37,41 @@ class ImuSensor(SensorTable, tag="imu"):
     yaw_offset_sigma: float = 0.5
     yaw_offset_walk: float = 0.05
 
+    # What ``orientation`` means, asked by name so that no module outside this package reads its strings.
+    @property
+    def fuses_orientation(self) -> bool:
+        """Is some part of the message's orientation fused (roll/pitch, and yaw in the yaw modes)?"""
+        return self.orientation != "off"
+
+    @property
+    def fuses_yaw(self) -> bool:
+        """Does the IMU observe the heading itself (an absolute or a relative yaw)?"""
+        return self.orientation in ("absolute", "relative")
+
+    @property
+    def absolute_yaw(self) -> bool:
+        """Is its yaw absolute (REP-103 ENU, a heading reference beside a GPS)?"""
+        return self.orientation == "absolute"
+
+    @property
+    def relative_yaw(self) -> bool:
+        """Is its yaw relative (its changes fused, its origin not)?"""
+        return self.orientation == "relative"
+
+    @property
+    def roll_pitch_only(self) -> bool:
+        """Are roll and pitch its only fused orientation (its yaw left to the gyro and the wheels)?"""
+        return self.orientation == "roll_pitch"
+
+    @property
+    def orientation_rows(self) -> tuple[int, ...]:
+        """The base rows (0 roll, 1 pitch, 2 yaw) its orientation updates fuse."""
+        return (0, 1, 2) if self.fuses_yaw else (0, 1) if self.fuses_orientation else ()
+
+    @property
+    def tilt_from_imu(self) -> bool:
+        """Does the IMU give the filter roll and pitch (from its orientation, or from gravity)?"""
+        return self.fuses_orientation or self.tilt_from_gravity
+
 
 __all__ = ["ImuSensor"]

@@ -1,6 +1,6 @@
 """The wheel-odometry sensor kind: its [[sensors]] table (``table``), its model, policy and coast
 (``model``), its standstill test (``rest``), the watch for a twist component that is no measurement
-(``lost_channel``) and its descriptor (``kind``)."""
+(``lost_channel``), the keys tune may fit (``tunables``) and its descriptor (``kind``)."""
 
 from __future__ import annotations
 

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import operator
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ....estimator import StateBlock, TwistPitchBlock, WheelScaleBlock
 from ....samples import OdomSample
 from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..tunable import Param
 from .model import OdomModel
 from .table import OdomSensor
+from .tunables import odom_tunables
 
 
 class OdomKind(SensorKind):
@@ -37,6 +39,9 @@ class OdomKind(SensorKind):
         if view.absolute_height and cfg.twist_frame == "body" and cfg.pitch_estimation:
             blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
         return blocks
+
+    def tunables(self, cfg: OdomSensor, samples: Sequence[object]) -> list[Param]:
+        return odom_tunables(cfg, samples)
 
     def from_ros(self) -> Callable[[Any, str], Any]:
         from ....codecs.from_ros import odom_from_ros

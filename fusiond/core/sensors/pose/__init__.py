@@ -1,5 +1,5 @@
 """The pose sensor kind (absolute, or differential: deltas between its poses): its [[sensors]] table
-(``table``), its model (``model``) and its descriptor (``kind``)."""
+(``table``), its model (``model``), the keys tune may fit (``tunables``) and its descriptor (``kind``)."""
 
 from __future__ import annotations
 

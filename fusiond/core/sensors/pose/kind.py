@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ....config_tables import FilterConfig
 from ....samples import PoseSample
 from ..kind import SensorKind
+from ..tunable import Param
 from .model import PoseModel
 from .table import POSE_MSGTYPES, PoseSensor
+from .tunables import pose_tunables
 
 
 class PoseKind(SensorKind):
@@ -22,6 +24,7 @@ class PoseKind(SensorKind):
     model_type = PoseModel
     ros_types = POSE_MSGTYPES
     frame_message = "pose"
+    measures_position = True
 
     def defines_frame(self, cfg: PoseSensor) -> bool:
         return not cfg.differential
@@ -31,6 +34,9 @@ class PoseKind(SensorKind):
 
     def ros_type(self, cfg: PoseSensor) -> str:
         return cfg.msgtype  # a CDR payload does not say which of the pose types it is
+
+    def tunables(self, cfg: PoseSensor, samples: Sequence[object]) -> list[Param]:
+        return pose_tunables(cfg, samples)
 
     def from_ros(self) -> Callable[[Any, str], Any]:
         from ....codecs.from_ros import pose_from_ros
