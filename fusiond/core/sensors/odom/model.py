@@ -217,6 +217,7 @@ class OdomModel(SensorModel):
         self._bias = tuple(layout.index("gyro_bias", i) for i in range(3))  # -1: no bias state
         self._bias_z = self._bias[2]
         self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
+        self._last_fit: tuple = ((), math.nan, 0.0)  # (window, linear variance, its forward_accel)
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN
@@ -364,18 +365,32 @@ class OdomModel(SensorModel):
         if own is None or not own.window:
             return 0.0
         window, linear_var = own.window, own.previous_cov[0]
-        n = len(window)
-        if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
-            # too few speeds for a slope: known only when they are all alike (at rest, cruising)
-            last = window[-1][1]
-            return 0.0 if all(p[1] == last for p in window) else math.nan
-        tm = sum(p[0] for p in window) / n
-        vm = sum(p[1] for p in window) / n
-        stt = sum((p[0] - tm) ** 2 for p in window)
-        slope = sum((p[0] - tm) * (p[1] - vm) for p in window) / stt
-        misfit = math.sqrt(sum((p[1] - vm - slope * (p[0] - tm)) ** 2 for p in window) / (n - 2))
-        noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
-        return slope if misfit <= noise else math.nan
+        last_fit = self._last_fit  # the IMU asks at its own rate, the window moves at the odometry's
+        if last_fit[0] is window and last_fit[1] == linear_var:
+            return last_fit[2]
+        accel = _fitted_accel(window, linear_var)
+        self._last_fit = (window, linear_var, accel)  # holds the window: its identity stays its own
+        return accel
+
+
+def _fitted_accel(window: tuple, linear_var: float) -> float:
+    """``OdomModel.forward_accel`` of one window of (stamp, forward speed) pairs. The sums run over lists
+    (a generator costs a resume an item), in the order and with the operations a sum over the pairs has."""
+    n = len(window)
+    if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
+        # too few speeds for a slope: known only when they are all alike (at rest, cruising)
+        last = window[-1][1]
+        return 0.0 if all(p[1] == last for p in window) else math.nan
+    ts = [p[0] for p in window]
+    vs = [p[1] for p in window]
+    tm = sum(ts) / n
+    vm = sum(vs) / n
+    dts = [t - tm for t in ts]
+    stt = sum([d ** 2 for d in dts])
+    slope = sum([d * (v - vm) for d, v in zip(dts, vs)]) / stt
+    misfit = math.sqrt(sum([(v - vm - slope * d) ** 2 for d, v in zip(dts, vs)]) / (n - 2))
+    noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
+    return slope if misfit <= noise else math.nan
 
 
 __all__ = ["OdomInput", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT", "body_twist", "impossible_stop"]
