@@ -27,7 +27,7 @@ reports its commanded speed and drops it to zero at once, 0.25 m from 0.5 m/s.
 from __future__ import annotations
 
 import math
-from operator import itemgetter
+from operator import itemgetter, mul
 from typing import TYPE_CHECKING
 
 import msgspec
@@ -375,20 +375,21 @@ class OdomModel(SensorModel):
 
 def _fitted_accel(window: tuple, linear_var: float) -> float:
     """``OdomModel.forward_accel`` of one window of (stamp, forward speed) pairs. The sums run over lists
-    (a generator costs a resume an item), in the order and with the operations a sum over the pairs has."""
+    and maps (a generator costs a resume an item), in the order and with the operations of the least-squares
+    sums written over the pairs: the same bits."""
     n = len(window)
     if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
         # too few speeds for a slope: known only when they are all alike (at rest, cruising)
         last = window[-1][1]
         return 0.0 if all(p[1] == last for p in window) else math.nan
-    ts = [p[0] for p in window]
-    vs = [p[1] for p in window]
+    ts, vs = zip(*window)
     tm = sum(ts) / n
     vm = sum(vs) / n
     dts = [t - tm for t in ts]
+    dvs = [v - vm for v in vs]
     stt = sum([d ** 2 for d in dts])
-    slope = sum([d * (v - vm) for d, v in zip(dts, vs)]) / stt
-    misfit = math.sqrt(sum([(v - vm - slope * d) ** 2 for d, v in zip(dts, vs)]) / (n - 2))
+    slope = sum(map(mul, dts, dvs)) / stt
+    misfit = math.sqrt(sum([(dv - slope * d) ** 2 for d, dv in zip(dts, dvs)]) / (n - 2))
     noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
     return slope if misfit <= noise else math.nan
 
