@@ -16,6 +16,7 @@ configuration go through structlog.
 from __future__ import annotations
 
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -196,7 +197,13 @@ def _json_line(level: str, event: str | None = None, *args: Any, **kw: Any) -> N
     _add_process_fields(None, level, fields)
     fields["level"] = level
     fields["timestamp"] = datetime.datetime.now(tz=datetime.timezone.utc).isoformat().replace("+00:00", "Z")
-    print(json.dumps(fields, default=_json_default), file=_Stderr(), flush=True)
+    line = json.dumps(fields, default=_json_default) + "\n"
+    with _WRITE_LOCK:  # one line at a time from the daemon's threads, as structlog's printer locks its file
+        sys.stderr.write(line)
+        sys.stderr.flush()
+
+
+_WRITE_LOCK = threading.Lock()
 
 
 def _json_default(obj: Any) -> Any:
