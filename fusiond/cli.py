@@ -53,12 +53,7 @@ def _output_error(path: str, option: str, directory: bool = False) -> str | None
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from .collector import paused
-
-    with paused():  # the imports and the config: nothing to collect (collector.py)
-        cfg = _load_config(args.config, needs="replay")
-        from .errors import ReplayError
-        from .replay.run import replay, summary
+    cfg = _load_config(args.config, needs="replay")
     for option, value, directory in (("--tum", args.tum, False), ("--diagnostics", args.diagnostics, False),
                                      ("--plot", args.plot, False), ("--report", args.report, True),
                                      ("--evaluation", args.evaluation, False)):
@@ -73,6 +68,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.fuse_every < 1:
         print(f"fusiond: --fuse-every {args.fuse_every}: must be 1 (fuse every message) or more", file=sys.stderr)
         return EXIT_USAGE
+    from .errors import ReplayError
+    from .replay.run import replay, summary
 
     reference = args.reference
     fuse_every = args.fuse_every

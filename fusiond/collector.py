@@ -9,10 +9,6 @@ come after the recording's own, whose records and doctor series are alive then t
 car's recording a full collection inside the proof walked them for 45-70 ms. None of those objects is
 garbage the replay makes, so they are frozen (``gc.freeze``) for its duration and handed back after
 (``gc.unfreeze``).
-
-Before a replay, its imports (numpy, rosbags, the package: some 100,000 objects) start about 80
-collections, young ones that walk what the imports just made and find nothing to free: a replay
-command takes its imports and its config with the collector paused (``paused``).
 """
 
 from __future__ import annotations
@@ -21,7 +17,7 @@ import gc
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ["paused", "skips_the_caller"]
+__all__ = ["skips_the_caller"]
 
 
 @contextmanager
@@ -36,16 +32,3 @@ def skips_the_caller() -> Iterator[None]:
         yield
     finally:
         gc.unfreeze()
-
-
-@contextmanager
-def paused() -> Iterator[None]:
-    """No collection inside the block (objects it leaves in cycles are found by the next one after); as it
-    was after, a caller's own ``gc.disable`` included."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()

@@ -68,23 +68,3 @@ def test_the_advice_is_proven_with_the_recordings_replay_frozen(jackal_bag: Path
     advice.prove_advice(cfg, fused, verdicts, 60.0, records)
     assert seen and all(n > 0 for n in seen)
     assert gc.get_freeze_count() == 0
-
-
-def test_paused_hands_the_collector_back_as_it_was() -> None:
-    from fusiond.collector import paused
-
-    assert gc.isenabled()
-    try:
-        with paused():
-            assert not gc.isenabled()
-            raise SystemExit(2)  # a config error inside the block
-    except SystemExit:
-        pass
-    assert gc.isenabled()
-    gc.disable()
-    try:
-        with paused():
-            pass
-        assert not gc.isenabled()  # a caller's own disable is kept
-    finally:
-        gc.enable()
