@@ -5,21 +5,33 @@ structlog is imported at the first event, not at start-up. Importing it costs ~0
 draws the monitor), a tenth of a whole replay of a small bag, and a replay that goes
 well logs nothing. So the modules log through ``get_logger``, whose proxy imports
 structlog and applies ``configure``'s settings when it is first used.
+
+A replay that logs a warning or two (a logging gap, a time jump) would still pay that import for
+a line: while structlog is not imported and the settings are this module's JSON lines, an event
+is written here (``_json_line``) exactly as structlog's chain of ``_apply`` renders it (a test
+holds the two byte for byte, timestamp aside). A terminal's human lines, a capture, any other
+configuration go through structlog.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
+from functools import partial
 from typing import Any
 
 __all__ = ["bind_process", "configure", "get_logger", "muted"]
 
-# logging's level names (``logging.getLevelNamesMapping()``), spelled out: importing logging to check
-# a name costs ~10 ms of a replay that logs nothing (a test holds the two equal)
-LEVELS = ("CRITICAL", "FATAL", "ERROR", "WARN", "WARNING", "INFO", "DEBUG", "NOTSET")
+# logging's level names and numbers (``logging.getLevelNamesMapping()``), spelled out: importing logging to
+# check a name costs ~10 ms of a replay that logs nothing (a test holds the two equal)
+LEVELS = {"CRITICAL": 50, "FATAL": 50, "ERROR": 40, "WARN": 30, "WARNING": 30, "INFO": 20, "DEBUG": 10, "NOTSET": 0}
+# the level of each of structlog's level methods, so that an event below the configured level is dropped
+# without importing structlog (a replay's info events: the GPS heading found)
+METHOD_LEVELS = {"debug": 10, "info": 20, "msg": 20, "warning": 30, "warn": 30, "error": 40, "exception": 40,
+                 "critical": 50, "fatal": 50}
 
 # Inside ``muted()``: events are dropped. A processor reads it at each event, so it holds for loggers
 # that structlog has already cached (a level change through ``configure`` would not reach those).
@@ -124,6 +136,12 @@ class _LazyLogger:
     def __getattr__(self, method: str) -> Any:
         logger = self._logger
         if logger is None:
+            if "structlog" not in sys.modules:  # not cached: a later configure() or import of structlog is heeded
+                if _dropped(method):
+                    return _drop
+                name = _LEVEL_NAMES.get(method)
+                if name is not None and _pending is not None and _json_pending():
+                    return partial(_json_line, name)
             import structlog
 
             # A configuration made since (a test's ``structlog.testing.capture_logs``) wins
@@ -132,6 +150,67 @@ class _LazyLogger:
                 _apply()
             logger = self._logger = structlog.get_logger(self._name)
         return getattr(logger, method)
+
+
+def _dropped(method: str) -> bool:
+    """Whether an event through ``method`` would be dropped by the settings pending for structlog: inside
+    ``muted()``, or below the configured level. Only for settings this module holds (``_pending``): with
+    none, structlog's defaults log every level."""
+    if _pending is None:
+        return False
+    if _MUTED.get():
+        return True
+    level = METHOD_LEVELS.get(method)
+    return level is not None and level < LEVELS[_pending[0].upper()]
+
+
+def _drop(*args: Any, **kwargs: Any) -> None:
+    """A filtered-out event, as structlog's filtering logger returns it."""
+    return None
+
+
+# the level an event is written with, per method (structlog's ``add_log_level``); ``exception`` (a traceback
+# to format) and ``log`` (a level number) are left to structlog
+_LEVEL_NAMES = {"debug": "debug", "info": "info", "msg": "info", "warning": "warning", "warn": "warning",
+                "error": "error", "critical": "critical", "fatal": "critical"}
+
+
+def _json_pending() -> bool:
+    """Whether the pending settings render JSON lines (``configure``'s default: when stderr is no terminal)."""
+    assert _pending is not None
+    json = _pending[1]
+    return (not sys.stderr.isatty()) if json is None else json
+
+
+def _json_line(level: str, event: str | None = None, *args: Any, **kw: Any) -> None:
+    """One event as ``_apply``'s chain writes it with JSON lines: the event's keys, ``event``, the
+    process's fields, ``level``, an ISO UTC ``timestamp``, rendered by ``json.dumps`` (an unknown type
+    by its ``__structlog__`` or ``repr``), one line on stderr."""
+    import datetime
+    import json
+
+    if args:  # structlog's positional interpolation
+        event = event % (args[0] if len(args) == 1 and isinstance(args[0], dict) and args[0] else args)
+    fields = dict(kw)
+    if event is not None:
+        fields["event"] = event
+    _add_process_fields(None, level, fields)
+    fields["level"] = level
+    fields["timestamp"] = datetime.datetime.now(tz=datetime.timezone.utc).isoformat().replace("+00:00", "Z")
+    line = json.dumps(fields, default=_json_default) + "\n"
+    with _WRITE_LOCK:  # one line at a time from the daemon's threads, as structlog's printer locks its file
+        sys.stderr.write(line)
+        sys.stderr.flush()
+
+
+_WRITE_LOCK = threading.Lock()
+
+
+def _json_default(obj: Any) -> Any:
+    try:
+        return obj.__structlog__()
+    except AttributeError:
+        return repr(obj)
 
 
 def get_logger(name: str) -> Any:

@@ -31,7 +31,7 @@ from ..config_tables import Config
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import (POSE, POSE_ERR, POSITION, POSITION_ERR, ErrorStateEKF, PredictWorkspace, add_motion_noise,
-                         corrected_inputs, predict)
+                         corrected_inputs, planar_mask, predict)
 from ..errors import EstimatorError
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..logs import get_logger
@@ -138,7 +138,7 @@ class FusionCore:
             nominal_zero += [nb, nb + 1]
             error_zero += [eb, eb + 1]
         self._planar_nominal = tuple(nominal_zero)
-        self._planar_error = np.array(error_zero)
+        self._planar_error = planar_mask(error_zero, self.layout.error_dim)
         self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d, self.layout)
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(

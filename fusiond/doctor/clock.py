@@ -17,6 +17,7 @@ from array import array
 import numpy as np
 
 from .. import reasons
+from .median import median
 from .verdict import Verdict, sensor_key
 from .thresholds import CLOCK_DROP_SHARE
 
@@ -76,7 +77,7 @@ class ClockOffsets:
     def offset(self, sensor: str) -> float | None:
         """Median offset of the sensor's stamps from the others' (s), None without another sensor."""
         kept = self._offsets.get(sensor)
-        return float(np.median(np.frombuffer(kept, dtype=float))) if kept else None
+        return float(median(np.frombuffer(kept, dtype=float))) if kept else None
 
 
 def clock_verdicts(stats: dict[str, dict], clocks: ClockOffsets, sensors: dict | None = None) -> list[Verdict]:

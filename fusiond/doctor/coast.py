@@ -26,6 +26,7 @@ from ..config import Config
 from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import quiet_bound
 from .gyro import Episode
+from .median import median
 from .mounting import MountYaw
 from .series import BIN_S, Series
 from .verdict import Verdict, sensor_key
@@ -48,7 +49,7 @@ def coast_verdict(series: Series, cfg: Config, mount: MountYaw | None, turning: 
     # still moving: the gyro beyond the quiet bound of its noise, measured at rest where it can be (drivers
     # overstate it tenfold, which would hide a 0.3 rad/s turn), else as stated
     at_rest = [e.gyro_sigma for e in quiet if math.isfinite(e.gyro_sigma)]
-    sigma = float(np.median(at_rest)) if at_rest else series.gyro_stated_sigma
+    sigma = float(median(at_rest)) if at_rest else series.gyro_stated_sigma
     sigma = sigma if math.isfinite(sigma) else 0.0
     moving = np.abs(np.interp(ta, np.asarray(series.gyro_t), np.asarray(series.gyro_z))) > quiet_bound(
         sigma, cfg.filter.gyro_bias_sigma)

@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from ..config import GpsSensor
+from .median import median
 from .nis import ChannelStats
 from .verdict import Verdict, sensor_key
 from .thresholds import MAX_LAG_FRACTION, PERSISTING_SHARE, WANDER_MIN_FIXES
@@ -56,7 +57,7 @@ def gps_wander_verdict(gps: GpsSensor, ch: ChannelStats, head: str = "",
     order = np.argsort(t)
     t = t[order]
     y = np.array([r[1][:2] for r in rows])[order]
-    dt = float(np.median(np.diff(t)))
+    dt = float(median(np.diff(t)))
     if not dt > 0.0:
         return None
     n = len(t)

@@ -40,6 +40,7 @@ from ..core.sensors.registry import kind_of
 from ..core.layout import fuses_height
 from .attitude import full_mount, paste_mount
 from .heading import gps_sigma
+from .median import median
 from .mounting import MountYaw
 from .series import Series
 from .speed import _cumulative, _newey_west, chord_ends, t_quantile
@@ -89,7 +90,7 @@ def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float
         sigma_w = float(gps.position_noise[2])
     else:
         stated = [v for v in series.gps_sigma_up if math.isfinite(v)]
-        sigma_w = float(np.median(stated)) if stated else float(gps.unknown_position_sigma[2])
+        sigma_w = float(median(stated)) if stated else float(gps.unknown_position_sigma[2])
     if gps.vertical_error_sigma > 0.0:
         return sigma_w, float(gps.vertical_error_sigma), float(gps.vertical_error_tau_s)
     if gps.error_tau_s > 0.0 and gps.error_sigma is not None:

@@ -22,6 +22,7 @@ from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from .covariance import has_heading_reference
 from .bins import BIN_S
+from .median import median
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
@@ -213,7 +214,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         evidence["turning_at_rest"] = float(len(turning))
     drift = bias_drift(episodes, fc.gyro_bias_walk)
     if len(episodes) >= 2:
-        ref = float(np.median([e.gyro_mean for e in episodes]))
+        ref = float(median([e.gyro_mean for e in episodes]))
         evidence["gyro_at_rest_rad_s"] = ref
 
         def odd(e: Episode) -> bool:
@@ -242,7 +243,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         return None
     frac = ch.rejected / ch.n
     sig = [e.gyro_sigma for e in episodes if math.isfinite(e.gyro_sigma)]
-    measured = float(np.median(sig)) if sig else math.nan
+    measured = float(median(sig)) if sig else math.nan
     if math.isfinite(measured):
         evidence["gyro_sigma_at_rest_rad_s"] = measured
     noise_hint = f"gyro_noise = {measured:.5f}" if math.isfinite(measured) else ""

@@ -22,6 +22,7 @@ from ..config import Config, GpsSensor, ImuSensor
 from ..core.sensors.registry import kind_of
 from ..core.sensors.gps import HEADING_READY_SIGMA
 from .gyro import quiet_episodes
+from .median import median
 from .series import Series
 from .verdict import Verdict, sensor_key
 from .thresholds import (DRIFT_RAD_S, MIN_SPAN_S, MIN_TURN_RAD, MISSED_INTERVAL_S, MISSED_TURN_RAD, TRACK_OFFSET_RAD,
@@ -120,7 +121,7 @@ def detrended_rms(t: np.ndarray, d: np.ndarray, shape: np.ndarray | None, breaks
     if not resid:
         return math.nan, math.nan
     r = np.concatenate(resid)
-    return float(np.sqrt(np.mean(r * r))), float(np.median(slopes))
+    return float(np.sqrt(np.mean(r * r))), float(median(slopes))
 
 
 def track_segments(series: Series, min_length: float, max_s: float = 30.0) -> list[tuple[float, float, float, float]]:
@@ -165,7 +166,7 @@ def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
         return float(max(gps.position_noise[0], gps.position_noise[1]))
     s = [v for v in series.gps_sigma if math.isfinite(v)]
     if s:
-        return float(np.median(s))
+        return float(median(s))
     return float(gps.unknown_position_sigma[0]) if gps is not None else 2.5
 
 
@@ -310,7 +311,7 @@ def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[floa
     rest, _ = quiet_episodes(series, cfg, imu)
     if not rest:
         return math.nan
-    return compared[1] + float(np.median([e.gyro_mean for e in rest]))
+    return compared[1] + float(median([e.gyro_mean for e in rest]))
 
 
 def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:

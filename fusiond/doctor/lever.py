@@ -34,6 +34,7 @@ import numpy as np
 
 from ..config import Config
 from ..core.sensors.registry import kind_of
+from .median import median
 from .series import Series
 from .verdict import Verdict, sensor_key
 from .thresholds import (LATENCY_ALONG, LEVER_TOL, LEVER_Z_SIGMAS, MAX_INTERVAL, MAX_SE, MAX_SE_NAMED, MIN_PAIRS,
@@ -69,7 +70,7 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
     # pairs PAIR_S apart, not overlapping (their noise independent): the signal grows with the heading
     # change across a pair, the fixes' white noise does not (the wheels' error and a wander's change do,
     # slowly), so longer pairs tell more, fewer of them
-    k = max(1, int(round(PAIR_S / float(np.median(np.diff(tf))))))
+    k = max(1, int(round(PAIR_S / float(median(np.diff(tf))))))
     tf, fe, fn = tf[::k], fe[::k], fn[::k]
     if len(tf) < MIN_PAIRS + 1:
         return None
@@ -77,7 +78,7 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
     yaw_f = np.interp(tf, te, ye)
     dt = np.diff(tf)
     # a pair is usable when its fixes are PAIR_S apart (none missing) and the wheels reported across it
-    use = (dt > 0.0) & (dt <= MAX_INTERVAL * max(PAIR_S, float(np.median(dt))))
+    use = (dt > 0.0) & (dt <= MAX_INTERVAL * max(PAIR_S, float(median(dt))))
     for start, length in series.odom_gaps:  # the wheels' travel in a logging gap is not in dP
         use &= ~((tf[1:] > start) & (tf[:-1] < start + length))
     if use.sum() < MIN_PAIRS:

@@ -1,6 +1,6 @@
 """Pure maths: state blocks, error-state EKF, motion and measurement models. No I/O, no clocks."""
 
-from .ekf import ErrorStateEKF, UpdateResult
+from .ekf import ErrorStateEKF, UpdateResult, planar_mask
 from .gps_error import GpsErrorBlock
 from .motion import MotionInput, PredictWorkspace, corrected_inputs, predict
 from .scale import GyroScaleBlock, WheelScaleBlock
@@ -9,7 +9,7 @@ from .state import (ATTITUDE, POSE, POSE_ERR, POSITION, POSITION_ERR, POSITION_R
 from .twist_pitch import TwistPitchBlock
 
 __all__ = [
-    "ErrorStateEKF", "UpdateResult", "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
+    "ErrorStateEKF", "UpdateResult", "planar_mask", "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
     "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "TwistPitchBlock", "WheelScaleBlock", "InputBlock",
     "PoseBlock", "StateBlock", "StateLayout", "YawOffsetBlock",
     "POSITION", "ATTITUDE", "POSE", "POSITION_ROWS", "POSITION_ERR", "POSE_ERR", "YAW_ROW", "position_of", "attitude_of", "add_motion_noise",

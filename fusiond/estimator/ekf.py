@@ -255,6 +255,8 @@ class ErrorStateEKF:
         listed nominal components (z, and what the layout adds, e.g. the x/y gyro bias) are
         set to 0, and the listed error components lose all variance and correlation: a
         state held at a value is known exactly, and nothing can be inferred through it.
+        ``error_zero``: their indices, or ``planar_mask`` of them (one masked write instead of a
+        row and a column write by index: a third of the time, twice a message in two-D mode).
         """
         x = self.x
         qx, qy, qz, qw = attitude_of(x)
@@ -265,8 +267,11 @@ class ErrorStateEKF:
         for i in nominal_zero:
             x[i] = 0.0
         P = self.P
-        P[error_zero, :] = 0.0
-        P[:, error_zero] = 0.0
+        if error_zero.ndim == 2:
+            P[error_zero] = 0.0
+        else:
+            P[error_zero, :] = 0.0
+            P[:, error_zero] = 0.0
 
     def cap_covariance(self, caps: np.ndarray) -> None:
         """Hygiene at a slow cadence (the core calls it once per second of message time and after
@@ -439,6 +444,15 @@ class ErrorStateEKF:
         self.x = x
         self.P = P  # as saved, bit for bit: the running filter's own rounding asymmetry is within the check
         self._spare = None  # the next P's buffer must not be the array just taken
+
+
+def planar_mask(error_zero: list[int], dim: int) -> np.ndarray:
+    """The (dim, dim) mask of the rows and columns of the error components ``error_zero``: what
+    ``ErrorStateEKF.hold_planar`` zeroes in P."""
+    mask = np.zeros((dim, dim), dtype=bool)
+    mask[error_zero, :] = True
+    mask[:, error_zero] = True
+    return mask
 
 
 def _copied_into(src: ErrorStateEKF, dst: ErrorStateEKF) -> bool:

@@ -246,12 +246,13 @@ def _predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt:
     decay: list[float] | tuple = ()
     if dynamic:
         decay = []
-        extra = np.zeros(len(noise_density))
+        noise = [0.0] * len(noise_density)  # summed as a list: an item of an array is a numpy call each
         for blk, _, e0 in dynamic:
             decay += blk.transition(dt)
             if dt > 0.0:
                 for i, q in enumerate(blk.process_noise(dt)):
-                    extra[e0 + i] += q
+                    noise[e0 + i] += q
+        extra = np.array(noise)
     x_new = np.empty(ws._nominal_dim)
     flags = (1 if u.world_frame else 0) | (2 if u.planar else 0)
     try:

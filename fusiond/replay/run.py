@@ -6,10 +6,8 @@ moment, exactly what the daemon publishes then (not a later, smoothed pose).
 
 from __future__ import annotations
 
-import gc
 import sys
 import time
-from contextlib import contextmanager
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +16,7 @@ from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
 
+from ..collector import skips_the_caller
 from ..config import Config
 from ..core.layout import absolute_sensor
 from ..core.sensors.registry import kind_of
@@ -185,27 +184,6 @@ class _Progress:
             self.stream.write("\n")
 
 
-@contextmanager
-def _collector_skips_the_caller() -> Iterator[None]:
-    """While a replay runs, the garbage collector looks only at what the replay allocates.
-
-    A replay keeps what its doctor and its history hold for a while, and every 700 surviving containers
-    start a collection; now and then one of those is a full collection, which walks every tracked object
-    of the process: the imports (numpy, rosbags, zenoh: about 100,000 objects) and the caller's data.
-    Measured on the Jackal bag: one such collection took 33 ms of a 480 ms replay, and whether one fell
-    inside a replay decided most of its run-to-run spread. None of those objects is garbage the replay
-    makes, so they are frozen (``gc.freeze``) for its duration and handed back after (``gc.unfreeze``);
-    a caller that froze objects itself keeps its own freeze (nothing is frozen or unfrozen here then)."""
-    if gc.get_freeze_count():
-        yield
-        return
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
-
-
 def replay(
     paths: list[Path],
     cfg: Config,
@@ -229,7 +207,7 @@ def replay(
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
-        with _collector_skips_the_caller(), open_bag_samples(paths, cfg.sensors) as bag:
+        with skips_the_caller(), open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn, allow_missing)
             runner = Runner(cfg, keep_trace, doctor)
             if diag_out is not None and records is not None:

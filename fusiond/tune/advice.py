@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 import msgspec
 
+from ..collector import skips_the_caller
 from ..config import Config, ConfigError, convert, validate
 from ..doctor import Proof, Verdict
 from ..logs import muted
@@ -109,7 +110,13 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
-    deadline = time.perf_counter() + budget_s
+    with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
+        return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records)
+
+
+def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
+            deadline: float, budget_s: float, base_records: Sequence[object] | None) -> list[Verdict]:
+    """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
             base_records = replay_records(cfg, samples)

@@ -237,3 +237,39 @@ def test_an_imu_sample_of_zeros_without_orientation_is_dropped_as_lost():
     core.ingest(turning)
     at_rest = ImuSample("imu", 10.01, (0.0, 0.0, 0.0, 1.0), COV3, (0.0, 0.0, 0.0), GYRO_COV)
     assert core.ingest(at_rest).accepted and core.state.gyro == (0.0, 0.0, 0.0)
+
+
+def _reference_fit(window: tuple, linear_var: float) -> float:
+    """The forward-speed slope written over the pairs, as the model's docstring states it."""
+    import math
+
+    from fusiond.core.sensors.odom.model import ACCEL_FIT_FLOOR, ACCEL_FIT_SIGMAS, ACCEL_WINDOW_S
+
+    n = len(window)
+    if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
+        last = window[-1][1]
+        return 0.0 if all(p[1] == last for p in window) else math.nan
+    tm = sum(p[0] for p in window) / n
+    vm = sum(p[1] for p in window) / n
+    stt = sum((p[0] - tm) ** 2 for p in window)
+    slope = sum((p[0] - tm) * (p[1] - vm) for p in window) / stt
+    misfit = math.sqrt(sum((p[1] - vm - slope * (p[0] - tm)) ** 2 for p in window) / (n - 2))
+    return slope if misfit <= max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR) else math.nan
+
+
+def test_the_forward_speed_fit_is_the_pairs_formula_to_the_bit_and_remembered():
+    import math
+    import random
+
+    from fusiond.core.sensors.odom.model import _fitted_accel
+
+    rng = random.Random(3)
+    for k in range(300):
+        n = rng.randint(1, 60)
+        t0, dt = rng.uniform(0.0, 2e9), rng.uniform(0.005, 0.05)
+        v0, a, noise = rng.uniform(-30, 30), rng.uniform(-3, 3), rng.choice([0.0, 1e-3, 0.05, 1.0])
+        window = tuple((t0 + i * dt, v0 + a * i * dt + rng.gauss(0.0, noise)) for i in range(n))
+        var = rng.choice([0.0, 1e-4, 0.01])
+        expected = _reference_fit(window, var)
+        for got in (_fitted_accel(window, var), _fitted_accel(tuple(window), var)):  # taken, then remembered
+            assert got == expected or (math.isnan(got) and math.isnan(expected)), (k, got, expected)

@@ -119,3 +119,25 @@ def test_interleaved_masks_each_get_their_own_weights():
         np.testing.assert_array_equal(ekf.P, fresh.P)
         np.testing.assert_array_equal(ekf.x, fresh.x)
     assert len(ekf._ws.masks) == 2
+
+
+def test_hold_planar_by_mask_is_hold_planar_by_index():
+    """The core hands two-D mode's held error components as a mask (one write): the same P as by index."""
+    import numpy as np
+
+    from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, PoseBlock, StateLayout, planar_mask
+
+    layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5)])
+    rng = np.random.default_rng(1)
+    a = ErrorStateEKF(layout)
+    A = rng.normal(size=(layout.error_dim, layout.error_dim))
+    a.P[:] = A @ A.T
+    a.x[3:7] = (0.1, -0.2, 0.3, 0.9)
+    a.x[3:7] /= np.linalg.norm(a.x[3:7])
+    b = a.copy()
+    nb, eb = layout.nominal["gyro_bias"].start, layout.error["gyro_bias"].start
+    nominal_zero, error_zero = (2, nb, nb + 1), [2, 3, 4, eb, eb + 1]
+    a.hold_planar(nominal_zero, np.array(error_zero))
+    b.hold_planar(nominal_zero, planar_mask(error_zero, layout.error_dim))
+    assert np.array_equal(a.P, b.P) and np.array_equal(a.x, b.x)
+    assert not a.P[error_zero].any() and not a.P[:, error_zero].any()

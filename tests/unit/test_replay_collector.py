@@ -1,4 +1,4 @@
-"""A replay freezes the objects that were alive before it (the collector walks only what the replay
+"""A replay (and the advice's proof) freezes the objects that were alive before it (the collector walks only what the replay
 allocates) and hands them back after; a caller's own freeze is left as it is."""
 
 from __future__ import annotations
@@ -40,3 +40,31 @@ def test_a_callers_freeze_is_left_to_the_caller(jackal_bag: Path) -> None:
         assert gc.get_freeze_count() > 0  # not unfrozen by the replay (only freed objects leave the count)
     finally:
         gc.unfreeze()
+
+
+def test_the_advice_is_proven_with_the_recordings_replay_frozen(jackal_bag: Path, monkeypatch) -> None:
+    from fusiond.tune import advice
+
+    cfg = load(ROOT / "examples" / "jackal_rl.toml")
+    fused: list = []
+    records: list = []
+
+    def keep(samples):
+        for s in samples:
+            fused.append(s)
+            yield s
+
+    result = run.replay([jackal_bag], cfg, keep_trace=False, progress=False, through=keep, records=records)
+    verdicts = result.verdicts()
+    assert any(v.suggestion for v in verdicts)  # the wheel/heading problem's paste line
+    seen: list[int] = []
+    real = advice.replay_records
+
+    def replay_records(*args):
+        seen.append(gc.get_freeze_count())
+        return real(*args)
+
+    monkeypatch.setattr(advice, "replay_records", replay_records)
+    advice.prove_advice(cfg, fused, verdicts, 60.0, records)
+    assert seen and all(n > 0 for n in seen)
+    assert gc.get_freeze_count() == 0

@@ -27,7 +27,8 @@ reports its commanded speed and drops it to zero at once, 0.25 m from 0.5 m/s.
 from __future__ import annotations
 
 import math
-from operator import itemgetter
+from functools import lru_cache
+from operator import itemgetter, mul
 from typing import TYPE_CHECKING
 
 import msgspec
@@ -49,6 +50,9 @@ if TYPE_CHECKING:
     from ..state import FilterState
 
 ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
+# windows whose fits are remembered (``_fitted_accel``): a replay's worth (a minute of 80 Hz odometry), a
+# few MB at most; a recording with more windows than this finds none of a previous replay's fits
+FIT_MEMO = 8192
 ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
 ACCEL_FIT_FLOOR = 0.02  # ... or within this many m/s (encoders quantise; drivers understate the noise)
 STOP_DECEL_LIMIT = 15.0  # m/s^2 (1.5 g): a drop to exactly zero faster than this is the drive, not a stop
@@ -217,6 +221,7 @@ class OdomModel(SensorModel):
         self._bias = tuple(layout.index("gyro_bias", i) for i in range(3))  # -1: no bias state
         self._bias_z = self._bias[2]
         self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
+        self._last_fit: tuple = ((), math.nan, 0.0)  # (window, linear variance, its forward_accel)
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN
@@ -364,18 +369,38 @@ class OdomModel(SensorModel):
         if own is None or not own.window:
             return 0.0
         window, linear_var = own.window, own.previous_cov[0]
-        n = len(window)
-        if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
-            # too few speeds for a slope: known only when they are all alike (at rest, cruising)
-            last = window[-1][1]
-            return 0.0 if all(p[1] == last for p in window) else math.nan
-        tm = sum(p[0] for p in window) / n
-        vm = sum(p[1] for p in window) / n
-        stt = sum((p[0] - tm) ** 2 for p in window)
-        slope = sum((p[0] - tm) * (p[1] - vm) for p in window) / stt
-        misfit = math.sqrt(sum((p[1] - vm - slope * (p[0] - tm)) ** 2 for p in window) / (n - 2))
-        noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
-        return slope if misfit <= noise else math.nan
+        last_fit = self._last_fit  # the IMU asks at its own rate, the window moves at the odometry's
+        if last_fit[0] is window and last_fit[1] == linear_var:
+            return last_fit[2]
+        accel = _fitted_accel(window, linear_var)
+        self._last_fit = (window, linear_var, accel)  # holds the window: its identity stays its own
+        return accel
+
+
+@lru_cache(maxsize=FIT_MEMO)
+def _fitted_accel(window: tuple, linear_var: float) -> float:
+    """``OdomModel.forward_accel`` of one window of (stamp, forward speed) pairs. The sums run over lists
+    and maps (a generator costs a resume an item), in the order and with the operations of the least-squares
+    sums written over the pairs: the same bits.
+
+    Memoised by value (FIT_MEMO): a replay of the same recording again (the doctor's advice proven, tune's
+    fit), whose odometry reads the same, finds each window's fit instead of taking it again. Keys equal
+    as values and unequal in bits (0.0 and -0.0) give the same fit."""
+    n = len(window)
+    if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
+        # too few speeds for a slope: known only when they are all alike (at rest, cruising)
+        last = window[-1][1]
+        return 0.0 if all(p[1] == last for p in window) else math.nan
+    ts, vs = zip(*window)
+    tm = sum(ts) / n
+    vm = sum(vs) / n
+    dts = [t - tm for t in ts]
+    dvs = [v - vm for v in vs]
+    stt = sum([d ** 2 for d in dts])
+    slope = sum(map(mul, dts, dvs)) / stt
+    misfit = math.sqrt(sum([(dv - slope * d) ** 2 for d, dv in zip(dts, dvs)]) / (n - 2))
+    noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
+    return slope if misfit <= noise else math.nan
 
 
 __all__ = ["OdomInput", "OdomModel", "OdomOwn", "OdomPolicy", "STOP_DECEL_LIMIT", "body_twist", "impossible_stop"]
