@@ -111,6 +111,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             through=through,
             records=records,
             allow_missing=args.allow_missing,
+            smooth=args.smooth,
         )
         if fused:
             from .tune.advice import prove_advice
@@ -122,7 +123,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
             evaluation = evaluate([Path(p) for p in args.bags], cfg, reference, result.trajectory, recorder,
                                   segment_gap_s=args.segment_gap, rpe_s=args.rpe_s,
-                                  heading_known=result.heading_known)
+                                  heading_known=result.heading_known, smoothed=result.smoothed)
     except ReplayError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -721,6 +722,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--rpe-s", type=float, default=1.0, metavar="S",
                    help="relative pose error over S seconds (default 1)")
     r.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
+    r.add_argument("--smooth", action="store_true",
+                   help="after the forward pass, smooth it (Rauch-Tung-Striebel, docs/SMOOTHER.md): --tum holds the "
+                        "smoothed poses, --reference scores them beside the filtered ones")
     r.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     r.add_argument("--allow-missing", **ALLOW_MISSING)
     r.set_defaults(func=cmd_replay)

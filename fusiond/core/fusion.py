@@ -386,13 +386,14 @@ class FusionCore:
             raise CoreError("no sample has been fused yet")
         return self.state.t, self._shown_pose()
 
-    def _shown_position(self) -> tuple[float, float, float] | None:
-        """The position to publish when a sensor model says the state's is not it (``shown_position``:
-        the GPS while the heading is searched for), else None."""
+    def _shown_position(self, s: FilterState | None = None) -> tuple[float, float, float] | None:
+        """The position to publish when a sensor model says the state's (``s``, the newest by default) is
+        not it (``shown_position``: the GPS while the heading is searched for), else None."""
+        s = self.state if s is None else s
         for m in self._showing:
-            shown = m.shown_position(self.state)
+            shown = m.shown_position(s)
             if shown is not None:
-                return shown[0], shown[1], self.state.ekf.position()[2]
+                return shown[0], shown[1], s.ekf.position()[2]
         return None
 
     def _published_position(self) -> tuple[float, float, float]:
@@ -668,5 +669,6 @@ class FusionCore:
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
         if self._smoothing is not None and self._publishes[idx] and (self.frame_index < 0 or s.frame_ready):
-            s.ekf.anchor(stamp)  # a publish moment (as _place decides it), re-applications included
+            # a publish moment (as _place decides it), re-applications included, with what it publishes
+            s.ekf.anchor(stamp, self._shown_position(s) if self._showing else None)
         return records

@@ -234,10 +234,11 @@ class ErrorStateEKF:
     def recording(self) -> OpenSegment | None:
         return self._rec
 
-    def anchor(self, stamp: float) -> None:
-        """An output moment for the smoother: the estimate now is one it returns smoothed."""
+    def anchor(self, stamp: float, shown: tuple[float, float, float] | None = None) -> None:
+        """An output moment for the smoother: the estimate now is one it returns smoothed (``shown``: the
+        position published instead of the state's, kept as it is: ``smoother.Anchor``)."""
         if self._rec is not None:
-            self._rec.anchor(stamp, self.x, self.P)
+            self._rec.anchor(stamp, self.x, self.P, shown)
 
     def end_segment(self) -> None:
         """The smoother does not link what comes next to what came before (a time gap, a jump)."""

@@ -53,16 +53,20 @@ class Anchor:
     """The filtered estimate at one output moment and the link that smooths the anchor before it.
 
     ``link``: (A, b, B) from the previous anchor to this one (``B`` None without covariance), or None
-    when this anchor starts a segment."""
+    when this anchor starts a segment. ``shown``: a position the caller published instead of the
+    state's (a GPS heading search publishes the fix's neighbourhood): the state's was not an
+    estimate there, so the output keeps the shown one."""
 
-    __slots__ = ("stamp", "x", "P", "link")
+    __slots__ = ("stamp", "x", "P", "link", "shown")
 
     def __init__(self, stamp: float, x: np.ndarray, P: np.ndarray | None,
-                 link: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None) -> None:
+                 link: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None,
+                 shown: tuple[float, float, float] | None = None) -> None:
         self.stamp = stamp
         self.x = x
         self.P = P
         self.link = link
+        self.shown = shown
 
 
 class Smoothed:
@@ -154,16 +158,16 @@ class OpenSegment:
         self.pending = False
         self.A = self.b = self.B = self.dP = None
 
-    def anchor(self, stamp: float, x: np.ndarray, P: np.ndarray) -> None:
+    def anchor(self, stamp: float, x: np.ndarray, P: np.ndarray, shown: tuple[float, float, float] | None = None) -> None:
         """An output moment: the filter's estimate now, linked to the previous anchor if the segment
-        holds; a new segment opens here."""
+        holds; a new segment opens here. ``shown``: see ``Anchor``."""
         rec = self.recorder
         link = None
         if self.open:
             self._flush()
             link = (self.A, self.b, self.B)
         rec.keep(self.count)
-        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.covariance else None, link))
+        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.covariance else None, link, shown))
         self.count += 1
         n = P.shape[0]
         self.A = np.eye(n)
@@ -206,7 +210,7 @@ def _solve(S: np.ndarray, C: np.ndarray) -> np.ndarray:
 
 def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False) -> Smoothed:
     """The backward pass over the recorded anchors: each segment from its last anchor (smoothed =
-    filtered there) back to its first."""
+    filtered there) back to its first; a shown position is kept where there was one."""
     N = len(anchors)
     m, n = layout.nominal_dim, layout.error_dim
     t = np.array([a.stamp for a in anchors], dtype=float)
@@ -234,4 +238,8 @@ def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False)
             Ps[i] = 0.5 * (P_s + P_s.T)
             P_next = Ps[i]
         d_next = d
+    for i, a in enumerate(anchors):
+        if a.shown is not None:
+            xs[i, 0:3] = a.shown
     return Smoothed(t, xs, Ps, filtered)
+
