@@ -43,6 +43,7 @@ writes its state.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dposv as _dposv
 
 from .state import StateLayout
 
@@ -187,25 +188,27 @@ class OpenSegment:
 def rts_gain(P_before: np.ndarray, F: np.ndarray, P_after: np.ndarray) -> np.ndarray:
     """G = P_before F^T P_after^-1, on the components P_after gives any variance.
 
-    A component held at an exact value (variance 0: two-D mode's z, roll, pitch) has no smoothing
-    gain; the rest is a linear solve (P_after is symmetric, so G^T = P_after^-1 F P_before), by least
-    squares where P_after is singular there too."""
+    A component held at an exact value (variance 0: two-D mode's z, roll, pitch, a block without
+    prior) has no smoothing gain; the rest is a Cholesky solve (P_after is symmetric, so G^T =
+    P_after^-1 F P_before: LAPACK's dposv called directly, a numpy solve's checks cost more than the
+    arithmetic at this size), by least squares where P_after is singular there too."""
     C = F.dot(P_before)
-    live = np.diagonal(P_after) > 0.0
-    if live.all():
+    d = P_after.diagonal()
+    if d.min() > 0.0:
         return _solve(P_after, C).T
     G = np.zeros_like(C)
-    idx = np.flatnonzero(live)
+    idx = np.flatnonzero(d > 0.0)
     if idx.size:
-        G[:, idx] = _solve(P_after[np.ix_(idx, idx)], C[idx]).T
+        G[:, idx] = _solve(P_after[idx[:, None], idx], C[idx]).T
     return G
 
 
 def _solve(S: np.ndarray, C: np.ndarray) -> np.ndarray:
-    try:
-        return np.linalg.solve(S, C)
-    except np.linalg.LinAlgError:
-        return np.linalg.lstsq(S, C, rcond=1e-12)[0]
+    """S^-1 C for a symmetric S: Cholesky, or least squares when S is not positive definite."""
+    _, x, info = _dposv(S, C, lower=1, overwrite_a=0, overwrite_b=0)
+    if info == 0:
+        return x
+    return np.linalg.lstsq(S, C, rcond=1e-12)[0]
 
 
 def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False) -> Smoothed:
