@@ -4,7 +4,7 @@
   rewinds its history again and again) give the same smoothed trajectory as the samples in stamp order: the
   record follows the final forward pass, never a timeline a rewind abandoned.
 - After the fact the smoothed track is closer to the truth than the causal one, and at the last publish
-  moment it is the filter's own estimate.
+  moment it is the filter's own estimate; in two-D mode too, exactly planar.
 """
 
 from __future__ import annotations
@@ -29,6 +29,18 @@ def _config():
     return robot_config(gps="datum = [48.137, 11.575, 520.0]\n")
 
 
+def _rms_after_heading(w: World, r, track: np.ndarray) -> float:
+    """RMS horizontal error against the truth at the poses after the first one published with its heading
+    known (before it the GPS heading search publishes a placeholder, kept as it is)."""
+    truth = {round(t, 6): (x, y) for t, x, y, _ in w.truth}
+    causal = np.asarray(r.trajectory).reshape(-1, 8)
+    t_known = causal[np.argmax(np.asarray(r.heading_known, dtype=bool)), 0]
+    errs = [math.hypot(x - truth[round(t, 6)][0], y - truth[round(t, 6)][1])
+            for t, x, y in track[:, 0:3] if t > t_known and round(t, 6) in truth]
+    assert len(errs) > 500
+    return math.sqrt(sum(e * e for e in errs) / len(errs))
+
+
 def test_late_data_gives_the_same_smoothed_trajectory_as_data_in_order():
     samples = simulate(_world())
     cfg = _config()
@@ -48,19 +60,21 @@ def test_smoothed_track_is_closer_to_the_truth_and_ends_on_the_filter():
     w = _world()
     samples = simulate(w)
     r = run_samples(samples, _config(), smooth=True)
-    truth = {round(t, 6): (x, y) for t, x, y, _ in w.truth}
     causal = np.asarray(r.trajectory).reshape(-1, 8)
     smoothed = np.asarray(r.smoothed).reshape(-1, 8)
-    known = np.asarray(r.heading_known, dtype=bool)
-    t_known = causal[np.argmax(known), 0]
-
-    def rms(track: np.ndarray) -> float:
-        errs = [math.hypot(x - truth[round(t, 6)][0], y - truth[round(t, 6)][1])
-                for t, x, y in track[:, 0:3] if t > t_known and round(t, 6) in truth]
-        assert len(errs) > 500
-        return math.sqrt(sum(e * e for e in errs) / len(errs))
-
-    assert rms(smoothed) < 0.8 * rms(causal)
+    assert _rms_after_heading(w, r, smoothed) < 0.8 * _rms_after_heading(w, r, causal)
     # in stamp order the last odometry message is published at its own stamp: the last smoothed pose is
     # that published one, to the bit
     assert smoothed[-1].tolist() == causal[-1].tolist()
+
+
+def test_two_d_mode_smoothed_stays_planar_and_beats_the_filter():
+    """Two-D mode holds z, roll and pitch at 0 after every step (``hold_planar``): recorded as corrections
+    of those components, the smoothed poses stay exactly planar."""
+    w = _world()
+    r = run_samples(simulate(w), robot_config(gps="datum = [48.137, 11.575, 520.0]\n", filt="two_d_mode = true"),
+                    smooth=True)
+    smoothed = np.asarray(r.smoothed).reshape(-1, 8)
+    causal = np.asarray(r.trajectory).reshape(-1, 8)
+    assert np.all(smoothed[:, 3] == 0.0) and np.all(smoothed[:, 4:6] == 0.0)
+    assert _rms_after_heading(w, r, smoothed) < 0.8 * _rms_after_heading(w, r, causal)
