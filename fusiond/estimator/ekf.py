@@ -235,7 +235,7 @@ class ErrorStateEKF:
         return self._rec
 
     def anchor(self, stamp: float, shown: tuple[float, float, float] | None = None) -> None:
-        """An output moment for the smoother: the estimate now is one it returns smoothed (``shown``: the
+        """An output moment for the smoother: the estimate at this moment is one it returns smoothed (``shown``: the
         position published instead of the state's, kept as it is: ``smoother.Anchor``)."""
         if self._rec is not None:
             self._rec.anchor(stamp, self.x, self.P, shown)

@@ -160,7 +160,7 @@ class OpenSegment:
         self.A = self.b = self.B = self.dP = None
 
     def anchor(self, stamp: float, x: np.ndarray, P: np.ndarray, shown: tuple[float, float, float] | None = None) -> None:
-        """An output moment: the filter's estimate now, linked to the previous anchor if the segment
+        """An output moment: the filter's estimate at it, linked to the previous anchor if the segment
         holds; a new segment opens here. ``shown``: see ``Anchor``."""
         rec = self.recorder
         link = None
