@@ -459,9 +459,9 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
     if smoothed is not None:
         sm = np.asarray(smoothed, dtype=float).reshape(-1, 8)
         sm_known = None
-        if known is not None:  # a smoothed pose's heading is scored where the published one's was
-            flags = dict(zip(tr[:, 0].tolist(), known.tolist()))
-            sm_known = np.array([flags.get(t, True) for t in sm[:, 0].tolist()], dtype=bool)
+        if known is not None:  # a smoothed pose's heading is scored where the last pose published by then was
+            i = np.searchsorted(tr[:, 0], sm[:, 0], side="right") - 1
+            sm_known = (i >= 0) & known[np.clip(i, 0, None)]
         tracks.append(Track.build("fusiond smoothed", sm[:, 0], sm[:, 1:4],
                                   np.array([yaw(tuple(q)) for q in sm[:, 4:8]]) if sm.size else None, world=world,
                                   heading_known=sm_known))
