@@ -40,8 +40,9 @@ def _tum(path: Path) -> np.ndarray:
 def test_smoothed_tum_through_the_cli_on_the_jackal_bag(jackal_bag, tmp_path):
     filtered, smoothed = tmp_path / "f.tum", tmp_path / "s.tum"
     a = fusiond("replay", str(jackal_bag), "--config", "examples/jackal_rl.toml", "--tum", str(filtered), "--quiet")
+    png = tmp_path / "s.png"
     b = fusiond("replay", str(jackal_bag), "--config", "examples/jackal_rl.toml", "--tum", str(smoothed), "--quiet",
-                "--smooth")
+                "--smooth", "--plot", str(png))
     assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
     f, s = _tum(filtered), _tum(smoothed)
     assert f.shape == s.shape == (3060, 8)  # one smoothed pose per published one
@@ -53,6 +54,7 @@ def test_smoothed_tum_through_the_cli_on_the_jackal_bag(jackal_bag, tmp_path):
     assert moved.max() > 1e-3  # the smoother did change the past
     assert np.allclose(np.linalg.norm(s[:, 4:8], axis=1), 1.0, atol=1e-9)
     assert all(len(v.split(".")[1]) >= 9 for v in smoothed.read_text().splitlines()[0].split())
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the plot draws the smoothed track beside the filter's
 
 
 def test_recording_for_the_smoother_leaves_the_forward_pass_to_the_bit(jackal_bag):
