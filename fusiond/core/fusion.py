@@ -187,7 +187,7 @@ class FusionCore:
         if rec is None:
             raise CoreError("smoothing was not recorded (record_for_smoothing)")
         seg = self.state.ekf.recording if self.state is not None else None
-        rec.keep(seg.count if seg is not None else 0)  # anchors of a timeline a rewind abandoned go
+        rec.keep(seg.count if seg is not None else 0, seg.turns if seg is not None else 0)  # what a rewind abandoned goes
         return rec.smooth()
 
     # -- public API ---------------------------------------------------------
@@ -396,6 +396,14 @@ class FusionCore:
                 return shown[0], shown[1], s.ekf.position()[2]
         return None
 
+    def _shown_origin(self, s: FilterState) -> tuple[float, float] | None:
+        """Where the state's position is dead-reckoned from while another is shown (``shown_origin``)."""
+        for m in self._showing:
+            origin = m.shown_origin(s)
+            if origin is not None:
+                return origin
+        return None
+
     def _published_position(self) -> tuple[float, float, float]:
         """The state's position, or the one ``_shown_position`` publishes instead."""
         shown = self._shown_position() if self._showing else None
@@ -585,6 +593,8 @@ class FusionCore:
         if self._smoothing is not None:  # the new filter's anchors follow the ones recorded so far
             old = self.state.ekf.recording if self.state is not None else None
             ekf.record(self._smoothing.open(old.count if old is not None else 0))
+            if old is not None:
+                ekf.recording.turns = old.turns
         s = FilterState.initial(ekf, len(self.sensors), self.inputs.default_linear_cov,
                                 self.inputs.default_angular_cov)
         for m in self.models:
@@ -670,5 +680,6 @@ class FusionCore:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
         if self._smoothing is not None and self._publishes[idx] and (self.frame_index < 0 or s.frame_ready):
             # a publish moment (as _place decides it), re-applications included, with what it publishes
-            s.ekf.anchor(stamp, self._shown_position(s) if self._showing else None)
+            shown = self._shown_position(s) if self._showing else None
+            s.ekf.anchor(stamp, shown, None if shown is None else self._shown_origin(s))
         return records

@@ -234,11 +234,13 @@ class ErrorStateEKF:
     def recording(self) -> OpenSegment | None:
         return self._rec
 
-    def anchor(self, stamp: float, shown: tuple[float, float, float] | None = None) -> None:
-        """An output moment for the smoother: the estimate at this moment is one it returns smoothed (``shown``: the
-        position published instead of the state's, kept as it is: ``smoother.Anchor``)."""
+    def anchor(self, stamp: float, shown: tuple[float, float, float] | None = None,
+               origin: tuple[float, float] | None = None) -> None:
+        """An output moment for the smoother: the estimate at this moment is one it returns smoothed
+        (``shown``: the position published instead of the state's, ``origin``: where the state's is
+        dead-reckoned from then: ``smoother.Anchor``)."""
         if self._rec is not None:
-            self._rec.anchor(stamp, self.x, self.P, shown)
+            self._rec.anchor(stamp, self.x, self.P, shown, origin)
 
     def end_segment(self) -> None:
         """The smoother does not link what comes next to what came before (a time gap, a jump)."""
@@ -444,6 +446,8 @@ class ErrorStateEKF:
         P0 = self.P
         self.P = J @ P0 @ J.T
         self._mapped(P0, J)
+        if self._rec is not None:  # the heading was found off by the angle: the smoother turns the search's past
+            self._rec.heading_turn(angle)
 
     def turn_heading(self, angle: float, yaw_var: float) -> None:
         """Turn the attitude about the world z axis by ``angle`` (q' = Rz q), the position where it is,

@@ -27,6 +27,13 @@ no noise; a change the smoother cannot see through (a covariance reset, a varian
 a time gap, a re-initialisation) ends the segment: each segment is smoothed on its own, and its last
 anchor keeps its filtered estimate.
 
+A heading found late. While a GPS searches for the heading, the caller publishes a position of its own
+(``Anchor.shown``) and the state dead-reckons from the newest fix (``Anchor.origin``) along a placeholder
+heading; each fit then turns the state about the antenna (``ErrorStateEKF.rotate_yaw``, recorded as
+``heading_turn``) and ends the segment. After the fact the turns that came later are known: such an
+anchor's position is its origin plus its dead-reckoned displacement turned by the sum of those turns
+(the displacement along the heading found), or the shown position when no turn came after it.
+
 Cost (n: error dimension, 9-16 here; m: nominal dimension). Per message while recording: one n x n
 solve and product for its transition (G = P F^T P_pred^-1, A <- A G), one n-vector product per
 correction, and with ``covariance`` two n x n products where a transition follows corrections.
@@ -58,16 +65,17 @@ class Anchor:
     state's (a GPS heading search publishes the fix's neighbourhood): the state's was not an
     estimate there, so the output keeps the shown one."""
 
-    __slots__ = ("stamp", "x", "P", "link", "shown")
+    __slots__ = ("stamp", "x", "P", "link", "shown", "origin")
 
     def __init__(self, stamp: float, x: np.ndarray, P: np.ndarray | None,
                  link: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None,
-                 shown: tuple[float, float, float] | None = None) -> None:
+                 shown: tuple[float, float, float] | None = None, origin: tuple[float, float] | None = None) -> None:
         self.stamp = stamp
         self.x = x
         self.P = P
         self.link = link
         self.shown = shown
+        self.origin = origin  # where the state's shown-over position is dead-reckoned from (module doc)
 
 
 class Smoothed:
@@ -89,29 +97,34 @@ class SmoothingRecorder:
         self.layout = layout
         self.covariance = covariance
         self.anchors: list[Anchor] = []
+        self.turns: list[tuple[int, float]] = []  # (anchors recorded before it, angle) of each heading turn
 
     def open(self, anchors: int = 0) -> "OpenSegment":
         """A filter's view of the recorder, starting after the first ``anchors`` anchors with no
         segment open (a new filter: nothing links it to what came before)."""
-        return OpenSegment(self, anchors)
+        return OpenSegment(self, anchors, len(self.turns))
 
-    def keep(self, count: int) -> None:
-        """Drop the anchors after the first ``count``: a rewound filter's timeline replaces them."""
+    def keep(self, count: int, turns: int) -> None:
+        """Drop the anchors after the first ``count`` and the heading turns after the first ``turns``: a
+        rewound filter's timeline replaces them."""
         if len(self.anchors) > count:
             del self.anchors[count:]
+        if len(self.turns) > turns:
+            del self.turns[turns:]
 
     def smooth(self) -> Smoothed:
-        return smooth(self.layout, self.anchors, self.covariance)
+        return smooth(self.layout, self.anchors, self.covariance, self.turns)
 
 
 class OpenSegment:
     """The composed RTS maps since the last anchor, carried by a filter and copied with it."""
 
-    __slots__ = ("recorder", "count", "A", "b", "B", "dP", "pending", "open")
+    __slots__ = ("recorder", "count", "turns", "A", "b", "B", "dP", "pending", "open")
 
-    def __init__(self, recorder: SmoothingRecorder, count: int) -> None:
+    def __init__(self, recorder: SmoothingRecorder, count: int, turns: int = 0) -> None:
         self.recorder = recorder
         self.count = count  # anchors of this filter's timeline
+        self.turns = turns  # heading turns of this filter's timeline
         self.A: np.ndarray | None = None
         self.b: np.ndarray | None = None
         self.B: np.ndarray | None = None
@@ -120,7 +133,7 @@ class OpenSegment:
         self.open = False  # False: the next anchor starts a segment
 
     def copy(self) -> "OpenSegment":
-        c = OpenSegment(self.recorder, self.count)
+        c = OpenSegment(self.recorder, self.count, self.turns)
         c.open, c.pending = self.open, self.pending
         if self.open:
             c.A, c.b = self.A.copy(), self.b.copy()
@@ -153,22 +166,30 @@ class OpenSegment:
                 self.dP = d
             self.pending = True
 
+    def heading_turn(self, angle: float) -> None:
+        """The heading was found off by ``angle`` and the state turned (module doc: a heading found late)."""
+        rec = self.recorder
+        rec.keep(self.count, self.turns)
+        rec.turns.append((self.count, angle))
+        self.turns += 1
+
     def cut(self) -> None:
         """A change the smoother cannot see through: the segment ends at the last anchor."""
         self.open = False
         self.pending = False
         self.A = self.b = self.B = self.dP = None
 
-    def anchor(self, stamp: float, x: np.ndarray, P: np.ndarray, shown: tuple[float, float, float] | None = None) -> None:
+    def anchor(self, stamp: float, x: np.ndarray, P: np.ndarray, shown: tuple[float, float, float] | None = None,
+               origin: tuple[float, float] | None = None) -> None:
         """An output moment: the filter's estimate at it, linked to the previous anchor if the segment
-        holds; a new segment opens here. ``shown``: see ``Anchor``."""
+        holds; a new segment opens here. ``shown``, ``origin``: see ``Anchor``."""
         rec = self.recorder
         link = None
         if self.open:
             self._flush()
             link = (self.A, self.b, self.B)
-        rec.keep(self.count)
-        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.covariance else None, link, shown))
+        rec.keep(self.count, self.turns)
+        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.covariance else None, link, shown, origin))
         self.count += 1
         n = P.shape[0]
         self.A = np.eye(n)
@@ -215,9 +236,11 @@ def _solve(S: np.ndarray, C: np.ndarray) -> np.ndarray:
     return np.linalg.lstsq(S, C, rcond=1e-12)[0]
 
 
-def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False) -> Smoothed:
+def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False,
+           turns: list[tuple[int, float]] | None = None) -> Smoothed:
     """The backward pass over the recorded anchors: each segment from its last anchor (smoothed =
-    filtered there) back to its first; a shown position is kept where there was one."""
+    filtered there) back to its first; where a position was shown instead of the state's, the state's
+    displacement from its origin turned by the heading turns that came later, else the shown one."""
     N = len(anchors)
     m, n = layout.nominal_dim, layout.error_dim
     t = np.array([a.stamp for a in anchors], dtype=float)
@@ -245,8 +268,19 @@ def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False)
             Ps[i] = 0.5 * (P_s + P_s.T)
             P_next = Ps[i]
         d_next = d
+    befores = np.array([b for b, _ in turns or ()], dtype=float)
+    angles = np.array([a for _, a in turns or ()], dtype=float)
     for i, a in enumerate(anchors):
-        if a.shown is not None:
+        if a.shown is None:
+            continue
+        later = befores > i
+        if a.origin is None or not later.any():
             xs[i, 0:3] = a.shown
+            continue
+        turn = float(angles[later].sum())
+        c, s = np.cos(turn), np.sin(turn)
+        ox, oy = a.origin
+        dx, dy = float(a.x[0]) - ox, float(a.x[1]) - oy
+        xs[i, 0:3] = (ox + c * dx - s * dy, oy + s * dx + c * dy, a.shown[2])
     return Smoothed(t, xs, Ps, filtered)
 
