@@ -187,7 +187,8 @@ class FusionCore:
         if rec is None:
             raise CoreError("smoothing was not recorded (record_for_smoothing)")
         seg = self.state.ekf.recording if self.state is not None else None
-        rec.keep(seg.count if seg is not None else 0, seg.turns if seg is not None else 0)  # what a rewind abandoned goes
+        # what a timeline abandoned by a rewind recorded goes
+        rec.keep(seg.count if seg is not None else 0, seg.turns if seg is not None else 0)
         return rec.smooth()
 
     # -- public API ---------------------------------------------------------

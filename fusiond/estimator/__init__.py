@@ -10,7 +10,8 @@ from .state import (ATTITUDE, POSE, POSE_ERR, POSITION, POSITION_ERR, POSITION_R
 from .twist_pitch import TwistPitchBlock
 
 __all__ = [
-    "ErrorStateEKF", "UpdateResult", "Smoothed", "SmoothingRecorder", "smooth", "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
+    "ErrorStateEKF", "UpdateResult", "Smoothed", "SmoothingRecorder", "smooth",
+    "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
     "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "TwistPitchBlock", "WheelScaleBlock", "InputBlock",
     "PoseBlock", "StateBlock", "StateLayout", "YawOffsetBlock",
     "POSITION", "ATTITUDE", "POSE", "POSITION_ROWS", "POSITION_ERR", "POSE_ERR", "YAW_ROW", "position_of", "attitude_of", "add_motion_noise",

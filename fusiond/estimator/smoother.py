@@ -20,10 +20,10 @@ composition: with A the product of the G since the anchor,
     d_i = b + A d_(i+1),  b = sum of A c over the corrections;
     Ps_i = B + A (Ps_(i+1) - P_(i+1)) A^T,  B = P_i + sum of A (P_after - P_before) A^T over them,
 
-which is exactly the per-step RTS result at the anchors. A component held at a value (two-D mode's z,
-roll, pitch) is a correction too: its nominal moved, its variance went. Any other change of the covariance that is a
-linear change of variables (P' = J P J^T, e.g. turning the world frame) is a transition with F = J and
-no noise; a change the smoother cannot see through (a covariance reset, a variance re-opened, caps,
+which is exactly the per-step RTS result at the anchors. A component held at a value (two-D mode's
+z, roll, pitch) is a correction too: its nominal moved, its variance went. Any other change of the
+covariance that is a linear change of variables (P' = J P J^T, e.g. turning the world frame) is a
+transition with F = J and no noise; a change the smoother cannot see through (a covariance reset, a variance re-opened, caps,
 a time gap, a re-initialisation) ends the segment: each segment is smoothed on its own, and its last
 anchor keeps its filtered estimate.
 
@@ -39,10 +39,11 @@ solve and product for its transition (G = P F^T P_pred^-1, A <- A G), one n-vect
 correction, and with ``covariance`` two n x n products where a transition follows corrections.
 Memory per anchor: x (m floats) and A (n x n) and b (n); with ``covariance`` also P and B (two n x n
 more). For n = 15 that is 2.0 kB an anchor (5.6 kB with covariance): 100 Hz odometry anchors for an
-hour hold 0.74 GB (2.0 GB), whatever the IMU's rate (measured: scripts/smoother_bench.py, docs/SMOOTHER.md). The open segment's A, b (B) travel with every copy
-of the filter (the core's late-data history copies it per message), so a rewound filter continues
-from the segment as it was at its restore point; anchors recorded after that point are dropped when
-the rewound filter records its next one.
+hour hold 0.74 GB (2.0 GB), whatever the IMU's rate (measured: scripts/smoother_bench.py,
+docs/SMOOTHER.md). The open segment's A, b (B) travel with every copy of the filter (the core's
+late-data history copies it per message), so a rewound filter continues from the segment as it was at
+its restore point; anchors and heading turns recorded after that point are dropped when the rewound
+filter records its next one.
 
 Pure maths: no clocks, no I/O. The filter calls the recorder (``ErrorStateEKF.record``); nothing else
 writes its state.

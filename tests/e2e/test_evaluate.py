@@ -106,8 +106,8 @@ def test_held_back_fixes_score_the_hold_and_the_gps_noise(drive, tmp_path: Path)
 
 def test_smooth_scores_the_smoothed_track_beside_the_filter_and_the_fused_fixes_interpolated(drive, tmp_path):
     """With --smooth and thinned fixes: a smoothed row, closer to the truth than the filter on the held-back
-    fixes' stamps, and the non-causal baseline it competes with (and beats). The fused fixes interpolated carry the fixes'
-    white noise, sqrt(2) sigma horizontally at a fix, less between two (an average of two independent
+    fixes' stamps, and the non-causal baseline it competes with (and beats). The fused fixes interpolated
+    carry the fixes' white noise, sqrt(2) sigma horizontally at a fix, less between two (an average of two independent
     errors), and the chord of the drive's weave between fixes one second apart."""
     bag, cfg, w = drive
     out = tmp_path / "ev.json"
