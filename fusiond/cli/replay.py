@@ -35,6 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rpe-s", type=float, default=1.0, metavar="S",
                    help="relative pose error over S seconds (default 1)")
     p.add_argument("--evaluation", metavar="OUT.json", help="write the evaluation (every score) as JSON")
+    p.add_argument("--smooth", action="store_true",
+                   help="after the forward pass, smooth it (Rauch-Tung-Striebel, docs/SMOOTHER.md): --tum holds the "
+                        "smoothed poses, --reference scores them beside the filtered ones")
     p.add_argument("--advice-budget-s", **ADVICE_BUDGET)
     p.add_argument("--allow-missing", **ALLOW_MISSING)
 
@@ -98,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
             through=through,
             records=records,
             allow_missing=args.allow_missing,
+            smooth=args.smooth,
         )
         if fused:
             from ..tune.advice import prove_advice
@@ -109,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
 
             evaluation = evaluate([Path(p) for p in args.bags], cfg, reference, result.trajectory, recorder,
                                   segment_gap_s=args.segment_gap, rpe_s=args.rpe_s,
-                                  heading_known=result.heading_known)
+                                  heading_known=result.heading_known, smoothed=result.smoothed)
     except ReplayError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE

@@ -34,6 +34,7 @@ from ..estimator import (POSE, POSE_ERR, POSITION, POSITION_ERR, ErrorStateEKF, 
                          corrected_inputs, planar_mask, predict)
 from ..errors import EstimatorError
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
+from ..estimator.smoother import Smoothed, SmoothingRecorder
 from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
@@ -168,6 +169,27 @@ class FusionCore:
         self.resets = 0
         self.covariance_resets = 0
         self.glitches = 0  # bursts of far stamps dropped as a clock glitch
+        self._smoothing: SmoothingRecorder | None = None  # record_for_smoothing: off unless asked
+
+    # -- smoothing (an offline replay's --smooth) -----------------------------------------------------
+    def record_for_smoothing(self, covariance: bool = False) -> None:
+        """Keep what the smoother needs (``fusiond.estimator.smoother``): an anchor at every publish moment
+        of the final timeline (the moments a replay writes a pose), the filter's steps between them
+        composed. Asked before the first sample; the estimates themselves do not change."""
+        if self.state is not None:
+            raise CoreError("record_for_smoothing must be called before the first sample")
+        self._smoothing = SmoothingRecorder(self.layout, covariance)
+
+    def smoothed(self) -> Smoothed:
+        """The smoothed estimates at the publish moments so far (RTS over each segment: a time jump, a
+        gap longer than ``gap_s``, a covariance reset or a re-set state ends one)."""
+        rec = self._smoothing
+        if rec is None:
+            raise CoreError("smoothing was not recorded (record_for_smoothing)")
+        seg = self.state.ekf.recording if self.state is not None else None
+        # what a timeline abandoned by a rewind recorded goes
+        rec.keep(seg.count if seg is not None else 0, seg.turns if seg is not None else 0)
+        return rec.smooth()
 
     # -- public API ---------------------------------------------------------
     def ingest(self, sample: Sample) -> Step:
@@ -370,13 +392,22 @@ class FusionCore:
             raise CoreError("no sample has been fused yet")
         return self.state.t, self._shown_pose()
 
-    def _shown_position(self) -> tuple[float, float, float] | None:
-        """The position to publish when a sensor model says the state's is not it (``shown_position``:
-        the GPS while the heading is searched for), else None."""
+    def _shown_position(self, s: FilterState | None = None) -> tuple[float, float, float] | None:
+        """The position to publish when a sensor model says the state's (``s``, the newest by default) is
+        not it (``shown_position``: the GPS while the heading is searched for), else None."""
+        s = self.state if s is None else s
         for m in self._showing:
-            shown = m.shown_position(self.state)
+            shown = m.shown_position(s)
             if shown is not None:
-                return shown[0], shown[1], self.state.ekf.position()[2]
+                return shown[0], shown[1], s.ekf.position()[2]
+        return None
+
+    def _shown_origin(self, s: FilterState) -> tuple[float, float] | None:
+        """Where the state's position is dead-reckoned from while another is shown (``shown_origin``)."""
+        for m in self._showing:
+            origin = m.shown_origin(s)
+            if origin is not None:
+                return origin
         return None
 
     def _published_position(self) -> tuple[float, float, float]:
@@ -521,6 +552,7 @@ class FusionCore:
         s = self.state
         assert s is not None
         ekf.resets = s.ekf.resets
+        ekf.record(s.ekf.recording)
         s.ekf = ekf
         s.t = saved.stamp
         s.tilt_seen = saved.stamp
@@ -563,7 +595,13 @@ class FusionCore:
     def _start(self) -> None:
         """A fresh state with no time yet: the first sample in stamp order sets it, so the
         start does not depend on which sensor happened to arrive first."""
-        s = FilterState.initial(ErrorStateEKF(self.layout), len(self.sensors), self.inputs.default_linear_cov,
+        ekf = ErrorStateEKF(self.layout)
+        if self._smoothing is not None:  # the new filter's anchors follow the ones recorded so far
+            old = self.state.ekf.recording if self.state is not None else None
+            ekf.record(self._smoothing.open(old.count if old is not None else 0))
+            if old is not None:
+                ekf.recording.turns = old.turns
+        s = FilterState.initial(ekf, len(self.sensors), self.inputs.default_linear_cov,
                                 self.inputs.default_angular_cov)
         for m in self.models:
             m.on_start(s)
@@ -589,6 +627,8 @@ class FusionCore:
         t0 = s.t
         t_end = t0 + dt
         gap = dt > self._gap_s
+        if gap:  # the gap's inflation and unheld motion are not a model the smoother can run backwards
+            s.ekf.end_segment()
         held = self.inputs
         timeouts = held.timeouts(s)
         expiries = held.expiries(s, timeouts)  # fixed while predicting: nothing here moves a sensor's newest stamp
@@ -644,4 +684,8 @@ class FusionCore:
         records = self.models[idx].apply(s, inp, stamp, emit, late)
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
+        if self._smoothing is not None and self._publishes[idx] and (self.frame_index < 0 or s.frame_ready):
+            # a publish moment (as _place decides it), re-applications included, with what it publishes
+            shown = self._shown_position(s) if self._showing else None
+            s.ekf.anchor(stamp, shown, None if shown is None else self._shown_origin(s))
         return records

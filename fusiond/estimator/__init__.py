@@ -4,12 +4,14 @@ from .ekf import ErrorStateEKF, UpdateResult, planar_mask
 from .gps_error import GpsErrorBlock
 from .motion import MotionInput, PredictWorkspace, corrected_inputs, predict
 from .scale import GyroScaleBlock, WheelScaleBlock
+from .smoother import Smoothed, SmoothingRecorder, smooth
 from .state import (ATTITUDE, POSE, POSE_ERR, POSITION, POSITION_ERR, POSITION_ROWS, YAW_ROW, GyroBiasBlock, InputBlock, PoseBlock, StateBlock,
                     StateLayout, YawOffsetBlock, add_motion_noise, attitude_of, position_of)
 from .twist_pitch import TwistPitchBlock
 
 __all__ = [
-    "ErrorStateEKF", "UpdateResult", "planar_mask", "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
+    "ErrorStateEKF", "UpdateResult", "planar_mask", "Smoothed", "SmoothingRecorder", "smooth",
+    "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
     "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "TwistPitchBlock", "WheelScaleBlock", "InputBlock",
     "PoseBlock", "StateBlock", "StateLayout", "YawOffsetBlock",
     "POSITION", "ATTITUDE", "POSE", "POSITION_ROWS", "POSITION_ERR", "POSE_ERR", "YAW_ROW", "position_of", "attitude_of", "add_motion_noise",

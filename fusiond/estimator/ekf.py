@@ -28,6 +28,7 @@ is the reference path and runs otherwise; tests hold the two to the same estimat
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
@@ -36,6 +37,9 @@ from . import rotation as rot
 from .cholesky import gain_rows
 from ..errors import EstimatorError
 from .state import YAW_ROW, StateLayout, attitude_of, position_of
+
+if TYPE_CHECKING:
+    from .smoother import OpenSegment
 
 
 class UpdateResult(msgspec.Struct, gc=False):
@@ -69,10 +73,15 @@ class ErrorStateEKF:
         # the usual layout, whose blocks after the pose are all additive, 0 (dx back to Python) otherwise
         self._fits = layout.error_dim <= _MAX_N
         self._boxplus_mode = 1 if layout._additive_tail else 0
+        # The smoother's view of this filter's timeline (``record``); None: nothing is recorded, and
+        # each step pays one attribute test.
+        self._rec: OpenSegment | None = None
 
     # -- propagation -------------------------------------------------------
     def propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
         """Accept a propagated state; False if the covariance had to be reset."""
+        if self._rec is not None:
+            return self._recorded_propagate(x_new, F, Q)
         self.x = x_new
         k = kernels.active()
         if k is not None and self._fits:
@@ -119,6 +128,8 @@ class ErrorStateEKF:
         ``hold_heading`` so that its correction about world x/y of a tilted body leaves the
         yaw exactly where it was (``state.hold_heading_of``).
         """
+        if self._rec is not None:
+            return self._recorded_update(y, H, R, threshold, mask, hold_heading)
         k = kernels.active()
         if k is not None and self._fits and len(y) <= _MAX_M:
             try:
@@ -214,6 +225,63 @@ class ErrorStateEKF:
             entry = masks[id(mask)] = (mask, keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep))
         self._mask, self._keep, self._joseph = entry
 
+    # -- recording for the smoother (fusiond.estimator.smoother) ------------------------------------
+    def record(self, segment: OpenSegment | None) -> None:
+        """Report every step from here on to ``segment`` (``SmoothingRecorder.open``); None stops."""
+        self._rec = segment
+
+    @property
+    def recording(self) -> OpenSegment | None:
+        return self._rec
+
+    def anchor(self, stamp: float, shown: tuple[float, float, float] | None = None,
+               origin: tuple[float, float] | None = None) -> None:
+        """An output moment for the smoother: the estimate at this moment is one it returns smoothed
+        (``shown``: the position published instead of the state's, ``origin``: where the state's is
+        dead-reckoned from then: ``smoother.Anchor``)."""
+        if self._rec is not None:
+            self._rec.anchor(stamp, self.x, self.P, shown, origin)
+
+    def end_segment(self) -> None:
+        """The smoother does not link what comes next to what came before (a time gap, a jump)."""
+        if self._rec is not None:
+            self._rec.cut()
+
+    def _recorded_propagate(self, x_new: np.ndarray, F: np.ndarray, Q: np.ndarray) -> bool:
+        rec, P0 = self._rec, self.P  # P0 is kept: the step writes the next P into another buffer
+        self._rec = None
+        try:
+            ok = self.propagate(x_new, F, Q)
+        finally:
+            self._rec = rec
+        if ok:
+            rec.transition(P0, F, self.P)
+        else:
+            rec.cut()
+        return ok
+
+    def _recorded_update(self, y, H, R, threshold, mask, hold_heading) -> UpdateResult:
+        rec, x0, P0 = self._rec, self.x.copy(), self.P
+        self._rec = None
+        try:
+            res = self.update(y, H, R, threshold, mask, hold_heading)
+        finally:
+            self._rec = rec
+        if res.covariance_reset:
+            rec.cut()
+        elif not res.rejected:
+            rec.correction(self.layout, x0, self.x, P0, self.P)
+        return res
+
+    def _cut(self) -> None:
+        if self._rec is not None:
+            self._rec.cut()
+
+    def _mapped(self, P0: np.ndarray, J: np.ndarray) -> None:
+        """P became J P0 J^T (a change of variables): a transition without noise for the smoother."""
+        if self._rec is not None:
+            self._rec.transition(P0, J, self.P)
+
     # -- covariance hygiene ------------------------------------------------
     def _store(self, P_new: np.ndarray) -> bool:
         """Accept P - K S K^T (written in the spare buffer); False if it had to be reset.
@@ -247,6 +315,7 @@ class ErrorStateEKF:
         P[:, i] = 0.0
         P[i, i] = var
         self.P = P
+        self._cut()
 
     def hold_planar(self, nominal_zero: tuple[int, ...], error_zero: np.ndarray) -> None:
         """Two-D mode (robot_localization's ``two_d_mode``): z, roll and pitch exactly 0.
@@ -258,6 +327,9 @@ class ErrorStateEKF:
         ``error_zero``: their indices, or ``planar_mask`` of them (one masked write instead of a
         row and a column write by index: a third of the time, twice a message in two-D mode).
         """
+        rec = self._rec
+        if rec is not None:
+            x0, P0 = self.x.copy(), self.P.copy()
         x = self.x
         qx, qy, qz, qw = attitude_of(x)
         if qx != 0.0 or qy != 0.0:
@@ -272,11 +344,14 @@ class ErrorStateEKF:
         else:
             P[error_zero, :] = 0.0
             P[:, error_zero] = 0.0
+        if rec is not None:  # a correction of the held components: the nominal state moved, P lost them
+            rec.correction(self.layout, x0, x, P0, P)
 
     def cap_covariance(self, caps: np.ndarray) -> None:
         """Hygiene at a slow cadence (the core calls it once per second of message time and after
         a gap): symmetrise P against rounding, then scale rows/columns whose variance exceeds its
-        cap (keeps correlations, stays PSD)."""
+        cap (keeps correlations, stays PSD). A capped variance is knowledge the filter did not gain:
+        the smoother's segment ends there (the symmetrising alone changes nothing it uses)."""
         P = self.P
         P += P.T
         P *= 0.5
@@ -286,6 +361,7 @@ class ErrorStateEKF:
             scale = np.ones_like(d)
             scale[over] = np.sqrt(caps[over] / d[over])
             P *= np.outer(scale, scale)
+            self._cut()
 
     # -- state surgery (world frame definition, heading initialisation, sensor offsets) ---------------------
     # The core never writes x or P itself: a re-set of part of the state goes through these,
@@ -299,6 +375,7 @@ class ErrorStateEKF:
         P[:, idx] = 0.0
         P[np.ix_(idx, idx)] = block
         self.P = P
+        self._cut()
 
     def decorrelate(self, group: list[int]) -> None:
         """Zero the covariances between the components ``group`` and all others: what P said about
@@ -309,6 +386,7 @@ class ErrorStateEKF:
         P[np.ix_(group, rest)] = 0.0
         P[np.ix_(rest, group)] = 0.0
         self.P = P
+        self._cut()
 
     def keep_beyond_pose(self, other: "ErrorStateEKF") -> None:
         """Take every block after the pose (biases, scales, offsets) from ``other``, with their
@@ -319,6 +397,7 @@ class ErrorStateEKF:
         P[:, 6:] = 0.0
         P[6:, 6:] = other.P[6:, 6:]
         self.P = P
+        self._cut()
 
     def position(self) -> tuple[float, float, float]:
         """The nominal position (m)."""
@@ -336,19 +415,24 @@ class ErrorStateEKF:
         """Set the nominal position components ``rows`` (covariance: ``reset_covariance``)."""
         for i in rows:
             self.x[i] = p[i]
+        self._cut()
 
     def set_attitude(self, q) -> None:
         """Set the nominal attitude quaternion (x y z w); the covariance is unchanged."""
         self.x[3:7] = q
+        self._cut()
 
     def shift(self, name: str, delta: list[float]) -> None:
         """Add ``delta`` to an additive block's nominal value (the covariance is unchanged)."""
         s = self.layout.nominal[name]
         self.x[s] = self.x[s] + np.asarray(delta, dtype=float)
+        self._cut()
 
     def map_errors(self, J: np.ndarray) -> None:
         """The error state is re-defined as J dx (a change of variables): P' = J P J^T."""
-        self.P = J @ self.P @ J.T
+        P0 = self.P
+        self.P = J @ P0 @ J.T
+        self._mapped(P0, J)
 
     def rotate_yaw(self, angle: float, center: tuple[float, float] = (0.0, 0.0)) -> None:
         """Turn the pose about the world z axis through ``center`` by ``angle``.
@@ -364,7 +448,11 @@ class ErrorStateEKF:
         x[0], x[1] = center[0] + c * dx - s * dy, center[1] + s * dx + c * dy
         J = self._turn_attitude(angle)
         J[0:2, 0:2] = J[3:5, 3:5]
-        self.P = J @ self.P @ J.T
+        P0 = self.P
+        self.P = J @ P0 @ J.T
+        self._mapped(P0, J)
+        if self._rec is not None:  # the heading was found off by the angle: the smoother turns the search's past
+            self._rec.heading_turn(angle)
 
     def turn_heading(self, angle: float, yaw_var: float) -> None:
         """Turn the attitude about the world z axis by ``angle`` (q' = Rz q), the position where it is,
@@ -388,6 +476,7 @@ class ErrorStateEKF:
             P[5, :] *= f
             P[:, 5] *= f
         self.P = P
+        self._cut()
 
     def _turn_attitude(self, angle: float) -> np.ndarray:
         """q' = Rz(angle) q; returns J, the identity but for Rz on the attitude block (dtheta' = Rz dtheta),
@@ -414,6 +503,7 @@ class ErrorStateEKF:
         c.layout = self.layout
         c._fits, c._boxplus_mode = self._fits, self._boxplus_mode
         c.resets = self.resets
+        c._rec = None if self._rec is None else self._rec.copy()
         c._mask, c._keep, c._joseph = self._mask, self._keep, self._joseph
         c._ws = self._ws
         return c
@@ -444,6 +534,7 @@ class ErrorStateEKF:
         self.x = x
         self.P = P  # as saved, bit for bit: the running filter's own rounding asymmetry is within the check
         self._spare = None  # the next P's buffer must not be the array just taken
+        self._cut()
 
 
 def planar_mask(error_zero: list[int], dim: int) -> np.ndarray:

@@ -277,8 +277,27 @@ def _dead_reckoned(name: str, odom: np.ndarray, heading_at, max_gap: float) -> T
     return Track.build(name, t, xyz, h)
 
 
-def baseline_tracks(rec: Recorder, frame: EnuFrame | None, max_gap: float) -> list:
-    """The tracks a user could have had with no filter, from the same samples."""
+class InterpolatedFixes:
+    """The fused fixes interpolated linearly between each and the next: what a user has after the fact
+    with no filter (the smoother's plain rival), read across the fused fixes' own spacing."""
+
+    world = True
+    heading = None
+
+    def __init__(self, name: str, t: np.ndarray, xyz: np.ndarray, spacing: float) -> None:
+        self.name = name
+        self.track = Track.build(name, t, xyz, world=True)
+        self.spacing = spacing  # the longest span interpolated: a longer one is a gap, not a fix missed
+
+    def at(self, ts: np.ndarray, max_gap: float) -> tuple[np.ndarray, None, np.ndarray]:
+        xyz, _, valid = self.track.at(ts, self.spacing)
+        return xyz, None, valid
+
+
+def baseline_tracks(rec: Recorder, frame: EnuFrame | None, max_gap: float, after_the_fact: bool = False) -> list:
+    """The tracks a user could have had with no filter, from the same samples. ``after_the_fact``
+    (a smoothed trajectory is scored): with thinned fixes, also the fused fixes interpolated, the
+    non-causal baseline a smoother must beat."""
     tracks: list = []
     if rec.odom:
         odom = np.array(sorted(rec.odom), dtype=float)
@@ -303,6 +322,8 @@ def baseline_tracks(rec: Recorder, frame: EnuFrame | None, max_gap: float) -> li
             fx = _enu(frame, [f[1:4] for f in fused])
             tracks.append(Track.build("hold last fused fix", ft, fx, world=True, held=True))
             tracks.append(ExtrapolatedFixes("fixes at constant velocity", ft, fx))
+            if after_the_fact and rec.fuse_every > 1:
+                tracks.append(InterpolatedFixes("fused fixes interpolated", ft, fx, rec.fuse_every * max_gap))
     poses = sorted(rec.fused_poses + rec.held_poses)
     if poses and rec.absolute is not None and not rec.geodetic:
         p = np.array(poses)
@@ -386,10 +407,12 @@ def _segments(t: np.ndarray, gap: float) -> list[tuple[float, float]]:
 
 
 def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec: Recorder,
-             segment_gap_s: float = 1.0, rpe_s: float = 1.0, heading_known=None) -> Evaluation:
+             segment_gap_s: float = 1.0, rpe_s: float = 1.0, heading_known=None, smoothed=None) -> Evaluation:
     """Score the published ``trajectory`` (8 doubles a pose: t x y z qx qy qz qw) and the baselines
     ``rec`` gathered during the replay. ``heading_known`` (one flag a pose, ReplayResult's): the heading
-    and RPE of the poses published before the filter knew its heading are not scored."""
+    and RPE of the poses published before the filter knew its heading are not scored. ``smoothed``
+    (the same layout, ReplayResult.smoothed): scored too, as "fusiond smoothed", beside the fused fixes
+    interpolated when they are thinned."""
     msgtype, rt, rpos, rhead, ref_lla = read_reference(paths, reference)
     world = rec.absolute is not None
     notes: list[str] = []
@@ -432,7 +455,17 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
     fused = Track.build("fusiond", tr[:, 0], tr[:, 1:4],
                         np.array([yaw(tuple(q)) for q in tr[:, 4:8]]) if tr.size else None, world=world,
                         heading_known=known)
-    tracks = [fused] + baseline_tracks(rec, frame, segment_gap_s)
+    tracks = [fused]
+    if smoothed is not None:
+        sm = np.asarray(smoothed, dtype=float).reshape(-1, 8)
+        sm_known = None
+        if known is not None:  # a smoothed pose's heading is scored where the last pose published by then was
+            i = np.searchsorted(tr[:, 0], sm[:, 0], side="right") - 1
+            sm_known = (i >= 0) & known[np.clip(i, 0, None)]
+        tracks.append(Track.build("fusiond smoothed", sm[:, 0], sm[:, 1:4],
+                                  np.array([yaw(tuple(q)) for q in sm[:, 4:8]]) if sm.size else None, world=world,
+                                  heading_known=sm_known))
+    tracks += baseline_tracks(rec, frame, segment_gap_s, after_the_fact=smoothed is not None)
     t0 = float(ref.t[0])
     segments = [Segment("all", 0.0, spans[-1][1] - t0)]
     if len(spans) > 1:

@@ -83,6 +83,11 @@ def plot_replay(result: ReplayResult, path: Path, title: str = "") -> None:
         fused = np.array(tr.fused)
         _, fx, fy = break_gaps(fused[:, 0], fused[:, 1], fused[:, 2])
         ax.plot(fx, fy, color="tab:blue", lw=1.6, label="fusiond")
+    if result.smoothed is not None and len(result.smoothed):  # replay --smooth: the track after the fact beside it
+        sm = np.asarray(result.smoothed).reshape(-1, 8)
+        _, sx, sy = break_gaps(sm[:, 0], sm[:, 1], sm[:, 2])
+        ax.plot(sx, sy, color="tab:purple", lw=1.0, ls="--", label="fusiond smoothed")
+    if tr.fused:
         ax.plot(fused[0, 1], fused[0, 2], "go", label="start")
         ax.plot(fused[-1, 1], fused[-1, 2], "rs", label="end")
     ax.set_aspect("equal", adjustable="datalim")

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
+import numpy as np
 
 from ..collector import skips_the_caller
 from ..config import Config
@@ -22,6 +23,7 @@ from ..core.layout import absolute_sensor
 from ..core.sensors.registry import kind_of
 from ..errors import ReplayError
 from ..core.fusion import FusionCore
+from ..estimator import POSE
 from ..estimator.rotation import to_rpy
 from ..samples import OdomSample, Sample
 from .bag import BagError, BagSamples, did_you_mean, open_bag_samples
@@ -57,6 +59,9 @@ class ReplayResult:
     heading_known: array = field(default_factory=lambda: array("b"))
     # the verdicts with their paste lines replayed (fusiond.tune.advice), once that has run
     proven: list[Verdict] | None = None
+    # with smoothing (replay(..., smooth=True)): t x y z qx qy qz qw of the smoothed pose at every publish
+    # moment of the final timeline (``smoothed_trajectory``)
+    smoothed: array | None = None
 
     def verdicts(self) -> list[Verdict]:
         if self.proven is not None:
@@ -196,6 +201,7 @@ def replay(
     through: Callable[[Iterator[Sample]], Iterator[Sample]] | None = None,
     records: list | None = None,
     allow_missing: bool = True,
+    smooth: bool = False,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
@@ -203,13 +209,15 @@ def replay(
     ``through``: the bag's samples pass through it on their way to the core (the evaluation's
     recorder sees every one and holds back the fixes it scores on). ``records``: every diagnostics
     record of the replay is appended to it (the advice's proof scores them as its reference run).
-    ``allow_missing``: a configured topic absent from the bags is a warning, not an error (``check_topics``)."""
+    ``allow_missing``: a configured topic absent from the bags is a warning, not an error (``check_topics``).
+    ``smooth``: the forward pass records what the smoother needs and the result carries the smoothed
+    trajectory (``ReplayResult.smoothed``), which the TUM file then holds instead of the causal one."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with skips_the_caller(), open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn, allow_missing)
-            runner = Runner(cfg, keep_trace, doctor)
+            runner = Runner(cfg, keep_trace, doctor, smooth)
             if diag_out is not None and records is not None:
                 def keep(r, add=diag_out.add, append=records.append) -> None:
                     add(r)
@@ -231,18 +239,22 @@ def replay(
         if diag_out is not None:
             diag_out.close()
     seconds = time.perf_counter() - t0
+    result = runner.result(seconds, missing, decode_errors)
     if tum is not None:
         tum.parent.mkdir(parents=True, exist_ok=True)
-        tum.write_text(tum_text(runner.trajectory))
-    return runner.result(seconds, missing, decode_errors)
+        tum.write_text(tum_text(result.smoothed if smooth else runner.trajectory))
+    return result
 
 
 class Runner:
     """One sample at a time through the core, the doctor and the trace: the loop of `replay`, also
     used on simulated samples by the tests (so they judge exactly what a replay would)."""
 
-    def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True) -> None:
+    def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True, smooth: bool = False) -> None:
         self.core = FusionCore(cfg)
+        self.smooth = smooth
+        if smooth:
+            self.core.record_for_smoothing()
         if doctor:
             from ..doctor import Doctor
 
@@ -307,12 +319,25 @@ class Runner:
 
     def result(self, seconds: float = 0.0, missing: list[str] | None = None, decode_errors: int = 0) -> ReplayResult:
         return ReplayResult(self.core, self.doctor, self.trace, self.messages, len(self.trajectory) // 8, seconds,
-                            missing or [], decode_errors, self.trajectory, self.heading_known)
+                            missing or [], decode_errors, self.trajectory, self.heading_known,
+                            smoothed=smoothed_trajectory(self.core) if self.smooth else None)
 
 
-def run_samples(samples, cfg: Config, keep_trace: bool = False) -> ReplayResult:
+def smoothed_trajectory(core: FusionCore) -> array:
+    """The smoothed poses at the core's publish moments, 8 doubles a pose (t x y z qx qy qz qw), as
+    ``ReplayResult.trajectory`` holds the causal ones."""
+    out = array("d")
+    if core.state is None:
+        return out
+    sm = core.smoothed()
+    rows = np.column_stack((sm.t, sm.x[:, POSE])) if sm.t.size else np.zeros((0, 8))
+    out.frombytes(np.ascontiguousarray(rows, dtype=float).tobytes())
+    return out
+
+
+def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False) -> ReplayResult:
     """Replay samples already in memory (a simulation) exactly as a bag would be replayed."""
-    runner = Runner(cfg, keep_trace)
+    runner = Runner(cfg, keep_trace, smooth=smooth)
     for s in samples:
         runner.feed(s)
     return runner.result()

@@ -92,6 +92,7 @@ def test_held_back_fixes_score_the_hold_and_the_gps_noise(drive, tmp_path: Path)
     s = _scores(out)
     held = len(w.fixes) - len(w.fixes[::every])
     assert ev["fuse_every"] == every and s["raw fixes"]["n"] <= held
+    assert "fusiond smoothed" not in s and "fused fixes interpolated" not in s  # only with --smooth
     # the raw held-back fixes, scored at their own stamps against the truth: their noise, sqrt(2) sigma
     n = s["raw fixes"]["n"]
     expected = math.sqrt(2.0) * w.gps_sigma
@@ -101,6 +102,24 @@ def test_held_back_fixes_score_the_hold_and_the_gps_noise(drive, tmp_path: Path)
     lag = w.speed / w.gps_rate * math.sqrt(np.mean(k**2))
     hold = math.sqrt(lag**2 + expected**2)
     assert abs(s["hold last fused fix"]["world_h"] - hold) <= 0.25 * hold
+
+
+def test_smooth_scores_the_smoothed_track_beside_the_filter_and_the_fused_fixes_interpolated(drive, tmp_path):
+    """With --smooth and thinned fixes: a smoothed row, closer to the truth than the filter on the held-back
+    fixes' stamps, and the non-causal baseline it competes with (and beats). The fused fixes interpolated
+    carry the fixes' white noise, sqrt(2) sigma horizontally at a fix, less between two (an average of two independent
+    errors), and the chord of the drive's weave between fixes one second apart."""
+    bag, cfg, w = drive
+    out = tmp_path / "ev.json"
+    assert main(["replay", str(bag), "--config", str(cfg), "--reference", "/ground_truth", "--fuse-every", "5",
+                 "--smooth", "--quiet", "--evaluation", str(out)]) == 0
+    s = _scores(out)
+    assert s["fusiond smoothed"]["n"] == s["fusiond"]["n"] > 0
+    assert s["fusiond smoothed"]["world_h"] < s["fusiond"]["world_h"]
+    interp = s["fused fixes interpolated"]["world_h"]
+    assert 0.5 * w.gps_sigma < interp < 3.0 * w.gps_sigma
+    # the odometry between the fixes knows the shape of the drive, a straight line between them does not
+    assert s["fusiond smoothed"]["world_h"] < interp
 
 
 def test_the_absolute_sensor_itself_is_the_reference_of_its_held_back_messages(drive, tmp_path: Path) -> None:

@@ -106,6 +106,11 @@ class SensorModel:
         computation for a while (the GPS while the heading is searched for)."""
         return None
 
+    def shown_origin(self, s: "FilterState") -> tuple[float, float] | None:
+        """While ``shown_position`` is not None: the horizontal position the state's is dead-reckoned from
+        along a heading not yet found (the smoother turns that displacement once it is), or None."""
+        return None
+
     def apply(self, s: "FilterState", inp: Any, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         """What an applied input does to state s at ``stamp`` (already predicted there). Returns the
         diagnostics records of its updates when ``emit`` (a re-application after late data does

@@ -281,6 +281,10 @@ class GpsModel(SensorModel):
         ux, uy = dx / d, dy / d
         return var * ux * ux, var * ux * uy, var * uy * uy
 
+    def shown_origin(self, s: "FilterState") -> tuple[float, float] | None:
+        """The state's position after the newest fix while the heading is searched for (``anchor``)."""
+        return None if s.heading_ready else s.own[self.index].anchor
+
     def shown_position(self, s: "FilterState") -> tuple[float, float] | None:
         """While the heading is searched for, the expected position: the state dead-reckons from the
         newest fix along a placeholder heading whose error psi is as wide as the filter's yaw variance
