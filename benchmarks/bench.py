@@ -194,7 +194,8 @@ def bench_sensors(repeat: int = 5, number: int = 2000, seconds: float = 20.0) ->
     from fusiond.estimator import observations as obs
     from fusiond.estimator import rotation as rot
     from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
-    from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample
+    from fusiond.core.sensors.pose import PoseSample
+    from fusiond.samples import GpsSample, ImuSample, OdomSample
 
     layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5), GyroScaleBlock(0.05, 1e-5),
                           WheelScaleBlock(0.1, 1e-4)])

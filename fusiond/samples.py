@@ -47,14 +47,9 @@ class GpsSample(msgspec.Struct, gc=False):
     covariance_type: int = 0  # 0 unknown, 1 approximated, 2 diagonal known, 3 known
 
 
-class PoseSample(msgspec.Struct, gc=False):
-    """A pose of base_link's sensor origin (PoseStamped, PoseWithCovarianceStamped, Odometry.pose)."""
+Sample = msgspec.Struct
+"""Any kind's sample: a msgspec Struct whose first fields are ``sensor`` and ``stamp``. The odometry's,
+IMU's and GPS's are here; another kind declares its own in its package (the pose's:
+``fusiond.core.sensors.pose.sample``)."""
 
-    sensor: str
-    stamp: float
-    position: tuple[float, float, float]
-    orientation: tuple[float, float, float, float]  # x y z w
-    covariance: tuple[float, ...] = ()  # 36 (x y z roll pitch yaw, row-major), or () when the message has none
-
-
-Sample = OdomSample | ImuSample | GpsSample | PoseSample
+__all__ = ["GpsSample", "ImuSample", "OdomSample", "Sample"]

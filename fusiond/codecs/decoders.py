@@ -1,8 +1,8 @@
-"""Bytes -> samples: the decoder of one sensor's key (`make_decoder`), by kind and encoding,
-and the decoders of the published pose and odometry.
+"""Bytes -> samples: the decoder of one sensor's key (`make_decoder`), by its kind's codec
+(`kind_codec.KindCodec`) and encoding, and the decoders of the published pose and odometry.
 
 Where the formats meet: a sensor's kind and encoding pick the struct fast path
-(`cdr_fast_path`) with rosbags behind it, rosbags alone, or the JSON / msgpack Structs;
+(`cdr_fast_path`) with rosbags behind it, rosbags alone, or the kind's JSON / msgpack Struct;
 rosbags' (de)serialisers are generated here at construction, not on the first message.
 Every decoder raises only `DecodeError`.
 """
@@ -10,65 +10,54 @@ Every decoder raises only `DecodeError`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Final
+from typing import Any
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+from fusiond.samples import Sample
 
-from .cdr_fast_path import ImuFields, OdomFields, RepeatedLayout
-from .from_ros import gps_from_ros, imu_from_ros, odom_from_ros, pose_from_ros
+from . import builtin_kinds  # noqa: F401 - registers the codecs written in this package
+from .cdr_fast_path import RepeatedLayout
 from .json_msgpack import structured_decoder
+from .kind_codec import KindCodec, codec_named
 from .rosbags_cdr import deserialize, typestore
-from .sample_encoders import encode_gps_sample, encode_imu_sample, encode_odom_sample, encode_pose_sample
-from .wire import IMU, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, POSE_TYPES, Decoder, Payload, check_size
-
-# kind -> (its ROS types, the first the default; rosbags message -> sample). Which of them a sensor reads is
-# its kind descriptor's to say (core/sensors/kind.py); these are the codecs of the built-in kinds.
-_KINDS: Final[dict[str, tuple[tuple[str, ...], Callable[[Any, str], Sample]]]] = {
-    "odom": ((ODOMETRY,), odom_from_ros),
-    "imu": ((IMU,), imu_from_ros),
-    "gps": ((NAVSATFIX,), gps_from_ros),
-    "pose": (POSE_TYPES, pose_from_ros),
-}
-# GPS and pose sensors run at 1-100 Hz: rosbags' generic path is fast enough for them.
-_REPEATED: Final = {  # kind -> (child frame id?, the block's reader) of `RepeatedLayout`
-    "odom": (True, OdomFields),
-    "imu": (False, ImuFields),
-}
+from .wire import ODOMETRY, POSE_COV_STAMPED, Decoder, Payload, check_size
 
 
-def ros_msgtype(kind: str, msgtype: str | None = None) -> str:
-    """The ROS 2 message type of a sensor kind (a pose sensor's own `msgtype` when given)."""
-    if kind not in _KINDS:
-        raise ValueError(f"unknown sensor kind {kind!r}, expected one of {sorted(_KINDS)}")
-    types = _KINDS[kind][0]
+def _codec(kind: str | KindCodec) -> KindCodec:
+    return kind if isinstance(kind, KindCodec) else codec_named(kind)
+
+
+def ros_msgtype(kind: str | KindCodec, msgtype: str | None = None) -> str:
+    """The ROS 2 message type of a sensor kind (a sensor's own choice ``msgtype`` when its kind reads several)."""
+    codec = _codec(kind)
+    types = codec.ros_types
     if msgtype is not None:
         if len(types) < 2 or msgtype not in types:  # only a kind reading several types has a choice
-            article = "an" if kind[0] in "aeiou" else "a"
-            raise ValueError(f"msgtype {msgtype!r} is not valid for {article} {kind} sensor")
+            article = "an" if codec.name[0] in "aeiou" else "a"
+            raise ValueError(f"msgtype {msgtype!r} is not valid for {article} {codec.name} sensor")
         return msgtype
     return types[0]
 
 
-def ros_converter(kind: str) -> Callable[[Any, str], Sample]:
+def ros_converter(kind: str | KindCodec) -> Callable[[Any, str], Sample]:
     """rosbags message -> sample for a sensor kind (bag replay)."""
-    return _KINDS[kind][1]
+    return _codec(kind).from_ros
 
 
-def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None = None) -> Decoder:
-    """The bytes -> sample function of one sensor; it raises only DecodeError.
+def make_decoder(kind: str | KindCodec, encoding: str, sensor: str, *, msgtype: str | None = None) -> Decoder:
+    """The bytes -> sample function of one sensor of ``kind`` (its name, or its ``KindCodec``); it raises
+    only DecodeError.
 
-    ``msgtype`` selects a pose sensor's ROS type (its config key `msgtype`; a CDR
-    payload does not say). Without it a pose decoder takes whichever of the three
-    pose types the payload parses as exactly (their CDR lengths differ).
+    ``msgtype`` selects the ROS type of a kind that reads several (a pose sensor's config key
+    `msgtype`; a CDR payload does not say). Without it such a decoder takes whichever of its types
+    the payload parses as exactly (the pose types' CDR lengths differ).
     Unknown kind or encoding is a ValueError at construction: that is a
     configuration bug, not a bad message.
     """
-    if kind not in _KINDS:
-        raise ValueError(f"unknown sensor kind {kind!r}, expected one of {sorted(_KINDS)}")
-    types, from_ros = _KINDS[kind]
+    codec = _codec(kind)
+    types, from_ros = codec.ros_types, codec.from_ros
     if len(types) > 1 and msgtype is None and encoding == "ros2-cdr":
         for t in types:
-            _warm(t)
+            _warm(codec, t)
 
         def decode_any_type(payload: Payload) -> Sample:
             check_size(payload)
@@ -80,13 +69,17 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
             return from_ros(deserialize(payload, types[0]), sensor)  # raises the DecodeError
 
         return decode_any_type
-    msgtype = ros_msgtype(kind, msgtype)
+    msgtype = ros_msgtype(codec, msgtype)
 
     if encoding != "ros2-cdr":
-        return structured_decoder(kind, encoding, sensor)
+        if codec.message_type is None or codec.from_message is None:
+            if encoding in ("json", "msgpack"):
+                raise ValueError(f"sensor kind {codec.name!r} reads ros2-cdr only, got {encoding!r}")
+            raise ValueError(f"unknown encoding {encoding!r}, expected ros2-cdr, json or msgpack")
+        return structured_decoder(codec.message_type, codec.from_message, encoding, sensor)
 
-    _warm(msgtype)
-    repeated = _REPEATED.get(kind)
+    _warm(codec, msgtype)
+    repeated = codec.repeated
     if repeated is not None:  # odometry and IMU: the hot path of the daemon
         has_child_frame, fields = repeated
         layout = RepeatedLayout(has_child_frame, fields())
@@ -108,7 +101,6 @@ def make_decoder(kind: str, encoding: str, sensor: str, *, msgtype: str | None =
 def cdr_decoder(msgtype: str, from_ros: Callable[[Any, str], Any], sensor: str) -> Decoder:
     """ROS 2 CDR of ``msgtype`` (any type rosbags' typestore knows) -> sample, through rosbags and
     ``from_ros``: the decoder of a kind without a fast path of its own; raises only DecodeError."""
-    _warm(msgtype)
 
     def decode_cdr(payload: Payload) -> Any:
         check_size(payload)
@@ -120,23 +112,13 @@ def cdr_decoder(msgtype: str, from_ros: Callable[[Any, str], Any], sensor: str) 
 _warmed: set[str] = set()
 
 
-def _warm(msgtype: str) -> None:
-    """rosbags generates its (de)serialisers on first use (~0.1 s): pay that at startup, not on a message."""
-    if msgtype in _warmed:
+def _warm(codec: KindCodec, msgtype: str) -> None:
+    """rosbags generates its (de)serialisers on first use (~0.1 s): pay that at startup, not on a message,
+    by decoding the CDR the kind's encoder makes of its ``zero`` sample (a kind without them: its first
+    message pays instead)."""
+    if msgtype in _warmed or codec.encode is None or codec.zero is None:
         return
-    zero = OdomSample("", 0.0, (0.0,) * 3, (0.0,) * 3, (0.0,) * 36)
-    if msgtype == ODOMETRY:
-        raw = encode_odom_sample(zero, "ros2-cdr")
-    elif msgtype == IMU:
-        raw = encode_imu_sample(ImuSample("", 0.0, (0.0, 0.0, 0.0, 1.0), (0.0,) * 9, (0.0,) * 3, (0.0,) * 9),
-                                "ros2-cdr")
-    elif msgtype == NAVSATFIX:
-        raw = encode_gps_sample(GpsSample("", 0.0, 0.0, 0.0, 0.0), "ros2-cdr")
-    elif msgtype in POSE_TYPES:
-        raw = encode_pose_sample(PoseSample("", 0.0, (0.0,) * 3, (0.0, 0.0, 0.0, 1.0)), "ros2-cdr", msgtype)
-    else:  # a type without a sample encoder here (another kind's): its first message pays instead
-        return
-    typestore().deserialize_cdr(raw, msgtype)
+    typestore().deserialize_cdr(codec.encode(codec.zero, "ros2-cdr", msgtype), msgtype)
     _warmed.add(msgtype)
 
 
@@ -150,3 +132,6 @@ def decode_odometry_cdr(payload: Payload) -> Any:
     """A published nav_msgs/msg/Odometry as a rosbags message."""
     check_size(payload)
     return deserialize(payload, ODOMETRY)
+
+
+__all__ = ["cdr_decoder", "decode_odometry_cdr", "decode_pose_cdr", "make_decoder", "ros_converter", "ros_msgtype"]

@@ -1,4 +1,5 @@
-"""rosbags messages -> fusiond samples: Odometry, Imu, NavSatFix and the pose types.
+"""rosbags messages -> fusiond samples: Odometry, Imu and NavSatFix (the pose kind converts its own
+messages, in its package).
 
 Separate from the CDR decoding because a message may come from elsewhere than a ROS 2
 payload: a bag replay hands over rosbags messages of a ROS 1 or ROS 2 type store, and
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample
+from fusiond.samples import GpsSample, ImuSample, OdomSample
 
 
 def odom_from_ros(msg: Any, sensor: str) -> OdomSample:
@@ -54,13 +55,4 @@ def gps_from_ros(msg: Any, sensor: str) -> GpsSample:
     )
 
 
-def pose_from_ros(msg: Any, sensor: str) -> PoseSample:
-    """PoseStamped, PoseWithCovarianceStamped or the pose of an Odometry as a PoseSample."""
-    stamp = msg.header.stamp
-    pose = msg.pose
-    cov: tuple[float, ...] = ()
-    if hasattr(pose, "covariance"):  # PoseWithCovariance (also inside Odometry)
-        cov = tuple(pose.covariance.tolist())
-        pose = pose.pose
-    p, q = pose.position, pose.orientation
-    return PoseSample(sensor, stamp.sec + stamp.nanosec * 1e-9, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), cov)
+__all__ = ["gps_from_ros", "imu_from_ros", "odom_from_ros"]

@@ -1,5 +1,6 @@
-"""The JSON / msgpack wire format of the sensors: one msgspec Struct per kind, the decoder of a
-sensor's JSON or msgpack key, and the encoding of a Struct as either.
+"""The JSON / msgpack wire format of the sensors: the Structs of the odometry, IMU and GPS kinds (a kind
+whose codecs live in its own package, the pose's, declares its Struct there), the decoder of a sensor's
+JSON or msgpack key given its kind's Struct, and the encoding of a Struct as either.
 
 For sensors that do not speak ROS 2 CDR: the ROS fields flattened into one object per message,
 `stamp` in seconds. The Structs' docstrings are the format's documentation (README points here).
@@ -9,18 +10,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Annotated, Any, Final
+from typing import Annotated, Any
 
 import msgspec
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+from fusiond.samples import GpsSample, ImuSample, OdomSample, Sample
 
 from .wire import Decoder, DecodeError, Payload, check_size
 
-_Vec3 = tuple[float, float, float]
-_Quat = tuple[float, float, float, float]
-_Cov9 = Annotated[tuple[float, ...], msgspec.Meta(min_length=9, max_length=9)]
-_Cov36 = Annotated[tuple[float, ...], msgspec.Meta(min_length=36, max_length=36)]
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+Cov9 = Annotated[tuple[float, ...], msgspec.Meta(min_length=9, max_length=9)]
+Cov36 = Annotated[tuple[float, ...], msgspec.Meta(min_length=36, max_length=36)]
 
 
 class OdomMessage(msgspec.Struct, kw_only=True):
@@ -38,11 +39,11 @@ class OdomMessage(msgspec.Struct, kw_only=True):
     """
 
     stamp: float
-    linear: _Vec3
-    angular: _Vec3
-    twist_covariance: _Cov36
-    position: _Vec3 = (0.0, 0.0, 0.0)
-    orientation: _Quat = (0.0, 0.0, 0.0, 1.0)
+    linear: Vec3
+    angular: Vec3
+    twist_covariance: Cov36
+    position: Vec3 = (0.0, 0.0, 0.0)
+    orientation: Quat = (0.0, 0.0, 0.0, 1.0)
 
 
 class ImuMessage(msgspec.Struct, kw_only=True):
@@ -60,12 +61,12 @@ class ImuMessage(msgspec.Struct, kw_only=True):
     """
 
     stamp: float
-    orientation: _Quat
-    orientation_covariance: _Cov9
-    angular_velocity: _Vec3
-    angular_velocity_covariance: _Cov9
-    linear_acceleration: _Vec3 = (0.0, 0.0, 0.0)
-    linear_acceleration_covariance: _Cov9 = (0.0,) * 9
+    orientation: Quat
+    orientation_covariance: Cov9
+    angular_velocity: Vec3
+    angular_velocity_covariance: Cov9
+    linear_acceleration: Vec3 = (0.0, 0.0, 0.0)
+    linear_acceleration_covariance: Cov9 = (0.0,) * 9
 
 
 class GpsMessage(msgspec.Struct, kw_only=True):
@@ -82,52 +83,31 @@ class GpsMessage(msgspec.Struct, kw_only=True):
     longitude: float
     altitude: float = 0.0
     status: int = 0
-    position_covariance: _Cov9 = (0.0,) * 9
+    position_covariance: Cov9 = (0.0,) * 9
     position_covariance_type: int = 0
 
 
-class PoseMessage(msgspec.Struct, kw_only=True):
-    """A pose on a `json` or `msgpack` key: `stamp`, `position` [x, y, z] m, `orientation`
-    [x, y, z, w], optional `covariance` (36 numbers, row-major over x y z roll pitch yaw)."""
-
-    stamp: float
-    position: _Vec3
-    orientation: _Quat
-    covariance: _Cov36 | None = None
-
-
-def _gps_from_message(m: GpsMessage, sensor: str) -> GpsSample:
+def gps_from_message(m: GpsMessage, sensor: str) -> GpsSample:
     return GpsSample(sensor, m.stamp, m.latitude, m.longitude, m.altitude, m.status, m.position_covariance,
                      m.position_covariance_type)
 
 
-def _pose_from_message(m: PoseMessage, sensor: str) -> PoseSample:
-    return PoseSample(sensor, m.stamp, m.position, m.orientation, m.covariance or ())
-
-
-def _odom_from_message(m: OdomMessage, sensor: str) -> OdomSample:
+def odom_from_message(m: OdomMessage, sensor: str) -> OdomSample:
     return OdomSample(sensor, m.stamp, m.linear, m.angular, m.twist_covariance, m.position, m.orientation)
 
 
-def _imu_from_message(m: ImuMessage, sensor: str) -> ImuSample:
+def imu_from_message(m: ImuMessage, sensor: str) -> ImuSample:
     return ImuSample(
         sensor, m.stamp, m.orientation, m.orientation_covariance, m.angular_velocity,
         m.angular_velocity_covariance, m.linear_acceleration, m.linear_acceleration_covariance,
     )
 
 
-_KINDS: Final[dict[str, tuple[type[msgspec.Struct], Callable[[Any, str], Sample]]]] = {
-    "odom": (OdomMessage, _odom_from_message),
-    "imu": (ImuMessage, _imu_from_message),
-    "gps": (GpsMessage, _gps_from_message),
-    "pose": (PoseMessage, _pose_from_message),
-}
-
-
-def structured_decoder(kind: str, encoding: str, sensor: str) -> Decoder:
-    """The bytes -> sample function of a sensor of ``kind`` (a known one) on a `json` or
-    `msgpack` key; it raises only DecodeError. Another encoding is a ValueError."""
-    wire_type, from_message = _KINDS[kind]
+def structured_decoder(wire_type: type, from_message: Callable[[Any, str], Sample], encoding: str,
+                       sensor: str) -> Decoder:
+    """The bytes -> sample function of a sensor whose kind's Struct is ``wire_type`` (made a sample by
+    ``from_message``) on a `json` or `msgpack` key; it raises only DecodeError. Another encoding is a
+    ValueError."""
     if encoding == "json":
         parser: Any = msgspec.json.Decoder(wire_type)
         syntax = "json_invalid"
@@ -163,3 +143,7 @@ def encode_structured(message: msgspec.Struct, encoding: str) -> bytes:
     if encoding == "msgpack":
         return _msgpack_encoder.encode(message)
     raise ValueError(f"unknown encoding {encoding!r}, expected ros2-cdr, json or msgpack")
+
+
+__all__ = ["Cov9", "Cov36", "GpsMessage", "ImuMessage", "OdomMessage", "Quat", "Vec3", "encode_structured",
+           "gps_from_message", "imu_from_message", "odom_from_message", "structured_decoder"]

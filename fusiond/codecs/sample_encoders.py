@@ -3,7 +3,8 @@
 The inverse of the decoders: `fusiond play` publishes bags with it, the benchmarks and the
 tests build their inputs with it, and the decoders warm rosbags' serialisers on its output.
 ROS 2 CDR is built and serialised by rosbags, except Odometry: `encode_odometry_cdr` packs the
-same bytes with struct. JSON and msgpack are the Structs of `json_msgpack`.
+same bytes with struct. JSON and msgpack are the Structs of `json_msgpack`. A sample of a kind whose
+codecs live in its own package (the pose's) is encoded by that kind's codec (`encode_sample`).
 """
 
 from __future__ import annotations
@@ -13,20 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+from fusiond.samples import GpsSample, ImuSample, OdomSample, Sample
 
-from .json_msgpack import GpsMessage, ImuMessage, OdomMessage, PoseMessage, encode_structured
+from .json_msgpack import GpsMessage, ImuMessage, OdomMessage, encode_structured
+from .kind_codec import codec_of
 from .output_encoders import encode_odometry_cdr
 from .rosbags_cdr import float_array, ros_header, ros_types, serialize
-from .wire import IMU, NAVSATFIX, ODOMETRY, POSE_COV_STAMPED, POSE_STAMPED, POSE_TYPES
-
-
-def _pose(position: Sequence[float], quat_xyzw: Sequence[float]) -> Any:
-    x, y, z = (float(v) for v in position)
-    qx, qy, qz, qw = (float(v) for v in quat_xyzw)
-    T = ros_types()
-    return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
-                                      orientation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
+from .wire import IMU, NAVSATFIX
 
 
 def _vec3(v: Sequence[float]) -> Any:
@@ -97,35 +91,13 @@ def encode_gps_sample(sample: GpsSample, encoding: str) -> bytes:
     )
 
 
-def encode_pose_sample(sample: PoseSample, encoding: str, msgtype: str = POSE_COV_STAMPED) -> bytes:
-    """What a pose publisher puts on the key, as ``msgtype`` (CDR; frame map, child base_link)."""
-    if encoding == "ros2-cdr":
-        T = ros_types()
-        header = ros_header(sample.stamp, "map")
-        pose = _pose(sample.position, sample.orientation)
-        cov = float_array(sample.covariance or (0.0,) * 36, 36)
-        if msgtype == POSE_STAMPED:
-            return serialize(T[POSE_STAMPED](header=header, pose=pose), POSE_STAMPED)
-        if msgtype == POSE_COV_STAMPED:
-            msg = T[POSE_COV_STAMPED](header=header, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov))
-            return serialize(msg, POSE_COV_STAMPED)
-        if msgtype == ODOMETRY:
-            return encode_odometry_cdr(sample.stamp, "map", "base_link", sample.position, sample.orientation, cov,
-                                       (0.0,) * 3, (0.0,) * 3, np.zeros(36))
-        raise ValueError(f"msgtype {msgtype!r} is not a pose type, expected one of {POSE_TYPES}")
-    return encode_structured(
-        PoseMessage(stamp=sample.stamp, position=sample.position, orientation=sample.orientation,
-                    covariance=sample.covariance or None),
-        encoding,
-    )
-
-
 def encode_sample(sample: Sample, encoding: str, msgtype: str | None = None) -> bytes:
-    """Any sample as its sensor would publish it (``msgtype``: a pose sensor's ROS type)."""
-    if isinstance(sample, OdomSample):
-        return encode_odom_sample(sample, encoding)
-    if isinstance(sample, ImuSample):
-        return encode_imu_sample(sample, encoding)
-    if isinstance(sample, GpsSample):
-        return encode_gps_sample(sample, encoding)
-    return encode_pose_sample(sample, encoding, msgtype or POSE_COV_STAMPED)
+    """Any sample as its sensor would publish it, by its kind's codec (``msgtype``: the ROS type of a kind
+    that reads several, a pose sensor's; its kind's first by default)."""
+    codec = codec_of(sample)
+    if codec.encode is None:
+        raise ValueError(f"sensor kind {codec.name!r} has no encoder")
+    return codec.encode(sample, encoding, msgtype or codec.ros_types[0])
+
+
+__all__ = ["encode_gps_sample", "encode_imu_sample", "encode_odom_sample", "encode_sample"]

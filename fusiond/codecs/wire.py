@@ -29,8 +29,6 @@ IMU: Final = "sensor_msgs/msg/Imu"
 POSE_COV_STAMPED: Final = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
 NAVSATFIX: Final = "sensor_msgs/msg/NavSatFix"
-POSE_TYPES: Final = (POSE_COV_STAMPED, POSE_STAMPED, ODOMETRY)
-"""What a `kind = "pose"` sensor may carry (its `msgtype` says which: a CDR payload does not)."""
 
 Encoding = Literal["ros2-cdr", "json", "msgpack"]
 Payload = bytes | bytearray | memoryview

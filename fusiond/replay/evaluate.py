@@ -31,7 +31,7 @@ from ..core.sensors.registry import kind_of
 from ..errors import ReplayError
 from ..estimator.geodesy import EnuFrame
 from ..estimator.rotation import from_rpy, matrix, yaw
-from ..samples import GpsSample, ImuSample, OdomSample, PoseSample, Sample
+from ..samples import GpsSample, ImuSample, OdomSample, Sample
 
 __all__ = ["Evaluation", "Score", "Segment", "Recorder", "evaluate", "format_evaluation", "read_reference"]
 
@@ -206,7 +206,7 @@ class Recorder:
                 if isinstance(s, GpsSample):
                     (self.fused_fixes if keep else self.held_fixes).append(
                         (s.stamp, s.latitude, s.longitude, s.altitude, s.status))
-                elif isinstance(s, PoseSample):
+                else:  # a world frame that is not geodetic is defined by poses (position, orientation)
                     (self.fused_poses if keep else self.held_poses).append((s.stamp, *s.position, yaw(s.orientation)))
                 if not keep:
                     continue

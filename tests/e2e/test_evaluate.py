@@ -20,7 +20,8 @@ from fusiond.cli import main
 from fusiond.codecs import encode_sample, typestore
 from fusiond.estimator import rotation as rot
 from fusiond.replay.evaluate import Track, _aligned_rms
-from fusiond.samples import GpsSample, ImuSample, OdomSample, PoseSample
+from fusiond.core.sensors.pose import PoseSample
+from fusiond.samples import GpsSample, ImuSample, OdomSample
 from tests.support.configs import robot_config_text
 from tests.support.sim_gps import World, simulate
 

@@ -20,10 +20,12 @@ from fusiond.estimator.geodesy import EnuFrame, WGS84_A, WGS84_E2, enu_to_geodet
 from fusiond.estimator.numeric import measurement_jacobian
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
 from fusiond.replay.run import replay
-from fusiond.samples import GpsSample, OdomSample, PoseSample
+from fusiond.samples import GpsSample, OdomSample
+from fusiond.core.sensors.pose import POSE_MSGTYPES, PoseSample
+from fusiond.core.sensors.pose.codec import encode_pose_sample
 from fusiond.codecs import (
-    NAVSATFIX, ODOMETRY, POSE_STAMPED, POSE_TYPES, TYPESTORE, DecodeError, encode_gps_sample, encode_odom_sample,
-    encode_pose_sample, encode_sample, make_decoder,
+    NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError, encode_gps_sample, encode_odom_sample,
+    encode_sample, make_decoder,
 )
 
 from tests.support.sim_gps import World, simulate, truth_at
@@ -422,7 +424,7 @@ POSE = PoseSample("pose", 3.25, (1.0, -2.0, 0.5), (0.0, 0.0, 0.6, 0.8), tuple(fl
 @pytest.mark.parametrize("encoding", ["ros2-cdr", "json", "msgpack"])
 def test_gps_and_pose_codecs_roundtrip(encoding):
     assert make_decoder("gps", encoding, "gps")(encode_gps_sample(GPS, encoding)) == GPS
-    for msgtype in POSE_TYPES:
+    for msgtype in POSE_MSGTYPES:
         raw = encode_pose_sample(POSE, encoding, msgtype)
         got = make_decoder("pose", encoding, "pose", msgtype=msgtype)(raw)
         expect = POSE if msgtype != POSE_STAMPED or encoding != "ros2-cdr" else PoseSample(

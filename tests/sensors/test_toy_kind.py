@@ -11,13 +11,13 @@ from pathlib import Path
 import pytest
 from rosbags.rosbag2 import Writer
 
-from fusiond.codecs import ODOMETRY, encode_odom_sample, typestore
+from fusiond.codecs import ODOMETRY, DecodeError, encode_odom_sample, encode_sample, make_decoder, typestore
 from fusiond.config import ConfigError, loads
 from fusiond.core.fusion import FusionCore
 from fusiond.core.layout import absolute_height, state_layout
 from fusiond.core.sensors import kind_of, register, unregister
 from fusiond.replay.run import replay
-from tests.support.altimeter import RANGE, AltimeterKind, AltimeterSample, AltimeterSensor
+from tests.support.altimeter import RANGE, AltimeterKind, AltimeterSample, AltimeterSensor, encode_altimeter_sample
 from tests.support.core_samples import odom
 
 HEIGHT = 2.0  # m: what the altimeter reads; the odometry says the robot never climbs
@@ -101,12 +101,7 @@ def test_the_core_pulls_z_to_the_altimeter_within_its_stated_noise(altimeter):
 
 
 def _range_cdr(sample: AltimeterSample) -> bytes:
-    ts = typestore()
-    Range, Header, Time = (ts.types[t] for t in (RANGE, "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
-    sec = int(sample.stamp)
-    msg = Range(Header(Time(sec, int(round((sample.stamp - sec) * 1e9))), "sonar"), 0, 0.1, 0.05, 10.0,
-                sample.height)
-    return bytes(ts.serialize_cdr(msg, RANGE))
+    return encode_altimeter_sample(sample, "ros2-cdr")
 
 
 def test_the_daemon_decoder_of_the_kind_reads_its_ros_message(altimeter):
@@ -114,6 +109,21 @@ def test_the_daemon_decoder_of_the_kind_reads_its_ros_message(altimeter):
     decode = kind_of(cfg.sensor("sonar")).decoder(cfg.sensor("sonar"))
     got = decode(_range_cdr(AltimeterSample("sonar", 12.25, 1.75)))
     assert got == AltimeterSample("sonar", 12.25, 1.75)
+
+
+@pytest.mark.parametrize("encoding", ["json", "msgpack"])
+def test_the_kind_registers_its_own_codecs_and_the_codecs_name_no_kind(altimeter, encoding):
+    """JSON and msgpack through the kind's ``codec``: the daemon's decoder of a `json` key, the codecs'
+    decoder by kind name and their encoder by sample type, none of them written for the altimeter."""
+    cfg = loads(TOML.replace('key = "range"', f'key = "range"\nencoding = "{encoding}"'))
+    sonar = cfg.sensor("sonar")
+    reading = AltimeterSample("sonar", 12.25, 1.75)
+    raw = encode_sample(reading, encoding)
+    assert raw == encode_altimeter_sample(reading, encoding)
+    assert kind_of(sonar).decoder(sonar)(raw) == reading
+    assert make_decoder("altimeter", encoding, "sonar")(raw) == reading
+    with pytest.raises(DecodeError, match="schema_invalid"):
+        make_decoder("altimeter", encoding, "sonar")(encode_odom_sample(_drive(0.1)[0], encoding))
 
 
 def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(altimeter, tmp_path: Path):

@@ -137,6 +137,22 @@ def test_the_kinds_never_import_the_outer_layers():
     assert out.strip() == "['fusiond.config_tables'] []"
 
 
+def test_a_kinds_codec_is_imported_when_a_decoder_is_asked_for():
+    """The pose's wire formats live in its package (``pose/codec.py``, a ``KindCodec``): loading the kinds
+    and the core imports neither it nor the codecs; asking the kind for a decoder imports both."""
+    code = (
+        "import sys, fusiond.core.sensors.registry as r, fusiond.core.fusion\n"
+        "def seen(): return ['fusiond.core.sensors.pose.codec' in sys.modules, 'fusiond.codecs' in sys.modules]\n"
+        "before = seen()\n"
+        "from fusiond.config import loads\n"
+        "cfg = loads('[[sensors]]\\nname = \"wheel\"\\nkind = \"odom\"\\nkey = \"odom\"\\n'\n"
+        "            '[[sensors]]\\nname = \"mocap\"\\nkind = \"pose\"\\nkey = \"mocap\"\\nencoding = \"json\"\\n')\n"
+        "r.kind_of(cfg.sensor('mocap')).decoder(cfg.sensor('mocap'))\n"
+        "print(before, seen())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[False, False] [True, True]"
+
+
 def test_the_config_stands_above_the_kinds_it_assembles():
     """A kind's table subclasses the shared ``SensorTable`` and its model reads ``FilterConfig`` from
     ``config_tables``; ``config``, which decodes a whole document as the registered kinds' tables,

@@ -8,9 +8,9 @@ question is a method or flag here, answered by the kind's own package (``odom/``
 The defaults describe a plain aiding sensor (no world frame, no yaw, no state block of its own,
 no publish prompt), so a new kind overrides only what it is.
 
-Decoding is the one place a descriptor reaches below the core: ``from_ros`` and ``decoder``
-import ``fusiond.codecs`` when called (it pulls rosbags in), never at import, so the filter core
-stays importable without it.
+Decoding is the one place a descriptor reaches below the core: ``codec``, ``from_ros`` and
+``decoder`` import ``fusiond.codecs`` (and the kind's own ``codec`` module) when called (they pull
+rosbags in), never at import, so the filter core stays importable without them.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from ...errors import ConfigError
 
 if TYPE_CHECKING:
     from ...config_tables import FilterConfig
+    from ...codecs.kind_codec import KindCodec
     from ...estimator import StateBlock
     from .base import SensorModel
     from .tunable import Param
@@ -127,13 +128,29 @@ class SensorKind:
         """The ROS 2 message type this sensor's topic carries (the first of ``ros_types`` by default)."""
         return self.ros_types[0]
 
+    def codec(self) -> "KindCodec | None":
+        """Its wire formats (a ``fusiond.codecs.KindCodec``: ROS converter, JSON / msgpack Struct, encoder,
+        struct fast path), imported from its package when first asked for, never when the kind loads.
+        None by default: a kind that offers only ``from_ros`` is read as ROS 2 CDR through rosbags."""
+        return None
+
     def from_ros(self) -> Callable[[Any, str], Any]:
-        """(rosbags message, sensor name) -> sample: what a bag replay reads with."""
-        raise NotImplementedError(f"sensor kind {self.name!r} has no ROS message converter")
+        """(rosbags message, sensor name) -> sample: what a bag replay reads with (its codec's by default)."""
+        codec = self.codec()
+        if codec is None:
+            raise NotImplementedError(f"sensor kind {self.name!r} has no ROS message converter")
+        return codec.from_ros
 
     def decoder(self, cfg: Any) -> Callable[[Any], Any]:
-        """bytes -> sample of this sensor's key; raises only ``DecodeError``. The default reads ROS 2 CDR
-        of ``ros_type`` through rosbags and ``from_ros``; other encodings are the kind's to offer."""
+        """bytes -> sample of this sensor's key; raises only ``DecodeError``. Through its ``codec`` (any
+        encoding it offers, ``ros_type`` of a kind reading several), else ROS 2 CDR of ``ros_type`` through
+        rosbags and ``from_ros``."""
+        codec = self.codec()
+        if codec is not None:
+            from ...codecs.decoders import make_decoder
+
+            msgtype = self.ros_type(cfg) if len(codec.ros_types) > 1 else None
+            return make_decoder(codec, cfg.encoding, cfg.name, msgtype=msgtype)
         from ...codecs.decoders import cdr_decoder
 
         if cfg.encoding != "ros2-cdr":
@@ -149,12 +166,4 @@ class SensorKind:
         return f"<sensor kind {self.name!r}>"
 
 
-def codecs_decoder(kind: SensorKind, cfg: Any) -> Callable[[Any], Any]:
-    """The decoder ``fusiond.codecs`` writes for a built-in kind (its CDR fast path, JSON and msgpack),
-    for the kinds whose ``decoder`` is this function rather than the default plain CDR path."""
-    from ...codecs.decoders import make_decoder
-
-    return make_decoder(kind.name, cfg.encoding, cfg.name)
-
-
-__all__ = ["LayoutView", "SensorKind", "codecs_decoder"]
+__all__ = ["LayoutView", "SensorKind"]

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 from ....config_tables import FilterConfig
 from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
 from ....samples import GpsSample
-from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import GpsModel
 from .table import GpsSensor
 from .tunables import gps_tunables, slow_errors
+
+if TYPE_CHECKING:
+    from ....codecs.kind_codec import KindCodec
 
 
 class GpsKind(SensorKind):
@@ -63,12 +66,10 @@ class GpsKind(SensorKind):
     def slow_errors(self, cfg: GpsSensor, span: float) -> dict[str, float]:
         return slow_errors(cfg, span)
 
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ....codecs.from_ros import gps_from_ros
+    def codec(self) -> "KindCodec":
+        from ....codecs.builtin_kinds import GPS
 
-        return gps_from_ros
-
-    decoder = codecs_decoder
+        return GPS
 
 
 __all__ = ["GpsKind"]

@@ -6,16 +6,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ....errors import ConfigError
 from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
 from ....samples import ImuSample
-from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import ImuModel
 from .table import ImuSensor
 from .tunables import imu_tunables
+
+if TYPE_CHECKING:
+    from ....codecs.kind_codec import KindCodec
 
 
 class ImuKind(SensorKind):
@@ -61,12 +64,10 @@ class ImuKind(SensorKind):
     def tunables(self, cfg: ImuSensor, samples: Sequence[object]) -> list[Param]:
         return imu_tunables(cfg, samples)
 
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ....codecs.from_ros import imu_from_ros
+    def codec(self) -> "KindCodec":
+        from ....codecs.builtin_kinds import IMU_CODEC
 
-        return imu_from_ros
-
-    decoder = codecs_decoder
+        return IMU_CODEC
 
     def zero_covariance(self, cfg: ImuSensor) -> Callable[[Any], bool] | None:
         use_orientation = cfg.fuses_orientation and cfg.orientation_noise is None

@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import operator
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ....estimator import StateBlock, TwistPitchBlock, WheelScaleBlock
 from ....samples import OdomSample
-from ..kind import LayoutView, SensorKind, codecs_decoder
+from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import OdomModel
 from .table import OdomSensor
 from .tunables import odom_tunables
+
+if TYPE_CHECKING:
+    from ....codecs.kind_codec import KindCodec
 
 
 class OdomKind(SensorKind):
@@ -43,12 +46,10 @@ class OdomKind(SensorKind):
     def tunables(self, cfg: OdomSensor, samples: Sequence[object]) -> list[Param]:
         return odom_tunables(cfg, samples)
 
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ....codecs.from_ros import odom_from_ros
+    def codec(self) -> "KindCodec":
+        from ....codecs.builtin_kinds import ODOM
 
-        return odom_from_ros
-
-    decoder = codecs_decoder
+        return ODOM
 
     def zero_covariance(self, cfg: OdomSensor) -> Callable[[Any], bool] | None:
         if cfg.twist_noise is not None:

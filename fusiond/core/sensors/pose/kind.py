@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from ....config_tables import FilterConfig
-from ....samples import PoseSample
 from ..kind import SensorKind
 from ..tunable import Param
 from .model import PoseModel
+from .sample import PoseSample
 from .table import POSE_MSGTYPES, PoseSensor
 from .tunables import pose_tunables
+
+if TYPE_CHECKING:
+    from ....codecs.kind_codec import KindCodec
 
 
 class PoseKind(SensorKind):
@@ -38,15 +41,7 @@ class PoseKind(SensorKind):
     def tunables(self, cfg: PoseSensor, samples: Sequence[object]) -> list[Param]:
         return pose_tunables(cfg, samples)
 
-    def from_ros(self) -> Callable[[Any, str], Any]:
-        from ....codecs.from_ros import pose_from_ros
+    def codec(self) -> "KindCodec":
+        from .codec import CODEC
 
-        return pose_from_ros
-
-    def decoder(self, cfg: PoseSensor) -> Callable[[Any], Any]:
-        from ....codecs.decoders import make_decoder
-
-        return make_decoder(self.name, cfg.encoding, cfg.name, msgtype=cfg.msgtype)
-
-
-__all__ = ["PoseKind"]
+        return CODEC

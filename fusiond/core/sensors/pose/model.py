@@ -18,11 +18,11 @@ from .... import reasons
 from ....estimator import YAW_ROW, attitude_of, mat3, position_of
 from ....estimator import observations as obs
 from ....estimator import rotation as rot
-from ....samples import PoseSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import Rejected, finite, plausible, unit_quaternion
 from ..frame import new_frame, set_position
+from .sample import PoseSample
 from .table import PoseSensor
 
 if TYPE_CHECKING:

@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ....samples import PoseSample
 from ..tunable import Param, median, own_samples
+from .sample import PoseSample
 from .table import PoseSensor
 
 
