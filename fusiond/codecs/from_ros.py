@@ -1,5 +1,5 @@
-"""rosbags messages -> fusiond samples: Odometry, Imu and NavSatFix (the pose kind converts its own
-messages, in its package).
+"""rosbags messages -> fusiond samples: Odometry and Imu (the GPS and pose kinds convert their own
+messages, in their packages).
 
 Separate from the CDR decoding because a message may come from elsewhere than a ROS 2
 payload: a bag replay hands over rosbags messages of a ROS 1 or ROS 2 type store, and
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample
+from fusiond.samples import ImuSample, OdomSample
 
 
 def odom_from_ros(msg: Any, sensor: str) -> OdomSample:
@@ -46,13 +46,5 @@ def imu_from_ros(msg: Any, sensor: str) -> ImuSample:
     )
 
 
-def gps_from_ros(msg: Any, sensor: str) -> GpsSample:
-    """A rosbags sensor_msgs/msg/NavSatFix (ROS 1 or ROS 2 typestore) as a GpsSample."""
-    stamp = msg.header.stamp
-    return GpsSample(
-        sensor, stamp.sec + stamp.nanosec * 1e-9, float(msg.latitude), float(msg.longitude), float(msg.altitude),
-        int(msg.status.status), tuple(msg.position_covariance.tolist()), int(msg.position_covariance_type),
-    )
 
-
-__all__ = ["gps_from_ros", "imu_from_ros", "odom_from_ros"]
+__all__ = ["imu_from_ros", "odom_from_ros"]

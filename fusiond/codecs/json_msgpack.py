@@ -1,5 +1,5 @@
-"""The JSON / msgpack wire format of the sensors: the Structs of the odometry, IMU and GPS kinds (a kind
-whose codecs live in its own package, the pose's, declares its Struct there), the decoder of a sensor's
+"""The JSON / msgpack wire format of the sensors: the Structs of the odometry and IMU kinds (a kind whose
+codecs live in its own package, the GPS's and the pose's, declares its Struct there), the decoder of a sensor's
 JSON or msgpack key given its kind's Struct, and the encoding of a Struct as either.
 
 For sensors that do not speak ROS 2 CDR: the ROS fields flattened into one object per message,
@@ -14,7 +14,7 @@ from typing import Annotated, Any
 
 import msgspec
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample, Sample
+from fusiond.samples import ImuSample, OdomSample, Sample
 
 from .wire import Decoder, DecodeError, Payload, check_size
 
@@ -69,27 +69,6 @@ class ImuMessage(msgspec.Struct, kw_only=True):
     linear_acceleration_covariance: Cov9 = (0.0,) * 9
 
 
-class GpsMessage(msgspec.Struct, kw_only=True):
-    """A GPS fix on a `json` or `msgpack` key (sensor_msgs/NavSatFix's fields).
-
-    - `stamp`: seconds; `latitude`, `longitude` in degrees (WGS84), `altitude` in m.
-    - `status`: NavSatStatus.status (-1 no fix: skipped and counted; default 0).
-    - `position_covariance`: 9 numbers, row-major ENU, m^2 (default zeros), and
-      `position_covariance_type` (0 unknown, default; 1 approximated; 2 diagonal; 3 known).
-    """
-
-    stamp: float
-    latitude: float
-    longitude: float
-    altitude: float = 0.0
-    status: int = 0
-    position_covariance: Cov9 = (0.0,) * 9
-    position_covariance_type: int = 0
-
-
-def gps_from_message(m: GpsMessage, sensor: str) -> GpsSample:
-    return GpsSample(sensor, m.stamp, m.latitude, m.longitude, m.altitude, m.status, m.position_covariance,
-                     m.position_covariance_type)
 
 
 def odom_from_message(m: OdomMessage, sensor: str) -> OdomSample:
@@ -145,5 +124,5 @@ def encode_structured(message: msgspec.Struct, encoding: str) -> bytes:
     raise ValueError(f"unknown encoding {encoding!r}, expected ros2-cdr, json or msgpack")
 
 
-__all__ = ["Cov9", "Cov36", "GpsMessage", "ImuMessage", "OdomMessage", "Quat", "Vec3", "encode_structured",
-           "gps_from_message", "imu_from_message", "odom_from_message", "structured_decoder"]
+__all__ = ["Cov9", "Cov36", "ImuMessage", "OdomMessage", "Quat", "Vec3", "encode_structured", "imu_from_message",
+           "odom_from_message", "structured_decoder"]

@@ -4,7 +4,7 @@ The inverse of the decoders: `fusiond play` publishes bags with it, the benchmar
 tests build their inputs with it, and the decoders warm rosbags' serialisers on its output.
 ROS 2 CDR is built and serialised by rosbags, except Odometry: `encode_odometry_cdr` packs the
 same bytes with struct. JSON and msgpack are the Structs of `json_msgpack`. A sample of a kind whose
-codecs live in its own package (the pose's) is encoded by that kind's codec (`encode_sample`).
+codecs live in its own package (the GPS's, the pose's) is encoded by that kind's codec (`encode_sample`).
 """
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from fusiond.samples import GpsSample, ImuSample, OdomSample, Sample
+from fusiond.samples import ImuSample, OdomSample, Sample
 
-from .json_msgpack import GpsMessage, ImuMessage, OdomMessage, encode_structured
+from .json_msgpack import ImuMessage, OdomMessage, encode_structured
 from .kind_codec import codec_of
 from .output_encoders import encode_odometry_cdr
 from .rosbags_cdr import float_array, ros_header, ros_types, serialize
-from .wire import IMU, NAVSATFIX
+from .wire import IMU
 
 
 def _vec3(v: Sequence[float]) -> Any:
@@ -71,26 +71,6 @@ def encode_imu_sample(sample: ImuSample, encoding: str) -> bytes:
     )
 
 
-def encode_gps_sample(sample: GpsSample, encoding: str) -> bytes:
-    """What a GPS driver puts on the key (CDR: sensor_msgs/msg/NavSatFix, frame gps)."""
-    if encoding == "ros2-cdr":
-        T = ros_types()
-        msg = T[NAVSATFIX](
-            header=ros_header(sample.stamp, "gps"),
-            status=T["sensor_msgs/msg/NavSatStatus"](status=int(sample.status), service=1),
-            latitude=float(sample.latitude), longitude=float(sample.longitude), altitude=float(sample.altitude),
-            position_covariance=float_array(sample.position_covariance, 9),
-            position_covariance_type=int(sample.covariance_type),
-        )
-        return serialize(msg, NAVSATFIX)
-    return encode_structured(
-        GpsMessage(stamp=sample.stamp, latitude=sample.latitude, longitude=sample.longitude,
-                   altitude=sample.altitude, status=sample.status, position_covariance=sample.position_covariance,
-                   position_covariance_type=sample.covariance_type),
-        encoding,
-    )
-
-
 def encode_sample(sample: Sample, encoding: str, msgtype: str | None = None) -> bytes:
     """Any sample as its sensor would publish it, by its kind's codec (``msgtype``: the ROS type of a kind
     that reads several, a pose sensor's; its kind's first by default)."""
@@ -100,4 +80,4 @@ def encode_sample(sample: Sample, encoding: str, msgtype: str | None = None) -> 
     return codec.encode(sample, encoding, msgtype or codec.ros_types[0])
 
 
-__all__ = ["encode_gps_sample", "encode_imu_sample", "encode_odom_sample", "encode_sample"]
+__all__ = ["encode_imu_sample", "encode_odom_sample", "encode_sample"]

@@ -178,7 +178,8 @@ def test_play_reports_what_a_daemon_that_cannot_keep_up_dropped(sessions, jackal
 def test_fused_position_is_published_as_navsatfix(sessions):
     """With a GPS and `output.navsat_key`, the daemon publishes the fused base position in WGS84."""
     from fusiond.samples import GpsSample, ImuSample
-    from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_gps_sample, encode_imu_sample
+    from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_imu_sample
+    from fusiond.core.sensors.gps.codec import encode_gps_sample
 
     cfg = loopback_daemon_config(output='navsat_key = "t/fix_filtered"',
                                  extra='[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n')

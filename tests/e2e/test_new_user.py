@@ -334,7 +334,8 @@ def _bag_with_gps(path: Path) -> None:
     """The Jackal's first 300 odometry and IMU messages as a ROS 2 bag, with NavSatFix fixes on /gps/fix."""
     from rosbags.rosbag2 import Writer
 
-    from fusiond.codecs import IMU, NAVSATFIX, ODOMETRY, TYPESTORE, encode_gps_sample
+    from fusiond.codecs import IMU, NAVSATFIX, ODOMETRY, TYPESTORE
+    from fusiond.core.sensors.gps.codec import encode_gps_sample
     from fusiond.config import ImuSensor, OdomSensor
     from fusiond.replay.bag import iter_raw_cdr
     from fusiond.samples import GpsSample

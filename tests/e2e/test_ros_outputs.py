@@ -161,7 +161,7 @@ def test_with_a_gps_the_tf_holds_map_to_odom_and_a_continuous_odom_to_base_link(
     """Nav2's tree beside a GPS: every TF carries map -> odom and odom -> base_link at the pose's stamp;
     composed they are the published (map-frame) pose, and when a fix moves the estimate sideways the
     odom frame keeps driving straight while map -> odom takes the jump."""
-    from fusiond.codecs import encode_gps_sample
+    from fusiond.core.sensors.gps.codec import encode_gps_sample
     from fusiond.core.tf_tree import compose
     from fusiond.samples import GpsSample
 

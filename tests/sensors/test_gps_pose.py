@@ -22,9 +22,10 @@ from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
 from fusiond.replay.run import replay
 from fusiond.samples import GpsSample, OdomSample
 from fusiond.core.sensors.pose import POSE_MSGTYPES, PoseSample
+from fusiond.core.sensors.gps.codec import encode_gps_sample
 from fusiond.core.sensors.pose.codec import encode_pose_sample
 from fusiond.codecs import (
-    NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError, encode_gps_sample, encode_odom_sample,
+    NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError, encode_odom_sample,
     encode_sample, make_decoder,
 )
 

@@ -67,9 +67,9 @@ class GpsKind(SensorKind):
         return slow_errors(cfg, span)
 
     def codec(self) -> "KindCodec":
-        from ....codecs.builtin_kinds import GPS
+        from .codec import CODEC
 
-        return GPS
+        return CODEC
 
 
 __all__ = ["GpsKind"]
