@@ -153,6 +153,27 @@ def test_a_kinds_codec_is_imported_when_a_decoder_is_asked_for():
     assert out.strip() == "[False, False] [True, True]"
 
 
+def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
+    """Loading the codecs imports nothing of the core (a kind's codec is found through its descriptor when
+    first asked for); the codecs written in ``fusiond/codecs`` are those of the kinds read through its
+    struct fast paths, and every other built-in kind's comes from its own package."""
+    code = ("import sys, fusiond.codecs; from fusiond.codecs import kind_codec; "
+            "print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}), "
+            "sorted(kind_codec._CODECS))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "['codecs', 'errors', 'samples'] ['imu', 'odom']"
+    from fusiond.codecs import codec_named, codec_of
+    from fusiond.core.sensors import kind_named
+
+    for name in ("odom", "imu", "gps", "pose"):  # the built-in kinds
+        kind = kind_named(name)
+        codec = kind.codec()
+        assert codec is codec_named(name) and codec.sample_type is kind.sample_type
+        assert codec.ros_types == kind.ros_types and kind.from_ros() is codec.from_ros
+        assert codec_of(codec.zero) is codec
+        assert kind.codec.__func__.__module__.startswith(f"fusiond.core.sensors.{name}.")
+
+
 def test_the_config_stands_above_the_kinds_it_assembles():
     """A kind's table subclasses the shared ``SensorTable`` and its model reads ``FilterConfig`` from
     ``config_tables``; ``config``, which decodes a whole document as the registered kinds' tables,
