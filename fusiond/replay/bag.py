@@ -64,7 +64,11 @@ class BagSamples:
         convert = {}
         for topic, s in self._by_topic.items():
             msgtype, from_ros = expected(s)
-            convert[topic] = (s.name, msgtype, from_ros, bag_fast_path(reader.typestore, msgtype, ros1))
+            # a struct fast path only where the kind's codec offers one: a pose sensor reading
+            # nav_msgs/msg/Odometry makes poses, not the odometry's samples
+            codec = kind_of(s).codec()
+            fast = None if codec is None or codec.repeated is None else bag_fast_path(reader.typestore, msgtype, ros1)
+            convert[topic] = (s.name, msgtype, from_ros, fast)
         deserialize = reader.deserialize
         for connection, _, raw in self._messages():
             name, msgtype, from_ros, fast = convert[connection.topic]

@@ -463,6 +463,31 @@ def _write_bag(path: Path, samples, pose_type: str) -> None:
             writer.write(conns[topic], int(s.stamp * 1e9), data)
 
 
+def test_a_pose_topic_of_odometry_messages_in_a_bag_reads_as_poses(tmp_path):
+    """The bag reader's struct fast path is the odometry kind's: a pose sensor whose `msgtype` is
+    nav_msgs/msg/Odometry reads its topic through its own codec, as poses."""
+    w = _gps_world(duration=5.0, pose_rate=10.0, pose_lever=(0.0, 0.0, 0.0), pose_increment_noise=True,
+                   pose_sigma=(0.01, 0.002))
+    samples = [s for s in simulate(w) if not isinstance(s, GpsSample)]
+    _write_bag(tmp_path / "bag", samples, ODOMETRY)
+    cfg = loads(f"""
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+[[sensors]]
+name = "pose"
+kind = "pose"
+key = "mocap"
+msgtype = "{ODOMETRY}"
+""")
+    with open_bag_samples([tmp_path / "bag"], cfg.sensors) as bag:
+        got = [s for s in bag if s.sensor == "pose"]
+    sent = [s for s in samples if isinstance(s, PoseSample)]
+    assert got and all(type(s) is PoseSample for s in got) and len(got) == len(sent)
+    assert [s.position for s in got] == [s.position for s in sent]
+
+
 def test_replay_of_a_ros2_bag_with_gps_and_pose(tmp_path):
     w = _gps_world(duration=30.0, pose_rate=5.0, pose_lever=(0.0, 0.0, 0.0), pose_increment_noise=True,
                    pose_sigma=(0.01, 0.002))
