@@ -208,6 +208,8 @@ class ImuStream:
         self.open: dict[str, OpenBin | None] = {"imu": None, "gyro": None, "acc": None}
 
     def take(self, rows: list[ImuSample], series, final: bool) -> None:
+        if not self.index:
+            return  # no IMU configured: no series to integrate (and no mounting to rotate through)
         t = _column(rows, "stamp")
         idx = _sensor_index(rows, self.index)
         q = _vectors(rows, "orientation", 4)
