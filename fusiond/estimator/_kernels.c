@@ -478,18 +478,56 @@ static Py_ssize_t read_blocks(PyObject *spec, MotionBlock *blocks, Py_ssize_t nx
     return count;
 }
 
+/* A Gauss-Markov error block (gps_error.GpsErrorBlock): x' = a x and F's diagonal a with a = exp(-dt / tau),
+ * its discrete noise var_i (1 - exp(-2 dt / tau)) added to Q's diagonal; the block's own expressions. */
+#define MAX_DECAY_BLOCKS 4
+typedef struct {
+    Py_ssize_t n0, e0, size;
+    double tau, var[3];
+} DecayBlock;
+
+/* ((n0, e0, tau, (var, ...)), ...) into decays; their count, or -1 with an exception set. */
+static Py_ssize_t read_decays(PyObject *spec, DecayBlock *decays, Py_ssize_t nx, Py_ssize_t n) {
+    if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) > MAX_DECAY_BLOCKS) {
+        PyErr_Format(PyExc_ValueError, "decays must be a tuple of at most %d entries", MAX_DECAY_BLOCKS);
+        return -1;
+    }
+    Py_ssize_t count = PyTuple_GET_SIZE(spec);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        DecayBlock *b = &decays[i];
+        PyObject *var;
+        if (!PyArg_ParseTuple(PyTuple_GET_ITEM(spec, i), "nndO!", &b->n0, &b->e0, &b->tau, &PyTuple_Type, &var)) {
+            return -1;
+        }
+        b->size = PyTuple_GET_SIZE(var);
+        if (b->size < 1 || b->size > 3 || b->n0 < 7 || b->n0 + b->size > nx || b->e0 < 6 || b->e0 + b->size > n) {
+            PyErr_SetString(PyExc_ValueError, "a decaying block outside the state");
+            return -1;
+        }
+        for (Py_ssize_t k = 0; k < b->size; k++) {
+            b->var[k] = PyFloat_AsDouble(PyTuple_GET_ITEM(var, k));
+        }
+        if (PyErr_Occurred()) {
+            return -1;
+        }
+    }
+    return count;
+}
+
 PyDoc_STRVAR(predict_doc,
 "predict(x, x_out, F, Q, density, dt, extra, linear, angular, linear_cov, angular_cov, linear_period,\n"
-"        angular_period, twist_correlation, flags, blocks) -> None\n\n"
+"        angular_period, twist_correlation, flags, blocks[, decays]) -> None\n\n"
 "motion.predict for a layout whose input blocks all have a kernel_code: x_out (nominal, as long as\n"
 "x) gets the propagated pose and x's other entries, F (n x n, the identity elsewhere) its cross\n"
 "block and the input blocks' columns, Q the entries input_noise writes. flags: 1 world-frame twist,\n"
 "2 planar rates. blocks: (code, applies, linear, n0, c0, size) per input block in layout order.\n"
-"The dynamic blocks' decay is left to the caller (their extra noise comes in extra, or None).");
+"decays: ((n0, e0, tau, (var, ...)), ...), the Gauss-Markov blocks, whose decay and noise are then\n"
+"written here (x' = a x, F's diagonal a, Q's diagonal var (1 - exp(-2 dt / tau)) beside density * dt);\n"
+"without it the dynamic blocks' decay is left to the caller (their noise comes in extra, or None).");
 
 static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 16) {
-        PyErr_SetString(PyExc_TypeError, "predict takes 16 arguments");
+    if (nargs != 16 && nargs != 17) {
+        PyErr_SetString(PyExc_TypeError, "predict takes 16 or 17 arguments");
         return NULL;
     }
     double dt = PyFloat_AsDouble(args[5]);
@@ -522,6 +560,11 @@ static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs
     }
     Py_ssize_t count = read_blocks(args[15], blocks, nx, n);
     if (count < 0) {
+        goto fail;
+    }
+    DecayBlock decays[MAX_DECAY_BLOCKS];
+    Py_ssize_t n_decays = nargs == 17 ? read_decays(args[16], decays, nx, n) : 0;
+    if (n_decays < 0) {
         goto fail;
     }
     /* the input blocks correct the inputs in layout order, each keeping the input it saw */
@@ -592,6 +635,14 @@ static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs
                 qd[i] += extra[i];
             }
         }
+        for (Py_ssize_t j = 0; j < n_decays; j++) { /* GpsErrorBlock.process_noise: k = 1 - exp(-2 dt / tau) */
+            DecayBlock *b = &decays[j];
+            double k = -expm1(-2.0 * dt / b->tau);
+            for (Py_ssize_t i = 0; i < b->size; i++) {
+                double add = b->var[i] * k;
+                qd[b->e0 + i] += add;
+            }
+        }
         const double *gs[2] = {G_lin, G_ang};
         double periods[2] = {lin_period, ang_period};
         for (int j = 0; j < 2; j++) {
@@ -627,6 +678,14 @@ static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         memcpy(x_out + 7, x + 7, sizeof(double) * (size_t)(nx - 7));
     }
     memcpy(x_out, head, sizeof(head));
+    for (Py_ssize_t j = 0; j < n_decays; j++) { /* GpsErrorBlock.transition: a = exp(-dt / tau) */
+        DecayBlock *b = &decays[j];
+        double a = exp(-dt / b->tau);
+        for (Py_ssize_t i = 0; i < b->size; i++) {
+            x_out[b->n0 + i] *= a;
+            F[(b->e0 + i) * n + b->e0 + i] = a;
+        }
+    }
     release(&held);
     Py_RETURN_NONE;
 fail:

@@ -48,6 +48,12 @@ class GpsErrorBlock(StateBlock):
         v0, v1, v2 = self._var
         return [v0 * k, v1 * k, v2 * k]
 
+    def kernel_decay(self) -> tuple[float, tuple[float, ...]]:
+        """(tau, per-axis variance): what ``kernels.predict`` needs to run ``transition`` and
+        ``process_noise`` itself, with the same expressions (a subclass that changes them does not
+        inherit this, so it keeps the Python path)."""
+        return self.tau, self._var
+
     def boxplus(self, x: list[float], dx: list[float], n0: int, e0: int) -> None:
         x[n0] += dx[e0]
         x[n0 + 1] += dx[e0 + 1]

@@ -119,7 +119,7 @@ class PredictWorkspace:
     """
 
     __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_index_f", "_pack_f", "_q_entries", "_zero_columns",
-                 "_cov_seen", "_cov_diagonal", "_nominal_dim", "_kernel_blocks", "_decay_f", "_decay_x")
+                 "_cov_seen", "_cov_diagonal", "_nominal_dim", "_kernel_blocks", "_decay_f", "_decay_x", "_kernel_decays")
 
     def __init__(self, layout: StateLayout) -> None:
         n = layout.error_dim
@@ -161,6 +161,7 @@ class PredictWorkspace:
                                   for i in range(blk.error_size)], dtype=np.intp)
         self._decay_x = np.array([n0 + i for blk, n0, _ in layout.dynamic_blocks for i in range(blk.error_size)],
                                  dtype=np.intp)
+        self._kernel_decays = _kernel_decays(layout)
 
 
 def _kernel_blocks(layout: StateLayout) -> tuple[tuple, tuple] | None:
@@ -178,6 +179,19 @@ def _kernel_blocks(layout: StateLayout) -> tuple[tuple, tuple] | None:
         specs.append((code, blk.corrects == "linear", n0, cols.start, cols.stop - cols.start, blk))
     return tuple(tuple((c, int(b.applies(g)), int(lin), n0, c0, size) for c, lin, n0, c0, size, b in specs)
                  for g in (False, True))
+
+
+def _kernel_decays(layout: StateLayout) -> tuple | None:
+    """The dynamic blocks as ``kernels.predict`` decays them itself: (n0, e0, tau, variances) each; None
+    when one has no compiled form (its own class defines no ``kernel_decay``), or there are none: their
+    decay and noise then stay in Python (``_predict_compiled``)."""
+    specs = []
+    for blk, n0, e0 in layout.dynamic_blocks:
+        if "kernel_decay" not in type(blk).__dict__ or blk.error_size != blk.nominal_size:
+            return None
+        tau, var = blk.kernel_decay()
+        specs.append((n0, e0, float(tau), tuple(float(v) for v in var)))
+    return tuple(specs) or None
 
 
 # F[0:3, 3:6] = -[dp]x: its off-diagonal entries, row-major (the diagonal stays 0)
@@ -239,8 +253,20 @@ def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: floa
 def _predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float,
                       noise_density: np.ndarray, ws: PredictWorkspace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``predict`` as one call of ``kernels.predict`` (the same expressions in C, _kernels.c): the
-    input blocks' chain, x', F and Q. The dynamic blocks' decay and noise stay here, the blocks' own
-    ``transition``/``process_noise``: x' = a x and F's diagonal a are written after the call."""
+    input blocks' chain, x', F and Q. The dynamic blocks' decay and noise: in the same call when each
+    has a ``kernel_decay`` (``_kernel_decays``), else here, the blocks' own ``transition``/``process_noise``:
+    x' = a x and F's diagonal a are written after the call."""
+    flags = (1 if u.world_frame else 0) | (2 if u.planar else 0)
+    x_new = np.empty(ws._nominal_dim)
+    decays = ws._kernel_decays
+    if decays is not None:  # the Gauss-Markov blocks' decay and noise in the same call
+        try:
+            k.predict(x, x_new, ws.F, ws.Q, noise_density, dt, None, u.linear, u.angular, u.linear_cov,
+                      u.angular_cov, u.linear_period, u.angular_period, u.twist_correlation, flags,
+                      ws._kernel_blocks[u.from_gyro], decays)
+        except ArithmeticError:
+            raise EstimatorError("quaternion has zero or non-finite norm") from None
+        return x_new, ws.F, ws.Q
     dynamic = layout.dynamic_blocks
     extra = None
     decay: list[float] | tuple = ()
@@ -253,8 +279,6 @@ def _predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt:
                 for i, q in enumerate(blk.process_noise(dt)):
                     noise[e0 + i] += q
         extra = np.array(noise)
-    x_new = np.empty(ws._nominal_dim)
-    flags = (1 if u.world_frame else 0) | (2 if u.planar else 0)
     try:
         k.predict(x, x_new, ws.F, ws.Q, noise_density, dt, extra, u.linear, u.angular, u.linear_cov, u.angular_cov,
                   u.linear_period, u.angular_period, u.twist_correlation, flags, ws._kernel_blocks[u.from_gyro])

@@ -130,6 +130,14 @@ def test_propagate_matches_the_numpy_path(layout, seed):
     _close(Pc, Pn)
 
 
+class _SlowGpsError(GpsErrorBlock):
+    """A subclass that changes the decay without naming a kernel_decay of its own: Python decays it."""
+
+    def transition(self, dt):
+        a = math.exp(-0.5 * dt / self.tau)
+        return [a, a, a]
+
+
 class _HalfWheelScale(WheelScaleBlock):
     """A subclass that changes the maths without naming a kernel code of its own: Python predicts it."""
 
@@ -154,8 +162,11 @@ PREDICT_LAYOUTS = {
                               GyroScaleBlock(0.05, 1e-5), TwistPitchBlock(0.05, 1e-5),
                               GpsErrorBlock(30.0, (2.0, 2.0, 5.0))]),
     "python_block": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), _HalfWheelScale(0.05, 1e-4)]),
+    # a Gauss-Markov block whose own class names no kernel_decay: compiled inputs, its decay in Python
+    "python_decay": StateLayout([PoseBlock(0.1, 0.1), GyroBiasBlock(0.01, 1e-4), _SlowGpsError(30.0, (2.0, 2.0, 5.0))]),
 }
-COMPILED_PREDICT = {"pose", "inputs", "gps_error", "all_kinds"}
+COMPILED_PREDICT = {"pose", "inputs", "gps_error", "all_kinds", "python_decay"}
+COMPILED_DECAY = {"gps_error", "all_kinds"}
 finite = st.floats(-3.0, 3.0)
 cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple of a silent input
     st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)).map(
@@ -191,6 +202,7 @@ def test_compiled_predict_gives_the_python_paths_floats(layout, seed, v, w, lin_
         kernels.use(name)
         ws = PredictWorkspace(lay)
         assert (ws._kernel_blocks is not None) is (layout in COMPILED_PREDICT)
+        assert (ws._kernel_decays is not None) is (layout in COMPILED_DECAY)
         predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
         x, F, Q = predict(lay, ekf.x, u, dt, density, ws)
         out.append((x.copy(), F.copy(), Q.copy()))
@@ -340,6 +352,19 @@ def test_compiled_predict_refuses_blocks_outside_the_state():
         k.predict(*args, ((9, 1, 0, 7, 6, 3),))
     with pytest.raises(BufferError):
         k.predict(x.astype(np.float32), *args[1:], ())
+
+
+def test_compiled_predict_refuses_decays_outside_the_state():
+    k = kernels.active()
+    x, n = np.zeros(10), 9
+    args = (x, np.empty(10), np.eye(n), np.zeros((n, n)), np.zeros(n), 0.01, None, (0.0,) * 3, (0.0,) * 3,
+            (0.0,) * 9, (0.0,) * 9, 0.0, 0.0, 0.0, 0, ())
+    with pytest.raises(ValueError, match="a decaying block outside the state"):
+        k.predict(*args, ((8, 6, 30.0, (1.0, 1.0, 1.0)),))  # three errors from nominal 8 run past x
+    with pytest.raises(ValueError, match="a decaying block outside the state"):
+        k.predict(*args, ((7, 3, 30.0, (1.0, 1.0, 1.0)),))  # into the pose's errors
+    with pytest.raises(TypeError):
+        k.predict(*args, ((7, 6, 30.0, [1.0, 1.0, 1.0]),))
 
 
 def test_the_constants_mirror_the_c_module():
