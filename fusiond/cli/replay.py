@@ -105,15 +105,8 @@ def run(args: argparse.Namespace) -> int:
         )
         if fused:
             from ..tune.advice import prove_advice
-            from ..tune.forked import usable_cpus
 
-            import threading
-
-            # the advice's replays share the CPUs in forked processes only while no other thread is alive
-            # (the bag's reader has ended): a fork copies no lock a thread holds then
-            workers = usable_cpus() if threading.active_count() == 1 else 1
-            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records,
-                                         workers=workers)
+            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records)
         evaluation = None
         if recorder is not None:
             from ..replay.evaluate import evaluate

@@ -28,7 +28,6 @@ from ..collector import skips_the_caller
 from ..config import Config, ConfigError, convert, validate
 from ..doctor import Proof, Verdict
 from ..logs import muted
-from .forked import map_forked
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
 
 __all__ = ["prove_advice", "split_key", "with_suggestion"]
@@ -102,32 +101,27 @@ def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
 
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
-                 budget_s: float = 60.0, base_records: Sequence[object] | None = None,
-                 workers: int = 1) -> list[Verdict]:
+                 budget_s: float = 60.0, base_records: Sequence[object] | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
     recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
     when the caller kept them (else the recording is replayed once more for them). Then one replay per
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
-    recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
-    ``workers`` > 1: the lines' replays shared with forked processes (``forked``; only a caller whose
-    process is safe to fork asks for it); the proofs are the same either way."""
+    recording's warnings were logged by the replay the verdicts come from: these replays log nothing."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
-        return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,
-                       workers)
+        return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records)
 
 
 def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
-            deadline: float, budget_s: float, base_records: Sequence[object] | None, workers: int) -> list[Verdict]:
+            deadline: float, budget_s: float, base_records: Sequence[object] | None) -> list[Verdict]:
     """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
             base_records = replay_records(cfg, samples)
     full = reference(base_records, cfg)
     proofs: dict[tuple[str, str], Proof] = {}
-    replays: list[tuple[tuple[str, str], Config, int, str]] = []  # (line, its config, keys it sets, sensor)
     # problems first: if the budget runs out, the lines left unproven are the least urgent ones
     for v in sorted(pending, key=lambda v: v.level != "problem"):
         line = (v.key, v.suggestion)
@@ -138,13 +132,9 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         except ConfigError as err:
             proofs[line] = Proof(False, f"it does not apply to this config ({err})", tried=False)
             continue
-        proofs[line] = Proof(False, "", tried=False)  # its place: replayed below
-        replays.append((line, changed, n_keys, v.sensor))
-
-    def prove(job: tuple[tuple[str, str], Config, int, str]) -> Proof:
-        _, changed, n_keys, sensor = job
         if time.perf_counter() > deadline:
-            return Proof(True, f"the {budget_s:g} s budget for replaying advice ran out", tried=False)
+            proofs[line] = Proof(True, f"the {budget_s:g} s budget for replaying advice ran out", tried=False)
+            continue
         with muted():
             records = replay_records(changed, samples)
         ref, dropped = _comparable(full, records)
@@ -152,11 +142,9 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         gain = before.neg_loglik - after.neg_loglik
         if gain == 0.0 and not dropped and after.rejected == before.rejected:
             # a key the filter does not use here (a floor of a channel only the doctor's check reads)
-            return Proof(False, "it changes none of the filter's updates on this recording, only the "
-                                "doctor's own check")
-        return Proof(gain > n_keys, _effect(before, after, sensor, dropped))
-
-    for job, proof in zip(replays, map_forked(prove, replays, workers)):
-        proofs[job[0]] = proof
+            proofs[line] = Proof(False, "it changes none of the filter's updates on this recording, only the "
+                                        "doctor's own check")
+        else:
+            proofs[line] = Proof(gain > n_keys, _effect(before, after, v.sensor, dropped))
     return [msgspec.structs.replace(v, proof=proofs[(v.key, v.suggestion)]) if v.suggestion else v
             for v in verdicts]

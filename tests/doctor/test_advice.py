@@ -136,14 +136,3 @@ def test_the_doctor_command_prints_the_replayed_effect(drive, tmp_path: Path, ca
     assert "gyro_noise = 0.00" in out and "replayed" not in out, out
     assert main(["replay", str(tmp_path / "bag"), "--config", str(cfg), "--advice-budget-s", "-1"]) == 2
     assert "--advice-budget-s" in capsys.readouterr().err
-
-
-def test_proofs_shared_with_forked_processes_are_the_ones_proven_here(drive) -> None:
-    """Two planted mistakes, two paste lines: replayed in a forked child and here, each line's proof is
-    the one the sequential run gives, in the same order."""
-    cfg = robot_config(imu="gyro_noise = 0.02\norientation_noise = [0.0002, 0.0002, 0.0002]")
-    verdicts = run_samples(drive, cfg).verdicts()
-    assert len({(v.key, v.suggestion) for v in verdicts if v.suggestion}) >= 2
-    alone = prove_advice(cfg, drive, verdicts, workers=1)
-    shared = prove_advice(cfg, drive, verdicts, workers=2)
-    assert shared == alone
