@@ -98,3 +98,17 @@ def test_lagged_pose_equals_the_offline_smoother_over_the_same_window(late):
 def test_off_by_default_no_recorder():
     core = FusionCore(robot_config())
     assert core._smoothing is None and core.lagged_pose() is None
+
+
+def test_config_keys_off_by_default_and_the_lag_must_be_positive():
+    from fusiond.config import ConfigError, loads
+
+    from tests.support.configs import robot_config_text
+
+    cfg = robot_config()
+    assert cfg.output.smoothed_key == "" and cfg.output.smooth_lag_s == 1.0
+    on = loads('[output]\nsmoothed_key = "odom_smoothed"\nsmooth_lag_s = 2.5\n' + robot_config_text())
+    assert on.output.smoothed_key == "odom_smoothed" and on.output.smooth_lag_s == 2.5
+    for bad in ("0", "-1.0", "nan"):
+        with pytest.raises(ConfigError, match="smooth_lag_s"):
+            loads(f'[output]\nsmooth_lag_s = {bad}\n' + robot_config_text())
