@@ -9,9 +9,10 @@ reach any more are forgotten, so memory stays bounded while the daemon runs.
 
 What a window keeps: the anchors of the last ``lag_s + history_s`` (``history_s``: the late-data history,
 so a rewind of the filter lands on anchors still held), each the nominal state, its filtered covariance,
-and the link (A, b): 13 x 13 + 13 + 13 x 13 floats and 16 nominal at n = 13, ~2.9 kB; at 100 Hz publish
-moments and the defaults (1 s + 1 s) ~200 anchors, ~0.6 MB. Per publish moment: one n-vector product
-per anchor of the window (~100 at 100 Hz and 1 s), one boxplus.
+and the link (A, b), and the link composed with its neighbours (``lag_window``: two stacks of (A, b)):
+about 3 n x n + 3 n + m floats, 2.1 kB at n = 9 (odometry + IMU), 4.3 kB at n = 13; at 100 Hz publish
+moments and the defaults (1 s + 1 s) ~200 anchors, 0.4-0.9 MB. Per publish moment: about two n x n
+products (the window's compositions kept as it slides, ``lag_window``) and one boxplus, whatever the lag.
 
 The stated covariance is the filtered one of that moment: the smoothed covariance is never larger, and
 computing it would cost two n x n products per anchor of the window per message.
@@ -22,6 +23,7 @@ from __future__ import annotations
 import msgspec
 
 from ..estimator import POSE_ERR, attitude_of, position_of
+from ..estimator.lag_window import SlidingCorrection
 from ..estimator.smoother import OpenSegment, SmoothingRecorder, smoothed_at
 from ..estimator.state import StateLayout
 
@@ -48,6 +50,7 @@ class FixedLag:
         self.lag_s = lag_s
         self.keep_s = lag_s + history_s
         self.recorder = SmoothingRecorder(layout, filtered_covariance=True)
+        self.window = SlidingCorrection(layout.error_dim)
 
     def pose(self, segment: OpenSegment | None) -> LaggedPose | None:
         """The pose at the newest anchor's stamp - ``lag_s`` (the anchor at or just before it), smoothed
@@ -69,7 +72,8 @@ class FixedLag:
         rec.forget(drop)
         k -= drop
         a = rec.anchors[k]
-        x = smoothed_at(self.layout, rec.anchors, k, rec.relative_turns())
+        d = self.window.correction(rec.anchors, rec.base, k)
+        x = smoothed_at(self.layout, rec.anchors, k, rec.relative_turns(), d)
         return LaggedPose(stamp=a.stamp, position=position_of(x), orientation=attitude_of(x),
                           pose_covariance=a.P[POSE_ERR, POSE_ERR].ravel().tolist())
 

@@ -331,23 +331,26 @@ def _shown_turned(a: Anchor, turn: float | None) -> tuple[float, float, float]:
 
 
 def smoothed_at(layout: StateLayout, anchors: list[Anchor], k: int,
-                turns: list[tuple[int, float]] | None = None) -> np.ndarray:
+                turns: list[tuple[int, float]] | None = None, d: np.ndarray | None = None) -> np.ndarray:
     """Anchor ``k``'s nominal state smoothed over ``anchors[k:]`` (a fixed lag: the window since it), the
     same as ``smooth(layout, anchors[k:], turns shifted by k).x[0]`` without smoothing the rest: only the
     correction d is carried back, from the last anchor of k's segment (d = 0 there) through the links
-    in between, one n-vector product each, and one boxplus at k. ``turns``: as ``smooth``'s, counted
-    from ``anchors[0]``."""
-    N = len(anchors)
-    end = k + 1  # the first anchor after k's segment (or N)
-    while end < N and anchors[end].link is not None:
-        end += 1
+    in between, one n-vector product each, and one boxplus at k. ``d``: that correction when the caller
+    keeps it otherwise (``lag_window.SlidingCorrection``). ``turns``: as ``smooth``'s, counted from
+    ``anchors[0]``."""
     a = anchors[k]
     x = a.x.copy()
-    if end > k + 1:
-        d = anchors[end - 1].link[1]
-        for j in range(end - 2, k, -1):
-            A, b, _ = anchors[j].link
-            d = b + A.dot(d)
+    if d is None:
+        N = len(anchors)
+        end = k + 1  # the first anchor after k's segment (or N)
+        while end < N and anchors[end].link is not None:
+            end += 1
+        if end > k + 1:
+            d = anchors[end - 1].link[1]
+            for j in range(end - 2, k, -1):
+                A, b, _ = anchors[j].link
+                d = b + A.dot(d)
+    if d is not None:
         layout.boxplus(x, d)
     if a.shown is not None:
         later = [angle for before, angle in turns or () if before > k]
