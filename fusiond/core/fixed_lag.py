@@ -10,8 +10,8 @@ reach any more are forgotten, so memory stays bounded while the daemon runs.
 What a window keeps: the anchors of the last ``lag_s + history_s`` (``history_s``: the late-data history,
 so a rewind of the filter lands on anchors still held), each the nominal state, its filtered covariance,
 and the link (A, b), and the link composed with its neighbours (``lag_window``: two stacks of (A, b)):
-about 3 n x n + 3 n + m floats, 2.1 kB at n = 9 (odometry + IMU), 4.3 kB at n = 13; at 100 Hz publish
-moments and the defaults (1 s + 1 s) ~200 anchors, 0.4-0.9 MB. Per publish moment: about two n x n
+measured 1.8 kB of arrays an anchor at n = 9 (odometry + IMU); at 100 Hz publish moments and the
+defaults (1 s + 1 s) 201 anchors, 0.36 MB (docs/SMOOTHER.md). Per publish moment: about two n x n
 products (the window's compositions kept as it slides, ``lag_window``) and one boxplus, whatever the lag.
 
 The stated covariance is the filtered one of that moment: the smoothed covariance is never larger, and
