@@ -26,7 +26,7 @@ from fusiond.transport.intake import direct
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config_text
-from tests.support.daemon import (client_session, daemon_process, free_port, sensor_publishers, wait_daemon_ready,
+from tests.support.daemon import (ROOT, client_session, daemon_process, free_port, sensor_publishers, wait_daemon_ready,
                                   wait_until)
 
 LAG = 0.5
@@ -131,3 +131,37 @@ def test_daemon_publishes_the_fixed_lag_smoothed_pose_equal_to_the_offline_smoot
         moved = max(moved, float(np.linalg.norm(want[0:3] - rec.anchors[k].x[0:3])))
     assert smoothed >= len(newest_of) - 2, (smoothed, len(newest_of))
     assert moved > 0.01  # the window did change the past
+
+
+@pytest.mark.e2e
+def test_fixed_lag_on_the_jackal_bag_equals_the_offline_smoother_through_its_rewinds(jackal_bag):
+    """The real Jackal bag (one IMU message in five late: the filter rewinds every few messages) through
+    a core with the fixed-lag window and one recording the whole run: at every tenth publish moment the
+    lagged pose equals the offline smoother over the same window, and the window stays bounded."""
+    from fusiond.replay.bag import open_bag_samples
+
+    cfg = load(ROOT / "examples" / "jackal_rl.toml")
+    with open_bag_samples([jackal_bag], cfg.sensors) as bag:
+        samples = list(bag)
+    lag, whole = FusionCore(cfg), FusionCore(cfg)
+    lag.smooth_with_lag(1.0)
+    whole.record_for_smoothing()
+    checked = most = publishes = 0
+    for s in samples:
+        step = lag.ingest(s)
+        whole.ingest(s)
+        if not step.publish:
+            continue
+        publishes += 1
+        pose = lag.lagged_pose()
+        most = max(most, len(lag._smoothing.anchors))
+        if pose is None or publishes % 10:
+            continue
+        whole.smoothed()
+        rec = whole._smoothing
+        k = [a.stamp for a in rec.anchors].index(pose.stamp)
+        turns = [(before - k, angle) for before, angle in rec.relative_turns()]
+        want = smooth(rec.layout, rec.anchors[k:], False, turns).x[0][POSE]
+        assert np.max(np.abs(np.array([*pose.position, *pose.orientation]) - want)) < 1e-9
+        checked += 1
+    assert checked > 250 and most < 0.1 * publishes, (checked, most, publishes)

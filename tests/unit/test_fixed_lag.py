@@ -112,3 +112,17 @@ def test_config_keys_off_by_default_and_the_lag_must_be_positive():
     for bad in ("0", "-1.0", "nan"):
         with pytest.raises(ConfigError, match="smooth_lag_s"):
             loads(f'[output]\nsmooth_lag_s = {bad}\n' + robot_config_text())
+
+
+def test_the_daemon_records_the_window_only_with_the_key():
+    """Off (the default) costs nothing: no recorder in the daemon's core; on, the window's recorder."""
+    from fusiond.config import loads
+    from fusiond.transport.daemon import Daemon
+
+    from tests.support.configs import robot_config_text
+
+    off = Daemon(robot_config(), session=None, monitor=False)
+    assert off.core._smoothing is None and off.core._lag is None
+    on = Daemon(loads('[output]\nsmoothed_key = "odom_smoothed"\nsmooth_lag_s = 2.0\n' + robot_config_text()),
+                session=None, monitor=False)
+    assert on.core._lag is not None and on.core._lag.lag_s == 2.0 and on.core._smoothing is on.core._lag.recorder
