@@ -51,11 +51,21 @@ class FixedLag:
         self.keep_s = lag_s + history_s
         self.recorder = SmoothingRecorder(layout, filtered_covariance=True)
         self.window = SlidingCorrection(layout.error_dim)
+        self._last = -1  # the timeline's index of the last anchor returned: each is returned once
+
+    def restart(self, segment: OpenSegment | None) -> None:
+        """The filter starts over (a time jump back, set_pose, a resumed state): what came before is
+        another timeline, whose stamps may be later than the new one's; the window starts empty."""
+        rec = self.recorder
+        if segment is not None:
+            rec.keep(segment.count, segment.turns)
+        rec.forget(len(rec.anchors))
 
     def pose(self, segment: OpenSegment | None) -> LaggedPose | None:
         """The pose at the newest anchor's stamp - ``lag_s`` (the anchor at or just before it), smoothed
-        over the anchors since; None while no anchor is that old. ``segment``: the newest filter's view
-        of the record (what an abandoned timeline recorded goes)."""
+        over the anchors since; None while no anchor is that old, or when that anchor's pose was
+        returned already. ``segment``: the newest filter's view of the record (what an abandoned
+        timeline recorded goes)."""
         rec = self.recorder
         if segment is None:
             return None
@@ -72,6 +82,9 @@ class FixedLag:
         rec.forget(drop)
         k -= drop
         a = rec.anchors[k]
+        if rec.base + k <= self._last:
+            return None
+        self._last = rec.base + k
         d = self.window.correction(rec.anchors, rec.base, k)
         x = smoothed_at(self.layout, rec.anchors, k, rec.relative_turns(), d)
         return LaggedPose(stamp=a.stamp, position=position_of(x), orientation=attitude_of(x),

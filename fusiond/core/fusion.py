@@ -194,8 +194,9 @@ class FusionCore:
         self._smoothing = self._lag.recorder
 
     def lagged_pose(self) -> LaggedPose | None:
-        """The pose of ``lag_s`` before the newest publish moment, smoothed over the window since (None
-        until the record reaches that far back, or without ``smooth_with_lag``)."""
+        """The pose of ``lag_s`` before the newest publish moment, smoothed over the window since, once
+        per publish moment it reaches (None until the record reaches that far back, when that moment's
+        was returned already, or without ``smooth_with_lag``)."""
         if self._lag is None or self.state is None:
             return None
         return self._lag.pose(self.state.ekf.recording)
@@ -621,6 +622,8 @@ class FusionCore:
             ekf.record(self._smoothing.open(old.count if old is not None else 0))
             if old is not None:
                 ekf.recording.turns = old.turns
+            if self._lag is not None and old is not None:
+                self._lag.restart(old)
         s = FilterState.initial(ekf, len(self.sensors), self.inputs.default_linear_cov,
                                 self.inputs.default_angular_cov)
         for m in self.models:

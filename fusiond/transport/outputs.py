@@ -11,8 +11,8 @@ writes the filter: it is handed the core and asks it for the estimate.
   They are batched, not ``express`` unless asked: on a loaded 2-core machine express messages lost a few
   poses to Zenoh's drop-on-congestion where batching lost none, at the same latency.
 - With ``[output] smoothed_key``: beside each pose, the pose of ``smooth_lag_s`` ago smoothed over the window
-  since (``core/fixed_lag.py``), in the pose's encoding and frame, once per publish moment it reaches (its
-  stamps strictly increase); off, no publisher is declared.
+  since (``core/fixed_lag.py``), in the pose's encoding and frame, once per publish moment it reaches (in
+  stamp order along a timeline; a reset starts it again); off, no publisher is declared.
 - Diagnostics (``[output] diagnostics_batch_s``): the records are collected and put as ONE JSON array,
   encoded in one msgspec call, when the worker's timer says so or MAX_BATCH are waiting; 0 puts one record
   per put. Readers accept both forms (``fusiond.monitor.decode_diagnostics``).
@@ -63,7 +63,6 @@ class Outputs:
         self.diagnostics = session.declare_publisher(out.diagnostics_key, encoding=zenoh.Encoding.APPLICATION_JSON)
         self.navsat = self._ros_publisher(out.navsat_key, NAVSATFIX) if out.navsat_key else None
         self.smoothed = self._ros_publisher(out.smoothed_key, POSE_COV_STAMPED) if out.smoothed_key else None
-        self._smoothed_stamp = -float("inf")  # the last smoothed pose's stamp: each is put once
         self.smoothed_published = 0
         self.tf_pub = self._ros_publisher(out.tf_key, TF_MESSAGE, depth=TF_DEPTH) if out.publish_tf else None
         self.ros_diagnostics = (self._ros_publisher(out.ros_diagnostics_key, DIAGNOSTIC_ARRAY)
@@ -112,11 +111,11 @@ class Outputs:
             self._publish_smoothed(core, frame)
 
     def _publish_smoothed(self, core: Any, frame: str) -> None:
-        """The fixed-lag smoothed pose, when the lag reaches a publish moment not yet put."""
+        """The fixed-lag smoothed pose, when the lag reaches a publish moment not yet put (the core
+        returns each once)."""
         lagged = core.lagged_pose()
-        if lagged is None or not lagged.stamp > self._smoothed_stamp:
+        if lagged is None:
             return
-        self._smoothed_stamp = lagged.stamp
         self.smoothed.put(encode_pose_cdr(lagged.stamp, frame, lagged.position, lagged.orientation,
                                           lagged.pose_covariance))
         self.smoothed_published += 1
