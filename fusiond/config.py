@@ -186,6 +186,8 @@ def _check_ros(cfg: Config) -> None:
     for name in ("tf_key", "set_pose_key"):
         if not getattr(out, name):
             raise ConfigError(f"output.{name}: must not be empty")
+    if not (math.isfinite(out.smooth_lag_s) and out.smooth_lag_s > 0.0):
+        raise ConfigError(f"output.smooth_lag_s: must be a positive number of seconds, got {out.smooth_lag_s}")
     if not 0 <= ros.domain_id < 2**31:
         raise ConfigError(f"ros.domain_id: must be in [0, 2^31), got {ros.domain_id}")
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", ros.node_name):

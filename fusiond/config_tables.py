@@ -59,6 +59,10 @@ class OutputConfig(_Table):
     ros_diagnostics_key: str = "diagnostics"  # health as diagnostic_msgs/msg/DiagnosticArray (empty: off)
     ros_diagnostics_period_s: float = 1.0  # how often it is published (diagnostic_updater's default rate)
     set_pose_key: str = "fusiond/set_pose"  # queryable: re-initialise the filter (robot_localization's set_pose)
+    # the pose of smooth_lag_s ago smoothed over the window since (core/fixed_lag.py), for a consumer that can
+    # wait (a mapper); "": off, and nothing is recorded for it
+    smoothed_key: str = ""
+    smooth_lag_s: float = 1.0
 
 
 class RosConfig(_Table):

@@ -35,6 +35,7 @@ from ..estimator import (POSE, POSE_ERR, POSITION, POSITION_ERR, ErrorStateEKF, 
 from ..errors import EstimatorError
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..estimator.smoother import Smoothed, SmoothingRecorder
+from .fixed_lag import FixedLag, LaggedPose
 from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
@@ -170,6 +171,7 @@ class FusionCore:
         self.covariance_resets = 0
         self.glitches = 0  # bursts of far stamps dropped as a clock glitch
         self._smoothing: SmoothingRecorder | None = None  # record_for_smoothing: off unless asked
+        self._lag: FixedLag | None = None  # smooth_with_lag: off unless asked
 
     # -- smoothing (an offline replay's --smooth) -----------------------------------------------------
     def record_for_smoothing(self, covariance: bool = False) -> None:
@@ -179,6 +181,25 @@ class FusionCore:
         if self.state is not None:
             raise CoreError("record_for_smoothing must be called before the first sample")
         self._smoothing = SmoothingRecorder(self.layout, covariance)
+
+    def smooth_with_lag(self, lag_s: float) -> None:
+        """Keep the window a fixed-lag smoothed pose needs (``core/fixed_lag.py``, ``lagged_pose``): the
+        anchors of the last ``lag_s`` + ``history_s``. Asked before the first sample; the estimates
+        themselves do not change. Not together with ``record_for_smoothing`` (one recorder a filter)."""
+        if self.state is not None:
+            raise CoreError("smooth_with_lag must be called before the first sample")
+        if self._smoothing is not None:
+            raise CoreError("smooth_with_lag: the core already records for the offline smoother")
+        self._lag = FixedLag(self.layout, lag_s, self._history_s)
+        self._smoothing = self._lag.recorder
+
+    def lagged_pose(self) -> LaggedPose | None:
+        """The pose of ``lag_s`` before the newest publish moment, smoothed over the window since, once
+        per publish moment it reaches (None until the record reaches that far back, when that moment's
+        was returned already, or without ``smooth_with_lag``)."""
+        if self._lag is None or self.state is None:
+            return None
+        return self._lag.pose(self.state.ekf.recording)
 
     def smoothed(self) -> Smoothed:
         """The smoothed estimates at the publish moments so far (RTS over each segment: a time jump, a
@@ -601,6 +622,8 @@ class FusionCore:
             ekf.record(self._smoothing.open(old.count if old is not None else 0))
             if old is not None:
                 ekf.recording.turns = old.turns
+            if self._lag is not None and old is not None:
+                self._lag.restart(old)
         s = FilterState.initial(ekf, len(self.sensors), self.inputs.default_linear_cov,
                                 self.inputs.default_angular_cov)
         for m in self.models:

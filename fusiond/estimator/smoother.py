@@ -55,7 +55,7 @@ import numpy as np
 
 from .state import StateLayout
 
-__all__ = ["Anchor", "Smoothed", "SmoothingRecorder", "OpenSegment", "smooth"]
+__all__ = ["Anchor", "Smoothed", "SmoothingRecorder", "OpenSegment", "smooth", "smoothed_at"]
 
 
 class Anchor:
@@ -92,13 +92,22 @@ class Smoothed:
 class SmoothingRecorder:
     """The anchors of one run, in the order of the filter's final timeline.
 
-    ``covariance``: also keep what the smoothed covariance needs (three times the memory)."""
+    ``covariance``: also keep what the smoothed covariance needs (three times the memory).
+    ``filtered_covariance``: keep each anchor's filtered P (not B): what a fixed-lag output states as its
+    covariance without the smoothed one's cost.
 
-    def __init__(self, layout: StateLayout, covariance: bool = False) -> None:
+    A fixed-lag output needs the last window only: ``forget`` drops the anchors before one, and
+    ``base`` counts them, so the counts the filters carry (``OpenSegment.count``, ``turns``) stay the
+    timeline's own: ``anchors[i]`` is the timeline's anchor ``base + i``."""
+
+    def __init__(self, layout: StateLayout, covariance: bool = False, filtered_covariance: bool = False) -> None:
         self.layout = layout
         self.covariance = covariance
+        self.keeps_P = covariance or filtered_covariance
         self.anchors: list[Anchor] = []
         self.turns: list[tuple[int, float]] = []  # (anchors recorded before it, angle) of each heading turn
+        self.base = 0  # anchors forgotten before anchors[0]
+        self.turns_base = 0  # heading turns forgotten before turns[0]
 
     def open(self, anchors: int = 0) -> "OpenSegment":
         """A filter's view of the recorder, starting after the first ``anchors`` anchors with no
@@ -107,14 +116,43 @@ class SmoothingRecorder:
 
     def keep(self, count: int, turns: int) -> None:
         """Drop the anchors after the first ``count`` and the heading turns after the first ``turns``: a
-        rewound filter's timeline replaces them."""
-        if len(self.anchors) > count:
-            del self.anchors[count:]
-        if len(self.turns) > turns:
-            del self.turns[turns:]
+        rewound filter's timeline replaces them. A rewind to before the forgotten ones empties the record
+        (the window restarts there)."""
+        k = count - self.base
+        if k < 0:
+            self.anchors.clear()
+            self.base = count
+        elif len(self.anchors) > k:
+            del self.anchors[k:]
+        k = turns - self.turns_base
+        if k < 0:
+            self.turns.clear()
+            self.turns_base = turns
+        elif len(self.turns) > k:
+            del self.turns[k:]
+
+    def forget(self, index: int) -> None:
+        """Drop ``anchors[:index]`` and the heading turns that only turned those (a fixed-lag window)."""
+        if index <= 0:
+            return
+        del self.anchors[:index]
+        self.base += index
+        drop = 0
+        for before, _ in self.turns:
+            if before > self.base:
+                break
+            drop += 1
+        if drop:
+            del self.turns[:drop]
+            self.turns_base += drop
+
+    def relative_turns(self) -> list[tuple[int, float]]:
+        """The heading turns with their counts relative to ``anchors[0]``."""
+        base = self.base
+        return [(before - base, angle) for before, angle in self.turns]
 
     def smooth(self) -> Smoothed:
-        return smooth(self.layout, self.anchors, self.covariance, self.turns)
+        return smooth(self.layout, self.anchors, self.covariance, self.relative_turns())
 
 
 class OpenSegment:
@@ -190,7 +228,7 @@ class OpenSegment:
             self._flush()
             link = (self.A, self.b, self.B)
         rec.keep(self.count, self.turns)
-        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.covariance else None, link, shown, origin))
+        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.keeps_P else None, link, shown, origin))
         self.count += 1
         n = P.shape[0]
         self.A = np.eye(n)
@@ -275,13 +313,46 @@ def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False,
         if a.shown is None:
             continue
         later = befores > i
-        if a.origin is None or not later.any():
-            xs[i, 0:3] = a.shown
-            continue
-        turn = float(angles[later].sum())
-        c, s = np.cos(turn), np.sin(turn)
-        ox, oy = a.origin
-        dx, dy = float(a.x[0]) - ox, float(a.x[1]) - oy
-        xs[i, 0:3] = (ox + c * dx - s * dy, oy + s * dx + c * dy, a.shown[2])
+        xs[i, 0:3] = _shown_turned(a, float(angles[later].sum()) if later.any() else None)
     return Smoothed(t, xs, Ps, filtered)
 
+
+def _shown_turned(a: Anchor, turn: float | None) -> tuple[float, float, float]:
+    """The position of an anchor whose published one was ``shown`` (module doc: a heading found late):
+    its origin plus its dead-reckoned displacement turned by ``turn`` (the later heading turns' sum), or
+    the shown one when no turn came after it (``turn`` None) or it has no origin."""
+    if a.origin is None or turn is None:
+        return a.shown
+    c, s = np.cos(turn), np.sin(turn)
+    ox, oy = a.origin
+    dx, dy = float(a.x[0]) - ox, float(a.x[1]) - oy
+    return (ox + c * dx - s * dy, oy + s * dx + c * dy, a.shown[2])
+
+
+
+def smoothed_at(layout: StateLayout, anchors: list[Anchor], k: int,
+                turns: list[tuple[int, float]] | None = None, d: np.ndarray | None = None) -> np.ndarray:
+    """Anchor ``k``'s nominal state smoothed over ``anchors[k:]`` (a fixed lag: the window since it), the
+    same as ``smooth(layout, anchors[k:], turns shifted by k).x[0]`` without smoothing the rest: only the
+    correction d is carried back, from the last anchor of k's segment (d = 0 there) through the links
+    in between, one n-vector product each, and one boxplus at k. ``d``: that correction when the caller
+    keeps it otherwise (``lag_window.SlidingCorrection``). ``turns``: as ``smooth``'s, counted from
+    ``anchors[0]``."""
+    a = anchors[k]
+    x = a.x.copy()
+    if d is None:
+        N = len(anchors)
+        end = k + 1  # the first anchor after k's segment (or N)
+        while end < N and anchors[end].link is not None:
+            end += 1
+        if end > k + 1:
+            d = anchors[end - 1].link[1]
+            for j in range(end - 2, k, -1):
+                A, b, _ = anchors[j].link
+                d = b + A.dot(d)
+    if d is not None:
+        layout.boxplus(x, d)
+    if a.shown is not None:
+        later = [angle for before, angle in turns or () if before > k]
+        x[0:3] = _shown_turned(a, float(np.array(later).sum()) if later else None)
+    return x

@@ -32,7 +32,8 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   Bookkeeping that can wait for the end of a pass does (health learns a pass's
   accepted samples under one lock), so the per-message path is decode, fuse, publish.
 - What goes out, in which encoding and on which key, is `outputs.py`'s: the pose,
-  odometry, NavSatFix and TF of every estimate the core says to publish, and the JSON
+  odometry, NavSatFix and TF of every estimate the core says to publish (and, with
+  `smoothed_key`, the fixed-lag smoothed pose beside it), and the JSON
   diagnostics records. Here: when. Diagnostics are put on a timer of the worker's own
   loop (never a Zenoh thread), one JSON array a put: at 1 kHz IMU 20 puts a second
   instead of 1,100 encodes and puts (6-9 us of worker time a message here); the batch
@@ -135,6 +136,8 @@ class Daemon:
         self.cfg = cfg
         self.session = session
         self.core = FusionCore(cfg)
+        if cfg.output.smoothed_key:  # the fixed-lag window is recorded only when its pose is published
+            self.core.smooth_with_lag(cfg.output.smooth_lag_s)
         # Samples and set_pose requests in arrival order (callbacks append, the worker pops), and the
         # wake tokens that end the worker's wait: one per sample that publishes, per set_pose, on stop,
         # and on the first arrival while the worker sleeps idle (see the module docstring).
@@ -605,6 +608,7 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
                  alive_key=alive_key(cfg.output.health_key), set_pose_key=cfg.output.set_pose_key,
                  tf_key=cfg.output.tf_key if cfg.output.publish_tf else None,
                  ros_diagnostics_key=cfg.output.ros_diagnostics_key or None, interop=cfg.ros.interop,
+                 smoothed_key=cfg.output.smoothed_key or None,
                  node=daemon.node.token_key if daemon.node is not None else None,
                  state_path=str(daemon.state_path) if daemon.state_path is not None else None)
         while not stop.wait(0.5):

@@ -10,6 +10,9 @@ writes the filter: it is handed the core and asks it for the estimate.
   says to publish, with the world frame when a GPS or absolute pose defines it (``tf_broadcast.py``).
   They are batched, not ``express`` unless asked: on a loaded 2-core machine express messages lost a few
   poses to Zenoh's drop-on-congestion where batching lost none, at the same latency.
+- With ``[output] smoothed_key``: beside each pose, the pose of ``smooth_lag_s`` ago smoothed over the window
+  since (``core/fixed_lag.py``), in the pose's encoding and frame, once per publish moment it reaches (in
+  stamp order along a timeline; a reset starts it again); off, no publisher is declared.
 - Diagnostics (``[output] diagnostics_batch_s``): the records are collected and put as ONE JSON array,
   encoded in one msgspec call, when the worker's timer says so or MAX_BATCH are waiting; 0 puts one record
   per put. Readers accept both forms (``fusiond.monitor.decode_diagnostics``).
@@ -59,6 +62,8 @@ class Outputs:
         self.odometry = self._ros_publisher(out.odometry_key, ODOMETRY)
         self.diagnostics = session.declare_publisher(out.diagnostics_key, encoding=zenoh.Encoding.APPLICATION_JSON)
         self.navsat = self._ros_publisher(out.navsat_key, NAVSATFIX) if out.navsat_key else None
+        self.smoothed = self._ros_publisher(out.smoothed_key, POSE_COV_STAMPED) if out.smoothed_key else None
+        self.smoothed_published = 0
         self.tf_pub = self._ros_publisher(out.tf_key, TF_MESSAGE, depth=TF_DEPTH) if out.publish_tf else None
         self.ros_diagnostics = (self._ros_publisher(out.ros_diagnostics_key, DIAGNOSTIC_ARRAY)
                                 if out.ros_diagnostics_key else None)
@@ -77,7 +82,7 @@ class Outputs:
     def declared(self) -> list[Any]:
         """Every publisher, in the order declared (undeclared in reverse by the daemon)."""
         return [p for p in (self.pose, self.odometry, self.diagnostics, self.navsat, self.tf_pub,
-                            self.ros_diagnostics) if p is not None]
+                            self.ros_diagnostics, self.smoothed) if p is not None]
 
     @property
     def tf_published(self) -> int:
@@ -102,6 +107,18 @@ class Outputs:
             if tf is not None:
                 self.tf_pub.put(tf)
         self.published += 1
+        if self.smoothed is not None:
+            self._publish_smoothed(core, frame)
+
+    def _publish_smoothed(self, core: Any, frame: str) -> None:
+        """The fixed-lag smoothed pose, when the lag reaches a publish moment not yet put (the core
+        returns each once)."""
+        lagged = core.lagged_pose()
+        if lagged is None:
+            return
+        self.smoothed.put(encode_pose_cdr(lagged.stamp, frame, lagged.position, lagged.orientation,
+                                          lagged.pose_covariance))
+        self.smoothed_published += 1
 
     @property
     def pending(self) -> bool:

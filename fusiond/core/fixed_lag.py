@@ -1,0 +1,103 @@
+"""The fixed-lag smoothed pose: the pose of ``lag_s`` ago, smoothed over the window since.
+
+A mapping node that can wait gets a better pose than the causal one: what the filter learnt in the last
+``lag_s`` also says where the robot was then. The maths is the offline smoother's
+(``fusiond.estimator.smoother``): the filter records an anchor at every publish moment with the composed
+RTS maps between them; here the anchor at or just before ``newest - lag_s`` is smoothed over the anchors
+since (``smoothed_at``: the same as the offline smoother over that window), and the anchors no window can
+reach any more are forgotten, so memory stays bounded while the daemon runs.
+
+What a window keeps: the anchors of the last ``lag_s + history_s`` (``history_s``: the late-data history,
+so a rewind of the filter lands on anchors still held), each the nominal state, its filtered covariance,
+and the link (A, b), and the link composed with its neighbours (``lag_window``: two stacks of (A, b)):
+measured 1.8 kB of arrays an anchor at n = 9 (odometry + IMU); at 100 Hz publish moments and the
+defaults (1 s + 1 s) 201 anchors, 0.36 MB (docs/SMOOTHER.md). Per publish moment: about two n x n
+products (the window's compositions kept as it slides, ``lag_window``) and one boxplus, whatever the lag.
+
+The stated covariance is the filtered one of that moment: the smoothed covariance is never larger, and
+computing it would cost two n x n products per anchor of the window per message.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from ..estimator import POSE_ERR, attitude_of, position_of
+from ..estimator.lag_window import SlidingCorrection
+from ..estimator.smoother import OpenSegment, SmoothingRecorder, smoothed_at
+from ..estimator.state import StateLayout
+
+__all__ = ["FixedLag", "LaggedPose"]
+
+
+class LaggedPose(msgspec.Struct, gc=False):
+    """A smoothed pose of the past: its stamp, position, orientation (x y z w) and the filtered pose
+    covariance of that moment (ROS row-major 6 x 6), as ``Estimate``'s pose fields."""
+
+    stamp: float
+    position: tuple[float, float, float]
+    orientation: tuple[float, float, float, float]
+    pose_covariance: list[float]
+
+
+class FixedLag:
+    """The recorder of a fixed-lag output and the window it keeps (module doc)."""
+
+    def __init__(self, layout: StateLayout, lag_s: float, history_s: float) -> None:
+        if not lag_s > 0.0:
+            raise ValueError(f"the lag must be positive, got {lag_s}")
+        self.layout = layout
+        self.lag_s = lag_s
+        self.keep_s = lag_s + history_s
+        self.recorder = SmoothingRecorder(layout, filtered_covariance=True)
+        self.window = SlidingCorrection(layout.error_dim)
+        self._last = -1  # the timeline's index of the last anchor returned: each is returned once
+
+    def restart(self, segment: OpenSegment | None) -> None:
+        """The filter starts over (a time jump back, set_pose, a resumed state): what came before is
+        another timeline, whose stamps may be later than the new one's; the window starts empty."""
+        rec = self.recorder
+        if segment is not None:
+            rec.keep(segment.count, segment.turns)
+        rec.forget(len(rec.anchors))
+
+    def pose(self, segment: OpenSegment | None) -> LaggedPose | None:
+        """The pose at the newest anchor's stamp - ``lag_s`` (the anchor at or just before it), smoothed
+        over the anchors since; None while no anchor is that old, or when that anchor's pose was
+        returned already. ``segment``: the newest filter's view of the record (what an abandoned
+        timeline recorded goes)."""
+        rec = self.recorder
+        if segment is None:
+            return None
+        rec.keep(segment.count, segment.turns)
+        anchors = rec.anchors
+        if not anchors:
+            return None
+        target = anchors[-1].stamp - self.lag_s
+        k = _last_at_or_before(anchors, target)
+        if k < 0:
+            return None
+        # what no window can reach any more, even after a rewind within the history, goes
+        drop = min(k, max(_last_at_or_before(anchors, anchors[-1].stamp - self.keep_s), 0))
+        rec.forget(drop)
+        k -= drop
+        a = rec.anchors[k]
+        if rec.base + k <= self._last:
+            return None
+        self._last = rec.base + k
+        d = self.window.correction(rec.anchors, rec.base, k)
+        x = smoothed_at(self.layout, rec.anchors, k, rec.relative_turns(), d)
+        return LaggedPose(stamp=a.stamp, position=position_of(x), orientation=attitude_of(x),
+                          pose_covariance=a.P[POSE_ERR, POSE_ERR].ravel().tolist())
+
+
+def _last_at_or_before(anchors: list, stamp: float) -> int:
+    """The index of the last anchor stamped at or before ``stamp`` (-1: none); stamps are in order."""
+    lo, hi = 0, len(anchors)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if anchors[mid].stamp <= stamp:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo - 1

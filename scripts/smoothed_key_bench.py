@@ -1,0 +1,113 @@
+"""The daemon's worker CPU with `[output] smoothed_key` against the same daemon without it.
+
+The `Daemon` of `fusiond run` on a loopback session, fed in real time by a generator session in this
+process with `fusiond bench-latency`'s pre-encoded traffic (1 kHz IMU + 100 Hz odometry, live stamps),
+as `scripts/profile_daemon_worker.py` does; the runs alternate, off and on, for a few rounds (the
+machine is shared: the median of each is reported, and every run). The worker's thread time is split
+into the core's `ingest` (which records the window's anchors when on) and the estimate publish (which
+smooths the lagged pose and puts it when on). A benchmark, not a test: it asserts nothing.
+
+    .venv/bin/python scripts/smoothed_key_bench.py [--rounds 3] [--seconds 10] [--lag 1.0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import zenoh
+
+from fusiond.config import loads
+from fusiond.transport.daemon import Daemon
+from fusiond.transport.session import build_config, open_session, query_health
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ of the source tree
+from benchmarks import bench_latency as bench  # noqa: E402
+
+
+def _timed(fn: Callable[..., Any], acc: dict[str, float], key: str) -> Callable[..., Any]:
+    clock = time.thread_time
+
+    def wrapper(*args: Any) -> Any:
+        t = clock()
+        try:
+            return fn(*args)
+        finally:
+            acc[key] += clock() - t
+
+    return wrapper
+
+
+def run_once(seconds: float, lag: float | None) -> dict[str, float]:
+    """One daemon fed ``seconds`` of traffic; ``lag`` None: without the smoothed key. Worker CPU in us
+    a message: total, core, publish; and the smoothed poses put."""
+    port = bench.free_port()
+    text = bench._config_text(port)
+    if lag is not None:
+        text = text.replace("[output]\n", f'[output]\nsmoothed_key = "bench/smoothed"\nsmooth_lag_s = {lag!r}\n')
+    cfg = loads(text, "<smoothed bench>")
+    d_session = open_session(build_config(cfg.zenoh))
+    daemon = Daemon(cfg, d_session, monitor=False)
+    acc = dict.fromkeys(("core", "publish"), 0.0)
+    daemon.core.ingest = _timed(daemon.core.ingest, acc, "core")
+    daemon._publish_estimate = _timed(daemon._publish_estimate, acc, "publish")
+    daemon.start()
+    g_session = open_session(build_config(msgspec.structs.replace(
+        cfg.zenoh, listen=[], connect=[f"tcp/127.0.0.1:{port}"])))
+    block = zenoh.CongestionControl.BLOCK
+    pubs = {k: g_session.declare_publisher(f"bench/{k}", express=True, congestion_control=block).put
+            for k in ("imu", "odom")}
+    deadline = time.monotonic() + 10.0
+    while not query_health(g_session, cfg.output.health_key, 0.5):
+        if time.monotonic() > deadline:
+            raise SystemExit("the daemon did not answer its health query within 10 s")
+    schedule = bench._schedule(seconds, 1000.0, 100.0)
+    start = time.perf_counter()
+    for offset, kind, payload, _ in schedule:
+        delay = start + offset - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        pubs[kind](payload)
+    deadline = time.monotonic() + 5.0
+    while sum(s.applied for s in daemon.report().sensors.values()) < len(schedule) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    daemon.stop()
+    g_session.close()
+    d_session.close()
+    n = len(schedule)
+    return {"total": 1e6 * daemon.worker_cpu_s / n, "core": 1e6 * acc["core"] / n,
+            "publish": 1e6 * acc["publish"] / n, "core_share": 100 * daemon.worker_cpu_s / seconds,
+            "smoothed": float(daemon.outputs.smoothed_published), "poses": float(daemon.published),
+            "anchors": float(len(daemon.core._smoothing.anchors)) if daemon.core._smoothing is not None else 0.0}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--lag", type=float, default=1.0)
+    args = ap.parse_args()
+    runs: dict[str, list[dict[str, float]]] = {"off": [], "on": []}
+    for r in range(args.rounds):
+        for name, lag in (("off", None), ("on", args.lag)):
+            res = run_once(args.seconds, lag)
+            runs[name].append(res)
+            print(f"round {r + 1} {name:>3}: worker {res['total']:6.1f} us/msg ({res['core_share']:4.1f}% of a core), "
+                  f"core {res['core']:6.1f}, publish {res['publish']:5.1f}; poses {res['poses']:.0f}, "
+                  f"smoothed {res['smoothed']:.0f}, anchors held {res['anchors']:.0f}", flush=True)
+    med = {k: {f: statistics.median(r[f] for r in v) for f in v[0]} for k, v in runs.items()}
+    off, on = med["off"], med["on"]
+    print(f"median of {args.rounds}, 1 kHz IMU + 100 Hz odometry, {args.seconds:g} s, smooth_lag_s = {args.lag:g}:")
+    for k in ("total", "core", "publish"):
+        print(f"  {k:<8} off {off[k]:6.1f}  on {on[k]:6.1f}  +{on[k] - off[k]:5.1f} us/msg")
+    print(f"  worker   off {off['core_share']:.1f}%  on {on['core_share']:.1f}% of a core")
+
+
+if __name__ == "__main__":
+    main()
