@@ -35,3 +35,18 @@ def test_a_yaw_rate_sent_as_zero_while_the_gyro_turns_is_taken_as_not_measured()
 def test_a_real_yaw_rate_stays_measured():
     core, measured_at = _run(lost=False)
     assert core.state.wheel_yaw_measured and max(measured_at) > 1000.0 + 7.5
+
+
+def test_a_steady_turn_read_as_one_value_the_gyro_agrees_with_stays_measured():
+    """A drive already turning at 0.2 rad/s from its first message, reading that one double every time (a
+    simulation, or encoders whose ticks do not change in a steady turn): constant, and the gyro turns, but
+    the gyro reads the same rate, so nothing says the value is not a measurement."""
+    world = RestWorld([Segment(6.0, speed=1.0, yaw_rate=0.2)], odom_rate=50.0, gyro_sigma=0.002, wheel_sigma=0.0)
+    core = FusionCore(make_config("roll_pitch"))
+    wz = set()
+    for s in simulate(world):
+        core.ingest(s)
+        if s.sensor == "wheel":
+            wz.add(s.angular[2])
+    assert wz == {0.2}  # the premise: one value, bit for bit
+    assert core.state.wheel_yaw_measured

@@ -6,12 +6,13 @@ turning". Taken at its word it is read as slip at every turn, teaches a wheel ya
 turns the heading across logging gaps by nothing. ``twist_measured`` declares it; a new user
 does not know to. So the odometry watches each angular component it takes as measured: one that
 has read the same value, bit for bit, since the first message while the gyro turned on that axis
-beyond its quiet bound (noise plus the bias's prior range, ``imu/gyro_bias.quiet_bound``) for
-LOST_AFTER consecutive odometry messages is not measured from then on (logged once as
+beyond its quiet bound (noise plus the bias's prior range, ``imu/gyro_bias.quiet_bound``), and away
+from that value by as much, for LOST_AFTER consecutive odometry messages is not measured from then on (logged once as
 ``twist_component_lost``; the doctor names the ``twist_measured`` to declare).
 
 The rule's false alarm is bounded by its parts: a real rate reads the same double at every
-message only when nothing moves it, and the quiet bound is three sigma of the gyro's noise and
+message only when nothing moves it (a drive reading a steady turn as one double from its first
+message, which the gyro agrees with, is not refuted by it), and the quiet bound is three sigma of the gyro's noise and
 the prior bias each, exceeded by chance with probability < 0.0027 per message, so LOST_AFTER = 5
 in a row is < 1e-12 per message. Linear components have no such witness (the accelerometer's
 integral drifts): a lost speed is the user's to declare.
@@ -39,7 +40,7 @@ def watch(watched: tuple | None, angular: tuple, measured: tuple, gyro: tuple | 
             continue
         if angular[i] != first[i]:
             out[i] = -1  # it moved: a measurement
-        elif gyro is not None and abs(gyro[i]) > bounds[i]:
+        elif gyro is not None and abs(gyro[i]) > bounds[i] and abs(gyro[i] - first[i]) > bounds[i]:
             out[i] = -2 if r + 1 >= LOST_AFTER else r + 1
         else:
             out[i] = 0
