@@ -41,13 +41,20 @@ def _group(key: str) -> tuple[str, str] | None:
     return (where[1], where[2]) if where[0] == "sensors" else (FILTER, where[2])
 
 
-def doctor_lines(cfg: Config, samples: Sequence[object], params: Sequence[Param]) -> dict[tuple[str, str], DoctorLine]:
-    """The doctor's paste lines for the keys of ``params``, by (table, key): one replay with the doctor."""
+def diagnose(cfg: Config, samples: Sequence[object]) -> tuple[list[Verdict], list[tuple[float, float]]]:
+    """One replay of the recording with the doctor: its verdicts, and the filter's standstills it was told of
+    (``Series.rest_spans``, in filter time), which ``floors`` measures the noise at rest over."""
     from ..replay.run import run_samples
 
-    groups = {p.group for p in params}
     with muted():
-        verdicts = run_samples(samples, cfg).verdicts()
+        result = run_samples(samples, cfg)
+        verdicts = result.verdicts()
+    return verdicts, list(result.doctor.series().rest_spans) if result.doctor is not None else []
+
+
+def doctor_lines(cfg: Config, verdicts: Sequence[Verdict], params: Sequence[Param]) -> dict[tuple[str, str], DoctorLine]:
+    """The doctor's paste lines (``verdicts``, from ``diagnose``) for the keys of ``params``, by (table, key)."""
+    groups = {p.group for p in params}
     out: dict[tuple[str, str], DoctorLine] = {}
     for v in verdicts:
         group = _group(v.key) if v.suggestion else None
@@ -61,4 +68,4 @@ def doctor_lines(cfg: Config, samples: Sequence[object], params: Sequence[Param]
     return out
 
 
-__all__ = ["DoctorLine", "doctor_lines"]
+__all__ = ["DoctorLine", "diagnose", "doctor_lines"]

@@ -48,7 +48,7 @@ from ..config import Config, ConfigError
 from ..errors import ReplayError
 from ..logs import muted
 from .advice import with_suggestion
-from .doctor_values import doctor_lines
+from .doctor_values import diagnose, doctor_lines
 from .floors import measured_floors, with_floors
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
@@ -235,9 +235,9 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     if not samples:
         raise ReplayError("nothing to tune: the recording has no sample of a configured sensor")
     params = select(tunable_params(cfg, samples), keys)
-    floor_replays = int(any(not p.skipped for p in params))  # the standstills' replay (floors.rest_spans)
-    with muted():
-        params = with_floors(params, measured_floors(cfg, samples, params))
+    # one replay with the doctor: its paste lines (step 6) and the standstills the floors are measured over
+    verdicts, spans = diagnose(cfg, samples)
+    params = with_floors(params, measured_floors(cfg, samples, params, spans))
     active = [p for p in params if not p.skipped]
     n = len(active)
     if maxfev is None:
@@ -266,7 +266,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
                 theta = [0.0] * n
                 f_best = f_start
         floored = [informed[i] and theta[i] <= active[i].lowest() + 1e-9 for i in range(n)]
-        result = _validate(cfg, samples, active, theta, informed, split, bar, floored)
+        result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts)
     finally:
         bar.close()
     rows, config, before, after, comments, replays, predicted = result
@@ -274,15 +274,16 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     rows = rows + skipped
     order = {p.name: i for i, p in enumerate(params)}
     rows.sort(key=lambda r: order[r.param.name])
-    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays + floor_replays,
+    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays + 1,
                       time.perf_counter() - t_start, stopped,
                       residuals(obj.ref) if n and obj.ref is not None else 0, comments=comments,
                       prediction_before=predicted[0], prediction_after=predicted[1])
 
 
 def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
-              informed: list[bool], split: float, bar: _Progress, floored: list[bool]):
-    """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays)."""
+              informed: list[bool], split: float, bar: _Progress, floored: list[bool], verdicts: Sequence[object]):
+    """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays).
+    ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6."""
     replays = 0
 
     def run(c: Config) -> list:
@@ -357,7 +358,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         if kept[i] is not None:
             status[i] = "tuned"
     # the doctor's measured values, each a candidate in place of tune's (doctor_values.py)
-    doctor = doctor_lines(cfg, samples, active)
+    doctor = doctor_lines(cfg, verdicts, active)  # type: ignore[arg-type]
     measured: list[object] = [None] * len(active)
     for group, line in doctor.items():
         idx = [i for i, p in enumerate(active) if p.group == group]

@@ -8,8 +8,8 @@ attitude it holds), so the difference of two consecutive readings there has vari
 what a slow error moves in between: 2 s_m^2 (1 - exp(-dt / tau)) for a Gauss-Markov error the config
 states (s_m, tau), taken off. A white noise below that is refuted by the standstills themselves.
 
-The standstills are the filter's own (its odometry rest test, ``core/sensors/odom/rest.py``): one
-replay of the recording marks them. Within each, component i of a sensor gives n_i differences and
+The standstills are the filter's own (its odometry rest test, ``core/sensors/odom/rest.py``), as the
+doctor's replay reports them (``doctor_values.diagnose``: the same replay gives the doctor's values). Within each, component i of a sensor gives n_i differences and
 their mean square D_i; sigma_i^2 = D_i / 2. Squared differences of white noise overlap (d_k and
 d_k+1 share a reading), so they carry about 2 n / 3 degrees of freedom (the figure the rest test
 uses), and the floor is the one-sided lower bound of size FLOOR_ALPHA:
@@ -31,11 +31,10 @@ from typing import Any
 
 from ..config import Config
 from ..core.diagnostics import chi2_ppf
-from ..core.fusion import FusionCore
 from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from ..estimator.geodesy import EnuFrame
-from ..samples import GpsSample, OdomSample
+from ..samples import GpsSample
 from .params import Param
 
 FLOOR_ALPHA = 0.01  # a floor above the true noise one time in a hundred
@@ -53,21 +52,6 @@ class Floor:
     def describe(self) -> str:
         shown = ", ".join(f"{f:.3g}" for f in self.sigmas if f > 0.0)
         return f"{shown} (measured at rest: {self.differences} differences over {self.standstills} standstill(s))"
-
-
-def rest_spans(cfg: Config, samples: Sequence[object]) -> list[tuple[float, float]]:
-    """The filter's standstills over the recording: (first, last stamp) per one replay."""
-    core = FusionCore(cfg)
-    spans: list[tuple[float, float]] = []
-    for s in samples:
-        core.ingest(s)
-        since = core.still_since
-        if since is not None and type(s) is OdomSample:
-            if spans and spans[-1][0] == since:
-                spans[-1] = (since, max(spans[-1][1], s.stamp))
-            else:
-                spans.append((since, s.stamp))
-    return spans
 
 
 def _geodetic(first) -> Callable[[GpsSample], tuple[float, ...]]:
@@ -105,18 +89,20 @@ def _mean_squares(values: list[tuple[float, float, tuple[float, ...]]], rotation
     return sums, n
 
 
-def _at_rest(samples: Sequence[object], kind: type, name: str, spans: list[tuple[float, float]],
-             values: Callable) -> list[tuple[int, float, tuple[float, ...]]]:
-    """(span index, stamp, values) of the sensor's samples inside a standstill, in stamp order."""
+def _at_rest(samples: Sequence[object], kind: type, name: str, spans: Sequence[tuple[float, float]],
+             values: Callable, offset: float) -> list[tuple[int, float, tuple[float, ...]]]:
+    """(span index, stamp, values) of the sensor's samples inside a standstill, in stamp order; a sample is
+    placed at its stamp shifted by the sensor's ``stamp_offset_s`` (``offset``), as the filter takes it."""
     rows = []
     for s in samples:
         if type(s) is not kind or s.sensor != name:  # type: ignore[attr-defined]
             continue
         if getattr(s, "status", 0) < 0:
             continue  # a GPS message without a fix: not a position
+        stamp = s.stamp + offset  # type: ignore[attr-defined]
         for k, (t0, t1) in enumerate(spans):
-            if t0 <= s.stamp <= t1:  # type: ignore[attr-defined]
-                rows.append((k, s.stamp, values(s)))  # type: ignore[attr-defined]
+            if t0 <= stamp <= t1:
+                rows.append((k, stamp, values(s)))
                 break
     rows.sort(key=lambda r: (r[0], r[1]))
     return rows
@@ -152,14 +138,14 @@ def _gps_slow(cfg: Any, dt: float) -> list[float]:
     return []
 
 
-def measured_floors(cfg: Config, samples: Sequence[object], params: Sequence[Param]) -> dict[str, Floor]:
-    """The floors the recording's standstills set on ``params``' noises, by parameter name (module doc)."""
+def measured_floors(cfg: Config, samples: Sequence[object], params: Sequence[Param],
+                    spans: Sequence[tuple[float, float]]) -> dict[str, Floor]:
+    """The floors the recording's standstills (``spans``: the filter's, in filter time, as
+    ``doctor_values.diagnose`` returns them) set on ``params``' noises, by parameter name (module doc)."""
     wanted = {(p.table, p.key) for p in params if not p.skipped}
-    if not wanted:
+    if not wanted or not spans:
         return {}
-    spans = rest_spans(cfg, samples)
-    if not spans:
-        return {}
+    offsets = {s.name: s.stamp_offset_s for s in cfg.sensors}
     by_key: dict[tuple[str, str], tuple[list[float], int]] = {}
     for sensor in cfg.sensors:
         kind = kind_of(sensor)
@@ -172,7 +158,7 @@ def measured_floors(cfg: Config, samples: Sequence[object], params: Sequence[Par
                 if first is None:
                     continue
                 read = _geodetic(first)
-            rows = _at_rest(samples, kind.sample_type, sensor.name, spans, read)
+            rows = _at_rest(samples, kind.sample_type, sensor.name, spans, read, offsets.get(sensor.name, 0.0))
             sums, n = _mean_squares(rows, rotation)
             slow = _gps_slow(sensor, _mean_step(rows)) if kind.geodetic else ()
             floors = _floors(sums, n, slow)
@@ -198,4 +184,4 @@ def with_floors(params: Sequence[Param], floors: dict[str, Floor]) -> list[Param
             else p for p in params]
 
 
-__all__ = ["FLOOR_ALPHA", "Floor", "MIN_DIFFERENCES", "measured_floors", "rest_spans", "with_floors"]
+__all__ = ["FLOOR_ALPHA", "Floor", "MIN_DIFFERENCES", "measured_floors", "with_floors"]

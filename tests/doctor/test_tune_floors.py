@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from fusiond.tune.floors import FLOOR_ALPHA, measured_floors, rest_spans
+from fusiond.tune.doctor_values import diagnose
+from fusiond.tune.floors import FLOOR_ALPHA, measured_floors
 from fusiond.tune.params import Param, tunable_params
 
 from tests.support.configs import robot_config
@@ -32,9 +33,10 @@ def test_the_standstills_measure_each_noise_from_below(noisy_rest):
     (a lower bound of size 1 %: over ~1,000 differences, within 10 % below it); the components the wheels read
     exactly 0 at rest set none."""
     cfg = robot_config()
-    assert len(rest_spans(cfg, noisy_rest)) == 3
+    _, spans = diagnose(cfg, noisy_rest)
+    assert len(spans) == 3
     params = tunable_params(cfg, noisy_rest)
-    floors = measured_floors(cfg, noisy_rest, params)
+    floors = measured_floors(cfg, noisy_rest, params, spans)
     gyro = floors["imu.gyro_noise"].sigmas[0]
     assert 0.9 * GYRO_SIGMA < gyro < GYRO_SIGMA, gyro
     twist = {p.name: p for p in params}
@@ -64,7 +66,8 @@ def test_a_robot_that_never_stands_sets_no_floor():
     world = RestWorld([Segment(20.0, speed=0.5, yaw_rate=0.2)], gyro_sigma=GYRO_SIGMA, ramp_s=0.5)
     samples = simulate(world)
     cfg = robot_config()
-    assert measured_floors(cfg, samples, tunable_params(cfg, samples)) == {}
+    _, spans = diagnose(cfg, samples)
+    assert measured_floors(cfg, samples, tunable_params(cfg, samples), spans) == {}
 
 
 def test_the_table_says_when_a_value_stays_below_what_the_standstills_show(noisy_rest):
