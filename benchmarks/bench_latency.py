@@ -183,6 +183,44 @@ def _wait(cond, timeout: float) -> bool:
     return True
 
 
+def thread_timed(fn: Callable[..., Any], acc: dict[str, float], key: str) -> Callable[..., Any]:
+    """``fn`` adding the calling thread's CPU time it takes to ``acc[key]`` (a daemon worker's share per part)."""
+    clock = time.thread_time
+
+    def wrapper(*args: Any) -> Any:
+        t = clock()
+        try:
+            return fn(*args)
+        finally:
+            acc[key] += clock() - t
+
+    return wrapper
+
+
+def feed_daemon(daemon: Daemon, cfg: Any, port: int, seconds: float) -> int:
+    """Feed a started in-process ``daemon`` (listening on ``port``) ``seconds`` of 1 kHz IMU and 100 Hz odometry
+    at their real pace from a second session, wait (5 s at most) until it applied them, then stop it; the
+    messages sent. Its worker's CPU (``daemon.worker_cpu_s``) is then the run's."""
+    g_session = open_session(build_config(msgspec.structs.replace(
+        cfg.zenoh, listen=[], connect=[f"tcp/127.0.0.1:{port}"])))
+    block = zenoh.CongestionControl.BLOCK
+    pubs = {k: g_session.declare_publisher(f"bench/{k}", express=True, congestion_control=block).put
+            for k in ("imu", "odom")}
+    if not _wait(lambda: query_health(g_session, cfg.output.health_key, 0.5), 10.0):
+        raise SystemExit("the daemon did not answer its health query within 10 s")
+    schedule = _schedule(seconds, 1000.0, 100.0)
+    start = time.perf_counter()
+    for offset, kind, payload, _ in schedule:
+        delay = start + offset - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        pubs[kind](payload)
+    _wait(lambda: sum(s.applied for s in daemon.report().sensors.values()) >= len(schedule), 5.0)
+    daemon.stop()
+    g_session.close()
+    return len(schedule)
+
+
 def _ping(put: Any, echo: list[float], seconds: float, hz: float = 500.0) -> list[float]:
     """Echo pings alone (no sensor load): the round trip of this machine at rest (the hops are the daemon's)."""
     echo.clear()

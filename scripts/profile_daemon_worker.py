@@ -17,33 +17,15 @@ import cProfile
 import io
 import pstats
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-import msgspec
-import zenoh
 
 from fusiond.config import loads
 from fusiond.transport.daemon import Daemon
-from fusiond.transport.session import build_config, open_session, query_health
+from fusiond.transport.session import build_config, open_session
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ of the source tree
 from benchmarks import bench_latency as bench  # noqa: E402
-
-
-def timed(fn: Callable[..., Any], acc: dict[str, float], key: str) -> Callable[..., Any]:
-    clock = time.thread_time
-
-    def wrapper(*args: Any) -> Any:
-        t = clock()
-        try:
-            return fn(*args)
-        finally:
-            acc[key] += clock() - t
-
-    return wrapper
 
 
 def main() -> None:
@@ -58,10 +40,10 @@ def main() -> None:
     d_session = open_session(build_config(cfg.zenoh))
     daemon = Daemon(cfg, d_session, monitor=False)
     acc = dict.fromkeys(("decode", "core", "publish", "diagnostics"), 0.0)
-    daemon._decoders = [timed(d, acc, "decode") for d in daemon._decoders]
-    daemon.core.ingest = timed(daemon.core.ingest, acc, "core")
-    daemon._publish_estimate = timed(daemon._publish_estimate, acc, "publish")
-    daemon._flush_diagnostics = timed(daemon._flush_diagnostics, acc, "diagnostics")
+    daemon._decoders = [bench.thread_timed(d, acc, "decode") for d in daemon._decoders]
+    daemon.core.ingest = bench.thread_timed(daemon.core.ingest, acc, "core")
+    daemon._publish_estimate = bench.thread_timed(daemon._publish_estimate, acc, "publish")
+    daemon._flush_diagnostics = bench.thread_timed(daemon._flush_diagnostics, acc, "diagnostics")
     profile = cProfile.Profile() if args.cprofile else None
     if profile is not None:
         work = daemon._work
@@ -75,30 +57,9 @@ def main() -> None:
 
         daemon._work = profiled
     daemon.start()
-    g_session = open_session(build_config(msgspec.structs.replace(
-        cfg.zenoh, listen=[], connect=[f"tcp/127.0.0.1:{port}"])))
-    block = zenoh.CongestionControl.BLOCK
-    pubs = {k: g_session.declare_publisher(f"bench/{k}", express=True, congestion_control=block).put
-            for k in ("imu", "odom")}
-    deadline = time.monotonic() + 10.0
-    while not query_health(g_session, cfg.output.health_key, 0.5):
-        if time.monotonic() > deadline:
-            raise SystemExit("the daemon did not answer its health query within 10 s")
-    schedule = bench._schedule(args.seconds, 1000.0, 100.0)
-    start = time.perf_counter()
-    for offset, kind, payload, _ in schedule:
-        delay = start + offset - time.perf_counter()
-        if delay > 0:
-            time.sleep(delay)
-        pubs[kind](payload)
-    deadline = time.monotonic() + 5.0
-    while sum(s.applied for s in daemon.report().sensors.values()) < len(schedule) and time.monotonic() < deadline:
-        time.sleep(0.01)
-    daemon.stop()
-    g_session.close()
+    n = bench.feed_daemon(daemon, cfg, port, args.seconds)
     d_session.close()
 
-    n = len(schedule)
     total = daemon.worker_cpu_s
     print(f"{n} messages in {args.seconds:g} s; worker thread CPU {total:.3f} s = "
           f"{100 * total / args.seconds:.1f}% of a core, {1e6 * total / n:.1f} us a message")

@@ -15,33 +15,15 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-import msgspec
-import zenoh
 
 from fusiond.config import loads
 from fusiond.transport.daemon import Daemon
-from fusiond.transport.session import build_config, open_session, query_health
+from fusiond.transport.session import build_config, open_session
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ of the source tree
 from benchmarks import bench_latency as bench  # noqa: E402
-
-
-def _timed(fn: Callable[..., Any], acc: dict[str, float], key: str) -> Callable[..., Any]:
-    clock = time.thread_time
-
-    def wrapper(*args: Any) -> Any:
-        t = clock()
-        try:
-            return fn(*args)
-        finally:
-            acc[key] += clock() - t
-
-    return wrapper
 
 
 def run_once(seconds: float, lag: float | None) -> dict[str, float]:
@@ -55,32 +37,11 @@ def run_once(seconds: float, lag: float | None) -> dict[str, float]:
     d_session = open_session(build_config(cfg.zenoh))
     daemon = Daemon(cfg, d_session, monitor=False)
     acc = dict.fromkeys(("core", "publish"), 0.0)
-    daemon.core.ingest = _timed(daemon.core.ingest, acc, "core")
-    daemon._publish_estimate = _timed(daemon._publish_estimate, acc, "publish")
+    daemon.core.ingest = bench.thread_timed(daemon.core.ingest, acc, "core")
+    daemon._publish_estimate = bench.thread_timed(daemon._publish_estimate, acc, "publish")
     daemon.start()
-    g_session = open_session(build_config(msgspec.structs.replace(
-        cfg.zenoh, listen=[], connect=[f"tcp/127.0.0.1:{port}"])))
-    block = zenoh.CongestionControl.BLOCK
-    pubs = {k: g_session.declare_publisher(f"bench/{k}", express=True, congestion_control=block).put
-            for k in ("imu", "odom")}
-    deadline = time.monotonic() + 10.0
-    while not query_health(g_session, cfg.output.health_key, 0.5):
-        if time.monotonic() > deadline:
-            raise SystemExit("the daemon did not answer its health query within 10 s")
-    schedule = bench._schedule(seconds, 1000.0, 100.0)
-    start = time.perf_counter()
-    for offset, kind, payload, _ in schedule:
-        delay = start + offset - time.perf_counter()
-        if delay > 0:
-            time.sleep(delay)
-        pubs[kind](payload)
-    deadline = time.monotonic() + 5.0
-    while sum(s.applied for s in daemon.report().sensors.values()) < len(schedule) and time.monotonic() < deadline:
-        time.sleep(0.01)
-    daemon.stop()
-    g_session.close()
+    n = bench.feed_daemon(daemon, cfg, port, seconds)
     d_session.close()
-    n = len(schedule)
     return {"total": 1e6 * daemon.worker_cpu_s / n, "core": 1e6 * acc["core"] / n,
             "publish": 1e6 * acc["publish"] / n, "core_share": 100 * daemon.worker_cpu_s / seconds,
             "smoothed": float(daemon.outputs.smoothed_published), "poses": float(daemon.published),
