@@ -27,6 +27,16 @@ transition with F = J and no noise; a change the smoother cannot see through (a 
 a time gap, a re-initialisation) ends the segment: each segment is smoothed on its own, and its last
 anchor keeps its filtered estimate.
 
+Transitions in a row. Where no correction comes between two transitions, P_(j+1) = P_(j+1|j) and
+
+    G_j G_(j+1) = P_j F_j^T P_(j+1|j)^-1 P_(j+1|j) F_(j+1)^T P_(j+2|j+1)^-1 = P_j (F_(j+1) F_j)^T P_(j+2|j+1)^-1,
+
+exactly (on the components with variance: a component with none has a zero row in F_j P_j, so the
+pseudo-inverse's projector leaves the product as it is). A 1 kHz IMU steps the filter ten times per 100 Hz
+odometry anchor with no correction between, so the recorder keeps the covariance before such a run and
+the product of its F, and folds their one gain into A where a correction or an anchor needs A: one solve
+per run instead of one per step.
+
 A heading found late. While a GPS searches for the heading, the caller publishes a position of its own
 (``Anchor.shown``) and the state dead-reckons from the newest fix (``Anchor.origin``) along a placeholder
 heading; each fit then turns the state about the antenna (``ErrorStateEKF.rotate_yaw``, recorded as
@@ -35,8 +45,9 @@ anchor's position is its origin plus its dead-reckoned displacement turned by th
 (the displacement along the heading found), or the shown position when no turn came after it.
 
 Cost (n: error dimension, 9-16 here; m: nominal dimension). Per message while recording: one n x n
-solve and product for its transition (G = P F^T P_pred^-1, A <- A G), one n-vector product per
-correction, and with ``covariance`` two n x n products where a transition follows corrections.
+product for its transition (the run's F product); per run of transitions, one n x n solve and product
+(G = P F^T P_pred^-1, A <- A G); one n-vector product per correction, and with ``covariance`` two n x n
+products where a transition follows corrections.
 Memory per anchor: x (m floats) and A (n x n) and b (n); with ``covariance`` also P and B (two n x n
 more). For n = 15 that is 2.0 kB an anchor (5.6 kB with covariance): 100 Hz odometry anchors for an
 hour hold 0.74 GB (2.0 GB), whatever the IMU's rate (measured: scripts/smoother_bench.py,
@@ -158,7 +169,7 @@ class SmoothingRecorder:
 class OpenSegment:
     """The composed RTS maps since the last anchor, carried by a filter and copied with it."""
 
-    __slots__ = ("recorder", "count", "turns", "A", "b", "B", "dP", "pending", "open")
+    __slots__ = ("recorder", "count", "turns", "A", "b", "B", "dP", "pending", "open", "gain_P", "gain_F")
 
     def __init__(self, recorder: SmoothingRecorder, count: int, turns: int = 0) -> None:
         self.recorder = recorder
@@ -170,11 +181,16 @@ class OpenSegment:
         self.dP: np.ndarray | None = None  # corrections' covariance change since the last transition
         self.pending = False
         self.open = False  # False: the next anchor starts a segment
+        # Transitions not yet folded into A (module doc, "transitions in a row"): the covariance before
+        # the first of them and the product of their F. Never written in place, so copies share them.
+        self.gain_P: np.ndarray | None = None
+        self.gain_F: np.ndarray | None = None
 
     def copy(self) -> "OpenSegment":
         c = OpenSegment(self.recorder, self.count, self.turns)
         c.open, c.pending = self.open, self.pending
         if self.open:
+            c.gain_P, c.gain_F = self.gain_P, self.gain_F
             c.A, c.b = self.A.copy(), self.b.copy()
             if self.B is not None:
                 c.B = self.B.copy()
@@ -184,17 +200,28 @@ class OpenSegment:
 
     # -- what the filter reports -----------------------------------------------------------------
     def transition(self, P_before: np.ndarray, F: np.ndarray, P_after: np.ndarray) -> None:
-        """P_after = F P_before F^T + Q: A <- A G with G = P_before F^T P_after^-1."""
+        """P_after = F P_before F^T + Q: A <- A G with G = P_before F^T P_after^-1, folded in when a
+        correction or an anchor needs A (module doc, "transitions in a row")."""
         if not self.open:
             return
-        self._flush()
-        self.A = self.A.dot(rts_gain(P_before, F, P_after))
+        if self.gain_P is None:
+            self._flush()
+            self.gain_P, self.gain_F = P_before.copy(), F.copy()  # the filter reuses both buffers
+        else:
+            self.gain_F = F.dot(self.gain_F)
+
+    def _fold(self, P: np.ndarray) -> None:
+        """A <- A G for the transitions since the last fold, P the covariance they ended at."""
+        if self.gain_P is not None:
+            self.A = self.A.dot(rts_gain(self.gain_P, self.gain_F, P))
+            self.gain_P = self.gain_F = None
 
     def correction(self, layout: StateLayout, x_before: np.ndarray, x_after: np.ndarray,
                    P_before: np.ndarray, P_after: np.ndarray) -> None:
         """The nominal state and covariance changed at one moment (an update, a held component)."""
         if not self.open:
             return
+        self._fold(P_before)
         c = layout.boxminus(x_after, x_before)
         self.b += self.A.dot(c)
         if self.B is not None:
@@ -216,7 +243,7 @@ class OpenSegment:
         """A change the smoother cannot see through: the segment ends at the last anchor."""
         self.open = False
         self.pending = False
-        self.A = self.b = self.B = self.dP = None
+        self.A = self.b = self.B = self.dP = self.gain_P = self.gain_F = None
 
     def anchor(self, stamp: float, x: np.ndarray, P: np.ndarray, shown: tuple[float, float, float] | None = None,
                origin: tuple[float, float] | None = None) -> None:
@@ -225,6 +252,7 @@ class OpenSegment:
         rec = self.recorder
         link = None
         if self.open:
+            self._fold(P)
             self._flush()
             link = (self.A, self.b, self.B)
         rec.keep(self.count, self.turns)
@@ -237,6 +265,7 @@ class OpenSegment:
         self.dP = None
         self.pending = False
         self.open = True
+        self.gain_P = self.gain_F = None
 
     def _flush(self) -> None:
         if self.pending:

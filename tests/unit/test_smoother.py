@@ -243,3 +243,39 @@ def test_nonlinear_smoother_is_consistent_over_monte_carlo_runs():
     # the smoothed errors are smaller, and judged against smaller covariances)
     assert np.mean((np.mean(nees_f, axis=0) > lo) & (np.mean(nees_f, axis=0) < hi)) > 0.9
     assert np.sqrt(np.mean(err_s)) < 0.8 * np.sqrt(np.mean(err_f))
+
+
+@pytest.mark.parametrize("held", [False, True])
+def test_transitions_in_a_row_fold_into_the_per_step_gains(held):
+    """The recorder folds a run of transitions into one gain (smoother module doc): the product of the per-
+    step RTS gains, also where a component is held at zero variance through the run."""
+    from fusiond.estimator.smoother import rts_gain
+
+    rng = np.random.default_rng(3)
+    layout = StateLayout([PoseBlock(position_sigma=2.0, attitude_sigma=0.1), _Velocity()])
+    n = layout.error_dim
+    M = rng.normal(size=(n, n))
+    P = M @ M.T + np.eye(n)
+    if held:
+        P[2, :] = P[:, 2] = 0.0
+    rec = SmoothingRecorder(layout)
+    seg = rec.open()
+    seg.anchor(0.0, layout.initial_state(), P)
+    want = np.eye(n)
+    for _ in range(4):
+        F = np.eye(n) + 0.1 * rng.normal(size=(n, n))
+        G = rng.normal(size=(n, n))
+        Q = 0.01 * G @ G.T
+        if held:
+            F[2, :] = 0.0
+            F[2, 2] = 1.0
+            Q[2, :] = Q[:, 2] = 0.0
+        P_next = F @ P @ F.T + Q
+        want = want @ rts_gain(P, F, P_next)
+        seg.transition(P, F, P_next)
+        P = P_next
+    seg.anchor(1.0, layout.initial_state(), P)
+    A = rec.anchors[1].link[0]
+    np.testing.assert_allclose(A, want, rtol=0, atol=1e-9 * np.abs(want).max())
+    if held:
+        assert not A[:, 2].any()
