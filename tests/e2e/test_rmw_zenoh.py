@@ -58,6 +58,7 @@ TYPES = {"/odom_combined": POSE_COV_STAMPED, "/odometry/filtered": ODOMETRY, "/t
          "/diagnostics": DIAGNOSTIC_ARRAY}
 INPUTS = {"/odom": ODOMETRY, "/imu/data": "sensor_msgs/msg/Imu", "/set_pose": POSE_COV_STAMPED}
 V = 0.5  # m/s along x
+SMOOTH_LAG = 0.2  # s, the smoothed pose's lag in smoothing_world
 
 
 def dds(msgtype: str) -> str:
@@ -98,8 +99,19 @@ def msg_dir(tmp_path_factory) -> Path:
 @pytest.fixture
 def world(msg_dir) -> Iterator[dict]:
     """A fusiond daemon in rmw_zenoh mode, a plain Zenoh session beside it, and the SDK's session."""
+    yield from _world(msg_dir, CONFIG)
+
+
+@pytest.fixture
+def smoothing_world(msg_dir) -> Iterator[dict]:
+    """As ``world``, the daemon also publishing the fixed-lag smoothed pose on /odom_smoothed."""
+    yield from _world(msg_dir, CONFIG.replace("[output]\n", f"[output]\nsmoothed_key = \"odom_smoothed\"\n"
+                                                            f"smooth_lag_s = {SMOOTH_LAG}\n"))
+
+
+def _world(msg_dir, config: str) -> Iterator[dict]:
     port = free_port()
-    cfg = loads(CONFIG.format(port=port, domain=DOMAIN))
+    cfg = loads(config.format(port=port, domain=DOMAIN))
     dsession = open_session(build_config(cfg.zenoh))
     client = open_session(build_config(ZenohConfig(connect=[f"tcp/127.0.0.1:{port}"], multicast_scouting=False)))
     sdk_registry._registry = sdk_registry.MessageRegistry(str(msg_dir))
@@ -356,6 +368,61 @@ def test_set_pose_topic_from_an_rmw_zenoh_publisher(world):
     sub.close()
     wheel.close()
     setter.close()
+
+
+@pytest.mark.e2e
+def test_smoothed_key_is_an_rmw_zenoh_topic_with_the_pose_of_the_lag_ago(smoothing_world):
+    """``[output] smoothed_key`` in rmw_zenoh mode: a ROS topic of the node (its liveliness token, its key
+    with the type hash, rmw_zenoh's attachment), which an rmw_zenoh subscriber receives; each pose is the one
+    of ``smooth_lag_s`` before the newest (odometry alone at constant speed: no later evidence moves it, so
+    it is where the wheels put it then)."""
+    world = smoothing_world
+    client: zenoh.Session = world["client"]
+    port = world["port"]
+    wait_until(lambda: health(client), 10, "the daemon")
+    key = f"{DOMAIN}/odom_smoothed/{dds(POSE_COV_STAMPED)}/{type_hash(POSE_COV_STAMPED)}"
+    zid = str(world["dsession"].zid())
+    tokens = [str(r.ok.key_expr) for r in client.liveliness().get(f"@ros2_lv/{DOMAIN}/{zid}/**", timeout=1.0)
+              if r.ok is not None]
+    mine = [parse_token(t) for t in tokens if "%odom_smoothed" in t]
+    assert len(mine) == 1 and mine[0]["kind"] == "MP" and mine[0]["hash"] == type_hash(POSE_COV_STAMPED)
+    raw: Received = Received()
+    raw_sub = client.declare_subscriber(key, lambda s: raw((s.payload.to_bytes(), None if s.attachment is None
+                                                            else s.attachment.to_bytes())))
+    smoothed, poses = Received(), Received()
+    subs = [sdk.ROS2Subscriber("/odom_smoothed", POSE_COV_STAMPED, smoothed, node_name="mapper", domain_id=DOMAIN,
+                               router_port=port),
+            sdk.ROS2Subscriber("/odom_combined", POSE_COV_STAMPED, poses, node_name="mapper", domain_id=DOMAIN,
+                               router_port=port)]
+    wheel = sdk.ROS2Publisher("/odom", ODOMETRY, node_name="wheel_driver", domain_id=DOMAIN, router_port=port)
+    wait_until(lambda: health(client), 10, "the declarations to reach the daemon")
+    n, t0, dt = 40, 400.0, 0.02
+    for k in range(n):
+        sdk_odometry(wheel, t0 + dt * k)
+    wait_until(lambda: (r := health(client)) and r.sensors["wheel"].applied == n, 10, f"{n} odometry messages")
+    newest = t0 + dt * (n - 1)
+    got = wait_until(lambda: (g := smoothed.snapshot()) and abs(_msg_stamp(g[-1]) - (newest - SMOOTH_LAG)) < 1e-6
+                     and g, 10, "the smoothed pose of the newest stamp minus the lag")
+    assert len(got) >= n - SMOOTH_LAG / dt - 2
+    for msg in got:
+        t = _msg_stamp(msg)
+        assert t0 <= t <= newest - SMOOTH_LAG + 1e-6
+        assert msg.pose.pose.position.x == pytest.approx(V * (t - t0), abs=1e-9)
+        assert msg.header.frame_id == poses.snapshot()[-1].header.frame_id
+    wait_until(lambda: len(raw) >= len(got), 5, "the raw samples on the smoothed key")
+    seqs = []
+    for payload, att in raw.snapshot():
+        assert att is not None and len(att) == 33 and payload[:4] == b"\x00\x01\x00\x00"
+        seqs.append(struct.unpack_from("<q", att)[0])
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    raw_sub.undeclare()
+    for s in subs:
+        s.close()
+    wheel.close()
+
+
+def _msg_stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
 def test_rmw_zenoh_mode_refuses_a_zenoh_namespace_and_non_cdr_sensors():
