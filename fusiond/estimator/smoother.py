@@ -182,20 +182,15 @@ class OpenSegment:
         self.pending = False
         self.open = False  # False: the next anchor starts a segment
         # Transitions not yet folded into A (module doc, "transitions in a row"): the covariance before
-        # the first of them and the product of their F. Never written in place, so copies share them.
+        # the first of them and the product of their F.
         self.gain_P: np.ndarray | None = None
         self.gain_F: np.ndarray | None = None
 
     def copy(self) -> "OpenSegment":
         c = OpenSegment(self.recorder, self.count, self.turns)
         c.open, c.pending = self.open, self.pending
-        if self.open:
-            c.gain_P, c.gain_F = self.gain_P, self.gain_F
-            c.A, c.b = self.A.copy(), self.b.copy()
-            if self.B is not None:
-                c.B = self.B.copy()
-            if self.dP is not None:
-                c.dP = self.dP.copy()
+        if self.open:  # the arrays are replaced, never written in place: copies share them
+            c.A, c.b, c.B, c.dP, c.gain_P, c.gain_F = self.A, self.b, self.B, self.dP, self.gain_P, self.gain_F
         return c
 
     # -- what the filter reports -----------------------------------------------------------------
@@ -223,11 +218,11 @@ class OpenSegment:
             return
         self._fold(P_before)
         c = layout.boxminus(x_after, x_before)
-        self.b += self.A.dot(c)
+        self.b = self.b + self.A.dot(c)
         if self.B is not None:
             d = P_after - P_before
             if self.pending:
-                self.dP += d
+                self.dP = self.dP + d
             else:
                 self.dP = d
             self.pending = True
@@ -270,7 +265,7 @@ class OpenSegment:
     def _flush(self) -> None:
         if self.pending:
             A = self.A
-            self.B += A.dot(self.dP).dot(A.T)
+            self.B = self.B + A.dot(self.dP).dot(A.T)
             self.pending = False
 
 
