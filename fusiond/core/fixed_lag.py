@@ -9,13 +9,15 @@ reach any more are forgotten, so memory stays bounded while the daemon runs.
 
 What a window keeps: the anchors of the last ``lag_s + history_s`` (``history_s``: the late-data history,
 so a rewind of the filter lands on anchors still held), each the nominal state, its filtered covariance,
-and the link (A, b), and the link composed with its neighbours (``lag_window``: two stacks of (A, b)):
-measured 1.8 kB of arrays an anchor at n = 9 (odometry + IMU); at 100 Hz publish moments and the
-defaults (1 s + 1 s) 201 anchors, 0.36 MB (docs/SMOOTHER.md). Per publish moment: about two n x n
-products (the window's compositions kept as it slides, ``lag_window``) and one boxplus, whatever the lag.
+and the link (A, b, B), and the link composed with its neighbours (``lag_window``: two stacks of maps).
+Per publish moment: a few n x n products (the window's compositions kept as it slides, ``lag_window``)
+and one boxplus, whatever the lag.
 
-The stated covariance is the filtered one of that moment: the smoothed covariance is never larger, and
-computing it would cost two n x n products per anchor of the window per message.
+The stated covariance is the smoothed one of that moment (the RTS covariance over the window since, the
+same as the offline smoother's over that window): what the later evidence says about where the robot
+was, never larger than the filtered covariance of that moment. Where the published position was shown
+instead of the state's (``smoother.Anchor.shown``: a GPS heading search), the filtered one, as the causal
+pose stated it.
 """
 
 from __future__ import annotations
@@ -31,8 +33,8 @@ __all__ = ["FixedLag", "LaggedPose"]
 
 
 class LaggedPose(msgspec.Struct, gc=False):
-    """A smoothed pose of the past: its stamp, position, orientation (x y z w) and the filtered pose
-    covariance of that moment (ROS row-major 6 x 6), as ``Estimate``'s pose fields."""
+    """A smoothed pose of the past: its stamp, position, orientation (x y z w) and its smoothed pose
+    covariance (ROS row-major 6 x 6), as ``Estimate``'s pose fields."""
 
     stamp: float
     position: tuple[float, float, float]
@@ -49,8 +51,8 @@ class FixedLag:
         self.layout = layout
         self.lag_s = lag_s
         self.keep_s = lag_s + history_s
-        self.recorder = SmoothingRecorder(layout, filtered_covariance=True)
-        self.window = SlidingCorrection(layout.error_dim)
+        self.recorder = SmoothingRecorder(layout, covariance=True)
+        self.window = SlidingCorrection(layout.error_dim, covariance=True)
         self._last = -1  # the timeline's index of the last anchor returned: each is returned once
 
     def restart(self, segment: OpenSegment | None) -> None:
@@ -85,10 +87,14 @@ class FixedLag:
         if rec.base + k <= self._last:
             return None
         self._last = rec.base + k
-        d = self.window.correction(rec.anchors, rec.base, k)
+        window = self.window
+        d = window.correction(rec.anchors, rec.base, k)
         x = smoothed_at(self.layout, rec.anchors, k, rec.relative_turns(), d)
+        # a position shown instead of the state's (a GPS heading search) is not the state's estimate, and
+        # the RTS covariance is not its own: it keeps what the causal pose stated then
+        P = window.covariance_k if a.shown is None else a.P
         return LaggedPose(stamp=a.stamp, position=position_of(x), orientation=attitude_of(x),
-                          pose_covariance=a.P[POSE_ERR, POSE_ERR].ravel().tolist())
+                          pose_covariance=(0.5 * (P + P.T))[POSE_ERR, POSE_ERR].ravel().tolist())
 
 
 def _last_at_or_before(anchors: list, stamp: float) -> int:

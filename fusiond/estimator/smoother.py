@@ -66,6 +66,11 @@ import numpy as np
 
 from .state import StateLayout
 
+try:
+    from . import _rts
+except ImportError:  # built without a C compiler: the Python fold runs
+    _rts = None
+
 __all__ = ["Anchor", "Smoothed", "SmoothingRecorder", "OpenSegment", "smooth", "smoothed_at"]
 
 
@@ -104,17 +109,14 @@ class SmoothingRecorder:
     """The anchors of one run, in the order of the filter's final timeline.
 
     ``covariance``: also keep what the smoothed covariance needs (three times the memory).
-    ``filtered_covariance``: keep each anchor's filtered P (not B): what a fixed-lag output states as its
-    covariance without the smoothed one's cost.
 
     A fixed-lag output needs the last window only: ``forget`` drops the anchors before one, and
     ``base`` counts them, so the counts the filters carry (``OpenSegment.count``, ``turns``) stay the
     timeline's own: ``anchors[i]`` is the timeline's anchor ``base + i``."""
 
-    def __init__(self, layout: StateLayout, covariance: bool = False, filtered_covariance: bool = False) -> None:
+    def __init__(self, layout: StateLayout, covariance: bool = False) -> None:
         self.layout = layout
         self.covariance = covariance
-        self.keeps_P = covariance or filtered_covariance
         self.anchors: list[Anchor] = []
         self.turns: list[tuple[int, float]] = []  # (anchors recorded before it, angle) of each heading turn
         self.base = 0  # anchors forgotten before anchors[0]
@@ -208,7 +210,7 @@ class OpenSegment:
     def _fold(self, P: np.ndarray) -> None:
         """A <- A G for the transitions since the last fold, P the covariance they ended at."""
         if self.gain_P is not None:
-            self.A = self.A.dot(rts_gain(self.gain_P, self.gain_F, P))
+            self.A = fold(self.A, self.gain_P, self.gain_F, P)
             self.gain_P = self.gain_F = None
 
     def correction(self, layout: StateLayout, x_before: np.ndarray, x_after: np.ndarray,
@@ -251,7 +253,7 @@ class OpenSegment:
             self._flush()
             link = (self.A, self.b, self.B)
         rec.keep(self.count, self.turns)
-        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.keeps_P else None, link, shown, origin))
+        rec.anchors.append(Anchor(stamp, x.copy(), P.copy() if rec.covariance else None, link, shown, origin))
         self.count += 1
         n = P.shape[0]
         self.A = np.eye(n)
@@ -267,6 +269,20 @@ class OpenSegment:
             A = self.A
             self.B = self.B + A.dot(self.dP).dot(A.T)
             self.pending = False
+
+
+def fold(A: np.ndarray, P_before: np.ndarray, F: np.ndarray, P_after: np.ndarray) -> np.ndarray:
+    """A G with G = ``rts_gain(P_before, F, P_after)``: one call of the compiled ``_rts.fold`` where it
+    was built (the same maths; this Python is the reference, held to it by tests/unit/test_smoother.py),
+    else, or where P_after's Cholesky fails (the least-squares path), the Python."""
+    if _rts is not None:
+        out = np.empty_like(A)
+        try:
+            if _rts.fold(A, P_before, F, P_after, out):
+                return out
+        except BufferError:  # an array not C-contiguous float64
+            pass
+    return A.dot(rts_gain(P_before, F, P_after))
 
 
 def rts_gain(P_before: np.ndarray, F: np.ndarray, P_after: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from fusiond.codecs import decode_pose_cdr, encode_sample
 from fusiond.config import load
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.registry import kind_of
-from fusiond.estimator import POSE
+from fusiond.estimator import POSE, POSE_ERR
 from fusiond.estimator.smoother import smooth
 from fusiond.transport.intake import direct
 
@@ -61,7 +61,7 @@ def test_daemon_publishes_the_fixed_lag_smoothed_pose_equal_to_the_offline_smoot
     # the window each lagged pose closes (its newest anchor)
     decoders = {s.name: kind_of(s).decoder(s) for s in cfg.sensors}
     whole, lagged = FusionCore(cfg), FusionCore(cfg)
-    whole.record_for_smoothing()
+    whole.record_for_smoothing(covariance=True)
     lagged.smooth_with_lag(LAG)
     newest_of: dict[float, float] = {}
     for name, _, raw in payloads:
@@ -107,7 +107,8 @@ def test_daemon_publishes_the_fixed_lag_smoothed_pose_equal_to_the_offline_smoot
 
     newest = None
     smoothed = 0
-    moved = 0.0
+    moved = shrunk = 0.0
+    shown = 0
     for kind, raw in arrived:
         msg = decode_pose_cdr(raw)
         t = _stamp(msg)
@@ -126,11 +127,26 @@ def test_daemon_publishes_the_fixed_lag_smoothed_pose_equal_to_the_offline_smoot
         j = int(np.argmin(np.abs(stamps - newest_of[stamps[k]])))
         # the heading turns known then: those recorded before the newest anchor (its sample's own included)
         turns = [(before - k, angle) for before, angle in rec.relative_turns() if before <= j]
-        want = smooth(rec.layout, rec.anchors[k:j + 1], False, turns).x[0][POSE]
+        sm = smooth(rec.layout, rec.anchors[k:j + 1], True, turns)
+        want = sm.x[0][POSE]
         assert np.max(np.abs(_row(msg) - want)) < 1e-9, (t, _row(msg) - want)
+        # its covariance: the smoothed one of that moment, not larger than the filtered one (to rounding: a
+        # component the window does not inform, here z, comes back within 1e-6 of its own); where the
+        # position was shown instead of the state's (the heading search), the filtered one
+        cov = np.array(msg.pose.covariance).reshape(6, 6)
+        filtered = rec.anchors[k].P[POSE_ERR, POSE_ERR]
+        if rec.anchors[k].shown is not None:
+            assert np.array_equal(cov, 0.5 * (filtered + filtered.T)), t
+            shown += 1
+            continue
+        want_cov = sm.P[0][POSE_ERR, POSE_ERR]
+        assert np.max(np.abs(cov - want_cov)) < 1e-9 * (1 + np.abs(want_cov).max()), t
+        assert np.all(np.diag(cov) <= np.diag(filtered) * (1 + 1e-4)), t
+        shrunk = max(shrunk, float(1 - cov[0, 0] / filtered[0, 0]))
         moved = max(moved, float(np.linalg.norm(want[0:3] - rec.anchors[k].x[0:3])))
     assert smoothed >= len(newest_of) - 2, (smoothed, len(newest_of))
-    assert moved > 0.01  # the window did change the past
+    assert moved > 0.01 and shrunk > 0.05  # the window did change the past, and what is known of it
+    assert 0 < shown < smoothed / 2, (shown, smoothed)
 
 
 @pytest.mark.e2e
@@ -145,7 +161,7 @@ def test_fixed_lag_on_the_jackal_bag_equals_the_offline_smoother_through_its_rew
         samples = list(bag)
     lag, whole = FusionCore(cfg), FusionCore(cfg)
     lag.smooth_with_lag(1.0)
-    whole.record_for_smoothing()
+    whole.record_for_smoothing(covariance=True)
     checked = most = publishes = 0
     for s in samples:
         step = lag.ingest(s)
@@ -161,7 +177,10 @@ def test_fixed_lag_on_the_jackal_bag_equals_the_offline_smoother_through_its_rew
         rec = whole._smoothing
         k = [a.stamp for a in rec.anchors].index(pose.stamp)
         turns = [(before - k, angle) for before, angle in rec.relative_turns()]
-        want = smooth(rec.layout, rec.anchors[k:], False, turns).x[0][POSE]
-        assert np.max(np.abs(np.array([*pose.position, *pose.orientation]) - want)) < 1e-9
+        sm = smooth(rec.layout, rec.anchors[k:], True, turns)
+        assert np.max(np.abs(np.array([*pose.position, *pose.orientation]) - sm.x[0][POSE])) < 1e-9
+        want_cov = sm.P[0][POSE_ERR, POSE_ERR]
+        cov = np.array(pose.pose_covariance).reshape(6, 6)
+        assert np.max(np.abs(cov - want_cov)) < 1e-9 * (1 + np.abs(want_cov).max())
         checked += 1
     assert checked > 250 and most < 0.1 * publishes, (checked, most, publishes)

@@ -279,3 +279,38 @@ def test_transitions_in_a_row_fold_into_the_per_step_gains(held):
     np.testing.assert_allclose(A, want, rtol=0, atol=1e-9 * np.abs(want).max())
     if held:
         assert not A[:, 2].any()
+
+
+def test_compiled_fold_equals_the_python_reference():
+    """``_rts.fold`` (C) against ``A rts_gain(...)`` (numpy, the reference): random covariances, with and
+    without held components; a P_after that is not positive definite is left to the Python path."""
+    from fusiond.estimator import smoother
+
+    if smoother._rts is None:
+        pytest.skip("fusiond.estimator._rts was not built (no C compiler at install time)")
+    rng = np.random.default_rng(11)
+    for n in (3, 9, 13, 16):
+        for held in ((), (2,), (1, 4)):
+            M = rng.normal(size=(n, n))
+            P0 = M @ M.T + 0.1 * np.eye(n)
+            F = np.eye(n) + 0.2 * rng.normal(size=(n, n))
+            G = rng.normal(size=(n, n))
+            P1 = F @ P0 @ F.T + 0.01 * G @ G.T
+            for h in held:
+                if h < n:
+                    P1[h, :] = P1[:, h] = 0.0
+            A = rng.normal(size=(n, n))
+            out = np.empty((n, n))
+            assert smoother._rts.fold(A, P0, F, P1, out)
+            want = A.dot(smoother.rts_gain(P0, F, P1))
+            np.testing.assert_allclose(out, want, rtol=0, atol=1e-10 * np.abs(want).max())
+            assert np.array_equal(smoother.fold(A, P0, F, P1), out)
+    # an indefinite P_after (its diagonal positive): nothing from C, the reference's least squares instead
+    P1 = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 2.0]])
+    out = np.full((3, 3), 7.0)
+    assert not smoother._rts.fold(np.eye(3), np.eye(3), np.eye(3), P1, out)
+    assert (out == 7.0).all()
+    np.testing.assert_allclose(smoother.fold(np.eye(3), np.eye(3), np.eye(3), P1),
+                               smoother.rts_gain(np.eye(3), np.eye(3), P1))
+    with pytest.raises(ValueError):
+        smoother._rts.fold(np.eye(3), np.eye(2), np.eye(3), np.eye(3), out)
