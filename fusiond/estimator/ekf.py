@@ -377,6 +377,15 @@ class ErrorStateEKF:
         self.P = P
         self._cut()
 
+    def widen(self, idx: list[int], C: np.ndarray) -> None:
+        """Add ``C`` (PSD) to the covariance of the error components ``idx``: an independent error they
+        took on at once (a GPS receiver's step, whose mean the caller moved the state by). P stays PSD;
+        for the smoother a change it does not see through."""
+        P = self.P.copy()
+        P[np.ix_(idx, idx)] += C
+        self.P = P
+        self._cut()
+
     def decorrelate(self, group: list[int]) -> None:
         """Zero the covariances between the components ``group`` and all others: what P said about
         how they move together no longer holds. P becomes block diagonal in (group, rest), each

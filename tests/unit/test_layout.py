@@ -125,6 +125,18 @@ def test_no_bare_pose_index_outside_the_estimator():
     assert found == []
 
 
+# The estimator alone writes the state and its covariance (ErrorStateEKF's methods keep P symmetric and
+# PSD, and tell the smoother's recorder): no assignment to a filter's x or P, whole or in part, elsewhere.
+_STATE_WRITE = re.compile(r"\bekf\.(x|P)\b(\[[^\]]*\])?\s*([-+*/]?=)(?!=)")
+
+
+def test_only_the_estimator_writes_the_state_and_its_covariance():
+    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
+             for path in PACKAGE.rglob("*.py") if not path.relative_to(PACKAGE).as_posix().startswith("estimator/")
+             for i, line in enumerate(path.read_text().splitlines(), 1) if _STATE_WRITE.search(line)]
+    assert found == []
+
+
 def test_the_kinds_never_import_the_outer_layers():
     """The registry, the kinds and the fusion core import nothing of transport, replay, the CLI, the tuner,
     the doctor, nor (until a decoder is asked for) the codecs and rosbags; the config's shared tables

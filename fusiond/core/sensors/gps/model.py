@@ -534,10 +534,7 @@ class GpsModel(SensorModel):
                         east=float(d[0]), north=float(d[1]), llr=own.step.llr)
         p = ekf.position()
         ekf.set_position((p[0] + float(d[0]), p[1] + float(d[1]), p[2]), (0, 1))
-        P = ekf.P.copy()
-        rows = np.ix_(POSITION_ROWS[0:2], POSITION_ROWS[0:2])
-        P[rows] += C
-        ekf.P = P
+        ekf.widen(list(POSITION_ROWS[0:2]), C)
         new_frame(s)  # the position moved under the differential pose sensors: their deltas restart
         last = own.rejected[-1] if own.rejected else None
         accepted = None if last is None else (stamp, last[1] - float(d[0]), last[2] - float(d[1]))
