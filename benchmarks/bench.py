@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+import os
 import re
 import statistics
 import subprocess
@@ -33,6 +34,13 @@ from fusiond.config import Config
 # processes' load stretches wall time but not the work this thread does (both sides of a
 # ratio are timed alike). Whole-process runs report wall time and the child's CPU time.
 CLOCK = time.thread_time
+
+
+def _backend():
+    """The estimator's backend the cores here run, as `fusiond` takes it (FUSIOND_KERNELS)."""
+    from fusiond.estimator.backend import from_environment
+
+    return from_environment(os.environ)
 
 
 def _best_us(fn: Callable[[], object], number: int, repeat: int) -> float:
@@ -276,7 +284,7 @@ gyro_scale_estimation = true
         per: dict[str, float] = {}
         total = math.inf
         for _ in range(max(repeat // 2, 1)):
-            core = FusionCore(cfg)
+            core = FusionCore(cfg, _backend())
             spent: dict[str, float] = {}
             t_all = clock()
             for smp in samples:
@@ -338,8 +346,10 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
 
     samples = read()
 
+    backend = _backend()
+
     def fuse() -> None:
-        core = FusionCore(cfg)
+        core = FusionCore(cfg, backend)
         for s in samples:
             if core.ingest(s).publish:
                 core.pose()
@@ -348,8 +358,8 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
         "rosbags": rosbags_decode,
         "read_decode": read,
         "core": fuse,
-        "no_doctor": lambda: replay([bag], cfg, keep_trace=False, progress=False, doctor=False),
-        "replay": lambda: replay([bag], cfg, keep_trace=False, progress=False),
+        "no_doctor": lambda: replay([bag], cfg, keep_trace=False, progress=False, doctor=False, backend=backend),
+        "replay": lambda: replay([bag], cfg, keep_trace=False, progress=False, backend=backend),
     }
     runs: dict[str, list[float]] = {k: [] for k in sides}
     n = 0

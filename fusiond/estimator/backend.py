@@ -104,6 +104,7 @@ class PythonBackend(Backend):
     name = "numpy"
 
     def propagate(self, F, P, Q, out):
+        """P' = F P F^T + Q."""
         # Two fresh products: measured faster than np.dot(..., out=) at these sizes (the out= path's
         # checks cost more than a 9x9 allocation), so ``out`` is left alone.
         P_new = F.dot(P).dot(F.T)
@@ -116,6 +117,14 @@ class PythonBackend(Backend):
         return P_new
 
     def update(self, layout, x, P, H, R, y, threshold2, keep, joseph, hold_heading, out, ws):
+        """With S = H P H^T + R = L L^T (Cholesky), z = L^-1 y and W = L^-1 H P:
+
+            NIS = z.z                       (gated when NIS > threshold2)
+            K y = P H^T S^-1 y = W^T z      x [+]= K y
+            K S K^T = W^T W                 P' = P - W^T W
+
+        and with a mask M (a Schmidt update: the gain rows of the others zeroed), K y -> M K y and
+        W^T W -> (W^T W) .* J, J_ij = 1 - (1 - m_i)(1 - m_j): the Joseph form's closed form."""
         HP = H.dot(P)  # H P = (P H^T)^T: P is symmetric
         S = HP.dot(H.T)
         S += R

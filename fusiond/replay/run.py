@@ -339,9 +339,11 @@ def smoothed_trajectory(core: FusionCore) -> array:
     return out
 
 
-def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False) -> ReplayResult:
-    """Replay samples already in memory (a simulation) exactly as a bag would be replayed."""
-    runner = Runner(cfg, keep_trace, smooth=smooth)
+def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False,
+                backend: Backend | None = None) -> ReplayResult:
+    """Replay samples already in memory (a simulation) exactly as a bag would be replayed (``backend``: the
+    estimator's, ``FusionCore``)."""
+    runner = Runner(cfg, keep_trace, smooth=smooth, backend=backend)
     for s in samples:
         runner.feed(s)
     return runner.result()

@@ -239,7 +239,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
         raise ReplayError("nothing to tune: the recording has no sample of a configured sensor")
     params = select(tunable_params(cfg, samples), keys)
     # one replay with the doctor: its paste lines (step 6) and the standstills the floors are measured over
-    verdicts, spans = diagnose(cfg, samples)
+    verdicts, spans = diagnose(cfg, samples, backend)
     params = with_floors(params, measured_floors(cfg, samples, params, spans))
     active = [p for p in params if not p.skipped]
     n = len(active)
