@@ -398,6 +398,29 @@ def test_fusiond_replay_gives_the_same_tum_on_both_paths(jackal_bag, tmp_path):
 
 
 @pytest.mark.e2e
+def test_fusiond_kernels_reaches_every_core_the_replay_builds(jackal_bag, tmp_path, monkeypatch, capsys):
+    """FUSIOND_KERNELS=numpy: the replay and the doctor's advice proofs (jackal_rl.toml has a paste line)
+    never ask the compiled backend; without it they do (what shows the check can see them)."""
+    from fusiond.cli import main
+    from fusiond.estimator.backend import CompiledBackend, PythonBackend
+
+    asked: list[str] = []
+    for name in ("predict", "propagate", "update", "orientation", "copy_into"):
+        def counted(self, *args, _name=name):
+            asked.append(_name)
+            return getattr(PythonBackend, _name)(self, *args)
+        monkeypatch.setattr(CompiledBackend, name, counted)
+    config = str(Path(__file__).resolve().parents[2] / "examples" / "jackal_rl.toml")
+    argv = ["replay", str(jackal_bag), "--config", config, "--tum", str(tmp_path / "a.tum")]
+    monkeypatch.setenv("FUSIOND_KERNELS", "numpy")
+    assert main(argv) == 0
+    assert "(replayed: likelihood" in capsys.readouterr().out and asked == []  # the advice was proven
+    monkeypatch.delenv("FUSIOND_KERNELS")
+    assert main(argv) == 0
+    assert {"predict", "propagate", "update", "orientation", "copy_into"} <= set(asked)
+
+
+@pytest.mark.e2e
 @pytest.mark.parametrize("config", ["examples/jackal_rl.toml", "examples/jackal.toml"])
 def test_jackal_trajectory_is_the_same_on_both_paths(jackal_bag, config):
     from tests.support.jackal_pin import trajectory
