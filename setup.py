@@ -1,9 +1,15 @@
 """Build step of the compiled modules: fusiond.estimator._kernels (the EKF's linear algebra) and _rts
 (the smoother's fold).
 
+<<<<<<< HEAD
 Everything else is in pyproject.toml. The extensions are optional: without a C compiler the
 install still succeeds and the estimator runs its numpy reference paths (ekf.py, smoother.py), which the
 tests hold equal to the compiled one. -ffp-contract=off keeps a * b + c from being fused into
+=======
+Everything else is in pyproject.toml. The extension is optional: without a C compiler the
+install still succeeds and the estimator runs its reference backend (estimator/backend.py), which
+the tests hold equal to the compiled one. -ffp-contract=off keeps a * b + c from being fused into
+>>>>>>> backend
 one rounding where the CPU has FMA (aarch64 does by default): the quaternion code then gives the
 same doubles as the Python it mirrors.
 """

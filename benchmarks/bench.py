@@ -1,8 +1,8 @@
 """`fusiond bench`: the numbers the closing notes report, measured the same way each time.
 
 - estimator: predict + roll/pitch update of the gyro-bias model, us per step
-  (min over repeats: the machine's quietest moment, not its average), with the compiled
-  kernels when built and, beside it, on the numpy reference path;
+  (min over repeats: the machine's quietest moment, not its average), on the compiled
+  backend when built and, beside it, on the numpy reference;
 - sensors: us per update of each issue-7 sensor (GPS position, absolute pose,
   pose delta), as estimator calls and as FusionCore.ingest on a synthetic
   odom/IMU/GPS/pose stream, and the core's us per message with and without them;
@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+import os
 import re
 import statistics
 import subprocess
@@ -35,18 +36,26 @@ from fusiond.config import Config
 CLOCK = time.thread_time
 
 
+def _backend():
+    """The estimator's backend the cores here run, as `fusiond` takes it (FUSIOND_KERNELS)."""
+    from fusiond.estimator.backend import from_environment
+
+    return from_environment(os.environ)
+
+
 def _best_us(fn: Callable[[], object], number: int, repeat: int) -> float:
     return min(timeit.Timer(fn, timer=CLOCK).repeat(repeat=repeat, number=number)) / number * 1e6
 
 
-def estimator_model():
+def estimator_model(backend=None):
     """The model ``bench_estimator`` times and ``tight_step`` mirrors (tests hold the two together):
     pose + gyro bias, driving a circle at 0.5 m/s with a gyro, a roll/pitch update masked to tilt and
     the x/y bias. Returns a namespace: layout, ws (the prediction workspace, as FusionCore holds one),
-    ekf, u, noise, cov (the update's covariance), mask."""
+    ekf (on ``backend``; None: the default), u, noise, cov (the update's covariance), mask."""
     from types import SimpleNamespace
 
-    from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout
+    from fusiond.estimator import (DEFAULT_BACKEND, ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock,
+                                   PredictWorkspace, StateLayout)
 
     layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5)])
     u = MotionInput()
@@ -57,40 +66,27 @@ def estimator_model():
     u.from_gyro = True
     mask = np.ones(layout.error_dim, dtype=bool)
     mask[[0, 1, 2, 5, 8]] = False
-    return SimpleNamespace(layout=layout, ws=PredictWorkspace(layout), ekf=ErrorStateEKF(layout), u=u,
+    ekf = ErrorStateEKF(layout, backend=DEFAULT_BACKEND if backend is None else backend)
+    return SimpleNamespace(layout=layout, ws=PredictWorkspace(layout), ekf=ekf, u=u,
                            noise=layout.noise_density(np.full(6, 4e-6)), cov=(1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6),
                            mask=mask)
 
 
 def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
     """us per predict, per update and per step (predict + update) of ``estimator_model``, with the
-    compiled kernels when built and on the numpy reference path. The steps are timed interleaved
+    compiled backend when built and on the numpy reference. The steps are timed interleaved
     with the yardstick (``tight_step``), a repeat of each in turn, so that a load spike on this shared
     machine slows both sides of the ratio alike; ``step_vs_tight_median`` is the median of the
     per-repeat ratios, the figure least moved by one noisy repeat."""
-    from fusiond.estimator import kernels
-    from fusiond.estimator import observations as obs
-    from fusiond.estimator import predict
+    from fusiond.estimator import DEFAULT_BACKEND, PYTHON_BACKEND
 
-    m = estimator_model()
-    layout, ws, ekf, u, noise, cov, mask = m.layout, m.ws, m.ekf, m.u, m.noise, m.cov, m.mask
-
-    def predict_only() -> None:
-        x, F, Q = predict(layout, ekf.x, u, 0.01, noise, ws)
-        ekf.propagate(x, F, Q)
-
-    def update_only() -> None:
-        y, H, R = obs.orientation(layout, ekf.x, (0.001, -0.002, 0.0), cov, (0, 1))
-        ekf.update(y, H, R, mask=mask)
-
-    def step() -> None:
-        predict_only()
-        update_only()
+    predict_only, update_only, step = _estimator_steps(estimator_model())
 
     def best(fn) -> float:
         return _best_us(fn, number, repeat)
 
-    compiled = kernels.active() is not None
+    compiled = DEFAULT_BACKEND is not PYTHON_BACKEND
+    reference_step = _estimator_steps(estimator_model(PYTHON_BACKEND))[2]
     out = {"kernels_compiled": float(compiled), "predict_us": best(predict_only), "update_us": best(update_only)}
     tight = tight_step()
     timer = {name: timeit.Timer(fn, timer=CLOCK) for name, fn in (("step", step), ("tight", tight))}
@@ -98,18 +94,36 @@ def bench_estimator(repeat: int = 7, number: int = 3000) -> dict[str, float]:
     for _ in range(repeat):
         for name in ("step", "tight"):
             runs[name].append(timer[name].timeit(number) / number * 1e6)
-        if compiled:  # the numpy reference path of the same step, for the before/after
-            kernels.use("numpy")
-            try:
-                runs["numpy"].append(timeit.Timer(step, timer=CLOCK).timeit(number) / number * 1e6)
-            finally:
-                kernels.use("auto")
+        if compiled:  # the reference backend's same step, for the before/after
+            runs["numpy"].append(timeit.Timer(reference_step, timer=CLOCK).timeit(number) / number * 1e6)
     out["predict_update_us"] = min(runs["step"])
     out["tight_numpy_step_us"] = min(runs["tight"])
     out["step_vs_tight_median"] = statistics.median(a / b for a, b in zip(runs["step"], runs["tight"]))
     if runs["numpy"]:
         out["predict_update_numpy_us"] = min(runs["numpy"])
     return out
+
+
+def _estimator_steps(m) -> tuple[Callable[[], None], Callable[[], None], Callable[[], None]]:
+    """(predict, update, both) of ``estimator_model`` ``m``, on its filter's backend."""
+    from fusiond.estimator import observations as obs
+
+    layout, ws, ekf, u, noise, cov, mask = m.layout, m.ws, m.ekf, m.u, m.noise, m.cov, m.mask
+    backend = ekf.backend
+
+    def predict_only() -> None:
+        x, F, Q = backend.predict(layout, ekf.x, u, 0.01, noise, ws)
+        ekf.propagate(x, F, Q)
+
+    def update_only() -> None:
+        y, H, R = obs.orientation(layout, ekf.x, (0.001, -0.002, 0.0), cov, (0, 1), backend)
+        ekf.update(y, H, R, mask=mask)
+
+    def step() -> None:
+        predict_only()
+        update_only()
+
+    return predict_only, update_only, step
 
 
 def tight_step(dt: float = 0.01) -> Callable[[], None]:
@@ -270,7 +284,7 @@ gyro_scale_estimation = true
         per: dict[str, float] = {}
         total = math.inf
         for _ in range(max(repeat // 2, 1)):
-            core = FusionCore(cfg)
+            core = FusionCore(cfg, _backend())
             spent: dict[str, float] = {}
             t_all = clock()
             for smp in samples:
@@ -332,8 +346,10 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
 
     samples = read()
 
+    backend = _backend()
+
     def fuse() -> None:
-        core = FusionCore(cfg)
+        core = FusionCore(cfg, backend)
         for s in samples:
             if core.ingest(s).publish:
                 core.pose()
@@ -342,8 +358,8 @@ def bench_replay(bag: Path, cfg: Config, repeat: int = 3) -> dict[str, float]:
         "rosbags": rosbags_decode,
         "read_decode": read,
         "core": fuse,
-        "no_doctor": lambda: replay([bag], cfg, keep_trace=False, progress=False, doctor=False),
-        "replay": lambda: replay([bag], cfg, keep_trace=False, progress=False),
+        "no_doctor": lambda: replay([bag], cfg, keep_trace=False, progress=False, doctor=False, backend=backend),
+        "replay": lambda: replay([bag], cfg, keep_trace=False, progress=False, backend=backend),
     }
     runs: dict[str, list[float]] = {k: [] for k in sides}
     n = 0

@@ -48,7 +48,7 @@ import zenoh
 from fusiond.codecs import encode_imu_sample, encode_odom_sample
 from fusiond.config import ZenohConfig, loads
 from fusiond.errors import TransportError
-from fusiond.estimator import kernels
+from fusiond.estimator.backend import from_environment
 from fusiond.samples import ImuSample, OdomSample
 from fusiond.health import decode_report, encode_report
 from fusiond.logs import configure
@@ -247,10 +247,10 @@ def _take(values: list[float]) -> list[float]:
 def _daemon_child(conn: Any, config_text: str, express: bool) -> None:
     """Child process: the daemon (as `fusiond run` builds it) plus the echo; answers the parent's commands."""
     configure("warning")  # a spawned child starts unconfigured: logs on stderr, stdout stays the table/JSON
-    kernels.use_environment(os.environ)  # as `fusiond run` would (FUSIOND_KERNELS)
     cfg = loads(config_text, "<bench>")
     session = open_session(build_config(cfg.zenoh))
-    daemon = Daemon(cfg, session, express=express, monitor=False)
+    # the estimator's backend as `fusiond run` would take it (FUSIOND_KERNELS)
+    daemon = Daemon(cfg, session, express=express, monitor=False, backend=from_environment(os.environ))
     hop: list[float] = []
     perf = time.perf_counter  # CLOCK_MONOTONIC: comparable with the parent's stamps
     objs: list[Any] = []

@@ -55,6 +55,21 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items[:] = keep
 
 
+# --- the estimator's backends (fusiond/estimator/backend.py) -----------------------------------------
+
+@pytest.fixture(scope="session", params=["numpy", "compiled"])
+def backend(request):
+    """Each estimator backend in turn: a test that takes it passes on the Python reference and on the
+    compiled kernels (skipped where they were not built)."""
+    from fusiond.estimator.backend import COMPILED, PYTHON
+
+    if request.param == "numpy":
+        return PYTHON
+    if COMPILED is None:
+        pytest.skip("fusiond.estimator._kernels not built (no C compiler at install)")
+    return COMPILED
+
+
 # --- bag fixtures (codecs / replay.bag tests) ------------------------------------------
 
 # robot_localization's test bag 2 (BSD, data/LICENSE.robot_localization), shipped in the repo so

@@ -78,15 +78,15 @@ def main(argv: list[str] | None = None) -> int:
     from ..logs import configure
 
     configure(args.log_level or getattr(args, "default_log_level", "warning"))
-    # The estimator's linear algebra: compiled when built (the default, "auto"), or the numpy
-    # reference path (FUSIOND_KERNELS=numpy; estimator/kernels.py). Read here, not in the estimator
-    # (no I/O there), and only when set: the commands that do not fuse need not import numpy.
+    # The estimator's backend: compiled when built (the default, "auto"), or the numpy reference
+    # (FUSIOND_KERNELS=numpy; estimator/backend.py). Each command that fuses passes
+    # ``common.chosen_backend()`` to the cores it builds; an unknown name is refused here, before any runs.
     if os.environ.get("FUSIOND_KERNELS"):
         from ..errors import EstimatorError
-        from ..estimator import kernels
+        from .common import chosen_backend
 
         try:
-            kernels.use_environment(os.environ)
+            chosen_backend()
         except EstimatorError as e:
             print(f"fusiond: {e}", file=sys.stderr)
             return 2

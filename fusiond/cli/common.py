@@ -13,11 +13,23 @@ import sys
 from pathlib import Path
 
 __all__ = ["ADVICE_BUDGET", "ALLOW_MISSING", "BENCH_NO_MULTICAST", "EXIT_UNHEALTHY", "EXIT_USAGE", "LOG_LEVELS",
-           "VersionAction", "load_config", "non_negative", "output_error", "positive"]
+           "VersionAction", "chosen_backend", "load_config", "non_negative", "output_error", "positive"]
 
 EXIT_USAGE = 2
 EXIT_UNHEALTHY = 1
 LOG_LEVELS = ["debug", "info", "warning", "error"]
+
+
+def chosen_backend():
+    """The estimator's backend that FUSIOND_KERNELS names (``estimator.backend.from_environment``), None
+    when it names none (the default: compiled when built). Read here, not in the estimator (no I/O
+    there), and only when set: the commands that do not fuse need not import numpy. An unknown name is
+    an EstimatorError (``main`` checks it before any command runs)."""
+    if not os.environ.get("FUSIOND_KERNELS"):
+        return None
+    from ..estimator.backend import from_environment
+
+    return from_environment(os.environ)
 
 
 def load_config(path: str, needs: str = ""):

@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import ADVICE_BUDGET, ALLOW_MISSING, EXIT_USAGE, load_config, output_error
+from .common import ADVICE_BUDGET, ALLOW_MISSING, EXIT_USAGE, chosen_backend, load_config, output_error
 
 __all__ = ["add_arguments", "as_replay", "run"]
 
@@ -88,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     through = recorder.filter if recorder is not None else None
     if fused is not None:
         through = _kept(fused, through)
+    backend = chosen_backend()
     try:
         result = replay(
             [Path(p) for p in args.bags],
@@ -102,11 +103,12 @@ def run(args: argparse.Namespace) -> int:
             records=records,
             allow_missing=args.allow_missing,
             smooth=args.smooth,
+            backend=backend,
         )
         if fused:
             from ..tune.advice import prove_advice
 
-            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records)
+            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend)
         evaluation = None
         if recorder is not None:
             from ..replay.evaluate import evaluate

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import EXIT_USAGE, load_config
+from .common import EXIT_USAGE, chosen_backend, load_config
 from .tool_session import zenoh_errors
 
 __all__ = ["add_arguments", "run"]
@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
 
     ConfigError, SessionError = zenoh_errors()
     try:
-        return run_daemon(cfg, base_dir=Path(args.config).resolve().parent)
+        return run_daemon(cfg, base_dir=Path(args.config).resolve().parent, backend=chosen_backend())
     except ConfigError as err:
         print(f"fusiond: config error: {args.config}: {err}", file=sys.stderr)
         return EXIT_USAGE

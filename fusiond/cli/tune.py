@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import ALLOW_MISSING, EXIT_USAGE, load_config, output_error
+from .common import ALLOW_MISSING, EXIT_USAGE, chosen_backend, load_config, output_error
 
 __all__ = ["add_arguments", "run"]
 
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         samples = read_samples([Path(b) for b in args.bags], cfg,
                                warn=lambda message: print(f"fusiond: warning: {message}", file=sys.stderr),
                                allow_missing=args.allow_missing)
-        result = tune(samples, cfg, keys, budget_s=args.budget_s, progress=not args.quiet)
+        result = tune(samples, cfg, keys, budget_s=args.budget_s, progress=not args.quiet, backend=chosen_backend())
     except (ConfigError, ReplayError) as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE

@@ -30,8 +30,8 @@ import numpy as np
 from ..config_tables import Config
 from .. import reasons
 from ..errors import CoreError
-from ..estimator import (POSE, POSE_ERR, POSITION, POSITION_ERR, ErrorStateEKF, PredictWorkspace, add_motion_noise,
-                         corrected_inputs, planar_mask, predict)
+from ..estimator import (DEFAULT_BACKEND, POSE, POSE_ERR, POSITION, POSITION_ERR, Backend, ErrorStateEKF,
+                         PredictWorkspace, add_motion_noise, corrected_inputs, planar_mask)
 from ..errors import EstimatorError
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..estimator.smoother import Smoothed, SmoothingRecorder
@@ -100,8 +100,10 @@ def _twist_covariance(linear: tuple[float, ...], angular: tuple[float, ...]) -> 
 
 
 class FusionCore:
-    def __init__(self, cfg: Config) -> None:
+    def __init__(self, cfg: Config, backend: Backend | None = None) -> None:
         self.cfg = cfg
+        # the estimator's numerics (estimator/backend.py; None: compiled when built): every filter built here runs it
+        self.backend = DEFAULT_BACKEND if backend is None else backend
         fc = cfg.filter
         self.sensors = list(cfg.sensors)
         self.index = {s.name: i for i, s in enumerate(self.sensors)}
@@ -563,7 +565,7 @@ class FusionCore:
                             f"this config {self.fingerprint})")
         if not (math.isfinite(saved.stamp) and saved.stamp > 0.0) or len(saved.period) != len(self.sensors):
             raise CoreError("saved state has no valid stamp or does not list this config's sensors")
-        ekf = ErrorStateEKF(self.layout)
+        ekf = ErrorStateEKF(self.layout, backend=self.backend)
         try:
             ekf.restore(saved.x, saved.P)
             enu = EnuFrame(*saved.datum) if saved.datum is not None else None
@@ -616,7 +618,7 @@ class FusionCore:
     def _start(self) -> None:
         """A fresh state with no time yet: the first sample in stamp order sets it, so the
         start does not depend on which sensor happened to arrive first."""
-        ekf = ErrorStateEKF(self.layout)
+        ekf = ErrorStateEKF(self.layout, backend=self.backend)
         if self._smoothing is not None:  # the new filter's anchors follow the ones recorded so far
             old = self.state.ekf.recording if self.state is not None else None
             ekf.record(self._smoothing.open(old.count if old is not None else 0))
@@ -659,7 +661,7 @@ class FusionCore:
             t1 = next_expiry(expiries, t0, t_end)
             seg = t1 - t0
             u = held.at(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
-            x, F, Q = predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
+            x, F, Q = s.ekf.backend.predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
             if not u.from_gyro and u.angular_period > 0.0:  # the wheels' yaw rate turns the heading
                 s.wheel_turn += u.angular[2] * seg
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)

@@ -1,5 +1,9 @@
 """Pure maths: state blocks, error-state EKF, motion and measurement models. No I/O, no clocks."""
 
+from .backend import COMPILED as COMPILED_BACKEND
+from .backend import DEFAULT as DEFAULT_BACKEND
+from .backend import PYTHON as PYTHON_BACKEND
+from .backend import Backend, CompiledBackend, PythonBackend
 from .ekf import ErrorStateEKF, UpdateResult, planar_mask
 from .gps_error import GpsErrorBlock
 from .motion import MotionInput, PredictWorkspace, corrected_inputs, predict
@@ -10,6 +14,7 @@ from .state import (ATTITUDE, POSE, POSE_ERR, POSITION, POSITION_ERR, POSITION_R
 from .twist_pitch import TwistPitchBlock
 
 __all__ = [
+    "Backend", "PythonBackend", "CompiledBackend", "PYTHON_BACKEND", "COMPILED_BACKEND", "DEFAULT_BACKEND",
     "ErrorStateEKF", "UpdateResult", "planar_mask", "Smoothed", "SmoothingRecorder", "smooth",
     "MotionInput", "PredictWorkspace", "corrected_inputs", "predict",
     "GpsErrorBlock", "GyroBiasBlock", "GyroScaleBlock", "TwistPitchBlock", "WheelScaleBlock", "InputBlock",

@@ -8,24 +8,24 @@
  * project's 2-core machine), more than a whole `fusiond replay` of the Jackal bag takes. This
  * module imports in well under a millisecond and needs nothing but the C compiler that
  * `pip install` already uses; the build is optional (setup.py), and without it the estimator
- * runs the numpy reference path in ekf.py, which tests hold equal to this one.
+ * runs the reference backend (backend.py's PythonBackend), which tests hold equal to this one.
  *
  * What is here is the EKF's linear algebra and, as the one model that runs on every message, the
  * motion model's prediction and the orientation observation; the other measurement models stay
- * in Python. The maths is exactly that of
- * ErrorStateEKF.propagate / update (ekf.py, whose docstrings derive it), of StateLayout.boxplus for
+ * in Python. The maths is exactly that of the reference backend's propagate / update
+ * (backend.py's PythonBackend, ekf.py's docstrings derive it), of StateLayout.boxplus for
  * the layout where every block after the pose is additive, of motion.predict and of
  * observations.orientation:
  *
  *   predict:    motion.predict for input blocks of the kinds listed under BLOCK_* (the classes
  *               name theirs in kernel_code): each block's correction of its input, x' (the pose
  *               moved by the twist and the rate), F (the cross block and the blocks' columns by the
- *               chain rule) and Q as input_noise; a layout with any other block predicts in Python.
+ *               chain rule) and Q: its diagonal (noise density * dt) and the input-noise blocks
+ *               scale * G S G^T of the odometry twist and the gyro rate (motion.py's _input_noise,
+ *               same expressions); a layout with any other block predicts in Python.
  *               tests/unit/test_kernels.py holds x', F and Q to the Python path's bits.
  *   orientation: observations.orientation's innovation and Jacobian (rpy_jacobian, rot.wrap), the
  *               IMU's most frequent update.
- *   input_noise: Q's diagonal (noise density * dt) and the input-noise blocks scale * G S G^T of
- *               the odometry twist and the gyro rate (motion.py's _input_noise, same expressions).
  *   propagate:  P' = (F P) F^T + Q, finite iff its diagonal sums to a finite number.
  *   update:     HP = H P, S = HP H^T + R = L L^T (Cholesky), z = L^-1 y, NIS = z.z,
  *               W = L^-1 HP, dx = HP^T L^-T z, P' = P - W^T W; with a mask (Schmidt update),
@@ -42,17 +42,17 @@
 #include <math.h>
 #include <string.h>
 
-#define MAX_N 48 /* error dimension handled here; larger layouts take the numpy path */
+#define MAX_N 48 /* error dimension handled here; larger layouts run the reference backend */
 #define MAX_M 12 /* measurement rows */
 
-/* Status codes of update(), mirrored in ekf.py. */
+/* Status codes of update(), mirrored in backend.py. */
 enum { APPLIED = 0, GATED = 1, SINGULAR = 2, NEEDS_CHECK = 3 };
 
 /* -- buffers --------------------------------------------------------------------------------- */
 
 /* A C-contiguous float64 buffer of exactly `count` items (or any count when count < 0). An array
- * that cannot be read so (another dtype or order) is a BufferError, which ekf.py answers with its
- * numpy path; a wrong size is a ValueError (a caller's bug). */
+ * that cannot be read so (another dtype or order) is a BufferError, which the compiled backend
+ * (backend.py) answers with the reference; a wrong size is a ValueError (a caller's bug). */
 static int get_doubles(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t count, const char *what) {
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(obj, view, flags) < 0) {
@@ -208,21 +208,22 @@ static int boxplus(double *x, Py_ssize_t nx, const double *dx, int hold_heading)
     return 0;
 }
 
-/* -- input noise ------------------------------------------------------------------------------ */
+/* -- small sequences and Q's noise blocks ----------------------------------------------------- */
 
-/* Nine doubles from a 9-sequence of floats (a row-major 3x3 as the motion model keeps them). */
-static int nine(PyObject *seq, double *out, const char *what) {
+/* `count` doubles from a sequence of as many floats (a 3-vector, or a row-major 3x3 as the motion model
+ * keeps them). */
+static int doubles(PyObject *seq, double *out, Py_ssize_t count, const char *what) {
     PyObject *fast = PySequence_Fast(seq, what);
     if (fast == NULL) {
         return -1;
     }
-    if (PySequence_Fast_GET_SIZE(fast) != 9) {
+    if (PySequence_Fast_GET_SIZE(fast) != count) {
         Py_DECREF(fast);
-        PyErr_Format(PyExc_ValueError, "%s must have 9 entries", what);
+        PyErr_Format(PyExc_ValueError, "%s must have %zd entries", what, count);
         return -1;
     }
     PyObject **items = PySequence_Fast_ITEMS(fast);
-    for (int i = 0; i < 9; i++) {
+    for (Py_ssize_t i = 0; i < count; i++) {
         out[i] = PyFloat_AsDouble(items[i]);
         if (out[i] == -1.0 && PyErr_Occurred()) {
             Py_DECREF(fast);
@@ -231,6 +232,13 @@ static int nine(PyObject *seq, double *out, const char *what) {
     }
     Py_DECREF(fast);
     return 0;
+}
+
+/* The off-diagonal entries (k, k+1), (k, k+2), (k+1, k+2) of Q's 3x3 block at k, and their mirrors. */
+static void noise_off_diagonal(double *Q, Py_ssize_t n, Py_ssize_t k, double c01, double c02, double c12) {
+    Q[k * n + k + 1] = Q[(k + 1) * n + k] = c01;
+    Q[k * n + k + 2] = Q[(k + 2) * n + k] = c02;
+    Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = c12;
 }
 
 /* motion._input_noise for one input: scale * G S G^T (mat3.sandwich, or mat3.sandwich_diag for a
@@ -258,71 +266,7 @@ static void input_block(double *Q, Py_ssize_t n, double *q, int k, const double 
     q[k] = c00 + q[k];
     q[k + 1] = c11 + q[k + 1];
     q[k + 2] = c22 + q[k + 2];
-    Q[k * n + k + 1] = Q[(k + 1) * n + k] = c01;
-    Q[k * n + k + 2] = Q[(k + 2) * n + k] = c02;
-    Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = c12;
-}
-
-PyDoc_STRVAR(input_noise_doc,
-"input_noise(Q, density, dt, extra, G_lin, cov_lin, scale_lin, G_ang, cov_ang, scale_ang) -> None\n\n"
-"Q's entries that the motion model writes (motion.PredictWorkspace): the diagonal density * dt\n"
-"(+ extra, the dynamic blocks' own noise, or None), then each input's scale * G cov G^T into the\n"
-"position (linear) and attitude (angular) blocks; G and cov are row-major 9-sequences, G None for\n"
-"an input that is silent (its block's off-diagonals 0). Q's other entries are not touched.");
-
-static PyObject *input_noise(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 10) {
-        PyErr_SetString(PyExc_TypeError, "input_noise takes 10 arguments");
-        return NULL;
-    }
-    double dt = PyFloat_AsDouble(args[2]);
-    if (dt == -1.0 && PyErr_Occurred()) {
-        return NULL;
-    }
-    double g[2][9], c[2][9], scale[2] = {0.0, 0.0};
-    int on[2] = {0, 0};
-    for (int j = 0; j < 2; j++) {
-        PyObject *G = args[4 + 3 * j];
-        if (G == Py_None) {
-            continue;
-        }
-        on[j] = 1;
-        scale[j] = PyFloat_AsDouble(args[6 + 3 * j]);
-        if ((scale[j] == -1.0 && PyErr_Occurred()) || nine(G, g[j], "G") < 0 || nine(args[5 + 3 * j], c[j], "cov") < 0) {
-            return NULL;
-        }
-    }
-    Held held = {.count = 0};
-    const double *d = NULL, *extra = NULL;
-    double *Q = hold(&held, args[0], 1, -1, "Q");
-    Py_ssize_t n = Q == NULL ? -1 : square_side(last_items(&held), 6, "Q");
-    if (n < 0 || (d = hold(&held, args[1], 0, n, "density")) == NULL ||
-        (args[3] != Py_None && (extra = hold(&held, args[3], 0, n, "extra")) == NULL)) {
-        release(&held);
-        return NULL;
-    }
-    double q[MAX_N];
-    for (Py_ssize_t i = 0; i < n; i++) {
-        q[i] = d[i] * dt;
-        if (extra != NULL) {
-            q[i] += extra[i];
-        }
-    }
-    for (int j = 0; j < 2; j++) {
-        int k = 3 * j;
-        if (on[j]) {
-            input_block(Q, n, q, k, g[j], c[j], scale[j]);
-        } else {
-            Q[k * n + k + 1] = Q[(k + 1) * n + k] = 0.0;
-            Q[k * n + k + 2] = Q[(k + 2) * n + k] = 0.0;
-            Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = 0.0;
-        }
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        Q[i * n + i] = q[i];
-    }
-    release(&held);
-    Py_RETURN_NONE;
+    noise_off_diagonal(Q, n, k, c01, c02, c12);
 }
 
 /* -- motion model ----------------------------------------------------------------------------- */
@@ -430,29 +374,6 @@ static void block_chain(const MotionBlock *blk, double *G, double *columns) {
     mat3_mul(G, d, 1.0, G);
 }
 
-/* Three doubles from a 3-sequence of floats. */
-static int three(PyObject *seq, double *out, const char *what) {
-    PyObject *fast = PySequence_Fast(seq, what);
-    if (fast == NULL) {
-        return -1;
-    }
-    if (PySequence_Fast_GET_SIZE(fast) != 3) {
-        Py_DECREF(fast);
-        PyErr_Format(PyExc_ValueError, "%s must have 3 entries", what);
-        return -1;
-    }
-    PyObject **items = PySequence_Fast_ITEMS(fast);
-    for (int i = 0; i < 3; i++) {
-        out[i] = PyFloat_AsDouble(items[i]);
-        if (out[i] == -1.0 && PyErr_Occurred()) {
-            Py_DECREF(fast);
-            return -1;
-        }
-    }
-    Py_DECREF(fast);
-    return 0;
-}
-
 /* The layout's input blocks, a tuple of (code, applies, linear, n0, c0, size) tuples, into blocks. */
 static Py_ssize_t read_blocks(PyObject *spec, MotionBlock *blocks, Py_ssize_t nx, Py_ssize_t n) {
     if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) > MAX_INPUT_BLOCKS) {
@@ -519,7 +440,8 @@ PyDoc_STRVAR(predict_doc,
 "        angular_period, twist_correlation, flags, blocks[, decays]) -> None\n\n"
 "motion.predict for a layout whose input blocks all have a kernel_code: x_out (nominal, as long as\n"
 "x) gets the propagated pose and x's other entries, F (n x n, the identity elsewhere) its cross\n"
-"block and the input blocks' columns, Q the entries input_noise writes. flags: 1 world-frame twist,\n"
+"block and the input blocks' columns, Q the entries motion.PredictWorkspace lists (its diagonal, the\n"
+"input-noise blocks' off-diagonals; the others untouched). flags: 1 world-frame twist,\n"
 "2 planar rates. blocks: (code, applies, linear, n0, c0, size) per input block in layout order.\n"
 "decays: ((n0, e0, tau, (var, ...)), ...), the Gauss-Markov blocks, whose decay and noise are then\n"
 "written here (x' = a x, F's diagonal a, Q's diagonal var (1 - exp(-2 dt / tau)) beside density * dt);\n"
@@ -535,8 +457,8 @@ static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs
     double tau = PyFloat_AsDouble(args[13]);
     long flags = PyLong_AsLong(args[14]);
     double v[3], w[3], cov[2][9];
-    if (PyErr_Occurred() || three(args[7], v, "linear") < 0 || three(args[8], w, "angular") < 0 ||
-        nine(args[9], cov[0], "linear_cov") < 0 || nine(args[10], cov[1], "angular_cov") < 0) {
+    if (PyErr_Occurred() || doubles(args[7], v, 3, "linear") < 0 || doubles(args[8], w, 3, "angular") < 0 ||
+        doubles(args[9], cov[0], 9, "linear_cov") < 0 || doubles(args[10], cov[1], 9, "angular_cov") < 0) {
         return NULL;
     }
     Held held = {.count = 0};
@@ -626,51 +548,44 @@ static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs
             }
         }
     }
-    /* Q: as input_noise, the odometry's period widened to its correlation (motion.py's module doc) */
-    if (dt > 0.0) {
-        double qd[MAX_N];
-        for (Py_ssize_t i = 0; i < n; i++) {
+    /* Q: density * dt (+ extra) and the decays' noise on the diagonal, each held input's noise block
+     * scale * G cov G^T (the odometry's period widened to its correlation, motion.py's module doc);
+     * without time (dt = 0) every written entry is 0 */
+    int noisy = dt > 0.0;
+    double qd[MAX_N];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        qd[i] = 0.0;
+        if (noisy) {
             qd[i] = d[i] * dt;
             if (extra != NULL) {
                 qd[i] += extra[i];
             }
         }
-        for (Py_ssize_t j = 0; j < n_decays; j++) { /* GpsErrorBlock.process_noise: k = 1 - exp(-2 dt / tau) */
-            DecayBlock *b = &decays[j];
-            double k = -expm1(-2.0 * dt / b->tau);
-            for (Py_ssize_t i = 0; i < b->size; i++) {
-                double add = b->var[i] * k;
-                qd[b->e0 + i] += add;
+    }
+    for (Py_ssize_t j = 0; noisy && j < n_decays; j++) { /* GpsErrorBlock.process_noise: k = 1 - exp(-2 dt / tau) */
+        DecayBlock *b = &decays[j];
+        double k = -expm1(-2.0 * dt / b->tau);
+        for (Py_ssize_t i = 0; i < b->size; i++) {
+            double add = b->var[i] * k;
+            qd[b->e0 + i] += add;
+        }
+    }
+    const double *gs[2] = {G_lin, G_ang};
+    double periods[2] = {lin_period, ang_period};
+    for (int j = 0; j < 2; j++) {
+        int k = 3 * j;
+        if (noisy && periods[j] > 0.0) {
+            double period = periods[j];
+            if (j == 0 && 2.0 * tau > period) { /* Python's max(period, 2 tau) */
+                period = 2.0 * tau;
             }
+            input_block(Q, n, qd, k, gs[j], cov[j], period / dt);
+        } else {
+            noise_off_diagonal(Q, n, k, 0.0, 0.0, 0.0);
         }
-        const double *gs[2] = {G_lin, G_ang};
-        double periods[2] = {lin_period, ang_period};
-        for (int j = 0; j < 2; j++) {
-            int k = 3 * j;
-            if (periods[j] > 0.0) {
-                double period = periods[j];
-                if (j == 0 && 2.0 * tau > period) { /* Python's max(period, 2 tau) */
-                    period = 2.0 * tau;
-                }
-                input_block(Q, n, qd, k, gs[j], cov[j], period / dt);
-            } else {
-                Q[k * n + k + 1] = Q[(k + 1) * n + k] = 0.0;
-                Q[k * n + k + 2] = Q[(k + 2) * n + k] = 0.0;
-                Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = 0.0;
-            }
-        }
-        for (Py_ssize_t i = 0; i < n; i++) {
-            Q[i * n + i] = qd[i];
-        }
-    } else {
-        for (int k = 0; k <= 3; k += 3) {
-            Q[k * n + k + 1] = Q[(k + 1) * n + k] = 0.0;
-            Q[k * n + k + 2] = Q[(k + 2) * n + k] = 0.0;
-            Q[(k + 1) * n + k + 2] = Q[(k + 2) * n + k + 1] = 0.0;
-        }
-        for (Py_ssize_t i = 0; i < n; i++) {
-            Q[i * n + i] = 0.0;
-        }
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        Q[i * n + i] = qd[i];
     }
     /* x_out last: x may be x_out */
     double head[7] = {x[0] + dp[0], x[1] + dp[1], x[2] + dp[2], q1[0], q1[1], q1[2], q1[3]};
@@ -732,7 +647,7 @@ static PyObject *orientation(PyObject *self, PyObject *const *args, Py_ssize_t n
     }
     double z[3];
     int rows[3];
-    if (three(args[1], z, "z_rpy") < 0) {
+    if (doubles(args[1], z, 3, "z_rpy") < 0) {
         return NULL;
     }
     PyObject *fast = PySequence_Fast(args[2], "rows");
@@ -820,6 +735,27 @@ static PyObject *copy_into(PyObject *self, PyObject *const *args, Py_ssize_t nar
     Py_RETURN_NONE;
 }
 
+/* -- the product propagate and update share ---------------------------------------------------- */
+
+/* out = A P for A (rows x n) and P (n x n), row by row, skipping A's zeros: the motion model's F and
+ * a measurement's H are mostly zeros, so this costs about their non-zeros times n. */
+static void sparse_times(const double *A, Py_ssize_t rows, const double *P, Py_ssize_t n, double *out) {
+    for (Py_ssize_t i = 0; i < rows; i++) {
+        double *row = out + i * n;
+        memset(row, 0, (size_t)n * sizeof(double));
+        for (Py_ssize_t k = 0; k < n; k++) {
+            double a = A[i * n + k];
+            if (a == 0.0) {
+                continue;
+            }
+            const double *pk = P + k * n;
+            for (Py_ssize_t j = 0; j < n; j++) {
+                row[j] += a * pk[j];
+            }
+        }
+    }
+}
+
 /* -- propagate ------------------------------------------------------------------------------- */
 
 PyDoc_STRVAR(propagate_doc,
@@ -842,21 +778,7 @@ static PyObject *propagate(PyObject *self, PyObject *const *args, Py_ssize_t nar
         return NULL;
     }
     double FP[MAX_N * MAX_N];
-    /* FP = F P, skipping F's zeros (F is the identity but for a few blocks) */
-    for (Py_ssize_t i = 0; i < n; i++) {
-        double *row = FP + i * n;
-        memset(row, 0, (size_t)n * sizeof(double));
-        for (Py_ssize_t k = 0; k < n; k++) {
-            double f = F[i * n + k];
-            if (f == 0.0) {
-                continue;
-            }
-            const double *pk = P + k * n;
-            for (Py_ssize_t j = 0; j < n; j++) {
-                row[j] += f * pk[j];
-            }
-        }
-    }
+    sparse_times(F, n, P, n, FP); /* F is the identity but for a few blocks */
     /* out = FP F^T + Q: out_ij = sum_k FP_ik F_jk */
     double trace = 0.0;
     for (Py_ssize_t i = 0; i < n; i++) {
@@ -924,21 +846,7 @@ static PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         double HP[MAX_M * MAX_N], S[MAX_M * MAX_M], L[MAX_M * MAX_M], Li[MAX_M * MAX_M];
         double z[MAX_M], v[MAX_M], W[MAX_M * MAX_N], dx[MAX_N];
 
-        /* HP = H P, skipping H's zeros (H touches a few columns) */
-        for (Py_ssize_t r = 0; r < m; r++) {
-            double *row = HP + r * n;
-            memset(row, 0, (size_t)n * sizeof(double));
-            for (Py_ssize_t k = 0; k < n; k++) {
-                double h = H[r * n + k];
-                if (h == 0.0) {
-                    continue;
-                }
-                const double *pk = P + k * n;
-                for (Py_ssize_t j = 0; j < n; j++) {
-                    row[j] += h * pk[j];
-                }
-            }
-        }
+        sparse_times(H, m, P, n, HP); /* H touches a few columns */
         /* S = HP H^T + R */
         for (Py_ssize_t a = 0; a < m; a++) {
             for (Py_ssize_t b = 0; b < m; b++) {
@@ -1084,7 +992,6 @@ done:
 static PyMethodDef methods[] = {
     {"propagate", (PyCFunction)(void (*)(void))propagate, METH_FASTCALL, propagate_doc},
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
-    {"input_noise", (PyCFunction)(void (*)(void))input_noise, METH_FASTCALL, input_noise_doc},
     {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL, predict_doc},
     {"orientation", (PyCFunction)(void (*)(void))orientation, METH_FASTCALL, orientation_doc},
     {"copy_into", (PyCFunction)(void (*)(void))copy_into, METH_FASTCALL, copy_into_doc},

@@ -6,23 +6,14 @@ Cholesky factorisation of S (see ``cholesky``) instead of an explicit inverse,
 and the covariance update K S K^T = W^T W is symmetric by construction; a masked
 (Schmidt) update uses the Joseph form's closed form.
 
-Cost. For the 9-15 dimensional states here every numpy call costs more in
-dispatch than in arithmetic, so the per-step work is a fixed, short list of calls
-(products through ``ndarray.dot``, which skips np.dot's Python-level dispatch):
-the update forms H P once, takes W = L^-1 H P and K y in a single product with
-the small matrix [L^-1; (L^-T z)^T] (see ``cholesky.gain_rows``), and writes
-P - K S K^T into a spare n x n buffer that is then swapped with P (P itself is
-never shared: copies and history snapshots copy it). Checks on every step are the
-ones that guard the next step: a non-finite P is reset (counted in ``resets``), a
-negative variance clipped.
-Symmetrising is hygiene against rounding, not correctness (the gain uses P H^T
-only): ``cap_covariance``, called once per second of message time by the core, does
-it with the caps.
-
-Compiled kernels. When ``fusiond.estimator._kernels`` is built (``kernels.py``), propagate and
-update each run as one C call: the same maths on the same arrays, P written into the spare
-buffer, the update's boxplus done in the same call for the usual layout. The numpy code below
-is the reference path and runs otherwise; tests hold the two to the same estimates.
+The numerics run in a backend chosen when the filter is built (``backend.py``): the Python
+reference (numpy products, the gain from a Cholesky factorisation in Python floats) or the same
+steps as one compiled call each; tests hold the two to the same estimates. What stays here is what
+either needs: the buffers (P is written into a spare n x n buffer that is then swapped with P; P
+itself is never shared: copies and history snapshots copy it) and the checks on every step that
+guard the next one: a non-finite P is reset (counted in ``resets``), a negative variance clipped.
+Symmetrising is hygiene against rounding, not correctness (the gain uses P H^T only):
+``cap_covariance``, called once per second of message time by the core, does it with the caps.
 """
 
 from __future__ import annotations
@@ -32,9 +23,8 @@ from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
-from . import kernels
 from . import rotation as rot
-from .cholesky import gain_rows
+from .backend import APPLIED, DEFAULT, NEEDS_CHECK, SINGULAR, Backend, UpdateWorkspace
 from ..errors import EstimatorError
 from .state import YAW_ROW, StateLayout, attitude_of, position_of
 
@@ -54,11 +44,15 @@ class ErrorStateEKF:
     """Nominal state ``x`` (on the manifold) and error covariance ``P``.
 
     ``P`` is replaced by a new array on every step that changes it (read it, do not keep
-    a reference across steps: its buffer is reused two steps later).
+    a reference across steps: its buffer is reused two steps later). ``backend`` runs the
+    numerics (``backend.py``; default: compiled when built, else the Python reference); the
+    motion and observation models take it from ``backend`` too.
     """
 
-    def __init__(self, layout: StateLayout, x: np.ndarray | None = None, P: np.ndarray | None = None) -> None:
+    def __init__(self, layout: StateLayout, x: np.ndarray | None = None, P: np.ndarray | None = None,
+                 backend: Backend = DEFAULT) -> None:
         self.layout = layout
+        self.backend = backend.for_layout(layout)
         self.x = layout.initial_state() if x is None else np.array(x, dtype=float)
         self.P = layout.initial_covariance() if P is None else np.array(P, dtype=float)
         # Covariance resets after a non-finite value, in propagate and update alike. It travels
@@ -68,11 +62,7 @@ class ErrorStateEKF:
         self._keep: np.ndarray | None = None
         self._joseph: np.ndarray | None = None
         self._spare: np.ndarray | None = None  # the next P's buffer (never self.P); allocated on first use
-        self._ws = _Workspace(layout.error_dim)  # scratch shared with copies (single-threaded use per core)
-        # the compiled kernels take layouts up to their fixed size; boxplus mode 1 (in the kernel) for
-        # the usual layout, whose blocks after the pose are all additive, 0 (dx back to Python) otherwise
-        self._fits = layout.error_dim <= _MAX_N
-        self._boxplus_mode = 1 if layout._additive_tail else 0
+        self._ws = UpdateWorkspace(layout.error_dim)  # scratch shared with copies (single-threaded use per core)
         # The smoother's view of this filter's timeline (``record``); None: nothing is recorded, and
         # each step pays one attribute test.
         self._rec: OpenSegment | None = None
@@ -83,34 +73,16 @@ class ErrorStateEKF:
         if self._rec is not None:
             return self._recorded_propagate(x_new, F, Q)
         self.x = x_new
-        k = kernels.active()
-        if k is not None and self._fits:
-            P_new = self._spare
-            if P_new is None:
-                P_new = self._spare = np.empty(self.P.shape)
-            try:
-                finite = k.propagate(F, self.P, Q, P_new)
-            except BufferError:  # an array not C-contiguous float64: the numpy path takes it
-                pass
-            else:
-                if not finite:
-                    self.P = self.layout.initial_covariance()
-                    self.resets += 1
-                    return False
-                self._spare, self.P = self.P, P_new
-                return True
-        # Two fresh products: measured faster than np.dot(..., out=) into the workspace at these
-        # sizes (the out= path's checks cost more than a 9x9 allocation). ndarray.dot is np.dot
-        # without its Python-level dispatch (~0.2 us a call here), so the products use the method.
-        P_new = F.dot(self.P).dot(F.T)
-        P_new += Q
-        # The diagonal is enough (as in ``_store``): a NaN/inf in F's row i makes (F P F^T)_ii
-        # non-finite (inf * 0 is NaN too), and Q's off-diagonal entries come from the same rows
-        # as its diagonal. A Python sum of 9-15 floats costs less than a numpy reduction.
-        if not math.isfinite(sum(P_new.diagonal().tolist())):
+        spare = self._spare
+        if spare is None:
+            spare = self._spare = np.empty(self.P.shape)
+        P_new = self.backend.propagate(F, self.P, Q, spare)
+        if P_new is None:
             self.P = self.layout.initial_covariance()
             self.resets += 1
             return False
+        if P_new is spare:
+            self._spare = self.P
         self.P = P_new
         return True
 
@@ -130,104 +102,30 @@ class ErrorStateEKF:
         """
         if self._rec is not None:
             return self._recorded_update(y, H, R, threshold, mask, hold_heading)
-        k = kernels.active()
-        if k is not None and self._fits and len(y) <= _MAX_M:
-            try:
-                return self._update_compiled(k, y, H, R, threshold, mask, hold_heading)
-            except BufferError:  # an array not C-contiguous float64: the numpy path takes it
-                pass
-        P = self.P
-        HP = H.dot(P)  # H P = (P H^T)^T: P is symmetric
-        S = HP.dot(H.T)
-        S += R
-        S_rows = S.tolist()
-        s_diag = [row[i] for i, row in enumerate(S_rows)]
-        solved = gain_rows(S_rows, y.tolist())
-        if solved is None:
-            return UpdateResult(nis=math.nan, innovation_var=s_diag, rejected=True, singular=True)
-        z, rows = solved  # z = L^-1 y, the whitened innovation; rows = [L^-1; (L^-T z)^T]
-        # fsum: the NIS gates and feeds the consistency tests; for one or two terms a float
-        # addition is already the correctly rounded sum, so it is used there (the same bits).
-        m = len(z)
-        if m == 2:
-            nis = z[0] * z[0] + z[1] * z[1]
-        elif m == 1:
-            nis = z[0] * z[0]
-        else:
-            nis = math.fsum([v * v for v in z])
-        if not math.isfinite(nis):
-            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
-        if nis > threshold * threshold:
-            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
-        # One product gives both W = L^-1 H P and the correction K y = P H^T S^-1 y = (H P)^T L^-T z:
-        # [W; (K y)^T] = [L^-1; (L^-T z)^T] H P, its m + 1 rows on the left written in place.
-        g = self._ws.gain(m)
-        g.rows_flat[:] = rows
-        g.rows.dot(HP, g.product)  # into g.product: g.W and g.dx are views of its rows
-        W, dx = g.W, g.dx
-        P_new = self._spare
-        if P_new is None:
-            P_new = self._spare = np.empty_like(P)
-        C = W.T.dot(W)  # K S K^T = K H P for the optimal gain K = P H^T S^-1
-        if mask is not None:
-            # Gain rows zeroed by the mask (M K): Joseph's P - MKHP - PH^TK^TM + MKSK^TM
-            # collapses to P - C * J with J_ij = 1 - (1 - m_i)(1 - m_j).
-            if mask is not self._mask:
-                self._set_mask(mask)
-            dx *= self._keep
-            C *= self._joseph
-        np.subtract(P, C, out=P_new)
-        self.layout.boxplus(self.x, dx, hold_heading)
-        reset = not self._store(P_new)
-        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False, covariance_reset=reset)
-
-    def _update_compiled(self, k, y: np.ndarray, H: np.ndarray, R: np.ndarray, threshold: float,
-                         mask: np.ndarray | None, hold_heading: bool) -> UpdateResult:
-        """``update`` as one call of the compiled kernel (the same maths, see _kernels.c)."""
         P_new = self._spare
         if P_new is None:
             P_new = self._spare = np.empty(self.P.shape)
         keep = joseph = None
         if mask is not None:
             if mask is not self._mask:
-                self._set_mask(mask)
+                self._mask, self._keep, self._joseph = self._ws.mask(mask)
             keep, joseph = self._keep, self._joseph
-        mode = self._boxplus_mode
-        target = self.x if mode else self._ws.dx()
-        if mode and hold_heading:
-            mode = 2
-        try:
-            status, nis, s_diag = k.update(self.P, H, R, y, threshold * threshold, keep, joseph, P_new, target, mode)
-        except ArithmeticError:
-            raise EstimatorError("quaternion has zero or non-finite norm") from None
-        if status == _GATED:
-            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True)
-        if status == _SINGULAR:
-            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=True)
-        if not mode:
-            self.layout.boxplus(self.x, target, hold_heading)
-        if status == _NEEDS_CHECK:  # a negative or non-finite variance: the reference path's checks
+        status, nis, s_diag = self.backend.update(self.layout, self.x, self.P, H, R, y, threshold * threshold, keep,
+                                                  joseph, hold_heading, P_new, self._ws)
+        if status == APPLIED:
+            self._spare, self.P = self.P, P_new
+            return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False)
+        if status == NEEDS_CHECK:  # the reference's P, or a negative or non-finite variance: the checks
             return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False,
                                 covariance_reset=not self._store(P_new))
-        self._spare, self.P = self.P, P_new
-        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=False)
-
-    def _set_mask(self, mask: np.ndarray) -> None:
-        """The mask as floats and the Joseph weights J, made once per mask array: the core holds one
-        array per kind of masked update (tilt, GPS position, pose delta), and updates of different
-        kinds interleave, so the workspace (shared with copies) keeps them all."""
-        masks = self._ws.masks
-        entry = masks.get(id(mask))
-        if entry is None or entry[0] is not mask:
-            if len(masks) >= _MASKS_KEPT:
-                masks.clear()
-            keep = mask.astype(float)
-            entry = masks[id(mask)] = (mask, keep, 1.0 - np.outer(1.0 - keep, 1.0 - keep))
-        self._mask, self._keep, self._joseph = entry
+        return UpdateResult(nis=nis, innovation_var=s_diag, rejected=True, singular=status == SINGULAR)
 
     # -- recording for the smoother (fusiond.estimator.smoother) ------------------------------------
     def record(self, segment: OpenSegment | None) -> None:
-        """Report every step from here on to ``segment`` (``SmoothingRecorder.open``); None stops."""
+        """Report every step from here on to ``segment`` (``SmoothingRecorder.open``), which folds them with
+        this filter's backend; None stops."""
+        if segment is not None:
+            segment.backend = self.backend
         self._rec = segment
 
     @property
@@ -510,7 +408,7 @@ class ErrorStateEKF:
             c.P = self.P.copy()
             c._spare = None
         c.layout = self.layout
-        c._fits, c._boxplus_mode = self._fits, self._boxplus_mode
+        c.backend = self.backend
         c.resets = self.resets
         c._rec = None if self._rec is None else self._rec.copy()
         c._mask, c._keep, c._joseph = self._mask, self._keep, self._joseph
@@ -556,65 +454,7 @@ def planar_mask(error_zero: list[int], dim: int) -> np.ndarray:
 
 
 def _copied_into(src: ErrorStateEKF, dst: ErrorStateEKF) -> bool:
-    """Write src's x and P into dst's arrays; False (nothing written) when they do not fit.
-
-    One call of ``kernels.copy_into`` when compiled (the sizes checked there: a history snapshot is
-    written once per message, and the two numpy assignments with their shape checks cost twice the
-    call), else ``a[...] = b`` of equal shapes, which copies the bytes."""
-    k = kernels.active()
-    if k is not None:
-        try:
-            k.copy_into(src.x, src.P, dst.x, dst.P)
-            return True
-        except (BufferError, ValueError):  # another size or layout of array: the checks below decide
-            pass
-    if dst.P.shape != src.P.shape or dst.x.shape != src.x.shape:
-        return False
-    dst.x[...] = src.x
-    dst.P[...] = src.P
-    return True
-
-
-_MASKS_KEPT = 8  # distinct masks held by a workspace (the core uses at most three)
-# the compiled kernels' fixed sizes and status codes (_kernels.c)
-_MAX_N, _MAX_M, _GATED, _SINGULAR, _NEEDS_CHECK = 48, 12, 1, 2, 3
-
-
-class _Workspace:
-    """Per-dimension scratch for the products of one step (never holds state between calls)."""
-
-    __slots__ = ("n", "_gains", "masks", "_dx")
-
-    def __init__(self, n: int) -> None:
-        self.n = n
-        self._gains: dict[int, _GainRows] = {}
-        self._dx: np.ndarray | None = None
-        # id(mask) -> (mask, its floats, its Joseph weights); the mask itself is kept so that its id
-        # cannot be reused by another array while the entry lives
-        self.masks: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-
-    def dx(self) -> np.ndarray:
-        """The compiled update's correction, for layouts whose boxplus runs in Python."""
-        if self._dx is None:
-            self._dx = np.empty(self.n)
-        return self._dx
-
-    def gain(self, m: int) -> "_GainRows":
-        g = self._gains.get(m)
-        if g is None:
-            g = self._gains[m] = _GainRows(m, self.n)
-        return g
-
-
-class _GainRows:
-    """The arrays of an m-row update: [L^-1; (L^-T z)^T] (written through a flat view) and its
-    product with H P, whose first m rows are W and last row K y (views made once)."""
-
-    __slots__ = ("rows", "rows_flat", "product", "W", "dx")
-
-    def __init__(self, m: int, n: int) -> None:
-        self.rows = np.empty((m + 1, m))
-        self.rows_flat = self.rows.reshape(-1)
-        self.product = np.empty((m + 1, n))
-        self.W = self.product[:m]
-        self.dx = self.product[m]
+    """Write src's x and P into dst's arrays; False (nothing written) when they do not fit (the
+    compiled backend does it in one call: a history snapshot is written once per message, and the two
+    numpy assignments with their shape checks cost twice the call)."""
+    return src.backend.copy_into(src.x, src.P, dst.x, dst.P)

@@ -49,7 +49,7 @@ class GpsErrorBlock(StateBlock):
         return [v0 * k, v1 * k, v2 * k]
 
     def kernel_decay(self) -> tuple[float, tuple[float, ...]]:
-        """(tau, per-axis variance): what ``kernels.predict`` needs to run ``transition`` and
+        """(tau, per-axis variance): what ``_kernels.predict`` needs to run ``transition`` and
         ``process_noise`` itself, with the same expressions (a subclass that changes them does not
         inherit this, so it keeps the Python path)."""
         return self.tau, self._var

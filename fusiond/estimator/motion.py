@@ -31,11 +31,12 @@ heading only without a gyro, where skid-steer wheels misreading the turn must ke
 showing as inconsistent innovations of the absolute yaw (the doctor's cue), not be
 hidden behind a widened prediction.
 
-This runs once per message. With the compiled kernels (``kernels.active()``) the whole step is one
-call of ``kernels.predict``, the same expressions in C (``_kernels.c``), for layouts whose input blocks
-all name a ``kernel_code``; the Python below is the reference, held to the same bits by
-tests/unit/test_kernels.py. In it the 3x3 algebra is done on Python floats (several times cheaper
-than numpy calls on 3-vectors); numpy only sees the n x n blocks.
+This runs once per message, through the filter's backend (``backend.py``): ``predict`` below is
+the reference, where the 3x3 algebra is done on Python floats (several times cheaper than numpy
+calls on 3-vectors) and numpy only sees the n x n blocks; the compiled backend runs the whole step
+as one call of ``_kernels.predict`` (``predict_compiled``), the same expressions in C, for layouts
+whose input blocks all name a ``kernel_code``, held to the reference's bits by
+tests/unit/test_kernels.py.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ import struct
 
 import numpy as np
 
-from . import kernels, mat3
+from . import mat3
 from . import rotation as rot
 from ..errors import EstimatorError
 from .state import StateLayout, Vec3
@@ -118,7 +119,7 @@ class PredictWorkspace:
     there is nothing to put back. The arrays belong to the workspace: valid until its next use.
     """
 
-    __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_index_f", "_pack_f", "_q_entries", "_zero_columns",
+    __slots__ = ("F", "Q", "_flat", "_index", "_pack", "_q_entries", "_zero_columns",
                  "_cov_seen", "_cov_diagonal", "_nominal_dim", "_kernel_blocks", "_decay_f", "_decay_x", "_kernel_decays")
 
     def __init__(self, layout: StateLayout) -> None:
@@ -145,9 +146,6 @@ class PredictWorkspace:
         # by element (~2 us for ~40 floats); packing them with struct and viewing the bytes costs
         # a third of that, the same doubles
         self._pack = struct.Struct(f"{len(self._index)}d").pack
-        # F's entries alone, for the compiled path (kernels.input_noise writes Q's itself)
-        self._index_f = np.array(f, dtype=np.intp)
-        self._pack_f = struct.Struct(f"{len(f)}d").pack
         self._q_entries = len(q)
         # an input block's columns while it does not apply (row-major, 3 x error_size)
         self._zero_columns = [[0.0] * (3 * blk.error_size) for blk, _, _, _ in layout.input_blocks]
@@ -165,7 +163,7 @@ class PredictWorkspace:
 
 
 def _kernel_blocks(layout: StateLayout) -> tuple[tuple, tuple] | None:
-    """The layout's input blocks as ``kernels.predict`` takes them, for a step without and with the gyro
+    """The layout's input blocks as ``_kernels.predict`` takes them, for a step without and with the gyro
     (index: ``from_gyro``): (code, applies, corrects linear, nominal start, error start, error size) each.
     ``applies`` is asked of the block here, once per layout. None when a block has no compiled form: its
     own class must name one (a subclass that changes the maths inherits its parent's code otherwise)."""
@@ -182,9 +180,9 @@ def _kernel_blocks(layout: StateLayout) -> tuple[tuple, tuple] | None:
 
 
 def _kernel_decays(layout: StateLayout) -> tuple | None:
-    """The dynamic blocks as ``kernels.predict`` decays them itself: (n0, e0, tau, variances) each; None
+    """The dynamic blocks as ``_kernels.predict`` decays them itself: (n0, e0, tau, variances) each; None
     when one has no compiled form (its own class defines no ``kernel_decay``), or there are none: their
-    decay and noise then stay in Python (``_predict_compiled``)."""
+    decay and noise then stay in Python (``predict_compiled``)."""
     specs = []
     for blk, n0, e0 in layout.dynamic_blocks:
         if "kernel_decay" not in type(blk).__dict__ or blk.error_size != blk.nominal_size:
@@ -198,7 +196,6 @@ def _kernel_decays(layout: StateLayout) -> tuple | None:
 _CROSS_ENTRIES = ((0, 4), (0, 5), (1, 3), (1, 5), (2, 3), (2, 4))
 _NO_CROSS = (0.0,) * 6
 _NO_NOISE = (0.0,) * 6
-_SILENT = (None, None, 0.0)  # kernels.input_noise's (G, cov, scale) of an input that is not held
 
 
 def _input_noise(ws: PredictWorkspace, j: int, qd: list[float], G: mat3.Mat3, cov, scale: float) -> tuple:
@@ -250,9 +247,9 @@ def propagate_state(layout: StateLayout, x: np.ndarray, u: MotionInput, dt: floa
     return predict(layout, x, u, dt, np.zeros(layout.error_dim))[0]
 
 
-def _predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float,
+def predict_compiled(k, layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float,
                       noise_density: np.ndarray, ws: PredictWorkspace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``predict`` as one call of ``kernels.predict`` (the same expressions in C, _kernels.c): the
+    """``predict`` as one call of ``k.predict`` (``_kernels``: the same expressions in C, _kernels.c): the
     input blocks' chain, x', F and Q. The dynamic blocks' decay and noise: in the same call when each
     has a ``kernel_decay`` (``_kernel_decays``), else here, the blocks' own ``transition``/``process_noise``:
     x' = a x and F's diagonal a are written after the call."""
@@ -295,7 +292,7 @@ def predict(
     layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, noise_density: np.ndarray,
     ws: PredictWorkspace | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Propagate the nominal state over dt; return (x_new, F, Q) in error space.
+    """Propagate the nominal state over dt; return (x_new, F, Q) in error space (the reference).
 
     ``noise_density``: variance per second added to each error component (model
     error of the pose plus the blocks' random walks, see ``StateLayout.noise_density``).
@@ -304,12 +301,6 @@ def predict(
     """
     if ws is None:
         ws = PredictWorkspace(layout)
-    k = kernels.active()
-    if k is not None and ws._kernel_blocks is not None:
-        try:
-            return _predict_compiled(k, layout, x, u, dt, noise_density, ws)
-        except BufferError:  # an array not C-contiguous float64: the Python path below
-            pass
     xl = x.tolist()
     v = u.linear
     w = u.angular
@@ -379,27 +370,6 @@ def predict(
     # G_lin/G_ang now map the measured inputs, whose noise the covariances describe. Q's
     # diagonal is assembled in floats (input noise + density * dt + the blocks' own noise,
     # summed in that order), then the input blocks' off-diagonals; all written at once.
-    # With the compiled kernels, one call writes Q's entries (the same expressions, in C).
-    k = kernels.active() if dt > 0.0 else None
-    if k is not None:
-        extra = None
-        if dynamic:
-            extra = np.zeros(len(noise_density))
-            for blk, n0, e0 in dynamic:
-                for i, q in enumerate(blk.process_noise(dt)):
-                    extra[e0 + i] += q
-        lin = ang = _SILENT
-        if u.linear_period > 0.0:
-            lin = (G_lin, u.linear_cov, max(u.linear_period, 2.0 * u.twist_correlation) / dt)
-        if u.angular_period > 0.0:
-            ang = (G_ang, u.angular_cov, u.angular_period / dt)
-        try:
-            k.input_noise(ws.Q, noise_density, dt, extra, *lin, *ang)
-        except BufferError:  # a density array not C-contiguous float64: the Python path below
-            pass
-        else:
-            ws._flat[ws._index_f] = np.frombuffer(ws._pack_f(*f_values))
-            return x_new, ws.F, ws.Q
     if dt > 0.0:
         qd = [d * dt for d in noise_density.tolist()]
         if dynamic:

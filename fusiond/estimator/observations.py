@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import math
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from . import kernels
 from . import rotation as rot
 from .state import StateLayout, attitude_of
+
+if TYPE_CHECKING:
+    from .backend import Backend
 
 # Roll/pitch/yaw rows used by each IMU orientation mode.
 ORIENTATION_ROWS: dict[str, tuple[int, ...]] = {
@@ -54,28 +58,30 @@ def rpy_jacobian(q: rot.Quat) -> tuple[tuple[float, float, float], tuple[tuple[f
 
 def orientation(
     layout: StateLayout, x: np.ndarray, z_rpy: tuple[float, float, float], cov: tuple[float, ...],
-    rows: tuple[int, ...],
+    rows: tuple[int, ...], backend: "Backend | None" = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Observe the selected roll/pitch/yaw rows of the attitude; cov is row-major 3x3 (9-tuple).
 
-    With the compiled kernels y and H come from ``kernels.orientation``, the same expressions in C
-    (this Python is the reference, held to the same bits by tests/unit/test_kernels.py)."""
-    k = kernels.active()
-    if k is not None:
-        y, H = np.empty(len(rows)), np.empty((len(rows), layout.error_dim))
-        try:
-            k.orientation(x, z_rpy, rows, y, H)
-        except BufferError:  # x not C-contiguous float64: the Python path below
-            pass
-        else:
-            return y, H, _noise_rows(cov, rows)
+    y and H come from ``backend`` (the filter's: ``ekf.backend``), ``rpy_residual`` without one."""
+    if backend is None:
+        y, H = rpy_residual(layout, x, z_rpy, rows)
+    else:
+        y, H = backend.orientation(layout, x, z_rpy, rows)
+    return y, H, _noise_rows(cov, rows)
+
+
+def rpy_residual(layout: StateLayout, x: np.ndarray, z_rpy: tuple[float, float, float],
+                 rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(y, H) of ``orientation``, the reference: each residual wrapped, H's attitude columns from
+    ``rpy_jacobian`` (the compiled backend's are the same expressions in C, held to the same bits by
+    tests/unit/test_kernels.py)."""
     h, Hrpy = rpy_jacobian(x[3:7].tolist())
     H = np.zeros((len(rows), layout.error_dim))
     residual = []
     for k, i in enumerate(rows):  # H element by element: cheaper than a slice from nested lists
         residual.append(rot.wrap(z_rpy[i] - h[i]))
         H[k, 3], H[k, 4], H[k, 5] = Hrpy[i]
-    return np.array(residual), H, _noise_rows(cov, rows)
+    return np.array(residual), H
 
 
 _NOISE_CACHE: dict[tuple[tuple[float, ...], tuple[int, ...]], np.ndarray] = {}
@@ -102,11 +108,11 @@ def _noise_rows(cov: tuple[float, ...], rows: tuple[int, ...]) -> np.ndarray:
 
 def orientation_with_offset(
     layout: StateLayout, x: np.ndarray, z_rpy: tuple[float, float, float], cov: tuple[float, ...],
-    rows: tuple[int, ...], offset: str = "yaw_offset",
+    rows: tuple[int, ...], backend: "Backend | None" = None, offset: str = "yaw_offset",
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``orientation`` of a sensor whose yaw reads heading + o (o: the ``offset`` block):
     h_yaw = yaw(q) + o, so the yaw row gains a 1 in o's column."""
-    y, H, R = orientation(layout, x, z_rpy, cov, rows)
+    y, H, R = orientation(layout, x, z_rpy, cov, rows, backend)
     if 2 in rows:
         k = rows.index(2)
         y[k] = rot.wrap(float(y[k]) - float(x[layout.nominal[offset]][0]))

@@ -64,12 +64,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .backend import DEFAULT, Backend
 from .state import StateLayout
-
-try:
-    from . import _rts
-except ImportError:  # built without a C compiler: the Python fold runs
-    _rts = None
 
 __all__ = ["Anchor", "Smoothed", "SmoothingRecorder", "OpenSegment", "smooth", "smoothed_at"]
 
@@ -171,10 +167,11 @@ class SmoothingRecorder:
 class OpenSegment:
     """The composed RTS maps since the last anchor, carried by a filter and copied with it."""
 
-    __slots__ = ("recorder", "count", "turns", "A", "b", "B", "dP", "pending", "open", "gain_P", "gain_F")
+    __slots__ = ("recorder", "count", "turns", "A", "b", "B", "dP", "pending", "open", "gain_P", "gain_F", "backend")
 
-    def __init__(self, recorder: SmoothingRecorder, count: int, turns: int = 0) -> None:
+    def __init__(self, recorder: SmoothingRecorder, count: int, turns: int = 0, backend: Backend = DEFAULT) -> None:
         self.recorder = recorder
+        self.backend = backend  # who folds (``Backend.rts_fold``): the filter's own (``ErrorStateEKF.record``)
         self.count = count  # anchors of this filter's timeline
         self.turns = turns  # heading turns of this filter's timeline
         self.A: np.ndarray | None = None
@@ -189,7 +186,7 @@ class OpenSegment:
         self.gain_F: np.ndarray | None = None
 
     def copy(self) -> "OpenSegment":
-        c = OpenSegment(self.recorder, self.count, self.turns)
+        c = OpenSegment(self.recorder, self.count, self.turns, self.backend)
         c.open, c.pending = self.open, self.pending
         if self.open:  # the arrays are replaced, never written in place: copies share them
             c.A, c.b, c.B, c.dP, c.gain_P, c.gain_F = self.A, self.b, self.B, self.dP, self.gain_P, self.gain_F
@@ -210,7 +207,7 @@ class OpenSegment:
     def _fold(self, P: np.ndarray) -> None:
         """A <- A G for the transitions since the last fold, P the covariance they ended at."""
         if self.gain_P is not None:
-            self.A = fold(self.A, self.gain_P, self.gain_F, P)
+            self.A = self.backend.rts_fold(self.A, self.gain_P, self.gain_F, P)
             self.gain_P = self.gain_F = None
 
     def correction(self, layout: StateLayout, x_before: np.ndarray, x_after: np.ndarray,
@@ -269,20 +266,6 @@ class OpenSegment:
             A = self.A
             self.B = self.B + A.dot(self.dP).dot(A.T)
             self.pending = False
-
-
-def fold(A: np.ndarray, P_before: np.ndarray, F: np.ndarray, P_after: np.ndarray) -> np.ndarray:
-    """A G with G = ``rts_gain(P_before, F, P_after)``: one call of the compiled ``_rts.fold`` where it
-    was built (the same maths; this Python is the reference, held to it by tests/unit/test_smoother.py),
-    else, or where P_after's Cholesky fails (the least-squares path), the Python."""
-    if _rts is not None:
-        out = np.empty_like(A)
-        try:
-            if _rts.fold(A, P_before, F, P_after, out):
-                return out
-        except BufferError:  # an array not C-contiguous float64
-            pass
-    return A.dot(rts_gain(P_before, F, P_after))
 
 
 def rts_gain(P_before: np.ndarray, F: np.ndarray, P_after: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from typing import IO, TYPE_CHECKING, Callable
 import msgspec
 import numpy as np
 
+from ..estimator.backend import Backend
 from ..collector import skips_the_caller
 from ..config import Config
 from ..core.layout import absolute_sensor
@@ -202,6 +203,7 @@ def replay(
     records: list | None = None,
     allow_missing: bool = True,
     smooth: bool = False,
+    backend: Backend | None = None,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
@@ -211,13 +213,14 @@ def replay(
     record of the replay is appended to it (the advice's proof scores them as its reference run).
     ``allow_missing``: a configured topic absent from the bags is a warning, not an error (``check_topics``).
     ``smooth``: the forward pass records what the smoother needs and the result carries the smoothed
-    trajectory (``ReplayResult.smoothed``), which the TUM file then holds instead of the causal one."""
+    trajectory (``ReplayResult.smoothed``), which the TUM file then holds instead of the causal one.
+    ``backend``: the estimator's (``FusionCore``'s; None: compiled when built)."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
         with skips_the_caller(), open_bag_samples(paths, cfg.sensors) as bag:
             check_topics(bag, cfg, warn, allow_missing)
-            runner = Runner(cfg, keep_trace, doctor, smooth)
+            runner = Runner(cfg, keep_trace, doctor, smooth, backend)
             if diag_out is not None and records is not None:
                 def keep(r, add=diag_out.add, append=records.append) -> None:
                     add(r)
@@ -250,8 +253,9 @@ class Runner:
     """One sample at a time through the core, the doctor and the trace: the loop of `replay`, also
     used on simulated samples by the tests (so they judge exactly what a replay would)."""
 
-    def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True, smooth: bool = False) -> None:
-        self.core = FusionCore(cfg)
+    def __init__(self, cfg: Config, keep_trace: bool = True, doctor: bool = True, smooth: bool = False,
+                 backend: Backend | None = None) -> None:
+        self.core = FusionCore(cfg, backend)
         self.smooth = smooth
         if smooth:
             self.core.record_for_smoothing()
@@ -335,9 +339,11 @@ def smoothed_trajectory(core: FusionCore) -> array:
     return out
 
 
-def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False) -> ReplayResult:
-    """Replay samples already in memory (a simulation) exactly as a bag would be replayed."""
-    runner = Runner(cfg, keep_trace, smooth=smooth)
+def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False,
+                backend: Backend | None = None) -> ReplayResult:
+    """Replay samples already in memory (a simulation) exactly as a bag would be replayed (``backend``: the
+    estimator's, ``FusionCore``)."""
+    runner = Runner(cfg, keep_trace, smooth=smooth, backend=backend)
     for s in samples:
         runner.feed(s)
     return runner.result()

@@ -74,6 +74,7 @@ from typing import Any
 
 import zenoh
 
+from ..estimator.backend import Backend
 from ..codecs import POSE_COV_STAMPED, DecodeError, SetPose, decode_set_pose
 from ..config import Config
 from .. import reasons
@@ -130,12 +131,12 @@ class Daemon:
     def __init__(self, cfg: Config, session: zenoh.Session, *, queue_size: int = QUEUE_SIZE,
                  health_log_s: float = HEALTH_LOG_S, express: bool = False, direct_callbacks: bool = True,
                  monitor: bool = True, clock: Callable[[], float] = time.monotonic, hold_s: float = HOLD_S,
-                 base_dir: Path | None = None) -> None:
+                 base_dir: Path | None = None, backend: Backend | None = None) -> None:
         if not hold_s >= 0.0:
             raise ValueError(f"hold_s must be >= 0 s, got {hold_s}")
         self.cfg = cfg
         self.session = session
-        self.core = FusionCore(cfg)
+        self.core = FusionCore(cfg, backend)
         if cfg.output.smoothed_key:  # the fixed-lag window is recorded only when its pose is published
             self.core.smooth_with_lag(cfg.output.smooth_lag_s)
         # Samples and set_pose requests in arrival order (callbacks append, the worker pops), and the
@@ -575,7 +576,8 @@ class Daemon:
 _LEVEL = {"ok": 20, "starting": 20, "degraded": 30, "failed": 40}
 
 
-def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | None = None) -> int:
+def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | None = None,
+        backend: Backend | None = None) -> int:
     """`fusiond run`: open the session, serve until SIGINT/SIGTERM (or `stop`), shut down cleanly.
 
     Raises ConfigError (bad Zenoh value or file) and SessionError (cannot open) before anything starts.
@@ -594,7 +596,7 @@ def run(cfg: Config, *, base_dir: Path | None = None, stop: threading.Event | No
     bind_process(namespace=cfg.zenoh.namespace)  # every line of the daemon names its robot
     session = open_session(conf)
     try:
-        daemon = Daemon(cfg, session, base_dir=base_dir)
+        daemon = Daemon(cfg, session, base_dir=base_dir, backend=backend)
         try:
             daemon.start()
         except SessionError:

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 import msgspec
 
+from ..estimator.backend import Backend
 from ..collector import skips_the_caller
 from ..config import Config, ConfigError, convert, validate
 from ..doctor import Proof, Verdict
@@ -101,25 +102,29 @@ def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
 
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
-                 budget_s: float = 60.0, base_records: Sequence[object] | None = None) -> list[Verdict]:
+                 budget_s: float = 60.0, base_records: Sequence[object] | None = None,
+                 backend: Backend | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
     recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
     when the caller kept them (else the recording is replayed once more for them). Then one replay per
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
-    recording's warnings were logged by the replay the verdicts come from: these replays log nothing."""
+    recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
+    ``backend``: the estimator's in these replays (``FusionCore``)."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
-        return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records)
+        return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,
+                       backend)
 
 
 def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
-            deadline: float, budget_s: float, base_records: Sequence[object] | None) -> list[Verdict]:
+            deadline: float, budget_s: float, base_records: Sequence[object] | None,
+            backend: Backend | None) -> list[Verdict]:
     """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
-            base_records = replay_records(cfg, samples)
+            base_records = replay_records(cfg, samples, backend)
     full = reference(base_records, cfg)
     proofs: dict[tuple[str, str], Proof] = {}
     # problems first: if the budget runs out, the lines left unproven are the least urgent ones
@@ -136,7 +141,7 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             proofs[line] = Proof(True, f"the {budget_s:g} s budget for replaying advice ran out", tried=False)
             continue
         with muted():
-            records = replay_records(changed, samples)
+            records = replay_records(changed, samples, backend)
         ref, dropped = _comparable(full, records)
         before, after = score(base_records, ref), score(records, ref)
         gain = before.neg_loglik - after.neg_loglik

@@ -16,12 +16,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ..config import Config, ConfigError
 from ..doctor import Verdict
 from ..logs import muted
 from .advice import split_key, with_suggestion
 from .params import FILTER, Param
+
+if TYPE_CHECKING:
+    from ..estimator.backend import Backend
 
 
 @dataclass(frozen=True)
@@ -41,13 +45,15 @@ def _group(key: str) -> tuple[str, str] | None:
     return (where[1], where[2]) if where[0] == "sensors" else (FILTER, where[2])
 
 
-def diagnose(cfg: Config, samples: Sequence[object]) -> tuple[list[Verdict], list[tuple[float, float]]]:
+def diagnose(cfg: Config, samples: Sequence[object],
+             backend: Backend | None = None) -> tuple[list[Verdict], list[tuple[float, float]]]:
     """One replay of the recording with the doctor: its verdicts, and the filter's standstills it was told of
-    (``Series.rest_spans``, in filter time), which ``floors`` measures the noise at rest over."""
+    (``Series.rest_spans``, in filter time), which ``floors`` measures the noise at rest over. ``backend``:
+    the estimator's (``FusionCore``)."""
     from ..replay.run import run_samples
 
     with muted():
-        result = run_samples(samples, cfg)
+        result = run_samples(samples, cfg, backend=backend)
         verdicts = result.verdicts()
     return verdicts, list(result.doctor.series().rest_spans) if result.doctor is not None else []
 

@@ -44,6 +44,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from ..estimator.backend import Backend
 from ..config import Config, ConfigError
 from ..errors import ReplayError
 from ..logs import muted
@@ -133,8 +134,8 @@ class _Objective:
     probes are the first simplex's vertices), counting replays against the budget."""
 
     def __init__(self, cfg: Config, params: Sequence[Param], samples: Sequence[object], deadline: float,
-                 maxfev: int, bar: _Progress) -> None:
-        self.cfg, self.params, self.samples = cfg, list(params), samples
+                 maxfev: int, bar: _Progress, backend: Backend | None = None) -> None:
+        self.cfg, self.params, self.samples, self.backend = cfg, list(params), samples, backend
         self.deadline, self.maxfev, self.bar = deadline, maxfev, bar
         self.cache: dict[tuple[float, ...], float] = {}
         self.replays = 0
@@ -158,7 +159,7 @@ class _Objective:
                 self.stopped = "maxfev"
                 raise _OutOfBudget
         with muted():  # the recording's warnings are said once, by the held-back check's first replay
-            records = replay_records(self.config(key), self.samples)
+            records = replay_records(self.config(key), self.samples, self.backend)
         self.replays += 1
         if self.ref is None:
             self.ref = reference(records, self.cfg)
@@ -225,18 +226,20 @@ def _fmt(v: object) -> str:
 
 
 def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = None, budget_s: float = 120.0,
-         maxfev: int | None = None, progress: bool = False, fit_fraction: float = 0.7) -> TuneResult:
+         maxfev: int | None = None, progress: bool = False, fit_fraction: float = 0.7,
+         backend: Backend | None = None) -> TuneResult:
     """Fit ``cfg``'s noise to ``samples`` (a recording's configured-sensor samples in bag order; the
     module doc says how). ``keys``: the parameters to fit (``params.select``; ConfigError for an
     unknown one). ``maxfev`` (default 60 per parameter) and ``budget_s`` bound the fit's replays;
-    validation adds 2 + one per changed key replays of the whole recording."""
+    validation adds 2 + one per changed key replays of the whole recording. ``backend``: the estimator's
+    in every replay (``FusionCore``)."""
     t_start = time.perf_counter()
     samples = list(samples)
     if not samples:
         raise ReplayError("nothing to tune: the recording has no sample of a configured sensor")
     params = select(tunable_params(cfg, samples), keys)
     # one replay with the doctor: its paste lines (step 6) and the standstills the floors are measured over
-    verdicts, spans = diagnose(cfg, samples)
+    verdicts, spans = diagnose(cfg, samples, backend)
     params = with_floors(params, measured_floors(cfg, samples, params, spans))
     active = [p for p in params if not p.skipped]
     n = len(active)
@@ -247,7 +250,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     fit_part = [s for s in samples if s.stamp <= split]
     bar = _Progress(progress, total=2 * n + maxfev + 2 * (2 + n))
     try:
-        obj = _Objective(cfg, active, fit_part, t_start + budget_s, maxfev, bar)
+        obj = _Objective(cfg, active, fit_part, t_start + budget_s, maxfev, bar, backend)
         informed = [False] * n
         stopped = "nothing to fit"
         theta = [0.0] * n
@@ -266,7 +269,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
                 theta = [0.0] * n
                 f_best = f_start
         floored = [informed[i] and theta[i] <= active[i].lowest() + 1e-9 for i in range(n)]
-        result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts)
+        result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts, backend)
     finally:
         bar.close()
     rows, config, before, after, comments, replays, predicted = result
@@ -281,7 +284,8 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
 
 
 def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
-              informed: list[bool], split: float, bar: _Progress, floored: list[bool], verdicts: Sequence[object]):
+              informed: list[bool], split: float, bar: _Progress, floored: list[bool], verdicts: Sequence[object],
+              backend: Backend | None = None):
     """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays).
     ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6."""
     replays = 0
@@ -291,9 +295,9 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         replays += 1
         bar.step("held-back check")
         if replays == 1:  # the user's config over the whole recording: its warnings are the recording's
-            return replay_records(c, samples)
+            return replay_records(c, samples, backend)
         with muted():
-            return replay_records(c, samples)
+            return replay_records(c, samples, backend)
 
     kept_samples, held = split_fixes(samples, cfg)
 
@@ -304,7 +308,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         replays += 1
         bar.step("held-back fixes")
         with muted():
-            return predict(c, kept_samples, held)
+            return predict(c, kept_samples, held, backend)
 
     original = run(cfg)
     ref = reference(original, cfg, after=split)

@@ -40,6 +40,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
+from ..estimator.backend import Backend
 from ..config import Config
 from ..core.diagnostics import DiagnosticsRecord
 from ..core.fusion import FusionCore
@@ -51,10 +52,10 @@ DEFAULT_GATE = ZERO_RATE_GATE  # sigma: the cap of a rejected update of a sensor
 TermKey = tuple[str, str, float, int]  # sensor, channel, stamp, occurrence (records sharing the first three)
 
 
-def replay_records(cfg: Config, samples: Iterable[object]) -> list[DiagnosticsRecord]:
+def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | None = None) -> list[DiagnosticsRecord]:
     """Every diagnostics record of one replay of ``samples`` (in the order given: a bag's) through a
-    fresh FusionCore with ``cfg``."""
-    core = FusionCore(cfg)
+    fresh FusionCore with ``cfg`` (and ``backend``, the estimator's: ``FusionCore``)."""
+    core = FusionCore(cfg, backend)
     ingest = core.ingest
     records: list[DiagnosticsRecord] = []
     for s in samples:

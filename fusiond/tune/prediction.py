@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..estimator.backend import Backend
 from ..config import Config
 from ..core.fusion import FusionCore
 from ..core.layout import absolute_sensor, fuses_height
@@ -125,13 +126,14 @@ def split(samples: Sequence[object], cfg: Config, every: int = HOLD_EVERY) -> tu
     return kept, held
 
 
-def predict(cfg: Config, kept: Sequence[object], held: Sequence[object]) -> Prediction:
-    """Replay ``kept`` through a fresh core and score its position at the ``held`` fixes or poses (module doc)."""
+def predict(cfg: Config, kept: Sequence[object], held: Sequence[object], backend: Backend | None = None) -> Prediction:
+    """Replay ``kept`` through a fresh core (``backend``: the estimator's, ``FusionCore``) and score its position
+    at the ``held`` fixes or poses (module doc)."""
     world = world_sensor(cfg)
     if world is None or len(held) < MIN_FIXES:
         return Prediction(None, None, 0)
     geodetic = kind_of(world).geodetic
-    core = FusionCore(cfg)
+    core = FusionCore(cfg, backend)
     ingest = core.ingest
     stamps: list[float] = []
     poses: list[np.ndarray] = []

@@ -2,7 +2,8 @@
 
 A fresh replay of the shared Jackal bag through FusionCore, with the robot_localization-like
 config (examples/jackal_rl.toml) and the recommended one (examples/jackal.toml), is compared
-pose by pose with tests/data/jackal_pin.json: every 50th published pose and the final one, to
+pose by pose with tests/data/jackal_pin.json, on each estimator backend (the Python reference and the
+compiled kernels): every 50th published pose and the final one, to
 1e-9 m in position, 1e-9 rad in attitude and 1e-9 in the position/attitude sigmas, and the
 per-sensor counters exactly. The pin stores 12 decimals, so 1e-9 leaves room only for
 floating-point reordering (a few ulps amplified over ~6000 steps), never for a changed model.
@@ -48,8 +49,8 @@ def test_pin_file_covers_every_pinned_config(pin):
 
 
 @pytest.mark.parametrize("config", CONFIGS)
-def test_jackal_trajectory_matches_pin(jackal_bag, pin, config):
-    now = trajectory(jackal_bag, config)
+def test_jackal_trajectory_matches_pin(jackal_bag, pin, config, backend):
+    now = trajectory(jackal_bag, config, backend)
     ref = pin[config]
     assert now["published"] == ref["meta"]["published"]
     assert now["counters"] == ref["meta"]["counters"]

@@ -25,14 +25,15 @@ EVERY = 50
 DECIMALS = 12
 
 
-def trajectory(bag: Path, config: str) -> dict:
-    """Replay ``bag`` through FusionCore with ``config``: sampled poses, their sigmas, the counters."""
+def trajectory(bag: Path, config: str, backend=None) -> dict:
+    """Replay ``bag`` through FusionCore with ``config`` (and ``backend``, the estimator's; None: the
+    default): sampled poses, their sigmas, the counters."""
     from fusiond.config import load
     from fusiond.core.fusion import FusionCore
     from fusiond.replay.bag import open_bag_samples
 
     cfg = load(ROOT / config)
-    core = FusionCore(cfg)
+    core = FusionCore(cfg, backend)
     poses: list[list[float]] = []
     last: list[float] | None = None
     n = 0

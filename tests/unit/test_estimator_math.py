@@ -1,4 +1,7 @@
-"""Estimator maths: analytic Jacobians against central differences, manifold hygiene."""
+"""Estimator maths: analytic Jacobians against central differences, manifold hygiene.
+
+The tests that run the filter's numerics take the ``backend`` fixture (tests/conftest.py): each passes
+on the Python reference and on the compiled kernels (estimator/backend.py)."""
 
 from __future__ import annotations
 
@@ -9,13 +12,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
+from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, PredictWorkspace, StateLayout
 from fusiond.estimator import observations as obs
 from fusiond.estimator import rotation as rot
 from fusiond.estimator.motion import propagate_state
 from fusiond.estimator.numeric import measurement_jacobian, transition_jacobian
 
 angles = st.floats(-math.pi, math.pi)
+
+
+def _predict(backend, layout: StateLayout, x: np.ndarray, u: MotionInput, dt: float, density: np.ndarray,
+             ws: PredictWorkspace | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The motion model's (x', F, Q) through ``backend``, in ``ws`` or a fresh workspace."""
+    return backend.predict(layout, x, u, dt, density, PredictWorkspace(layout) if ws is None else ws)
 tilts = st.floats(-1.2, 1.2)
 
 
@@ -49,11 +58,11 @@ def _input(world: bool = False, gyro: bool = True, planar: bool = False) -> Moti
 @settings(max_examples=40, deadline=None)
 @given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans(),
        planar=st.booleans())
-def test_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, planar):
+def test_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, planar, backend):
     layout = _layout()
     x = _state(layout, (r, p, y))
     u = _input(world, gyro, planar)
-    _, F, _ = predict(layout, x, u, dt, np.zeros(9))
+    _, F, _ = _predict(backend, layout, x, u, dt, np.zeros(9))
     F_num = transition_jacobian(layout, lambda s: propagate_state(layout, s, u, dt), x)
     np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
 
@@ -75,11 +84,11 @@ def test_rpy_jacobian_matches_central_differences(r, p, y):
 
 @settings(max_examples=60, deadline=None)
 @given(r=tilts, p=tilts, y=angles)
-def test_roll_pitch_observation_has_no_yaw_column(r, p, y):
+def test_roll_pitch_observation_has_no_yaw_column(r, p, y, backend):
     layout = _layout()
     x = _state(layout, (r, p, y))
     _, H, _ = obs.orientation(layout, x, (0.0, 0.0, 0.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4),
-                              obs.ORIENTATION_ROWS["roll_pitch"])
+                              obs.ORIENTATION_ROWS["roll_pitch"], backend)
     assert H.shape == (2, layout.error_dim)
     assert np.all(H[:, 5] == 0.0)  # global yaw error column
     assert np.all(H[:, 0:3] == 0.0)  # position
@@ -121,20 +130,21 @@ def test_right_jacobian_definition():
     np.testing.assert_allclose(rot.log(rot.mul(lhs, rot.conj(rhs))), 0.0, atol=1e-11)
 
 
-def test_long_random_run_keeps_covariance_psd_and_quaternion_unit():
+def test_long_random_run_keeps_covariance_psd_and_quaternion_unit(backend):
     rng = np.random.default_rng(7)
     layout = _layout()
-    ekf = ErrorStateEKF(layout)
+    ekf = ErrorStateEKF(layout, backend=backend)
     for k in range(5000):
         u = _input(gyro=bool(k % 2))
         u.linear = tuple(rng.normal(0, 1, 3).tolist())
         u.angular = tuple(rng.normal(0, 0.5, 3).tolist())
-        x, F, Q = predict(layout, ekf.x, u, float(rng.uniform(0.0, 0.05)), np.full(9, 1e-6))
+        x, F, Q = _predict(backend, layout, ekf.x, u, float(rng.uniform(0.0, 0.05)), np.full(9, 1e-6))
         ekf.propagate(x, F, Q)
         if k % 3 == 0:
             z = tuple(rng.uniform(-0.5, 0.5, 3)) if k % 2 else tuple(rng.uniform(-math.pi, math.pi, 3))
             var = rng.uniform(1e-6, 1e-1, 3).tolist()
-            y, H, R = obs.orientation(layout, ekf.x, z, (var[0], 0, 0, 0, var[1], 0, 0, 0, var[2]), (0, 1, 2))
+            y, H, R = obs.orientation(layout, ekf.x, z, (var[0], 0, 0, 0, var[1], 0, 0, 0, var[2]), (0, 1, 2),
+                                      backend)
             ekf.update(y, H, R)
         q = ekf.x[3:7]
         assert abs(float(q @ q) - 1.0) < 1e-12
@@ -143,9 +153,9 @@ def test_long_random_run_keeps_covariance_psd_and_quaternion_unit():
         assert np.isfinite(ekf.P).all()
 
 
-def test_non_finite_covariance_is_reset_not_raised():
+def test_non_finite_covariance_is_reset_not_raised(backend):
     layout = _layout()
-    ekf = ErrorStateEKF(layout)
+    ekf = ErrorStateEKF(layout, backend=backend)
     F = np.eye(layout.error_dim)
     Q = np.zeros_like(F)
     Q[0, 0] = math.nan
@@ -154,24 +164,26 @@ def test_non_finite_covariance_is_reset_not_raised():
     np.testing.assert_array_equal(ekf.P, layout.initial_covariance())
 
 
-def test_gate_rejects_outlier_and_leaves_state():
+def test_gate_rejects_outlier_and_leaves_state(backend):
     layout = _layout()
-    ekf = ErrorStateEKF(layout)
+    ekf = ErrorStateEKF(layout, backend=backend)
     before = ekf.snapshot()
-    y, H, R = obs.orientation(layout, ekf.x, (0.0, 0.0, 2.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0, 1, 2))
+    y, H, R = obs.orientation(layout, ekf.x, (0.0, 0.0, 2.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0, 1, 2),
+                              backend)
     res = ekf.update(y, H, R, threshold=5.0)
     assert res.rejected and res.nis > 25.0
     np.testing.assert_array_equal(ekf.x, before[0])
     np.testing.assert_array_equal(ekf.P, before[1])
 
 
-def test_kalman_update_matches_textbook_inverse():
+def test_kalman_update_matches_textbook_inverse(backend):
     layout = _layout()
     rng = np.random.default_rng(1)
     A = rng.normal(size=(9, 9))
     P = A @ A.T * 1e-2 + np.eye(9) * 1e-3
-    ekf = ErrorStateEKF(layout, P=P)
-    y, H, R = obs.orientation(layout, ekf.x, (0.05, -0.02, 0.1), (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3), (0, 1, 2))
+    ekf = ErrorStateEKF(layout, P=P, backend=backend)
+    y, H, R = obs.orientation(layout, ekf.x, (0.05, -0.02, 0.1), (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3), (0, 1, 2),
+                              backend)
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
     res = ekf.update(y, H, R)
@@ -181,14 +193,15 @@ def test_kalman_update_matches_textbook_inverse():
     np.testing.assert_allclose(ekf.x[layout.nominal["gyro_bias"]], (K @ y)[6:9], atol=1e-14)
 
 
-def test_masked_update_equals_joseph_form_with_zeroed_gain_rows():
+def test_masked_update_equals_joseph_form_with_zeroed_gain_rows(backend):
     layout = _layout()
     rng = np.random.default_rng(2)
     A = rng.normal(size=(9, 9))
     P = A @ A.T * 1e-2 + np.eye(9) * 1e-3
-    ekf = ErrorStateEKF(layout, x=_state(layout, (0.2, -0.1, 0.5)), P=P)
+    ekf = ErrorStateEKF(layout, x=_state(layout, (0.2, -0.1, 0.5)), P=P, backend=backend)
     x0 = ekf.x.copy()
-    y, H, R = obs.orientation(layout, ekf.x, (0.25, -0.12, 0.0), (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3), (0, 1))
+    y, H, R = obs.orientation(layout, ekf.x, (0.25, -0.12, 0.0), (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3), (0, 1),
+                              backend)
     mask = np.ones(9, dtype=bool)
     mask[[0, 1, 2, 5, 8]] = False
     ekf.update(y, H, R, mask=mask)
@@ -202,7 +215,7 @@ def test_masked_update_equals_joseph_form_with_zeroed_gain_rows():
 
 @settings(max_examples=40, deadline=None)
 @given(r=tilts, p=tilts, y=angles)
-def test_a_tilt_update_holding_heading_keeps_the_yaw_exactly_and_roll_pitch_as_updated(r, p, y):
+def test_a_tilt_update_holding_heading_keeps_the_yaw_exactly_and_roll_pitch_as_updated(r, p, y, backend):
     """A masked roll/pitch update of a tilted body moves its Euler yaw (second order); with
     hold_heading the yaw stays (to rounding), and roll/pitch stay what the update made them
     (the turn back is about world z, which the roll/pitch of a yaw-free rotation ignore)."""
@@ -215,9 +228,9 @@ def test_a_tilt_update_holding_heading_keeps_the_yaw_exactly_and_roll_pitch_as_u
     cov = (1e-3, 0, 0, 0, 2e-3, 0, 0, 0, 3e-3)
     results = []
     for hold in (False, True):
-        ekf = ErrorStateEKF(layout, x=_state(layout, (r, p, y)), P=P.copy())
+        ekf = ErrorStateEKF(layout, x=_state(layout, (r, p, y)), P=P.copy(), backend=backend)
         yaw0 = rot.yaw(tuple(ekf.x[3:7].tolist()))
-        yv, H, R = obs.orientation(layout, ekf.x, (r + 0.1, p - 0.08, 0.0), cov, (0, 1))
+        yv, H, R = obs.orientation(layout, ekf.x, (r + 0.1, p - 0.08, 0.0), cov, (0, 1), backend)
         assert not ekf.update(yv, H, R, mask=mask, hold_heading=hold).rejected
         results.append((yaw0, rot.to_rpy(tuple(ekf.x[3:7].tolist())), ekf.x.copy(), ekf.P.copy()))
     (yaw0, free, x_free, P_free), (_, held, x_held, P_held) = results
@@ -257,25 +270,25 @@ def _scale_layout(bias: bool = True) -> StateLayout:
 @settings(max_examples=40, deadline=None)
 @given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans(),
        k=st.floats(0.7, 1.3), s=st.floats(0.7, 1.3), bias=st.booleans())
-def test_scale_blocks_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, k, s, bias):
+def test_scale_blocks_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, k, s, bias, backend):
     """Bias then scale correct the same gyro input: the bias columns must be chained through the scale."""
     layout = _scale_layout(bias)
     x = _state(layout, (r, p, y))
     x[layout.nominal["gyro_scale"]] = k
     x[layout.nominal["wheel_scale"]] = s
     u = _input(world, gyro)
-    _, F, _ = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+    _, F, _ = _predict(backend, layout, x, u, dt, np.zeros(layout.error_dim))
     F_num = transition_jacobian(layout, lambda st_: propagate_state(layout, st_, u, dt), x)
     np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
 
 
-def test_scales_correct_the_inputs_and_their_noise():
+def test_scales_correct_the_inputs_and_their_noise(backend):
     layout = _scale_layout()
     x = _state(layout, (0.0, 0.0, 0.0), bias=(0.0, 0.0, 0.1))
     x[layout.nominal["gyro_scale"]] = 0.5
     x[layout.nominal["wheel_scale"]] = 2.0
     u = _input(world=True, gyro=True)
-    x1, _, Q = predict(layout, x, u, 1.0, np.zeros(layout.error_dim))
+    x1, _, Q = _predict(backend, layout, x, u, 1.0, np.zeros(layout.error_dim))
     np.testing.assert_allclose(x1[0:3], x[0:3] + 2.0 * np.array(u.linear), atol=1e-12)
     yaw_rate = 0.5 * (u.angular[2] - 0.1)
     q1 = rot.mul(tuple(x[3:7].tolist()), rot.exp(u.angular[0], u.angular[1], yaw_rate))
@@ -296,19 +309,19 @@ def _pitch_layout() -> StateLayout:
 @settings(max_examples=40, deadline=None)
 @given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 0.5), world=st.booleans(), gyro=st.booleans(),
        s=st.floats(0.7, 1.3), b=st.floats(-0.3, 0.3))
-def test_twist_pitch_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, s, b):
+def test_twist_pitch_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, s, b, backend):
     """Scale then pitch correct the same wheel input: the scale's columns are chained through the rotation."""
     layout = _pitch_layout()
     x = _state(layout, (r, p, y))
     x[layout.nominal["wheel_scale"]] = s
     x[layout.nominal["twist_pitch"]] = b
     u = _input(world, gyro)
-    _, F, _ = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+    _, F, _ = _predict(backend, layout, x, u, dt, np.zeros(layout.error_dim))
     F_num = transition_jacobian(layout, lambda st_: propagate_state(layout, st_, u, dt), x)
     np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
 
 
-def test_a_twist_pitch_turns_the_wheels_forward_speed_into_the_body():
+def test_a_twist_pitch_turns_the_wheels_forward_speed_into_the_body(backend):
     """Body pitched by b against the vehicle: the wheels' (v, 0, 0) is (cos b v, 0, sin b v) in the body,
     so along a level body x the base climbs by sin b per metre, and the pitched body sees level travel."""
     from fusiond.estimator import MotionInput
@@ -319,7 +332,7 @@ def test_a_twist_pitch_turns_the_wheels_forward_speed_into_the_body():
     x[layout.nominal["twist_pitch"]] = b
     u = MotionInput()
     u.linear = (10.0, 0.0, 0.0)
-    x1, _, _ = predict(layout, x, u, 1.0, np.zeros(layout.error_dim))
+    x1, _, _ = _predict(backend, layout, x, u, 1.0, np.zeros(layout.error_dim))
     np.testing.assert_allclose(x1[0:3] - x[0:3], (10.0, 0.0, 0.0), atol=1e-12)  # level travel: the vehicle's
 
 
@@ -335,25 +348,25 @@ def _gm_layout():
 @settings(max_examples=40, deadline=None)
 @given(r=tilts, p=tilts, y=angles, dt=st.floats(0.001, 5.0), world=st.booleans(), gyro=st.booleans(),
        b=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
-def test_gauss_markov_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, b):
+def test_gauss_markov_transition_jacobian_matches_central_differences(r, p, y, dt, world, gyro, b, backend):
     layout = _gm_layout()
     x = _state(layout, (r, p, y))
     x[layout.nominal["gps_error"]] = b
     u = _input(world, gyro)
-    x1, F, _ = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+    x1, F, _ = _predict(backend, layout, x, u, dt, np.zeros(layout.error_dim))
     F_num = transition_jacobian(layout, lambda s: propagate_state(layout, s, u, dt), x)
     np.testing.assert_allclose(F, F_num, atol=2e-7, rtol=1e-6)
     np.testing.assert_allclose(x1[layout.nominal["gps_error"]], np.array(b) * math.exp(-dt / 30.0), rtol=1e-12)
 
 
-def test_gauss_markov_noise_keeps_the_stationary_variance_whatever_the_step():
+def test_gauss_markov_noise_keeps_the_stationary_variance_whatever_the_step(backend):
     layout = _gm_layout()
     es = layout.error["gps_error"]
     sig2 = np.array([1.0, 1.5, 2.0]) ** 2
     u = _input()
     for dt in (0.01, 0.5, 7.0):
         x = _state(layout, (0.0, 0.0, 0.0))
-        _, F, Q = predict(layout, x, u, dt, np.zeros(layout.error_dim))
+        _, F, Q = _predict(backend, layout, x, u, dt, np.zeros(layout.error_dim))
         a = math.exp(-dt / 30.0)
         np.testing.assert_allclose(np.diag(Q)[es], sig2 * (1.0 - math.exp(-2.0 * dt / 30.0)), rtol=1e-12)
         np.testing.assert_allclose(np.diag(F)[es], a, rtol=1e-15)
@@ -390,7 +403,7 @@ _step_inputs = st.tuples(st.booleans(), st.booleans(), st.booleans(), st.boolean
 
 @settings(max_examples=40, deadline=None)
 @given(steps=st.lists(_step_inputs, min_size=2, max_size=8))
-def test_a_reused_workspace_gives_what_a_fresh_one_gives(steps):
+def test_a_reused_workspace_gives_what_a_fresh_one_gives(steps, backend):
     """predict rewrites only the entries of F and Q a step sets and puts back what an earlier step
     wrote and this one does not (an input block that stops applying when the gyro goes silent, a
     silent input's noise, world vs body twist, dt = 0). Whatever sequence of steps went before,
@@ -405,28 +418,28 @@ def test_a_reused_workspace_gives_what_a_fresh_one_gives(steps):
         u = _input(world, gyro, planar)
         u.linear_period = 0.02 if linear_on else 0.0
         u.angular_period = 0.02 if angular_on else 0.0
-        x1, F, Q = predict(layout, x, u, dt, density, ws)
-        x2, F2, Q2 = predict(layout, x, u, dt, density)
+        x1, F, Q = _predict(backend, layout, x, u, dt, density, ws)
+        x2, F2, Q2 = _predict(backend, layout, x, u, dt, density)
         np.testing.assert_array_equal(x1, x2)
         np.testing.assert_array_equal(F, F2)
         np.testing.assert_array_equal(Q, Q2)
         x = x1
 
 
-def test_orientation_noise_is_shared_read_only_and_follows_the_covariance():
+def test_orientation_noise_is_shared_read_only_and_follows_the_covariance(backend):
     """R is cached per (covariance, rows): a changed covariance must give its own R, and the shared
     array must refuse writes (a caller scaling it in place would change every later update)."""
     layout = _layout()
     x = _state(layout, (0.1, 0.2, 0.3))
     cov_a = (1e-4, 0.0, 0.0, 0.0, 2e-4, 0.0, 0.0, 0.0, 3e-4)
     cov_b = (5e-4, 1e-5, 0.0, 1e-5, 6e-4, 0.0, 0.0, 0.0, 7e-4)
-    _, _, Ra = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
-    _, _, Rb = obs.orientation(layout, x, (0.0, 0.0, 0.0), list(cov_b), (0, 1, 2))
+    _, _, Ra = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1), backend)
+    _, _, Rb = obs.orientation(layout, x, (0.0, 0.0, 0.0), list(cov_b), (0, 1, 2), backend)
     np.testing.assert_array_equal(Ra, [[1e-4, 0.0], [0.0, 2e-4]])
     np.testing.assert_array_equal(Rb, np.reshape(cov_b, (3, 3)))
     with pytest.raises(ValueError):
         Ra *= 2.0
-    _, _, Ra2 = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1))
+    _, _, Ra2 = obs.orientation(layout, x, (0.0, 0.0, 0.0), cov_a, (0, 1), backend)
     np.testing.assert_array_equal(Ra2, [[1e-4, 0.0], [0.0, 2e-4]])
 
 

@@ -1,11 +1,11 @@
-"""The compiled kernels (estimator/_kernels.c) compute what the numpy reference path computes.
+"""The compiled backend (estimator/_kernels.c) computes what the Python reference computes.
 
-Each test runs the same EKF step twice, once through the C kernel and once through ekf.py's
-numpy code (``kernels.use("numpy")``), and compares. The tolerances are rounding, not modelling:
-the two differ only in the order of the products' sums (OpenBLAS against plain loops), a few ulps
-of values of order one, so 1e-12 relative holds with margin; a wrong index or a missed mask
-weight moves a result by its own size. On the Jackal bag the two trajectories must agree to the
-pin's 1e-9 m / 1e-9 rad.
+Each test runs the same EKF step twice, once on a filter built with the compiled backend and once
+with the reference (``ErrorStateEKF(..., backend=...)``, estimator/backend.py), and compares. The
+tolerances are rounding, not modelling: the two differ only in the order of the products' sums
+(OpenBLAS against plain loops), a few ulps of values of order one, so 1e-12 relative holds with
+margin; a wrong index or a missed mask weight moves a result by its own size. On the Jackal bag the
+two trajectories must agree to the pin's 1e-9 m / 1e-9 rad.
 """
 
 from __future__ import annotations
@@ -21,22 +21,18 @@ from hypothesis import strategies as st
 from fusiond.errors import EstimatorError
 from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock,
                                PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
-from fusiond.estimator import ekf as ekf_module
 from fusiond.estimator import motion as motion_module
 from fusiond.estimator import observations
 from fusiond.estimator.twist_pitch import TwistPitchBlock
-from fusiond.estimator import kernels
+from fusiond.estimator import backend as backend_module
+from fusiond.estimator.backend import COMPILED, PYTHON, choose, from_environment
 
-pytestmark = pytest.mark.skipif(not kernels.available(),
+pytestmark = pytest.mark.skipif(COMPILED is None,
                                 reason="fusiond.estimator._kernels not built (no C compiler at install)")
+k = backend_module._kernels  # the compiled module itself, for its own checks
 
 RTOL = 1e-12
-
-
-@pytest.fixture(autouse=True)
-def _restore_kernels():
-    yield
-    kernels.use("auto")
+BOTH = (COMPILED, PYTHON)
 
 
 class _LoggedOffset(StateBlock):
@@ -60,22 +56,21 @@ LAYOUTS = {
 }
 
 
-def _random_filter(layout: StateLayout, rng: np.random.Generator) -> ErrorStateEKF:
+def _random_filter(layout: StateLayout, rng: np.random.Generator, backend=PYTHON) -> ErrorStateEKF:
     n = layout.error_dim
     A = rng.normal(size=(n, n)) * rng.uniform(0.01, 1.0)
     x = layout.initial_state()
     q = rng.normal(size=4)
     x[3:7] = q / np.linalg.norm(q)
     x[0:3] = rng.normal(size=3) * 10.0
-    return ErrorStateEKF(layout, x, A @ A.T + np.eye(n) * 1e-4)
+    return ErrorStateEKF(layout, x, A @ A.T + np.eye(n) * 1e-4, backend=backend)
 
 
 def _both(layout: StateLayout, seed: int, step) -> tuple:
-    """(result, x, P, resets) of ``step(ekf)`` on the same random filter, compiled then numpy."""
+    """(result, x, P, resets) of ``step(ekf)`` on the same random filter, compiled then the reference."""
     out = []
-    for name in ("compiled", "numpy"):
-        kernels.use(name)
-        ekf = _random_filter(layout, np.random.default_rng(seed))
+    for b in BOTH:
+        ekf = _random_filter(layout, np.random.default_rng(seed), b)
         res = step(ekf)
         out.append((res, ekf.x.copy(), ekf.P.copy(), ekf.resets))
     return out[0], out[1]
@@ -182,10 +177,10 @@ cov9 = st.one_of(  # a diagonal covariance (the usual), a full one, or the tuple
        dt=st.sampled_from([0.0, 0.001, 0.02, 0.7]))
 def test_compiled_predict_gives_the_python_paths_floats(layout, seed, v, w, lin_cov, ang_cov, periods, flags, tau,
                                                         dt):
-    """The motion model's x', F and Q from kernels.predict are the Python path's, to the bit: the input
+    """The motion model's x', F and Q from the compiled backend are the reference's, to the bit: the input
     blocks' corrections and chain, the rotation, the right Jacobian and the input noise are the same
     expressions in C, compiled without FMA contraction. A layout with a block that has no compiled
-    form predicts in Python on both paths."""
+    form predicts in Python on both backends."""
     lay = PREDICT_LAYOUTS[layout]
     u = MotionInput()
     u.linear, u.angular, u.linear_cov, u.angular_cov = v, w, lin_cov, ang_cov
@@ -198,13 +193,12 @@ def test_compiled_predict_gives_the_python_paths_floats(layout, seed, v, w, lin_
     ekf.x[7:] += rng.uniform(-0.3, 0.3, lay.nominal_dim - 7)
     density = rng.uniform(0.0, 1e-3, lay.error_dim)
     out = []
-    for name in ("compiled", "numpy"):
-        kernels.use(name)
+    for b in BOTH:
         ws = PredictWorkspace(lay)
         assert (ws._kernel_blocks is not None) is (layout in COMPILED_PREDICT)
         assert (ws._kernel_decays is not None) is (layout in COMPILED_DECAY)
-        predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
-        x, F, Q = predict(lay, ekf.x, u, dt, density, ws)
+        b.predict(lay, ekf.x, u, 0.3, density * 2.0, ws)  # an earlier step: nothing of it may stay in F or Q
+        x, F, Q = b.predict(lay, ekf.x, u, dt, density, ws)
         out.append((x.copy(), F.copy(), Q.copy()))
     (xc, Fc, Qc), (xn, Fn, Qn) = out
     np.testing.assert_array_equal(xc, xn)
@@ -276,7 +270,6 @@ def test_arrays_the_kernel_cannot_read_take_the_numpy_path():
 
 
 def test_kernel_refuses_wrong_shapes_with_a_clear_error():
-    k = kernels.active()
     P = np.eye(4)
     with pytest.raises(ValueError, match="F has 9 values, expected 16"):
         k.propagate(np.eye(3), P, np.zeros((4, 4)), np.empty((4, 4)))
@@ -295,17 +288,12 @@ def test_kernel_refuses_wrong_shapes_with_a_clear_error():
     frozen.flags.writeable = False
     with pytest.raises(BufferError, match="out must be a C-contiguous writable"):
         k.update(P, H, R, y, 1.0, None, None, frozen, x, 1)
-    with pytest.raises(ValueError, match="Q must be square with 6 to 48 rows"):
-        k.input_noise(np.zeros((4, 4)), np.zeros(4), 0.1, None, None, None, 0.0, None, None, 0.0)
-    with pytest.raises(ValueError, match="G must have 9 entries"):
-        k.input_noise(np.zeros((6, 6)), np.zeros(6), 0.1, None, (1.0,) * 8, (0.0,) * 9, 1.0, None, None, 0.0)
 
 
 def test_a_zero_quaternion_is_an_estimator_error_and_leaves_x():
     lay = LAYOUTS["pose"]
-    for name in ("compiled", "numpy"):
-        kernels.use(name)
-        ekf = ErrorStateEKF(lay)
+    for b in BOTH:
+        ekf = ErrorStateEKF(lay, backend=b)
         ekf.x[3:7] = 0.0
         before = ekf.x.copy()
         H = np.zeros((1, lay.error_dim))
@@ -315,15 +303,15 @@ def test_a_zero_quaternion_is_an_estimator_error_and_leaves_x():
         np.testing.assert_array_equal(ekf.x, before)
 
 
-def test_layouts_beyond_the_kernel_size_use_numpy():
-    """The kernels have fixed-size scratch: a layout with more error states than MAX_N runs numpy."""
+def test_layouts_beyond_the_kernel_size_run_the_reference():
+    """The kernels have fixed-size scratch: a layout with more error states than MAX_N runs the reference."""
 
     class Wide(StateBlock):
         name = "wide"
         nominal_size = error_size = 50
 
-    ekf = ErrorStateEKF(StateLayout([PoseBlock(0.1, 0.1), Wide()]))
-    assert not ekf._fits
+    ekf = ErrorStateEKF(StateLayout([PoseBlock(0.1, 0.1), Wide()]), backend=COMPILED)
+    assert ekf.backend is PYTHON
     F, Q = np.eye(56), np.eye(56) * 1e-3
     assert ekf.propagate(ekf.x.copy(), F, Q)
     np.testing.assert_allclose(np.diagonal(ekf.P)[:6], 0.01 + 1e-3)
@@ -335,14 +323,12 @@ def test_compiled_predict_refuses_a_zero_quaternion_as_python_does():
     u.angular, u.from_gyro = (0.1, 0.2, 0.3), True
     x = lay.initial_state()
     x[3:7] = 0.0
-    for name in ("compiled", "numpy"):
-        kernels.use(name)
+    for b in BOTH:
         with pytest.raises(EstimatorError, match="quaternion"):
-            predict(lay, x, u, 0.01, np.zeros(lay.error_dim))
+            b.predict(lay, x, u, 0.01, np.zeros(lay.error_dim), PredictWorkspace(lay))
 
 
 def test_compiled_predict_refuses_blocks_outside_the_state():
-    k = kernels.active()
     x, n = np.zeros(10), 9
     args = (x, np.empty(10), np.eye(n), np.zeros((n, n)), np.zeros(n), 0.01, None, (0.0,) * 3, (0.0,) * 3,
             (0.0,) * 9, (0.0,) * 9, 0.0, 0.0, 0.0, 0)
@@ -355,7 +341,6 @@ def test_compiled_predict_refuses_blocks_outside_the_state():
 
 
 def test_compiled_predict_refuses_decays_outside_the_state():
-    k = kernels.active()
     x, n = np.zeros(10), 9
     args = (x, np.empty(10), np.eye(n), np.zeros((n, n)), np.zeros(n), 0.01, None, (0.0,) * 3, (0.0,) * 3,
             (0.0,) * 9, (0.0,) * 9, 0.0, 0.0, 0.0, 0, ())
@@ -368,27 +353,27 @@ def test_compiled_predict_refuses_decays_outside_the_state():
 
 
 def test_the_constants_mirror_the_c_module():
-    k = kernels.active()
     assert motion_module._KERNEL_MAX_N == k.MAX_N
     codes = {GyroBiasBlock: k.BLOCK_GYRO_BIAS, WheelScaleBlock: k.BLOCK_WHEEL_SCALE,
              GyroScaleBlock: k.BLOCK_GYRO_SCALE, TwistPitchBlock: k.BLOCK_TWIST_PITCH}
     assert {cls: cls.__dict__["kernel_code"] for cls in codes} == codes
-    assert (ekf_module._MAX_N, ekf_module._MAX_M) == (k.MAX_N, k.MAX_M)
-    assert (ekf_module._GATED, ekf_module._SINGULAR, ekf_module._NEEDS_CHECK) == (k.GATED, k.SINGULAR, k.NEEDS_CHECK)
+    assert (backend_module.MAX_N, backend_module.MAX_M) == (k.MAX_N, k.MAX_M)
+    assert ((backend_module.APPLIED, backend_module.GATED, backend_module.SINGULAR, backend_module.NEEDS_CHECK)
+            == (k.APPLIED, k.GATED, k.SINGULAR, k.NEEDS_CHECK))
 
 
-def test_use_names_the_choices():
-    assert kernels.use("numpy") == "numpy" and kernels.active() is None
-    assert kernels.use("auto") == "compiled" and kernels.active() is not None
+def test_choose_names_the_choices():
+    assert choose("numpy") is PYTHON and choose("auto") is COMPILED and choose("compiled") is COMPILED
+    assert ErrorStateEKF(LAYOUTS["pose"]).backend is COMPILED  # the default where it was built
     with pytest.raises(EstimatorError, match="auto, compiled, numpy"):
-        kernels.use("fast")
+        choose("fast")
 
 
-def test_the_environment_selects_the_path():
-    assert kernels.use_environment({"FUSIOND_KERNELS": "numpy"}) == "numpy" and kernels.active() is None
-    assert kernels.use_environment({}) == "compiled"
-    with pytest.raises(EstimatorError, match="FUSIOND_KERNELS=fast: kernels must be one of"):
-        kernels.use_environment({"FUSIOND_KERNELS": "fast"})
+def test_the_environment_selects_the_backend():
+    assert from_environment({"FUSIOND_KERNELS": "numpy"}) is PYTHON
+    assert from_environment({}) is COMPILED
+    with pytest.raises(EstimatorError, match="FUSIOND_KERNELS=fast: the backend must be one of"):
+        from_environment({"FUSIOND_KERNELS": "fast"})
 
 
 @pytest.mark.e2e
@@ -413,14 +398,35 @@ def test_fusiond_replay_gives_the_same_tum_on_both_paths(jackal_bag, tmp_path):
 
 
 @pytest.mark.e2e
+def test_fusiond_kernels_reaches_every_core_the_replay_builds(jackal_bag, tmp_path, monkeypatch, capsys):
+    """FUSIOND_KERNELS=numpy: the replay and the doctor's advice proofs (jackal_rl.toml has a paste line)
+    never ask the compiled backend; without it they do (what shows the check can see them)."""
+    from fusiond.cli import main
+    from fusiond.estimator.backend import CompiledBackend, PythonBackend
+
+    asked: list[str] = []
+    for name in ("predict", "propagate", "update", "orientation", "copy_into"):
+        def counted(self, *args, _name=name):
+            asked.append(_name)
+            return getattr(PythonBackend, _name)(self, *args)
+        monkeypatch.setattr(CompiledBackend, name, counted)
+    config = str(Path(__file__).resolve().parents[2] / "examples" / "jackal_rl.toml")
+    argv = ["replay", str(jackal_bag), "--config", config, "--tum", str(tmp_path / "a.tum")]
+    monkeypatch.setenv("FUSIOND_KERNELS", "numpy")
+    assert main(argv) == 0
+    assert "(replayed: likelihood" in capsys.readouterr().out and asked == []  # the advice was proven
+    monkeypatch.delenv("FUSIOND_KERNELS")
+    assert main(argv) == 0
+    assert {"predict", "propagate", "update", "orientation", "copy_into"} <= set(asked)
+
+
+@pytest.mark.e2e
 @pytest.mark.parametrize("config", ["examples/jackal_rl.toml", "examples/jackal.toml"])
 def test_jackal_trajectory_is_the_same_on_both_paths(jackal_bag, config):
     from tests.support.jackal_pin import trajectory
 
-    kernels.use("numpy")
-    ref = trajectory(jackal_bag, config)
-    kernels.use("compiled")
-    now = trajectory(jackal_bag, config)
+    ref = trajectory(jackal_bag, config, PYTHON)
+    now = trajectory(jackal_bag, config, COMPILED)
     assert now["counters"] == ref["counters"]
     assert now["published"] == ref["published"]
     worst = max(abs(a - b) for pa, pb in zip(now["poses"], ref["poses"]) for a, b in zip(pa, pb))
@@ -439,7 +445,7 @@ unit = st.floats(-1.0, 1.0)
        rows=st.sampled_from([(0, 1), (0, 1, 2), (2,), (1,), (2, 0)]),
        layout=st.sampled_from(["pose", "bias_scale"]))
 def test_compiled_orientation_gives_the_python_paths_floats(q, z, rows, layout):
-    """observations.orientation's y and H from kernels.orientation are the Python path's to the bit
+    """observations.orientation's y and H from the compiled backend are the reference's to the bit
     (rpy_jacobian and rot.wrap as the same expressions in C); R is the same shared array."""
     lay = LAYOUTS[layout]
     norm = math.sqrt(sum(c * c for c in q))
@@ -449,9 +455,8 @@ def test_compiled_orientation_gives_the_python_paths_floats(q, z, rows, layout):
     x[3:7] = q if norm < 1e-6 else tuple(c / norm for c in q)
     cov = (0.01, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.03)
     out = []
-    for name in ("compiled", "numpy"):
-        kernels.use(name)
-        out.append(observations.orientation(lay, x, z, cov, rows))
+    for b in BOTH:
+        out.append(observations.orientation(lay, x, z, cov, rows, b))
     (yc, Hc, Rc), (yn, Hn, Rn) = out
     np.testing.assert_array_equal(yc, yn)
     np.testing.assert_array_equal(Hc, Hn)
@@ -459,7 +464,6 @@ def test_compiled_orientation_gives_the_python_paths_floats(q, z, rows, layout):
 
 
 def test_compiled_orientation_refuses_bad_rows_and_shapes():
-    k = kernels.active()
     x = np.zeros(7)
     x[6] = 1.0
     with pytest.raises(ValueError, match="rows must be among 0, 1, 2"):
@@ -472,19 +476,17 @@ def test_compiled_orientation_refuses_bad_rows_and_shapes():
         k.orientation(x[::-1], (0.0,) * 3, (0, 1), np.empty(2), np.empty((2, 6)))
 
 
-@pytest.mark.parametrize("name", ["compiled", "numpy"])
-def test_a_copy_into_a_recycled_filter_is_the_filter_in_its_own_arrays(name):
-    kernels.use(name)
+def test_a_copy_into_a_recycled_filter_is_the_filter_in_its_own_arrays(backend):
     lay = LAYOUTS["bias_scale"]
-    src = _random_filter(lay, np.random.default_rng(3))
-    old = _random_filter(lay, np.random.default_rng(4))
+    src = _random_filter(lay, np.random.default_rng(3), backend)
+    old = _random_filter(lay, np.random.default_rng(4), backend)
     x_buf, P_buf = old.x, old.P
     c = src.copy(into=old)
     assert c is old and c.x is x_buf and c.P is P_buf  # the recycled arrays, overwritten
     np.testing.assert_array_equal(c.x, src.x)
     np.testing.assert_array_equal(c.P, src.P)
     assert not np.shares_memory(c.P, src.P) and not np.shares_memory(c.x, src.x)
-    other = _random_filter(LAYOUTS["pose"], np.random.default_rng(5))  # another size: a new object
+    other = _random_filter(LAYOUTS["pose"], np.random.default_rng(5), backend)  # another size: a new object
     d = src.copy(into=other)
     assert d is not other
     np.testing.assert_array_equal(d.P, src.P)
@@ -492,7 +494,6 @@ def test_a_copy_into_a_recycled_filter_is_the_filter_in_its_own_arrays(name):
 
 
 def test_copy_into_checks_every_size_before_writing():
-    k = kernels.active()
     x, P = np.ones(4), np.ones((2, 2))
     x_to, P_to = np.zeros(4), np.zeros((3, 3))
     with pytest.raises(ValueError, match="P_to has 9 values, expected 4"):

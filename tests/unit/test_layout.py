@@ -137,6 +137,21 @@ def test_only_the_estimator_writes_the_state_and_its_covariance():
     assert found == []
 
 
+# The estimator's numerics run in the backend the filter was built with (fusiond/estimator/backend.py): the
+# compiled module is reached through it alone, so no other module can switch or bypass it.
+_KERNELS_IMPORT = re.compile(r"\b(_kernels|_rts)\b.*\bimport\b|\bimport\b.*\b(_kernels|_rts)\b")
+
+
+def test_only_the_backend_imports_the_compiled_kernels():
+    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
+             for path in PACKAGE.rglob("*.py") if path.relative_to(PACKAGE).as_posix() != "estimator/backend.py"
+             for i, line in enumerate(path.read_text().splitlines(), 1) if _KERNELS_IMPORT.search(line)]
+    assert found == []
+    backend = (PACKAGE / "estimator" / "backend.py").read_text()
+    assert _KERNELS_IMPORT.search(backend)  # the pattern finds the one import there is
+    assert "global " not in backend  # no process-wide switch: a backend is chosen per filter
+
+
 def test_the_kinds_never_import_the_outer_layers():
     """The registry, the kinds and the fusion core import nothing of transport, replay, the CLI, the tuner,
     the doctor, nor (until a decoder is asked for) the codecs and rosbags; the config's shared tables

@@ -282,12 +282,15 @@ def test_transitions_in_a_row_fold_into_the_per_step_gains(held):
 
 
 def test_compiled_fold_equals_the_python_reference():
-    """``_rts.fold`` (C) against ``A rts_gain(...)`` (numpy, the reference): random covariances, with and
-    without held components; a P_after that is not positive definite is left to the Python path."""
-    from fusiond.estimator import smoother
+    """The compiled backend's fold (``_rts.fold``, C) against the reference's ``A rts_gain(...)`` (numpy):
+    random covariances, with and without held components; a P_after that is not positive definite is
+    left to the reference's least squares."""
+    from fusiond.estimator import backend
+    from fusiond.estimator.smoother import rts_gain
 
-    if smoother._rts is None:
+    if backend.COMPILED is None or backend.COMPILED._rts is None:
         pytest.skip("fusiond.estimator._rts was not built (no C compiler at install time)")
+    rts, compiled, python = backend.COMPILED._rts, backend.COMPILED, backend.PYTHON
     rng = np.random.default_rng(11)
     for n in (3, 9, 13, 16):
         for held in ((), (2,), (1, 4)):
@@ -301,16 +304,32 @@ def test_compiled_fold_equals_the_python_reference():
                     P1[h, :] = P1[:, h] = 0.0
             A = rng.normal(size=(n, n))
             out = np.empty((n, n))
-            assert smoother._rts.fold(A, P0, F, P1, out)
-            want = A.dot(smoother.rts_gain(P0, F, P1))
+            assert rts.fold(A, P0, F, P1, out)
+            want = python.rts_fold(A, P0, F, P1)
             np.testing.assert_allclose(out, want, rtol=0, atol=1e-10 * np.abs(want).max())
-            assert np.array_equal(smoother.fold(A, P0, F, P1), out)
+            assert np.array_equal(compiled.rts_fold(A, P0, F, P1), out)
     # an indefinite P_after (its diagonal positive): nothing from C, the reference's least squares instead
     P1 = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 2.0]])
     out = np.full((3, 3), 7.0)
-    assert not smoother._rts.fold(np.eye(3), np.eye(3), np.eye(3), P1, out)
+    assert not rts.fold(np.eye(3), np.eye(3), np.eye(3), P1, out)
     assert (out == 7.0).all()
-    np.testing.assert_allclose(smoother.fold(np.eye(3), np.eye(3), np.eye(3), P1),
-                               smoother.rts_gain(np.eye(3), np.eye(3), P1))
+    np.testing.assert_allclose(compiled.rts_fold(np.eye(3), np.eye(3), np.eye(3), P1),
+                               rts_gain(np.eye(3), np.eye(3), P1))
     with pytest.raises(ValueError):
-        smoother._rts.fold(np.eye(3), np.eye(2), np.eye(3), np.eye(3), out)
+        rts.fold(np.eye(3), np.eye(2), np.eye(3), np.eye(3), out)
+
+
+@pytest.mark.parametrize("name", ["numpy", "compiled"])
+def test_the_recorder_folds_with_its_filters_backend(name):
+    """A filter records with its own backend: its segment, and the copies the history takes of it, fold
+    with the backend the filter was built with."""
+    from fusiond.estimator import backend
+
+    if name == "compiled" and backend.COMPILED is None:
+        pytest.skip("the compiled backend was not built")
+    layout, F, q, H, R, zs = _linear_problem(seed=5)
+    rec = SmoothingRecorder(layout, covariance=True)
+    ekf = ErrorStateEKF(layout, backend=backend.choose(name))
+    seg = rec.open()
+    ekf.record(seg)
+    assert seg.backend is ekf.backend and seg.copy().backend is ekf.backend

@@ -282,7 +282,7 @@ class ImuModel(SensorModel):
                           late: bool) -> list[DiagnosticsRecord]:
         cfg = self.cfg
         observe = obs.orientation_with_offset if self.offset else obs.orientation
-        y, H, R = observe(self.ctx.layout, s.ekf.x, rpy, cov, rows)
+        y, H, R = observe(self.ctx.layout, s.ekf.x, rpy, cov, rows, s.ekf.backend)
         own: ImuOwn = s.own[self.index]
         scale = own.adaptive[0] if cfg.adaptive else 1.0
         tilt_only = 2 not in rows
@@ -371,7 +371,7 @@ class ImuModel(SensorModel):
             initialise_attitude(s, (roll, pitch, 0.0), False)
         var = self.cfg.gravity_tilt_noise**2 / n
         y, H, R = obs.orientation(self.ctx.layout, s.ekf.x, (roll, pitch, 0.0),
-                                  (var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var), (0, 1))
+                                  (var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var), (0, 1), s.ekf.backend)
         res = s.ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.tilt_mask, hold_heading=True)
         if not res.rejected:
             s.tilt_seen = stamp
