@@ -34,7 +34,7 @@ from ..core.diagnostics import chi2_ppf
 from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from ..estimator.geodesy import EnuFrame
-from ..samples import GpsSample
+from ..core.sensors import GpsSample
 from .params import Param
 
 FLOOR_ALPHA = 0.01  # a floor above the true noise one time in a hundred

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from ....config_tables import FilterConfig
 from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
-from ....samples import GpsSample
+from .sample import GpsSample
 from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import GpsModel

@@ -9,7 +9,7 @@ import statistics
 from collections.abc import Sequence
 from dataclasses import replace
 
-from ....samples import GpsSample
+from .sample import GpsSample
 from ..tunable import Param, own_samples
 from .table import GpsSensor
 

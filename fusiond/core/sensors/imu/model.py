@@ -21,7 +21,7 @@ from ....estimator import mat3
 from ....estimator import observations as obs
 from ....estimator import rotation as rot
 from ....logs import get_logger
-from ....samples import ImuSample
+from .sample import ImuSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, Rejected, finite, near_unit, plausible, resolve_variances, unit_quaternion

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ....samples import ImuSample
+from .sample import ImuSample
 from ..tunable import Param, median, own_samples
 from .axes import seen_axes
 from .table import ImuSensor

@@ -37,7 +37,7 @@ from .... import reasons
 from ....estimator import mat3
 from ....estimator import rotation as rot
 from ....logs import get_logger
-from ....samples import OdomSample
+from .sample import OdomSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ....samples import OdomSample
+from .sample import OdomSample
 from ..tunable import Param, median, own_samples
 from .table import OdomSensor
 
