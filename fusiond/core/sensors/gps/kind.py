@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 from ....config_tables import FilterConfig
 from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
-from .sample import GpsSample
 from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import GpsModel
+from .sample import GpsSample
 from .table import GpsSensor
 from .tunables import difference_variance, gps_tunables, slow_errors
 

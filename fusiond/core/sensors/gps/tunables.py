@@ -11,8 +11,8 @@ import statistics
 from collections.abc import Sequence
 from dataclasses import replace
 
-from .sample import GpsSample
 from ..tunable import Param, own_samples
+from .sample import GpsSample
 from .table import GpsSensor
 
 
