@@ -209,7 +209,7 @@ def bench_sensors(repeat: int = 5, number: int = 2000, seconds: float = 20.0) ->
     from fusiond.estimator import rotation as rot
     from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
     from fusiond.core.sensors.pose import PoseSample
-    from fusiond.samples import GpsSample, ImuSample, OdomSample
+    from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
 
     layout = StateLayout([PoseBlock(0.0, 0.1), GyroBiasBlock(0.01, 2e-5), GyroScaleBlock(0.05, 1e-5),
                           WheelScaleBlock(0.1, 1e-4)])
@@ -452,8 +452,8 @@ def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: i
     from rosbags.rosbag2 import Writer
 
     from fusiond.estimator import rotation as rot
-    from fusiond.samples import ImuSample, OdomSample
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, encode_odom_sample
+    from fusiond.core.sensors import ImuSample, OdomSample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample
 
     cov36 = tuple(1e-3 if i % 7 == 0 else 0.0 for i in range(36))
     ocov = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
@@ -465,13 +465,13 @@ def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: i
         while n < messages:
             t = 1000.0 + 0.01 * k
             if k % 2 == 0:
-                writer.write(odom, int(t * 1e9), encode_odom_sample(
+                writer.write(odom, int(t * 1e9), encode_sample(
                     OdomSample("wheel", t, (1.0, 0.0, 0.0), (0.0, 0.0, 0.2), cov36), "ros2-cdr"))
                 n += 1
             if n < messages:
                 ti = t + 0.005
                 q = rot.from_rpy(0.01 * math.sin(ti), -0.01 * math.cos(ti), 0.2 * (ti - 1000.0))
-                writer.write(imu, int(ti * 1e9), encode_imu_sample(
+                writer.write(imu, int(ti * 1e9), encode_sample(
                     ImuSample("imu", ti, q, ocov, (0.0, 0.0, 0.2), gcov), "ros2-cdr"))
                 n += 1
             k += 1

@@ -45,11 +45,11 @@ import msgspec
 import numpy as np
 import zenoh
 
-from fusiond.codecs import encode_imu_sample, encode_odom_sample
+from fusiond.codecs import encode_sample
 from fusiond.config import ZenohConfig, loads
 from fusiond.errors import TransportError
 from fusiond.estimator.backend import from_environment
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.health import decode_report, encode_report
 from fusiond.logs import configure
 from fusiond.transport.daemon import Daemon, direct
@@ -153,11 +153,11 @@ def _schedule(seconds: float, imu_hz: float, odom_hz: float, t0: float = 1000.0
         yaw = w * t
         q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
         stamp = t0 + t
-        out.append((t, "imu", encode_imu_sample(ImuSample("imu", stamp, q, cov_o, (0.0, 0.0, w), cov_g), "ros2-cdr"),
+        out.append((t, "imu", encode_sample(ImuSample("imu", stamp, q, cov_o, (0.0, 0.0, w), cov_g), "ros2-cdr"),
                     _ros(stamp)))
         if k % every == 0:
             ts = t + 0.5 / imu_hz
-            out.append((ts, "odom", encode_odom_sample(
+            out.append((ts, "odom", encode_sample(
                 OdomSample("wheel", t0 + ts, (v, 0.0, 0.0), (0.0, 0.0, w), twist_cov), "ros2-cdr"), _ros(t0 + ts)))
     return out
 

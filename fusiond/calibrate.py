@@ -22,7 +22,7 @@ import numpy as np
 from .config import ImuSensor, OdomSensor
 from .errors import CalibrationError
 from .estimator import rotation as rot
-from .samples import ImuSample, OdomSample
+from .core.sensors import ImuSample, OdomSample
 
 STATIC_RATE = 0.05  # rad/s: a mean rate above this is motion, not bias
 # Static floors. A MEMS gyro at rest spreads by 0.001-0.01 rad/s and an accelerometer by 0.01-0.04 m/s^2

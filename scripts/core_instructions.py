@@ -51,7 +51,7 @@ def _jackal():
 
 def _synthetic(messages: int):
     from fusiond.config import loads
-    from fusiond.samples import ImuSample, OdomSample
+    from fusiond.core.sensors import ImuSample, OdomSample
     from benchmarks import bench_latency
 
     cfg = loads(bench_latency._config_text(bench_latency.free_port()), "<core_instructions>")

@@ -29,7 +29,7 @@ def _floor_child(conn: Any, config_text: str, express: bool) -> None:
     decoded sample is accepted, and each odometry sample answered with a pose at its own stamp."""
     from fusiond.codecs import encode_pose_cdr
     from fusiond.core.fusion import Step
-    from fusiond.samples import OdomSample
+    from fusiond.core.sensors import OdomSample
     from fusiond.transport.daemon import Daemon
 
     zero_cov = (0.0,) * 36

@@ -269,7 +269,7 @@ def _first_imu_yaw(bag: Path, cfg) -> float:
     """The yaw of the bag's first IMU orientation (rad)."""
     from fusiond.estimator.rotation import to_rpy
     from fusiond.replay.bag import open_bag_samples
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     with open_bag_samples([bag], cfg.sensors) as samples:
         first = next(s for s in samples if isinstance(s, ImuSample))

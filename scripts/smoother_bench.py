@@ -24,7 +24,7 @@ ROOT_HINT = "run from the repository root with its .venv"
 def stream(seconds: float) -> list:
     from fusiond.estimator import rotation as rot
     from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
-    from fusiond.samples import GpsSample, ImuSample, OdomSample
+    from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
 
     enu = EnuFrame(48.137, 11.575, 520.0)
     cov36 = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))

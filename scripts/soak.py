@@ -45,8 +45,8 @@ sys.path.insert(0, str(ROOT))
 import zenoh  # noqa: E402
 
 from fusiond.config import ZenohConfig  # noqa: E402
-from fusiond.samples import ImuSample, OdomSample  # noqa: E402
-from fusiond.codecs import encode_imu_sample, encode_odom_sample  # noqa: E402
+from fusiond.core.sensors import ImuSample, OdomSample  # noqa: E402
+from fusiond.codecs import encode_sample  # noqa: E402
 from fusiond.transport.session import build_config, open_session, query_health  # noqa: E402
 
 _STAMP = struct.Struct("<iI")
@@ -102,10 +102,10 @@ class Templates:
     than the daemon's work). The robot drives straight at 0.5 m/s, level, gyro at rest + noise-free."""
 
     def __init__(self) -> None:
-        self.odom = bytearray(encode_odom_sample(
+        self.odom = bytearray(encode_sample(
             OdomSample("wheel", 1.0, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), _cov(6, [1e-3, 1e-3, 1e-3, 1e6, 1e6, 1e-2])),
             "ros2-cdr"))
-        self.imu = bytearray(encode_imu_sample(
+        self.imu = bytearray(encode_sample(
             ImuSample("imu", 1.0, (0.0, 0.0, 0.0, 1.0), _cov(3, [1e-4, 1e-4, 1e-2]), (0.0, 0.0, 0.0),
                       _cov(3, [1e-5] * 3)), "ros2-cdr"))
 

@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import EXIT_USAGE, load_config, non_negative, positive
+from .common import EXIT_USAGE, add_daemon_client_arguments, load_config, non_negative, positive
 from .tool_session import tool_session
 
 __all__ = ["add_arguments", "run"]
@@ -18,13 +18,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=positive, default=60.0, help="seconds to record (default 60)")
     p.add_argument("--bag", help="read the IMU from this bag instead of Zenoh")
     p.add_argument("--start", type=non_negative, default=0.0, help="with --bag: skip the first S seconds")
-    p.add_argument("--config", help="TOML config naming the IMU sensor (key, encoding, extrinsic_rpy)")
+    add_daemon_client_arguments(p, reads="the IMU sensor: key, encoding, extrinsic_rpy",
+                                key="the IMU without a config: its Zenoh key (default imu/data, ROS 2 CDR), or with "
+                                    "--bag its topic without the leading slash (the wheels then unread: a recording "
+                                    "that moved is told by the IMU alone)")
     p.add_argument("--sensor", help="which imu sensor of the config (default: the first)")
-    p.add_argument("--key", help="the IMU without a config: its Zenoh key (default imu/data, ROS 2 CDR), or with "
-                                 "--bag its topic without the leading slash (the wheels then unread: a recording "
-                                 "that moved is told by the IMU alone)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
-    p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
 
 
 def run(args: argparse.Namespace) -> int:

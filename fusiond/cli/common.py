@@ -1,5 +1,6 @@
 """What several commands share: exit codes, loading the config as a one-line error, checking an output path
-before a long run, argparse types for numbers, and the option specs that more than one command takes.
+before a long run, argparse types for numbers, the option specs that more than one command takes, and the
+options of a command that reaches a running daemon over Zenoh (``add_daemon_client_arguments``).
 
 Imports only the standard library at module level: every command, ``--help`` included, reads this module.
 """
@@ -13,7 +14,8 @@ import sys
 from pathlib import Path
 
 __all__ = ["ADVICE_BUDGET", "ALLOW_MISSING", "BENCH_NO_MULTICAST", "EXIT_UNHEALTHY", "EXIT_USAGE", "LOG_LEVELS",
-           "VersionAction", "chosen_backend", "load_config", "non_negative", "output_error", "positive"]
+           "VersionAction", "add_daemon_client_arguments", "chosen_backend", "load_config", "non_negative",
+           "output_error", "positive"]
 
 EXIT_USAGE = 2
 EXIT_UNHEALTHY = 1
@@ -122,3 +124,25 @@ BENCH_NO_MULTICAST = "do not scout for peers by multicast (always so: the benchm
 ALLOW_MISSING = {"action": "store_true",
                  "help": "replay without a configured sensor whose topic is not in the bag (a warning); "
                          "default: that is an error naming the topic"}
+
+
+def add_daemon_client_arguments(p: argparse.ArgumentParser, *, reads: str, config_required: bool = False,
+                                key: str | None = None, timeout: bool = False) -> None:
+    """The options of a command that opens a Zenoh session to a running daemon (health, set-pose, play,
+    calibrate-imu): ``--config``, ``--connect``, ``--key``, ``--no-multicast``, ``--timeout``.
+
+    Every such command reaches the daemon the same way (``tool_session``: the config's [zenoh] table,
+    ``--connect`` wins, else the config's connect, else its listen endpoints on loopback), so those options
+    read the same on each. What differs is the command's own: ``reads``, what it takes from the config
+    beside the namespace and endpoints; ``config_required``, a command that cannot run without one; ``key``,
+    the help of its key (None: it has no --key); ``timeout``, whether it waits for an answer."""
+    p.add_argument("--config", required=config_required,
+                   help=f"TOML config of the daemon ({reads}, namespace, endpoints)")
+    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "
+                        "endpoints on loopback")
+    if key is not None:
+        p.add_argument("--key", help=key)
+    p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
+    if timeout:
+        p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for an answer (default 2)")

@@ -6,19 +6,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import EXIT_UNHEALTHY, positive
+from .common import EXIT_UNHEALTHY, add_daemon_client_arguments
 from .tool_session import in_namespace, reached, tool_session
 
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", help="TOML config of the daemon (health key, namespace, endpoints)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT",
-                   help="Zenoh endpoint of the daemon (repeatable); default: from the config")
-    p.add_argument("--key", help="health key (default: output.health_key of the config)")
-    p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for an answer (default 2)")
+    add_daemon_client_arguments(p, reads="health key", key="health key (default: output.health_key of the config)",
+                                timeout=True)
     p.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
                    help="worst status that still exits 0 (default degraded; failed = any answer)")
 

@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import EXIT_USAGE, load_config, non_negative, positive
+from .common import EXIT_USAGE, add_daemon_client_arguments, load_config, non_negative, positive
 from .tool_session import in_namespace, tool_session
 
 __all__ = ["add_arguments", "run"]
@@ -15,16 +15,12 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
-    p.add_argument("--config", required=True, help="TOML config: sensors, keys and the [zenoh] section")
+    add_daemon_client_arguments(p, reads="sensors, keys", config_required=True)
     p.add_argument("--rate", type=non_negative, default=1.0,
                    help="pace relative to the recording (default 1: the recorded pace); 0 = as fast as possible, "
                         "which a daemon may not keep up with (play reports what its queue dropped)")
     p.add_argument("--duration", type=positive, help="play only the first S seconds of the bag")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT",
-                   help="Zenoh endpoint to connect to (repeatable); default: the config's connect, else its listen "
-                        "endpoints on loopback")
     p.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
-    p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
     p.add_argument("--wait", type=non_negative, default=5.0,
                    help="wait up to S seconds for the config's daemon to answer on its health key before "
                         "playing, then play anyway (default 5; 0: do not wait)")

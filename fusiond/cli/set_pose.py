@@ -6,7 +6,7 @@ import argparse
 import math
 import sys
 
-from .common import EXIT_UNHEALTHY, EXIT_USAGE, positive
+from .common import EXIT_UNHEALTHY, EXIT_USAGE, add_daemon_client_arguments
 from .tool_session import in_namespace, tool_session
 
 __all__ = ["add_arguments", "run"]
@@ -23,12 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="time the pose holds at, s (message time); default 0: the filter's current time")
     p.add_argument("--sigma", type=float, nargs=2, default=(0.0, 0.0), metavar=("POSITION_M", "ATTITUDE_RAD"),
                    help="standard deviations of the pose (default 0 0: exactly this pose)")
-    p.add_argument("--config", help="TOML config of the daemon (set_pose key, namespace, endpoints)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT",
-                   help="Zenoh endpoint of the daemon (repeatable); default: from the config")
-    p.add_argument("--key", help="set_pose key (default: output.set_pose_key of the config)")
-    p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
-    p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for the answer (default 2)")
+    add_daemon_client_arguments(p, reads="set_pose key", key="set_pose key (default: output.set_pose_key of the config)",
+                                timeout=True)
 
 
 def run(args: argparse.Namespace) -> int:

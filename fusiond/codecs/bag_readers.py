@@ -1,12 +1,14 @@
-"""Struct readers of a bag's raw Odometry and Imu messages (ROS 1 and ROS 2), and the check that
-a bag defines those types with the standard layout before they are used (`bag_fast_path`).
+"""Struct readers of a bag's raw messages (ROS 1 and ROS 2) of a kind whose codec has a struct fast path
+(``KindCodec.repeated``: the odometry's and the IMU's), and the check that a bag defines the kind's type
+with the layout that fast path reads before it is used (`bag_fast_path`).
 
-A bag replay reads the same two messages thousands of times a second. ROS 2 bags hold the CDR
-of `cdr_fast_path`; ROS 1 bags hold ROS 1 serialisation: the same fields with a `seq` in the
-header, strings without a terminator and no alignment, before the same float64 block, read as
+A bag replay reads those messages thousands of times a second. ROS 2 bags hold the CDR of
+`cdr_fast_path`; ROS 1 bags hold ROS 1 serialisation: the same fields with a `seq` in the header, strings
+without a terminator and no alignment, before the same float64 block, read by the kind's ``Fields`` as
 `cdr_fast_path` reads it. A bag carries its own message definitions, which may differ from the standard
-ones under the same name: a fast path is used only for a type whose definition in the bag's
-store (rosbags parsed it) has exactly the layout it reads.
+ones under the same name: a fast path is used only for a type whose definition in the bag's store (rosbags
+parsed it) has exactly the layout it reads (a Header, the child_frame_id where the kind has one, the
+float64 block).
 """
 
 from __future__ import annotations
@@ -17,8 +19,9 @@ from typing import TYPE_CHECKING, Final
 
 from fusiond.samples import Sample
 
-from .cdr_fast_path import U32, Fields, ImuFields, OdomFields, RepeatedLayout
-from .wire import IMU, ODOMETRY, Payload
+from .cdr_fast_path import U32, Fields, RepeatedLayout
+from .kind_codec import KindCodec
+from .wire import Payload
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -78,16 +81,6 @@ class _Ros1Stream:
 
 
 _HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id
-_FAST_LAYOUTS: Final = {
-    ODOMETRY: (*_HEADER_LAYOUT, "string", *("float64",) * 85),  # + child_frame_id, pose, twist
-    IMU: (*_HEADER_LAYOUT, *("float64",) * 37),
-}
-_FAST_PATHS: Final = {  # one reader per topic: each remembers its stream's layout and covariances
-    (ODOMETRY, False): lambda: RepeatedLayout(True, OdomFields()).sample,
-    (ODOMETRY, True): lambda: _Ros1Stream(True, OdomFields()),
-    (IMU, False): lambda: RepeatedLayout(False, ImuFields()).sample,
-    (IMU, True): lambda: _Ros1Stream(False, ImuFields()),
-}
 
 
 def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
@@ -121,21 +114,29 @@ def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
     return tuple(out) if walk(msgtype) else None
 
 
-def bag_fast_path(store: Typestore, msgtype: str, ros1: bool) -> Callable[[Payload, str], Sample | None] | None:
-    """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR), when the
-    bag's definition of it (in ``store``, the bag reader's type store) has the standard layout.
+def bag_fast_path(store: Typestore, codec: KindCodec, msgtype: str,
+                  ros1: bool) -> Callable[[Payload, str], Sample | None] | None:
+    """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR) for a sensor of the kind
+    whose codec is ``codec``, when the codec has a struct fast path for that type (``repeated``, of its first
+    ROS type) and the bag's definition of it (in ``store``, the bag reader's type store) has the layout that
+    fast path reads.
 
     A reader remembers its stream's layout and covariances (`_Ros1Stream`, `RepeatedLayout`): one per
-    topic. It returns the
-    sample, or None for a message it does not read exactly as rosbags would
-    (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority
-    on errors. None when ``msgtype`` has no fast path or the bag defines it differently.
+    topic. It returns the sample, or None for a message it does not read exactly as rosbags would
+    (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority on errors.
+    None when the codec has no fast path for ``msgtype`` or the bag defines it differently.
     """
-    want = _FAST_LAYOUTS.get(msgtype)
-    if want is None:
+    if codec.repeated is None or msgtype != codec.ros_types[0]:
         return None
+    has_child_frame, fields = codec.repeated
+    want = (*_HEADER_LAYOUT, *(("string",) if has_child_frame else ()), *("float64",) * (fields.size // 8))
     if ros1:
         want = ("uint32", *want)  # header.seq
     if flat_layout(store, msgtype) != want:
         return None
-    return _FAST_PATHS[msgtype, ros1]()
+    if ros1:
+        return _Ros1Stream(has_child_frame, fields())
+    return RepeatedLayout(has_child_frame, fields()).sample
+
+
+__all__ = ["bag_fast_path", "flat_layout"]

@@ -1,8 +1,10 @@
-"""The struct fast path of Odometry and Imu in little-endian ROS 2 CDR: the daemon's hot path.
+"""The struct fast path of a message that is a Header (+ child_frame_id) followed by one run of float64s
+in little-endian ROS 2 CDR: the daemon's hot path (the odometry's and the IMU's messages).
 
-Odometry and Imu are a Header (+ child_frame_id) followed by one run of float64s with no
-padding inside it, so a little-endian payload unpacks with struct calls, several times faster
-than the generic rosbags path (a stream's repeated covariances read once: ``_Covariances``).
+Such a message has no padding inside its float64 block, so a little-endian payload unpacks with struct
+calls, several times faster than the generic rosbags path. Which floats make the sample is the kind's to
+say (its ``Fields``, in its package's ``codec``); the walk to the block, the checks and what repeats
+between a stream's messages (``RepeatedLayout``, ``Covariances``) are here, the same for every kind.
 Anything the fast path does not accept exactly as rosbags would is left to rosbags
 (`rosbags_cdr.deserialize`), which stays the authority on errors; tests check both paths agree on
 arbitrary bytes.
@@ -11,19 +13,15 @@ arbitrary bytes.
 from __future__ import annotations
 
 import struct
-from typing import Final
+from typing import Final, Protocol
 
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.samples import Sample
 
 from .wire import Payload
 
 U32: Final = struct.Struct("<I").unpack_from
 _STAMP: Final = struct.Struct("<iI").unpack_from
 _CDR_LE: Final = b"\x00\x01"
-
-# the values of a block that move from message to message, the covariances between them skipped
-_IMU_MOVING: Final = struct.Struct("<4d72x3d72x3d72x").unpack_from  # orientation, angular velocity, acceleration
-_ODOM_MOVING: Final = struct.Struct("<3d4d288x3d3d288x").unpack_from  # position, orientation, linear, angular
 
 
 def _skip_string(buf: Payload, pos: int) -> int:
@@ -56,7 +54,7 @@ def _block_offset(buf: Payload, has_child_frame: bool, size: int) -> int:
     return pos + 4
 
 
-class _Covariances:
+class Covariances:
     """The covariance blocks of one stream's messages (``starts``: their byte offsets in the float64 block,
     ``size`` float64s each), read once while their bytes repeat.
 
@@ -81,41 +79,14 @@ class _Covariances:
         return self._tuples
 
 
-class ImuFields:
-    """An Imu float64 block (at offset ``at`` of a payload) as an ImuSample: orientation and its covariance,
-    angular velocity and its, linear acceleration and its; the three covariances read once while they
-    repeat (``_Covariances``), so only ten of the 37 values are unpacked a message. One reader per stream."""
+class Fields(Protocol):
+    """A kind's reader of its message's float64 block (``KindCodec.repeated``): ``size`` bytes at offset ``at``
+    of a payload, with the stamp and sensor name read before it, as the kind's sample. One reader per
+    stream, so that it may keep what repeats between messages (``Covariances``)."""
 
-    __slots__ = ("_covariances",)
-    size: Final = 37 * 8  # bytes: 37 float64s
+    size: int
 
-    def __init__(self) -> None:
-        self._covariances = _Covariances((32, 128, 224), 9)
-
-    def sample(self, buf: Payload, at: int, stamp: float, sensor: str) -> ImuSample:
-        oc, gc, ac = self._covariances.read(buf, at)
-        v = _IMU_MOVING(buf, at)
-        return ImuSample(sensor, stamp, v[0:4], oc, v[4:7], gc, v[7:10], ac)
-
-
-class OdomFields:
-    """An Odometry float64 block as an OdomSample: pose position, orientation (its covariance is not
-    read), twist linear, angular and covariance; the twist covariance read once while it repeats
-    (``_Covariances``): 13 values unpacked a message instead of 85."""
-
-    __slots__ = ("_covariances",)
-    size: Final = 85 * 8  # bytes: pose position, orientation, covariance (0:43), twist (43:85)
-
-    def __init__(self) -> None:
-        self._covariances = _Covariances((392,), 36)
-
-    def sample(self, buf: Payload, at: int, stamp: float, sensor: str) -> OdomSample:
-        (tc,) = self._covariances.read(buf, at)
-        v = _ODOM_MOVING(buf, at)
-        return OdomSample(sensor, stamp, v[7:10], v[10:13], tc, v[0:3], v[3:7])
-
-
-Fields = ImuFields | OdomFields
+    def sample(self, buf: Payload, at: int, stamp: float, sensor: str) -> Sample: ...
 
 
 class RepeatedLayout:
@@ -142,7 +113,7 @@ class RepeatedLayout:
         self.middle = b""  # its bytes [12, at)
         self.at = 0  # offset of its float64 block
 
-    def sample(self, buf: Payload, sensor: str) -> ImuSample | OdomSample | None:
+    def sample(self, buf: Payload, sensor: str) -> Sample | None:
         """The payload's sample, None where rosbags must decide (``_block_offset``)."""
         at = self.at
         if len(buf) != self.length or buf[12:at] != self.middle or buf[:2] != _CDR_LE:
@@ -152,3 +123,6 @@ class RepeatedLayout:
             self.length, self.middle, self.at = len(buf), bytes(buf[12:at]), at
         sec, nanosec = _STAMP(buf, 4)
         return self.fields.sample(buf, at, sec + nanosec * 1e-9, sensor)
+
+
+__all__ = ["U32", "Covariances", "Fields", "RepeatedLayout"]

@@ -14,7 +14,6 @@ from typing import Any
 
 from fusiond.samples import Sample
 
-from . import builtin_kinds  # noqa: F401 - registers the codecs written in this package
 from .cdr_fast_path import RepeatedLayout
 from .json_msgpack import structured_decoder
 from .kind_codec import KindCodec, codec_named
@@ -80,7 +79,7 @@ def make_decoder(kind: str | KindCodec, encoding: str, sensor: str, *, msgtype: 
 
     _warm(codec, msgtype)
     repeated = codec.repeated
-    if repeated is not None:  # odometry and IMU: the hot path of the daemon
+    if repeated is not None:  # a kind read at the daemon's highest rates (the odometry, the IMU): its hot path
         has_child_frame, fields = repeated
         layout = RepeatedLayout(has_child_frame, fields())
         read = layout.sample

@@ -7,18 +7,21 @@ for a kind read a thousand times a second, its struct fast path. The kind's pack
 asked for, so that the fusion core loads without the codecs. The codecs here are generic over
 ``KindCodec``: ``decoders.make_decoder`` and ``sample_encoders.encode_sample`` read no table of kinds.
 
-The kinds whose codecs are written in this package (``builtin_kinds``) are found here at once; any
-other is the registry's to name: ``codec_named`` asks the kind when first asked, as the kinds import
-the codecs only when asked for a decoder. Nothing of the core is imported when this package loads.
+Every kind's codec is the registry's to name: ``codec_named`` and ``codec_of`` ask the kind's descriptor
+when first asked, as the kinds import the codecs only when asked for a decoder. Nothing of the core is
+imported when this package loads.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["KindCodec", "codec_named", "codec_of", "register_codec"]
+if TYPE_CHECKING:
+    from .cdr_fast_path import Fields
+
+__all__ = ["KindCodec", "codec_named", "codec_of"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,8 +34,9 @@ class KindCodec:
     - ``encode``: (sample, encoding, ROS type) -> bytes as its sensor publishes them; None: no encoder.
     - ``message_type``, ``from_message``: the JSON / msgpack Struct and (Struct, sensor) -> sample;
       None: the kind reads ros2-cdr only.
-    - ``repeated``: (has child_frame_id?, the float64 block's reader class) of ``cdr_fast_path``'s
-      struct fast path, for a kind read at the daemon's highest rates; None: rosbags reads it.
+    - ``repeated``: (has child_frame_id?, the float64 block's reader class, a ``cdr_fast_path.Fields``) of
+      the struct fast path of its first ROS type (a Header, that child_frame_id, one run of float64s), for
+      a kind read at the daemon's highest rates; None: rosbags reads it.
     - ``zero``: a sample whose CDR ``encode`` makes, to generate rosbags' deserialisers at start-up.
     """
 
@@ -43,27 +47,16 @@ class KindCodec:
     encode: Callable[[Any, str, str], bytes] | None = None
     message_type: type | None = None
     from_message: Callable[[Any, str], Any] | None = None
-    repeated: tuple[bool, Callable[[], Any]] | None = None
+    repeated: tuple[bool, type[Fields]] | None = None
     zero: Any = None
 
 
-_CODECS: dict[str, KindCodec] = {}  # the codecs written in this package, by kind name
-_BY_SAMPLE: dict[type, KindCodec] = {}
-
-
-def register_codec(codec: KindCodec) -> KindCodec:
-    """Make a codec written in this package known by its kind's name and sample type; returns it."""
-    _CODECS[codec.name] = codec
-    _BY_SAMPLE[codec.sample_type] = codec
-    return codec
+_BY_SAMPLE: dict[type, tuple[object, KindCodec]] = {}  # sample type -> (its kind's descriptor, its codec)
 
 
 def codec_named(name: str) -> KindCodec:
-    """The codec of the kind ``name``: this package's, else the kind's own (``SensorKind.codec``). A
-    ValueError for a kind that is not registered, or offers no codec."""
-    found = _CODECS.get(name)
-    if found is not None:
-        return found
+    """The codec of the kind ``name`` (``SensorKind.codec``); a ValueError for a kind that is not registered,
+    or offers no codec."""
     from ..core.sensors.registry import kind_named  # the kind's package declares it: asked when first needed
 
     found = kind_named(name).codec()
@@ -73,15 +66,20 @@ def codec_named(name: str) -> KindCodec:
 
 
 def codec_of(sample: object) -> KindCodec:
-    """The codec of the kind whose sample ``sample`` is (its exact type); a ValueError for another."""
-    found = _BY_SAMPLE.get(type(sample))
-    if found is not None:
-        return found
+    """The codec of the kind whose sample ``sample`` is (its exact type); a ValueError for another.
+
+    Asked once a sample by ``encode_sample`` (`fusiond play` re-encoding a bag): the answer is kept by
+    sample type while the kind that gave it stays registered under its name."""
     from ..core.sensors.registry import KINDS  # the kind's package declares it: asked when first needed
 
+    sample_type = type(sample)
+    kept = _BY_SAMPLE.get(sample_type)
+    if kept is not None and KINDS.get(kept[1].name) is kept[0]:
+        return kept[1]
     for described in list(KINDS.values()):
-        if described.sample_type is type(sample):
+        if described.sample_type is sample_type:
             codec = described.codec()
             if codec is not None:
+                _BY_SAMPLE[sample_type] = (described, codec)
                 return codec
-    raise ValueError(f"no sensor kind's codec encodes a {type(sample).__name__}")
+    raise ValueError(f"no sensor kind's codec encodes a {sample_type.__name__}")

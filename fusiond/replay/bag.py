@@ -67,7 +67,7 @@ class BagSamples:
             # a struct fast path only where the kind's codec offers one: a pose sensor reading
             # nav_msgs/msg/Odometry makes poses, not the odometry's samples
             codec = kind_of(s).codec()
-            fast = None if codec is None or codec.repeated is None else bag_fast_path(reader.typestore, msgtype, ros1)
+            fast = None if codec is None else bag_fast_path(reader.typestore, codec, msgtype, ros1)
             convert[topic] = (s.name, msgtype, from_ros, fast)
         deserialize = reader.deserialize
         for connection, _, raw in self._messages():

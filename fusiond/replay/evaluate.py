@@ -31,7 +31,8 @@ from ..core.sensors.registry import kind_of
 from ..errors import ReplayError
 from ..estimator.geodesy import EnuFrame
 from ..estimator.rotation import from_rpy, matrix, yaw
-from ..samples import GpsSample, ImuSample, OdomSample, Sample
+from ..samples import Sample
+from ..core.sensors import GpsSample, ImuSample, OdomSample
 
 __all__ = ["Evaluation", "Score", "Segment", "Recorder", "evaluate", "format_evaluation", "read_reference"]
 

@@ -26,7 +26,8 @@ from ..errors import ReplayError
 from ..core.fusion import FusionCore
 from ..estimator import POSE
 from ..estimator.rotation import to_rpy
-from ..samples import OdomSample, Sample
+from ..samples import Sample
+from ..core.sensors import OdomSample
 from .bag import BagError, BagSamples, did_you_mean, open_bag_samples
 
 if TYPE_CHECKING:  # the doctor is imported only by a replay that runs it (not by --quiet)

@@ -6,7 +6,8 @@ are constants; the recording says more. While the robot stands, every sensor rea
 about a constant (a gyro its bias, the wheels zero, a GPS its slow error, an IMU's orientation the
 attitude it holds), so the difference of two consecutive readings there has variance 2 sigma^2, plus
 what a slow error moves in between: 2 s_m^2 (1 - exp(-dt / tau)) for a Gauss-Markov error the config
-states (s_m, tau), taken off. A white noise below that is refuted by the standstills themselves.
+states (s_m, tau), taken off (the sensor's kind says what its error adds: ``SensorKind.difference_variance``).
+A white noise below that is refuted by the standstills themselves.
 
 The standstills are the filter's own (its odometry rest test, ``core/sensors/odom/rest.py``), as the
 doctor's replay reports them (``doctor_values.diagnose``: the same replay gives the doctor's values). Within each, component i of a sensor gives n_i differences and
@@ -34,7 +35,7 @@ from ..core.diagnostics import chi2_ppf
 from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from ..estimator.geodesy import EnuFrame
-from ..samples import GpsSample
+from ..core.sensors import GpsSample
 from .params import Param
 
 FLOOR_ALPHA = 0.01  # a floor above the true noise one time in a hundred
@@ -128,16 +129,6 @@ def _mean_step(rows: list[tuple[int, float, tuple[float, ...]]]) -> float:
     return sum(steps) / len(steps) if steps else 0.0
 
 
-def _gps_slow(cfg: Any, dt: float) -> list[float]:
-    """What the GPS's configured Gauss-Markov error adds to the variance of a difference over dt, e/n/u."""
-    if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
-        return [2.0 * s * s * (1.0 - math.exp(-dt / cfg.error_tau_s)) for s in cfg.error_sigma]
-    if cfg.vertical_error_sigma > 0.0 and cfg.vertical_error_tau_s > 0.0:
-        s = cfg.vertical_error_sigma
-        return [0.0, 0.0, 2.0 * s * s * (1.0 - math.exp(-dt / cfg.vertical_error_tau_s))]
-    return []
-
-
 def measured_floors(cfg: Config, samples: Sequence[object], params: Sequence[Param],
                     spans: Sequence[tuple[float, float]]) -> dict[str, Floor]:
     """The floors the recording's standstills (``spans``: the filter's, in filter time, as
@@ -160,7 +151,7 @@ def measured_floors(cfg: Config, samples: Sequence[object], params: Sequence[Par
                 read = _geodetic(first)
             rows = _at_rest(samples, kind.sample_type, sensor.name, spans, read, offsets.get(sensor.name, 0.0))
             sums, n = _mean_squares(rows, rotation)
-            slow = _gps_slow(sensor, _mean_step(rows)) if kind.geodetic else ()
+            slow = kind.difference_variance(sensor, _mean_step(rows))  # its slow error's share (module doc)
             floors = _floors(sums, n, slow)
             if key == "gyro_noise":  # one noise for three axes: none may be refuted (module doc)
                 floors = [min(floors)] if floors and min(floors) > 0.0 else [0.0]

@@ -19,7 +19,7 @@ from fusiond.codecs import encode_sample, typestore
 from fusiond.config import ConfigError
 from fusiond.doctor import Verdict, format_verdicts
 from fusiond.replay.run import run_samples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.tune.advice import prove_advice, with_suggestion
 
 from tests.support.configs import robot_config, robot_config_text

@@ -7,7 +7,7 @@ import pytest
 
 from fusiond.calibrate import calibrate
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 
 def static_imu(n=6000, rate=100.0, ori_sigma=(0.01, 0.02, 0.05), gyro_sigma=0.003, bias=(0.001, -0.002, 0.003),

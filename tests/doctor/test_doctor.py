@@ -16,7 +16,7 @@ import pytest
 from fusiond.doctor import Verdict
 from fusiond.core.sensors import OdomPolicy
 from fusiond.replay.run import run_samples
-from fusiond.samples import OdomSample
+from fusiond.core.sensors import OdomSample
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config
@@ -421,7 +421,7 @@ def test_mirrored_accelerometer_axis_is_not_read_as_a_mounting_yaw():
     import msgspec
 
     from fusiond.doctor.mounting import mount_yaw_fit
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     from tests.support.sim_mount import MountWorld, simulate as simulate_mount
 
@@ -533,7 +533,7 @@ def test_magnetometer_yaw_without_any_gyro_is_judged_against_the_gps_track():
     """robot_localization's Husky setup: absolute yaw, no gyro in the messages at all, GPS. The wander
     (0.2 rad amplitude: rms 0.14 rad) stands far above the track's own noise (0.3 m over >= 10 m chords:
     0.04 rad), so the IMU yaw is blamed and the GPS is not told to state more noise."""
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.3, imu_yaw_sigma=0.002,
                          imu_yaw_disturbance=(0.2, 2 * math.pi / 0.4))
@@ -627,7 +627,7 @@ def test_world_twist_setting_on_gentle_curves_is_found_from_the_message_pose():
 def test_an_imu_that_sent_nothing_is_named_as_such_not_as_a_bias_never_learned():
     """The IMU's topic absent from the recording: the odometry drove the whole run, no gyro sample came.
     The verdict points at the IMU's key, not at the driving (no standstill) nor at gyro_bias_sigma."""
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     samples = [s for s in simulate(SimConfig(duration=30.0)) if not isinstance(s, ImuSample)]
     v = one(verdicts_of(make_config(), samples), "imu", "gyro_bias")

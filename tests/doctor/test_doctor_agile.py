@@ -23,7 +23,7 @@ from fusiond.doctor.heading import detrended_rms, heading_check
 from fusiond.doctor.thresholds import WANDER_RAD
 from fusiond.estimator import rotation as rot
 from fusiond.replay.run import run_samples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.verdicts import agree, one
 from tests.support.core_samples import make_config

@@ -15,7 +15,7 @@ import pytest
 
 from fusiond.doctor.thresholds import DECEL_TOLERANCE, MIN_COAST_DECEL
 from fusiond.core.fusion import FusionCore
-from fusiond.samples import OdomSample
+from fusiond.core.sensors import OdomSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_rest import T0, RestWorld, Segment, simulate

@@ -18,7 +18,7 @@ from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.doctor import ChannelStats
 from fusiond.doctor.channels import absolute_verdict
 from fusiond.doctor.thresholds import GATED_FRACTION, NIS_HIGH
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config

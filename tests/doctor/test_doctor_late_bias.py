@@ -19,7 +19,7 @@ import pytest
 from fusiond.doctor.thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN
 from fusiond.estimator import rotation as rot
 from fusiond.replay.run import Runner, run_samples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.verdicts import agree, one
 from tests.support.core_samples import make_config

@@ -8,7 +8,7 @@ import msgspec
 import pytest
 
 from fusiond.doctor.lost import LostSamples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_mount import MountWorld, simulate as simulate_mount

@@ -19,7 +19,7 @@ import pytest
 
 from fusiond.config import load, loads
 from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
-from fusiond.samples import GpsSample, ImuSample
+from fusiond.core.sensors import GpsSample, ImuSample
 from fusiond.tune import dumps, tune
 from fusiond.tune.fit import XATOL
 from fusiond.tune.likelihood import reference, replay_records, score

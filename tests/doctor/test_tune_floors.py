@@ -82,3 +82,19 @@ def test_the_table_says_when_a_value_stays_below_what_the_standstills_show(noisy
     after = row.after if row.after is not None else row.param.start()
     assert (after < 0.9 * GYRO_SIGMA) == ("below the noise the recording shows at rest" in row.note), (after, row.note)
     assert "measured at rest" in format_table(result) or after >= 0.9 * GYRO_SIGMA
+
+
+def test_what_a_slow_error_adds_between_two_readings_is_the_kinds_answer():
+    """The floors take off what a configured Gauss-Markov error moves between two readings at rest,
+    2 sigma^2 (1 - exp(-dt / tau)) an axis, and the sensor's kind says it: the GPS's with ``error_tau_s``
+    (every axis) or its vertical one alone; a kind without a slow error adds nothing."""
+    from fusiond.config import loads
+    from fusiond.core.sensors import kind_of
+
+    tables = '[[sensors]]\nname = "wheel"\nkind = "odom"\nkey = "odom"\n[[sensors]]\nname = "fix"\nkind = "gps"\nkey = "gps"\n'
+    wheel, fix = loads(tables + 'error_tau_s = 50.0\nerror_sigma = [0.5, 0.5, 1.0]\n').sensors
+    alt = loads(tables + 'vertical_error_sigma = 2.0\nvertical_error_tau_s = 100.0\n').sensors[1]
+    step = 1.0 - math.exp(-0.2 / 50.0)
+    assert kind_of(fix).difference_variance(fix, 0.2) == pytest.approx([0.5 * step, 0.5 * step, 2.0 * step])
+    assert kind_of(alt).difference_variance(alt, 0.2) == pytest.approx([0.0, 0.0, 8.0 * (1.0 - math.exp(-0.002))])
+    assert kind_of(wheel).difference_variance(wheel, 0.2) == []

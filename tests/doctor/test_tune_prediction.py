@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fusiond.core.fusion import FusionCore
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 from fusiond.tune import tune
 from fusiond.tune.fit import format_table
 from fusiond.tune.prediction import HOLD_EVERY, Prediction, predict, split

@@ -12,7 +12,7 @@ import pytest
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
 from fusiond.estimator import observations as obs
-from fusiond.codecs import encode_imu_sample, encode_odom_sample, make_decoder
+from fusiond.codecs import encode_sample, make_decoder
 
 from tests.support.sim import SimConfig, simulate
 from tests.support.core_samples import make_config
@@ -59,7 +59,7 @@ def test_bench_core_ingest_stream(benchmark, stream):
 @pytest.mark.parametrize("kind", ["odom", "imu"])
 def test_bench_cdr_decode(benchmark, stream, kind):
     sample = next(s for s in stream if (s.sensor == "wheel") == (kind == "odom"))
-    payload = encode_odom_sample(sample, "ros2-cdr") if kind == "odom" else encode_imu_sample(sample, "ros2-cdr")
+    payload = encode_sample(sample, "ros2-cdr") if kind == "odom" else encode_sample(sample, "ros2-cdr")
     decode = make_decoder(kind, "ros2-cdr", sample.sensor)
     out = benchmark(decode, payload)
     assert out.stamp == pytest.approx(sample.stamp, abs=1e-9)

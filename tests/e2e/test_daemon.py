@@ -23,14 +23,8 @@ from fusiond.config import load
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.bag import open_bag_samples
 from fusiond.replay.run import replay
-from fusiond.samples import OdomSample
-from fusiond.codecs import (
-    decode_odometry_cdr,
-    decode_pose_cdr,
-    encode_imu_sample,
-    encode_odom_sample,
-    make_decoder,
-)
+from fusiond.core.sensors import OdomSample
+from fusiond.codecs import decode_odometry_cdr, decode_pose_cdr, encode_sample, make_decoder
 
 from tests.support.daemon import (
     ROOT,
@@ -200,10 +194,10 @@ def test_daemon_fuses_the_jackal_bag_over_zenoh_like_replay(jackal_bag, tmp_path
         degraded = None
         for k in range(1, 200):
             w = OdomSample("wheel", t_base + 0.02 * k, w.linear, w.angular, w.twist_covariance)
-            pubs["wheel"].put(encode_odom_sample(w, "ros2-cdr"))
+            pubs["wheel"].put(encode_sample(w, "ros2-cdr"))
             if imu_stopped_at is None:
                 i = msgspec.structs.replace(i, stamp=t_base + 0.02 * k + 0.01)
-                pubs["imu"].put(encode_imu_sample(i, "ros2-cdr"))
+                pubs["imu"].put(encode_sample(i, "ros2-cdr"))
             if k == 30:
                 ok_seen = health(session)["status"] == "ok"
                 imu_stopped_at = time.monotonic()

@@ -11,9 +11,9 @@ from collections import Counter
 import pytest
 import zenoh
 
-from fusiond.codecs import encode_imu_sample
+from fusiond.codecs import encode_sample
 from fusiond.monitor import decode_diagnostics
-from fusiond.samples import ImuSample
+from fusiond.core.sensors import ImuSample
 from fusiond.transport.daemon import HOLD_S, Daemon
 
 from tests.support.configs import loopback_daemon_config
@@ -24,7 +24,7 @@ COV3 = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
 
 
 def imu(k: int) -> bytes:
-    return encode_imu_sample(ImuSample("imu", 50.0 + 0.001 * k, (0.0, 0.0, 0.0, 1.0), COV3, (0.0, 0.0, 0.0), COV3),
+    return encode_sample(ImuSample("imu", 50.0 + 0.001 * k, (0.0, 0.0, 0.0, 1.0), COV3, (0.0, 0.0, 0.0), COV3),
                              "ros2-cdr")
 
 

@@ -10,8 +10,8 @@ import zenoh
 
 from fusiond.config import loads
 from fusiond.health import decode_report
-from fusiond.samples import OdomSample
-from fusiond.codecs import decode_pose_cdr, encode_odom_sample
+from fusiond.core.sensors import OdomSample
+from fusiond.codecs import decode_pose_cdr, encode_sample
 from fusiond.transport.daemon import Daemon, alive_key
 from fusiond.transport.session import query_health
 
@@ -20,7 +20,7 @@ from tests.support.loopback import sessions, wait_until  # noqa: F401  (fixture)
 
 
 def odom(k: int) -> bytes:
-    return encode_odom_sample(OdomSample("wheel", 10.0 + 0.02 * k, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1),
+    return encode_sample(OdomSample("wheel", 10.0 + 0.02 * k, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1),
                                          tuple(0.01 if i % 7 == 0 else 0.0 for i in range(36))), "ros2-cdr")
 
 
@@ -177,8 +177,8 @@ def test_play_reports_what_a_daemon_that_cannot_keep_up_dropped(sessions, jackal
 
 def test_fused_position_is_published_as_navsatfix(sessions):
     """With a GPS and `output.navsat_key`, the daemon publishes the fused base position in WGS84."""
-    from fusiond.samples import GpsSample, ImuSample
-    from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_imu_sample
+    from fusiond.core.sensors import GpsSample, ImuSample
+    from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_sample
     from fusiond.core.sensors.gps.codec import encode_gps_sample
 
     cfg = loopback_daemon_config(output='navsat_key = "t/fix_filtered"',
@@ -195,7 +195,7 @@ def test_fused_position_is_published_as_navsatfix(sessions):
         cov = (1.0, 0, 0, 0, 1.0, 0, 0, 0, 4.0)
         for k in range(20):
             t = 10.0 + 0.02 * k
-            pubs["imu"].put(encode_imu_sample(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), (1e-4,) * 9, (0.0,) * 3,
+            pubs["imu"].put(encode_sample(ImuSample("imu", t, (0.0, 0.0, 0.0, 1.0), (1e-4,) * 9, (0.0,) * 3,
                                                         (1e-6,) * 9), "ros2-cdr"))
             if k == 5:
                 pubs["gps"].put(encode_gps_sample(GpsSample("gps", t, 48.0001, 11.0002, 501.0, 0, cov, 2), "ros2-cdr"))

@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fusiond.codecs import decode_pose_cdr, encode_imu_sample, encode_odom_sample
+from fusiond.codecs import decode_pose_cdr, encode_sample
 from fusiond.config import load
 from fusiond.core.resume import state_fingerprint
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.transport.state_file import load_state
 
 from tests.support.configs import sensor_tables
@@ -81,9 +81,9 @@ class Feed:
             if wait > 0:
                 time.sleep(wait)  # pacing the publisher, not waiting for a result
             stamp = t0 + k / RATE
-            self.imu.put(encode_imu_sample(ImuSample("imu", stamp - 0.003, (0.0, 0.0, 0.0, 1.0), IMU_COV,
+            self.imu.put(encode_sample(ImuSample("imu", stamp - 0.003, (0.0, 0.0, 0.0, 1.0), IMU_COV,
                                                      (0.0, 0.0, 0.0), GYRO_COV), "ros2-cdr"))
-            self.odom.put(encode_odom_sample(OdomSample("wheel", stamp, (v, 0.0, 0.0), (0.0, 0.0, 0.0), TWIST_COV),
+            self.odom.put(encode_sample(OdomSample("wheel", stamp, (v, 0.0, 0.0), (0.0, 0.0, 0.0), TWIST_COV),
                                              "ros2-cdr"))
             self.last_stamp = stamp
             k += 1

@@ -21,7 +21,7 @@ from fusiond.codecs import encode_sample, typestore
 from fusiond.estimator import rotation as rot
 from fusiond.replay.evaluate import Track, _aligned_rms
 from fusiond.core.sensors.pose import PoseSample
-from fusiond.samples import GpsSample, ImuSample, OdomSample
+from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
 from tests.support.configs import robot_config_text
 from tests.support.sim_gps import World, simulate
 

@@ -9,11 +9,11 @@ import subprocess
 
 import pytest
 
-from fusiond.codecs import decode_pose_cdr, encode_imu_sample, encode_odom_sample
+from fusiond.codecs import decode_pose_cdr, encode_sample
 from fusiond.config import load
 from fusiond.estimator.rotation import yaw as yaw_of
 from fusiond.replay.bag import open_bag_samples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from tests.support.daemon import (
     ROOT, client_session, daemon_process, free_port, fusiond_cmd, health, sensor_publishers, wait_daemon_ready,
     wait_until, write_config,
@@ -85,9 +85,9 @@ def test_with_a_gps_configured_the_heading_is_not_known_before_a_fix(tmp_path):
         cov = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
         for k in range(50):
             t = 100.0 + 0.02 * k
-            pubs["wheel"].put(encode_odom_sample(OdomSample("wheel", t, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), cov),
+            pubs["wheel"].put(encode_sample(OdomSample("wheel", t, (0.5, 0.0, 0.0), (0.0, 0.0, 0.0), cov),
                                                  "ros2-cdr"))
-            pubs["imu"].put(encode_imu_sample(ImuSample("imu", t + 0.01, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0,
+            pubs["imu"].put(encode_sample(ImuSample("imu", t + 0.01, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0,
                                                         0, 0, 1e-4), (0.0, 0.0, 0.0), (1e-6, 0, 0, 0, 1e-6, 0, 0, 0,
                                                                                       1e-6)), "ros2-cdr"))
         h = wait_until(lambda: (h := health(session)) and h["filter"]["initialised"] and h, 10,

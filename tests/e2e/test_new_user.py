@@ -338,7 +338,7 @@ def _bag_with_gps(path: Path) -> None:
     from fusiond.core.sensors.gps.codec import encode_gps_sample
     from fusiond.config import ImuSensor, OdomSensor
     from fusiond.replay.bag import iter_raw_cdr
-    from fusiond.samples import GpsSample
+    from fusiond.core.sensors import GpsSample
 
     sensors = [OdomSensor(name="wheel", key="jackal_velocity_controller/odom"), ImuSensor(name="imu", key="imu/data")]
     rows = list(iter_raw_cdr([JACKAL], sensors))[:300]
@@ -392,9 +392,9 @@ nis_window = 50
 def _static_imu_bag(path: Path, n: int = 3000, rate: float = 100.0) -> None:
     from rosbags.rosbag2 import Writer
 
-    from fusiond.codecs import IMU, TYPESTORE, encode_imu_sample
+    from fusiond.codecs import IMU, TYPESTORE, encode_sample
     from fusiond.estimator import rotation as rot
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     rng = np.random.default_rng(3)
     cov = (1e-6, 0.0, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 1e-6)
@@ -406,7 +406,7 @@ def _static_imu_bag(path: Path, n: int = 3000, rate: float = 100.0) -> None:
             w = tuple(b + rng.normal(0, 0.003) for b in (0.001, -0.002, 0.003))
             acc = (rng.normal(0, 0.02), rng.normal(0, 0.02), 9.81 + rng.normal(0, 0.02))
             sample = ImuSample("imu", t, tuple(q), cov, w, cov, acc, cov)
-            writer.write(conn, int(t * 1e9), encode_imu_sample(sample, "ros2-cdr"))
+            writer.write(conn, int(t * 1e9), encode_sample(sample, "ros2-cdr"))
 
 
 def paste(config: str, snippet: str) -> str:
@@ -580,7 +580,7 @@ def _jackal_with_an_imu_outlier(path: Path, roll: float = 0.8, messages: int = 1
 
     import msgspec
 
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_imu_sample, make_decoder
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample, make_decoder
     from fusiond.config import ImuSensor, OdomSensor
     from fusiond.estimator import rotation as rot
     from fusiond.replay.bag import iter_raw_cdr
@@ -593,7 +593,7 @@ def _jackal_with_an_imu_outlier(path: Path, roll: float = 0.8, messages: int = 1
     sample = decode(rows[bad][2])
     r, p, y = rot.to_rpy(np.asarray(sample.orientation))
     sample = msgspec.structs.replace(sample, orientation=tuple(rot.from_rpy(r + roll, p, y)))
-    rows[bad] = (rows[bad][0], rows[bad][1], encode_imu_sample(sample, "ros2-cdr"))
+    rows[bad] = (rows[bad][0], rows[bad][1], encode_sample(sample, "ros2-cdr"))
     with Writer(path, version=9) as writer:
         conns = {}
         for t, s, cdr in rows:

@@ -29,14 +29,8 @@ import zenoh
 
 from fusiond.config import ZenohConfig, load
 from fusiond.replay.bag import open_bag_samples
-from fusiond.samples import ImuSample, OdomSample
-from fusiond.codecs import (
-    MAX_PAYLOAD,
-    DecodeError,
-    encode_imu_sample,
-    encode_odom_sample,
-    make_decoder,
-)
+from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.codecs import MAX_PAYLOAD, DecodeError, encode_sample, make_decoder
 from fusiond.transport.session import build_config, open_session
 
 from tests.support.daemon import (
@@ -152,7 +146,7 @@ class Stream:
 
     def enc(self, name: str, **changes) -> bytes:
         s = msgspec.structs.replace(self.sample[name], **changes)
-        return encode_odom_sample(s, "ros2-cdr") if isinstance(s, OdomSample) else encode_imu_sample(s, "ros2-cdr")
+        return encode_sample(s, "ros2-cdr")
 
     def other(self, name: str) -> str:
         return "imu" if name == "wheel" else "wheel"

@@ -60,7 +60,7 @@ def test_a_run_that_publishes_nothing_says_why_instead_of_a_final_pose() -> None
     everything is fused but no pose is published. The summary must not print a "final pose" that
     was never published; it says what the filter waits for."""
     from fusiond.replay.run import run_samples, summary
-    from fusiond.samples import ImuSample, OdomSample
+    from fusiond.core.sensors import ImuSample, OdomSample
 
     from tests.support.configs import robot_config
 

@@ -24,7 +24,7 @@ def _write_bag(path, samples) -> None:
     from rosbags.rosbag2 import Writer
 
     from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample
-    from fusiond.samples import OdomSample
+    from fusiond.core.sensors import OdomSample
 
     with Writer(path, version=9) as writer:
         conns = {}

@@ -17,13 +17,11 @@ import numpy as np
 import pytest
 import zenoh
 
-from fusiond.codecs import (
-    DIAGNOSTIC_ARRAY, POSE_COV_STAMPED, TF_MESSAGE, TYPESTORE, decode_pose_cdr, encode_imu_sample, encode_odom_sample,
-)
+from fusiond.codecs import DIAGNOSTIC_ARRAY, POSE_COV_STAMPED, TF_MESSAGE, TYPESTORE, decode_pose_cdr, encode_sample
 from fusiond.config import loads
 from fusiond.estimator.rotation import from_rpy
 from fusiond.health import decode_report
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.transport.daemon import Daemon
 from fusiond.transport.session import query_health, request_set_pose
 
@@ -42,11 +40,11 @@ TWIST_COV = tuple(1e-4 if i % 7 == 0 else 0.0 for i in range(36))
 
 
 def odom(stamp: float, v: float = V) -> bytes:
-    return encode_odom_sample(OdomSample("wheel", stamp, (v, 0.0, 0.0), (0.0, 0.0, 0.0), TWIST_COV), "ros2-cdr")
+    return encode_sample(OdomSample("wheel", stamp, (v, 0.0, 0.0), (0.0, 0.0, 0.0), TWIST_COV), "ros2-cdr")
 
 
 def imu(stamp: float) -> bytes:
-    return encode_imu_sample(ImuSample("imu", stamp, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4),
+    return encode_sample(ImuSample("imu", stamp, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4),
                                        (0.0, 0.0, 0.0), (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)), "ros2-cdr")
 
 
@@ -163,7 +161,7 @@ def test_with_a_gps_the_tf_holds_map_to_odom_and_a_continuous_odom_to_base_link(
     odom frame keeps driving straight while map -> odom takes the jump."""
     from fusiond.core.sensors.gps.codec import encode_gps_sample
     from fusiond.core.tf_tree import compose
-    from fusiond.samples import GpsSample
+    from fusiond.core.sensors import GpsSample
 
     gps = '[[sensors]]\nname = "gps"\nkind = "gps"\nkey = "t/gps"\ndatum = [48.0, 11.0, 500.0]\n' \
           'position_noise = [0.1, 0.1, 1.0]\n'

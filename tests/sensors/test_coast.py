@@ -17,7 +17,7 @@ import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.odom import STOP_DECEL_LIMIT
-from fusiond.samples import OdomSample
+from fusiond.core.sensors import OdomSample
 
 from tests.support.configs import robot_config
 from tests.support.sim import arrival_order

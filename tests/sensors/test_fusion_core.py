@@ -9,7 +9,7 @@ import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.sim import SimConfig, arrival_order, simulate
 from tests.support.core_samples import imu, make_config, odom

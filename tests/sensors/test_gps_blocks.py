@@ -15,7 +15,7 @@ import math
 import pytest
 
 from fusiond.core.fusion import FusionCore
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_gps import World, simulate, truth_at

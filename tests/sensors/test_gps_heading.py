@@ -17,7 +17,7 @@ from fusiond.core.fusion import FusionCore
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, PoseBlock, StateLayout
 from fusiond.estimator import rotation as rot
 from fusiond.estimator.rigid_fit import fit_rigid
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_gps import World, simulate

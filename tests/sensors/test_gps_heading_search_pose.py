@@ -19,7 +19,7 @@ import msgspec
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.gps import HEADING_UNKNOWN_SIGMA
 from fusiond.core.sensors.gps import model as gps_model
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_gps import World, simulate, truth_at

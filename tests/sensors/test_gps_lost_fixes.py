@@ -16,7 +16,7 @@ import pytest
 from fusiond import reasons
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.gps import GpsPolicy
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 
 from tests.support.sim_gps import World, simulate, truth_at
 from tests.support.gps_pose import _gps_config, _gps_world

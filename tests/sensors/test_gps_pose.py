@@ -20,14 +20,11 @@ from fusiond.estimator.geodesy import EnuFrame, WGS84_A, WGS84_E2, enu_to_geodet
 from fusiond.estimator.numeric import measurement_jacobian
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
 from fusiond.replay.run import replay
-from fusiond.samples import GpsSample, OdomSample
+from fusiond.core.sensors import GpsSample, OdomSample
 from fusiond.core.sensors.pose import POSE_MSGTYPES, PoseSample
 from fusiond.core.sensors.gps.codec import encode_gps_sample
 from fusiond.core.sensors.pose.codec import encode_pose_sample
-from fusiond.codecs import (
-    NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError, encode_odom_sample,
-    encode_sample, make_decoder,
-)
+from fusiond.codecs import NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError, encode_sample, make_decoder
 
 from tests.support.sim_gps import World, simulate, truth_at
 from tests.support.configs import sensor_tables
@@ -451,7 +448,7 @@ def _write_bag(path: Path, samples, pose_type: str) -> None:
         conns = {}
         for s in samples:
             if isinstance(s, OdomSample):
-                topic, msgtype, data = "/odom", ODOMETRY, encode_odom_sample(s, "ros2-cdr")
+                topic, msgtype, data = "/odom", ODOMETRY, encode_sample(s, "ros2-cdr")
             elif isinstance(s, GpsSample):
                 topic, msgtype, data = "/gps/fix", NAVSATFIX, encode_gps_sample(s, "ros2-cdr")
             elif isinstance(s, PoseSample):
@@ -678,7 +675,7 @@ def test_gps_with_a_trusted_absolute_imu_yaw_takes_heading_from_the_imu():
     from fusiond.config import loads
     from fusiond.core.fusion import FusionCore
     from fusiond.estimator import rotation as rot
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     cfg = loads(sensor_tables('orientation = "absolute"\nyaw_offset_sigma = 0.0', gps="datum = [48.0, 11.0, 500.0]",
                               gps_key="fix"))

@@ -18,7 +18,7 @@ import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.gps import GpsOwn
-from fusiond.samples import GpsSample
+from fusiond.core.sensors import GpsSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_gps import World, simulate, truth_at

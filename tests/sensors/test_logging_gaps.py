@@ -150,7 +150,7 @@ def test_after_a_long_gap_every_odometry_message_still_gets_its_pose():
     """A 26.4 s gap is beyond jump_s: the samples after it are held until the new timeline is
     confirmed (jump_persist_s), then applied at once. The replay's contract is one TUM line per
     odometry message, the estimate just after it: the held odometry messages are no exception."""
-    from fusiond.samples import OdomSample
+    from fusiond.core.sensors import OdomSample
     from fusiond.replay.run import Runner
 
     sim = SimConfig(duration=40.0, odom_rate=50.0, imu_rate=100.0)

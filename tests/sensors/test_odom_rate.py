@@ -8,7 +8,7 @@ import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 

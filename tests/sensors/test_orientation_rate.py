@@ -19,7 +19,7 @@ from fusiond.config import ConfigError
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.imu import ORIENTATION_BURST
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 

@@ -21,7 +21,7 @@ from fusiond.core.sensors.imu import ImuOwn
 from fusiond.core.state import FilterState
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 from tests.support.sim_gps import World, simulate, truth_at

@@ -9,7 +9,7 @@ import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator.rotation import from_rpy, to_rpy
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 

@@ -129,7 +129,7 @@ def test_engine_vibration_is_not_read_as_a_tilt():
     0.1 deg x 1.5 km = 2.6 m that bound allows (3 m)."""
     import numpy as np
 
-    from fusiond.samples import ImuSample, OdomSample
+    from fusiond.core.sensors import ImuSample, OdomSample
 
     rng = np.random.default_rng(1)
     core = _core()

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from rosbags.rosbag2 import Writer
 
-from fusiond.codecs import ODOMETRY, DecodeError, encode_odom_sample, encode_sample, make_decoder, typestore
+from fusiond.codecs import ODOMETRY, DecodeError, encode_sample, make_decoder, typestore
 from fusiond.config import ConfigError, loads
 from fusiond.core.fusion import FusionCore
 from fusiond.core.layout import absolute_height, state_layout
@@ -123,7 +123,7 @@ def test_the_kind_registers_its_own_codecs_and_the_codecs_name_no_kind(altimeter
     assert kind_of(sonar).decoder(sonar)(raw) == reading
     assert make_decoder("altimeter", encoding, "sonar")(raw) == reading
     with pytest.raises(DecodeError, match="schema_invalid"):
-        make_decoder("altimeter", encoding, "sonar")(encode_odom_sample(_drive(0.1)[0], encoding))
+        make_decoder("altimeter", encoding, "sonar")(encode_sample(_drive(0.1)[0], encoding))
 
 
 def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(altimeter, tmp_path: Path):
@@ -137,7 +137,7 @@ def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(alti
             if isinstance(s, AltimeterSample):
                 writer.write(conns["/range"], int(s.stamp * 1e9), _range_cdr(s))
             else:
-                writer.write(conns["/odom"], int(s.stamp * 1e9), encode_odom_sample(s, "ros2-cdr"))
+                writer.write(conns["/odom"], int(s.stamp * 1e9), encode_sample(s, "ros2-cdr"))
     result = replay([bag], loads(TOML), progress=False, keep_trace=False)
     assert result.core.stats[result.core.index["sonar"]].applied == 200
     final = result.trajectory[-8:]  # t x y z qx qy qz qw of the last published pose

@@ -15,7 +15,7 @@ import numpy as np
 
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 

@@ -14,7 +14,7 @@ import pytest
 
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample
+from fusiond.core.sensors import ImuSample
 
 from tests.support.sim import SimConfig, arrival_order, simulate
 from tests.support.core_samples import make_config

@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from fusiond.codecs import encode_imu_sample, encode_odom_sample, make_decoder
+from fusiond.codecs import encode_sample, make_decoder
 from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.core.fusion import FusionCore
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.transport.daemon import sensor_kind
 
 IMU_HZ, ODOM_EVERY, N_IMU = 1000.0, 10, 1500  # 1.5 s of 1 kHz IMU and 100 Hz odometry
@@ -24,9 +24,9 @@ def stream() -> list[tuple[str, bytes]]:
         t = 100.0 + k / IMU_HZ
         yaw = W * (t - 100.0)
         q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-        out.append(("t/imu", encode_imu_sample(ImuSample("imu", t, q, cov3, (0.0, 0.0, W), cov3), "ros2-cdr")))
+        out.append(("t/imu", encode_sample(ImuSample("imu", t, q, cov3, (0.0, 0.0, W), cov3), "ros2-cdr")))
         if k % ODOM_EVERY == 0:
-            out.append(("t/odom", encode_odom_sample(OdomSample("wheel", t + 0.5 / IMU_HZ, (0.5, 0.0, 0.0),
+            out.append(("t/odom", encode_sample(OdomSample("wheel", t + 0.5 / IMU_HZ, (0.5, 0.0, 0.0),
                                                                 (0.0, 0.0, W), twist_cov), "ros2-cdr")))
     return out
 

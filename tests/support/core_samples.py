@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 from tests.support.configs import robot_config
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from fusiond.config import Config
 from fusiond.replay.bag import open_bag_samples
-from fusiond.samples import OdomSample
+from fusiond.core.sensors import OdomSample
 
 __all__ = ["STEP_MARGIN_M", "excess_steps", "odom_speeds", "read_tum"]
 

@@ -8,8 +8,8 @@ import time
 
 import zenoh
 
-from fusiond.samples import ImuSample, OdomSample
-from fusiond.codecs import DecodeError, decode_pose_cdr, encode_imu_sample, encode_odom_sample
+from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.codecs import decode_pose_cdr, DecodeError, encode_sample
 
 WHEEL_KEY = "jackal_velocity_controller/odom"
 IMU_KEY = "imu/data"
@@ -59,12 +59,12 @@ def _cov_diag(n: int, values: list[float]) -> tuple[float, ...]:
 def odom_payload(stamp: float) -> bytes:
     """Odometry of a robot driving a circle (0.5 m/s, 0.2 rad/s), as CDR."""
     cov = _cov_diag(6, [1e-3, 1e-3, 1e-3, 1e6, 1e6, 1e-2])
-    return encode_odom_sample(OdomSample("wheel", stamp, (0.5, 0.0, 0.0), (0.0, 0.0, 0.2), cov), "ros2-cdr")
+    return encode_sample(OdomSample("wheel", stamp, (0.5, 0.0, 0.0), (0.0, 0.0, 0.2), cov), "ros2-cdr")
 
 
 def imu_payload(stamp: float, t0: float = 1000.0) -> bytes:
     """The IMU of the same robot (level, yaw turning at 0.2 rad/s), as CDR."""
     yaw = 0.2 * (stamp - t0)
     q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-    return encode_imu_sample(ImuSample("imu", stamp, q, _cov_diag(3, [1e-4, 1e-4, 1e-2]), (0.0, 0.0, 0.2),
+    return encode_sample(ImuSample("imu", stamp, q, _cov_diag(3, [1e-4, 1e-4, 1e-2]), (0.0, 0.0, 0.2),
                                        _cov_diag(3, [1e-5] * 3)), "ros2-cdr")

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 
 @dataclass

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import msgspec
 
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 
 def drop_span(samples: list, t0: float, t1: float) -> list:

@@ -21,7 +21,7 @@ import numpy as np
 from fusiond.estimator import rotation as rot
 from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
 from fusiond.core.sensors.pose import PoseSample
-from fusiond.samples import GpsSample, ImuSample, OdomSample
+from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
 
 T0 = 1000.0
 

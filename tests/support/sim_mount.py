@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fusiond.estimator import rotation as rot
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 T0 = 1000.0
 GRAVITY = 9.80665

@@ -10,7 +10,7 @@ from rosbags.rosbag2 import Writer
 
 from fusiond.config import ImuSensor, OdomSensor
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, make_decoder
 
 JACKAL_ODOM_KEY = "jackal_velocity_controller/odom"

@@ -18,13 +18,22 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from fusiond.codecs import (IMU, ODOMETRY, bag_fast_path, encode_imu_sample, encode_odom_sample, flat_layout,
-                            imu_from_ros, odom_from_ros, typestore)
+from fusiond.codecs import IMU, NAVSATFIX, ODOMETRY, bag_fast_path, codec_named, encode_sample, flat_layout, typestore
+from fusiond.core.sensors.imu.codec import imu_from_ros
+from fusiond.core.sensors.odom.codec import odom_from_ros
 from fusiond.config import ImuSensor, OdomSensor
 from fusiond.replay.bag import open_bag_samples
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 
 ROOT = Path(__file__).resolve().parents[2]
+_KIND_OF = {ODOMETRY: "odom", IMU: "imu"}
+
+
+def _fast(store, msgtype: str, ros1: bool):
+    """The bag reader of ``msgtype`` through its kind's codec, as replay asks for it."""
+    return bag_fast_path(store, codec_named(_KIND_OF[msgtype]), msgtype, ros1=ros1)
+
+
 JACKAL_TOPICS = {"/jackal_velocity_controller/odom": (ODOMETRY, odom_from_ros), "/imu/data": (IMU, imu_from_ros)}
 
 
@@ -50,7 +59,7 @@ def _reference(store, msgtype: str, raw: bytes, ros1: bool) -> OdomSample | ImuS
 def test_every_jackal_message_reads_as_rosbags_reads_it(jackal_raw) -> None:
     store, raw = jackal_raw
     assert len(raw) == 6121
-    fast = {t: bag_fast_path(store, t, ros1=True) for t in (ODOMETRY, IMU)}
+    fast = {t: _fast(store, t, ros1=True) for t in (ODOMETRY, IMU)}
     assert None not in fast.values()  # the bag's definitions are the standard ones
     for msgtype, data in raw:
         got = fast[msgtype](data, "s")
@@ -88,7 +97,7 @@ def test_mutated_ros1_messages_read_as_rosbags_or_not_at_all(jackal_raw) -> None
     @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
     def check(case: tuple[str, bytes]) -> None:
         msgtype, data = case
-        _assert_reads_as_rosbags(bag_fast_path(store, msgtype, ros1=True)(data, "s"),
+        _assert_reads_as_rosbags(_fast(store, msgtype, ros1=True)(data, "s"),
                                  _reference(store, msgtype, data, ros1=True))
 
     check()
@@ -98,7 +107,7 @@ def test_a_ros1_stream_that_remembers_its_layout_reads_mutations_as_rosbags(jack
     """One reader per type for every case, each mutated message after an intact one of its type: the
     remembered layout meets changed lengths, strings and string lengths, and still answers as rosbags."""
     store, raw = jackal_raw
-    fast = {t: bag_fast_path(store, t, ros1=True) for t in (ODOMETRY, IMU)}
+    fast = {t: _fast(store, t, ros1=True) for t in (ODOMETRY, IMU)}
     intact = {t: next(d for m, d in raw if m == t) for t in (ODOMETRY, IMU)}
 
     @given(case=mutated_ros1(raw))
@@ -113,11 +122,11 @@ def test_a_ros1_stream_that_remembers_its_layout_reads_mutations_as_rosbags(jack
 
 def test_cdr_fast_path_of_a_ros2_bag_reads_as_rosbags() -> None:
     store = typestore()
-    odom = encode_odom_sample(OdomSample("s", 12.25, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1), tuple(range(36))), "ros2-cdr")
-    imu = encode_imu_sample(ImuSample("s", 12.5, (0.0, 0.0, 0.0, 1.0), (0.1,) * 9, (0.0, 0.0, 0.1), (0.2,) * 9),
+    odom = encode_sample(OdomSample("s", 12.25, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1), tuple(range(36))), "ros2-cdr")
+    imu = encode_sample(ImuSample("s", 12.5, (0.0, 0.0, 0.0, 1.0), (0.1,) * 9, (0.0, 0.0, 0.1), (0.2,) * 9),
                             "ros2-cdr")
     for msgtype, data in ((ODOMETRY, odom), (IMU, imu)):
-        got = bag_fast_path(store, msgtype, ros1=False)(data, "s")
+        got = _fast(store, msgtype, ros1=False)(data, "s")
         assert got is not None and got == _reference(store, msgtype, data, ros1=False)
 
 
@@ -127,10 +136,12 @@ def test_a_bag_defining_the_type_differently_gets_no_fast_path() -> None:
     store.register(get_types_from_msg("std_msgs/Header header\nfloat32[36] covariance\n", ODOMETRY))
     store.register(get_types_from_msg("uint32 seq\ntime stamp\nstring frame_id\n", "std_msgs/msg/Header"))
     assert flat_layout(store, ODOMETRY) == ("uint32", "int32", "uint32", "string", *("float32",) * 36)
-    assert bag_fast_path(store, ODOMETRY, ros1=True) is None
-    assert bag_fast_path(store, IMU, ros1=True) is None  # not defined in this store at all
+    assert _fast(store, ODOMETRY, ros1=True) is None
+    assert _fast(store, IMU, ros1=True) is None  # not defined in this store at all
     assert flat_layout(store, IMU) is None
-    assert bag_fast_path(typestore(), "sensor_msgs/msg/NavSatFix", ros1=False) is None  # no fast path of its own
+    assert bag_fast_path(typestore(), codec_named("gps"), NAVSATFIX, ros1=False) is None  # no fast path of its own
+    # a pose sensor reading Odometry makes poses: the odometry kind's fast path is not its own
+    assert bag_fast_path(typestore(), codec_named("pose"), ODOMETRY, ros1=False) is None
 
 
 def _ros2_bag(path: Path, n: int = 40) -> Path:
@@ -139,9 +150,9 @@ def _ros2_bag(path: Path, n: int = 40) -> Path:
         imu = writer.add_connection("/imu", IMU, typestore=typestore())
         for k in range(n):
             t = 100.0 + 0.02 * k
-            writer.write(odom, int(t * 1e9), encode_odom_sample(
+            writer.write(odom, int(t * 1e9), encode_sample(
                 OdomSample("wheel", t, (0.5, 0.0, 0.0), (0.0, 0.0, 0.1), (1e-3,) * 36), "ros2-cdr"))
-            writer.write(imu, int(t * 1e9) + 1000, encode_imu_sample(
+            writer.write(imu, int(t * 1e9) + 1000, encode_sample(
                 ImuSample("imu", t + 1e-6, (0.0, 0.0, 0.0, 1.0), (1e-4,) * 9, (0.0, 0.0, 0.1), (1e-5,) * 9), "ros2-cdr"))
     return path
 

@@ -50,3 +50,30 @@ def test_help_reads_no_command_module_and_a_command_only_its_own():
     # a word naming another command (a log level, a bag) costs that module's import, nothing else
     assert _cli_modules_loaded("--log-level", "info", "replay", "--help") == {
         "fusiond.cli.common", "fusiond.cli.info", "fusiond.cli.replay"}
+
+
+_DAEMON_CLIENTS = ("health", "set-pose", "play", "calibrate-imu")  # they open a session to a running daemon
+
+
+def _options(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+    return {a.option_strings[0]: a for a in parser._actions if a.option_strings}
+
+
+def test_the_commands_that_reach_a_daemon_take_its_options_alike():
+    """health, set-pose, play and calibrate-imu reach the daemon the same way (``tool_session``): --connect
+    and --no-multicast read the same on each, --timeout on those that wait for an answer, and --config says
+    what the command reads of it beside the namespace and endpoints (required where it cannot run without)."""
+    commands = _subparsers(build_parser())
+    options = {name: _options(commands[name]) for name in _DAEMON_CLIENTS}
+    for flag in ("--connect", "--no-multicast"):
+        actions = [options[name][flag] for name in _DAEMON_CLIENTS]
+        assert len({(a.help, a.metavar, type(a).__name__, a.default) for a in actions}) == 1, flag
+    timeouts = [options[name]["--timeout"] for name in ("health", "set-pose")]
+    assert len({(a.help, a.type, a.default) for a in timeouts}) == 1
+    assert not {"--timeout"} & (set(options["play"]) | set(options["calibrate-imu"]))
+    for name in _DAEMON_CLIENTS:
+        config = options[name]["--config"]
+        assert config.help.startswith("TOML config of the daemon (") and config.help.endswith(", namespace, endpoints)")
+        assert config.required == (name == "play"), name
+    assert "--key" not in options["play"] and all("--key" in options[name] for name in ("health", "set-pose",
+                                                                                        "calibrate-imu"))

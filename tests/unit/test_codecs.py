@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from fusiond.codecs import (
     IMU,
     MAX_PAYLOAD,
@@ -22,15 +22,14 @@ from fusiond.codecs import (
     DecodeError,
     decode_odometry_cdr,
     decode_pose_cdr,
-    encode_imu_sample,
-    encode_odom_sample,
     encode_odometry_cdr,
     encode_pose_cdr,
-    imu_from_ros,
+    encode_sample,
     make_decoder,
-    odom_from_ros,
     stamp_to_ros,
 )
+from fusiond.core.sensors.imu.codec import imu_from_ros
+from fusiond.core.sensors.odom.codec import odom_from_ros
 
 KINDS = ("odom", "imu")
 ENCODINGS = ("ros2-cdr", "json", "msgpack")
@@ -89,7 +88,7 @@ def _assert_roundtrip(decoded: OdomSample | ImuSample, sample: OdomSample | ImuS
 @given(sample=odom_samples)
 @FUZZ
 def test_odom_roundtrip(encoding: str, sample: OdomSample) -> None:
-    decoded = make_decoder("odom", encoding, "wheel")(encode_odom_sample(sample, encoding))
+    decoded = make_decoder("odom", encoding, "wheel")(encode_sample(sample, encoding))
     _assert_roundtrip(decoded, sample, encoding == "ros2-cdr")
 
 
@@ -97,24 +96,23 @@ def test_odom_roundtrip(encoding: str, sample: OdomSample) -> None:
 @given(sample=imu_samples)
 @FUZZ
 def test_imu_roundtrip(encoding: str, sample: ImuSample) -> None:
-    decoded = make_decoder("imu", encoding, "imu")(encode_imu_sample(sample, encoding))
+    decoded = make_decoder("imu", encoding, "imu")(encode_sample(sample, encoding))
     _assert_roundtrip(decoded, sample, encoding == "ros2-cdr")
 
 
 def test_cdr_is_what_rosbags_reads() -> None:
-    msg = TYPESTORE.deserialize_cdr(encode_odom_sample(_odom(), "ros2-cdr"), ODOMETRY)
+    msg = TYPESTORE.deserialize_cdr(encode_sample(_odom(), "ros2-cdr"), ODOMETRY)
     assert (msg.header.frame_id, msg.child_frame_id) == ("odom", "base_link")
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (12, 500_000_000)
     assert odom_from_ros(msg, "wheel") == _odom()
-    imu = TYPESTORE.deserialize_cdr(encode_imu_sample(_imu(), "ros2-cdr"), IMU)
+    imu = TYPESTORE.deserialize_cdr(encode_sample(_imu(), "ros2-cdr"), IMU)
     assert imu.header.frame_id == "base_link"
     assert imu_from_ros(imu, "imu") == _imu()
 
 
 def test_big_endian_cdr_decodes_too() -> None:
-    for kind, encode, sample, msgtype in (("odom", encode_odom_sample, _odom(), ODOMETRY),
-                                          ("imu", encode_imu_sample, _imu(), IMU)):
-        msg = TYPESTORE.deserialize_cdr(encode(sample, "ros2-cdr"), msgtype)
+    for kind, sample, msgtype in (("odom", _odom(), ODOMETRY), ("imu", _imu(), IMU)):
+        msg = TYPESTORE.deserialize_cdr(encode_sample(sample, "ros2-cdr"), msgtype)
         big = bytes(TYPESTORE.serialize_cdr(msg, msgtype, little_endian=False))
         assert make_decoder(kind, "ros2-cdr", sample.sensor)(big) == sample
 
@@ -195,8 +193,8 @@ def test_structured_wrong_lengths(encoding: str) -> None:
     enc = msgspec.json.encode if encoding == "json" else msgspec.msgpack.encode
     odom = make_decoder("odom", encoding, "wheel")
     imu = make_decoder("imu", encoding, "imu")
-    good_odom = msgspec.to_builtins(msgspec.json.decode(encode_odom_sample(_odom(), "json")))
-    good_imu = msgspec.to_builtins(msgspec.json.decode(encode_imu_sample(_imu(), "json")))
+    good_odom = msgspec.to_builtins(msgspec.json.decode(encode_sample(_odom(), "json")))
+    good_imu = msgspec.to_builtins(msgspec.json.decode(encode_sample(_imu(), "json")))
     assert odom(enc(good_odom)) == _odom()
     assert imu(enc(good_imu)) == _imu()
     bad = [
@@ -282,8 +280,8 @@ def test_random_cdr_body_raise_only_decode_error(kind: str, payload: bytes) -> N
 
 
 @pytest.mark.parametrize(("kind", "raw"), [
-    ("odom", encode_odom_sample(_odom(), "ros2-cdr")),
-    ("imu", encode_imu_sample(_imu(), "ros2-cdr")),
+    ("odom", encode_sample(_odom(), "ros2-cdr")),
+    ("imu", encode_sample(_imu(), "ros2-cdr")),
 ])
 def test_every_truncation_and_trailing_garbage_is_rejected(kind: str, raw: bytes) -> None:
     decode = make_decoder(kind, "ros2-cdr", "s")
@@ -299,8 +297,8 @@ def test_every_truncation_and_trailing_garbage_is_rejected(kind: str, raw: bytes
 
 
 def test_payload_of_another_type_is_wrong_type() -> None:
-    odom_raw = encode_odom_sample(_odom(), "ros2-cdr")
-    imu_raw = encode_imu_sample(_imu(), "ros2-cdr")
+    odom_raw = encode_sample(_odom(), "ros2-cdr")
+    imu_raw = encode_sample(_imu(), "ros2-cdr")
     for decode, raw, sent in ((make_decoder("odom", "ros2-cdr", "w"), imu_raw, IMU),
                               (make_decoder("imu", "ros2-cdr", "i"), odom_raw, ODOMETRY),
                               (make_decoder("imu", "ros2-cdr", "i"),
@@ -330,7 +328,7 @@ def mutated_cdr(draw: st.DrawFn) -> tuple[str, bytes]:
         raw = bytearray(encode_odometry_cdr(sample.stamp, frame, frame[:3], sample.position, sample.orientation,
                                             [0.0] * 36, sample.linear, sample.angular, sample.twist_covariance))
     else:
-        raw = bytearray(encode_imu_sample(sample, "ros2-cdr"))
+        raw = bytearray(encode_sample(sample, "ros2-cdr"))
     for _ in range(draw(st.integers(0, 3))):
         raw[draw(st.integers(0, len(raw) - 1))] = draw(st.integers(0, 255))
     cut = draw(st.integers(-4, 4))
@@ -356,7 +354,7 @@ def _cdr_of(kind: str, sample: OdomSample | ImuSample, frame: str) -> bytes:
     if kind == "odom":
         return encode_odometry_cdr(sample.stamp, frame, frame[:3], sample.position, sample.orientation,
                                    [0.0] * 36, sample.linear, sample.angular, sample.twist_covariance)
-    msg = TYPESTORE.deserialize_cdr(encode_imu_sample(sample, "ros2-cdr"), IMU)  # frame base_link: set another
+    msg = TYPESTORE.deserialize_cdr(encode_sample(sample, "ros2-cdr"), IMU)  # frame base_link: set another
     msg.header.frame_id = frame
     return bytes(TYPESTORE.serialize_cdr(msg, IMU))
 
@@ -402,7 +400,7 @@ def test_one_decoder_over_a_stream_agrees_with_rosbags(case: tuple[str, list[byt
 
 def test_cdr_header_values_pass_through() -> None:
     """Negative seconds and NaN values are the core's business, not the codec's."""
-    raw = bytearray(encode_imu_sample(_imu(), "ros2-cdr"))
+    raw = bytearray(encode_sample(_imu(), "ros2-cdr"))
     struct.pack_into("<i", raw, 4, -3)
     nan_at = len(raw) - 8
     struct.pack_into("<d", raw, nan_at, math.nan)
@@ -415,7 +413,7 @@ def test_cdr_header_values_pass_through() -> None:
 @settings(max_examples=60, deadline=None)
 def test_repeated_covariances_are_read_once_and_shared_only_while_their_bytes_repeat(kind: str, data) -> None:
     """A driver's covariances are constants: the decoder keeps the previous message's covariance tuples
-    while their bytes repeat (``cdr_fast_path._Covariances``), and reads them anew when any changes. Over
+    while their bytes repeat (``cdr_fast_path.Covariances``), and reads them anew when any changes. Over
     a stream whose covariances switch between two sets (and a value that moves in every message), each
     payload still decodes exactly as rosbags does, and a covariance tuple is the previous one's object
     exactly when its message repeated the previous covariance bytes."""

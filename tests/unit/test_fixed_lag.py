@@ -15,7 +15,7 @@ import pytest
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import POSE
 from fusiond.estimator.smoother import smooth
-from fusiond.samples import ImuSample
+from fusiond.core.sensors import ImuSample
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config

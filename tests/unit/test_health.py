@@ -15,7 +15,7 @@ from fusiond.health import (
     decode_report,
     encode_report,
 )
-from fusiond.samples import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample
 from tests.support.configs import sensor_tables
 
 
@@ -188,7 +188,7 @@ def test_health_says_when_the_world_frame_is_not_defined_yet():
     from fusiond.config import loads
     from fusiond.core.fusion import FusionCore
     from fusiond.health import core_counters
-    from fusiond.samples import ImuSample
+    from fusiond.core.sensors import ImuSample
 
     cfg = loads(sensor_tables("angular_velocity = true", gps="", gps_key="gps/fix"))
     core = FusionCore(cfg)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from fusiond.core.sensors.imu.axes import seen_axes, weights
-from fusiond.samples import ImuSample
+from fusiond.core.sensors import ImuSample
 from fusiond.tune.params import tunable_params
 
 from tests.support.configs import robot_config

@@ -181,14 +181,17 @@ def test_a_kinds_codec_is_imported_when_a_decoder_is_asked_for():
 
 
 def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
-    """Loading the codecs imports nothing of the core (a kind's codec is found through its descriptor when
-    first asked for); the codecs written in ``fusiond/codecs`` are those of the kinds read through its
-    struct fast paths, and every other built-in kind's comes from its own package."""
-    code = ("import sys, fusiond.codecs; from fusiond.codecs import kind_codec; "
-            "print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}), "
-            "sorted(kind_codec._CODECS))")
+    """Loading the codecs imports nothing of the core, and no module of ``fusiond/codecs`` imports a kind (only
+    the registry, when a kind's codec is first asked for): every built-in kind's sample and wire formats (ROS
+    converter, JSON / msgpack Struct, encoder, struct fast path) live in its own package
+    (``core/sensors/<kind>/sample.py``, ``codec.py``), found through its descriptor."""
+    code = "import sys, fusiond.codecs; print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "['codecs', 'errors', 'samples'] ['imu', 'odom']"
+    assert out.strip() == "['codecs', 'errors', 'samples']"
+    upward = sorted(path.relative_to(PACKAGE).as_posix() for path in (PACKAGE / "codecs").rglob("*.py")
+                    if any(m.startswith("fusiond.core") and not m.startswith("fusiond.core.sensors.registry")
+                           for m in _imported_modules(path)))
+    assert upward == []
     from fusiond.codecs import codec_named, codec_of
     from fusiond.core.sensors import kind_named
 
@@ -199,6 +202,10 @@ def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
         assert codec.ros_types == kind.ros_types and kind.from_ros() is codec.from_ros
         assert codec_of(codec.zero) is codec
         assert kind.codec.__func__.__module__.startswith(f"fusiond.core.sensors.{name}.")
+        assert kind.sample_type.__module__ == f"fusiond.core.sensors.{name}.sample"
+        assert codec.from_ros.__module__ == f"fusiond.core.sensors.{name}.codec"
+        if codec.repeated is not None:  # its struct fast path is its own too
+            assert codec.repeated[1].__module__ == f"fusiond.core.sensors.{name}.codec"
 
 
 def test_the_config_stands_above_the_kinds_it_assembles():

@@ -12,7 +12,7 @@ import pytest
 from fusiond.core.fusion import FusionCore
 from fusiond.core.resume import ResumeState, state_fingerprint
 from fusiond.errors import CoreError
-from fusiond.samples import GpsSample, ImuSample, OdomSample
+from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
 from fusiond.transport import state_file
 from fusiond.transport.state_file import StateRefused, StateSaver, load_state, save_state
 

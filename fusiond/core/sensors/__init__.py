@@ -1,5 +1,5 @@
 """Sensor kinds: one package each (``odom/``, ``imu/``, ``gps/``, ``pose/``) with its [[sensors]]
-table, its ``SensorModel`` (``base.py``) and its ``SensorKind`` descriptor (``kind.py``), registered
+table, its sample, its ``SensorModel`` (``base.py``) and its ``SensorKind`` descriptor (``kind.py``), registered
 by its `kind` tag in ``registry.py``.
 
 ``fusiond.config`` re-exports the built-in kinds' tables. A model is built once per configured
@@ -16,11 +16,11 @@ from __future__ import annotations
 
 from .base import SensorContext, SensorModel
 from .checks import Rejected
-from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy, GpsSensor
-from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSensor, quiet_bound
+from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy, GpsSample, GpsSensor
+from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSample, ImuSensor, quiet_bound
 from .kind import LayoutView, SensorKind
-from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSensor
-from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSensor
+from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSample, OdomSensor
+from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSample, PoseSensor
 from .registry import (ENTRY_POINT_GROUP, KINDS, config_types, discover, kind_named, kind_of, register, require,
                        unregister)
 
@@ -31,9 +31,9 @@ def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
 
 
 __all__ = [
-    "ENTRY_POINT_GROUP", "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSensor", "ImuInput", "ImuKind",
-    "ImuModel", "ImuPolicy", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
-    "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSensor", "Rejected", "SensorContext",
+    "ENTRY_POINT_GROUP", "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSample", "GpsSensor", "ImuInput", "ImuKind",
+    "ImuModel", "ImuPolicy", "ImuSample", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
+    "OdomSample", "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSample", "PoseSensor", "Rejected", "SensorContext",
     "SensorKind", "SensorModel", "build_models", "config_types", "discover", "kind_named", "kind_of", "quiet_bound",
     "register", "require", "unregister",
 ]

@@ -118,6 +118,12 @@ class SensorKind:
         share that error with their fused neighbours). None by default."""
         return {}
 
+    def difference_variance(self, cfg: Any, dt: float) -> list[float]:
+        """What its configured slow error (a Gauss-Markov state) adds to the variance of the difference of two
+        of its readings ``dt`` seconds apart, per component of its reading (for the GPS: east, north, up);
+        the floors `fusiond tune` measures at rest take it off. None by default: ``[]``."""
+        return []
+
     def tunables(self, cfg: Any, samples: Sequence[object]) -> list["Param"]:
         """The keys of its table `fusiond tune` may fit on ``samples``, and where each starts
         (``tunable.py``); those that cannot be fitted carry the reason. None by default."""

@@ -17,7 +17,7 @@ from ....codecs.json_msgpack import Cov9, encode_structured
 from ....codecs.kind_codec import KindCodec
 from ....codecs.rosbags_cdr import float_array, ros_header, ros_types, serialize
 from ....codecs.wire import NAVSATFIX
-from ....samples import GpsSample
+from .sample import GpsSample
 
 
 class GpsMessage(msgspec.Struct, kw_only=True):

@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING
 from ....config_tables import FilterConfig
 from ....errors import ConfigError
 from ....estimator import GpsErrorBlock, StateBlock
-from ....samples import GpsSample
 from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import GpsModel
+from .sample import GpsSample
 from .table import GpsSensor
-from .tunables import gps_tunables, slow_errors
+from .tunables import difference_variance, gps_tunables, slow_errors
 
 if TYPE_CHECKING:
     from ....codecs.kind_codec import KindCodec
@@ -65,6 +65,9 @@ class GpsKind(SensorKind):
 
     def slow_errors(self, cfg: GpsSensor, span: float) -> dict[str, float]:
         return slow_errors(cfg, span)
+
+    def difference_variance(self, cfg: GpsSensor, dt: float) -> list[float]:
+        return difference_variance(cfg, dt)
 
     def codec(self) -> "KindCodec":
         from .codec import CODEC

@@ -81,11 +81,11 @@ from ....estimator import observations as obs
 from ....estimator.geodesy import EnuFrame
 from ....estimator.rigid_fit import RigidFit, fit_rigid
 from ....logs import get_logger
-from ....samples import GpsSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import Rejected, finite
 from ..frame import lever, new_frame, set_position
+from .sample import GpsSample
 from .table import GpsSensor
 
 if TYPE_CHECKING:

@@ -1,6 +1,8 @@
 """The GPS's tunable keys (``SensorKind.tunables``): the horizontal and the vertical of its
 ``position_noise``, and its Gauss-Markov error's size (``error_sigma``, or without ``error_tau_s`` the
-vertical one's ``vertical_error_sigma``) and time constant, less those a recording is too short for."""
+vertical one's ``vertical_error_sigma``) and time constant, less those a recording is too short for; and
+what that error adds between two fixes (``difference_variance``), which the floors measured at rest take
+off."""
 
 from __future__ import annotations
 
@@ -9,8 +11,8 @@ import statistics
 from collections.abc import Sequence
 from dataclasses import replace
 
-from ....samples import GpsSample
 from ..tunable import Param, own_samples
+from .sample import GpsSample
 from .table import GpsSensor
 
 
@@ -57,6 +59,18 @@ def slow_errors(s: GpsSensor, span: float) -> dict[str, float]:
     elif s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s > 0.0:
         taus = {"vertical": s.vertical_error_tau_s}
     return {part: tau for part, tau in taus.items() if span < SPAN_TAUS * tau} if span > 0.0 else {}
+
+
+def difference_variance(s: GpsSensor, dt: float) -> list[float]:
+    """What the GPS's configured Gauss-Markov error adds to the variance of the difference of two fixes ``dt``
+    seconds apart, east/north/up: 2 sigma^2 (1 - exp(-dt / tau)) an axis (``error_sigma`` with ``error_tau_s``,
+    else the vertical one's ``vertical_error_*``); ``[]`` without one."""
+    if s.error_tau_s > 0.0 and s.error_sigma is not None:
+        return [2.0 * e * e * (1.0 - math.exp(-dt / s.error_tau_s)) for e in s.error_sigma]
+    if s.vertical_error_sigma > 0.0 and s.vertical_error_tau_s > 0.0:
+        e = s.vertical_error_sigma
+        return [0.0, 0.0, 2.0 * e * e * (1.0 - math.exp(-dt / s.vertical_error_tau_s))]
+    return []
 
 
 def gps_tunables(s: GpsSensor, samples: Sequence[object]) -> list[Param]:
@@ -114,4 +128,4 @@ def unstated(m: GpsSample) -> bool:
     return m.status >= 0 and (m.covariance_type == 0 or (len(c) == 9 and c[0] == 0.0 and c[4] == 0.0 and c[8] == 0.0))
 
 
-__all__ = ["SPAN_TAUS", "error_params", "fix_sigmas", "gps_tunables", "noise_params", "slow_errors", "unstated"]
+__all__ = ["SPAN_TAUS", "difference_variance", "error_params", "fix_sigmas", "gps_tunables", "noise_params", "slow_errors", "unstated"]

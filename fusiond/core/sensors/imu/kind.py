@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING, Any
 
 from ....errors import ConfigError
 from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
-from ....samples import ImuSample
 from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import ImuModel
+from .sample import ImuSample
 from .table import ImuSensor
 from .tunables import imu_tunables
 
@@ -65,9 +65,9 @@ class ImuKind(SensorKind):
         return imu_tunables(cfg, samples)
 
     def codec(self) -> "KindCodec":
-        from ....codecs.builtin_kinds import IMU_CODEC
+        from .codec import CODEC
 
-        return IMU_CODEC
+        return CODEC
 
     def zero_covariance(self, cfg: ImuSensor) -> Callable[[Any], bool] | None:
         use_orientation = cfg.fuses_orientation and cfg.orientation_noise is None

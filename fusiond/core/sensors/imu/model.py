@@ -21,7 +21,6 @@ from ....estimator import mat3
 from ....estimator import observations as obs
 from ....estimator import rotation as rot
 from ....logs import get_logger
-from ....samples import ImuSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, Rejected, finite, near_unit, plausible, resolve_variances, unit_quaternion
@@ -29,6 +28,7 @@ from .gap_turn import carry_yaw
 from .gyro_bias import learn_bias_at_rest
 from .inputs import ImuInput
 from .own import ImuOwn
+from .sample import ImuSample
 from .table import ImuSensor
 
 if TYPE_CHECKING:

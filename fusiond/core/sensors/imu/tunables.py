@@ -7,9 +7,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ....samples import ImuSample
 from ..tunable import Param, median, own_samples
 from .axes import seen_axes
+from .sample import ImuSample
 from .table import ImuSensor
 
 

@@ -7,10 +7,10 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ....estimator import StateBlock, TwistPitchBlock, WheelScaleBlock
-from ....samples import OdomSample
 from ..kind import LayoutView, SensorKind
 from ..tunable import Param
 from .model import OdomModel
+from .sample import OdomSample
 from .table import OdomSensor
 from .tunables import odom_tunables
 
@@ -47,9 +47,9 @@ class OdomKind(SensorKind):
         return odom_tunables(cfg, samples)
 
     def codec(self) -> "KindCodec":
-        from ....codecs.builtin_kinds import ODOM
+        from .codec import CODEC
 
-        return ODOM
+        return CODEC
 
     def zero_covariance(self, cfg: OdomSensor) -> Callable[[Any], bool] | None:
         if cfg.twist_noise is not None:

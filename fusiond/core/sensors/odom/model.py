@@ -37,13 +37,13 @@ from .... import reasons
 from ....estimator import mat3
 from ....estimator import rotation as rot
 from ....logs import get_logger
-from ....samples import OdomSample
 from ...diagnostics import DiagnosticsRecord
 from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
 from ..imu.gyro_bias import quiet_bound
 from . import lost_channel
 from .rest import rest_window, running_noise
+from .sample import OdomSample
 from .table import OdomSensor
 
 if TYPE_CHECKING:

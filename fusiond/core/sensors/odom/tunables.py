@@ -9,8 +9,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ....samples import OdomSample
 from ..tunable import Param, median, own_samples
+from .sample import OdomSample
 from .table import OdomSensor
 
 
