@@ -61,7 +61,9 @@ class _PerChannel(ABC):
 
     name = ""
     kind = ""
+    group = "channel"
     needs: tuple[str, ...] = ()
+    listed_after: tuple[str, ...] = ()
     needs_config = False  # a channel's innovations are judged without the config (a remote monitor)
 
     def run(self, ev: Evidence) -> list[Verdict]:

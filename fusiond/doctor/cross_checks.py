@@ -23,6 +23,7 @@ class LeverArm(BaseCheck):
     """The GPS antenna's lever arm, from how the fixes swing as the vehicle turns."""
 
     name = "lever"
+    group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
         return found(lever_verdict(ev.series, ev.config))
@@ -32,6 +33,7 @@ class UnmeasuredYawRate(BaseCheck):
     """A wheel yaw rate the odometry driver does not measure (exact zeros while the gyro turns)."""
 
     name = "unmeasured_yaw_rate"
+    group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
         if ev.odom is None:
@@ -43,6 +45,7 @@ class YawRateNotMeasured(BaseCheck):
     """No source of yaw rate fused at all while the odometry says the vehicle turns."""
 
     name = "yaw_rate_not_measured"
+    group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
         if ev.odom is None:
@@ -55,6 +58,7 @@ class WheelHeading(BaseCheck):
     (either check above already says so)."""
 
     name = "wheel_heading"
+    group = "cross"
     needs = ("unmeasured_yaw_rate", "yaw_rate_not_measured")
 
     def run(self, ev: Evidence) -> list[Verdict]:
@@ -67,6 +71,7 @@ class Heading(BaseCheck):
     """An IMU's fused yaw against the gyro, the wheels and the GPS track."""
 
     name = "heading"
+    group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
         return found(heading_check(ev.series, ev.config))
@@ -76,6 +81,7 @@ class Speed(BaseCheck):
     """The wheel speed's scale against the GPS chords."""
 
     name = "speed"
+    group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
         return found(speed_check(ev.series, ev.config, ev.scales))

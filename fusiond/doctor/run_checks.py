@@ -55,6 +55,7 @@ class Mounting(BaseCheck):
     """The IMU's mounting yaw the accelerometer measures against the wheels."""
 
     name = "mounting"
+    listed_after = ("lean",)  # both speak of the IMU's attitude: the lean first
 
     def run(self, ev: Evidence) -> list[Verdict]:
         return found(mount_verdict(ev.run_imu, ev.mount, ev.tilt, MIN_UPDATES))
@@ -124,6 +125,7 @@ class Clocks(BaseCheck):
     """Samples dropped as far from filter time, explained by their sensor's clock."""
 
     name = "clocks"
+    listed_after = ("drops",)  # both speak of a sensor's time: the drops first
     needs_config = False  # the core's counters, which a run without a config has too
 
     def run(self, ev: Evidence) -> list[Verdict]:
@@ -136,6 +138,7 @@ class CovarianceResets(BaseCheck):
     """A covariance that went non-finite and was reset."""
 
     name = "covariance_resets"
+    listed_after = ("covariance_cap",)  # both speak of the covariance: the cap first
     needs_config = False  # the core's counters, which a run without a config has too
 
     def run(self, ev: Evidence) -> list[Verdict]:
