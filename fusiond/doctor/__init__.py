@@ -43,8 +43,8 @@ from .series import Series, SeriesCollector
 from .twist import TwistStats
 from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
 
-__all__ = ["Doctor", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
-           "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
+__all__ = ["Doctor", "Evidence", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose",
+           "format_verdicts", "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
@@ -182,8 +182,9 @@ class Doctor:
     def verdicts(self, stats: dict[str, dict] | None = None, at_cap: bool = False, covariance_resets: int = 0,
                  scales: dict[str, float] | None = None) -> list[Verdict]:
         """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
-        return diagnose(self.cfg if self.known else None, self.series(), self.channels, self.twist, self.tilt,
-                        stats, at_cap, covariance_resets, scales, self.t0, self.clocks)
+        return diagnose(Evidence(self.cfg if self.known else None, self.series(), self.channels, self.twist,
+                                 self.tilt, stats=stats, at_cap=at_cap, covariance_resets=covariance_resets,
+                                 scales=scales, t0=self.t0, clocks=self.clocks))
 
 
 def _merge(candidates: list[Verdict]) -> Verdict:
@@ -197,14 +198,9 @@ def _merge(candidates: list[Verdict]) -> Verdict:
     return top
 
 
-def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str], ChannelStats],
-             twist: TwistStats, tilt: TiltStats, stats: dict[str, dict] | None = None, at_cap: bool = False,
-             covariance_resets: int = 0, scales: dict[str, float] | None = None,
-             t0: float | None = None, clocks: ClockOffsets | None = None) -> list[Verdict]:
+def diagnose(ev: Evidence) -> list[Verdict]:
     """Every check (``registry.CHECKS``, in order) on the run's evidence, the blame rules over what they
-    found (``blame.RULES``), merged into one verdict per (sensor, channel). ``clocks``: the sensors' stamp
-    offsets measured at arrival (the replay has them), to explain samples dropped as far from filter time."""
-    ev = Evidence(cfg, series, channels, twist, tilt, stats, at_cap, covariance_resets, scales, t0, clocks)
+    found (``blame.RULES``), merged into one verdict per (sensor, channel)."""
     entries: list[Entry] = []
     for check in CHECKS:
         verdicts = run_check(check, ev)
