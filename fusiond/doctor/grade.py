@@ -43,9 +43,10 @@ from .heading import gps_sigma
 from .median import median
 from .mounting import MountYaw
 from .series import Series
-from .speed import _cumulative, _newey_west, chord_ends, t_quantile
+from .chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, chord_ends, cumulative, newey_west
+from ..core.diagnostics import t_quantile
 from .verdict import Verdict, sensor_key
-from .thresholds import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, MOUNT_PITCH_RAD, SCALE_Z_SIGMAS
+from .thresholds import MOUNT_PITCH_RAD
 
 
 @dataclass
@@ -114,13 +115,13 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     v = np.asarray(series.odom_v)
     te = np.asarray(series.est_t)
     pitch = np.interp(to, te, np.asarray(series.est_pitch))
-    climb = _cumulative(to, -v * np.sin(pitch))
-    along = _cumulative(to, v * np.cos(pitch))
+    climb = cumulative(to, -v * np.sin(pitch))
+    along = cumulative(to, v * np.cos(pitch))
     sigma_w, sigma_m, tau = _vertical_noise(series, gps)
     breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
     gt, gu = series.gps_t, series.gps_u
     r, d, ends = [], [], []
-    for i, j in chord_ends(series, to, _cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
+    for i, j in chord_ends(series, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
         t0, t1 = gt[i], gt[j]
         if t0 < te[0] or t1 > te[-1]:
             continue  # before the first estimate (or after the last): no pitch to compare
@@ -149,7 +150,7 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
             runs += 1
             start = None
     se_model = math.sqrt(var_n) / abs(total)
-    se_emp = math.sqrt(_newey_west((r_ - delta * d_) / total) * n / (n - 1))
+    se_emp = math.sqrt(newey_west((r_ - delta * d_) / total) * n / (n - 1))
     return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs)
 
 

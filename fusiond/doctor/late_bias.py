@@ -29,11 +29,11 @@ import math
 from ..config import Config
 from ..core.sensors.registry import kind_of
 from .gyro import quiet_episodes
-from .heading import imu_vs_gyro
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, sensor_key
-from .thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN, WANDER_RAD
+from .heading import WANDER_RAD, imu_vs_gyro
+from .thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN
 
 __all__ = ["late_bias_verdict"]
 

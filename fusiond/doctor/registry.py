@@ -14,10 +14,23 @@ import heapq
 from collections.abc import Iterable
 
 from ..errors import DoctorError
-from .channel_checks import (AbsoluteNis, ChannelNis, Frozen, GpsWander, GyroBiasAtRest, OrientationNis, Reacquired,
-                             Unaligned, YawJumps, YawRateSlip)
+from .checks.absolute import AbsoluteNis
+from .checks.channel_nis import ChannelNis
+from .checks.frozen import Frozen
+from .checks.gps_wander import GpsWander
+from .checks.gyro_bias import GyroBiasAtRest
+from .checks.orientation import OrientationNis
+from .checks.reacquired import Reacquired
+from .checks.unaligned import Unaligned
+from .checks.yaw_jump import YawJumps
+from .checks.slip import YawRateSlip
 from .check import GROUPS, Check
-from .cross_checks import Heading, LeverArm, Speed, UnmeasuredYawRate, WheelHeading, YawRateNotMeasured
+from .checks.heading import Heading
+from .checks.lever import LeverArm
+from .checks.speed import Speed
+from .checks.unmeasured_yaw_rate import UnmeasuredYawRate
+from .checks.wheel_heading import WheelHeading
+from .checks.yaw_rate_not_measured import YawRateNotMeasured
 from .run_checks import (Clocks, Coast, CovarianceCap, CovarianceResets, Drops, GapHeading, GyroBiasUnseen, LateBias,
                          Lean, Mounting, TwistFrame)
 

@@ -15,27 +15,18 @@ from .bins import BIN_S
 __all__ = [
     "MIN_UPDATES",
     "NIS_HIGH", "NIS_LOW",
-    "ROLL_PITCH_OFFSET_RAD", "GATED_FRACTION", "MOST_GATED", "JUMP_NOTE_SHARE", "JUMP_NOISE_SHARE",
-    "UNALIGNED_MIN_FIXES", "UNALIGNED_LARGE",
     "LEAN_RAD",
     "CLOCK_DROP_SHARE",
     "MIN_COAST_BINS", "DECEL_TOLERANCE", "MIN_COAST_DECEL", "COAST_Z_SIGMAS", "LEVEL_SHARE",
     "DROPOUT_LONGEST_S", "DROPOUT_FRACTION",
     "MIN_GAP_S", "GAP_TURN_RAD", "GAP_DRIFT_RATE", "GAP_EDGE_S",
-    "PERSISTING_SHARE", "WANDER_MIN_FIXES", "MAX_LAG_FRACTION",
     "MOUNT_PITCH_RAD",
     "MIN_REJECTED_FRACTION", "OVERSTATED_RATIO", "NOISE_RATIO", "DISAGREE_RAD_S", "MIN_DRIFT_EPISODES",
     "DRIFT_WALK_MARGIN",
-    "WINDOW_S", "WANDER_RAD", "TRACK_OFFSET_RAD", "DRIFT_RAD_S", "MIN_SPAN_S",
-    "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "WHEEL_OFFSET_RAD_S", "ZERO_TURNING_RAD_S", "MISSED_INTERVAL_S",
-    "MISSED_TURN_RAD",
-    "LATE_DRIFT_RAD", "RELATIVE_MARGIN", "REACQUIRE_AFTER_GAP_S",
-    "LEVER_TOL", "MAX_SE", "MAX_SE_NAMED", "LATENCY_ALONG", "LEVER_Z_SIGMAS", "OUTLIER_SIGMAS", "MIN_PAIRS", "PAIR_S",
-    "MAX_INTERVAL",
+    "LATE_DRIFT_RAD", "RELATIVE_MARGIN",
     "MOUNT_YAW_RAD", "MOUNT_MIN_SPEED", "SMOOTH_BINS", "MOUNT_MIN_SAMPLES", "GAIN_BAND", "MAX_ALIGN_S",
     "MOUNT_Z_SIGMAS",
-    "SCALE_TOLERANCE", "CHORD_M", "CHORD_MAX_S", "MIN_CHORDS", "ASSUMED_TAU_S", "SCALE_Z_SIGMAS",
-    "TURNING_RAD_S", "UNMEASURED_FRACTION", "ALL_ZEROS_FRACTION", "MIN_TURNED_RAD", "SLIP_FRACTION", "TURNED_RAD",
+    "SCALE_TOLERANCE", "TURNED_RAD",
     "ALONG_SIN", "MOVING_M_S",
 ]
 
@@ -47,13 +38,6 @@ NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): 
 NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
 
 # -- one channel's own records (channels.py) ---------------------------------------------------------------------
-ROLL_PITCH_OFFSET_RAD = 0.01  # a mean roll/pitch innovation this large is a mounting error, not noise
-GATED_FRACTION = 0.1  # gated beyond this: the sensor jumps (or its noise is understated) ...
-MOST_GATED = 0.5  # ... and beyond this: its noise is understated (jumps are the exception, not the rule)
-JUMP_NOTE_SHARE = 0.01  # yaw jumps in more than this share of the orientation samples are worth a warning
-JUMP_NOISE_SHARE = 0.2  # ... in more than this, the stated yaw noise is what is wrong (or the yaw is unusable)
-UNALIGNED_MIN_FIXES = 50  # fixes before a heading never found is worth a verdict
-UNALIGNED_LARGE = 2.0  # predicted innovation rms this many times the measured one: the stated noise hides the heading
 
 # -- the estimate's lean (attitude.py) ---------------------------------------------------------------------------
 LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
@@ -98,17 +82,6 @@ GAP_DRIFT_RATE = 0.01  # rad/s: an uncorrected consumer gyro bias, integrated by
 GAP_EDGE_S = 2.0
 
 # -- a wandering GPS receiver error (gps_wander.py) ----------------------------------------------------------------
-# "Strongly autocorrelated": at least 15 % of the innovations' variance persists to the next fix. A
-# consistent filter's innovations are white: their lag-1 autocorrelation is ~N(0, 1/n) (0.04 over 750
-# fixes); with the noise misstated the filter's own response adds a little: measured 0.00-0.04 on white
-# fixes at 2 and 10 Hz, 1 to 25 m/s, stated honestly to 3.7x overstated; it must also be beyond
-# 4 / sqrt(n) of zero for short runs. A Gauss-Markov error of 1.2 m (tau 60 s) under 0.6 m of white noise
-# leaves 0.38 (stated honestly) to 0.54 (stated 2.2 m) at 2 Hz, where the filter follows the wander less
-# the more the fixes are distrusted; at 10 Hz on a car at 25 m/s it follows more of it and leaves 0.18-0.25
-# (a highway car: 0.18; a threshold of 0.3 misses it, and the advice would be "lower position_noise").
-PERSISTING_SHARE = 0.15
-WANDER_MIN_FIXES = 50  # fixes for an autocorrelation: at lag 1 its standard error is ~1/sqrt(50) = 0.14
-MAX_LAG_FRACTION = 0.25  # autocorrelation lags up to this share of the run (beyond, too few pairs)
 
 # -- the mounting pitch against the GPS grade (grade.py) -----------------------------------------------------------
 # A pitch error delta sinks or lifts the dead-reckoned z by delta per metre driven: at 0.01 rad, 1 %
@@ -126,50 +99,17 @@ MIN_DRIFT_EPISODES = 3  # a drift is told from one odd standstill by its trend, 
 DRIFT_WALK_MARGIN = 2.0  # a drift is named when the walk it shows exceeds the configured one by this factor
 
 # -- the heading sources against each other (heading.py) -----------------------------------------------------------
-WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
-WANDER_RAD = 0.05  # rms yaw wander (after bias and scale are removed) that is a disturbance, not noise
-TRACK_OFFSET_RAD = 0.05  # a mean IMU-vs-track offset this large is worth a yaw_offset
-DRIFT_RAD_S = 0.002  # the IMU yaw's own drift (against the gyro, its bias at rest removed) that is no heading:
-# 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)
-MIN_SPAN_S = 10.0  # s: a detrending window whose samples span less than this is too short to fit a bias and is skipped
-WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
-MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
-WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
-ZERO_TURNING_RAD_S = 0.05  # the gyro turning this fast while the wheels read exactly zero: not at rest
-MISSED_INTERVAL_S = 0.5  # s: an odometry interval counts for at most this much turn time (gaps count nothing)
-MISSED_TURN_RAD = 0.2  # rad (11 deg) of turn the wheels missed in all: worth fusing the gyro for
 
 # -- a gyro bias learned late (late_bias.py) -----------------------------------------------------------------------
 LATE_DRIFT_RAD = 0.05  # heading drift before the first standstill worth a verdict (3 deg)
 RELATIVE_MARGIN = 0.5  # the relative yaw's mean heading error must stay below this share of the late bias's
-REACQUIRE_AFTER_GAP_S = 30.0  # a GPS reacquired this soon after a logging gap ended is blamed on the gap
 
 # -- the GPS lever arm (lever.py) ------------------------------------------------------------------------------------
-LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change
-MAX_SE = 0.1  # m: "as stated" needs the fit this precise (half LEVER_TOL)
-MAX_SE_NAMED = 0.3  # m: a lever is named only from a fit this precise (a fifth of a 1.5 m mast's offset)
-LATENCY_ALONG = 2.0  # a misfit behind base_link this many times longer than it is wide: also says latency
-# named when the lever's chi-square (2 dof) exceeds LEVER_Z_SIGMAS^2 = 25 (p ~ 4e-6, lever's docstring)
-LEVER_Z_SIGMAS = 5.0
-OUTLIER_SIGMAS = 4.0  # a pair beyond 4 sigma of the scatter is multipath (a normal pair: 6e-5 chance)
-MIN_PAIRS = 30  # fix pairs in turns before a fit: its scatter estimate then good to ~13 %
-PAIR_S = 3.0  # s between the two fixes of a pair (lever's docstring)
-MAX_INTERVAL = 1.5  # a pair further apart than this many PAIR_S (fixes missing) is not used
 
 # -- the wheel speed scale against the GPS (speed.py) --------------------------------------------------------------
 SCALE_TOLERANCE = 0.02  # a wheel scale within 2 % is not worth a state
-CHORD_M = 10.0  # chords at least this long (or 20 sigma_w): short and consecutive (speed's docstring)
-CHORD_MAX_S = 60.0  # a chord spans at most this long (slower: the robot is standing or creeping)
-MIN_CHORDS = 3  # the fewest for a residual standard error (2 dof) next to the model's
-ASSUMED_TAU_S = 100.0  # the fast end of receivers' wander times (speed's docstring)
-SCALE_Z_SIGMAS = 3.0  # a scale is named beyond this many standard errors (as a normal quantile: 0.27 % two-sided)
 
 # -- the odometry twist (twist.py) ------------------------------------------------------------------------------------
-TURNING_RAD_S = 0.05  # the gyro says the robot turns (well above any gyro's noise and bias)
-UNMEASURED_FRACTION = 0.5  # in turns, this share of exact zeros is a component the driver does not measure
-ALL_ZEROS_FRACTION = 0.99  # ... and in gentle turns only: (nearly) every moving sample an exact zero
-MIN_TURNED_RAD = 1.0  # ... over a run whose heading the gyro turned by at least this much
-SLIP_FRACTION = 0.2  # samples flagged as slip beyond a fifth: the wheels' yaw rate is not just noisy
 TURNED_RAD = 0.3  # the message's own pose yaw this far from the odom frame's x: a world twist must follow it
 ALONG_SIN = 0.05  # |sin| of the angle between the twist and an axis below this: the twist points along it
 MOVING_M_S = 0.1  # speed above which a twist has a direction

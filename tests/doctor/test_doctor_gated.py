@@ -16,8 +16,9 @@ import numpy as np
 
 from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.doctor import ChannelStats
-from fusiond.doctor.channels import absolute_verdict
-from fusiond.doctor.thresholds import GATED_FRACTION, NIS_HIGH
+from fusiond.doctor.checks.absolute import absolute_verdict
+from fusiond.doctor.channels import GATED_FRACTION
+from fusiond.doctor.thresholds import NIS_HIGH
 from fusiond.samples import GpsSample
 
 from tests.support import sim_gps

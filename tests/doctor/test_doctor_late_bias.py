@@ -236,7 +236,7 @@ def test_a_drifting_ahrs_yaw_fused_is_named_with_roll_pitch(orientation):
     beyond DRIFT_RAD_S: no heading, take roll/pitch only. The fused yaw dragged the filter's bias estimate
     to b - r (0.001), which is why the bias at rest, not the estimate, is what is subtracted. The AHRS
     that does not drift gets no such verdict."""
-    from fusiond.doctor.thresholds import DRIFT_RAD_S
+    from fusiond.doctor.checks.heading import DRIFT_RAD_S
 
     assert 0.003 - 0.0005 > DRIFT_RAD_S  # the whole tolerance band is beyond the threshold
     result, _, _ = replay(weaving_car(yaw_drift=0.003), orientation)

@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-from fusiond.doctor.thresholds import LEVER_TOL
+from fusiond.doctor.checks.lever import LEVER_TOL
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.run import run_samples
 

@@ -32,15 +32,26 @@ import math
 
 import numpy as np
 
-from ..config import Config
-from ..core.sensors.registry import kind_of
-from .median import median
-from .series import Series
-from .verdict import Verdict, sensor_key
-from .thresholds import (LATENCY_ALONG, LEVER_TOL, LEVER_Z_SIGMAS, MAX_INTERVAL, MAX_SE, MAX_SE_NAMED, MIN_PAIRS,
-                         OUTLIER_SIGMAS, PAIR_S)
+from ...config import Config
+from ...core.sensors.registry import kind_of
+from ..median import median
+from ..series import Series
+from ..check import BaseCheck, found
+from ..evidence import Evidence
+from ..verdict import Verdict, sensor_key
 
-__all__ = ["lever_verdict"]
+__all__ = ["LeverArm", "lever_verdict"]
+
+LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change
+MAX_SE = 0.1  # m: "as stated" needs the fit this precise (half LEVER_TOL)
+MAX_SE_NAMED = 0.3  # m: a lever is named only from a fit this precise (a fifth of a 1.5 m mast's offset)
+LATENCY_ALONG = 2.0  # a misfit behind base_link this many times longer than it is wide: also says latency
+# named when the lever's chi-square (2 dof) exceeds LEVER_Z_SIGMAS^2 = 25 (p ~ 4e-6, lever's docstring)
+LEVER_Z_SIGMAS = 5.0
+OUTLIER_SIGMAS = 4.0  # a pair beyond 4 sigma of the scatter is multipath (a normal pair: 6e-5 chance)
+MIN_PAIRS = 30  # fix pairs in turns before a fit: its scatter estimate then good to ~13 %
+PAIR_S = 3.0  # s between the two fixes of a pair (lever's docstring)
+MAX_INTERVAL = 1.5  # a pair further apart than this many PAIR_S (fixes missing) is not used
 
 
 def _rot(yaw: np.ndarray, l: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -160,3 +171,13 @@ def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
                    + latency,
                    sensor_key(gps.name, "extrinsic_xyz"),
                    f"extrinsic_xyz = [{lever[0]:.2f}, {lever[1]:.2f}, {lever[2]:.2f}]", evidence)
+
+
+class LeverArm(BaseCheck):
+    """The GPS antenna's lever arm, from how the fixes swing as the vehicle turns."""
+
+    name = "lever"
+    group = "cross"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        return found(lever_verdict(ev.series, ev.config))
