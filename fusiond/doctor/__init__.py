@@ -4,14 +4,15 @@ It encodes the table a practitioner tunes an EKF with, but NIS alone points the
 wrong way when one source is wrong and the filter follows it (a disturbed
 magnetometer yaw makes the GPS look bad). So besides the innovation statistics the
 doctor compares the sources on the quantities they share (heading, speed, the gyro
-at rest; see ``heading``, ``speed``, ``gyro``, ``twist``) and names the one that
+at rest; see ``checks/heading``, ``checks/speed``, ``gyro``, ``twist``) and names the one that
 disagrees with the others, with what it measured and the config key to change. It
 never advises trusting a sensor more while another source contradicts it.
 
-How it is built: every check (``registry.CHECKS``) is one class with one interface, run on the
-run's shared ``evidence.Evidence`` and returning its findings as :class:`Verdict` structs; who is to
-blame when findings meet is decided by the rule table in ``blame``; every threshold a check decides
-by is in ``thresholds``, with where it comes from.
+How it is built: every check is one class with one interface in its own module (``checks/``), with
+the thresholds it decides by beside it, each with where it comes from; it runs on the run's shared
+``evidence.Evidence`` and returns its findings as :class:`Verdict` structs. The registry derives the
+order they run in from what each needs (``registry.CHECKS``); who is to blame when findings meet is
+decided by the rule table in ``blame``.
 
 A floor above the fusion core: the core never imports it (its diagnostics records are all the
 doctor reads of it), and only the commands that show verdicts do (replay, tune's advice, monitor).

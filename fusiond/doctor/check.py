@@ -16,12 +16,14 @@ from typing import Protocol, runtime_checkable
 from .evidence import Evidence
 from .verdict import Verdict
 
-__all__ = ["GROUPS", "BaseCheck", "Check", "found", "run_check"]
+__all__ = ["GROUPS", "MIN_UPDATES", "BaseCheck", "Check", "found", "run_check"]
 
 # The order groups run in. The cross-source checks first: what they find decides who is to blame. Then
 # one check per channel kind, each judging a channel on its own innovations. Then the whole-run checks
 # and the core's counters, which speak last of a channel the others have spoken of.
 GROUPS = ("cross", "channel", "run")
+
+MIN_UPDATES = 50  # the twist-frame, lean and mounting checks need this many samples (not NIS: that uses what there is)
 
 
 @runtime_checkable

@@ -1,5 +1,6 @@
 """The checks, in the order they run, derived from what each declares.
 
+Each module under ``checks/`` holds one check (``discovered``): a check is added by adding its module.
 Each check names its ``group`` (``check.GROUPS``: the cross-source checks, then one per channel kind,
 then the whole-run checks and the core's counters), the checks whose findings it reads (``needs``) and
 those whose findings on a channel it shares are listed before its own (``listed_after``). Within a
@@ -11,30 +12,15 @@ then by name. A name that is no check, or a cycle, is a :class:`DoctorError`.
 from __future__ import annotations
 
 import heapq
+import importlib
+import pkgutil
 from collections.abc import Iterable
 
 from ..errors import DoctorError
-from .checks.absolute import AbsoluteNis
-from .checks.channel_nis import ChannelNis
-from .checks.frozen import Frozen
-from .checks.gps_wander import GpsWander
-from .checks.gyro_bias import GyroBiasAtRest
-from .checks.orientation import OrientationNis
-from .checks.reacquired import Reacquired
-from .checks.unaligned import Unaligned
-from .checks.yaw_jump import YawJumps
-from .checks.slip import YawRateSlip
-from .check import GROUPS, Check
-from .checks.heading import Heading
-from .checks.lever import LeverArm
-from .checks.speed import Speed
-from .checks.unmeasured_yaw_rate import UnmeasuredYawRate
-from .checks.wheel_heading import WheelHeading
-from .checks.yaw_rate_not_measured import YawRateNotMeasured
-from .run_checks import (Clocks, Coast, CovarianceCap, CovarianceResets, Drops, GapHeading, GyroBiasUnseen, LateBias,
-                         Lean, Mounting, TwistFrame)
+from . import checks as _checks
+from .check import GROUPS, BaseCheck, Check
 
-__all__ = ["CHECKS", "ordered"]
+__all__ = ["CHECKS", "discovered", "ordered"]
 
 
 def ordered(checks: Iterable[Check]) -> tuple[Check, ...]:
@@ -74,10 +60,17 @@ def ordered(checks: Iterable[Check]) -> tuple[Check, ...]:
     return tuple(out)
 
 
-CHECKS: tuple[Check, ...] = ordered((
-    LeverArm(), UnmeasuredYawRate(), YawRateNotMeasured(), WheelHeading(), Heading(), Speed(),
-    OrientationNis(), YawRateSlip(), GyroBiasAtRest(), YawJumps(), Reacquired(), Frozen(), Unaligned(), AbsoluteNis(),
-    GpsWander(), ChannelNis(),
-    GyroBiasUnseen(), Lean(), Mounting(), GapHeading(), LateBias(), Coast(), TwistFrame(), CovarianceCap(),
-    Drops(), Clocks(), CovarianceResets(),
-))
+def discovered() -> list[Check]:
+    """One instance of each check class, found in its module under ``checks/`` (one check a module)."""
+    out: list[Check] = []
+    for info in sorted(pkgutil.iter_modules(_checks.__path__), key=lambda m: m.name):
+        module = importlib.import_module(f"{_checks.__name__}.{info.name}")
+        found = [c for c in vars(module).values() if isinstance(c, type) and issubclass(c, BaseCheck)
+                 and c.__module__ == module.__name__ and c.name]
+        if len(found) != 1:
+            raise DoctorError(f"checks/{info.name}.py holds {len(found)} checks, not one")
+        out.append(found[0]())
+    return out
+
+
+CHECKS: tuple[Check, ...] = ordered(discovered())

@@ -14,10 +14,12 @@ from itertools import chain
 
 import numpy as np
 
-from ..config import OdomSensor
 from .settled import Settled
-from .verdict import Verdict, sensor_key
-from .thresholds import ALONG_SIN, MOVING_M_S, TURNED_RAD
+
+
+TURNED_RAD = 0.3  # the message's own pose yaw this far from the odom frame's x: a world twist must follow it
+ALONG_SIN = 0.05  # |sin| of the angle between the twist and an axis below this: the twist points along it
+MOVING_M_S = 0.1  # speed above which a twist has a direction
 
 CHUNK = 4096  # twists noted before they are summed (bounded memory)
 
@@ -71,32 +73,3 @@ class TwistStats:
         rows = np.abs(np.column_stack((linear[:, 0], linear[:, 1], angular[:, 2])))
         self._n += n
         self._sums = np.cumsum(np.concatenate(([self._sums], rows)), axis=0)[-1].tolist()
-
-
-def twist_frame_verdict(odom: OdomSensor, t: TwistStats, min_updates: int = 50) -> Verdict | None:
-    if t.n < min_updates or t.abs_vx + t.abs_vy < 1e-6:
-        return None
-    lateral = t.abs_vy / max(t.abs_vx + t.abs_vy, 1e-12)
-    key = sensor_key(odom.name, "twist_frame")
-    if odom.twist_frame == "world" and t.turned >= min_updates and t.along_x >= 0.9 * t.turned:
-        # a world-frame twist points where the vehicle heads, which the message's own pose says: one that
-        # keeps pointing along x while that pose turns away is a body-frame twist. Gentle curves (a highway:
-        # 37 m off, otherwise blamed on the wheel scale and an IMU mounting) never make the turn-rate rule
-        # below fire
-        return Verdict(odom.name, "twist", "problem",
-                       f"twist configured in the world frame, but in {100 * t.along_x / t.turned:.0f}% of the "
-                       f"{t.turned} moving messages whose own pose is turned beyond {TURNED_RAD:g} rad from the odom "
-                       "frame's x it points along x, not where that pose heads: it is a body-frame twist, and the "
-                       "trajectory runs off sideways", key, 'twist_frame = "body"',
-                       evidence={"twist_along_x_share": t.along_x / t.turned})
-    if odom.twist_frame == "world" and lateral < 0.05 and t.abs_wz / t.n > 0.05:
-        return Verdict(odom.name, "twist", "problem",
-                       "twist configured in the world frame, but its lateral velocity stays near zero while "
-                       "the robot turns: it is a body-frame twist, and the trajectory heading will run away",
-                       key, 'twist_frame = "body"')
-    if odom.twist_frame == "body" and lateral > 0.35:
-        return Verdict(odom.name, "twist", "warn",
-                       f"lateral velocity is {100 * lateral:.0f}% of the motion: a wheeled robot's body twist "
-                       "has little; if the driver reports the twist in the odom frame, say so", key,
-                       'twist_frame = "world"')
-    return None

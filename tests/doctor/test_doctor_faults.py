@@ -72,7 +72,7 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
     yaw_across_gaps = true to paste. Pasted, the heading turns by it at the first orientation after the gap:
     the final heading error is the IMU yaw's noise (0.05 asserted) and nothing is named. Without the gap
     both headings follow the gyro: nothing is named."""
-    from fusiond.doctor.thresholds import GAP_DRIFT_RATE, GAP_TURN_RAD
+    from fusiond.doctor.checks.gap_heading import GAP_DRIFT_RATE, GAP_TURN_RAD
 
     cfg = SimConfig(duration=90.0, standstill=2.0)
     samples = simulate(cfg)
@@ -106,8 +106,8 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
 def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():
     """The bins compared must lie within BIN_S of the estimate's times (the IMU) and GAP_EDGE_S of the gap (the
     estimate): a series that stops before the gap, or one with a single bin, gives no comparison."""
-    from fusiond.doctor.gap_heading import BIN_S, _around, _at
-    from fusiond.doctor.thresholds import GAP_EDGE_S
+    from fusiond.doctor.bins import BIN_S
+    from fusiond.doctor.checks.gap_heading import GAP_EDGE_S, _around, _at
 
     t = np.array([0.0, 0.2, 0.4, 10.4, 10.6])
     y = np.array([0.0, 0.1, 0.2, 1.2, 1.3])

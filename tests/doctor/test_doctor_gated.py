@@ -18,7 +18,7 @@ from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.doctor import ChannelStats
 from fusiond.doctor.checks.absolute import absolute_verdict
 from fusiond.doctor.channels import GATED_FRACTION
-from fusiond.doctor.thresholds import NIS_HIGH
+from fusiond.doctor.nis import NIS_HIGH
 from fusiond.samples import GpsSample
 
 from tests.support import sim_gps

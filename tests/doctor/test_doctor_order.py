@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from fusiond.doctor.check import GROUPS, BaseCheck
-from fusiond.doctor.registry import CHECKS, ordered
+from fusiond.doctor.registry import CHECKS, discovered, ordered
 from fusiond.errors import DoctorError, FusiondError
 
 
@@ -67,3 +67,13 @@ def test_the_registry_runs_each_check_after_what_it_follows_and_the_groups_in_or
             assert before in names[:i], (check.name, before)
     free = [c for c in CHECKS if not c.needs and not c.listed_after]
     assert [GROUPS.index(c.group) for c in free] == sorted(GROUPS.index(c.group) for c in free)
+
+
+def test_each_check_module_holds_one_check_and_the_registry_runs_them_all():
+    from pathlib import Path
+
+    import fusiond.doctor.checks
+
+    modules = sorted(p.stem for p in Path(fusiond.doctor.checks.__file__).parent.glob("*.py") if p.stem != "__init__")
+    assert [type(c).__module__.rsplit(".", 1)[1] for c in discovered()] == modules
+    assert sorted(_names(CHECKS)) == sorted(_names(discovered())) and len(CHECKS) == len(modules)

@@ -232,6 +232,7 @@ def test_each_doctor_check_holds_its_own_thresholds():
             if module.startswith("fusiond.doctor.checks") and names:
                 crossing.append(f"{path.name}: {module} {names}")
     assert crossing == []
+    assert not (PACKAGE / "doctor" / "thresholds.py").exists()  # no module of loose thresholds
 
 
 def test_a_kind_registers_under_its_tables_tag_and_an_unknown_tag_names_the_known_ones():

@@ -8,21 +8,20 @@ integrates into heading and, at speed, into position), or else the process noise
 
 from __future__ import annotations
 
-from ..config import Config
-from ..core.sensors.registry import kind_of
-from .series import Series
-from .verdict import Verdict, filter_key
-from .thresholds import DROPOUT_FRACTION, DROPOUT_LONGEST_S
+from ...config import Config
+from ..check import BaseCheck, found
+from ..evidence import Evidence
+from ..gyro import has_heading_reference
+from ..series import Series
+from ..verdict import Verdict, filter_key
 
 
-def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
-    """Does a sensor that observes heading (a GPS, a pose, an IMU's absolute or relative yaw) take part: one
-    configured and, when the per-sensor counts are known, one that delivered a sample (a configured sensor
-    that stayed silent, replayed with --allow-missing, references nothing)."""
-    def delivered(name: str) -> bool:
-        return stats is None or stats.get(name, {}).get("received", 0) > 0
+__all__ = ["CovarianceCap", "cap_verdict"]
 
-    return any(kind_of(s).heading_reference(s) and delivered(s.name) for s in cfg.sensors)
+# a cap reached after dropouts is blamed on them (gap_inflation) when one silence lasted 10 s or they add up
+# to a tenth of the run; shorter, rarer silences leave the growth to the dead-reckoning between them
+DROPOUT_LONGEST_S = 10.0
+DROPOUT_FRACTION = 0.1
 
 
 def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, standstill_updates: int,
@@ -65,3 +64,12 @@ def cap_verdict(series: Series, cfg: Config, at_cap: bool, gyro_fused: bool, sta
                    f"position/attitude uncertainty reached filter.covariance_cap{when} without long dropouts "
                    f"(longest silence {longest:.1f} s) or an unobservable bias: the process noise grows it faster "
                    "than the sensors constrain it", filter_key("process_noise"))
+
+
+class CovarianceCap(BaseCheck):
+    """A covariance left at its cap: what kept it growing."""
+
+    name = "covariance_cap"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        return found(cap_verdict(ev.series, ev.config, ev.at_cap, ev.gyro_fused, ev.standstill_updates, ev.stats))

@@ -26,16 +26,21 @@ from __future__ import annotations
 
 import math
 
-from ..config import Config
-from ..core.sensors.registry import kind_of
-from .gyro import quiet_episodes
-from .nis import ChannelStats
-from .series import Series
-from .verdict import Verdict, sensor_key
-from .heading import WANDER_RAD, imu_vs_gyro
-from .thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN
+from ...config import Config
+from ...core.sensors.registry import kind_of
+from ..gyro import quiet_episodes
+from ..nis import ChannelStats
+from ..series import Series
+from ..check import BaseCheck, found
+from ..evidence import Evidence
+from ..verdict import Verdict, sensor_key
+from ..heading import WANDER_RAD, imu_vs_gyro
 
-__all__ = ["late_bias_verdict"]
+
+__all__ = ["LateBias", "late_bias_verdict"]
+
+LATE_DRIFT_RAD = 0.05  # heading drift before the first standstill worth a verdict (3 deg)
+RELATIVE_MARGIN = 0.5  # the relative yaw's mean heading error must stay below this share of the late bias's
 
 
 def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: ChannelStats | None) -> Verdict | None:
@@ -95,3 +100,12 @@ def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: Channel
     return Verdict(imu.name, "heading", "warn", msg + ". Start recordings with the vehicle at rest for at least "
                    f"standstill_s ({cfg.filter.standstill_s:g} s) so that the bias is learned before it drives",
                    evidence=evidence)
+
+
+class LateBias(BaseCheck):
+    """A gyro bias first learned late, after the heading drifted with it."""
+
+    name = "late_bias"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        return found(late_bias_verdict(ev.series, ev.config, ev.gyro_fused, ev.gyro_bias_stats))

@@ -32,15 +32,25 @@ import math
 
 import numpy as np
 
-from ..config import Config, ImuSensor
-from ..core.sensors.registry import kind_of
-from ..estimator import rotation as rot
-from .bins import BIN_S
-from .gyro import quiet_episodes
-from .heading import imu_vs_gyro, timed
-from .series import Series
-from .verdict import Verdict, sensor_key
-from .thresholds import GAP_DRIFT_RATE, GAP_EDGE_S, GAP_TURN_RAD, MIN_GAP_S
+from ...config import Config, ImuSensor
+from ...core.sensors.registry import kind_of
+from ...estimator import rotation as rot
+from ..bins import BIN_S
+from ..gyro import quiet_episodes
+from ..heading import imu_vs_gyro, timed
+from ..series import Series
+from ..check import BaseCheck, found
+from ..evidence import Evidence
+from ..verdict import Verdict, sensor_key
+
+
+__all__ = ["GapHeading", "gap_heading_verdict"]
+
+MIN_GAP_S = 1.0  # shorter silences: the held inputs cover most of them
+GAP_TURN_RAD = 0.2  # rad of unexplained turn across a gap: several times the yaw noise (gap_heading's docstring)
+GAP_DRIFT_RATE = 0.01  # rad/s: an uncorrected consumer gyro bias, integrated by the IMU through the gap
+# the estimates compared lie this close to the gap's ends (a time jump holds poses ~1 s), or it is not judged
+GAP_EDGE_S = 2.0
 
 
 def _around(t: np.ndarray, start: float, end: float) -> tuple[int, int] | None:
@@ -156,4 +166,10 @@ def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float,
     return wander, slope + b
 
 
-__all__ = ["gap_heading_verdict"]
+class GapHeading(BaseCheck):
+    """The IMU's yaw against the estimate's across logging gaps."""
+
+    name = "gap_heading"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        return found(gap_heading_verdict(ev.series, ev.config, ev.run_imu, ev.t0))

@@ -22,17 +22,25 @@ import math
 
 import numpy as np
 
-from ..config import Config
-from ..core.sensors.registry import kind_of
-from ..core.sensors.imu.gyro_bias import quiet_bound
-from .gyro import Episode
-from .median import median
-from .mounting import MountYaw
-from .series import BIN_S, Series
-from .verdict import Verdict, sensor_key
-from .thresholds import COAST_Z_SIGMAS, DECEL_TOLERANCE, LEVEL_SHARE, MIN_COAST_BINS, MIN_COAST_DECEL, SMOOTH_BINS
+from ...config import Config
+from ...core.sensors.registry import kind_of
+from ...core.sensors.imu.gyro_bias import quiet_bound
+from ..gyro import Episode, quiet_episodes
+from ..median import median
+from ..mounting import SMOOTH_BINS, MountYaw
+from ..series import BIN_S, Series
+from ..check import BaseCheck, found
+from ..evidence import Evidence
+from ..verdict import Verdict, sensor_key
 
-__all__ = ["coast_verdict"]
+
+__all__ = ["Coast", "coast_verdict"]
+
+MIN_COAST_BINS = 2 * SMOOTH_BINS  # 2 s of coasting measured, at least
+DECEL_TOLERANCE = 0.15  # m/s^2: a coast-down constant this close to the measured one is right enough
+MIN_COAST_DECEL = 0.05  # m/s^2: the smallest advised (a 3 m/s coast then runs a minute); 0 turns the coast off
+COAST_Z_SIGMAS = 3.0  # a coast-down is named beyond 3 standard errors (0.27 % two-sided for a normal error)
+LEVEL_SHARE = 0.5  # an accelerometer bin counts when gravity was removed with the IMU's attitude in most of it
 
 
 def coast_verdict(series: Series, cfg: Config, mount: MountYaw | None, turning: list[Episode],
@@ -87,3 +95,15 @@ def coast_verdict(series: Series, cfg: Config, mount: MountYaw | None, turning: 
     return Verdict(odom.name, "coast", "warn",
                    where + f"slowing at {decel:.2f} m/s^2 (+- {se:.2f}), not the {configured:g} assumed; {cost}", key,
                    f"coast_decel = {decel:.2f}", evidence)
+
+
+class Coast(BaseCheck):
+    """How the vehicle slowed while its drive read zero, against the configured coast-down."""
+
+    name = "coast"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        if ev.run_imu is None:
+            return []
+        standstills, turning = quiet_episodes(ev.series, ev.config, ev.run_imu)
+        return found(coast_verdict(ev.series, ev.config, ev.mount, turning, standstills))
