@@ -39,12 +39,12 @@ from ..bins import BIN_S
 from ..gyro import quiet_episodes
 from ..heading import imu_vs_gyro, timed
 from ..series import Series
-from ..check import BaseCheck, found
+from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
 
 
-__all__ = ["GapHeading", "gap_heading_verdict"]
+__all__ = ["GapHeading"]
 
 MIN_GAP_S = 1.0  # shorter silences: the held inputs cover most of them
 GAP_TURN_RAD = 0.2  # rad of unexplained turn across a gap: several times the yaw noise (gap_heading's docstring)
@@ -78,78 +78,6 @@ def _at(t: np.ndarray, y: np.ndarray, when: float) -> float | None:
     return float(y[k])
 
 
-def gap_heading_verdict(series: Series, cfg: Config, imu: ImuSensor | None, t0: float | None = None) -> Verdict | None:
-    """A verdict when the IMU's unfused yaw turned across logging gaps more than the estimate did. ``t0``: the
-    run's first stamp (the gap is then placed in seconds from it)."""
-    if imu is None or imu.fuses_yaw:
-        return None
-    if any(kind_of(s).measures_position for s in cfg.sensors):
-        return None  # an absolute position/pose finds the heading again
-    gaps = [(start, length) for start, length in series.odom_gaps if length >= MIN_GAP_S]
-    if not gaps:
-        return None
-    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    if len(yi) < 2 or float(np.ptp(yi)) < 1e-6:
-        return None  # a constant yaw (a driver's placeholder): it shows no turn, in a gap or out of one
-    te, ye = np.array(series.est_t), np.array(series.est_yaw)
-    # the IMU yaw's own drift against the bias-corrected gyro, measured over the run: a 6-axis AHRS integrating
-    # its gyro's bias turns by r x the gap with the vehicle parked (0.5 rad over 25 s at 0.02 rad/s); what
-    # it turned beyond that is the turn
-    drift = _relative_drift(series, cfg, imu)
-    rate = drift[1] if drift is not None and math.isfinite(drift[1]) else 0.0
-    missed = []
-    for start, length in gaps:
-        # the estimate's heading change over the gap and the IMU's over the same interval (outside the gap
-        # the filter's heading follows the gyro, and so does the IMU's yaw: only the gap differs)
-        # (a bin after the gap: the first pose after it is the odometry's, published before the IMU sample
-        # of the same instant turns the heading across the gap)
-        around = _around(te, start, start + length + BIN_S)
-        if around is None:
-            continue
-        e0, e1 = around
-        before, after = _at(ti, yi, float(te[e0])), _at(ti, yi, float(te[e1]))
-        if before is None or after is None:
-            continue
-        imu_turn = rot.wrap(after - before - rate * (float(te[e1]) - float(te[e0])))
-        est_turn = rot.wrap(float(ye[e1]) - float(ye[e0]))
-        miss = rot.wrap(imu_turn - est_turn)
-        if abs(miss) > GAP_TURN_RAD + GAP_DRIFT_RATE * length:
-            missed.append((start, length, imu_turn, est_turn))
-    if not missed:
-        return None
-    worst = max(missed, key=lambda m: abs(rot.wrap(m[2] - m[3])))
-    start, length, imu_turn, est_turn = worst
-    evidence = {"gaps_with_missed_turn": float(len(missed)), "largest_missed_turn_rad": rot.wrap(imu_turn - est_turn),
-                "gap_s": length}
-    msg = (f"across {len(missed)} logging gap(s) the IMU's own yaw turned by more than the estimate (the largest: "
-           f"{length:.1f} s from {start - (t0 or 0.0):.1f} s{' into the run' if t0 is not None else ''}, the IMU "
-           f"turned {math.degrees(imu_turn):+.0f} deg beyond its own drift, the estimate "
-           f"{math.degrees(est_turn):+.0f} deg): nothing "
-           "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused), so it drives "
-           "on along the heading it had")
-    if imu.roll_pitch_only and imu.yaw_across_gaps:
-        # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
-        return Verdict(imu.name, "heading_across_gaps", "warn",
-                       msg + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
-                       "above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the vehicle "
-                       "stood still before and after the gap (see the heading_not_turned_across_gap log lines). "
-                       "Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)
-    cost = ""
-    if drift is not None:
-        wander, rate = drift
-        evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate})
-        cost = (f"; it drifts {rate:+.5f} rad/s against the bias-corrected gyro, ~{abs(rate) * length:.3f} rad over "
-                f"the largest gap, turned in with the turn (fused as relative, over the whole run)")
-    if imu.roll_pitch_only:
-        return Verdict(imu.name, "heading_across_gaps", "warn",
-                       msg + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
-                       f"heading{cost}", sensor_key(imu.name, "yaw_across_gaps"), "yaw_across_gaps = true", evidence)
-    return Verdict(imu.name, "heading_across_gaps", "warn",
-                   msg + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, and with yaw_across_gaps its "
-                   f"yaw change across a gap turns the heading{cost}", sensor_key(imu.name, "orientation"),
-                   'orientation = "roll_pitch"\nyaw_across_gaps = true', evidence)
-
-
 def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, float] | None:
     """(wander, drift rate) of the IMU's yaw against the bias-corrected gyro: ``heading.imu_vs_gyro``'s slope
     is r - b, b the gyro's z bias, read at the first standstill (0 without one: then r - b is all that can be
@@ -172,4 +100,77 @@ class GapHeading(BaseCheck):
     name = "gap_heading"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(gap_heading_verdict(ev.series, ev.config, ev.run_imu, ev.t0))
+        """A verdict when the IMU's unfused yaw turned across logging gaps more than the estimate did. ``t0``: the
+        run's first stamp (the gap is then placed in seconds from it)."""
+        series, cfg, imu, t0 = ev.series, ev.config, ev.run_imu, ev.t0
+        if imu is None or imu.fuses_yaw:
+            return []
+        if any(kind_of(s).measures_position for s in cfg.sensors):
+            return []  # an absolute position/pose finds the heading again
+        gaps = [(start, length) for start, length in series.odom_gaps if length >= MIN_GAP_S]
+        if not gaps:
+            return []
+        ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
+        if len(yi) < 2 or float(np.ptp(yi)) < 1e-6:
+            return []  # a constant yaw (a driver's placeholder): it shows no turn, in a gap or out of one
+        te, ye = np.array(series.est_t), np.array(series.est_yaw)
+        # the IMU yaw's own drift against the bias-corrected gyro, measured over the run: a 6-axis AHRS integrating
+        # its gyro's bias turns by r x the gap with the vehicle parked (0.5 rad over 25 s at 0.02 rad/s); what
+        # it turned beyond that is the turn
+        drift = _relative_drift(series, cfg, imu)
+        rate = drift[1] if drift is not None and math.isfinite(drift[1]) else 0.0
+        missed = []
+        for start, length in gaps:
+            # the estimate's heading change over the gap and the IMU's over the same interval (outside the gap
+            # the filter's heading follows the gyro, and so does the IMU's yaw: only the gap differs)
+            # (a bin after the gap: the first pose after it is the odometry's, published before the IMU sample
+            # of the same instant turns the heading across the gap)
+            around = _around(te, start, start + length + BIN_S)
+            if around is None:
+                continue
+            e0, e1 = around
+            before, after = _at(ti, yi, float(te[e0])), _at(ti, yi, float(te[e1]))
+            if before is None or after is None:
+                continue
+            imu_turn = rot.wrap(after - before - rate * (float(te[e1]) - float(te[e0])))
+            est_turn = rot.wrap(float(ye[e1]) - float(ye[e0]))
+            miss = rot.wrap(imu_turn - est_turn)
+            if abs(miss) > GAP_TURN_RAD + GAP_DRIFT_RATE * length:
+                missed.append((start, length, imu_turn, est_turn))
+        if not missed:
+            return []
+        worst = max(missed, key=lambda m: abs(rot.wrap(m[2] - m[3])))
+        start, length, imu_turn, est_turn = worst
+        evidence = {"gaps_with_missed_turn": float(len(missed)),
+                    "largest_missed_turn_rad": rot.wrap(imu_turn - est_turn),
+                    "gap_s": length}
+        msg = (f"across {len(missed)} logging gap(s) the IMU's own yaw turned by more than the estimate (the largest: "
+               f"{length:.1f} s from {start - (t0 or 0.0):.1f} s{' into the run' if t0 is not None else ''}, the IMU "
+               f"turned {math.degrees(imu_turn):+.0f} deg beyond its own drift, the estimate "
+               f"{math.degrees(est_turn):+.0f} deg): nothing "
+               "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused), so it drives "
+               "on along the heading it had")
+        if imu.roll_pitch_only and imu.yaw_across_gaps:
+            # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
+            return [Verdict(imu.name, "heading_across_gaps", "warn",
+                            msg + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
+                            "above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the "
+                            "vehicle stood still before and after the gap (see the heading_not_turned_across_gap log "
+                            "lines). Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
+        cost = ""
+        if drift is not None:
+            wander, rate = drift
+            evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate})
+            cost = (f"; it drifts {rate:+.5f} rad/s against the bias-corrected gyro, "
+                    f"~{abs(rate) * length:.3f} rad over "
+                    f"the largest gap, turned in with the turn (fused as relative, over the whole run)")
+        if imu.roll_pitch_only:
+            return [Verdict(imu.name, "heading_across_gaps", "warn",
+                            msg + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
+                            f"heading{cost}", sensor_key(imu.name, "yaw_across_gaps"),
+                            "yaw_across_gaps = true", evidence)]
+        return [Verdict(imu.name, "heading_across_gaps", "warn",
+                        msg + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, "
+                        "and with yaw_across_gaps its "
+                        f"yaw change across a gap turns the heading{cost}", sensor_key(imu.name, "orientation"),
+                        'orientation = "roll_pitch"\nyaw_across_gaps = true', evidence)]

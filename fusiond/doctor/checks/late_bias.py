@@ -26,80 +26,18 @@ from __future__ import annotations
 
 import math
 
-from ...config import Config
 from ...core.sensors.registry import kind_of
 from ..gyro import quiet_episodes
-from ..nis import ChannelStats
-from ..series import Series
-from ..check import BaseCheck, found
+from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
 from ..heading import WANDER_RAD, imu_vs_gyro
 
 
-__all__ = ["LateBias", "late_bias_verdict"]
+__all__ = ["LateBias"]
 
 LATE_DRIFT_RAD = 0.05  # heading drift before the first standstill worth a verdict (3 deg)
 RELATIVE_MARGIN = 0.5  # the relative yaw's mean heading error must stay below this share of the late bias's
-
-
-def late_bias_verdict(series: Series, cfg: Config, gyro_fused: bool, ch: ChannelStats | None) -> Verdict | None:
-    """The verdict on a gyro bias first learned long after the start, without a heading reference (module doc).
-
-    ``ch``: the IMU's gyro_bias channel. The bias counts as learned at its first accepted update (the core's
-    own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the first
-    standstill's gyro reading says."""
-    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
-    if imu is None or not gyro_fused or len(series.odom_t) < 2:
-        return None
-    if any(kind_of(s).heading_reference(s) for s in cfg.sensors):
-        return None  # a heading reference corrects the drift as it happens
-    episodes, _ = quiet_episodes(series, cfg, imu)
-    if not episodes or not math.isfinite(episodes[0].gyro_mean):
-        return None  # never learned: bias_check's verdict
-    first = episodes[0]
-    t_start, t_end = series.odom_t[0], series.odom_t[-1]
-    accepted = [t for t, rejected in zip(ch.stamps, ch.rejected_flags) if not rejected] if ch is not None else []
-    before = (min(accepted) if accepted else t_end) - t_start
-    b = first.gyro_mean
-    drift = abs(b) * before
-    if drift < LATE_DRIFT_RAD:
-        return None
-    evidence = {"first_standstill_s": first.t0 - t_start, "gyro_at_rest_rad_s": b, "heading_drift_rad": drift}
-    unknown = f"for the first {before:.0f} s" if accepted else f"for the whole run ({before:.0f} s)"
-    msg = (f"the gyro's z bias was unknown {unknown}: the first standstill, at "
-           f"{first.t0 - t_start:.0f} s, shows the gyro reading {b:+.4f} rad/s at rest, so until then the heading "
-           f"turned by up to {drift:.2f} rad ({math.degrees(drift):.0f} deg) that the vehicle did not, and the "
-           "track with it; nothing configured holds the heading (no GPS or pose, the IMU's yaw not fused). "
-           + ("The odom frame being continuous (filter.continuous_odom), the heading stays off by that from then on"
-              if cfg.filter.continuous_odom else
-              "The bias update turns the heading back as far as the filter's correlations allow; the track driven "
-              "meanwhile stays bent"))
-    wander, slope = imu_vs_gyro(series) or (math.nan, math.nan)
-    if math.isfinite(wander) and math.isfinite(slope):
-        # yaw - raw gyro heading drifts at r - b: the IMU's own drift against the bias-corrected gyro is r
-        rate = slope + b
-        run = t_end - t_start
-        late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured ...
-        if cfg.filter.continuous_odom:  # ... plus the drift left in the heading after the update
-            late_cost += abs(b) * before * max(run - before, 0.0) / run
-        relative_cost = abs(rate) * run / 2.0  # ... with the IMU's yaw fused as relative
-        evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
-                         "mean_heading_error_rad": late_cost, "relative_mean_heading_error_rad": relative_cost})
-        if wander < WANDER_RAD and relative_cost < RELATIVE_MARGIN * late_cost:
-            return Verdict(imu.name, "heading", "warn",
-                           msg + f". The IMU's own yaw follows the bias-corrected gyro to {wander:.3f} rad rms "
-                           f"and drifts {rate:+.5f} rad/s: fused as a relative yaw it holds the heading from "
-                           f"the start, off by ~{relative_cost:.3f} rad on average over the run against "
-                           f"~{late_cost:.3f} now", sensor_key(imu.name, "orientation"),
-                           'orientation = "relative"', evidence)
-        msg += (". The IMU's own yaw would not do better: it "
-                + (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD
-                   else f"drifts {rate:+.5f} rad/s, ~{relative_cost:.3f} rad off on average over the run "
-                   f"against ~{late_cost:.3f} now"))
-    return Verdict(imu.name, "heading", "warn", msg + ". Start recordings with the vehicle at rest for at least "
-                   f"standstill_s ({cfg.filter.standstill_s:g} s) so that the bias is learned before it drives",
-                   evidence=evidence)
 
 
 class LateBias(BaseCheck):
@@ -108,4 +46,60 @@ class LateBias(BaseCheck):
     name = "late_bias"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(late_bias_verdict(ev.series, ev.config, ev.gyro_fused, ev.gyro_bias_stats))
+        """The verdict on a gyro bias first learned long after the start, without a heading reference (module doc).
+
+        ``ch``: the IMU's gyro_bias channel. The bias counts as learned at its first accepted update (the core's
+        own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the first
+        standstill's gyro reading says."""
+        series, cfg, gyro_fused, ch = ev.series, ev.config, ev.gyro_fused, ev.gyro_bias_stats
+        imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
+        if imu is None or not gyro_fused or len(series.odom_t) < 2:
+            return []
+        if any(kind_of(s).heading_reference(s) for s in cfg.sensors):
+            return []  # a heading reference corrects the drift as it happens
+        episodes, _ = quiet_episodes(series, cfg, imu)
+        if not episodes or not math.isfinite(episodes[0].gyro_mean):
+            return []  # never learned: bias_check's verdict
+        first = episodes[0]
+        t_start, t_end = series.odom_t[0], series.odom_t[-1]
+        accepted = [t for t, rejected in zip(ch.stamps, ch.rejected_flags) if not rejected] if ch is not None else []
+        before = (min(accepted) if accepted else t_end) - t_start
+        b = first.gyro_mean
+        drift = abs(b) * before
+        if drift < LATE_DRIFT_RAD:
+            return []
+        evidence = {"first_standstill_s": first.t0 - t_start, "gyro_at_rest_rad_s": b, "heading_drift_rad": drift}
+        unknown = f"for the first {before:.0f} s" if accepted else f"for the whole run ({before:.0f} s)"
+        msg = (f"the gyro's z bias was unknown {unknown}: the first standstill, at "
+               f"{first.t0 - t_start:.0f} s, shows the gyro reading {b:+.4f} rad/s at rest, so until then the heading "
+               f"turned by up to {drift:.2f} rad ({math.degrees(drift):.0f} deg) that the vehicle did not, and the "
+               "track with it; nothing configured holds the heading (no GPS or pose, the IMU's yaw not fused). "
+               + ("The odom frame being continuous (filter.continuous_odom), the heading stays off by that from then on"
+                  if cfg.filter.continuous_odom else
+                  "The bias update turns the heading back as far as the filter's correlations allow; the track driven "
+                  "meanwhile stays bent"))
+        wander, slope = imu_vs_gyro(series) or (math.nan, math.nan)
+        if math.isfinite(wander) and math.isfinite(slope):
+            # yaw - raw gyro heading drifts at r - b: the IMU's own drift against the bias-corrected gyro is r
+            rate = slope + b
+            run = t_end - t_start
+            late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured ...
+            if cfg.filter.continuous_odom:  # ... plus the drift left in the heading after the update
+                late_cost += abs(b) * before * max(run - before, 0.0) / run
+            relative_cost = abs(rate) * run / 2.0  # ... with the IMU's yaw fused as relative
+            evidence.update({"imu_yaw_wander_rad": wander, "imu_yaw_drift_rad_s": rate,
+                             "mean_heading_error_rad": late_cost, "relative_mean_heading_error_rad": relative_cost})
+            if wander < WANDER_RAD and relative_cost < RELATIVE_MARGIN * late_cost:
+                return [Verdict(imu.name, "heading", "warn",
+                                msg + f". The IMU's own yaw follows the bias-corrected gyro to {wander:.3f} rad rms "
+                                f"and drifts {rate:+.5f} rad/s: fused as a relative yaw it holds the heading from "
+                                f"the start, off by ~{relative_cost:.3f} rad on average over the run against "
+                                f"~{late_cost:.3f} now", sensor_key(imu.name, "orientation"),
+                                'orientation = "relative"', evidence)]
+            msg += (". The IMU's own yaw would not do better: it "
+                    + (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD
+                       else f"drifts {rate:+.5f} rad/s, ~{relative_cost:.3f} rad off on average over the run "
+                       f"against ~{late_cost:.3f} now"))
+        return [Verdict(imu.name, "heading", "warn", msg + ". Start recordings with the vehicle at rest for at least "
+                        f"standstill_s ({cfg.filter.standstill_s:g} s) so that the bias is learned before it drives",
+                        evidence=evidence)]

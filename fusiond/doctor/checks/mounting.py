@@ -4,38 +4,12 @@ from __future__ import annotations
 
 import math
 
-from ...config import ImuSensor
-from ..attitude import TiltStats, full_mount, lean_of, paste_mount
-from ..check import MIN_UPDATES, BaseCheck, found
+from ..attitude import full_mount, lean_of, paste_mount
+from ..check import MIN_UPDATES, BaseCheck
 from ..evidence import Evidence
-from ..mounting import MountYaw
 from ..verdict import Verdict, sensor_key
 
-__all__ = ["Mounting", "mount_verdict"]
-
-
-def mount_verdict(imu: ImuSensor | None, mount: MountYaw | None, tilt: TiltStats,
-                  min_updates: int = 50) -> Verdict | None:
-    """The accelerometer's verdict on the mounting yaw; None when the driving could not tell."""
-    if imu is None or mount is None:
-        return None
-    ev = mount.evidence()
-    deg = math.degrees(mount.delta)
-    se_deg = math.degrees(mount.se)
-    if mount.named:
-        means, _, leaning = lean_of(tilt, min_updates)
-        lean = (means[0], means[1]) if leaning else (0.0, 0.0)
-        return Verdict(imu.name, "attitude", "problem",
-                       f"the accelerometer's horizontal axes are turned by {deg:+.1f} deg (+- {se_deg:.1f}) against "
-                       f"the motion the wheels and the gyro report ({mount.samples} s of driving): the IMU is mounted "
-                       "yawed by that and extrinsic_rpy does not say so (the gyro's z rate cannot show it; the IMU's "
-                       "roll and pitch land on the wrong base axes). The full mount is below",
-                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, lean, mount.delta)), ev)
-    if mount.resolved:
-        return Verdict(imu.name, "attitude", "ok",
-                       f"the accelerometer agrees with the wheels' motion: mounting yaw {deg:+.1f} deg "
-                       f"(+- {se_deg:.1f}) against extrinsic_rpy", evidence=ev)
-    return None
+__all__ = ["Mounting"]
 
 
 class Mounting(BaseCheck):
@@ -45,4 +19,25 @@ class Mounting(BaseCheck):
     listed_after = ("lean",)  # both speak of the IMU's attitude: the lean first
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(mount_verdict(ev.run_imu, ev.mount, ev.tilt, MIN_UPDATES))
+        """The accelerometer's verdict on the mounting yaw; none when the driving could not tell."""
+        imu, mount, tilt, min_updates = ev.run_imu, ev.mount, ev.tilt, MIN_UPDATES
+        if imu is None or mount is None:
+            return []
+        evidence = mount.evidence()
+        deg = math.degrees(mount.delta)
+        se_deg = math.degrees(mount.se)
+        if mount.named:
+            means, _, leaning = lean_of(tilt, min_updates)
+            lean = (means[0], means[1]) if leaning else (0.0, 0.0)
+            return [Verdict(imu.name, "attitude", "problem",
+                            f"the accelerometer's horizontal axes are turned by {deg:+.1f} deg (+- {se_deg:.1f}) "
+                            f"against the motion the wheels and the gyro report ({mount.samples} s of driving): the "
+                            "IMU is mounted yawed by that and extrinsic_rpy does not say so (the gyro's z rate cannot "
+                            "show it; the IMU's roll and pitch land on the wrong base axes). The full mount is below",
+                            sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, lean, mount.delta)),
+                            evidence)]
+        if mount.resolved:
+            return [Verdict(imu.name, "attitude", "ok",
+                            f"the accelerometer agrees with the wheels' motion: mounting yaw {deg:+.1f} deg "
+                            f"(+- {se_deg:.1f}) against extrinsic_rpy", evidence=evidence)]
+        return []

@@ -53,7 +53,7 @@ import numpy as np
 from ...config import Config, GpsSensor
 from ...core.sensors.registry import kind_of
 from ...core.diagnostics import t_quantile
-from ..check import BaseCheck, found
+from ..check import BaseCheck
 from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, chord_ends, cumulative, newey_west
 from ..evidence import Evidence
 from ..heading import gps_sigma, timed
@@ -61,7 +61,7 @@ from ..series import Series
 from ..verdict import Verdict, sensor_key
 
 
-__all__ = ["Speed", "speed_check", "wheel_scale_fit"]
+__all__ = ["Speed", "wheel_scale_fit"]
 
 SCALE_TOLERANCE = 0.02  # a wheel scale within 2 % is not worth a state
 
@@ -164,53 +164,6 @@ def _model_variance(c: np.ndarray, ta: np.ndarray, tb: np.ndarray, u: np.ndarray
     return total
 
 
-def speed_check(series: Series, cfg: Config, scales: dict[str, float] | None = None) -> Verdict | None:
-    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
-    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
-    if odom is None or gps is None:
-        return None
-    fit = wheel_scale_fit(series, cfg)
-    if fit is None:
-        return None
-    scale, se, n = fit.scale, fit.se, fit.chords
-    evidence = fit.evidence()
-    estimated = (scales or {}).get("wheel_scale")
-    # scale_estimation unset means on with a GPS: the core then has a wheel_scale state
-    estimating = odom.scale_estimation or (odom.scale_estimation is None and estimated is not None)
-    band = fit.band
-    if abs(scale - 1.0) > band:
-        if estimating:
-            if estimated is not None and abs(estimated - scale) <= band:
-                return Verdict(odom.name, "speed", "ok",
-                               f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS over {n} chords; "
-                               f"the estimated wheel scale {estimated:.3f} matches ({scale:.3f} +- {se:.3f} measured)",
-                               evidence=evidence)
-            return Verdict(odom.name, "speed", "warn",
-                           f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS (scale {scale:.3f} +- "
-                           f"{se:.3f} measured over {n} chords) but the estimated wheel scale is "
-                           f"{estimated if estimated is not None else float('nan'):.3f}: it has not converged; "
-                           "filter.wheel_scale_sigma may be too small", "filter.wheel_scale_sigma", evidence=evidence)
-        return Verdict(odom.name, "speed", "problem",
-                       f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS distance (true/wheel speed "
-                       f"{scale:.3f} +- {se:.3f}, over {n} chords, {fit.distance_m:.0f} m): a tyre radius or slip "
-                       "error; estimate the wheel scale", sensor_key(odom.name, "scale_estimation"),
-                       "scale_estimation = true", evidence)
-    if estimating and estimated is not None and abs(estimated - scale) > band:
-        # The wheels agree with the GPS chords, yet the filter's wheel_scale state moved away: it learned
-        # something the data does not contain (fixes gated out while the estimate drifted, a heading or
-        # altitude error explained as a scale, a filter re-acquired after a gap), and it bends every
-        # dead-reckoned metre by that much.
-        return Verdict(odom.name, "speed", "warn",
-                       f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
-                       f"{fit.distance_m:.0f} m) but the filter's estimated wheel scale is {estimated:.3f}: the "
-                       "state learned an error the wheels do not have; see the GPS verdicts (gated or lost fixes, "
-                       "a wrong heading), or turn the state off", sensor_key(odom.name, "scale_estimation"),
-                       "scale_estimation = false", {**evidence, "wheel_scale_estimated": estimated})
-    return Verdict(odom.name, "speed", "ok",
-                   f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
-                   f"{fit.distance_m:.0f} m)", evidence=evidence)
-
-
 class Speed(BaseCheck):
     """The wheel speed's scale against the GPS chords."""
 
@@ -218,4 +171,50 @@ class Speed(BaseCheck):
     group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        return found(speed_check(ev.series, ev.config, ev.scales))
+        series, cfg, scales = ev.series, ev.config, ev.scales
+        odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+        gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
+        if odom is None or gps is None:
+            return []
+        fit = wheel_scale_fit(series, cfg)
+        if fit is None:
+            return []
+        scale, se, n = fit.scale, fit.se, fit.chords
+        evidence = fit.evidence()
+        estimated = (scales or {}).get("wheel_scale")
+        # scale_estimation unset means on with a GPS: the core then has a wheel_scale state
+        estimating = odom.scale_estimation or (odom.scale_estimation is None and estimated is not None)
+        band = fit.band
+        if abs(scale - 1.0) > band:
+            if estimating:
+                if estimated is not None and abs(estimated - scale) <= band:
+                    return [Verdict(odom.name, "speed", "ok",
+                                    f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS over {n} chords; "
+                                    f"the estimated wheel scale {estimated:.3f} matches ({scale:.3f} +- {se:.3f} "
+                                    "measured)",
+                                    evidence=evidence)]
+                return [Verdict(odom.name, "speed", "warn",
+                                f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS (scale {scale:.3f} +- "
+                                f"{se:.3f} measured over {n} chords) but the estimated wheel scale is "
+                                f"{estimated if estimated is not None else float('nan'):.3f}: it has not converged; "
+                                "filter.wheel_scale_sigma may be too small",
+                                "filter.wheel_scale_sigma", evidence=evidence)]
+            return [Verdict(odom.name, "speed", "problem",
+                            f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS distance (true/wheel speed "
+                            f"{scale:.3f} +- {se:.3f}, over {n} chords, {fit.distance_m:.0f} m): a tyre radius or slip "
+                            "error; estimate the wheel scale", sensor_key(odom.name, "scale_estimation"),
+                            "scale_estimation = true", evidence)]
+        if estimating and estimated is not None and abs(estimated - scale) > band:
+            # The wheels agree with the GPS chords, yet the filter's wheel_scale state moved away: it learned
+            # something the data does not contain (fixes gated out while the estimate drifted, a heading or
+            # altitude error explained as a scale, a filter re-acquired after a gap), and it bends every
+            # dead-reckoned metre by that much.
+            return [Verdict(odom.name, "speed", "warn",
+                            f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
+                            f"{fit.distance_m:.0f} m) but the filter's estimated wheel scale is {estimated:.3f}: the "
+                            "state learned an error the wheels do not have; see the GPS verdicts (gated or lost fixes, "
+                            "a wrong heading), or turn the state off", sensor_key(odom.name, "scale_estimation"),
+                            "scale_estimation = false", {**evidence, "wheel_scale_estimated": estimated})]
+        return [Verdict(odom.name, "speed", "ok",
+                        f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
+                        f"{fit.distance_m:.0f} m)", evidence=evidence)]

@@ -11,16 +11,15 @@ import math
 
 import numpy as np
 
-from ...config import Config
 from ...core.sensors.registry import kind_of
-from ..check import BaseCheck, found
+from ..check import BaseCheck
 from ..evidence import Evidence
 from ..heading import (MIN_TURN_RAD, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, rate_fit_text, segments, timed,
                        wheel_yaw_fit, zero_while_turning)
 from ..series import Series
 from ..verdict import Verdict, sensor_key
 
-__all__ = ["WheelHeading", "wheel_heading_check"]
+__all__ = ["WheelHeading"]
 
 MISSED_INTERVAL_S = 0.5  # s: an odometry interval counts for at most this much turn time (gaps count nothing)
 MISSED_TURN_RAD = 0.2  # rad (11 deg) of turn the wheels missed in all: worth fusing the gyro for
@@ -62,49 +61,6 @@ def _missed_turn(series: Series) -> tuple[float, float]:
     return float(np.sum(np.abs(g[zero]) * dt[zero])), float(np.sum(dt[zero]))
 
 
-def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
-    """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
-    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
-    if odom is None or any(kind_of(s).fuses_gyro(s) for s in cfg.sensors) or not odom.twist_measured[5]:
-        return None
-    if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
-        return None
-    fit = wheel_yaw_fit(series)
-    if fit is None:
-        return None
-    k, offset = fit
-    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-    evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
-    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    k_imu = (_yaw_scale(ti, yi, tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if len(ti) >= 10 and len(tg)
-             else math.nan)
-    if math.isfinite(k_imu):
-        evidence["imu_vs_gyro_yaw_scale"] = k_imu
-    imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
-    missed, seconds = _missed_turn(series)
-    if missed > MISSED_TURN_RAD and imu is not None:
-        evidence.update({"turn_missed_rad": missed, "zero_while_turning_s": seconds})
-        return Verdict(odom.name, "heading", "problem",
-                       f"the wheels read exactly zero for {seconds:.1f} s in all while the gyro turned ({missed:.2f} "
-                       "rad of turn: the drive at rest while the vehicle turns, or its yaw rate lost). The gyro is "
-                       "not fused, so the predicted heading missed every one of those turns (outside them the wheels' "
-                       f"yaw rate = {rate_fit_text(k, offset)}); fuse the gyro so it drives heading",
-                       sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)
-    if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
-        return Verdict(odom.name, "heading", "ok",
-                       f"wheel yaw rate agrees with the gyro (scale {k:.2f}, offset {offset:+.3f} rad/s)",
-                       evidence=evidence)
-    agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
-             if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
-    msg = (f"the wheels' yaw rate = {rate_fit_text(k, offset)}{agree}: skid-steer slip "
-           "or a driver scale. The gyro "
-           "is not fused, so this wheel yaw rate drives the predicted heading and every heading update fights it")
-    if imu is None:
-        return Verdict(odom.name, "heading", "warn", msg, evidence=evidence)
-    return Verdict(odom.name, "heading", "problem", msg + "; fuse the gyro so it drives heading",
-                   sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)
-
-
 class WheelHeading(BaseCheck):
     """The wheels' yaw rate against the gyro's; not asked when the wheels' yaw rate is known unmeasured
     (either check it needs already says so)."""
@@ -114,6 +70,47 @@ class WheelHeading(BaseCheck):
     needs = ("unmeasured_yaw_rate", "yaw_rate_not_measured")
 
     def run(self, ev: Evidence) -> list[Verdict]:
+        """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
         if any(ev.findings.first(n) is not None for n in self.needs):
             return []
-        return found(wheel_heading_check(ev.series, ev.config))
+        series, cfg = ev.series, ev.config
+        odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+        if odom is None or any(kind_of(s).fuses_gyro(s) for s in cfg.sensors) or not odom.twist_measured[5]:
+            return []
+        if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
+            return []
+        fit = wheel_yaw_fit(series)
+        if fit is None:
+            return []
+        k, offset = fit
+        tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
+        evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
+        ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
+        k_imu = (_yaw_scale(ti, yi, tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if len(ti) >= 10 and len(tg)
+                 else math.nan)
+        if math.isfinite(k_imu):
+            evidence["imu_vs_gyro_yaw_scale"] = k_imu
+        imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
+        missed, seconds = _missed_turn(series)
+        if missed > MISSED_TURN_RAD and imu is not None:
+            evidence.update({"turn_missed_rad": missed, "zero_while_turning_s": seconds})
+            return [Verdict(odom.name, "heading", "problem",
+                            f"the wheels read exactly zero for {seconds:.1f} s in all while the gyro turned "
+                            f"({missed:.2f} rad of turn: the drive at rest while the vehicle turns, or its yaw rate "
+                            "lost). The gyro "
+                            "is not fused, so the predicted heading missed every one of those turns (outside them the "
+                            f"wheels' yaw rate = {rate_fit_text(k, offset)}); fuse the gyro so it drives heading",
+                            sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)]
+        if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
+            return [Verdict(odom.name, "heading", "ok",
+                            f"wheel yaw rate agrees with the gyro (scale {k:.2f}, offset {offset:+.3f} rad/s)",
+                            evidence=evidence)]
+        agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
+                 if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
+        msg = (f"the wheels' yaw rate = {rate_fit_text(k, offset)}{agree}: skid-steer slip "
+               "or a driver scale. The gyro "
+               "is not fused, so this wheel yaw rate drives the predicted heading and every heading update fights it")
+        if imu is None:
+            return [Verdict(odom.name, "heading", "warn", msg, evidence=evidence)]
+        return [Verdict(odom.name, "heading", "problem", msg + "; fuse the gyro so it drives heading",
+                        sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)]
