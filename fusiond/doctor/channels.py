@@ -20,7 +20,8 @@ from .verdict import Verdict
 __all__ = ["ABSOLUTE_CHANNELS", "GATED_FRACTION", "PerChannel", "applied_verdict", "channel_kind", "figures",
            "gated_out", "geodetic", "gps_up", "nis_head"]
 
-GATED_FRACTION = 0.1  # gated beyond this: the sensor jumps (or its noise is understated) ...
+# gated beyond this: the sensor jumps, or its noise is understated (checks/absolute.py MOST_GATED tells which)
+GATED_FRACTION = 0.1
 UNALIGNED_MIN_FIXES = 50  # fixes before a heading never found is worth a verdict
 
 

@@ -16,7 +16,8 @@ from ..verdict import Verdict, sensor_key
 
 __all__ = ["AbsoluteNis", "absolute_verdict"]
 
-MOST_GATED = 0.5  # ... and beyond this: its noise is understated (jumps are the exception, not the rule)
+# gated beyond this (and so beyond GATED_FRACTION): its noise is understated, as jumps are the exception, not the rule
+MOST_GATED = 0.5
 
 
 def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
