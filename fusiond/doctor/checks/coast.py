@@ -49,11 +49,11 @@ class Coast(BaseCheck):
 
     def run(self, ev: Evidence) -> list[Verdict]:
         """The verdict on ``coast_decel`` from the coasts (``turning``: the wheels at rest while the gyro turns;
-        ``quiet``: the standstills, whose gyro scatter is the gyro's real noise, where there are any)."""
+        ``standstills``: their gyro scatter is the gyro's real noise, where there are any)."""
         if ev.run_imu is None:
             return []
         standstills, turning = quiet_episodes(ev.series, ev.config, ev.run_imu)
-        series, cfg, mount, quiet = ev.series, ev.config, ev.mount, standstills
+        series, cfg, mount = ev.series, ev.config, ev.mount
         odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
         imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
         if odom is None or imu is None or not turning or mount is None or not mount.turned or mount.named:
@@ -63,7 +63,7 @@ class Coast(BaseCheck):
         ta, ax, level = np.asarray(series.acc_t), np.asarray(series.acc_x), np.asarray(series.acc_level)
         # still moving: the gyro beyond the quiet bound of its noise, measured at rest where it can be (drivers
         # overstate it tenfold, which would hide a 0.3 rad/s turn), else as stated
-        at_rest = [e.gyro_sigma for e in quiet if math.isfinite(e.gyro_sigma)]
+        at_rest = [e.gyro_sigma for e in standstills if math.isfinite(e.gyro_sigma)]
         sigma = float(median(at_rest)) if at_rest else series.gyro_stated_sigma
         sigma = sigma if math.isfinite(sigma) else 0.0
         moving = np.abs(np.interp(ta, np.asarray(series.gyro_t), np.asarray(series.gyro_z))) > quiet_bound(

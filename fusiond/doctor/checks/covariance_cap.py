@@ -31,12 +31,7 @@ class CovarianceCap(BaseCheck):
         """The covariance reached its cap: after dropouts, or because the gyro bias is unobservable (no
         standstill, no heading reference that delivered a sample: a configured sensor that stayed silent,
         replayed with --allow-missing, references nothing), or otherwise."""
-        series = ev.series
-        cfg = ev.config
-        at_cap = ev.at_cap
-        gyro_fused = ev.gyro_fused
-        standstill_updates = ev.standstill_updates
-        stats = ev.stats
+        series, cfg, at_cap, stats = ev.series, ev.config, ev.at_cap, ev.stats
         fc = cfg.filter
         pos_cap, att_cap = fc.covariance_cap
         reached = at_cap or any(v >= 0.999 * pos_cap for v in series.est_pos_var) or any(
@@ -58,7 +53,7 @@ class CovarianceCap(BaseCheck):
                             filter_key("gap_inflation"), evidence={"gaps": float(len(gaps)), "gap_total_s": total,
                                                                   "gap_longest_s": longest})]
         heading_ref = has_heading_reference(cfg, stats)
-        if gyro_fused and standstill_updates == 0 and not heading_ref:
+        if ev.gyro_fused and ev.standstill_updates == 0 and not heading_ref:
             return [Verdict("filter", "covariance", "warn",
                             f"position uncertainty reached filter.covariance_cap{when} because the gyro bias is "
                             f"unobservable: no standstill in {duration:.0f} s and no heading reference, so its initial "

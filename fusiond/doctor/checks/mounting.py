@@ -20,14 +20,14 @@ class Mounting(BaseCheck):
 
     def run(self, ev: Evidence) -> list[Verdict]:
         """The accelerometer's verdict on the mounting yaw; none when the driving could not tell."""
-        imu, mount, tilt, min_updates = ev.run_imu, ev.mount, ev.tilt, MIN_UPDATES
+        imu, mount, tilt = ev.run_imu, ev.mount, ev.tilt
         if imu is None or mount is None:
             return []
         evidence = mount.evidence()
         deg = math.degrees(mount.delta)
         se_deg = math.degrees(mount.se)
         if mount.named:
-            means, _, leaning = lean_of(tilt, min_updates)
+            means, _, leaning = lean_of(tilt, MIN_UPDATES)
             lean = (means[0], means[1]) if leaning else (0.0, 0.0)
             return [Verdict(imu.name, "attitude", "problem",
                             f"the accelerometer's horizontal axes are turned by {deg:+.1f} deg (+- {se_deg:.1f}) "

@@ -23,12 +23,12 @@ class TwistFrame(BaseCheck):
     def run(self, ev: Evidence) -> list[Verdict]:
         if ev.odom is None:
             return []
-        odom, t, min_updates = ev.odom, ev.twist, MIN_UPDATES
-        if t.n < min_updates or t.abs_vx + t.abs_vy < 1e-6:
+        odom, t = ev.odom, ev.twist
+        if t.n < MIN_UPDATES or t.abs_vx + t.abs_vy < 1e-6:
             return []
         lateral = t.abs_vy / max(t.abs_vx + t.abs_vy, 1e-12)
         key = sensor_key(odom.name, "twist_frame")
-        if odom.twist_frame == "world" and t.turned >= min_updates and t.along_x >= 0.9 * t.turned:
+        if odom.twist_frame == "world" and t.turned >= MIN_UPDATES and t.along_x >= 0.9 * t.turned:
             # a world-frame twist points where the vehicle heads, which the message's own pose says: one that
             # keeps pointing along x while that pose turns away is a body-frame twist. Gentle curves (a highway:
             # 37 m off, otherwise blamed on the wheel scale and an IMU mounting) never make the turn-rate rule
