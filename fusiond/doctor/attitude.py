@@ -8,10 +8,11 @@ it can see, so a noise measured on base pitch of an IMU rolled by 90 degrees is
 reported where it belongs: on the IMU's yaw.
 
 A steady lean of the estimate on level ground is a mounting rotation missing from
-``extrinsic_rpy``; so is an accelerometer whose horizontal axes are turned against
-the motion the wheels report (``mounting``: an IMU mounted yawed, which neither the
-gyro nor the lean shows). Both verdicts print the full mount (the tilt, the yaw and
-the configured one composed) as one ready-to-paste value.
+``extrinsic_rpy`` (``lean_of``); so is an accelerometer whose horizontal axes are turned
+against the motion the wheels report (``mounting``: an IMU mounted yawed, which neither
+the gyro nor the lean shows). The lean and mounting checks (``checks/lean.py``,
+``checks/mounting.py``) share these, and both print the full mount (the tilt, the yaw
+and the configured one composed, ``full_mount``) as one ready-to-paste value.
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ from ..core.sensors.imu.axes import seen_axes, weights
 from ..estimator import rotation as rot
 from .nis import ChannelStats
 from .settled import Settled
-
 
 LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
 

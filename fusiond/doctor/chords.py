@@ -16,10 +16,10 @@ from .series import Series
 
 __all__ = ["ASSUMED_TAU_S", "CHORD_M", "MIN_CHORDS", "SCALE_Z_SIGMAS", "chord_ends", "cumulative", "newey_west"]
 
-CHORD_M = 10.0  # chords at least this long (or 20 sigma_w): short and consecutive (speed's docstring)
+CHORD_M = 10.0  # chords at least this long (or 20 sigma_w): short and consecutive (checks/speed.py's docstring)
 CHORD_MAX_S = 60.0  # a chord spans at most this long (slower: the robot is standing or creeping)
 MIN_CHORDS = 3  # the fewest for a residual standard error (2 dof) next to the model's
-ASSUMED_TAU_S = 100.0  # the fast end of receivers' wander times (speed's docstring)
+ASSUMED_TAU_S = 100.0  # the fast end of receivers' wander times (checks/speed.py's docstring)
 SCALE_Z_SIGMAS = 3.0  # a scale is named beyond this many standard errors (as a normal quantile: 0.27 % two-sided)
 
 

@@ -6,7 +6,7 @@ only says "a clock glitch", N times. The doctor sees every sample as it arrives,
 it measures the offset: each sample's stamp against the newest stamp of the OTHER
 sensors when it arrives (what the filter's time follows). The median over the run is
 that sensor's clock offset (plus its transport lag, milliseconds), and a sensor whose
-samples are mostly dropped that way gets one plain verdict with it.
+samples are mostly dropped that way gets one plain verdict with it (``checks/clocks.py``).
 """
 
 from __future__ import annotations

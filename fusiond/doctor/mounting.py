@@ -59,7 +59,7 @@ class MountYaw:
     samples: int
     expected_rms: float  # m/s^2: how much horizontal acceleration the driving gave to fit against
     residual_rms: float
-    bias_x: float = 0.0  # m/s^2: b on base x (accelerometer bias, gravity leaking through a tilt), for coast.py
+    bias_x: float = 0.0  # m/s^2: b on base x (accelerometer bias, gravity leaking through a tilt), for checks/coast.py
 
     @property
     def named(self) -> bool:

@@ -1,10 +1,8 @@
-"""Odometry twist: a yaw rate that is not measured, slip against the gyro, the twist frame.
+"""Odometry twist over the run: what tells a body-frame twist from a world-frame one.
 
-A driver that lost its yaw rate publishes 0 with covariance 0: to the filter a
-perfect measurement of "not turning". Against the gyro it looks like slip in every
-turn. The difference is in the numbers: slip reads a wrong rate, a lost component
-reads exactly zero (with zero variance) while the gyro turns. That is "not
-measured", declared with ``twist_measured``.
+The replay feeds every accepted odometry message's twist (and the message's own pose) here; the sums
+are what the twist-frame check (``checks/twist_frame.py``) judges: a wheeled robot's body twist has
+little lateral velocity, and a world twist points where the message's pose heads.
 """
 
 from __future__ import annotations

@@ -47,7 +47,7 @@ from ..verdict import Verdict, sensor_key
 __all__ = ["GapHeading"]
 
 MIN_GAP_S = 1.0  # shorter silences: the held inputs cover most of them
-GAP_TURN_RAD = 0.2  # rad of unexplained turn across a gap: several times the yaw noise (gap_heading's docstring)
+GAP_TURN_RAD = 0.2  # rad of unexplained turn across a gap: several times the yaw noise (the module docstring)
 GAP_DRIFT_RATE = 0.01  # rad/s: an uncorrected consumer gyro bias, integrated by the IMU through the gap
 # the estimates compared lie this close to the gap's ends (a time jump holds poses ~1 s), or it is not judged
 GAP_EDGE_S = 2.0

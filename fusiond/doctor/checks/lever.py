@@ -45,11 +45,11 @@ LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change
 MAX_SE = 0.1  # m: "as stated" needs the fit this precise (half LEVER_TOL)
 MAX_SE_NAMED = 0.3  # m: a lever is named only from a fit this precise (a fifth of a 1.5 m mast's offset)
 LATENCY_ALONG = 2.0  # a misfit behind base_link this many times longer than it is wide: also says latency
-# named when the lever's chi-square (2 dof) exceeds LEVER_Z_SIGMAS^2 = 25 (p ~ 4e-6, lever's docstring)
+# named when the lever's chi-square (2 dof) exceeds LEVER_Z_SIGMAS^2 = 25 (p ~ 4e-6, the module docstring)
 LEVER_Z_SIGMAS = 5.0
 OUTLIER_SIGMAS = 4.0  # a pair beyond 4 sigma of the scatter is multipath (a normal pair: 6e-5 chance)
 MIN_PAIRS = 30  # fix pairs in turns before a fit: its scatter estimate then good to ~13 %
-PAIR_S = 3.0  # s between the two fixes of a pair (lever's docstring)
+PAIR_S = 3.0  # s between the two fixes of a pair (the module docstring)
 MAX_INTERVAL = 1.5  # a pair further apart than this many PAIR_S (fixes missing) is not used
 
 
