@@ -13,6 +13,7 @@ from __future__ import annotations
 __all__ = [
     "FusiondError", "ConfigError", "EstimatorError", "CoreError", "CodecError", "TransportError",
     "SessionError", "PlaybackError", "ReplayError", "BagError", "CalibrationError",
+    "DoctorError",
 ]
 
 
@@ -58,3 +59,7 @@ class BagError(ReplayError, ValueError):
 
 class CalibrationError(FusiondError, ValueError):
     """Not enough or unusable data to calibrate from."""
+
+
+class DoctorError(FusiondError, ValueError):
+    """The doctor's checks cannot be put in an order (a check that needs one that is not there, or a cycle)."""

@@ -4,14 +4,15 @@ It encodes the table a practitioner tunes an EKF with, but NIS alone points the
 wrong way when one source is wrong and the filter follows it (a disturbed
 magnetometer yaw makes the GPS look bad). So besides the innovation statistics the
 doctor compares the sources on the quantities they share (heading, speed, the gyro
-at rest; see ``heading``, ``speed``, ``gyro``, ``twist``) and names the one that
+at rest; see ``checks/heading``, ``checks/speed``, ``gyro``, ``twist``) and names the one that
 disagrees with the others, with what it measured and the config key to change. It
 never advises trusting a sensor more while another source contradicts it.
 
-How it is built: every check (``registry.CHECKS``) is one class with one interface, run on the
-run's shared ``evidence.Evidence`` and returning its findings as :class:`Verdict` structs; who is to
-blame when findings meet is decided by the rule table in ``blame``; every threshold a check decides
-by is in ``thresholds``, with where it comes from.
+How it is built: every check is one class with one interface in its own module (``checks/``), with
+the thresholds it decides by beside it, each with where it comes from; it runs on the run's shared
+``evidence.Evidence`` and returns its findings as :class:`Verdict` structs. The registry derives the
+order they run in from what each needs (``registry.CHECKS``); who is to blame when findings meet is
+decided by the rule table in ``blame``.
 
 A floor above the fusion core: the core never imports it (its diagnostics records are all the
 doctor reads of it), and only the commands that show verdicts do (replay, tune's advice, monitor).
@@ -29,7 +30,7 @@ import msgspec
 
 from ..config import Config
 from ..core.sensors.registry import kind_of
-from ..samples import OdomSample
+from ..core.sensors import OdomSample
 from ..core.sensors.odom import body_twist
 from .attitude import TiltStats
 from .blame import Entry, apply_rules
@@ -43,8 +44,8 @@ from .series import Series, SeriesCollector
 from .twist import TwistStats
 from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
 
-__all__ = ["Doctor", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose", "format_verdicts",
-           "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
+__all__ = ["Doctor", "Evidence", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose",
+           "format_verdicts", "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
 # GPS innovations whose autocorrelation tells a wandering receiver error from white noise
@@ -182,8 +183,9 @@ class Doctor:
     def verdicts(self, stats: dict[str, dict] | None = None, at_cap: bool = False, covariance_resets: int = 0,
                  scales: dict[str, float] | None = None) -> list[Verdict]:
         """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
-        return diagnose(self.cfg if self.known else None, self.series(), self.channels, self.twist, self.tilt,
-                        stats, at_cap, covariance_resets, scales, self.t0, self.clocks)
+        return diagnose(Evidence(self.cfg if self.known else None, self.series(), self.channels, self.twist,
+                                 self.tilt, stats=stats, at_cap=at_cap, covariance_resets=covariance_resets,
+                                 scales=scales, t0=self.t0, clocks=self.clocks))
 
 
 def _merge(candidates: list[Verdict]) -> Verdict:
@@ -197,14 +199,9 @@ def _merge(candidates: list[Verdict]) -> Verdict:
     return top
 
 
-def diagnose(cfg: Config | None, series: Series, channels: dict[tuple[str, str], ChannelStats],
-             twist: TwistStats, tilt: TiltStats, stats: dict[str, dict] | None = None, at_cap: bool = False,
-             covariance_resets: int = 0, scales: dict[str, float] | None = None,
-             t0: float | None = None, clocks: ClockOffsets | None = None) -> list[Verdict]:
+def diagnose(ev: Evidence) -> list[Verdict]:
     """Every check (``registry.CHECKS``, in order) on the run's evidence, the blame rules over what they
-    found (``blame.RULES``), merged into one verdict per (sensor, channel). ``clocks``: the sensors' stamp
-    offsets measured at arrival (the replay has them), to explain samples dropped as far from filter time."""
-    ev = Evidence(cfg, series, channels, twist, tilt, stats, at_cap, covariance_resets, scales, t0, clocks)
+    found (``blame.RULES``), merged into one verdict per (sensor, channel)."""
     entries: list[Entry] = []
     for check in CHECKS:
         verdicts = run_check(check, ev)

@@ -8,10 +8,11 @@ it can see, so a noise measured on base pitch of an IMU rolled by 90 degrees is
 reported where it belongs: on the IMU's yaw.
 
 A steady lean of the estimate on level ground is a mounting rotation missing from
-``extrinsic_rpy``; so is an accelerometer whose horizontal axes are turned against
-the motion the wheels report (``mounting``: an IMU mounted yawed, which neither the
-gyro nor the lean shows). Both verdicts print the full mount (the tilt, the yaw and
-the configured one composed) as one ready-to-paste value.
+``extrinsic_rpy`` (``lean_of``); so is an accelerometer whose horizontal axes are turned
+against the motion the wheels report (``mounting``: an IMU mounted yawed, which neither
+the gyro nor the lean shows). The lean and mounting checks (``checks/lean.py``,
+``checks/mounting.py``) share these, and both print the full mount (the tilt, the yaw
+and the configured one composed, ``full_mount``) as one ready-to-paste value.
 """
 
 from __future__ import annotations
@@ -24,11 +25,10 @@ import numpy as np
 from ..config import ImuSensor
 from ..core.sensors.imu.axes import seen_axes, weights
 from ..estimator import rotation as rot
-from .mounting import MountYaw
 from .nis import ChannelStats
 from .settled import Settled
-from .verdict import Verdict, sensor_key
-from .thresholds import LEAN_RAD
+
+LEAN_RAD = 0.03  # a mean lean of ~1.7 degrees that barely varies
 
 CHUNK = 4096  # poses noted before their angles are computed (bounded memory)
 AXES = ("roll", "pitch", "yaw")
@@ -159,53 +159,3 @@ def lean_of(tilt: TiltStats, min_updates: int = 50) -> tuple[list[float], list[f
         means.append(m)
         stds.append(math.sqrt(max(tilt.squares[k] / tilt.n - m * m, 0.0)))
     return means, stds, [k for k in range(2) if abs(means[k]) > LEAN_RAD and stds[k] < 0.5 * abs(means[k])]
-
-
-def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50,
-                 mount: MountYaw | None = None) -> Verdict | None:
-    """``mount``: the accelerometer's yaw fit; when it names a yaw error, the suggestion includes it."""
-    if imu is None:
-        return None
-    means, stds, leaning = lean_of(tilt, min_updates)
-    if not leaning:
-        return None
-    rpy = full_mount(imu, (means[0], means[1]), mount.delta if mount is not None and mount.named else 0.0)
-    what = " and ".join(f"{('roll', 'pitch')[k]} {means[k]:+.3f} rad (std {stds[k]:.3f})" for k in leaning)
-    if inverted_lean(tilt) is not None:
-        return Verdict(imu.name, "attitude", "problem",
-                       f"the estimate is upside down ({what} on average): the IMU is mounted upside down (its z axis "
-                       "points down) and extrinsic_rpy does not say so. The pose published is upside down, and the "
-                       "gyro's z rate reads against the wheels' yaw rate (a wheel yaw-rate fit of -1 x gyro is this, "
-                       "not slip). The full mount is below",
-                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(rpy),
-                       {"lean_roll_rad": means[0], "lean_pitch_rad": means[1], "inverted": 1.0})
-    return Verdict(imu.name, "attitude", "warn",
-                   f"the robot leans by {what} on average: on level ground that is an IMU mounting rotation "
-                   "missing from, or wrong in, extrinsic_rpy (the body-frame twist then climbs or sinks). The full "
-                   "mount, both tilt axes composed with the configured one, is below",
-                   sensor_key(imu.name, "extrinsic_rpy"), paste_mount(rpy),
-                   {"lean_roll_rad": means[0], "lean_pitch_rad": means[1]})
-
-
-def mount_verdict(imu: ImuSensor | None, mount: MountYaw | None, tilt: TiltStats,
-                  min_updates: int = 50) -> Verdict | None:
-    """The accelerometer's verdict on the mounting yaw; None when the driving could not tell."""
-    if imu is None or mount is None:
-        return None
-    ev = mount.evidence()
-    deg = math.degrees(mount.delta)
-    se_deg = math.degrees(mount.se)
-    if mount.named:
-        means, _, leaning = lean_of(tilt, min_updates)
-        lean = (means[0], means[1]) if leaning else (0.0, 0.0)
-        return Verdict(imu.name, "attitude", "problem",
-                       f"the accelerometer's horizontal axes are turned by {deg:+.1f} deg (+- {se_deg:.1f}) against "
-                       f"the motion the wheels and the gyro report ({mount.samples} s of driving): the IMU is mounted "
-                       "yawed by that and extrinsic_rpy does not say so (the gyro's z rate cannot show it; the IMU's "
-                       "roll and pitch land on the wrong base axes). The full mount is below",
-                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, lean, mount.delta)), ev)
-    if mount.resolved:
-        return Verdict(imu.name, "attitude", "ok",
-                       f"the accelerometer agrees with the wheels' motion: mounting yaw {deg:+.1f} deg "
-                       f"(+- {se_deg:.1f}) against extrinsic_rpy", evidence=ev)
-    return None

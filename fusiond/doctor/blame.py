@@ -24,7 +24,7 @@ from .channels import applied_verdict, figures
 from .evidence import Evidence
 from .mounting import MountYaw
 from .nis import ChannelStats
-from .thresholds import TRACK_OFFSET_RAD
+from .checks.heading import TRACK_OFFSET_RAD
 from .verdict import Verdict, sensor_key
 
 __all__ = ["Entry", "Rule", "RULES", "CULPRITS", "CANDIDATES", "apply_rules"]

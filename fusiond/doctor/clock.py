@@ -6,7 +6,7 @@ only says "a clock glitch", N times. The doctor sees every sample as it arrives,
 it measures the offset: each sample's stamp against the newest stamp of the OTHER
 sensors when it arrives (what the filter's time follows). The median over the run is
 that sensor's clock offset (plus its transport lag, milliseconds), and a sensor whose
-samples are mostly dropped that way gets one plain verdict with it.
+samples are mostly dropped that way gets one plain verdict with it (``checks/clocks.py``).
 """
 
 from __future__ import annotations
@@ -16,13 +16,9 @@ from array import array
 
 import numpy as np
 
-from .. import reasons
 from .median import median
-from .verdict import Verdict, sensor_key
-from .thresholds import CLOCK_DROP_SHARE
 
 MAX_KEPT = 20_000  # offsets kept per sensor (the median of that many is settled; bounded memory)
-CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
 
 
 class ClockOffsets:
@@ -78,27 +74,3 @@ class ClockOffsets:
         """Median offset of the sensor's stamps from the others' (s), None without another sensor."""
         kept = self._offsets.get(sensor)
         return float(median(np.frombuffer(kept, dtype=float))) if kept else None
-
-
-def clock_verdicts(stats: dict[str, dict], clocks: ClockOffsets, sensors: dict | None = None) -> list[Verdict]:
-    """A verdict for each sensor whose samples were mostly dropped as far from filter time; ``sensors`` (by
-    name: their configs) gives the stamp_offset_s that brings them onto the others' clock."""
-    out = []
-    for name, st in stats.items():
-        received = st.get("received", 0)
-        far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
-        if received <= 0 or far < CLOCK_DROP_SHARE * received:
-            continue
-        offset = clocks.offset(name)
-        if offset is None:
-            continue
-        side = "ahead of" if offset > 0 else "behind"
-        configured = getattr((sensors or {}).get(name), "stamp_offset_s", 0.0)
-        out.append(Verdict(name, "time", "problem",
-                           f"{far} of {received} samples stamped ~{abs(offset):.1f} s {side} the other sensors: its "
-                           "clock is offset (GPS time vs UTC?), so they were dropped as far from filter time. Stamp "
-                           "them with the same clock as the other sensors (the driver's time source), or shift "
-                           "them here", sensor_key(name, "stamp_offset_s"),
-                           f"stamp_offset_s = {configured - offset:.3f}",
-                           evidence={"clock_offset_s": offset, "dropped_far": float(far), "received": float(received)}))
-    return out

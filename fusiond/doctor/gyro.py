@@ -17,17 +17,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config, ImuSensor, OdomSensor
+from ..config import Config, ImuSensor
 from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
-from .covariance import has_heading_reference
 from .bins import BIN_S
 from .median import median
 from .nis import ChannelStats
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
-from .thresholds import (DISAGREE_RAD_S, DRIFT_WALK_MARGIN, MIN_DRIFT_EPISODES, MIN_REJECTED_FRACTION, NOISE_RATIO,
-                         OVERSTATED_RATIO)
+
+
+MIN_REJECTED_FRACTION = 0.1  # rejected standstill updates beyond a tenth: more than a gate's chance ones
+OVERSTATED_RATIO = 3.0  # a stated gyro noise this many times the measured one at rest is overstated
+# the gyro's noise at rest measured beyond this factor of the stated (either way) explains a NIS high or low;
+# within it, the noise is as stated
+NOISE_RATIO = 1.5
+DISAGREE_RAD_S = 0.003  # episodes whose gyro means differ by more than this (and 5 sigma) disagree
+MIN_DRIFT_EPISODES = 3  # a drift is told from one odd standstill by its trend, which takes three points
+DRIFT_WALK_MARGIN = 2.0  # a drift is named when the walk it shows exceeds the configured one by this factor
 
 
 @dataclass
@@ -44,6 +51,16 @@ class Episode:
     def spread(self) -> float:
         """Standard error of the episode's mean."""
         return self.gyro_sigma / math.sqrt(self.samples) if self.samples > 1 else math.inf
+
+
+def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
+    """Does a sensor that observes heading (a GPS, a pose, an IMU's absolute or relative yaw) take part: one
+    configured and, when the per-sensor counts are known, one that delivered a sample (a configured sensor
+    that stayed silent, replayed with --allow-missing, references nothing)."""
+    def delivered(name: str) -> bool:
+        return stats is None or stats.get(name, {}).get("received", 0) > 0
+
+    return any(kind_of(s).heading_reference(s) and delivered(s.name) for s in cfg.sensors)
 
 
 def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:

@@ -1,15 +1,9 @@
-"""Heading cross-check: the IMU's absolute yaw against the gyro, the wheels and the GPS track.
+"""The heading sources compared: what the heading, wheel-heading, slip, late-bias and gap checks share.
 
-A magnetometer yaw carries a constant offset (declination, mounting) and a slow
-disturbance near motors and steel. Neither shows in the IMU's own NIS when the
-filter follows the IMU; both show against other sources:
-
-* against the integrated gyro, over windows of a minute: a gyro bias is a linear
-  drift and a gyro scale error is proportional to the turn, so after fitting
-  ``a + b t + c gyro_heading`` what is left is the IMU yaw wandering (the wheels,
-  fitted the same way, say whether the gyro itself is the odd one out);
-* against the GPS track direction (chords of the fixes while moving): the mean is
-  the IMU's yaw offset, the rest its wander (beyond the track's own noise).
+Headings are compared at the instants each holds at (``timed``); the IMU's own yaw against the
+integrated gyro over windows of a minute (``detrended_rms``: a gyro bias is a linear drift, a scale
+error proportional to the turn, so what is left is the yaw wandering); the wheels' yaw rate fitted
+against the gyro's (``wheel_yaw_fit``). The thresholds here judge those shared figures.
 """
 
 from __future__ import annotations
@@ -18,18 +12,25 @@ import math
 
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor
-from ..core.sensors.registry import kind_of
-from ..core.sensors.gps import HEADING_READY_SIGMA
-from .gyro import quiet_episodes
+from ..config import GpsSensor
 from .median import median
 from .series import Series
-from .verdict import Verdict, sensor_key
-from .thresholds import (DRIFT_RAD_S, MIN_SPAN_S, MIN_TURN_RAD, MISSED_INTERVAL_S, MISSED_TURN_RAD, TRACK_OFFSET_RAD,
-                         WANDER_RAD, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, WINDOW_S, ZERO_TURNING_RAD_S)
+
+__all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro",
+           "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning", "wheel_yaw_fit",
+           "wrap"]
+
+WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
+# 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)
+MIN_SPAN_S = 10.0  # s: a detrending window whose samples span less than this is too short to fit a bias and is skipped
+WANDER_RAD = 0.05  # rms yaw wander (after bias and scale are removed) that is a disturbance, not noise
+MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
+WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
+WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
+ZERO_TURNING_RAD_S = 0.05  # the gyro turning this fast while the wheels read exactly zero: not at rest
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
+def wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -53,26 +54,10 @@ def imu_vs_gyro(series: Series) -> tuple[float, float] | None:
     instants each holds at; None when they overlap in fewer than 10 bins. The drift is the yaw's own less
     the gyro's bias: yaw - gyro heading drifts at r - b."""
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    return _vs_gyro(series, ti, yi, series.imu_breaks)
+    return vs_gyro(series, ti, yi, series.imu_breaks)
 
 
-def estimate_vs_gyro(series: Series) -> float:
-    """How far the filter's own heading wanders against the integrated raw gyro (as ``imu_vs_gyro``: a bias
-    and a scale removed per window): what of a disturbed IMU yaw reached the estimate, once its heading is
-    known (attitude variance within HEADING_READY_SIGMA^2: a magnetometer disturbed at start-up is
-    followed while nothing else gives the heading, and only then). NaN when they overlap in fewer than 10
-    bins, or the heading never became known."""
-    ye = np.unwrap(np.asarray(series.est_yaw)) if series.est_yaw else np.empty(0)
-    te = np.asarray(series.est_t)
-    known = np.asarray(series.est_att_var) <= HEADING_READY_SIGMA**2
-    if len(known) != len(te) or not known.any():
-        return math.nan
-    first = int(np.argmax(known))
-    compared = _vs_gyro(series, te[first:], ye[first:], series.odom_breaks)
-    return compared[0] if compared is not None else math.nan
-
-
-def _vs_gyro(series: Series, t: np.ndarray, y: np.ndarray, breaks: list[float]) -> tuple[float, float] | None:
+def vs_gyro(series: Series, t: np.ndarray, y: np.ndarray, breaks: list[float]) -> tuple[float, float] | None:
     """``detrended_rms`` of a heading (y at instants t) less the integrated raw gyro at those instants, never
     across the gyro's silences or ``breaks``; None when they overlap in fewer than 10 bins."""
     tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
@@ -124,43 +109,6 @@ def detrended_rms(t: np.ndarray, d: np.ndarray, shape: np.ndarray | None, breaks
     return float(np.sqrt(np.mean(r * r))), float(median(slopes))
 
 
-def track_segments(series: Series, min_length: float, max_s: float = 30.0) -> list[tuple[float, float, float, float]]:
-    """(t0, t1, track direction rad, chord length m) between fixes at least min_length apart."""
-    t, e, n = np.array(series.gps_t), np.array(series.gps_e), np.array(series.gps_n)
-    order = np.argsort(t)
-    t, e, n = t[order], e[order], n[order]
-    out = []
-    i = 0
-    while i < len(t) - 1:
-        end = int(np.searchsorted(t, t[i] + max_s, side="right"))  # only fixes within max_s: O(n) overall
-        d = np.hypot(e[i + 1:end] - e[i], n[i + 1:end] - n[i])
-        far = np.nonzero(d >= min_length)[0]
-        if not len(far):
-            i += 1  # standing, or too slow from here: try the next fix
-            continue
-        j = i + 1 + int(far[0])
-        out.append((float(t[i]), float(t[j]), math.atan2(n[j] - n[i], e[j] - e[i]), float(d[far[0]])))
-        i = j
-    return out
-
-
-def yaw_along(series: Series, ti: np.ndarray, yi: np.ndarray, t0: float, t1: float) -> float:
-    """The direction the IMU's yaw says the vehicle moved in from t0 to t1: that of the sum of the
-    odometry's speed along the yaw, sum v (cos yaw, sin yaw), over the bins between (a GPS chord is
-    exactly that displacement, whatever the curvature, and an offset of the yaw turns it by itself).
-    The yaw at the chord's middle instant is that direction only on an arc of constant curvature: a
-    chord that runs straight, then turns, reads the turn's direction, a bias with the sense of the turns
-    (on a skid-steer, a -0.13 rad "offset" of a correct magnetometer). Without two moving bins inside,
-    the middle instant's yaw."""
-    to, vo = np.asarray(series.odom_t), np.asarray(series.odom_v)
-    lo, hi = np.searchsorted(to, t0, side="left"), np.searchsorted(to, t1, side="right")
-    v = vo[lo:hi]
-    if hi - lo < 2 or not np.any(v != 0.0):
-        return float(np.interp(0.5 * (t0 + t1), ti, yi))
-    yaw = np.interp(to[lo:hi], ti, yi)
-    return math.atan2(float(np.sum(v * np.sin(yaw))), float(np.sum(v * np.cos(yaw))))
-
-
 def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
     if gps is not None and gps.position_noise is not None:
         return float(max(gps.position_noise[0], gps.position_noise[1]))
@@ -170,198 +118,18 @@ def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
     return float(gps.unknown_position_sigma[0]) if gps is not None else 2.5
 
 
-def heading_check(series: Series, cfg: Config) -> Verdict | None:
-    """The verdict on an IMU whose absolute yaw is fused, from the other heading sources."""
-    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_yaw(s)),
-               None)
-    if imu is None or len(series.imu_t) < 10:
-        return None
-    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
-    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    if len(ti) < 10:
-        return None
-    evidence: dict[str, float] = {}
-    notes: list[str] = []
-    wander = math.nan
-    culprit_gyro = False
-    compared = imu_vs_gyro(series)
-    if compared is not None:
-        wander, drift = compared
-        evidence["imu_vs_gyro_wander_rad"] = wander
-        if math.isfinite(drift):
-            evidence["imu_vs_gyro_drift_rad_s"] = drift
-        if len(series.odom_t) >= 10 and np.ptp(series.odom_heading) > 0.0:
-            tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-            to, ho = timed(series.odom_heading_at, series.odom_heading)
-            mo = (to >= tg[0]) & (to <= tg[-1])
-            if mo.sum() >= 10:
-                g = np.interp(to[mo], tg, hg)
-                wheel_vs_gyro, _ = detrended_rms(to[mo], ho[mo] - g, g, [*series.odom_breaks, *series.gyro_breaks])
-                wi = np.interp(to[mo], ti, yi)
-                wheel_vs_imu, _ = detrended_rms(to[mo], ho[mo] - wi, wi, [*series.odom_breaks, *series.imu_breaks])
-                evidence["wheel_vs_gyro_wander_rad"] = wheel_vs_gyro
-                if math.isfinite(wheel_vs_gyro) and wheel_vs_gyro < WANDER_RAD:
-                    notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
-                elif math.isfinite(wheel_vs_imu) and wheel_vs_imu < WANDER_RAD <= wander:
-                    culprit_gyro = True
-    own_drift = _own_drift(series, cfg, imu, compared)
-    if math.isfinite(own_drift):
-        evidence["imu_yaw_drift_rad_s"] = own_drift
-    if abs(own_drift) > DRIFT_RAD_S and not culprit_gyro:
-        # checked before the wander: a steady drift is what the detrending takes out
-        suggestion = 'orientation = "roll_pitch"' + ("" if imu.angular_velocity else " and angular_velocity = true")
-        return Verdict(imu.name, "orientation", "problem",
-                       f"the IMU's yaw drifts at {own_drift:+.4f} rad/s ({math.degrees(own_drift) * 60.0:+.1f} deg a "
-                       "minute) against the gyro, its bias at rest removed: an AHRS integrating its own gyro (a 6-axis "
-                       "IMU), not an absolute heading. Fused, it drags the heading and the gyro bias along. Take "
-                       "heading from the gyro and only roll/pitch from the IMU (yaw_across_gaps still carries its "
-                       "turns across logging gaps); do not state a smaller orientation_noise",
-                       sensor_key(imu.name, "orientation"), suggestion, evidence)
-    offset = math.nan
-    track_wander = math.nan
-    if gps is not None and len(series.gps_t) >= 5:
-        sigma = gps_sigma(series, gps)
-        length = max(5.0, 10.0 * sigma)
-        segs = track_segments(series, length)
-        if len(segs) >= 5:
-            mids = np.array([(a + b) / 2.0 for a, b, _, _ in segs])
-            m = (mids >= ti[0]) & (mids <= ti[-1])
-            if m.sum() >= 5:
-                tracks = np.array([s[2] for s in segs])[m]
-                chords = np.array([s[3] for s in segs])[m]
-                d = _wrap(np.array([yaw_along(series, ti, yi, a, b) for a, b, _, _ in
-                                    (seg for seg, keep in zip(segs, m) if keep)]) - tracks)
-                offset = float(math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
-                r = _wrap(d - offset)
-                track_var = np.mean(2.0 * sigma**2 / chords**2)
-                n = len(r)
-                se = math.sqrt(max(np.mean(r * r), track_var) / n)
-                evidence["imu_vs_gps_track_offset_rad"] = offset
-                evidence["imu_vs_gps_track_offset_se_rad"] = se
-                excess = float(np.mean(r * r) - track_var)
-                if excess > 0 and np.mean(r * r) / track_var > 1.0 + 3.0 * math.sqrt(2.0 / n):
-                    track_wander = math.sqrt(excess)
-                    evidence["imu_vs_gps_track_wander_rad"] = track_wander
-                if abs(offset) < max(TRACK_OFFSET_RAD, 3.0 * se) or imu.relative_yaw:
-                    offset = math.nan  # not significant (or removed by the relative mode anyway)
-    disturbed = (math.isfinite(wander) and wander > WANDER_RAD and not culprit_gyro) or (
-        not math.isfinite(wander) and math.isfinite(track_wander) and track_wander > WANDER_RAD)
-    key_sensor = imu.name
-    if culprit_gyro:
-        return Verdict(imu.name, "orientation", "warn",
-                       f"the integrated gyro wanders against both the IMU yaw and the wheels by {wander:.3f} rad rms "
-                       "(beyond a bias or scale): the gyro, not the IMU yaw, is the odd one out",
-                       sensor_key(key_sensor, "gyro_noise"), evidence=evidence)
-    if disturbed:
-        w = wander if math.isfinite(wander) else track_wander
-        against = "the integrated gyro" if math.isfinite(wander) else "the GPS track"
-        removed = ("once a gyro bias and scale are removed" if math.isfinite(wander)
-                   else "beyond the track's own noise")
-        msg = (f"the IMU's absolute yaw wanders against {against} by {w:.3f} rad rms {removed}: a "
-               "magnetometer-disturbed yaw (motors, steel)")
-        if notes:
-            msg += "; " + "; ".join(notes)
-        held = estimate_vs_gyro(series) if (gps is not None and imu.absolute_yaw
-                                            and imu.yaw_offset_sigma > 0.0) else math.nan
-        if math.isfinite(held):
-            evidence["estimate_vs_gyro_wander_rad"] = held
-        if held <= WANDER_RAD:
-            # Beside the GPS the filter estimates the yaw's offset and gates its jumps: its heading did not
-            # follow the disturbance, so roll_pitch would only lose the magnetometer's help (a skid-steer's
-            # heading rms 0.395 rad with roll_pitch against 0.077 rad absolute: the GPS heading is then found
-            # from travel again)
-            msg += (f"; the estimate's heading did not follow it ({held:.3f} rad rms against the gyro): the filter's "
-                    "yaw-offset state and yaw-jump gate absorb it beside the GPS, keep the yaw absolute")
-            if math.isfinite(offset):
-                return Verdict(imu.name, "orientation", "warn",
-                               msg + f"; it sits {offset:+.3f} rad off the GPS track: correct that (corrected = raw "
-                               "+ yaw_offset)", sensor_key(key_sensor, "yaw_offset"),
-                               f"yaw_offset = {getattr(imu, 'yaw_offset', 0.0) - offset:.4f}", evidence)
-            return Verdict(imu.name, "orientation", "warn", msg, evidence=evidence)
-        if math.isfinite(offset):
-            msg += f"; it also sits {offset:+.3f} rad off the GPS track"
-        has_gyro = len(series.gyro_t) >= 10
-        suggestion = 'orientation = "roll_pitch"'
-        if has_gyro and not imu.angular_velocity:
-            suggestion += " and angular_velocity = true"
-        msg += (". Take heading from the gyro" if has_gyro else ". Take heading from the other sources") + \
-            " and only roll/pitch from the IMU; do not state a smaller orientation_noise while the yaw is disturbed"
-        return Verdict(imu.name, "orientation", "problem", msg, sensor_key(key_sensor, "orientation"),
-                       suggestion, evidence)
-    if math.isfinite(offset):
-        return Verdict(imu.name, "orientation", "problem",
-                       f"the IMU's absolute yaw sits {offset:+.3f} rad ({math.degrees(offset):+.1f} deg) off the GPS "
-                       f"track direction (standard error {evidence['imu_vs_gps_track_offset_se_rad']:.3f} rad): a "
-                       "declination or mounting offset. Correct it (corrected = raw + yaw_offset), or use "
-                       'orientation = "roll_pitch" with the gyro', sensor_key(key_sensor, "yaw_offset"),
-                       f"yaw_offset = {getattr(imu, 'yaw_offset', 0.0) - offset:.4f}", evidence)
-    if evidence:
-        return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources "
-                       + ", ".join(f"{k} {v:.3f}" for k, v in evidence.items()), evidence=evidence)
-    return None
-
-
-def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[float, float] | None) -> float:
-    """The IMU yaw's own drift rate, rad/s: the median slope of (yaw - integrated raw gyro), r - b, plus the
-    gyro's bias b as it reads at rest (the standstills' median). The filter's bias estimate will not do:
-    a fused drifting yaw drags it to b - r (the gyro verdict's "moved by another source"). NaN without
-    standstills."""
-    if compared is None or not math.isfinite(compared[1]):
-        return math.nan
-    rest, _ = quiet_episodes(series, cfg, imu)
-    if not rest:
-        return math.nan
-    return compared[1] + float(median([e.gyro_mean for e in rest]))
-
-
-def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
-    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns. Each stretch
-    between breaks (a heading not integrated across a gap) gets its own a: the turn made in a gap is
-    missing from h_ref only, not a scale."""
-    m = (t >= t_ref[0]) & (t <= t_ref[-1])
-    if m.sum() < 10:
-        return math.nan
-    ref = np.interp(t[m], t_ref, h_ref)
-    if np.ptp(ref) < MIN_TURN_RAD:
-        return math.nan
-    tm = t[m]
-    offsets = []
-    for idx in segments(tm, breaks):
-        col = np.zeros(len(tm))
-        col[idx] = 1.0
-        offsets.append(col)
-    A = np.vstack([*offsets, ref, tm - tm[0]]).T
-    coef, *_ = np.linalg.lstsq(A, h[m], rcond=None)
-    return float(coef[len(offsets)])
-
-
 def rate_fit_text(k: float, offset: float) -> str:
     """'0.70 x gyro - 0.002 rad/s': the scale and the offset of a rate fit, printed apart."""
     return f"{k:.2f} x gyro {'-' if offset < 0 else '+'} {abs(offset):.3f} rad/s"
 
 
-def _zero_while_turning(to: np.ndarray, wz: np.ndarray, tg: np.ndarray,
+def zero_while_turning(to: np.ndarray, wz: np.ndarray, tg: np.ndarray,
                         gz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the gyro's rate at the odometry bins, the bins whose wheels read exactly zero while it turned faster
     than ZERO_TURNING_RAD_S): the drive at rest while the vehicle coasts or turns (or a component not
     measured). ``wheel_yaw_fit`` leaves them out of the scale, ``_missed_turn`` sums what they missed."""
     g = np.interp(to, tg, gz)
     return g, (wz == 0.0) & (np.abs(g) > ZERO_TURNING_RAD_S)
-
-
-def _missed_turn(series: Series) -> tuple[float, float]:
-    """(rad, s): what the gyro turned while the wheels read exactly zero (``_zero_while_turning``), each
-    odometry interval capped at MISSED_INTERVAL_S so a logging gap counts for nothing. No scale information,
-    but with the wheels driving heading, turns the heading never made (a race car's hairpins with the
-    drive reading zero)."""
-    to, wz = np.array(series.odom_t), np.array(series.odom_wz)
-    tg, gz = np.array(series.gyro_t), np.array(series.gyro_z)
-    if len(to) < 2 or len(tg) < 2:
-        return 0.0, 0.0
-    g, zero = _zero_while_turning(to, wz, tg, gz)
-    zero &= (to >= tg[0]) & (to <= tg[-1])
-    dt = np.minimum(np.diff(to, append=to[-1]), MISSED_INTERVAL_S)
-    return float(np.sum(np.abs(g[zero]) * dt[zero])), float(np.sum(dt[zero]))
 
 
 def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
@@ -374,53 +142,10 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
     tg, hg, gz = np.array(series.gyro_t), np.array(series.gyro_heading), np.array(series.gyro_z)
     m = (to >= tg[0]) & (to <= tg[-1])
     # a wheel reading exactly zero while the gyro turns: no scale information, left out of the fit
-    g, zero = _zero_while_turning(to, wz, tg, gz)
+    g, zero = zero_while_turning(to, wz, tg, gz)
     m &= ~zero
     g = g[m]
     if m.sum() < 10 or np.ptp(hg) < MIN_TURN_RAD or np.std(g) < 0.02:
         return None
     (offset, k), *_ = np.linalg.lstsq(np.vstack([np.ones_like(g), g]).T, wz[m], rcond=None)
     return float(k), float(offset)
-
-
-def wheel_heading_check(series: Series, cfg: Config) -> Verdict | None:
-    """When the wheels drive heading (no gyro fused): their yaw against the gyro and the IMU yaw."""
-    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
-    if odom is None or any(kind_of(s).fuses_gyro(s) for s in cfg.sensors) or not odom.twist_measured[5]:
-        return None
-    if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
-        return None
-    fit = wheel_yaw_fit(series)
-    if fit is None:
-        return None
-    k, offset = fit
-    tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
-    evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
-    ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-    k_imu = (_yaw_scale(ti, yi, tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if len(ti) >= 10 and len(tg)
-             else math.nan)
-    if math.isfinite(k_imu):
-        evidence["imu_vs_gyro_yaw_scale"] = k_imu
-    imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
-    missed, seconds = _missed_turn(series)
-    if missed > MISSED_TURN_RAD and imu is not None:
-        evidence.update({"turn_missed_rad": missed, "zero_while_turning_s": seconds})
-        return Verdict(odom.name, "heading", "problem",
-                       f"the wheels read exactly zero for {seconds:.1f} s in all while the gyro turned ({missed:.2f} "
-                       "rad of turn: the drive at rest while the vehicle turns, or its yaw rate lost). The gyro is "
-                       "not fused, so the predicted heading missed every one of those turns (outside them the wheels' "
-                       f"yaw rate = {rate_fit_text(k, offset)}); fuse the gyro so it drives heading",
-                       sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)
-    if abs(k - 1.0) <= WHEEL_SCALE_TOLERANCE and abs(offset) <= WHEEL_OFFSET_RAD_S:
-        return Verdict(odom.name, "heading", "ok",
-                       f"wheel yaw rate agrees with the gyro (scale {k:.2f}, offset {offset:+.3f} rad/s)",
-                       evidence=evidence)
-    agree = (f"; the IMU's own yaw agrees with the gyro (scale {k_imu:.2f})"
-             if math.isfinite(k_imu) and abs(k_imu - 1.0) <= WHEEL_SCALE_TOLERANCE else "")
-    msg = (f"the wheels' yaw rate = {rate_fit_text(k, offset)}{agree}: skid-steer slip "
-           "or a driver scale. The gyro "
-           "is not fused, so this wheel yaw rate drives the predicted heading and every heading update fights it")
-    if imu is None:
-        return Verdict(odom.name, "heading", "warn", msg, evidence=evidence)
-    return Verdict(odom.name, "heading", "problem", msg + "; fuse the gyro so it drives heading",
-                   sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-from ..samples import ImuSample, OdomSample
+from ..core.sensors import ImuSample, OdomSample
 from ..core.inputs import smoothed_period
 from ..core.sensors.odom import impossible_stop
 

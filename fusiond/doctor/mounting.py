@@ -31,8 +31,22 @@ import numpy as np
 
 from ..config import ImuSensor
 from .series import BIN_S, Series
-from .thresholds import (GAIN_BAND, MAX_ALIGN_S, MOUNT_MIN_SAMPLES, MOUNT_MIN_SPEED, MOUNT_YAW_RAD, MOUNT_Z_SIGMAS,
-                         SMOOTH_BINS)
+
+
+# A yaw error delta in the mounting puts sin(delta) of the IMU's roll on base pitch (and of the
+# centripetal tilt correction on the wrong axis): at 0.05 rad (3 degrees) a 0.1 rad side slope
+# becomes a 0.005 rad pitch error, a sixth of the lean check's LEAN_RAD (0.03), i.e. 0.5 % of the
+# distance driven in height. Smaller errors are not worth a verdict.
+MOUNT_YAW_RAD = 0.05
+MOUNT_MIN_SPEED = 0.2  # m/s: slower, dv/dt and v w are too small and the wheels too coarse to compare
+SMOOTH_BINS = 5  # 1 s at 5 Hz: vibration averaged, manoeuvres (seconds long) kept
+MOUNT_MIN_SAMPLES = 20  # decimated driving samples: 20 s of driving
+# |(c, s)| is 1 for an accelerometer that sees the motion turned; at half or twice that it is not a turn
+# (a mirrored axis, e.g. one sign flipped in the driver, fits with |(c, s)| near 0; wrong units near 10):
+# the angle then means nothing and is not named
+GAIN_BAND = (0.5, 2.0)
+MAX_ALIGN_S = 1.5 * BIN_S  # an accelerometer bin with no wheel bin this close is not compared
+MOUNT_Z_SIGMAS = 3.0  # a mounting yaw is named beyond 3 standard errors (0.27 % two-sided)
 
 
 @dataclass
@@ -45,7 +59,7 @@ class MountYaw:
     samples: int
     expected_rms: float  # m/s^2: how much horizontal acceleration the driving gave to fit against
     residual_rms: float
-    bias_x: float = 0.0  # m/s^2: b on base x (accelerometer bias, gravity leaking through a tilt), for coast.py
+    bias_x: float = 0.0  # m/s^2: b on base x (accelerometer bias, gravity leaking through a tilt), for checks/coast.py
 
     @property
     def named(self) -> bool:

@@ -24,7 +24,7 @@ from ..config import Config
 from ..core.sensors.registry import kind_of
 from ..estimator import rotation as rot
 from ..estimator.geodesy import EnuFrame
-from ..samples import GpsSample, ImuSample, OdomSample
+from ..core.sensors import GpsSample, ImuSample, OdomSample
 from .bins import BIN_S
 from .streams import MAX_STEP_S, ImuStream, OdomStream
 

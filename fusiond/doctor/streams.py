@@ -19,7 +19,7 @@ import numpy as np
 
 from ..config import ImuSensor, OdomSensor
 from ..estimator import rotation as rot
-from ..samples import ImuSample, OdomSample
+from ..core.sensors import ImuSample, OdomSample
 from ..core.sensors.imu import G_UNITS_BAND, GRAVITY
 from .bins import Binned, OpenBin, bin_rows
 

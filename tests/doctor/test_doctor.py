@@ -113,7 +113,7 @@ def test_a_lost_yaw_rate_on_gentle_curves_is_not_measured_either():
     yaw rate as exactly 0 with variance 0: no turn is sharp enough for the in-turns test, but every moving
     sample is an exact zero over a run whose gyro heading spans 0.03 x 40 s = 1.2 rad (over MIN_TURNED_RAD):
     the same verdict, not 'state more noise'. With the yaw rate measured, nothing of the kind."""
-    from fusiond.doctor.thresholds import MIN_TURNED_RAD, TURNING_RAD_S
+    from fusiond.doctor.checks.unmeasured_yaw_rate import MIN_TURNED_RAD, TURNING_RAD_S
 
     from tests.support.sim_rest import RestWorld, Segment
     from tests.support.sim_rest import simulate as simulate_rest

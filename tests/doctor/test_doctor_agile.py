@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from fusiond.doctor.bins import BIN_S
-from fusiond.doctor.heading import detrended_rms, heading_check
-from fusiond.doctor.thresholds import WANDER_RAD
+from fusiond.doctor.checks.heading import heading_check
+from fusiond.doctor.heading import WANDER_RAD, detrended_rms
 from fusiond.estimator import rotation as rot
 from fusiond.replay.run import run_samples
 from fusiond.core.sensors import ImuSample, OdomSample

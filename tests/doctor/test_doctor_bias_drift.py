@@ -9,7 +9,7 @@ doctor that takes the first standstill for a false one would advise ``standstill
 from __future__ import annotations
 
 from fusiond.doctor.gyro import Episode, bias_drift
-from fusiond.doctor.thresholds import DISAGREE_RAD_S
+from fusiond.doctor.gyro import DISAGREE_RAD_S
 
 from tests.support.configs import robot_config
 from tests.support.sim_rest import RestWorld, Segment, simulate

@@ -1,4 +1,4 @@
-"""The doctor measures how a vehicle slowed while its drive read zero (``doctor/coast.py``).
+"""The doctor measures how a vehicle slowed while its drive read zero (``doctor/checks/coast.py``).
 
 ``sim_rest``'s car weaves for 40 s with speed changes (ramps of 1 m/s^2) and twice has its drive read
 exactly zero for COAST_S while it turns at 0.2 rad/s: the core rolls the position on from the last speed,
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusiond.doctor.thresholds import DECEL_TOLERANCE, MIN_COAST_DECEL
+from fusiond.doctor.checks.coast import DECEL_TOLERANCE, MIN_COAST_DECEL
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors import OdomSample
 

@@ -14,7 +14,7 @@ import re
 import numpy as np
 import pytest
 
-from fusiond.doctor.thresholds import WANDER_RAD, WHEEL_OFFSET_RAD_S
+from fusiond.doctor.heading import WANDER_RAD, WHEEL_OFFSET_RAD_S
 from fusiond.estimator import rotation as rot
 from fusiond.replay.run import Runner, run_samples, summary
 
@@ -56,7 +56,7 @@ def test_a_logging_gap_does_not_make_a_correct_imu_yaw_look_disturbed(gap):
     v = one(verdicts, "imu", "orientation")
     assert v.key != "sensors.imu.orientation" and "magnetometer" not in v.message, v
     result = run_samples(samples, make_config(orientation="absolute", gyro=True))
-    from fusiond.doctor.heading import heading_check
+    from fusiond.doctor.checks.heading import heading_check
 
     checked = heading_check(result.doctor.series(), result.doctor.cfg)
     assert checked is not None and checked.evidence["imu_vs_gyro_wander_rad"] < WANDER_RAD / 2, checked
@@ -72,7 +72,7 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
     yaw_across_gaps = true to paste. Pasted, the heading turns by it at the first orientation after the gap:
     the final heading error is the IMU yaw's noise (0.05 asserted) and nothing is named. Without the gap
     both headings follow the gyro: nothing is named."""
-    from fusiond.doctor.thresholds import GAP_DRIFT_RATE, GAP_TURN_RAD
+    from fusiond.doctor.checks.gap_heading import GAP_DRIFT_RATE, GAP_TURN_RAD
 
     cfg = SimConfig(duration=90.0, standstill=2.0)
     samples = simulate(cfg)
@@ -106,8 +106,8 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
 def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():
     """The bins compared must lie within BIN_S of the estimate's times (the IMU) and GAP_EDGE_S of the gap (the
     estimate): a series that stops before the gap, or one with a single bin, gives no comparison."""
-    from fusiond.doctor.gap_heading import BIN_S, _around, _at
-    from fusiond.doctor.thresholds import GAP_EDGE_S
+    from fusiond.doctor.bins import BIN_S
+    from fusiond.doctor.checks.gap_heading import GAP_EDGE_S, _around, _at
 
     t = np.array([0.0, 0.2, 0.4, 10.4, 10.6])
     y = np.array([0.0, 0.1, 0.2, 1.2, 1.3])
@@ -134,7 +134,7 @@ def test_imu_yaw_scale_against_the_gyro_is_fitted_per_stretch_between_gaps():
     the gyro (scale 1: both measure the turn, the IMU yaw to 0.002 rad over turns of ~1 rad). Across the
     gap the gyro misses a 1.12 rad turn that the IMU yaw keeps: one line over the run read it as a scale
     of 0.74; each stretch gets its own offset, and the scale stays within WHEEL_SCALE_TOLERANCE of 1."""
-    from fusiond.doctor.thresholds import WHEEL_SCALE_TOLERANCE
+    from fusiond.doctor.heading import WHEEL_SCALE_TOLERANCE
 
     samples = drop_span(simulate(SimConfig(duration=90.0, standstill=2.0, wheel_yaw_scale=2.3)),
                         T0 + GAP[0], T0 + GAP[1])
@@ -217,7 +217,7 @@ STATED_HIGHWAY = "position_noise = [1.3, 1.3, 2.6]"  # the wander and the white 
 
 @pytest.mark.parametrize("wander", [True, False])
 def test_a_wander_under_10_hz_fixes_on_a_highway_is_named_and_white_fixes_are_not(wander):
-    from fusiond.doctor.thresholds import PERSISTING_SHARE
+    from fusiond.doctor.checks.gps_wander import PERSISTING_SHARE
 
     world = sim_gps.World(**HIGHWAY, **(dict(gps_error_tau=60.0, gps_error_sigma=1.2) if wander else {}))
     v = one(verdicts_of(robot_config(gps=STATED_HIGHWAY), sim_gps.simulate(world)), "gps", "position")

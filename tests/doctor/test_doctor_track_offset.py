@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import pytest
 
-from fusiond.doctor.thresholds import TRACK_OFFSET_RAD
+from fusiond.doctor.checks.heading import TRACK_OFFSET_RAD
 
 from tests.support import sim_gps
 from tests.support.configs import robot_config
@@ -60,7 +60,7 @@ def test_the_yaw_along_a_chord_is_the_direction_of_its_displacement():
 
     import numpy as np
 
-    from fusiond.doctor.heading import yaw_along
+    from fusiond.doctor.checks.heading import yaw_along
     from fusiond.doctor.series import Series
 
     t = np.arange(0.1, 8.0, 0.2)  # bin middles

@@ -90,7 +90,7 @@ def test_the_doctor_says_what_the_yaw_jumps_were():
     """The four step edges of the world above, gated (every yaw_jump record is a reading the gate kept out):
     the channel's NIS is not judged (it is beyond the gate by construction) and the verdict counts them, a
     share of the IMU's readings far below JUMP_NOTE_SHARE: ok, a disturbance switching on now and then."""
-    from fusiond.doctor.thresholds import JUMP_NOTE_SHARE
+    from fusiond.doctor.checks.yaw_jump import JUMP_NOTE_SHARE
     from fusiond.replay.run import run_samples
 
     from tests.support.verdicts import agree, one
@@ -123,7 +123,7 @@ def _kept_absolute(steps):
     """A magnetometer 0.35 rad off and disturbed by ``steps`` beside a 1.5 m GPS at 1 Hz: (world, samples,
     the advised yaw_offset), the verdict asserted to find the disturbance (beyond 2 WANDER_RAD against the
     gyro), the estimate not following it (within WANDER_RAD) and so to keep the yaw absolute."""
-    from fusiond.doctor.thresholds import WANDER_RAD
+    from fusiond.doctor.heading import WANDER_RAD
     from fusiond.replay.run import run_samples
 
     w = World(duration=300.0, speed=1.0, gps_rate=1.0, gps_sigma=1.5, gyro_bias=0.002,

@@ -251,6 +251,24 @@ def test_the_core_never_imports_the_doctor_and_only_its_readers_do():
     assert readers == _DOCTOR_READERS
 
 
+def test_each_doctor_check_holds_its_own_thresholds():
+    """A check's thresholds are module constants beside it (``doctor/checks/<check>.py``, each with where it
+    comes from): no check module imports a constant from another check module."""
+    crossing = []
+    for path in (PACKAGE / "doctor" / "checks").glob("*.py"):
+        package = ["fusiond", *path.relative_to(PACKAGE).parent.parts]
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            base = package[:len(package) - node.level + 1] if node.level else []
+            module = ".".join(base + ([node.module] if node.module else []))
+            names = [a.name for a in node.names if a.name.isupper()]
+            if module.startswith("fusiond.doctor.checks") and names:
+                crossing.append(f"{path.name}: {module} {names}")
+    assert crossing == []
+    assert not (PACKAGE / "doctor" / "thresholds.py").exists()  # no module of loose thresholds
+
+
 def test_a_kind_registers_under_its_tables_tag_and_an_unknown_tag_names_the_known_ones():
     from fusiond.config import SensorTable
     from fusiond.core.sensors import SensorKind, kind_named, register

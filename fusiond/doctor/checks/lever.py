@@ -32,15 +32,25 @@ import math
 
 import numpy as np
 
-from ..config import Config
-from ..core.sensors.registry import kind_of
-from .median import median
-from .series import Series
-from .verdict import Verdict, sensor_key
-from .thresholds import (LATENCY_ALONG, LEVER_TOL, LEVER_Z_SIGMAS, MAX_INTERVAL, MAX_SE, MAX_SE_NAMED, MIN_PAIRS,
-                         OUTLIER_SIGMAS, PAIR_S)
+from ...core.sensors.registry import kind_of
+from ..median import median
+from ..series import Series
+from ..check import BaseCheck
+from ..evidence import Evidence
+from ..verdict import Verdict, sensor_key
 
-__all__ = ["lever_verdict"]
+__all__ = ["LeverArm"]
+
+LEVER_TOL = 0.2  # m: a lever this close to the stated one is not worth a change
+MAX_SE = 0.1  # m: "as stated" needs the fit this precise (half LEVER_TOL)
+MAX_SE_NAMED = 0.3  # m: a lever is named only from a fit this precise (a fifth of a 1.5 m mast's offset)
+LATENCY_ALONG = 2.0  # a misfit behind base_link this many times longer than it is wide: also says latency
+# named when the lever's chi-square (2 dof) exceeds LEVER_Z_SIGMAS^2 = 25 (p ~ 4e-6, the module docstring)
+LEVER_Z_SIGMAS = 5.0
+OUTLIER_SIGMAS = 4.0  # a pair beyond 4 sigma of the scatter is multipath (a normal pair: 6e-5 chance)
+MIN_PAIRS = 30  # fix pairs in turns before a fit: its scatter estimate then good to ~13 %
+PAIR_S = 3.0  # s between the two fixes of a pair (the module docstring)
+MAX_INTERVAL = 1.5  # a pair further apart than this many PAIR_S (fixes missing) is not used
 
 
 def _rot(yaw: np.ndarray, l: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -115,48 +125,58 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
     return x[:2], cov[:2, :2], int(keep.sum())
 
 
-def lever_verdict(series: Series, cfg: Config) -> Verdict | None:
-    """A verdict on the first GPS's ``extrinsic_xyz`` (module doc), or None when the run cannot tell."""
-    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
-    if gps is None:
-        return None
-    stated = (float(gps.extrinsic_xyz[0]), float(gps.extrinsic_xyz[1]))
-    fit = lever_fit(series, stated)
-    if fit is None:
-        return None
-    dl, cov, pairs = fit
-    se = math.sqrt(max(float(np.max(np.diag(cov))), 0.0))
-    try:
-        chi2 = float(dl @ np.linalg.solve(cov, dl))
-    except np.linalg.LinAlgError:
-        return None
-    named = math.hypot(*dl) >= LEVER_TOL and chi2 >= LEVER_Z_SIGMAS**2 and se <= MAX_SE_NAMED
-    if not (named or se <= MAX_SE):
-        return None
-    lever = (stated[0] + float(dl[0]), stated[1] + float(dl[1]), float(gps.extrinsic_xyz[2]))
-    evidence = {"lever_x_m": lever[0], "lever_y_m": lever[1], "lever_dx_m": float(dl[0]), "lever_dy_m": float(dl[1]),
-                "lever_se_m": se, "fix_pairs": float(pairs)}
-    where = (f"over {pairs} pairs of fixes, what they moved beyond the wheels' dead-reckoned travel as the vehicle "
-             "turned puts the antenna at ")
-    if not named:
-        # not "as stated" when it is not: the distance is said, and why it is not named (a 0.25 m lever at
-        # 4.2 standard errors is not shown to be what extrinsic_xyz says, only not proven to differ)
-        off = math.hypot(*dl)
-        why = (f"within {LEVER_TOL:g} m: not worth a change" if off < LEVER_TOL else
-               f"not named: {math.sqrt(chi2):.1f} standard errors, {LEVER_Z_SIGMAS:g} needed")
-        return Verdict(gps.name, "lever_arm", "ok",
-                       where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, {off:.2f} m from "
-                       f"extrinsic_xyz's ({stated[0]:+.2f}, {stated[1]:+.2f}): {why}", evidence=evidence)
-    latency = ""
-    if dl[0] < 0.0 and abs(dl[0]) > LATENCY_ALONG * abs(dl[1]):
-        # fixes stamped late trail the vehicle by speed x latency: at one speed that looks like a lever behind it
-        latency = (". Behind and along the vehicle, it can also be fixes stamped late (a latency tau trails them "
-                   "by speed x tau): if the antenna is not there, see the GPS's clock verdict and stamp_offset_s")
-    return Verdict(gps.name, "lever_arm", "warn",
-                   where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, {math.hypot(*dl):.2f} m "
-                   f"from where extrinsic_xyz puts it ({stated[0]:+.2f}, {stated[1]:+.2f}): its fixes swing by that as "
-                   "the vehicle turns, which the filter takes for the base moving (and partly follows, so the NIS "
-                   "need not show it). State the antenna's position (the height is kept: only the tilt shows it)"
-                   + latency,
-                   sensor_key(gps.name, "extrinsic_xyz"),
-                   f"extrinsic_xyz = [{lever[0]:.2f}, {lever[1]:.2f}, {lever[2]:.2f}]", evidence)
+class LeverArm(BaseCheck):
+    """The GPS antenna's lever arm, from how the fixes swing as the vehicle turns."""
+
+    name = "lever"
+    group = "cross"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        """A verdict on the first GPS's ``extrinsic_xyz`` (module doc); none when the run cannot tell."""
+        series, cfg = ev.series, ev.config
+        gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
+        if gps is None:
+            return []
+        stated = (float(gps.extrinsic_xyz[0]), float(gps.extrinsic_xyz[1]))
+        fit = lever_fit(series, stated)
+        if fit is None:
+            return []
+        dl, cov, pairs = fit
+        se = math.sqrt(max(float(np.max(np.diag(cov))), 0.0))
+        try:
+            chi2 = float(dl @ np.linalg.solve(cov, dl))
+        except np.linalg.LinAlgError:
+            return []
+        named = math.hypot(*dl) >= LEVER_TOL and chi2 >= LEVER_Z_SIGMAS**2 and se <= MAX_SE_NAMED
+        if not (named or se <= MAX_SE):
+            return []
+        lever = (stated[0] + float(dl[0]), stated[1] + float(dl[1]), float(gps.extrinsic_xyz[2]))
+        evidence = {"lever_x_m": lever[0], "lever_y_m": lever[1], "lever_dx_m": float(dl[0]),
+                    "lever_dy_m": float(dl[1]),
+                    "lever_se_m": se, "fix_pairs": float(pairs)}
+        where = (f"over {pairs} pairs of fixes, what they moved beyond the wheels' dead-reckoned travel as the vehicle "
+                 "turned puts the antenna at ")
+        if not named:
+            # not "as stated" when it is not: the distance is said, and why it is not named (a 0.25 m lever at
+            # 4.2 standard errors is not shown to be what extrinsic_xyz says, only not proven to differ)
+            off = math.hypot(*dl)
+            why = (f"within {LEVER_TOL:g} m: not worth a change" if off < LEVER_TOL else
+                   f"not named: {math.sqrt(chi2):.1f} standard errors, {LEVER_Z_SIGMAS:g} needed")
+            return [Verdict(gps.name, "lever_arm", "ok",
+                            where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, "
+                            f"{off:.2f} m from "
+                            f"extrinsic_xyz's ({stated[0]:+.2f}, {stated[1]:+.2f}): {why}", evidence=evidence)]
+        latency = ""
+        if dl[0] < 0.0 and abs(dl[0]) > LATENCY_ALONG * abs(dl[1]):
+            # fixes stamped late trail the vehicle by speed x latency: at one speed that looks like a lever behind it
+            latency = (". Behind and along the vehicle, it can also be fixes stamped late (a latency tau trails them "
+                       "by speed x tau): if the antenna is not there, see the GPS's clock verdict and stamp_offset_s")
+        return [Verdict(gps.name, "lever_arm", "warn",
+                        where + f"x {lever[0]:+.2f} y {lever[1]:+.2f} m (+- {se:.2f}) in base_link, "
+                        f"{math.hypot(*dl):.2f} m from where extrinsic_xyz puts it ({stated[0]:+.2f}, "
+                        f"{stated[1]:+.2f}): its fixes swing by that as the vehicle turns, which the filter takes for "
+                        "the base moving (and partly follows, so the NIS need not show it). State the antenna's "
+                        "position (the height is kept: only the tilt shows it)"
+                        + latency,
+                        sensor_key(gps.name, "extrinsic_xyz"),
+                        f"extrinsic_xyz = [{lever[0]:.2f}, {lever[1]:.2f}, {lever[2]:.2f}]", evidence)]

@@ -50,13 +50,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config, GpsSensor, OdomSensor
-from ..core.sensors.registry import kind_of
-from ..core.diagnostics import t_quantile
-from .heading import gps_sigma, timed
-from .series import Series
-from .verdict import Verdict, sensor_key
-from .thresholds import ASSUMED_TAU_S, CHORD_M, CHORD_MAX_S, MIN_CHORDS, SCALE_TOLERANCE, SCALE_Z_SIGMAS
+from ...config import Config, GpsSensor
+from ...core.sensors.registry import kind_of
+from ...core.diagnostics import t_quantile
+from ..check import BaseCheck
+from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, chord_ends, cumulative, newey_west
+from ..evidence import Evidence
+from ..heading import gps_sigma, timed
+from ..series import Series
+from ..verdict import Verdict, sensor_key
+
+
+__all__ = ["Speed", "wheel_scale_fit"]
+
+SCALE_TOLERANCE = 0.02  # a wheel scale within 2 % is not worth a state
 
 
 @dataclass
@@ -79,14 +86,6 @@ class ScaleFit:
         return {"wheel_scale_vs_gps": self.scale, "wheel_scale_se": self.se, "wheel_scale_se_model": self.se_model,
                 "wheel_scale_se_residuals": self.se_empirical, "stretches": float(self.chords),
                 "gps_distance_m": self.distance_m}
-
-
-def _cumulative(t: np.ndarray, v: np.ndarray) -> np.ndarray:
-    out = np.zeros(len(t))
-    if len(t) > 1:
-        dt = np.diff(t)
-        out[1:] = np.cumsum(np.where(dt < 1.0, 0.5 * (v[1:] + v[:-1]) * dt, 0.0))
-    return out
 
 
 def wander(gps: GpsSensor | None, sigma_w: float) -> tuple[float, float]:
@@ -112,13 +111,13 @@ def wheel_scale_fit(series: Series, cfg: Config) -> ScaleFit | None:
     heading = np.interp(to, tg, hg)
     v = np.array(series.odom_v)
     # dead-reckon the wheels with the (short-term exact) integrated gyro: chords compare, curves or not
-    x = _cumulative(to, v * np.cos(heading))
-    y = _cumulative(to, v * np.sin(heading))
+    x = cumulative(to, v * np.cos(heading))
+    y = cumulative(to, v * np.sin(heading))
     g, d, dt, ta, tb, u = [], [], [], [], [], []
     # a chord across a logging gap: the wheels' travel (and the gyro's turn) in the gap is missing from
     # the dead reckoning, not from the GPS: that chord is no evidence of a scale
     breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
-    for i, j in chord_ends(series, to, _cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * sigma_w)):
+    for i, j in chord_ends(series, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * sigma_w)):
         t0, t1 = series.gps_t[i], series.gps_t[j]
         if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
             continue
@@ -142,40 +141,8 @@ def wheel_scale_fit(series: Series, cfg: Config) -> ScaleFit | None:
     c = d_ / V / info
     se_model = math.sqrt(max(_model_variance(c, np.array(ta), np.array(tb), np.array(u), sigma_w, sigma_m, tau),
                              0.0))
-    se_emp = math.sqrt(_newey_west(c * (g_ - k * d_)) * n / (n - 1))
+    se_emp = math.sqrt(newey_west(c * (g_ - k * d_)) * n / (n - 1))
     return ScaleFit(k, max(se_model, se_emp), se_model, se_emp, n, float(g_.sum()))
-
-
-def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: float) -> list[tuple[int, int]]:
-    """Consecutive chords (indices into the fixes) each spanning ``length`` metres of WHEEL travel.
-
-    Chosen on the wheels, not on the fixes' own distance: a chord that ends where the GPS distance
-    first exceeds a threshold ends preferably on a fix whose error points forward, and is biased
-    long by it (measured: +3 % with 0.3 m noise at 1 m/s, 1 Hz fixes, 10 m chords). The wheels'
-    travel is independent of the GPS error, so the GPS chord stays unbiased."""
-    t = np.asarray(series.gps_t)
-    if len(t) < 2 or np.any(np.diff(t) < 0.0):
-        order = np.argsort(t, kind="stable")
-    else:
-        order = np.arange(len(t))
-    ts = t[order]
-    inside = (ts >= to[0]) & (ts <= to[-1])
-    s = np.where(inside, np.interp(ts, to, travelled), np.nan)
-    out = []
-    i = 0
-    while i < len(ts) - 1:
-        if not inside[i]:
-            i += 1
-            continue
-        end = int(np.searchsorted(ts, ts[i] + CHORD_MAX_S, side="right"))
-        far = np.nonzero(s[i + 1:end] - s[i] >= length)[0]
-        if not len(far):
-            i += 1  # standing, or too slow from here: try the next fix
-            continue
-        j = i + 1 + int(far[0])
-        out.append((int(order[i]), int(order[j])))
-        i = j
-    return out
 
 
 def _model_variance(c: np.ndarray, ta: np.ndarray, tb: np.ndarray, u: np.ndarray, sigma_w: float, sigma_m: float,
@@ -197,60 +164,57 @@ def _model_variance(c: np.ndarray, ta: np.ndarray, tb: np.ndarray, u: np.ndarray
     return total
 
 
-def _newey_west(score: np.ndarray) -> float:
-    """Variance of sum(score) from the scores' autocovariances up to NW_LAGS(n) apart, Bartlett weights
-    (never negative). Longer-range terms of an OU wander are negative (see the module docstring), so
-    leaving them out errs on the large side."""
-    n = len(score)
-    lags = min(n - 1, int(math.ceil(n ** (1.0 / 3.0))))
-    total = float(score @ score)
-    for lag in range(1, lags + 1):
-        total += 2.0 * (1.0 - lag / (lags + 1.0)) * float(score[lag:] @ score[:-lag])
-    return max(total, 0.0)
+class Speed(BaseCheck):
+    """The wheel speed's scale against the GPS chords."""
 
+    name = "speed"
+    group = "cross"
 
-def speed_check(series: Series, cfg: Config, scales: dict[str, float] | None = None) -> Verdict | None:
-    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
-    gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
-    if odom is None or gps is None:
-        return None
-    fit = wheel_scale_fit(series, cfg)
-    if fit is None:
-        return None
-    scale, se, n = fit.scale, fit.se, fit.chords
-    evidence = fit.evidence()
-    estimated = (scales or {}).get("wheel_scale")
-    # scale_estimation unset means on with a GPS: the core then has a wheel_scale state
-    estimating = odom.scale_estimation or (odom.scale_estimation is None and estimated is not None)
-    band = fit.band
-    if abs(scale - 1.0) > band:
-        if estimating:
-            if estimated is not None and abs(estimated - scale) <= band:
-                return Verdict(odom.name, "speed", "ok",
-                               f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS over {n} chords; "
-                               f"the estimated wheel scale {estimated:.3f} matches ({scale:.3f} +- {se:.3f} measured)",
-                               evidence=evidence)
-            return Verdict(odom.name, "speed", "warn",
-                           f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS (scale {scale:.3f} +- "
-                           f"{se:.3f} measured over {n} chords) but the estimated wheel scale is "
-                           f"{estimated if estimated is not None else float('nan'):.3f}: it has not converged; "
-                           "filter.wheel_scale_sigma may be too small", "filter.wheel_scale_sigma", evidence=evidence)
-        return Verdict(odom.name, "speed", "problem",
-                       f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS distance (true/wheel speed "
-                       f"{scale:.3f} +- {se:.3f}, over {n} chords, {fit.distance_m:.0f} m): a tyre radius or slip "
-                       "error; estimate the wheel scale", sensor_key(odom.name, "scale_estimation"),
-                       "scale_estimation = true", evidence)
-    if estimating and estimated is not None and abs(estimated - scale) > band:
-        # The wheels agree with the GPS chords, yet the filter's wheel_scale state moved away: it learned
-        # something the data does not contain (fixes gated out while the estimate drifted, a heading or
-        # altitude error explained as a scale, a filter re-acquired after a gap), and it bends every
-        # dead-reckoned metre by that much.
-        return Verdict(odom.name, "speed", "warn",
-                       f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
-                       f"{fit.distance_m:.0f} m) but the filter's estimated wheel scale is {estimated:.3f}: the "
-                       "state learned an error the wheels do not have; see the GPS verdicts (gated or lost fixes, "
-                       "a wrong heading), or turn the state off", sensor_key(odom.name, "scale_estimation"),
-                       "scale_estimation = false", {**evidence, "wheel_scale_estimated": estimated})
-    return Verdict(odom.name, "speed", "ok",
-                   f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
-                   f"{fit.distance_m:.0f} m)", evidence=evidence)
+    def run(self, ev: Evidence) -> list[Verdict]:
+        series, cfg, scales = ev.series, ev.config, ev.scales
+        odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+        gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
+        if odom is None or gps is None:
+            return []
+        fit = wheel_scale_fit(series, cfg)
+        if fit is None:
+            return []
+        scale, se, n = fit.scale, fit.se, fit.chords
+        evidence = fit.evidence()
+        estimated = (scales or {}).get("wheel_scale")
+        # scale_estimation unset means on with a GPS: the core then has a wheel_scale state
+        estimating = odom.scale_estimation or (odom.scale_estimation is None and estimated is not None)
+        band = fit.band
+        if abs(scale - 1.0) > band:
+            if estimating:
+                if estimated is not None and abs(estimated - scale) <= band:
+                    return [Verdict(odom.name, "speed", "ok",
+                                    f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS over {n} chords; "
+                                    f"the estimated wheel scale {estimated:.3f} matches ({scale:.3f} +- {se:.3f} "
+                                    "measured)",
+                                    evidence=evidence)]
+                return [Verdict(odom.name, "speed", "warn",
+                                f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS (scale {scale:.3f} +- "
+                                f"{se:.3f} measured over {n} chords) but the estimated wheel scale is "
+                                f"{estimated if estimated is not None else float('nan'):.3f}: it has not converged; "
+                                "filter.wheel_scale_sigma may be too small",
+                                "filter.wheel_scale_sigma", evidence=evidence)]
+            return [Verdict(odom.name, "speed", "problem",
+                            f"the wheels read {100 * (1 / scale - 1):+.1f}% against the GPS distance (true/wheel speed "
+                            f"{scale:.3f} +- {se:.3f}, over {n} chords, {fit.distance_m:.0f} m): a tyre radius or slip "
+                            "error; estimate the wheel scale", sensor_key(odom.name, "scale_estimation"),
+                            "scale_estimation = true", evidence)]
+        if estimating and estimated is not None and abs(estimated - scale) > band:
+            # The wheels agree with the GPS chords, yet the filter's wheel_scale state moved away: it learned
+            # something the data does not contain (fixes gated out while the estimate drifted, a heading or
+            # altitude error explained as a scale, a filter re-acquired after a gap), and it bends every
+            # dead-reckoned metre by that much.
+            return [Verdict(odom.name, "speed", "warn",
+                            f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
+                            f"{fit.distance_m:.0f} m) but the filter's estimated wheel scale is {estimated:.3f}: the "
+                            "state learned an error the wheels do not have; see the GPS verdicts (gated or lost fixes, "
+                            "a wrong heading), or turn the state off", sensor_key(odom.name, "scale_estimation"),
+                            "scale_estimation = false", {**evidence, "wheel_scale_estimated": estimated})]
+        return [Verdict(odom.name, "speed", "ok",
+                        f"wheel speed agrees with the GPS (scale {scale:.3f} +- {se:.3f} over {n} chords, "
+                        f"{fit.distance_m:.0f} m)", evidence=evidence)]

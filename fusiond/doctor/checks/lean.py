@@ -1,7 +1,7 @@
-"""IMU mounting pitch: the GPS's climb against the climb the estimate's pitch implies.
+"""The estimate's lean: against the grade the GPS altitude measures, else its mean over the run.
 
-The lean check (``attitude``) reads a steady tilt of the estimate as a mounting error, which
-holds on level ground only: a car on a highway leans with the road. With a GPS that measures
+Without a GPS grade (``lean_verdict``), a steady tilt of the estimate is read as a mounting error,
+which holds on level ground only: a car on a highway leans with the road. With a GPS that measures
 altitude the road's grade is measured too. The body-frame twist is integrated along the
 estimate's pitch theta_est = theta + delta, delta the IMU's pitch in its mount that
 ``extrinsic_rpy`` does not say; for a vehicle that moves along its x axis (REP-103, pitch
@@ -14,13 +14,13 @@ Over a chord from fix a to fix b, with Z the climb the estimate implies (the int
 
     r = (u_b - u_a) - (Z_b - Z_a) = delta (D_b - D_a) + (E_b - E_a),
 
-E the fixes' vertical error. The chords are consecutive (speed.chord_ends: they start where the
+E the fixes' vertical error. The chords are consecutive (``chords.chord_ends``: they start where the
 last one ended), so the errors telescope: over a run of chords without a break the sum of r
 carries only E at its two ends. Hence delta = sum(r) / sum(d), with, per unbroken run of length
 T, Var(E_end - E_start) = 2 sigma_w^2 + 2 sigma_m^2 (1 - exp(-T / tau)): the white noise at the
 two ends and the slow wander (the GPS's vertical error state, ``vertical_error_sigma`` /
 ``vertical_error_tau_s``, else ``error_sigma``'s up / ``error_tau_s``, else the stated sigma as in
-speed.py). The residuals' Newey-West variance catches errors larger than that model; the verdict
+``checks/speed.py``). The residuals' Newey-West variance catches errors larger than that model; the verdict
 uses the larger.
 
 The fit measures what is left in the estimate: a filter whose pitch already follows the grade
@@ -35,17 +35,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Config, GpsSensor, ImuSensor
-from ..core.sensors.registry import kind_of
-from ..core.layout import fuses_height
-from .attitude import full_mount, paste_mount
-from .heading import gps_sigma
-from .median import median
-from .mounting import MountYaw
-from .series import Series
-from .speed import _cumulative, _newey_west, chord_ends, t_quantile
-from .verdict import Verdict, sensor_key
-from .thresholds import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, MOUNT_PITCH_RAD, SCALE_Z_SIGMAS
+from ...config import Config, GpsSensor, ImuSensor
+from ...core.sensors.registry import kind_of
+from ...core.diagnostics import t_quantile
+from ...core.layout import fuses_height, state_layout
+from ..attitude import TiltStats, full_mount, inverted_lean, lean_of, paste_mount
+from ..check import MIN_UPDATES, BaseCheck, found
+from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, chord_ends, cumulative, newey_west
+from ..evidence import Evidence
+from ..heading import gps_sigma
+from ..median import median
+from ..mounting import MountYaw
+from ..series import Series
+from ..verdict import Verdict, sensor_key
+
+__all__ = ["GradeFit", "Lean", "grade_fit", "grade_verdict", "lean_verdict"]
+
+# A pitch error delta sinks or lifts the dead-reckoned z by delta per metre driven: at 0.01 rad, 1 %
+# of the distance, twice the 0.5 % below which mounting.py names no yaw error. Smaller: not named.
+MOUNT_PITCH_RAD = 0.01
 
 
 @dataclass
@@ -114,13 +122,13 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     v = np.asarray(series.odom_v)
     te = np.asarray(series.est_t)
     pitch = np.interp(to, te, np.asarray(series.est_pitch))
-    climb = _cumulative(to, -v * np.sin(pitch))
-    along = _cumulative(to, v * np.cos(pitch))
+    climb = cumulative(to, -v * np.sin(pitch))
+    along = cumulative(to, v * np.cos(pitch))
     sigma_w, sigma_m, tau = _vertical_noise(series, gps)
     breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
     gt, gu = series.gps_t, series.gps_u
     r, d, ends = [], [], []
-    for i, j in chord_ends(series, to, _cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
+    for i, j in chord_ends(series, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
         t0, t1 = gt[i], gt[j]
         if t0 < te[0] or t1 > te[-1]:
             continue  # before the first estimate (or after the last): no pitch to compare
@@ -149,7 +157,7 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
             runs += 1
             start = None
     se_model = math.sqrt(var_n) / abs(total)
-    se_emp = math.sqrt(_newey_west((r_ - delta * d_) / total) * n / (n - 1))
+    se_emp = math.sqrt(newey_west((r_ - delta * d_) / total) * n / (n - 1))
     return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs)
 
 
@@ -180,4 +188,39 @@ def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw |
     return None
 
 
-__all__ = ["GradeFit", "grade_fit", "grade_verdict"]
+def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50,
+                 mount: MountYaw | None = None) -> Verdict | None:
+    """``mount``: the accelerometer's yaw fit; when it names a yaw error, the suggestion includes it."""
+    if imu is None:
+        return None
+    means, stds, leaning = lean_of(tilt, min_updates)
+    if not leaning:
+        return None
+    rpy = full_mount(imu, (means[0], means[1]), mount.delta if mount is not None and mount.named else 0.0)
+    what = " and ".join(f"{('roll', 'pitch')[k]} {means[k]:+.3f} rad (std {stds[k]:.3f})" for k in leaning)
+    if inverted_lean(tilt) is not None:
+        return Verdict(imu.name, "attitude", "problem",
+                       f"the estimate is upside down ({what} on average): the IMU is mounted upside down (its z axis "
+                       "points down) and extrinsic_rpy does not say so. The pose published is upside down, and the "
+                       "gyro's z rate reads against the wheels' yaw rate (a wheel yaw-rate fit of -1 x gyro is this, "
+                       "not slip). The full mount is below",
+                       sensor_key(imu.name, "extrinsic_rpy"), paste_mount(rpy),
+                       {"lean_roll_rad": means[0], "lean_pitch_rad": means[1], "inverted": 1.0})
+    return Verdict(imu.name, "attitude", "warn",
+                   f"the robot leans by {what} on average: on level ground that is an IMU mounting rotation "
+                   "missing from, or wrong in, extrinsic_rpy (the body-frame twist then climbs or sinks). The full "
+                   "mount, both tilt axes composed with the configured one, is below",
+                   sensor_key(imu.name, "extrinsic_rpy"), paste_mount(rpy),
+                   {"lean_roll_rad": means[0], "lean_pitch_rad": means[1]})
+
+
+class Lean(BaseCheck):
+    """The estimate's lean: against the grade the GPS altitude measures when there is enough driving to
+    tell (it replaces "on level ground"), else its mean over the run."""
+
+    name = "lean"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        graded = grade_verdict(grade_fit(ev.series, ev.config), ev.run_imu, ev.mount,
+                               state_layout(ev.config).has("twist_pitch"))
+        return found(graded if graded is not None else lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount))

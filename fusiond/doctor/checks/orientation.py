@@ -1,0 +1,83 @@
+"""An IMU's orientation innovations: NIS against the stated noise, and a roll/pitch offset in them.
+
+A yaw the heading cross-check found following the gyro is not a disturbed one, whatever its NIS: that
+check's wander figure is passed on, and a NIS high beside it is the yaw's own noise stated too small.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..attitude import noise_suggestion
+from ..channels import PerChannel, figures
+from ..evidence import Evidence
+from ..nis import ChannelStats
+from ..verdict import Verdict, sensor_key
+
+__all__ = ["OrientationNis"]
+
+ROLL_PITCH_OFFSET_RAD = 0.01  # a mean roll/pitch innovation this large is a mounting error, not noise
+
+
+class OrientationNis(PerChannel):
+    """An IMU's orientation innovations. A yaw the heading cross-check found following the gyro is not a
+    disturbed one, whatever its NIS: that check's wander figure is passed on."""
+
+    name = kind = "orientation"
+    needs = ("heading",)
+
+    def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
+        """``yaw_vs_gyro``: the rms wander of the IMU's yaw against the integrated gyro that the heading
+        cross-check measured and found below its threshold (None when it did not). A yaw NIS high beside it
+        is not a disturbed yaw, whose wander the gyro would show: the innovations are the yaw's own noise,
+        stated too small (an AHRS reporting a zero covariance reads as the orientation_min_sigma floor)."""
+        heading = ev.findings.first("heading")
+        agrees = (heading.evidence.get("imu_vs_gyro_wander_rad")
+                  if heading is not None and heading.sensor == key[0] and heading.level == "ok" else None)
+        imu = ev.channel_imu(key)
+        t0 = ev.t0
+        yaw_vs_gyro = agrees if agrees is not None and math.isfinite(agrees) else None
+        out = []
+        comps = ch.components
+        verdict = ch.verdict()
+        key = sensor_key(imu.name, "orientation_noise")
+        detail = ", ".join(f"{c} rms {ch.component(i)[1]:.4f} vs {ch.component(i)[2]:.4f} predicted"
+                           for i, c in enumerate(comps))
+        if verdict == "nis_high":
+            comp_nis = []
+            for i in range(len(comps)):
+                _, rms, pred = ch.component(i)
+                comp_nis.append((rms / pred) ** 2 if pred > 0 else math.nan)
+            yaw_dominates = "yaw" in comps and comp_nis[comps.index("yaw")] > 3.0 * max(
+                [v for c, v in zip(comps, comp_nis) if c != "yaw"] or [0.0])
+            if yaw_dominates and imu.fuses_yaw and yaw_vs_gyro is None:
+                out.append(Verdict(imu.name, "orientation", "problem",
+                                   f"NIS high ({figures(ch, t0)}; {detail}). The IMU yaw disagrees with the predicted "
+                                   "heading: a magnetometer-disturbed IMU yaw, or (without the gyro) wheels whose yaw "
+                                   "rate is wrong. Take heading from the gyro", sensor_key(imu.name, "orientation"),
+                                   'orientation = "roll_pitch" and angular_velocity = true'))
+            else:
+                line, note = noise_suggestion(ch, imu)
+                agrees = (f"; the yaw agrees with the integrated gyro to {yaw_vs_gyro:.3f} rad rms once a bias and "
+                          "scale are removed, so it is not a disturbed yaw" if yaw_dominates and yaw_vs_gyro is not None
+                          else "")
+                out.append(Verdict(imu.name, "orientation", "problem",
+                                   f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small or the IMU "
+                                   f"lies{agrees}; the measured innovations, {note}, suggest the value below",
+                                   key, line))
+        elif verdict == "nis_low":
+            line, note = noise_suggestion(ch, imu)
+            out.append(Verdict(imu.name, "orientation", "warn",
+                               f"NIS low ({figures(ch, t0)}; {detail}): the stated orientation noise is larger than "
+                               f"the innovations show (or the process noise is); measured {note}", key, line))
+        else:
+            out.append(Verdict(imu.name, "orientation", "ok", f"consistent ({figures(ch, t0)})"))
+        for i, c in enumerate(comps):
+            mean, rms, _ = ch.component(i)
+            if c in ("roll", "pitch") and abs(mean) > ROLL_PITCH_OFFSET_RAD and abs(mean) > 0.5 * rms:
+                out.append(Verdict(imu.name, "orientation", "warn",
+                                   f"constant {c} offset of {mean:+.3f} rad in the innovations: a mounting rotation "
+                                   "not in the config", sensor_key(imu.name, "extrinsic_rpy")))
+        for v in out:
+            v.evidence = {**v.evidence, "nis_per_dof": ch.nis_per_dof}
+        return out

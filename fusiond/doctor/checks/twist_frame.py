@@ -1,0 +1,52 @@
+"""Whether the odometry twist is in the frame the config says (body or world).
+
+A world-frame twist points where the vehicle heads, which the message's own pose says; a body-frame one
+keeps pointing along x, and a wheeled robot's has little lateral velocity (``twist.TwistStats`` sums what
+tells them apart).
+"""
+
+from __future__ import annotations
+
+from ..check import MIN_UPDATES, BaseCheck
+from ..evidence import Evidence
+from ..twist import TURNED_RAD
+from ..verdict import Verdict, sensor_key
+
+__all__ = ["TwistFrame"]
+
+
+class TwistFrame(BaseCheck):
+    """Whether the odometry twist is in the frame the config says (body or world)."""
+
+    name = "twist_frame"
+
+    def run(self, ev: Evidence) -> list[Verdict]:
+        if ev.odom is None:
+            return []
+        odom, t = ev.odom, ev.twist
+        if t.n < MIN_UPDATES or t.abs_vx + t.abs_vy < 1e-6:
+            return []
+        lateral = t.abs_vy / max(t.abs_vx + t.abs_vy, 1e-12)
+        key = sensor_key(odom.name, "twist_frame")
+        if odom.twist_frame == "world" and t.turned >= MIN_UPDATES and t.along_x >= 0.9 * t.turned:
+            # a world-frame twist points where the vehicle heads, which the message's own pose says: one that
+            # keeps pointing along x while that pose turns away is a body-frame twist. Gentle curves (a highway:
+            # 37 m off, otherwise blamed on the wheel scale and an IMU mounting) never make the turn-rate rule
+            # below fire
+            return [Verdict(odom.name, "twist", "problem",
+                            f"twist configured in the world frame, but in {100 * t.along_x / t.turned:.0f}% of the "
+                            f"{t.turned} moving messages whose own pose is turned beyond {TURNED_RAD:g} rad from the "
+                            "odom frame's x it points along x, not where that pose heads: it is a body-frame twist, "
+                            "and the trajectory runs off sideways", key, 'twist_frame = "body"',
+                            evidence={"twist_along_x_share": t.along_x / t.turned})]
+        if odom.twist_frame == "world" and lateral < 0.05 and t.abs_wz / t.n > 0.05:
+            return [Verdict(odom.name, "twist", "problem",
+                            "twist configured in the world frame, but its lateral velocity stays near zero while "
+                            "the robot turns: it is a body-frame twist, and the trajectory heading will run away",
+                            key, 'twist_frame = "body"')]
+        if odom.twist_frame == "body" and lateral > 0.35:
+            return [Verdict(odom.name, "twist", "warn",
+                            f"lateral velocity is {100 * lateral:.0f}% of the motion: a wheeled robot's body twist "
+                            "has little; if the driver reports the twist in the odom frame, say so", key,
+                            'twist_frame = "world"')]
+        return []
