@@ -6,8 +6,7 @@ one or more Kalman updates (the IMU's orientation the most frequent). Two implem
 - ``PythonBackend``, the reference: the maths as written in numpy and Python floats (the EKF steps
   here, the motion model in ``motion.predict``, the orientation observation in
   ``observations.rpy_residual``). It runs everywhere and is what the other is held to.
-- ``CompiledBackend``: the same steps as one C call each (``_kernels.c``, and the smoother's fold in
-  ``_rts.c``, built by ``pip install``
+- ``CompiledBackend``: the same steps as one C call each (``_kernels.c``, built by ``pip install``
   where a compiler is; see its header for why C). What the kernels cannot take (an array that is not
   C-contiguous float64, a layout wider than their fixed scratch, an input block without a compiled
   form) runs the reference, inherited: the one fallback, in this class.
@@ -40,10 +39,6 @@ try:
     from . import _kernels
 except ImportError:  # built without a C compiler: the reference runs
     _kernels = None
-try:
-    from . import _rts
-except ImportError:
-    _rts = None
 
 __all__ = ["Backend", "PythonBackend", "CompiledBackend", "UpdateWorkspace", "PYTHON", "COMPILED", "DEFAULT",
            "CHOICES", "ENVIRONMENT", "APPLIED", "GATED", "SINGULAR", "NEEDS_CHECK", "choose", "from_environment"]
@@ -199,9 +194,8 @@ class CompiledBackend(PythonBackend):
 
     name = "compiled"
 
-    def __init__(self, kernels: ModuleType, rts: ModuleType | None = None) -> None:
+    def __init__(self, kernels: ModuleType) -> None:
         self._k = kernels
-        self._rts = rts  # the smoother's fold (_rts.c, built beside _kernels): None, the reference folds
 
     def for_layout(self, layout):
         return self if layout.error_dim <= MAX_N else PYTHON
@@ -256,12 +250,9 @@ class CompiledBackend(PythonBackend):
         return y, H
 
     def rts_fold(self, A, P0, F, P1):
-        rts = self._rts
-        if rts is None:
-            return PythonBackend.rts_fold(self, A, P0, F, P1)
         out = np.empty_like(A)
         try:
-            if rts.fold(A, P0, F, P1, out):
+            if self._k.rts_fold(A, P0, F, P1, out):
                 return out
         except BufferError:  # an array not C-contiguous float64
             pass
@@ -323,7 +314,7 @@ class _GainRows:
 
 
 PYTHON = PythonBackend()
-COMPILED: CompiledBackend | None = CompiledBackend(_kernels, _rts) if _kernels is not None else None
+COMPILED: CompiledBackend | None = CompiledBackend(_kernels) if _kernels is not None else None
 DEFAULT: Backend = COMPILED if COMPILED is not None else PYTHON
 
 CHOICES = ("auto", "compiled", "numpy")

@@ -282,15 +282,16 @@ def test_transitions_in_a_row_fold_into_the_per_step_gains(held):
 
 
 def test_compiled_fold_equals_the_python_reference():
-    """The compiled backend's fold (``_rts.fold``, C) against the reference's ``A rts_gain(...)`` (numpy):
+    """The compiled backend's fold (``_kernels.rts_fold``, C) against the reference's ``A rts_gain(...)`` (numpy):
     random covariances, with and without held components; a P_after that is not positive definite is
     left to the reference's least squares."""
     from fusiond.estimator import backend
     from fusiond.estimator.smoother import rts_gain
 
-    if backend.COMPILED is None or backend.COMPILED._rts is None:
-        pytest.skip("fusiond.estimator._rts was not built (no C compiler at install time)")
-    rts, compiled, python = backend.COMPILED._rts, backend.COMPILED, backend.PYTHON
+    if backend.COMPILED is None:
+        pytest.skip("fusiond.estimator._kernels was not built (no C compiler at install time)")
+    compiled, python = backend.COMPILED, backend.PYTHON
+    fold = compiled._k.rts_fold
     rng = np.random.default_rng(11)
     for n in (3, 9, 13, 16):
         for held in ((), (2,), (1, 4)):
@@ -304,19 +305,19 @@ def test_compiled_fold_equals_the_python_reference():
                     P1[h, :] = P1[:, h] = 0.0
             A = rng.normal(size=(n, n))
             out = np.empty((n, n))
-            assert rts.fold(A, P0, F, P1, out)
+            assert fold(A, P0, F, P1, out)
             want = python.rts_fold(A, P0, F, P1)
             np.testing.assert_allclose(out, want, rtol=0, atol=1e-10 * np.abs(want).max())
             assert np.array_equal(compiled.rts_fold(A, P0, F, P1), out)
     # an indefinite P_after (its diagonal positive): nothing from C, the reference's least squares instead
     P1 = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 2.0]])
     out = np.full((3, 3), 7.0)
-    assert not rts.fold(np.eye(3), np.eye(3), np.eye(3), P1, out)
+    assert not fold(np.eye(3), np.eye(3), np.eye(3), P1, out)
     assert (out == 7.0).all()
     np.testing.assert_allclose(compiled.rts_fold(np.eye(3), np.eye(3), np.eye(3), P1),
                                rts_gain(np.eye(3), np.eye(3), P1))
     with pytest.raises(ValueError):
-        rts.fold(np.eye(3), np.eye(2), np.eye(3), np.eye(3), out)
+        fold(np.eye(3), np.eye(2), np.eye(3), np.eye(3), out)
 
 
 @pytest.mark.parametrize("name", ["numpy", "compiled"])
