@@ -7,6 +7,7 @@ import importlib
 import re
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -118,11 +119,20 @@ def test_no_module_outside_the_sensor_kinds_branches_on_a_kind():
 _BARE_POSE_INDEX = re.compile(r"\b(x|x0|x1|P|Q)\[\d+(:\d+)?(, *\d+(:\d+)?)?\]|\.(x|P)\[\d|_covariance\(\[\d")
 
 
+def _lines_matching(pattern: re.Pattern, skip: Callable[[str], bool]) -> list[str]:
+    """``module:line: text`` of every line of the package that ``pattern`` finds, in the modules whose
+    package-relative path ``skip`` does not exempt."""
+    return [f"{rel}:{i}: {line.strip()}" for path in PACKAGE.rglob("*.py")
+            if not skip(rel := path.relative_to(PACKAGE).as_posix())
+            for i, line in enumerate(path.read_text().splitlines(), 1) if pattern.search(line)]
+
+
+def _in_the_estimator(rel: str) -> bool:
+    return rel.startswith("estimator/")
+
+
 def test_no_bare_pose_index_outside_the_estimator():
-    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
-             for path in PACKAGE.rglob("*.py") if not path.relative_to(PACKAGE).as_posix().startswith("estimator/")
-             for i, line in enumerate(path.read_text().splitlines(), 1) if _BARE_POSE_INDEX.search(line)]
-    assert found == []
+    assert _lines_matching(_BARE_POSE_INDEX, _in_the_estimator) == []
 
 
 # The estimator alone writes the state and its covariance (ErrorStateEKF's methods keep P symmetric and
@@ -131,10 +141,7 @@ _STATE_WRITE = re.compile(r"\bekf\.(x|P)\b(\[[^\]]*\])?\s*([-+*/]?=)(?!=)")
 
 
 def test_only_the_estimator_writes_the_state_and_its_covariance():
-    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
-             for path in PACKAGE.rglob("*.py") if not path.relative_to(PACKAGE).as_posix().startswith("estimator/")
-             for i, line in enumerate(path.read_text().splitlines(), 1) if _STATE_WRITE.search(line)]
-    assert found == []
+    assert _lines_matching(_STATE_WRITE, _in_the_estimator) == []
 
 
 # The estimator's numerics run in the backend the filter was built with (fusiond/estimator/backend.py): the
@@ -143,10 +150,7 @@ _KERNELS_IMPORT = re.compile(r"\b_kernels\b.*\bimport\b|\bimport\b.*\b_kernels\b
 
 
 def test_only_the_backend_imports_the_compiled_kernels():
-    found = [f"{path.relative_to(PACKAGE).as_posix()}:{i}: {line.strip()}"
-             for path in PACKAGE.rglob("*.py") if path.relative_to(PACKAGE).as_posix() != "estimator/backend.py"
-             for i, line in enumerate(path.read_text().splitlines(), 1) if _KERNELS_IMPORT.search(line)]
-    assert found == []
+    assert _lines_matching(_KERNELS_IMPORT, lambda rel: rel == "estimator/backend.py") == []
     backend = (PACKAGE / "estimator" / "backend.py").read_text()
     assert _KERNELS_IMPORT.search(backend)  # the pattern finds the one import there is
     assert "global " not in backend  # no process-wide switch: a backend is chosen per filter
