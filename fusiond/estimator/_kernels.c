@@ -32,7 +32,7 @@
  *               dx *= keep and W^T W *= J elementwise (the Joseph form's closed form); then
  *               x [+]= dx: p += dp, q = normalize(Exp(dtheta) q), x_i += dx_(i-1) after the
  *               quaternion, and with hold_heading the yaw put back (state.hold_heading_of).
- *   rts_fold:   the smoother's fold of a run of transitions (smoother.py, rts_gain): A P0 F^T P1^-1 on
+ *   rts_fold:   the smoother's fold of a run of transitions (smoother.py; the reference: rts.py): A P0 F^T P1^-1 on
  *               the components P1 gives any variance, by a Cholesky solve; paid per correction and per
  *               output moment while a smoother records, ~30 us of numpy and LAPACK calls otherwise.
  *
@@ -997,7 +997,7 @@ done:
 /* out = A P0 F^T P1^-1 on the components P1 gives any variance (idx: P1_ii > 0; a component held at an
  * exact value has no smoothing gain, out's column 0): C = F P0, S = P1[idx, idx] = L L^T, X = S^-1 C[idx],
  * out[:, idx] = A X^T. 0, with nothing written, when S is not positive definite (the reference's least
- * squares takes it). The same maths as smoother.rts_gain, one call instead of a dozen numpy ones. */
+ * squares takes it). The same maths as rts.rts_gain, one call instead of a dozen numpy ones. */
 static int fold_into(Py_ssize_t n, const double *A, const double *P0, const double *F, const double *P1,
                      double *out) {
     double C[MAX_N * MAX_N], L[MAX_N * MAX_N], X[MAX_N * MAX_N];

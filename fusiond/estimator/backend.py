@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import EstimatorError
 from . import motion, observations
 from .cholesky import gain_rows
+from .rts import rts_gain
 
 if TYPE_CHECKING:
     from .motion import MotionInput, PredictWorkspace
@@ -182,8 +183,6 @@ class PythonBackend(Backend):
         return observations.rpy_residual(layout, x, z_rpy, rows)
 
     def rts_fold(self, A, P0, F, P1):
-        from .smoother import rts_gain  # the smoother's own maths (it imports this module)
-
         return A.dot(rts_gain(P0, F, P1))
 
 

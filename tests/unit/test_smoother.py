@@ -249,7 +249,7 @@ def test_nonlinear_smoother_is_consistent_over_monte_carlo_runs():
 def test_transitions_in_a_row_fold_into_the_per_step_gains(held):
     """The recorder folds a run of transitions into one gain (smoother module doc): the product of the per-
     step RTS gains, also where a component is held at zero variance through the run."""
-    from fusiond.estimator.smoother import rts_gain
+    from fusiond.estimator.rts import rts_gain
 
     rng = np.random.default_rng(3)
     layout = StateLayout([PoseBlock(position_sigma=2.0, attitude_sigma=0.1), _Velocity()])
@@ -286,7 +286,7 @@ def test_compiled_fold_equals_the_python_reference():
     random covariances, with and without held components; a P_after that is not positive definite is
     left to the reference's least squares."""
     from fusiond.estimator import backend
-    from fusiond.estimator.smoother import rts_gain
+    from fusiond.estimator.rts import rts_gain
 
     if backend.COMPILED is None:
         pytest.skip("fusiond.estimator._kernels was not built (no C compiler at install time)")
