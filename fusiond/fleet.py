@@ -15,7 +15,11 @@ from typing import Any
 
 from .presence import rank
 
-__all__ = ["fleet_rows", "fleet_lines", "render_fleet", "worst_channel"]
+# the colour of a daemon's status, in the fleet table and in the one robot's monitor alike
+STATUS_STYLE = {"ok": "green", "degraded": "yellow", "starting": "yellow", "waiting": "yellow", "failed": "red",
+                "lost": "bold red", "disconnected": "bold red"}
+
+__all__ = ["STATUS_STYLE", "fleet_rows", "fleet_lines", "render_fleet", "worst_channel"]
 
 
 def worst_channel(consistency: dict[str, dict[str, Any]]) -> dict | None:
@@ -89,13 +93,11 @@ def render_fleet(rows: list[dict]):
     from rich.table import Table
     from rich.text import Text
 
-    from .monitor import _STATUS_STYLE
-
     t = Table(show_header=True, header_style="bold", box=None)
     for col in ("daemon", "status", "link", "sensors", "worst NIS", "dropped", "age", ""):
         t.add_column(col)
     for r in rows:
-        t.add_row(r["daemon"], Text(r["status"], style=_STATUS_STYLE.get(r["status"], "")), r["link"] or "-",
+        t.add_row(r["daemon"], Text(r["status"], style=STATUS_STYLE.get(r["status"], "")), r["link"] or "-",
                   r["sensors_alive"] or "-", _nis(r["worst_nis"]), "-" if r["dropped"] is None else str(r["dropped"]),
                   _age(r["health_age_s"]), _since(r) if r["reason"] else "")
     return t

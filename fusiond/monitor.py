@@ -39,6 +39,7 @@ import msgspec
 
 from .core.diagnostics import DiagnosticsRecord
 from .doctor import ChannelStats, Doctor, Verdict, judge_nis, nis_bounds
+from .fleet import STATUS_STYLE
 from .presence import Presence, withdrawn
 
 ALIVE_SUFFIX = "/alive"
@@ -308,8 +309,6 @@ def _bounds(b: list[float] | None) -> str:
     return f"[{b[0]:{NIS_FORMAT}}, {b[1]:{NIS_FORMAT}}]" if b else "-"
 
 
-_STATUS_STYLE = {"ok": "green", "degraded": "yellow", "starting": "yellow", "waiting": "yellow", "failed": "red",
-                 "lost": "bold red", "disconnected": "bold red"}
 
 
 def _clock(wall: float | None) -> str:
@@ -335,7 +334,7 @@ def render(snapshots: list[dict]):
     for snap in snapshots:
         health = snap.get("health") or {}
         status = snap.get("status") or health.get("status", "?")
-        colour = _STATUS_STYLE.get(status, "white")
+        colour = STATUS_STYLE.get(status, "white")
         parts.append(Text(f"daemon {snap['daemon']}  status ", style="bold") + Text(status, style=f"bold {colour}")
                      + Text(state_note(snap)))
         sensors = health.get("sensors", {})
