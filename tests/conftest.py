@@ -32,7 +32,7 @@ pytest.register_assert_rewrite("tests.support")
 # every change. The whole suite (CI) adds the simulated recordings, the doctor, the daemon end to end.
 FAST_MODULES = frozenset({
     "test_estimator_math", "test_estimator_fast_paths", "test_kernels", "test_layout", "test_history_ring",
-    "test_written_out", "test_replay_collector",
+    "test_written_out", "test_replay_collector", "test_snapshot_plan",
     "test_codecs", "test_config_truth", "test_logs", "test_thread_state", "test_drain_schedule",
     "test_time_jumps", "test_fusion_core", "test_sensor_models", "test_evaluate", "test_health",
     "test_diagnostics", "test_gps_blocks", "test_continuous_odom", "test_odom_rate", "test_world_twist",

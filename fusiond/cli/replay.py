@@ -104,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
             allow_missing=args.allow_missing,
             smooth=args.smooth,
             backend=backend,
+            lookahead=fused is not None,  # the recording is kept in memory for the advice's proof anyway
         )
         if fused:
             from ..tune.advice import prove_advice

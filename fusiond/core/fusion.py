@@ -22,6 +22,7 @@ falls out of the history, which is what makes replay and live agree.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import msgspec
@@ -39,7 +40,7 @@ from .fixed_lag import FixedLag, LaggedPose
 from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
-from .history import History
+from .history import History, snapshots_read
 from .inputs import HeldInputs, next_expiry, note_period
 from .layout import absolute_sensor, state_layout, update_masks
 from .resume import RESUME_VERSION, ResumeState, state_fingerprint
@@ -215,7 +216,22 @@ class FusionCore:
         return rec.smooth()
 
     # -- public API ---------------------------------------------------------
-    def ingest(self, sample: Sample) -> Step:
+    def snapshot_plan(self, samples: Sequence[Sample]) -> list[bool]:
+        """For samples to be ingested in this order, the ``keep`` each is ingested with: False where no
+        later one of them can land right after it (``history.snapshots_read``), so its history snapshot,
+        never read, is not taken. The estimates are the same as with every snapshot kept; a replay of a
+        recording held in memory saves a snapshot a message where its samples come in order."""
+        index, offsets = self.index, self._stamp_offset
+        keys: list[tuple[float, int] | None] = []
+        for sample in samples:
+            idx = index.get(sample.sensor)
+            stamp = sample.stamp + offsets[idx] if idx is not None else math.nan
+            keys.append((stamp, idx) if 0.0 < stamp < math.inf else None)
+        return snapshots_read(keys)
+
+    def ingest(self, sample: Sample, keep: bool = True) -> Step:
+        """Fuse one sample. ``keep``: ``snapshot_plan``'s word for it (False: no later sample lands right
+        after it; an entry of a timeline held for a time jump keeps its snapshot whatever it says)."""
         idx = self.index.get(sample.sensor)
         if idx is None:
             return Step(sample.sensor, False, reasons.UNKNOWN_SENSOR)
@@ -240,9 +256,9 @@ class FusionCore:
             return self._hold_jump(idx, inp, stamp)
         if self._held.cluster is not None and stamp > t:
             self._abandon_jump()  # the stream moved on along the old timeline: the far stamps were a glitch
-        return self._place(idx, inp, stamp)
+        return self._place(idx, inp, stamp, keep)
 
-    def _place(self, idx: int, inp, stamp: float) -> Step:
+    def _place(self, idx: int, inp, stamp: float, keep: bool = True) -> Step:
         """Apply a sample at its own stamp (re-applying later ones when it is late) and count it."""
         st = self.stats[idx]
         resets = self.state.ekf.resets  # the newest timeline's covariance resets before this sample
@@ -257,7 +273,7 @@ class FusionCore:
                 return self._drop(idx, reasons.TOO_OLD, stamp)
             self.state = h.state_before(pos)
         records = self._apply(self.state, idx, inp, stamp, emit=True, late=late)
-        h.insert(pos, key, (idx, inp, stamp), self.state)
+        h.insert(pos, key, (idx, inp, stamp), self.state, keep)
         if late:
             h.reapply_after(pos, self.state, self._reapply)
         h.trim(self._history_s, self._history_max)

@@ -11,7 +11,7 @@ import time
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
@@ -205,6 +205,7 @@ def replay(
     allow_missing: bool = True,
     smooth: bool = False,
     backend: Backend | None = None,
+    lookahead: bool = False,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
@@ -215,7 +216,10 @@ def replay(
     ``allow_missing``: a configured topic absent from the bags is a warning, not an error (``check_topics``).
     ``smooth``: the forward pass records what the smoother needs and the result carries the smoothed
     trajectory (``ReplayResult.smoothed``), which the TUM file then holds instead of the causal one.
-    ``backend``: the estimator's (``FusionCore``'s; None: compiled when built)."""
+    ``backend``: the estimator's (``FusionCore``'s; None: compiled when built). ``lookahead``: the samples
+    are read in full before the first is fused, so that the core takes a history snapshot only where a later
+    sample can land (``FusionCore.snapshot_plan``): the same estimates, for the recording held in memory
+    (as a caller that keeps it for the advice's proof does anyway)."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
     t0 = time.perf_counter()
     try:
@@ -232,7 +236,14 @@ def replay(
             elif records is not None:
                 runner.on_record = records.append
             bar = _Progress(bag.total if progress else 0)
-            for sample in (bag if through is None else through(iter(bag))):
+            samples = bag if through is None else through(iter(bag))
+            if lookahead:
+                samples = list(samples)
+                for sample, keep in zip(samples, runner.core.snapshot_plan(samples)):
+                    runner.feed(sample, keep)
+                    if runner.messages % 256 == 0:
+                        bar.update(runner.messages)
+            for sample in () if lookahead else samples:
                 runner.feed(sample)
                 if runner.messages % 256 == 0:
                     bar.update(runner.messages)
@@ -273,10 +284,11 @@ class Runner:
         self.messages = 0
         self.on_record: Callable | None = None
 
-    def feed(self, sample) -> None:
+    def feed(self, sample, keep: bool = True) -> None:
+        """``keep``: the core's (``FusionCore.ingest``, ``snapshot_plan``)."""
         core, doctor, trace, keep_trace = self.core, self.doctor, self.trace, self.keep_trace
         self.messages += 1
-        step = core.ingest(sample)
+        step = core.ingest(sample, keep)
         if doctor is not None:
             doctor.add_sample(sample)
         if step.poses:  # samples held for a time jump, applied at once: one pose per odometry message
@@ -345,8 +357,9 @@ def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = F
     """Replay samples already in memory (a simulation) exactly as a bag would be replayed (``backend``: the
     estimator's, ``FusionCore``)."""
     runner = Runner(cfg, keep_trace, smooth=smooth, backend=backend)
-    for s in samples:
-        runner.feed(s)
+    samples = samples if isinstance(samples, Sequence) else list(samples)
+    for s, keep in zip(samples, runner.core.snapshot_plan(samples)):  # all here: FusionCore.snapshot_plan
+        runner.feed(s, keep)
     return runner.result()
 
 

@@ -58,8 +58,10 @@ def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | No
     core = FusionCore(cfg, backend)
     ingest = core.ingest
     records: list[DiagnosticsRecord] = []
-    for s in samples:
-        step = ingest(s)
+    samples = samples if isinstance(samples, Sequence) else list(samples)
+    # the recording is all here: no snapshot is taken where no later sample lands (FusionCore.snapshot_plan)
+    for s, keep in zip(samples, core.snapshot_plan(samples)):
+        step = ingest(s, keep)
         if step.records:
             records.extend(step.records)
     return records
