@@ -7,15 +7,19 @@ first 2N samples of a workload, and prints the difference per message: the inter
 the imports and the bag reading cancel out. The garbage collector is off while the samples are
 fused (the count is the core's own work; the collector's is the replay's and the daemon's).
 
-    .venv/bin/python scripts/core_instructions.py [--workload jackal|synthetic] [--messages 1000]
-        [--loop core|replay|doctor]
+    .venv/bin/python scripts/core_instructions.py [--workload jackal|comma|synthetic] [--messages 1000]
+        [--loop core|replay|doctor|proof]
 
 `--loop`: `core` (the default) counts `FusionCore` alone; `replay` the replay's loop (`replay.run.Runner`)
 without the doctor, as `replay --quiet` runs it; `doctor` the same loop with the doctor fed, and what it
 was fed folded into its statistics at the end (`Doctor.series`, `Doctor.channels`), as a replay that
-prints verdicts does; the difference of the last two is what the doctor costs a message.
+prints verdicts does; the difference of the last two is what the doctor costs a message. `proof`: the
+replay of the doctor's advice (`fusiond.tune.likelihood.replay_records`: the core alone, the samples all
+in memory, its snapshot plan made first).
 
 `jackal`: data/jackal_test2.bag with examples/jackal.toml (up to its 6,121 messages).
+`comma`: comma2k19's Example_1 (../shared/data/comma2k19_ex1, not in this repository) with
+examples/comma2k19.toml: a car at 100 Hz IMU, 80 Hz wheels and 10 Hz GPS, every sample in order.
 `synthetic`: the traffic of `fusiond bench-latency` (1 kHz IMU with roll/pitch and gyro, 100 Hz
 odometry, driving a circle) with its configuration. Takes about a minute per workload.
 """
@@ -46,6 +50,15 @@ def _jackal():
 
     cfg = load(ROOT / "examples" / "jackal.toml")
     with open_bag_samples([ROOT / "data" / "jackal_test2.bag"], cfg.sensors) as b:
+        return cfg, list(b)
+
+
+def _comma():
+    from fusiond.config import load
+    from fusiond.replay.bag import open_bag_samples
+
+    cfg = load(ROOT / "examples" / "comma2k19.toml")
+    with open_bag_samples([ROOT.parent / "shared" / "data" / "comma2k19_ex1"], cfg.sensors) as b:
         return cfg, list(b)
 
 
@@ -80,7 +93,9 @@ def _child(workload: str, count: int, loop: str) -> None:
     from fusiond.replay.run import Runner
 
     structlog.configure(logger_factory=structlog.ReturnLoggerFactory())  # the core's logs cost nothing here
-    cfg, samples = _jackal() if workload == "jackal" else _synthetic(count + WARM_UP)
+    from fusiond.tune.likelihood import replay_records
+
+    cfg, samples = {"jackal": _jackal, "comma": _comma}.get(workload, lambda: _synthetic(count + WARM_UP))()
     # The collector off while fusing: when its runs come depends on everything the process allocated
     # before (the bag reading, the workload's size), so one more or one fewer full collection in either
     # count moved the figure by thousands of instructions a message, or made it negative.
@@ -92,6 +107,9 @@ def _child(workload: str, count: int, loop: str) -> None:
             for s in part:
                 if core.ingest(s).publish:
                     core.pose()
+            continue
+        if loop == "proof":
+            replay_records(cfg, part)
             continue
         runner = Runner(cfg, keep_trace=False, doctor=loop == "doctor")
         for s in part:
@@ -116,9 +134,9 @@ def _count(workload: str, count: int, loop: str) -> tuple[int, int]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--workload", choices=("jackal", "synthetic"), default="jackal")
+    ap.add_argument("--workload", choices=("jackal", "comma", "synthetic"), default="jackal")
     ap.add_argument("--messages", type=int, default=1000, help="N: the runs fuse N and 2N samples")
-    ap.add_argument("--loop", choices=("core", "replay", "doctor"), default="core")
+    ap.add_argument("--loop", choices=("core", "replay", "doctor", "proof"), default="core")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:

@@ -26,6 +26,9 @@
  *               tests/unit/test_kernels.py holds x', F and Q to the Python path's bits.
  *   orientation: observations.orientation's innovation and Jacobian (rpy_jacobian, rot.wrap), the
  *               IMU's most frequent update.
+ *   line_fit:   line_fit.line_fit, the odometry's forward acceleration (a least-squares slope over
+ *               half a second of speeds, taken at every odometry message when an IMU reads tilt
+ *               from gravity): the same sums in the same order, the same doubles.
  *   propagate:  P' = (F P) F^T + Q, finite iff its diagonal sums to a finite number.
  *   update:     HP = H P, S = HP H^T + R = L L^T (Cholesky), z = L^-1 y, NIS = z.z,
  *               W = L^-1 HP, dx = HP^T L^-T z, P' = P - W^T W; with a mask (Schmidt update),
@@ -1089,6 +1092,70 @@ static PyObject *rts_fold(PyObject *self, PyObject *const *args, Py_ssize_t narg
 PyDoc_STRVAR(rts_fold_doc, "rts_fold(A, P0, F, P1, out) -> bool: out = A P0 F^T P1^-1 on the components of P1 "
                            "with variance; False (out untouched) when that block of P1 is not positive definite.");
 
+/* -- the odometry's forward acceleration --------------------------------------------------------- */
+
+PyDoc_STRVAR(line_fit_doc,
+"line_fit(pairs) -> (slope, misfit) or None\n\n"
+"line_fit.line_fit of a tuple of (t, v) tuples of floats: the same sums in the same order, the squares\n"
+"by libm's pow as Python's ** takes them, so the same doubles. None when an item is not a 2-tuple of\n"
+"floats, there are fewer than three, or the t are all one (the reference decides those).");
+
+/* libm's pow through a pointer the compiler cannot see through: it would otherwise turn pow(d, 2.0) into
+ * d * d, which Python's d ** 2 (float_pow: pow of |d|) is not guaranteed to equal. */
+static double (*volatile libm_pow)(double, double) = pow;
+
+static int pair_of(PyObject *item, double *t, double *v) {
+    if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) {
+        return 0;
+    }
+    PyObject *a = PyTuple_GET_ITEM(item, 0), *b = PyTuple_GET_ITEM(item, 1);
+    if (!PyFloat_CheckExact(a) || !PyFloat_CheckExact(b)) {
+        return 0;
+    }
+    *t = PyFloat_AS_DOUBLE(a);
+    *v = PyFloat_AS_DOUBLE(b);
+    return 1;
+}
+
+static PyObject *line_fit(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 1) {
+        PyErr_SetString(PyExc_TypeError, "line_fit(pairs) takes 1 argument");
+        return NULL;
+    }
+    PyObject *pairs = args[0];
+    if (!PyTuple_CheckExact(pairs) || PyTuple_GET_SIZE(pairs) < 3) {
+        Py_RETURN_NONE;
+    }
+    Py_ssize_t n = PyTuple_GET_SIZE(pairs);
+    double t, v, st = 0.0, sv = 0.0;  /* Python's sum: 0 + the first item, then each in turn */
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (!pair_of(PyTuple_GET_ITEM(pairs, i), &t, &v)) {
+            Py_RETURN_NONE;
+        }
+        st += t;
+        sv += v;
+    }
+    double tm = st / (double)n, vm = sv / (double)n;
+    double stt = 0.0, stv = 0.0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        pair_of(PyTuple_GET_ITEM(pairs, i), &t, &v);
+        double d = t - tm, dv = v - vm;
+        stt += libm_pow(fabs(d), 2.0);
+        stv += d * dv;
+    }
+    if (stt == 0.0) {
+        Py_RETURN_NONE;
+    }
+    double slope = stv / stt, srr = 0.0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        pair_of(PyTuple_GET_ITEM(pairs, i), &t, &v);
+        double d = t - tm, dv = v - vm;
+        double r = dv - slope * d;
+        srr += libm_pow(fabs(r), 2.0);
+    }
+    return Py_BuildValue("(dd)", slope, sqrt(srr / (double)(n - 2)));
+}
+
 static PyMethodDef methods[] = {
     {"propagate", (PyCFunction)(void (*)(void))propagate, METH_FASTCALL, propagate_doc},
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
@@ -1096,6 +1163,7 @@ static PyMethodDef methods[] = {
     {"orientation", (PyCFunction)(void (*)(void))orientation, METH_FASTCALL, orientation_doc},
     {"copy_into", (PyCFunction)(void (*)(void))copy_into, METH_FASTCALL, copy_into_doc},
     {"rts_fold", (PyCFunction)(void (*)(void))rts_fold, METH_FASTCALL, rts_fold_doc},
+    {"line_fit", (PyCFunction)(void (*)(void))line_fit, METH_FASTCALL, line_fit_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -31,6 +31,7 @@ from ..errors import EstimatorError
 from . import motion, observations
 from .cholesky import gain_rows
 from .rts import rts_gain
+from .line_fit import line_fit
 
 if TYPE_CHECKING:
     from .motion import MotionInput, PredictWorkspace
@@ -86,6 +87,10 @@ class Backend:
     def orientation(self, layout: "StateLayout", x: np.ndarray, z_rpy: tuple[float, float, float],
                     rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """The orientation observation's (y, H) (``observations.orientation``)."""
+        raise NotImplementedError
+
+    def line_fit(self, pairs: tuple[tuple[float, float], ...]) -> tuple[float, float]:
+        """(slope, rms misfit) of the least-squares line through (t, v) pairs (``line_fit.line_fit``)."""
         raise NotImplementedError
 
     def rts_fold(self, A: np.ndarray, P0: np.ndarray, F: np.ndarray, P1: np.ndarray) -> np.ndarray:
@@ -182,6 +187,9 @@ class PythonBackend(Backend):
     def orientation(self, layout, x, z_rpy, rows):
         return observations.rpy_residual(layout, x, z_rpy, rows)
 
+    def line_fit(self, pairs):
+        return line_fit(pairs)
+
     def rts_fold(self, A, P0, F, P1):
         return A.dot(rts_gain(P0, F, P1))
 
@@ -247,6 +255,10 @@ class CompiledBackend(PythonBackend):
         except BufferError:  # x not C-contiguous float64
             return observations.rpy_residual(layout, x, z_rpy, rows)
         return y, H
+
+    def line_fit(self, pairs):
+        fit = self._k.line_fit(pairs)
+        return line_fit(pairs) if fit is None else fit  # None: not floats in tuples, or a degenerate fit
 
     def rts_fold(self, A, P0, F, P1):
         out = np.empty_like(A)

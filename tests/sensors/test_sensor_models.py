@@ -262,6 +262,9 @@ def test_the_forward_speed_fit_is_the_pairs_formula_to_the_bit_and_remembered():
     import random
 
     from fusiond.core.sensors.odom.model import _fitted_accel
+    from fusiond.estimator import COMPILED_BACKEND, PYTHON_BACKEND
+
+    BACKENDS = [b for b in (PYTHON_BACKEND, COMPILED_BACKEND) if b is not None]  # either: the same bits
 
     rng = random.Random(3)
     for k in range(300):
@@ -271,5 +274,6 @@ def test_the_forward_speed_fit_is_the_pairs_formula_to_the_bit_and_remembered():
         window = tuple((t0 + i * dt, v0 + a * i * dt + rng.gauss(0.0, noise)) for i in range(n))
         var = rng.choice([0.0, 1e-4, 0.01])
         expected = _reference_fit(window, var)
-        for got in (_fitted_accel(window, var), _fitted_accel(tuple(window), var)):  # taken, then remembered
-            assert got == expected or (math.isnan(got) and math.isnan(expected)), (k, got, expected)
+        for backend in BACKENDS:  # taken, then remembered
+            for got in (_fitted_accel(window, var, backend), _fitted_accel(tuple(window), var, backend)):
+                assert got == expected or (math.isnan(got) and math.isnan(expected)), (k, backend, got, expected)

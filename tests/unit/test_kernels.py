@@ -499,3 +499,31 @@ def test_copy_into_checks_every_size_before_writing():
     with pytest.raises(ValueError, match="P_to has 9 values, expected 4"):
         k.copy_into(x, P, x_to, P_to)
     assert not x_to.any()
+
+
+def _bits(values) -> list[str]:
+    return [float(v).hex() for v in values]
+
+
+@settings(max_examples=200, deadline=None)
+@given(t0=st.floats(0.0, 2e9), rate=st.floats(5.0, 1000.0), n=st.integers(3, 600),
+       speeds=st.lists(st.floats(-60.0, 60.0), min_size=1, max_size=40), jitter=st.floats(0.0, 0.4))
+def test_the_compiled_line_fit_gives_the_references_bits(t0, rate, n, speeds, jitter):
+    """The odometry's forward acceleration: the same sums in the same order, squares by the same pow."""
+    from fusiond.estimator.line_fit import line_fit
+
+    pairs = tuple((t0 + (i + jitter * math.sin(7.0 * i)) / rate, speeds[i % len(speeds)] + 1e-3 * i)
+                  for i in range(n))
+    assert _bits(COMPILED.line_fit(pairs)) == _bits(line_fit(pairs)) == _bits(PYTHON.line_fit(pairs))
+
+
+def test_a_line_fit_the_kernel_cannot_read_is_the_references():
+    """Ints among the values, a list of pairs, all stamps alike: the reference answers (or raises)."""
+    from fusiond.estimator.line_fit import line_fit
+
+    assert k.line_fit(((1, 2.0), (2.0, 3.0), (3.0, 3.5))) is None
+    assert COMPILED.line_fit(((1, 2.0), (2.0, 3.0), (3.0, 3.5))) == line_fit(((1, 2.0), (2.0, 3.0), (3.0, 3.5)))
+    assert k.line_fit([(1.0, 2.0), (2.0, 3.0), (3.0, 3.5)]) is None
+    assert k.line_fit(((1.0, 2.0), (1.0, 3.0), (1.0, 3.5))) is None
+    with pytest.raises(ZeroDivisionError):
+        COMPILED.line_fit(((1.0, 2.0), (1.0, 3.0), (1.0, 3.5)))

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from operator import itemgetter, mul
+from operator import itemgetter
 from typing import TYPE_CHECKING
 
 import msgspec
@@ -47,6 +47,7 @@ from .sample import OdomSample
 from .table import OdomSensor
 
 if TYPE_CHECKING:
+    from ....estimator import Backend
     from ..state import FilterState
 
 ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
@@ -372,16 +373,15 @@ class OdomModel(SensorModel):
         last_fit = self._last_fit  # the IMU asks at its own rate, the window moves at the odometry's
         if last_fit[0] is window and last_fit[1] == linear_var:
             return last_fit[2]
-        accel = _fitted_accel(window, linear_var)
+        accel = _fitted_accel(window, linear_var, s.ekf.backend)
         self._last_fit = (window, linear_var, accel)  # holds the window: its identity stays its own
         return accel
 
 
 @lru_cache(maxsize=FIT_MEMO)
-def _fitted_accel(window: tuple, linear_var: float) -> float:
-    """``OdomModel.forward_accel`` of one window of (stamp, forward speed) pairs. The sums run over lists
-    and maps (a generator costs a resume an item), in the order and with the operations of the least-squares
-    sums written over the pairs: the same bits.
+def _fitted_accel(window: tuple, linear_var: float, backend: Backend) -> float:
+    """``OdomModel.forward_accel`` of one window of (stamp, forward speed) pairs: the slope of their
+    least-squares line (the estimator's ``line_fit``, the same bits in either backend).
 
     Memoised by value (FIT_MEMO): a replay of the same recording again (the doctor's advice proven, tune's
     fit), whose odometry reads the same, finds each window's fit instead of taking it again. Keys equal
@@ -391,14 +391,7 @@ def _fitted_accel(window: tuple, linear_var: float) -> float:
         # too few speeds for a slope: known only when they are all alike (at rest, cruising)
         last = window[-1][1]
         return 0.0 if all(p[1] == last for p in window) else math.nan
-    ts, vs = zip(*window)
-    tm = sum(ts) / n
-    vm = sum(vs) / n
-    dts = [t - tm for t in ts]
-    dvs = [v - vm for v in vs]
-    stt = sum([d ** 2 for d in dts])
-    slope = sum(map(mul, dts, dvs)) / stt
-    misfit = math.sqrt(sum([(dv - slope * d) ** 2 for d, dv in zip(dts, dvs)]) / (n - 2))
+    slope, misfit = backend.line_fit(window)
     noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
     return slope if misfit <= noise else math.nan
 
