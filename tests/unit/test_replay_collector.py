@@ -1,11 +1,12 @@
 """A replay (and the advice's proof) freezes the objects that were alive before it (the collector walks only what the replay
-allocates) and hands them back after; a caller's own freeze is left as it is."""
+allocates) and hands them back after, spacing the young collections out meanwhile; a caller's own freeze is left as it is."""
 
 from __future__ import annotations
 
 import gc
 from pathlib import Path
 
+from fusiond.collector import YOUNG
 from fusiond.config import load
 from fusiond.replay import run
 
@@ -15,11 +16,14 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_a_replay_freezes_what_existed_and_unfreezes_it_after(jackal_bag: Path, monkeypatch) -> None:
     cfg = load(ROOT / "examples" / "jackal.toml")
     seen: list[int] = []
+    young: list[int] = []
+    thresholds = gc.get_threshold()
     real_feed = run.Runner.feed
 
     def feed(self, sample) -> None:
         if not seen:
             seen.append(gc.get_freeze_count())
+            young.append(gc.get_threshold()[0])
         real_feed(self, sample)
 
     monkeypatch.setattr(run.Runner, "feed", feed)
@@ -29,6 +33,8 @@ def test_a_replay_freezes_what_existed_and_unfreezes_it_after(jackal_bag: Path, 
     assert seen and seen[0] > 0  # frozen while the samples were fused
     assert gc.get_freeze_count() == 0  # and handed back to the collector
     assert gc.is_tracked(kept_before)
+    assert young == [max(YOUNG, thresholds[0])]  # young collections spaced out while fusing ...
+    assert gc.get_threshold() == thresholds  # ... and the caller's thresholds back after
 
 
 def test_a_callers_freeze_is_left_to_the_caller(jackal_bag: Path) -> None:
