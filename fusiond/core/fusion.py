@@ -671,17 +671,18 @@ class FusionCore:
         if gap:  # the gap's inflation and unheld motion are not a model the smoother can run backwards
             s.ekf.end_segment()
         held = self.inputs
-        timeouts = held.timeouts(s)
-        expiries = held.expiries(s, timeouts)  # fixed while predicting: nothing here moves a sensor's newest stamp
+        ekf = s.ekf
+        # fixed while predicting: nothing here moves a sensor's newest stamp
+        timeouts, expiries = held.timeouts_and_expiries(s)
         while True:
             t1 = next_expiry(expiries, t0, t_end)
             seg = t1 - t0
             u = held.at(s, 0.5 * (t0 + t1), timeouts)  # fresh throughout the segment iff fresh at its middle
-            x, F, Q = s.ekf.backend.predict(self.layout, s.ekf.x, u, seg, self.noise_density, self._predict_ws)
+            x, F, Q = ekf.backend.predict(self.layout, ekf.x, u, seg, self.noise_density, self._predict_ws)
             if not u.from_gyro and u.angular_period > 0.0:  # the wheels' yaw rate turns the heading
                 s.wheel_turn += u.angular[2] * seg
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
-                extra = m.on_predict(s, s.ekf.x, x)
+                extra = m.on_predict(s, ekf.x, x)
                 if extra is not None:  # what the linearised model leaves out of this step's horizontal motion
                     add_motion_noise(Q, *extra)
             if gap and t1 >= t_end:
@@ -690,7 +691,7 @@ class FusionCore:
                 add_motion_noise(Q, pos_var, 0.0, pos_var, yaw_var)
                 if u.angular_period == 0.0:  # no yaw rate held at the gap's end: its turn was not seen
                     s.turn_unseen = t_end
-            s.ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it
+            ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it
             if t1 >= t_end:
                 break
             t0 = t1

@@ -46,11 +46,26 @@ class HeldInputs:
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
-        during a prediction, so it reads them once for all its segments."""
+        during a prediction, so it reads them once for all its segments. ``timeout`` of each, written
+        out (``silent_after``): the core asks for them two or three times a message."""
         odom = self.odom_index
-        odom_timeout = self.timeout(odom, s) if odom >= 0 and s.last[odom] is not None else 0.0
-        gyro_timeout = self.timeout(s.gyro_last[0], s) if s.gyro is not None else 0.0
+        odom_timeout = gyro_timeout = 0.0
+        if odom >= 0 and s.last[odom] is not None:
+            base, period = self._timeout_base[odom], s.period[odom]
+            odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period)
+        if s.gyro is not None:
+            idx = s.gyro_last[0]
+            base, period = self._timeout_base[idx], s.period[idx]
+            gyro_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period)
         return odom_timeout, gyro_timeout
+
+    def timeouts_and_expiries(self, s: FilterState) -> tuple[tuple[float, float], tuple[float, float]]:
+        """``timeouts`` and ``expiries`` of state s in one call (a prediction's)."""
+        timeouts = self.timeouts(s)
+        odom = self.odom_index
+        odom_expiry = s.last[odom] + timeouts[0] if odom >= 0 and s.last[odom] is not None else -math.inf
+        gyro_expiry = s.gyro_last[1] + timeouts[1] if s.gyro_last is not None else -math.inf
+        return timeouts, (odom_expiry, gyro_expiry)
 
     def at(self, s: FilterState, t: float | None = None,
            timeouts: tuple[float, float] | None = None) -> MotionInput:

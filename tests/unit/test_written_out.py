@@ -35,6 +35,17 @@ def test_timeouts_are_the_timeout_of_the_odometry_and_of_the_gyro(odom_period, i
     assert gyro_timeout == held.timeout(s.gyro_last[0], s)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.005, 2.0), st.floats(0.001, 2.0), st.integers(0, 6))
+def test_timeouts_and_expiries_are_the_two_calls(odom_period, imu_period, n):
+    core = _driven((odom_period, imu_period), n) if n else FusionCore(make_config())
+    if n == 0:
+        core.ingest(imu(1.0))  # a gyro rate, no odometry yet
+    s, held = core.state, core.inputs
+    timeouts = held.timeouts(s)
+    assert held.timeouts_and_expiries(s) == (timeouts, held.expiries(s, timeouts))
+
+
 def test_timeouts_are_zero_for_inputs_not_yet_held():
     core = FusionCore(make_config())
     core.ingest(imu(1.0))  # a gyro rate, no odometry yet
