@@ -55,6 +55,7 @@ class SlidingCorrection:
         self.front: list[Map] = []
         self.back: list[Map] = []
         self.objs: list[object] = []  # the anchors of [f0, f1 + len(back))
+        self.maps: list[Map] = []  # each one's own map (``_link``), made once as it joins
 
     def _link(self, anchor, before) -> Map:
         """The map into ``anchor`` from the anchor ``before`` it (None: not held, never in a window)."""
@@ -91,16 +92,19 @@ class SlidingCorrection:
         else:
             del self.back[seen - self.f1:]
             del self.objs[seen - self.f0:]
+            del self.maps[seen - self.f0:]
         for j in range(seen, N):  # new anchors join the back
             a = anchors[j - base]
             m = self._link(a, anchors[j - base - 1] if j > base else None)
             self.back.append(self._compose(self.back[-1], m) if self.back else m)
             self.objs.append(a)
+            self.maps.append(m)
         if K1 >= self.f1:  # the window starts in the back: flip it into suffix compositions from K1
-            self._flip(K1, N, anchors, base)
+            self._flip(K1, N)
         elif K1 > self.f0:  # what left the window goes
             del self.front[:K1 - self.f0]
             del self.objs[:K1 - self.f0]
+            del self.maps[:K1 - self.f0]
             self.f0 = K1
         last_P = anchors[-1].P if self.covariance else None
         if K1 >= N:
@@ -114,13 +118,13 @@ class SlidingCorrection:
             self.covariance_k = C + A.dot(last_P).dot(A.T)
         return b if self.back else b.copy()
 
-    def _flip(self, K1: int, N: int, anchors: list, base: int) -> None:
-        objs = self.objs[K1 - self.f0:]
+    def _flip(self, K1: int, N: int) -> None:
+        maps = self.maps[K1 - self.f0:]
         front: list[Map] = [None] * (N - K1)  # type: ignore[list-item]
         S = None
         for j in range(N - 1, K1 - 1, -1):
-            m = self._link(objs[j - K1], anchors[j - base - 1] if j > base else None)
+            m = maps[j - K1]
             S = m if S is None else self._compose(m, S)
             front[j - K1] = S
-        self.front, self.back, self.objs = front, [], objs
+        self.front, self.back, self.objs, self.maps = front, [], self.objs[K1 - self.f0:], maps
         self.f0, self.f1 = K1, N
