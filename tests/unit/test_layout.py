@@ -156,6 +156,11 @@ def test_only_the_backend_imports_the_compiled_kernels():
     assert "global " not in backend  # no process-wide switch: a backend is chosen per filter
 
 
+def _printed(code: str) -> str:
+    """What ``code`` prints, run in a fresh interpreter (what a module imports shows only in a new process)."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+
+
 def test_the_kinds_never_import_the_outer_layers():
     """The registry, the kinds and the fusion core import nothing of transport, replay, the CLI, the tuner,
     the doctor, nor (until a decoder is asked for) the codecs and rosbags; the config's shared tables
@@ -164,7 +169,7 @@ def test_the_kinds_never_import_the_outer_layers():
             "import fusiond.core.sensors.registry, fusiond.core.fusion; "
             "b = {m for m in sys.modules if m.split('.')[1:2] in (['transport'], ['replay'], ['cli'], ['tune'], "
             "['codecs'], ['doctor']) or m.startswith('rosbags')}; print(sorted(a), sorted(b))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = _printed(code)
     assert out.strip() == "['fusiond.config_tables'] []"
 
 
@@ -180,7 +185,7 @@ def test_a_kinds_codec_is_imported_when_a_decoder_is_asked_for():
         "            '[[sensors]]\\nname = \"mocap\"\\nkind = \"pose\"\\nkey = \"mocap\"\\nencoding = \"json\"\\n')\n"
         "r.kind_of(cfg.sensor('mocap')).decoder(cfg.sensor('mocap'))\n"
         "print(before, seen())\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = _printed(code)
     assert out.strip() == "[False, False] [True, True]"
 
 
@@ -190,7 +195,7 @@ def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
     converter, JSON / msgpack Struct, encoder, struct fast path) live in its own package
     (``core/sensors/<kind>/sample.py``, ``codec.py``), found through its descriptor."""
     code = "import sys, fusiond.codecs; print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}))"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = _printed(code)
     assert out.strip() == "['codecs', 'errors', 'samples']"
     upward = sorted(path.relative_to(PACKAGE).as_posix() for path in (PACKAGE / "codecs").rglob("*.py")
                     if any(m.startswith("fusiond.core") and not m.startswith("fusiond.core.sensors.registry")
