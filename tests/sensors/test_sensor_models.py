@@ -257,7 +257,7 @@ def _reference_fit(window: tuple, linear_var: float) -> float:
     return slope if misfit <= max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR) else math.nan
 
 
-def test_the_forward_speed_fit_is_the_pairs_formula_to_the_bit_and_remembered():
+def test_the_forward_speed_fit_is_the_pairs_formula_to_the_bit():
     import math
     import random
 
@@ -274,6 +274,6 @@ def test_the_forward_speed_fit_is_the_pairs_formula_to_the_bit_and_remembered():
         window = tuple((t0 + i * dt, v0 + a * i * dt + rng.gauss(0.0, noise)) for i in range(n))
         var = rng.choice([0.0, 1e-4, 0.01])
         expected = _reference_fit(window, var)
-        for backend in BACKENDS:  # taken, then remembered
-            for got in (_fitted_accel(window, var, backend), _fitted_accel(tuple(window), var, backend)):
-                assert got == expected or (math.isnan(got) and math.isnan(expected)), (k, backend, got, expected)
+        for backend in BACKENDS:
+            got = _fitted_accel(window, var, backend)
+            assert got == expected or (math.isnan(got) and math.isnan(expected)), (k, backend, got, expected)

@@ -27,7 +27,6 @@ reports its commanded speed and drops it to zero at once, 0.25 m from 0.5 m/s.
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from operator import itemgetter
 from typing import TYPE_CHECKING
 
@@ -51,9 +50,6 @@ if TYPE_CHECKING:
     from ..state import FilterState
 
 ACCEL_WINDOW_S = 0.5  # s of forward speeds whose slope is the forward acceleration
-# windows whose fits are remembered (``_fitted_accel``): a replay's worth (a minute of 80 Hz odometry), a
-# few MB at most; a recording with more windows than this finds none of a previous replay's fits
-FIT_MEMO = 8192
 ACCEL_FIT_SIGMAS = 3.0  # the speeds fit a line (a steady acceleration) within this many noise sigmas ...
 ACCEL_FIT_FLOOR = 0.02  # ... or within this many m/s (encoders quantise; drivers understate the noise)
 STOP_DECEL_LIMIT = 15.0  # m/s^2 (1.5 g): a drop to exactly zero faster than this is the drive, not a stop
@@ -378,14 +374,12 @@ class OdomModel(SensorModel):
         return accel
 
 
-@lru_cache(maxsize=FIT_MEMO)
 def _fitted_accel(window: tuple, linear_var: float, backend: Backend) -> float:
     """``OdomModel.forward_accel`` of one window of (stamp, forward speed) pairs: the slope of their
     least-squares line (the estimator's ``line_fit``, the same bits in either backend).
 
-    Memoised by value (FIT_MEMO): a replay of the same recording again (the doctor's advice proven, tune's
-    fit), whose odometry reads the same, finds each window's fit instead of taking it again. Keys equal
-    as values and unequal in bits (0.0 and -0.0) give the same fit."""
+    Not memoised across replays: hashing a window of 25-40 (stamp, speed) pairs to find an earlier fit
+    costs more instructions than the compiled fit itself."""
     n = len(window)
     if n < 3 or window[-1][0] - window[0][0] < 0.5 * ACCEL_WINDOW_S:
         # too few speeds for a slope: known only when they are all alike (at rest, cruising)
