@@ -5,7 +5,7 @@ one or more Kalman updates (the IMU's orientation the most frequent). Two implem
 
 - ``PythonBackend``, the reference: the maths as written in numpy and Python floats (the EKF steps
   here, the motion model in ``motion.predict``, the orientation observation in
-  ``observations.rpy_residual``). It runs everywhere and is what the other is held to.
+  ``orientation_residual.rpy_residual``). It runs everywhere and is what the other is held to.
 - ``CompiledBackend``: the same steps as one C call each (``_kernels.c``, built by ``pip install``
   where a compiler is; see its header for why C). What the kernels cannot take (an array that is not
   C-contiguous float64, a layout wider than their fixed scratch, an input block without a compiled
@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import EstimatorError
-from . import motion, observations
+from . import motion
+from .orientation_residual import rpy_residual
 from .cholesky import gain_rows
 from .rts import rts_gain
 from .line_fit import line_fit
@@ -185,7 +186,7 @@ class PythonBackend(Backend):
         return motion.predict(layout, x, u, dt, noise_density, ws)
 
     def orientation(self, layout, x, z_rpy, rows):
-        return observations.rpy_residual(layout, x, z_rpy, rows)
+        return rpy_residual(layout, x, z_rpy, rows)
 
     def line_fit(self, pairs):
         return line_fit(pairs)
@@ -253,7 +254,7 @@ class CompiledBackend(PythonBackend):
         try:
             self._k.orientation(x, z_rpy, rows, y, H)
         except BufferError:  # x not C-contiguous float64
-            return observations.rpy_residual(layout, x, z_rpy, rows)
+            return rpy_residual(layout, x, z_rpy, rows)
         return y, H
 
     def line_fit(self, pairs):
