@@ -13,7 +13,7 @@ from __future__ import annotations
 __all__ = [
     "FusiondError", "ConfigError", "EstimatorError", "CoreError", "CodecError", "TransportError",
     "SessionError", "PlaybackError", "ReplayError", "BagError", "CalibrationError",
-    "DoctorError",
+    "DoctorError", "TuneError",
 ]
 
 
@@ -63,3 +63,7 @@ class CalibrationError(FusiondError, ValueError):
 
 class DoctorError(FusiondError, ValueError):
     """The doctor's checks cannot be put in an order (a check that needs one that is not there, or a cycle)."""
+
+
+class TuneError(FusiondError, RuntimeError):
+    """A replay of tune's or of the doctor's advice ended without a result (a forked replay that died)."""

@@ -29,6 +29,7 @@ from ..collector import skips_the_caller
 from ..config import Config, ConfigError, convert, validate
 from ..doctor import Proof, Verdict
 from ..logs import muted
+from .forked import run_side_by_side
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
 
 __all__ = ["prove_advice", "split_key", "with_suggestion"]
@@ -103,43 +104,51 @@ def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                  budget_s: float = 60.0, base_records: Sequence[object] | None = None,
-                 backend: Backend | None = None) -> list[Verdict]:
+                 backend: Backend | None = None, workers: int | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
     recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
     when the caller kept them (else the recording is replayed once more for them). Then one replay per
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
     recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
-    ``backend``: the estimator's in these replays (``FusionCore``)."""
+    ``backend``: the estimator's in these replays (``FusionCore``). ``workers``: how many lines are replayed
+    at once, each in a forked process (``forked.run_side_by_side``; default: one per CPU)."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
         return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,
-                       backend)
+                       backend, workers)
 
 
 def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
             deadline: float, budget_s: float, base_records: Sequence[object] | None,
-            backend: Backend | None) -> list[Verdict]:
+            backend: Backend | None, workers: int | None) -> list[Verdict]:
     """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
             base_records = replay_records(cfg, samples, backend)
     full = reference(base_records, cfg)
     proofs: dict[tuple[str, str], Proof] = {}
+    to_replay: list[tuple[tuple[str, str], Verdict, Config, int]] = []
     # problems first: if the budget runs out, the lines left unproven are the least urgent ones
     for v in sorted(pending, key=lambda v: v.level != "problem"):
         line = (v.key, v.suggestion)
-        if line in proofs:
+        if line in proofs or any(line == queued[0] for queued in to_replay):
             continue
         try:
             changed, n_keys = with_suggestion(cfg, v)
         except ConfigError as err:
             proofs[line] = Proof(False, f"it does not apply to this config ({err})", tried=False)
             continue
+        to_replay.append((line, v, changed, n_keys))
+
+    def out_of_time(_job) -> Proof | None:
         if time.perf_counter() > deadline:
-            proofs[line] = Proof(True, f"the {budget_s:g} s budget for replaying advice ran out", tried=False)
-            continue
+            return Proof(True, f"the {budget_s:g} s budget for replaying advice ran out", tried=False)
+        return None
+
+    def prove(job: tuple[tuple[str, str], Verdict, Config, int]) -> Proof:
+        _, v, changed, n_keys = job
         with muted():
             records = replay_records(changed, samples, backend)
         ref, dropped = _comparable(full, records)
@@ -147,9 +156,12 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         gain = before.neg_loglik - after.neg_loglik
         if gain == 0.0 and not dropped and after.rejected == before.rejected:
             # a key the filter does not use here (a floor of a channel only the doctor's check reads)
-            proofs[line] = Proof(False, "it changes none of the filter's updates on this recording, only the "
-                                        "doctor's own check")
-        else:
-            proofs[line] = Proof(gain > n_keys, _effect(before, after, v.sensor, dropped))
+            return Proof(False, "it changes none of the filter's updates on this recording, only the "
+                                "doctor's own check")
+        return Proof(gain > n_keys, _effect(before, after, v.sensor, dropped))
+
+    # each line's replay is independent of the others': side by side on the machine's cores (``forked``)
+    for job, proof in zip(to_replay, run_side_by_side(prove, to_replay, workers, out_of_time)):
+        proofs[job[0]] = proof
     return [msgspec.structs.replace(v, proof=proofs[(v.key, v.suggestion)]) if v.suggestion else v
             for v in verdicts]

@@ -82,6 +82,22 @@ def test_a_key_the_filter_does_not_use_here_is_said_to_change_nothing(drive) -> 
     assert v.proof is not None and not v.proof.advised and "changes none of the filter's updates" in v.proof.effect
 
 
+def test_lines_replayed_side_by_side_get_the_proofs_of_lines_replayed_in_turn(drive) -> None:
+    """Each line in a forked process of its own (two at a time) or all here, one after the other: the same
+    proofs, in the verdicts' order."""
+    cfg = robot_config(imu="gyro_noise = 0.02")
+    planted = [
+        Verdict("imu", "orientation", "warn", "planted", "sensors.imu.orientation_noise",
+                "orientation_noise = [0.00024, 0.00024, 0.00024]"),
+        Verdict("wheel", "yaw_rate", "warn", "planted", "sensors.wheel.twist_min_sigma", "twist_min_sigma = [0.01, 0.03]"),
+        Verdict("imu", "gyro", "warn", "planted", "sensors.imu.gyro_noise", "gyro_noise = 0.002"),
+    ]
+    in_turn = prove_advice(cfg, drive, planted, workers=1)
+    side_by_side = prove_advice(cfg, drive, planted, workers=2)
+    assert [v.proof for v in side_by_side] == [v.proof for v in in_turn]
+    assert len({v.proof.effect for v in in_turn}) == 3 and all(v.proof.tried for v in in_turn)
+
+
 def test_out_of_budget_lines_are_printed_as_not_replayed(drive) -> None:
     v = _by_key(_proven(drive, imu="gyro_noise = 0.02", budget_s=0.0), "sensors.imu.gyro_noise")
     assert v.proof is not None and not v.proof.tried and v.proof.advised

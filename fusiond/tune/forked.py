@@ -1,0 +1,149 @@
+"""Independent replays side by side: each in a forked child process, at most one per CPU at a time.
+
+Proving the doctor's advice replays the recording once per paste line, each line on its own copy of
+the config, and no replay reads another's result: on a machine with two cores two lines take the
+time of one. A forked child shares the parent's recording (its samples, the reference terms) without
+copying or pickling it; only the small result travels back, pickled through a pipe. The results are
+those of running the jobs in turn, in the order given: the child runs the same function on the same
+objects, in a process of its own.
+
+Where fork is not offered (not Linux or macOS), with one CPU, or with one job, the jobs run in turn
+in this process. A job that raises in a child raises here (its exception pickled back, or a
+``ForkedJobError`` naming it when that fails): no job starts after it, the running ones are waited
+for, and of those that failed the first in ``items`` order raises, as it would have in turn.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import selectors
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
+
+from ..errors import TuneError
+
+__all__ = ["ForkedJobError", "run_side_by_side", "workers_available"]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+class ForkedJobError(TuneError):
+    """A job in a forked child ended without a result that could be read back."""
+
+
+def workers_available() -> int:
+    """How many jobs may run at once: the CPUs this process may use (1 where fork is not offered)."""
+    if not hasattr(os, "fork"):
+        return 1
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | None = None,
+                     before_each: Callable[[T], R | None] | None = None) -> list[R]:
+    """``[job(item) for item in items]``, the jobs in forked children, at most ``workers`` (default:
+    ``workers_available()``) at once. ``before_each(item)``, asked in this process as each job is about
+    to start, may answer for it instead (a budget run out): its non-None answer is the item's result."""
+    workers = workers_available() if workers is None else max(1, workers)
+    if workers == 1 or len(items) < 2 or not hasattr(os, "fork"):
+        in_turn = []
+        for item in items:
+            answer = _answer(before_each, item)
+            in_turn.append(answer if answer is not None else job(item))
+        return in_turn
+    results: list[Any] = [None] * len(items)
+    failed: dict[int, BaseException] = {}  # once a job fails no other starts; the first one's error is raised
+    running: dict[int, tuple[int, int, bytearray]] = {}  # read end -> (item index, child pid, bytes read)
+    selector = selectors.DefaultSelector()
+    upcoming = iter(range(len(items)))
+    try:
+        while True:
+            while len(running) < workers and not failed:
+                index = next(upcoming, None)
+                if index is None:
+                    break
+                answer = _answer(before_each, items[index])
+                if answer is not None:
+                    results[index] = answer
+                    continue
+                read_end, pid = _start(job, items[index])
+                running[read_end] = (index, pid, bytearray())
+                selector.register(read_end, selectors.EVENT_READ)
+            if not running:
+                break
+            for key, _ in selector.select():
+                fd = key.fd
+                chunk = os.read(fd, 1 << 16)
+                if chunk:
+                    running[fd][2].extend(chunk)
+                    continue
+                index, pid, data = running.pop(fd)
+                selector.unregister(fd)
+                os.close(fd)
+                os.waitpid(pid, 0)
+                try:
+                    results[index] = _result(data, index)
+                except Exception as err:  # noqa: BLE001 - raised below, once the running jobs have ended
+                    failed[index] = err
+    finally:
+        for fd, (_, pid, _) in running.items():  # an error here: no child outlives the call
+            selector.unregister(fd)
+            os.close(fd)
+            try:
+                os.kill(pid, 9)
+                os.waitpid(pid, 0)
+            except OSError:
+                pass
+        selector.close()
+    if failed:
+        raise failed[min(failed)]
+    return results
+
+
+def _answer(before_each: Callable[[Any], Any] | None, item: Any) -> Any:
+    return None if before_each is None else before_each(item)
+
+
+def _start(job: Callable[[Any], Any], item: Any) -> tuple[int, int]:
+    """Fork a child that runs ``job(item)`` and writes ("ok", result) or ("error", exception), pickled,
+    to a pipe; (the pipe's read end, the child's pid)."""
+    read_end, write_end = os.pipe()
+    sys.stdout.flush()  # what the parent has buffered is written once, by the parent
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns into the caller's code
+        status = 0
+        try:
+            os.close(read_end)
+            try:
+                payload = pickle.dumps(("ok", job(item)), protocol=pickle.HIGHEST_PROTOCOL)
+            except BaseException as err:  # noqa: BLE001 - carried back to the parent, which raises it
+                try:
+                    payload = pickle.dumps(("error", err), protocol=pickle.HIGHEST_PROTOCOL)
+                except Exception:  # noqa: BLE001 - an exception that does not pickle: its text
+                    payload = pickle.dumps(("error", ForkedJobError(f"{type(err).__name__}: {err}")))
+            view = memoryview(payload)
+            while view:
+                view = view[os.write(write_end, view):]
+        except BaseException:  # noqa: BLE001 - the parent sees a pipe closed without a result
+            status = 1
+        finally:
+            os._exit(status)  # no atexit handlers, no second flush of the parent's buffers
+    os.close(write_end)
+    return read_end, pid
+
+
+def _result(data: bytearray, index: int) -> Any:
+    """What the child of job ``index`` sent back: its result, or its exception raised here."""
+    try:
+        tag, value = pickle.loads(bytes(data))
+    except Exception as err:  # noqa: BLE001 - a child that died before writing (killed, out of memory)
+        raise ForkedJobError(f"forked job {index} ended without a result ({err})") from None
+    if tag == "error":
+        raise value
+    return value

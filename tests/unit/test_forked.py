@@ -1,0 +1,82 @@
+"""Jobs side by side in forked children (``fusiond.tune.forked``): the results of running them in turn."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from fusiond.errors import FusiondError, TuneError
+from fusiond.tune.forked import ForkedJobError, run_side_by_side, workers_available
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is not offered on this platform")
+
+
+def _square_and_pid(n: int) -> tuple[int, int]:
+    return n * n, os.getpid()
+
+
+def test_results_come_back_in_order_and_from_other_processes():
+    got = run_side_by_side(_square_and_pid, list(range(7)), workers=3)
+    assert [value for value, _ in got] == [n * n for n in range(7)]
+    assert all(pid != os.getpid() for _, pid in got)  # each ran in a child
+
+
+def test_one_worker_runs_the_jobs_in_turn_here():
+    got = run_side_by_side(_square_and_pid, [2, 3], workers=1)
+    assert got == [(4, os.getpid()), (9, os.getpid())]
+
+
+def test_a_large_result_travels_whole():
+    big = run_side_by_side(lambda n: list(range(n)), [200_000, 3], workers=2)
+    assert big[0] == list(range(200_000)) and big[1] == [0, 1, 2]
+
+
+def test_an_answer_before_a_job_starts_stands_for_it():
+    asked = []
+
+    def before(n):
+        asked.append(n)  # asked here, in this process, as each job is about to start
+        return "skipped" if n == 2 else None
+
+    got = run_side_by_side(lambda n: n + 100, [1, 2, 3], workers=2, before_each=before)
+    assert got == [101, "skipped", 103]
+    assert asked == [1, 2, 3]
+
+
+def _raises(n: int) -> int:
+    if n == 1:
+        raise ValueError(f"job {n} refused")
+    return n
+
+
+def test_a_job_that_raises_in_a_child_raises_here():
+    with pytest.raises(ValueError, match="job 1 refused"):
+        run_side_by_side(_raises, [0, 1, 2], workers=2)
+
+
+def _dies(n: int) -> int:
+    if n == 0:
+        os._exit(3)  # killed, out of memory: no result is written
+    return n
+
+
+def test_a_child_that_dies_is_an_error_of_the_tune_layer():
+    with pytest.raises(ForkedJobError, match="forked job 0 ended without a result") as caught:
+        run_side_by_side(_dies, [0, 1], workers=2)
+    assert isinstance(caught.value, TuneError) and isinstance(caught.value, FusiondError)
+
+
+def test_an_exception_that_does_not_pickle_comes_back_as_its_text():
+    class Local(Exception):  # a local class: pickle cannot name it
+        pass
+
+    def job(n):
+        raise Local(f"local {n}")
+
+    with pytest.raises(ForkedJobError, match="Local: local 0"):
+        run_side_by_side(job, [0, 1], workers=2)
+
+
+def test_workers_available_is_at_least_one():
+    assert workers_available() >= 1
