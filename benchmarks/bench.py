@@ -452,8 +452,8 @@ def write_synthetic_bag(path: Path, odom_topic: str, imu_topic: str, messages: i
     from rosbags.rosbag2 import Writer
 
     from fusiond.estimator import rotation as rot
-    from fusiond.core.sensors import ImuSample, OdomSample
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample
+    from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
 
     cov36 = tuple(1e-3 if i % 7 == 0 else 0.0 for i in range(36))
     ocov = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)

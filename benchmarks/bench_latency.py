@@ -45,11 +45,10 @@ import msgspec
 import numpy as np
 import zenoh
 
-from fusiond.codecs import encode_sample
 from fusiond.config import ZenohConfig, loads
 from fusiond.errors import TransportError
 from fusiond.estimator.backend import from_environment
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
 from fusiond.health import decode_report, encode_report
 from fusiond.logs import configure
 from fusiond.transport.daemon import Daemon, direct

@@ -169,7 +169,8 @@ def record_imu(session, sensor: ImuSensor, duration: float, odom: OdomSensor | N
     import threading
     import time
 
-    from .codecs import DecodeError, make_decoder
+    from .codecs import DecodeError
+    from .core.sensors import make_decoder
 
     lock = threading.Lock()
 

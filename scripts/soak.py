@@ -45,8 +45,7 @@ sys.path.insert(0, str(ROOT))
 import zenoh  # noqa: E402
 
 from fusiond.config import ZenohConfig  # noqa: E402
-from fusiond.core.sensors import ImuSample, OdomSample  # noqa: E402
-from fusiond.codecs import encode_sample  # noqa: E402
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample  # noqa: E402
 from fusiond.transport.session import build_config, open_session, query_health  # noqa: E402
 
 _STAMP = struct.Struct("<iI")

@@ -1,5 +1,6 @@
-"""Bytes -> samples: the decoder of one sensor's key (`make_decoder`), by its kind's codec
-(`kind_codec.KindCodec`) and encoding, and the decoders of the published pose and odometry.
+"""Bytes -> samples: the decoder of one sensor's key (`decoder_for`), by its kind's codec
+(`kind_codec.KindCodec`, handed in by the caller) and encoding, and the decoders of the published pose and
+odometry.
 
 Where the formats meet: a sensor's kind and encoding pick the struct fast path
 (`cdr_fast_path`) with rosbags behind it, rosbags alone, or the kind's JSON / msgpack Struct;
@@ -16,18 +17,14 @@ from fusiond.samples import Sample
 
 from .cdr_fast_path import RepeatedLayout
 from .json_msgpack import structured_decoder
-from .kind_codec import KindCodec, codec_named
+from .kind_codec import KindCodec
 from .rosbags_cdr import deserialize, typestore
 from .wire import ODOMETRY, POSE_COV_STAMPED, Decoder, Payload, check_size
 
 
-def _codec(kind: str | KindCodec) -> KindCodec:
-    return kind if isinstance(kind, KindCodec) else codec_named(kind)
-
-
-def ros_msgtype(kind: str | KindCodec, msgtype: str | None = None) -> str:
-    """The ROS 2 message type of a sensor kind (a sensor's own choice ``msgtype`` when its kind reads several)."""
-    codec = _codec(kind)
+def ros_msgtype(codec: KindCodec, msgtype: str | None = None) -> str:
+    """The ROS 2 message type of a sensor of the kind of ``codec`` (a sensor's own choice ``msgtype`` when its
+    kind reads several)."""
     types = codec.ros_types
     if msgtype is not None:
         if len(types) < 2 or msgtype not in types:  # only a kind reading several types has a choice
@@ -37,22 +34,14 @@ def ros_msgtype(kind: str | KindCodec, msgtype: str | None = None) -> str:
     return types[0]
 
 
-def ros_converter(kind: str | KindCodec) -> Callable[[Any, str], Sample]:
-    """rosbags message -> sample for a sensor kind (bag replay)."""
-    return _codec(kind).from_ros
-
-
-def make_decoder(kind: str | KindCodec, encoding: str, sensor: str, *, msgtype: str | None = None) -> Decoder:
-    """The bytes -> sample function of one sensor of ``kind`` (its name, or its ``KindCodec``); it raises
-    only DecodeError.
+def decoder_for(codec: KindCodec, encoding: str, sensor: str, *, msgtype: str | None = None) -> Decoder:
+    """The bytes -> sample function of one sensor of the kind of ``codec``; it raises only DecodeError.
 
     ``msgtype`` selects the ROS type of a kind that reads several (a pose sensor's config key
     `msgtype`; a CDR payload does not say). Without it such a decoder takes whichever of its types
     the payload parses as exactly (the pose types' CDR lengths differ).
-    Unknown kind or encoding is a ValueError at construction: that is a
-    configuration bug, not a bad message.
+    An unknown encoding is a ValueError at construction: that is a configuration bug, not a bad message.
     """
-    codec = _codec(kind)
     types, from_ros = codec.ros_types, codec.from_ros
     if len(types) > 1 and msgtype is None and encoding == "ros2-cdr":
         for t in types:
@@ -133,4 +122,4 @@ def decode_odometry_cdr(payload: Payload) -> Any:
     return deserialize(payload, ODOMETRY)
 
 
-__all__ = ["cdr_decoder", "decode_odometry_cdr", "decode_pose_cdr", "make_decoder", "ros_converter", "ros_msgtype"]
+__all__ = ["cdr_decoder", "decode_odometry_cdr", "decode_pose_cdr", "decoder_for", "ros_msgtype"]

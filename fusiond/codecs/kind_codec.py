@@ -1,15 +1,15 @@
-"""What the codecs need of a sensor kind (``KindCodec``), and where they find it: by the kind's name
-(``codec_named``) or by its sample's type (``codec_of``).
+"""What the codecs need of a sensor kind (``KindCodec``), handed to them by their caller.
 
 A kind owns its wire formats: its sample's ROS converter, its JSON / msgpack Struct, its encoder and,
 for a kind read a thousand times a second, its struct fast path. The kind's package declares them in a
 ``KindCodec`` its descriptor returns from ``SensorKind.codec()``, imported only when a decoder is first
 asked for, so that the fusion core loads without the codecs. The codecs here are generic over
-``KindCodec``: ``decoders.make_decoder`` and ``sample_encoders.encode_sample`` read no table of kinds.
+``KindCodec``: ``decoders.decoder_for`` and ``sample_encoders.encode_with`` take one and read no table of
+kinds.
 
-Every kind's codec is the registry's to name: ``codec_named`` and ``codec_of`` ask the kind's descriptor
-when first asked, as the kinds import the codecs only when asked for a decoder. Nothing of the core is
-imported when this package loads.
+Finding a kind's codec by its name or its sample's type is the registry's business, a floor above
+(``fusiond.core.sensors.formats``): this package imports nothing of the core, at load or in a function, so
+that the kinds' packages may import it without an import circle.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .cdr_fast_path import Fields
 
-__all__ = ["KindCodec", "codec_named", "codec_of"]
+__all__ = ["KindCodec"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,37 +49,3 @@ class KindCodec:
     from_message: Callable[[Any, str], Any] | None = None
     repeated: tuple[bool, type[Fields]] | None = None
     zero: Any = None
-
-
-_BY_SAMPLE: dict[type, tuple[object, KindCodec]] = {}  # sample type -> (its kind's descriptor, its codec)
-
-
-def codec_named(name: str) -> KindCodec:
-    """The codec of the kind ``name`` (``SensorKind.codec``); a ValueError for a kind that is not registered,
-    or offers no codec."""
-    from ..core.sensors.registry import kind_named  # the kind's package declares it: asked when first needed
-
-    found = kind_named(name).codec()
-    if found is None:
-        raise ValueError(f"sensor kind {name!r} offers no codec")
-    return found
-
-
-def codec_of(sample: object) -> KindCodec:
-    """The codec of the kind whose sample ``sample`` is (its exact type); a ValueError for another.
-
-    Asked once a sample by ``encode_sample`` (`fusiond play` re-encoding a bag): the answer is kept by
-    sample type while the kind that gave it stays registered under its name."""
-    from ..core.sensors.registry import KINDS  # the kind's package declares it: asked when first needed
-
-    sample_type = type(sample)
-    kept = _BY_SAMPLE.get(sample_type)
-    if kept is not None and KINDS.get(kept[1].name) is kept[0]:
-        return kept[1]
-    for described in list(KINDS.values()):
-        if described.sample_type is sample_type:
-            codec = described.codec()
-            if codec is not None:
-                _BY_SAMPLE[sample_type] = (described, codec)
-                return codec
-    raise ValueError(f"no sensor kind's codec encodes a {sample_type.__name__}")

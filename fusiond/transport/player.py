@@ -30,8 +30,8 @@ from typing import Any, Protocol
 import msgspec
 import zenoh
 
-from ..codecs import encode_sample, make_decoder
 from ..config import Config
+from ..core.sensors import encode_sample, make_decoder
 from ..errors import PlaybackError
 from ..health import decode_report
 from ..presence import withdrawn

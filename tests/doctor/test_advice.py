@@ -15,11 +15,11 @@ import pytest
 from rosbags.rosbag2 import Writer
 
 from fusiond.cli import main
-from fusiond.codecs import encode_sample, typestore
+from fusiond.codecs import typestore
 from fusiond.config import ConfigError
 from fusiond.doctor import Verdict, format_verdicts
 from fusiond.replay.run import run_samples
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
 from fusiond.tune.advice import prove_advice, with_suggestion
 
 from tests.support.configs import robot_config, robot_config_text

@@ -12,7 +12,7 @@ import pytest
 from fusiond.core.fusion import FusionCore
 from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, MotionInput, PoseBlock, StateLayout, predict
 from fusiond.estimator import observations as obs
-from fusiond.codecs import encode_sample, make_decoder
+from fusiond.core.sensors import encode_sample, make_decoder
 
 from tests.support.sim import SimConfig, simulate
 from tests.support.core_samples import make_config

@@ -23,8 +23,8 @@ from fusiond.config import load
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.bag import open_bag_samples
 from fusiond.replay.run import replay
-from fusiond.core.sensors import OdomSample
-from fusiond.codecs import decode_odometry_cdr, decode_pose_cdr, encode_sample, make_decoder
+from fusiond.core.sensors import OdomSample, encode_sample, make_decoder
+from fusiond.codecs import decode_odometry_cdr, decode_pose_cdr
 
 from tests.support.daemon import (
     ROOT,

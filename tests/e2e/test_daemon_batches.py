@@ -11,9 +11,8 @@ from collections import Counter
 import pytest
 import zenoh
 
-from fusiond.codecs import encode_sample
 from fusiond.monitor import decode_diagnostics
-from fusiond.core.sensors import ImuSample
+from fusiond.core.sensors import ImuSample, encode_sample
 from fusiond.transport.daemon import HOLD_S, Daemon
 
 from tests.support.configs import loopback_daemon_config

@@ -10,8 +10,8 @@ import zenoh
 
 from fusiond.config import loads
 from fusiond.health import decode_report
-from fusiond.core.sensors import OdomSample
-from fusiond.codecs import decode_pose_cdr, encode_sample
+from fusiond.core.sensors import OdomSample, encode_sample
+from fusiond.codecs import decode_pose_cdr
 from fusiond.transport.daemon import Daemon, alive_key
 from fusiond.transport.session import query_health
 
@@ -177,8 +177,8 @@ def test_play_reports_what_a_daemon_that_cannot_keep_up_dropped(sessions, jackal
 
 def test_fused_position_is_published_as_navsatfix(sessions):
     """With a GPS and `output.navsat_key`, the daemon publishes the fused base position in WGS84."""
-    from fusiond.core.sensors import GpsSample, ImuSample
-    from fusiond.codecs import NAVSATFIX, TYPESTORE, encode_sample
+    from fusiond.core.sensors import GpsSample, ImuSample, encode_sample
+    from fusiond.codecs import NAVSATFIX, TYPESTORE
     from fusiond.core.sensors.gps.codec import encode_gps_sample
 
     cfg = loopback_daemon_config(output='navsat_key = "t/fix_filtered"',

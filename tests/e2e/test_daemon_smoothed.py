@@ -16,7 +16,8 @@ import time
 import numpy as np
 import pytest
 
-from fusiond.codecs import decode_pose_cdr, encode_sample
+from fusiond.codecs import decode_pose_cdr
+from fusiond.core.sensors import encode_sample
 from fusiond.config import load
 from fusiond.core.fusion import FusionCore
 from fusiond.core.sensors.registry import kind_of

@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fusiond.codecs import decode_pose_cdr, encode_sample
+from fusiond.codecs import decode_pose_cdr
 from fusiond.config import load
 from fusiond.core.resume import state_fingerprint
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
 from fusiond.transport.state_file import load_state
 
 from tests.support.configs import sensor_tables

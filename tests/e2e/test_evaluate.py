@@ -17,11 +17,11 @@ import pytest
 from rosbags.rosbag2 import Writer
 
 from fusiond.cli import main
-from fusiond.codecs import encode_sample, typestore
+from fusiond.codecs import typestore
 from fusiond.estimator import rotation as rot
 from fusiond.replay.evaluate import Track, _aligned_rms
 from fusiond.core.sensors.pose import PoseSample
-from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
+from fusiond.core.sensors import GpsSample, ImuSample, OdomSample, encode_sample
 from tests.support.configs import robot_config_text
 from tests.support.sim_gps import World, simulate
 

@@ -9,11 +9,11 @@ import subprocess
 
 import pytest
 
-from fusiond.codecs import decode_pose_cdr, encode_sample
+from fusiond.codecs import decode_pose_cdr
 from fusiond.config import load
 from fusiond.estimator.rotation import yaw as yaw_of
 from fusiond.replay.bag import open_bag_samples
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
 from tests.support.daemon import (
     ROOT, client_session, daemon_process, free_port, fusiond_cmd, health, sensor_publishers, wait_daemon_ready,
     wait_until, write_config,

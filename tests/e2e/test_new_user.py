@@ -392,9 +392,9 @@ nis_window = 50
 def _static_imu_bag(path: Path, n: int = 3000, rate: float = 100.0) -> None:
     from rosbags.rosbag2 import Writer
 
-    from fusiond.codecs import IMU, TYPESTORE, encode_sample
+    from fusiond.codecs import IMU, TYPESTORE
     from fusiond.estimator import rotation as rot
-    from fusiond.core.sensors import ImuSample
+    from fusiond.core.sensors import ImuSample, encode_sample
 
     rng = np.random.default_rng(3)
     cov = (1e-6, 0.0, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 1e-6)
@@ -580,7 +580,8 @@ def _jackal_with_an_imu_outlier(path: Path, roll: float = 0.8, messages: int = 1
 
     import msgspec
 
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample, make_decoder
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
+    from fusiond.core.sensors import encode_sample, make_decoder
     from fusiond.config import ImuSensor, OdomSensor
     from fusiond.estimator import rotation as rot
     from fusiond.replay.bag import iter_raw_cdr

@@ -29,8 +29,8 @@ import zenoh
 
 from fusiond.config import ZenohConfig, load
 from fusiond.replay.bag import open_bag_samples
-from fusiond.core.sensors import ImuSample, OdomSample
-from fusiond.codecs import MAX_PAYLOAD, DecodeError, encode_sample, make_decoder
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample, make_decoder
+from fusiond.codecs import MAX_PAYLOAD, DecodeError
 from fusiond.transport.session import build_config, open_session
 
 from tests.support.daemon import (

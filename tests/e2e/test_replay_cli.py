@@ -258,8 +258,8 @@ def test_wrong_odometry_topic_in_a_simulated_bag_is_an_error_not_an_empty_run(tm
     is not. Before: exit 0, an empty trajectory, a final pose of 0, 0, 0. Now: exit 2 naming it."""
     from rosbags.rosbag2 import Writer
 
-    from fusiond.core.sensors import OdomSample
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample
+    from fusiond.core.sensors import OdomSample, encode_sample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
 
     from tests.support.sim import SimConfig, simulate
 

@@ -23,8 +23,8 @@ GLITCH_AT = 1005.0  # the five odometry messages after this stamp carry stamp + 
 def _write_bag(path, samples) -> None:
     from rosbags.rosbag2 import Writer
 
-    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, encode_sample
-    from fusiond.core.sensors import OdomSample
+    from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
+    from fusiond.core.sensors import OdomSample, encode_sample
 
     with Writer(path, version=9) as writer:
         conns = {}

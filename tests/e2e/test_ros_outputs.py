@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 import zenoh
 
-from fusiond.codecs import DIAGNOSTIC_ARRAY, POSE_COV_STAMPED, TF_MESSAGE, TYPESTORE, decode_pose_cdr, encode_sample
+from fusiond.codecs import DIAGNOSTIC_ARRAY, POSE_COV_STAMPED, TF_MESSAGE, TYPESTORE, decode_pose_cdr
 from fusiond.config import loads
 from fusiond.estimator.rotation import from_rpy
 from fusiond.health import decode_report
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
 from fusiond.transport.daemon import Daemon
 from fusiond.transport.session import query_health, request_set_pose
 

@@ -20,11 +20,11 @@ from fusiond.estimator.geodesy import EnuFrame, WGS84_A, WGS84_E2, enu_to_geodet
 from fusiond.estimator.numeric import measurement_jacobian
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
 from fusiond.replay.run import replay
-from fusiond.core.sensors import GpsSample, OdomSample
+from fusiond.core.sensors import GpsSample, OdomSample, encode_sample, make_decoder
 from fusiond.core.sensors.pose import POSE_MSGTYPES, PoseSample
 from fusiond.core.sensors.gps.codec import encode_gps_sample
 from fusiond.core.sensors.pose.codec import encode_pose_sample
-from fusiond.codecs import NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError, encode_sample, make_decoder
+from fusiond.codecs import NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError
 
 from tests.support.sim_gps import World, simulate, truth_at
 from tests.support.configs import sensor_tables

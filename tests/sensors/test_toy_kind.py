@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 from rosbags.rosbag2 import Writer
 
-from fusiond.codecs import ODOMETRY, DecodeError, encode_sample, make_decoder, typestore
+from fusiond.codecs import ODOMETRY, DecodeError, typestore
 from fusiond.config import ConfigError, loads
 from fusiond.core.fusion import FusionCore
 from fusiond.core.layout import absolute_height, state_layout
-from fusiond.core.sensors import kind_of, register, unregister
+from fusiond.core.sensors import encode_sample, kind_of, make_decoder, register, unregister
 from fusiond.replay.run import replay
 from tests.support.altimeter import RANGE, AltimeterKind, AltimeterSample, AltimeterSensor, encode_altimeter_sample
 from tests.support.core_samples import odom

@@ -5,10 +5,9 @@ from __future__ import annotations
 import math
 from collections import Counter
 
-from fusiond.codecs import encode_sample, make_decoder
 from fusiond.core.diagnostics import DiagnosticsRecord
 from fusiond.core.fusion import FusionCore
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample, make_decoder
 from fusiond.transport.daemon import sensor_kind
 
 IMU_HZ, ODOM_EVERY, N_IMU = 1000.0, 10, 1500  # 1.5 s of 1 kHz IMU and 100 Hz odometry

@@ -8,8 +8,8 @@ import time
 
 import zenoh
 
-from fusiond.core.sensors import ImuSample, OdomSample
-from fusiond.codecs import decode_pose_cdr, DecodeError, encode_sample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
+from fusiond.codecs import decode_pose_cdr, DecodeError
 
 WHEEL_KEY = "jackal_velocity_controller/odom"
 IMU_KEY = "imu/data"

@@ -10,8 +10,8 @@ from rosbags.rosbag2 import Writer
 
 from fusiond.config import ImuSensor, OdomSensor
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
-from fusiond.core.sensors import ImuSample, OdomSample
-from fusiond.codecs import IMU, ODOMETRY, TYPESTORE, make_decoder
+from fusiond.core.sensors import ImuSample, OdomSample, make_decoder
+from fusiond.codecs import IMU, ODOMETRY, TYPESTORE
 
 JACKAL_ODOM_KEY = "jackal_velocity_controller/odom"
 JACKAL_IMU_KEY = "imu/data"
@@ -143,7 +143,7 @@ def test_a_ros2_bag_directory_named_dot_bag(tmp_path: Path) -> None:
     bag = tmp_path / "real_bag"
     with Writer(bag, version=9) as writer:
         conn = writer.add_connection("/odom", ODOMETRY, typestore=TYPESTORE)
-        from fusiond.codecs import encode_sample
+        from fusiond.core.sensors import encode_sample
 
         for k in range(3):
             s = OdomSample("wheel", 10.0 + 0.1 * k, (0.1, 0.0, 0.0), (0.0, 0.0, 0.0), (1e-4,) * 36)

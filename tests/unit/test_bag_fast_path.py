@@ -18,12 +18,12 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from fusiond.codecs import IMU, NAVSATFIX, ODOMETRY, bag_fast_path, codec_named, encode_sample, flat_layout, typestore
+from fusiond.codecs import IMU, NAVSATFIX, ODOMETRY, bag_fast_path, flat_layout, typestore
 from fusiond.core.sensors.imu.codec import imu_from_ros
 from fusiond.core.sensors.odom.codec import odom_from_ros
 from fusiond.config import ImuSensor, OdomSensor
 from fusiond.replay.bag import open_bag_samples
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, codec_named, encode_sample
 
 ROOT = Path(__file__).resolve().parents[2]
 _KIND_OF = {ODOMETRY: "odom", IMU: "imu"}

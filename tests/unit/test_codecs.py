@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fusiond.core.sensors import ImuSample, OdomSample
+from fusiond.core.sensors import ImuSample, OdomSample, encode_sample, make_decoder
 from fusiond.codecs import (
     IMU,
     MAX_PAYLOAD,
@@ -24,8 +24,6 @@ from fusiond.codecs import (
     decode_pose_cdr,
     encode_odometry_cdr,
     encode_pose_cdr,
-    encode_sample,
-    make_decoder,
     stamp_to_ros,
 )
 from fusiond.core.sensors.imu.codec import imu_from_ros

@@ -189,20 +189,26 @@ def test_a_kinds_codec_is_imported_when_a_decoder_is_asked_for():
     assert out.strip() == "[False, False] [True, True]"
 
 
+def test_no_codecs_module_imports_the_core():
+    """``fusiond/codecs`` is a floor below the core: no module of it imports ``fusiond.core`` (nor ``..core``),
+    at load or inside a function, since the kinds' ``codec`` modules import it and any such import would close
+    a circle. Finding a kind's codec by its name or its sample's type is ``core/sensors/formats.py``'s."""
+    upward = sorted(f"{path.relative_to(PACKAGE).as_posix()}: {m}" for path in (PACKAGE / "codecs").rglob("*.py")
+                    for m in _imported_modules(path) if m == "fusiond.core" or m.startswith("fusiond.core."))
+    assert upward == []
+    # what this reads sees an import inside a function, relative: SensorKind.decoder's of the codecs
+    assert "fusiond.codecs.decoders" in _imported_modules(PACKAGE / "core" / "sensors" / "kind.py")
+
+
 def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
-    """Loading the codecs imports nothing of the core, and no module of ``fusiond/codecs`` imports a kind (only
-    the registry, when a kind's codec is first asked for): every built-in kind's sample and wire formats (ROS
+    """Loading the codecs imports nothing of the core: every built-in kind's sample and wire formats (ROS
     converter, JSON / msgpack Struct, encoder, struct fast path) live in its own package
-    (``core/sensors/<kind>/sample.py``, ``codec.py``), found through its descriptor."""
+    (``core/sensors/<kind>/sample.py``, ``codec.py``), found through its descriptor, by its name or its
+    sample's type (``core/sensors/formats.py``)."""
     code = "import sys, fusiond.codecs; print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}))"
     out = _printed(code)
     assert out.strip() == "['codecs', 'errors', 'samples']"
-    upward = sorted(path.relative_to(PACKAGE).as_posix() for path in (PACKAGE / "codecs").rglob("*.py")
-                    if any(m.startswith("fusiond.core") and not m.startswith("fusiond.core.sensors.registry")
-                           for m in _imported_modules(path)))
-    assert upward == []
-    from fusiond.codecs import codec_named, codec_of
-    from fusiond.core.sensors import kind_named
+    from fusiond.core.sensors import codec_named, codec_of, kind_named
 
     for name in ("odom", "imu", "gps", "pose"):  # the built-in kinds
         kind = kind_named(name)

@@ -8,14 +8,16 @@ filter input (its policy: floors, overrides, "not measured" rules, mounting rota
 them to the filter state through the EKF's own methods, keeping what it must remember between
 messages in its own immutable slice of the state (``FilterState.own[index]``). The core's time
 handling knows none of them, and what the rest of fusiond asks of a kind (does it define the world
-frame, which state blocks, which decoder) its descriptor answers: adding a kind is a new package
-here (or a single module) and one ``register`` call (docs/SENSOR_KINDS.md, "Adding a sensor kind").
+frame, which state blocks, which decoder) its descriptor answers (``formats.py`` finds its wire formats by
+its name or its sample's type: ``make_decoder``, ``encode_sample``): adding a kind is a new package here (or
+a single module) and one ``register`` call (docs/SENSOR_KINDS.md, "Adding a sensor kind").
 """
 
 from __future__ import annotations
 
 from .base import SensorContext, SensorModel
 from .checks import Rejected
+from .formats import codec_named, codec_of, encode_sample, make_decoder
 from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy, GpsSample, GpsSensor
 from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSample, ImuSensor, quiet_bound
 from .kind import LayoutView, SensorKind
@@ -34,6 +36,7 @@ __all__ = [
     "ENTRY_POINT_GROUP", "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSample", "GpsSensor", "ImuInput", "ImuKind",
     "ImuModel", "ImuPolicy", "ImuSample", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
     "OdomSample", "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSample", "PoseSensor", "Rejected", "SensorContext",
-    "SensorKind", "SensorModel", "build_models", "config_types", "discover", "kind_named", "kind_of", "quiet_bound",
+    "SensorKind", "SensorModel", "build_models", "codec_named", "codec_of", "config_types", "discover",
+    "encode_sample", "kind_named", "kind_of", "quiet_bound",
     "register", "require", "unregister",
 ]

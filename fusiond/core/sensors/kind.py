@@ -153,10 +153,10 @@ class SensorKind:
         rosbags and ``from_ros``."""
         codec = self.codec()
         if codec is not None:
-            from ...codecs.decoders import make_decoder
+            from ...codecs.decoders import decoder_for
 
             msgtype = self.ros_type(cfg) if len(codec.ros_types) > 1 else None
-            return make_decoder(codec, cfg.encoding, cfg.name, msgtype=msgtype)
+            return decoder_for(codec, cfg.encoding, cfg.name, msgtype=msgtype)
         from ...codecs.decoders import cdr_decoder
 
         if cfg.encoding != "ros2-cdr":
