@@ -32,7 +32,7 @@ from ..config_tables import Config
 from .. import reasons
 from ..errors import CoreError
 from ..estimator import (DEFAULT_BACKEND, POSE, POSE_ERR, POSITION, POSITION_ERR, Backend, ErrorStateEKF,
-                         PredictWorkspace, add_motion_noise, corrected_inputs, planar_mask)
+                         PredictWorkspace, corrected_inputs)
 from ..errors import EstimatorError
 from ..estimator.geodesy import EnuFrame, enu_to_geodetic
 from ..estimator.smoother import Smoothed, SmoothingRecorder
@@ -143,7 +143,7 @@ class FusionCore:
             nominal_zero += [nb, nb + 1]
             error_zero += [eb, eb + 1]
         self._planar_nominal = tuple(nominal_zero)
-        self._planar_error = planar_mask(error_zero, self.layout.error_dim)
+        self._planar_error = tuple(error_zero)  # indices: the compiled backend holds them in one call
         self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d, self.layout)
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(
@@ -684,11 +684,11 @@ class FusionCore:
             for m in self._predicting:  # the sensors' own bookkeeping (GPS track, pose anchors)
                 extra = m.on_predict(s, ekf.x, x)
                 if extra is not None:  # what the linearised model leaves out of this step's horizontal motion
-                    add_motion_noise(Q, *extra)
+                    ekf.backend.add_motion_noise(Q, *extra)
             if gap and t1 >= t_end:
                 Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
                 pos_var, yaw_var = held.unheld_motion_var(s, t_end, timeouts)
-                add_motion_noise(Q, pos_var, 0.0, pos_var, yaw_var)
+                ekf.backend.add_motion_noise(Q, pos_var, 0.0, pos_var, yaw_var)
                 if u.angular_period == 0.0:  # no yaw rate held at the gap's end: its turn was not seen
                     s.turn_unseen = t_end
             ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it

@@ -4,7 +4,8 @@ from .backend import COMPILED as COMPILED_BACKEND
 from .backend import DEFAULT as DEFAULT_BACKEND
 from .backend import PYTHON as PYTHON_BACKEND
 from .backend import Backend, CompiledBackend, PythonBackend
-from .ekf import ErrorStateEKF, UpdateResult, planar_mask
+from .ekf import ErrorStateEKF, UpdateResult
+from .planar import planar_mask
 from .gps_error import GpsErrorBlock
 from .motion import MotionInput, PredictWorkspace, corrected_inputs, predict
 from .scale import GyroScaleBlock, WheelScaleBlock

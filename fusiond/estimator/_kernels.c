@@ -380,6 +380,19 @@ static void block_chain(const MotionBlock *blk, double *G, double *columns) {
     mat3_mul(G, d, 1.0, G);
 }
 
+/* A tuple of `count` ints into out (PyArg_ParseTuple's format parsing cost as much as the rest of a
+ * prediction's argument handling, once per block and call). */
+static int ints(PyObject *tuple, Py_ssize_t *out, Py_ssize_t count, const char *what) {
+    if (!PyTuple_Check(tuple) || PyTuple_GET_SIZE(tuple) != count) {
+        PyErr_Format(PyExc_TypeError, "%s must be a tuple of %zd ints", what, count);
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < count; i++) {
+        out[i] = PyLong_AsSsize_t(PyTuple_GET_ITEM(tuple, i));
+    }
+    return PyErr_Occurred() ? -1 : 0;
+}
+
 /* The layout's input blocks, a tuple of (code, applies, linear, n0, c0, size) tuples, into blocks. */
 static Py_ssize_t read_blocks(PyObject *spec, MotionBlock *blocks, Py_ssize_t nx, Py_ssize_t n) {
     if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) > MAX_INPUT_BLOCKS) {
@@ -389,12 +402,13 @@ static Py_ssize_t read_blocks(PyObject *spec, MotionBlock *blocks, Py_ssize_t nx
     Py_ssize_t count = PyTuple_GET_SIZE(spec);
     for (Py_ssize_t i = 0; i < count; i++) {
         MotionBlock *b = &blocks[i];
-        long code, applies, linear;
-        if (!PyArg_ParseTuple(PyTuple_GET_ITEM(spec, i), "lllnnn", &code, &applies, &linear, &b->n0, &b->c0,
-                              &b->size)) {
+        Py_ssize_t f[6];
+        if (ints(PyTuple_GET_ITEM(spec, i), f, 6, "an input block") < 0) {
             return -1;
         }
-        b->code = (int)code, b->applies = applies != 0, b->linear = linear != 0;
+        Py_ssize_t code = f[0];
+        b->applies = f[1] != 0, b->linear = f[2] != 0, b->n0 = f[3], b->c0 = f[4], b->size = f[5];
+        b->code = (int)code;
         Py_ssize_t expected = code == BLOCK_GYRO_BIAS ? 3 : 1;
         if (code < BLOCK_GYRO_BIAS || code > BLOCK_TWIST_PITCH || b->size != expected || b->n0 < 7 ||
             b->n0 + b->size > nx || b->c0 < 6 || b->c0 + b->size > n) {
@@ -422,8 +436,15 @@ static Py_ssize_t read_decays(PyObject *spec, DecayBlock *decays, Py_ssize_t nx,
     Py_ssize_t count = PyTuple_GET_SIZE(spec);
     for (Py_ssize_t i = 0; i < count; i++) {
         DecayBlock *b = &decays[i];
-        PyObject *var;
-        if (!PyArg_ParseTuple(PyTuple_GET_ITEM(spec, i), "nndO!", &b->n0, &b->e0, &b->tau, &PyTuple_Type, &var)) {
+        PyObject *entry = PyTuple_GET_ITEM(spec, i), *var;
+        if (!PyTuple_Check(entry) || PyTuple_GET_SIZE(entry) != 4 || !PyTuple_Check(var = PyTuple_GET_ITEM(entry, 3))) {
+            PyErr_SetString(PyExc_TypeError, "a decaying block must be (n0, e0, tau, (var, ...))");
+            return -1;
+        }
+        b->n0 = PyLong_AsSsize_t(PyTuple_GET_ITEM(entry, 0));
+        b->e0 = PyLong_AsSsize_t(PyTuple_GET_ITEM(entry, 1));
+        b->tau = PyFloat_AsDouble(PyTuple_GET_ITEM(entry, 2));
+        if (PyErr_Occurred()) {
             return -1;
         }
         b->size = PyTuple_GET_SIZE(var);
@@ -709,6 +730,112 @@ static PyObject *orientation(PyObject *self, PyObject *const *args, Py_ssize_t n
 fail:
     release(&held);
     return NULL;
+}
+
+/* -- small writes a prediction makes ---------------------------------------------------------- */
+
+PyDoc_STRVAR(add_motion_noise_doc,
+"add_motion_noise(Q, xx, xy, yy, yaw_row, yaw) -> None\n\n"
+"state.add_motion_noise in one call: Q[0,0] += xx, Q[0,1] and Q[1,0] += xy, Q[1,1] += yy,\n"
+"Q[yaw_row, yaw_row] += yaw (Q: an n x n float64 array; the same additions, so the same doubles).");
+
+static PyObject *add_motion_noise(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "add_motion_noise(Q, xx, xy, yy, yaw_row, yaw) takes 6 arguments");
+        return NULL;
+    }
+    double xx = PyFloat_AsDouble(args[1]), xy = PyFloat_AsDouble(args[2]), yy = PyFloat_AsDouble(args[3]);
+    Py_ssize_t yaw_row = PyLong_AsSsize_t(args[4]);
+    double yaw = PyFloat_AsDouble(args[5]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    Held held = {.count = 0};
+    double *Q = hold(&held, args[0], 1, -1, "Q");
+    Py_ssize_t n = Q == NULL ? -1 : square_side(last_items(&held), 2, "Q");
+    if (n < 0 || yaw_row < 0 || yaw_row >= n) {
+        if (n >= 0) {
+            PyErr_SetString(PyExc_ValueError, "yaw_row outside Q");
+        }
+        release(&held);
+        return NULL;
+    }
+    Q[0] += xx;
+    Q[1] += xy;
+    Q[n] += xy;
+    Q[n + 1] += yy;
+    Q[yaw_row * n + yaw_row] += yaw;
+    release(&held);
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(hold_planar_doc,
+"hold_planar(x, P, nominal_zero, error_zero) -> None\n\n"
+"ErrorStateEKF.hold_planar's writes in one call: the attitude x[3:7] turned into the rotation about z\n"
+"with its heading (the reference's expressions, so the same doubles), x[i] = 0 for i in nominal_zero,\n"
+"and P's rows and columns of error_zero zeroed (both tuples of ints, checked before anything is written).");
+
+static PyObject *hold_planar(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "hold_planar(x, P, nominal_zero, error_zero) takes 4 arguments");
+        return NULL;
+    }
+    Py_ssize_t nominal[MAX_N], error[MAX_N];
+    Py_ssize_t n_nominal = PyTuple_Check(args[2]) ? PyTuple_GET_SIZE(args[2]) : -1;
+    Py_ssize_t n_error = PyTuple_Check(args[3]) ? PyTuple_GET_SIZE(args[3]) : -1;
+    if (n_nominal < 0 || n_nominal > MAX_N || n_error < 0 || n_error > MAX_N) {
+        PyErr_SetString(PyExc_TypeError, "nominal_zero and error_zero must be tuples of ints");
+        return NULL;
+    }
+    if ((n_nominal && ints(args[2], nominal, n_nominal, "nominal_zero") < 0) ||
+        (n_error && ints(args[3], error, n_error, "error_zero") < 0)) {
+        return NULL;
+    }
+    Held held = {.count = 0};
+    double *x = hold(&held, args[0], 1, -1, "x");
+    Py_ssize_t nx = x == NULL ? -1 : last_items(&held);
+    double *P = nx < 0 ? NULL : hold(&held, args[1], 1, -1, "P");
+    Py_ssize_t n = P == NULL ? -1 : square_side(last_items(&held), 6, "P");
+    if (n < 0) {
+        release(&held);
+        return NULL;
+    }
+    if (nx < 7) {
+        PyErr_SetString(PyExc_ValueError, "x must hold a pose");
+        release(&held);
+        return NULL;
+    }
+    for (Py_ssize_t k = 0; k < n_nominal; k++) {
+        if (nominal[k] < 0 || nominal[k] >= nx) {
+            PyErr_SetString(PyExc_ValueError, "nominal_zero outside x");
+            release(&held);
+            return NULL;
+        }
+    }
+    for (Py_ssize_t k = 0; k < n_error; k++) {
+        if (error[k] < 0 || error[k] >= n) {
+            PyErr_SetString(PyExc_ValueError, "error_zero outside P");
+            release(&held);
+            return NULL;
+        }
+    }
+    double qx = x[3], qy = x[4], qz = x[5], qw = x[6];
+    if (qx != 0.0 || qy != 0.0) {
+        double half = 0.5 * atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz));
+        x[3] = 0.0, x[4] = 0.0, x[5] = sin(half), x[6] = cos(half);
+    }
+    for (Py_ssize_t k = 0; k < n_nominal; k++) {
+        x[nominal[k]] = 0.0;
+    }
+    for (Py_ssize_t k = 0; k < n_error; k++) {
+        Py_ssize_t r = error[k];
+        memset(P + r * n, 0, sizeof(double) * (size_t)n);
+        for (Py_ssize_t i = 0; i < n; i++) {
+            P[i * n + r] = 0.0;
+        }
+    }
+    release(&held);
+    Py_RETURN_NONE;
 }
 
 /* -- snapshots -------------------------------------------------------------------------------- */
@@ -1178,6 +1305,8 @@ static PyMethodDef methods[] = {
     {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL, predict_doc},
     {"orientation", (PyCFunction)(void (*)(void))orientation, METH_FASTCALL, orientation_doc},
     {"copy_into", (PyCFunction)(void (*)(void))copy_into, METH_FASTCALL, copy_into_doc},
+    {"add_motion_noise", (PyCFunction)(void (*)(void))add_motion_noise, METH_FASTCALL, add_motion_noise_doc},
+    {"hold_planar", (PyCFunction)(void (*)(void))hold_planar, METH_FASTCALL, hold_planar_doc},
     {"rts_fold", (PyCFunction)(void (*)(void))rts_fold, METH_FASTCALL, rts_fold_doc},
     {"line_fit", (PyCFunction)(void (*)(void))line_fit, METH_FASTCALL, line_fit_doc},
     {NULL, NULL, 0, NULL},

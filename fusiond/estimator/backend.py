@@ -33,6 +33,8 @@ from .orientation_residual import rpy_residual
 from .cholesky import gain_rows
 from .rts import rts_gain
 from .line_fit import line_fit
+from .planar import hold_planar
+from .state import YAW_ROW, add_motion_noise
 
 if TYPE_CHECKING:
     from .motion import MotionInput, PredictWorkspace
@@ -97,6 +99,15 @@ class Backend:
     def rts_fold(self, A: np.ndarray, P0: np.ndarray, F: np.ndarray, P1: np.ndarray) -> np.ndarray:
         """The smoother's fold of a run of transitions (``smoother.OpenSegment``): A P0 F^T P1^-1 on the
         components P1 gives any variance."""
+        raise NotImplementedError
+
+    def add_motion_noise(self, Q: np.ndarray, xx: float, xy: float, yy: float, yaw: float = 0.0) -> None:
+        """Q += the horizontal position covariance [[xx, xy], [xy, yy]] and the heading variance yaw, in
+        place (``state.add_motion_noise``)."""
+        raise NotImplementedError
+
+    def hold_planar(self, x: np.ndarray, P: np.ndarray, nominal_zero: tuple[int, ...], error_zero) -> None:
+        """Two-D mode's hold of x and P, in place (``planar.hold_planar``)."""
         raise NotImplementedError
 
     def __repr__(self) -> str:
@@ -194,6 +205,12 @@ class PythonBackend(Backend):
     def rts_fold(self, A, P0, F, P1):
         return A.dot(rts_gain(P0, F, P1))
 
+    def add_motion_noise(self, Q, xx, xy, yy, yaw=0.0):
+        add_motion_noise(Q, xx, xy, yy, yaw)
+
+    def hold_planar(self, x, P, nominal_zero, error_zero):
+        hold_planar(x, P, nominal_zero, error_zero)
+
 
 class CompiledBackend(PythonBackend):
     """The steps as one call each of ``_kernels`` (the same maths; ``_kernels.c``). P is written into
@@ -269,6 +286,21 @@ class CompiledBackend(PythonBackend):
         except BufferError:  # an array not C-contiguous float64
             pass
         return PythonBackend.rts_fold(self, A, P0, F, P1)  # also where P1's Cholesky fails: least squares
+
+    def add_motion_noise(self, Q, xx, xy, yy, yaw=0.0):
+        try:
+            self._k.add_motion_noise(Q, xx, xy, yy, YAW_ROW, yaw)
+        except BufferError:  # Q not C-contiguous float64
+            add_motion_noise(Q, xx, xy, yy, yaw)
+
+    def hold_planar(self, x, P, nominal_zero, error_zero):
+        if type(error_zero) is tuple:  # indices: one call; an array or a mask: the reference's writes
+            try:
+                self._k.hold_planar(x, P, nominal_zero, error_zero)
+                return
+            except BufferError:  # an array not C-contiguous float64
+                pass
+        hold_planar(x, P, nominal_zero, error_zero)
 
 
 class UpdateWorkspace:

@@ -215,35 +215,16 @@ class ErrorStateEKF:
         self.P = P
         self._cut()
 
-    def hold_planar(self, nominal_zero: tuple[int, ...], error_zero: np.ndarray) -> None:
-        """Two-D mode (robot_localization's ``two_d_mode``): z, roll and pitch exactly 0.
-
-        The attitude becomes the pure rotation about world z with the same heading, the
-        listed nominal components (z, and what the layout adds, e.g. the x/y gyro bias) are
-        set to 0, and the listed error components lose all variance and correlation: a
-        state held at a value is known exactly, and nothing can be inferred through it.
-        ``error_zero``: their indices, or ``planar_mask`` of them (one masked write instead of a
-        row and a column write by index: a third of the time, twice a message in two-D mode).
-        """
+    def hold_planar(self, nominal_zero: tuple[int, ...], error_zero) -> None:
+        """Two-D mode (robot_localization's ``two_d_mode``): z, roll and pitch exactly 0, through the
+        backend (``planar.hold_planar`` says what is held; ``error_zero``: the error components' indices
+        as a tuple, which the compiled backend writes in one call, or an array or ``planar_mask`` of them)."""
         rec = self._rec
         if rec is not None:
             x0, P0 = self.x.copy(), self.P.copy()
-        x = self.x
-        qx, qy, qz, qw = attitude_of(x)
-        if qx != 0.0 or qy != 0.0:
-            half = 0.5 * math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-            qx, qy, qz, qw = 0.0, 0.0, math.sin(half), math.cos(half)
-            x[3], x[4], x[5], x[6] = qx, qy, qz, qw
-        for i in nominal_zero:
-            x[i] = 0.0
-        P = self.P
-        if error_zero.ndim == 2:
-            P[error_zero] = 0.0
-        else:
-            P[error_zero, :] = 0.0
-            P[:, error_zero] = 0.0
+        self.backend.hold_planar(self.x, self.P, nominal_zero, error_zero)
         if rec is not None:  # a correction of the held components: the nominal state moved, P lost them
-            rec.correction(self.layout, x0, x, P0, P)
+            rec.correction(self.layout, x0, self.x, P0, self.P)
 
     def cap_covariance(self, caps: np.ndarray) -> None:
         """Hygiene at a slow cadence (the core calls it once per second of message time and after
@@ -442,15 +423,6 @@ class ErrorStateEKF:
         self.P = P  # as saved, bit for bit: the running filter's own rounding asymmetry is within the check
         self._spare = None  # the next P's buffer must not be the array just taken
         self._cut()
-
-
-def planar_mask(error_zero: list[int], dim: int) -> np.ndarray:
-    """The (dim, dim) mask of the rows and columns of the error components ``error_zero``: what
-    ``ErrorStateEKF.hold_planar`` zeroes in P."""
-    mask = np.zeros((dim, dim), dtype=bool)
-    mask[error_zero, :] = True
-    mask[:, error_zero] = True
-    return mask
 
 
 def _copied_into(src: ErrorStateEKF, dst: ErrorStateEKF) -> bool:

@@ -121,8 +121,9 @@ def test_interleaved_masks_each_get_their_own_weights():
     assert len(ekf._ws.masks) == 2
 
 
-def test_hold_planar_by_mask_is_hold_planar_by_index():
-    """The core hands two-D mode's held error components as a mask (one write): the same P as by index."""
+def test_hold_planar_by_tuple_by_mask_and_by_index_hold_alike():
+    """Two-D mode's held error components as the core hands them (a tuple: one compiled call), as an index
+    array or as a mask (one numpy write): the same x and P."""
     import numpy as np
 
     from fusiond.estimator import ErrorStateEKF, GyroBiasBlock, PoseBlock, StateLayout, planar_mask
@@ -134,10 +135,12 @@ def test_hold_planar_by_mask_is_hold_planar_by_index():
     a.P[:] = A @ A.T
     a.x[3:7] = (0.1, -0.2, 0.3, 0.9)
     a.x[3:7] /= np.linalg.norm(a.x[3:7])
-    b = a.copy()
+    b, c = a.copy(), a.copy()
     nb, eb = layout.nominal["gyro_bias"].start, layout.error["gyro_bias"].start
     nominal_zero, error_zero = (2, nb, nb + 1), [2, 3, 4, eb, eb + 1]
     a.hold_planar(nominal_zero, np.array(error_zero))
     b.hold_planar(nominal_zero, planar_mask(error_zero, layout.error_dim))
+    c.hold_planar(nominal_zero, tuple(error_zero))
     assert np.array_equal(a.P, b.P) and np.array_equal(a.x, b.x)
+    assert np.array_equal(a.P, c.P) and np.array_equal(a.x, c.x)
     assert not a.P[error_zero].any() and not a.P[:, error_zero].any()

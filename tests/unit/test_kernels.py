@@ -527,3 +527,64 @@ def test_a_line_fit_the_kernel_cannot_read_is_the_references():
     assert k.line_fit(((1.0, 2.0), (1.0, 3.0), (1.0, 3.5))) is None
     with pytest.raises(ZeroDivisionError):
         COMPILED.line_fit(((1.0, 2.0), (1.0, 3.0), (1.0, 3.5)))
+
+
+@given(seed=st.integers(0, 2**32 - 1), xx=st.floats(0.0, 1e3), xy=st.floats(-1e3, 1e3), yy=st.floats(0.0, 1e3),
+       yaw=st.floats(0.0, 10.0))
+@settings(max_examples=60, deadline=None)
+def test_compiled_motion_noise_adds_the_references_doubles(seed, xx, xy, yy, yaw):
+    from fusiond.estimator.state import add_motion_noise
+
+    Q = np.random.default_rng(seed).normal(size=(9, 9))
+    reference, compiled = Q.copy(), Q.copy()
+    add_motion_noise(reference, xx, xy, yy, yaw)
+    COMPILED.add_motion_noise(compiled, xx, xy, yy, yaw)
+    assert compiled.tobytes() == reference.tobytes()
+
+
+def test_compiled_motion_noise_refuses_a_row_outside_q_and_reads_any_array_through_the_reference():
+    Q = np.zeros((6, 6))
+    with pytest.raises(ValueError, match="yaw_row outside Q"):
+        k.add_motion_noise(Q, 1.0, 0.0, 1.0, 6, 1.0)
+    assert not Q.any()  # refused before anything was written
+    strided = np.zeros((6, 12))[:, ::2]  # not C-contiguous: the reference writes it
+    COMPILED.add_motion_noise(strided, 1.0, 0.5, 2.0, 0.25)
+    assert strided[0, 0] == 1.0 and strided[0, 1] == strided[1, 0] == 0.5 and strided[1, 1] == 2.0
+    assert strided[5, 5] == 0.25
+
+
+@given(q=st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(lambda q: sum(c * c for c in q) > 1e-3),
+       tilted=st.booleans(), seed=st.integers(0, 2**32 - 1))
+@settings(max_examples=80, deadline=None)
+def test_compiled_planar_hold_writes_the_references_doubles(q, tilted, seed):
+    from fusiond.estimator.planar import hold_planar, planar_mask
+
+    rng = np.random.default_rng(seed)
+    norm = math.sqrt(sum(c * c for c in q))
+    qx, qy, qz, qw = (c / norm for c in q)
+    if not tilted:  # already a rotation about z: left as it is
+        qx = qy = 0.0
+    x = rng.normal(size=13)
+    x[3:7] = qx, qy, qz, qw
+    P = rng.normal(size=(12, 12))
+    nominal, error = (2, 9, 10), (2, 3, 4, 9, 10)
+    by_index, by_mask, compiled = (x.copy(), P.copy()), (x.copy(), P.copy()), (x.copy(), P.copy())
+    hold_planar(*by_index, nominal, np.array(error))
+    hold_planar(*by_mask, nominal, planar_mask(list(error), 12))
+    COMPILED.hold_planar(*compiled, nominal, error)
+    for got in (by_mask, compiled):
+        assert got[0].tobytes() == by_index[0].tobytes() and got[1].tobytes() == by_index[1].tobytes()
+    assert compiled[0][3] == compiled[0][4] == 0.0 and not compiled[1][list(error)].any()
+
+
+def test_compiled_planar_hold_checks_every_index_before_writing():
+    x, P = np.arange(13.0), np.ones((12, 12))
+    x[3:7] = 0.1, 0.2, 0.3, 0.9
+    before = x.copy()
+    for nominal, error, said in (((13,), (2,), "nominal_zero outside x"), ((2,), (12,), "error_zero outside P"),
+                                 ((-1,), (2,), "nominal_zero outside x")):
+        with pytest.raises(ValueError, match=said):
+            k.hold_planar(x, P, nominal, error)
+        assert x.tobytes() == before.tobytes() and (P == 1.0).all()
+    with pytest.raises(TypeError, match="tuples of ints"):
+        k.hold_planar(x, P, [2], (2,))
