@@ -76,7 +76,7 @@ import msgspec
 import numpy as np
 
 from .... import reasons
-from ....estimator import POSITION_ROWS, YAW_ROW, mat3, position_of
+from ....estimator import POSITION_ROWS, YAW_ROW, mat3
 from ....estimator import observations as obs
 from ....estimator.geodesy import EnuFrame
 from ....estimator.rigid_fit import RigidFit, fit_rigid
@@ -268,10 +268,11 @@ class GpsModel(SensorModel):
         if own.track is None:
             return None
         tr = own.travel
-        p0, p1 = position_of(x0), position_of(x1)
-        dx, dy = p1[0] - p0[0], p1[1] - p0[1]
+        e0, n0, u0 = x0[:3].tolist()  # the positions as floats: one slice each (a third of three items' cost)
+        e1, n1, u1 = x1[:3].tolist()
+        dx, dy = e1 - e0, n1 - n0
         d = math.hypot(dx, dy)
-        s.own[self.index] = msgspec.structs.replace(own, travel=(tr[0] + dx, tr[1] + dy, tr[2] + (p1[2] - p0[2])),
+        s.own[self.index] = msgspec.structs.replace(own, travel=(tr[0] + dx, tr[1] + dy, tr[2] + (u1 - u0)),
                                                     unaligned=own.unaligned + d)
         if d == 0.0:
             return None
