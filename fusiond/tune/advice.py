@@ -111,7 +111,7 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
     recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
     ``backend``: the estimator's in these replays (``FusionCore``). ``workers``: how many lines are replayed
-    at once, each in a forked process (``forked.run_side_by_side``; default: one per CPU)."""
+    at once, each in a forked process (``forked.run_side_by_side``; default: all at once, up to two per CPU)."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
