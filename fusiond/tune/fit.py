@@ -22,6 +22,10 @@
 6. The doctor's measured value of each key (``doctor_values``) is tried in place of the fit's and
    judged the same way; it is taken when no worse, else the table says what it measured and why not.
 
+Replays that do not depend on each other run side by side, each in a forked process (``forked``): the
+probes of step 2, and in steps 4-6 each held-back check beside its prediction of the held-back fixes.
+Nelder-Mead's replays each depend on the one before and run in turn.
+
 No fitted white noise goes below what the recording shows at rest (``floors``): the scatter of each
 sensor's readings over the filter's own standstills bounds the fit from below, beside the sensors'
 ``*_min_sigma`` constants.
@@ -41,8 +45,9 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from ..estimator.backend import Backend
 from ..config import Config, ConfigError
@@ -51,6 +56,7 @@ from ..logs import muted
 from .advice import with_suggestion
 from .doctor_values import diagnose, doctor_lines
 from .floors import measured_floors, with_floors
+from .forked import beside, run_side_by_side
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
 from .prediction import HOLD_EVERY, Prediction, predict
@@ -63,6 +69,9 @@ BOUND = math.log(1000.0)  # no scale beyond x1000 or /1000 of the start
 # (a difference of 0.5 in log L is half a standard deviation of the likelihood-ratio statistic)
 XATOL = 0.03
 FATOL = 0.5
+
+
+T = TypeVar("T")
 
 
 class _OutOfBudget(Exception):
@@ -147,23 +156,58 @@ class _Objective:
         return apply(self.cfg, self.params, list(theta))
 
     def __call__(self, theta: Sequence[float]) -> float:
-        key = tuple(round(float(t), 9) for t in theta)
+        key = _key(theta)
         hit = self.cache.get(key)
         if hit is not None:
             return hit
-        if self.ref is not None:  # the reference replay is never refused
-            if time.perf_counter() > self.deadline:
-                self.stopped = "budget"
-                raise _OutOfBudget
-            if self.replays >= self.maxfev:
-                self.stopped = "maxfev"
-                raise _OutOfBudget
+        if self.ref is not None and self._spent(0):  # the reference replay is never refused
+            raise _OutOfBudget
         with muted():  # the recording's warnings are said once, by the held-back check's first replay
             records = replay_records(self.config(key), self.samples, self.backend)
-        self.replays += 1
         if self.ref is None:
             self.ref = reference(records, self.cfg)
-        f = score(records, self.ref).neg_loglik
+        return self._note(key, score(records, self.ref).neg_loglik)
+
+    def many(self, thetas: Sequence[Sequence[float]]) -> list[float]:
+        """``[self(theta) for theta in thetas]`` with the replays not yet made side by side (``forked``): the
+        same values, cached and counted alike; the budget is asked as each replay starts, and when it runs
+        out, what was replayed is kept and ``_OutOfBudget`` raised, as in turn."""
+        keys = [_key(theta) for theta in thetas]
+        todo = [k for k in dict.fromkeys(keys) if k not in self.cache]
+        if self.ref is None or len(todo) < 2:
+            return [self(theta) for theta in thetas]
+        started = 0
+
+        def before(_key: tuple[float, ...]) -> float | None:
+            nonlocal started
+            if self._spent(started):
+                return math.nan  # not replayed
+            started += 1
+            return None
+
+        def job(key: tuple[float, ...]) -> float:
+            with muted():
+                return score(replay_records(self.config(key), self.samples, self.backend), self.ref).neg_loglik
+
+        for key, f in zip(todo, run_side_by_side(job, todo, before_each=before)):
+            if f == f:
+                self._note(key, f)
+        if started < len(todo):
+            raise _OutOfBudget
+        return [self.cache[k] for k in keys]
+
+    def _spent(self, started: int) -> bool:
+        """Is the budget spent, with ``started`` replays under way besides those made? (``stopped`` says how)"""
+        if time.perf_counter() > self.deadline:
+            self.stopped = "budget"
+            return True
+        if self.replays + started >= self.maxfev:
+            self.stopped = "maxfev"
+            return True
+        return False
+
+    def _note(self, key: tuple[float, ...], f: float) -> float:
+        self.replays += 1
         self.cache[key] = f
         if f < self.best[0]:
             self.best = (f, key)
@@ -171,19 +215,26 @@ class _Objective:
         return f
 
 
+def _key(theta: Sequence[float]) -> tuple[float, ...]:
+    """The cache's key of a point: its log-scales rounded (a simplex step lands on a probe exactly)."""
+    return tuple(round(float(t), 9) for t in theta)
+
+
 def _informed(obj: _Objective, n: int) -> list[bool]:
-    """Step 2 of the module doc, per parameter."""
+    """Step 2 of the module doc, per parameter: every x2 probe side by side, then the /2 probes of those
+    the x2 left uninformed (``_Objective.many``)."""
     f0 = obj([0.0] * n)
-    out = []
-    for i in range(n):
-        up = [0.0] * n
-        up[i] = PROBE
-        if abs(obj(up) - f0) >= INFORMED:
-            out.append(True)
-            continue
-        up[i] = -PROBE
-        out.append(abs(obj(up) - f0) >= INFORMED)
+    out = [abs(f - f0) >= INFORMED for f in obj.many([_probe(n, i, PROBE) for i in range(n)])]
+    down = [i for i in range(n) if not out[i]]
+    for i, f in zip(down, obj.many([_probe(n, i, -PROBE) for i in down])):
+        out[i] = abs(f - f0) >= INFORMED
     return out
+
+
+def _probe(n: int, i: int, step: float) -> list[float]:
+    theta = [0.0] * n
+    theta[i] = step
+    return theta
 
 
 def _minimise(obj: _Objective, n: int, informed: list[bool]) -> tuple[list[float], str]:
@@ -301,19 +352,23 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
 
     kept_samples, held = split_fixes(samples, cfg)
 
-    def predicted(c: Config) -> Prediction | None:
-        nonlocal replays
-        if not held:
-            return None
-        replays += 1
-        bar.step("held-back fixes")
+    def predicted(c: Config) -> Prediction:
         with muted():
             return predict(c, kept_samples, held, backend)
 
-    original = run(cfg)
+    def and_predicted(here: Callable[[], T], c: Config) -> tuple[T, Prediction | None]:
+        """``here()`` and, where fixes are held back, ``c``'s prediction of them beside it (a replay of its
+        own, independent of ``here``'s: in a forked process, ``forked.beside``)."""
+        nonlocal replays
+        if not held:
+            return here(), None
+        replays += 1
+        bar.step("held-back fixes")
+        return beside(here, lambda: predicted(c))
+
+    original, pred_before = and_predicted(lambda: run(cfg), cfg)
     ref = reference(original, cfg, after=split)
     before = score(original, ref)
-    pred_before = predicted(cfg)
     pred_after = pred_before
     start = apply(cfg, active, [0.0] * len(active))
     kept: list[float | None] = [None] * len(active)
@@ -325,16 +380,14 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
     after, config = before, cfg
     if any(t is not None for t in kept):
         config = apply(cfg, active, kept)
-        after = score(run(config), ref)
-        pred_after = predicted(config)
+        after, pred_after = and_predicted(lambda: score(run(config), ref), config)
         for i in range(len(active)):
             if kept[i] is None:
                 continue
             trial = list(kept)
             trial[i] = None
             trial_cfg = apply(cfg, active, trial)
-            trial_score = score(run(trial_cfg), ref)
-            trial_pred = predicted(trial_cfg)
+            trial_score, trial_pred = and_predicted(lambda: score(run(trial_cfg), ref), trial_cfg)
             fitted = _fmt(value(apply(cfg, active, kept), active[i]))
             if trial_score.neg_loglik <= after.neg_loglik:
                 notes[i] = (f"fitted {fitted}; held-back -log L {trial_score.neg_loglik:.1f} without it, "
@@ -374,8 +427,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
             trial_cfg, _ = with_suggestion(config, line.verdict)
         except ConfigError:
             continue
-        trial_score = score(run(trial_cfg), ref)
-        trial_pred = predicted(trial_cfg)
+        trial_score, trial_pred = and_predicted(lambda: score(run(trial_cfg), ref), trial_cfg)
         loses = trial_score.neg_loglik > after.neg_loglik + INFORMED
         mispredicts = trial_pred is not None and pred_after is not None and trial_pred.worse_than(pred_after)
         if not loses and not mispredicts:

@@ -2,7 +2,8 @@
 
 Proving the doctor's advice replays the recording once per paste line, each line on its own copy of
 the config, and no replay reads another's result: on a machine with two cores two lines take the
-time of one. A forked child shares the parent's recording (its samples, the reference terms) without
+time of one. Tune's probes are such replays too, and each of its held-back checks has a prediction of
+the held-back fixes to make beside it (``beside``). A forked child shares the parent's recording (its samples, the reference terms) without
 copying or pickling it; only the small result travels back, pickled through a pipe. The results are
 those of running the jobs in turn, in the order given: the child runs the same function on the same
 objects, in a process of its own.
@@ -24,7 +25,10 @@ from typing import Any, TypeVar
 
 from ..errors import TuneError
 
-__all__ = ["ForkedJobError", "run_side_by_side", "workers_available"]
+__all__ = ["ForkedJobError", "beside", "run_side_by_side", "workers_available"]
+
+A = TypeVar("A")
+B = TypeVar("B")
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -108,6 +112,32 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
     if failed:
         raise failed[min(failed)]
     return results
+
+
+def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
+    """``(here(), there())``: ``there`` in a forked child while ``here`` runs in this process (what ``here``
+    logs or keeps stays here); in turn, here first, where fork is not offered or with one CPU."""
+    if workers_available() == 1:
+        return here(), there()
+    read_end, pid = _start(lambda _: there(), None)
+    try:
+        mine = here()
+    except BaseException:
+        os.close(read_end)
+        try:
+            os.kill(pid, 9)
+        except OSError:
+            pass
+        os.waitpid(pid, 0)
+        raise
+    data = bytearray()
+    try:
+        while chunk := os.read(read_end, 1 << 16):
+            data.extend(chunk)
+    finally:
+        os.close(read_end)
+        os.waitpid(pid, 0)
+    return mine, _result(data, 0)
 
 
 def _answer(before_each: Callable[[Any], Any] | None, item: Any) -> Any:

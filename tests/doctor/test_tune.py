@@ -194,3 +194,23 @@ def test_the_table_says_an_unstated_gps_noise_is_measured_and_the_default_only_i
     assert off[0].source == "messages (median)"
     stated = msgspec.structs.replace(fix, position_covariance=(0.04, 0, 0, 0, 0.04, 0, 0, 0, 0.09), covariance_type=2)
     assert noise_params(gps, [stated])[0].source == "messages (median)"
+
+
+def test_replays_side_by_side_tune_as_replays_in_turn(gps_recording, monkeypatch):
+    """The probes, and each held-back check with its prediction of the held-back fixes, replayed in forked
+    processes beside each other (``forked``): the same fit, table and config as all in this process."""
+    import fusiond.tune.forked as forked
+
+    cfg = robot_config(gps="position_noise = [1.2, 1.2, 1.2]\nvertical_error_sigma = 0.0",
+                       imu="orientation_noise = [0.01, 0.01, 0.01]")
+    keys = ["gps.position_noise", "imu.orientation_noise"]
+    side_by_side = tune(gps_recording, cfg, keys=keys, budget_s=300.0)
+    monkeypatch.setattr(forked, "workers_available", lambda: 1)
+    in_turn = tune(gps_recording, cfg, keys=keys, budget_s=300.0)
+    assert side_by_side.prediction_before is not None  # fixes were held back: their checks ran beside
+    assert side_by_side.config == in_turn.config and side_by_side.evaluations == in_turn.evaluations
+    assert [(r.param.name, r.after, r.status, r.note) for r in side_by_side.rows] == \
+        [(r.param.name, r.after, r.status, r.note) for r in in_turn.rows]
+    for field in ("fit_before", "fit_after", "heldback_before", "heldback_after", "prediction_before",
+                  "prediction_after"):
+        assert getattr(side_by_side, field) == getattr(in_turn, field), field

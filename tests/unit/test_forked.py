@@ -7,7 +7,7 @@ import os
 import pytest
 
 from fusiond.errors import FusiondError, TuneError
-from fusiond.tune.forked import ForkedJobError, run_side_by_side, workers_available
+from fusiond.tune.forked import ForkedJobError, beside, run_side_by_side, workers_available
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is not offered on this platform")
 
@@ -80,3 +80,19 @@ def test_an_exception_that_does_not_pickle_comes_back_as_its_text():
 
 def test_workers_available_is_at_least_one():
     assert workers_available() >= 1
+
+
+def test_beside_runs_one_job_here_and_the_other_in_a_child():
+    here, there = beside(lambda: ("here", os.getpid()), lambda: ("there", os.getpid()))
+    assert here == ("here", os.getpid()) and there[0] == "there" and there[1] != os.getpid()
+
+
+def test_beside_raises_what_either_side_raises():
+    with pytest.raises(ValueError, match="there"):
+        beside(lambda: 1, lambda: _raises_value("there"))
+    with pytest.raises(ValueError, match="here"):
+        beside(lambda: _raises_value("here"), lambda: 2)
+
+
+def _raises_value(said: str) -> int:
+    raise ValueError(said)
