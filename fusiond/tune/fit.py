@@ -23,8 +23,9 @@
    judged the same way; it is taken when no worse, else the table says what it measured and why not.
 
 Replays that do not depend on each other run side by side, each in a forked process (``forked``): the
-probes of step 2, and in steps 4-6 each held-back check beside its prediction of the held-back fixes.
-Nelder-Mead's replays each depend on the one before and run in turn.
+probes of step 2, each of Nelder-Mead's reflections beside a guess of the point its step asks for next
+(``simplex``: scipy's steps, held to scipy's points by a test), and in steps 4-6 each held-back check
+beside its prediction of the held-back fixes.
 
 No fitted white noise goes below what the recording shows at rest (``floors``): the scatter of each
 sensor's readings over the filter's own standstills bounds the fit from below, beside the sensors'
@@ -61,6 +62,7 @@ from .likelihood import Reference, Score, reference, replay_records, residuals, 
 from .params import Param, apply, select, sensor_of, tunable_params, value
 from .prediction import HOLD_EVERY, Prediction, predict
 from .prediction import split as split_fixes
+from .simplex import nelder_mead
 
 PROBE = math.log(2.0)  # the informedness probe and the first simplex step: a factor of 2
 INFORMED = 1.0  # -log L must change by at least this over a factor of 2
@@ -238,9 +240,8 @@ def _probe(n: int, i: int, step: float) -> list[float]:
 
 
 def _minimise(obj: _Objective, n: int, informed: list[bool]) -> tuple[list[float], str]:
-    """Nelder-Mead over the informed log-scales (the others held at their start), within budget."""
-    from scipy.optimize import minimize
-
+    """Nelder-Mead over the informed log-scales (the others held at their start), within budget: scipy's
+    steps, each reflection replayed beside a guess of the next point (``simplex``)."""
     free = [i for i in range(n) if informed[i]]
     if not free:
         return [0.0] * n, "nothing to fit"
@@ -257,11 +258,9 @@ def _minimise(obj: _Objective, n: int, informed: list[bool]) -> tuple[list[float
         v[k] = PROBE  # the probes already replayed
         simplex.append(v)
     try:
-        res = minimize(lambda z: obj(full(z)), [0.0] * len(free), method="Nelder-Mead",
-                       bounds=[(max(-BOUND, obj.params[i].lowest()), BOUND) for i in free],
-                       options={"initial_simplex": simplex, "xatol": XATOL, "fatol": FATOL,
-                                "maxfev": 10**9, "adaptive": len(free) > 3})
-        stopped = "converged" if res.success else (obj.stopped or "maxfev")
+        nelder_mead(lambda z: obj(full(z)), lambda points, _asked: obj.many([full(z) for z in points]), simplex,
+                    [(max(-BOUND, obj.params[i].lowest()), BOUND) for i in free], XATOL, FATOL, len(free) > 3)
+        stopped = "converged"
     except _OutOfBudget:
         stopped = obj.stopped
     best = obj.best[1]
