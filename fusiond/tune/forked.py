@@ -8,10 +8,12 @@ copying or pickling it; only the small result travels back, pickled through a pi
 those of running the jobs in turn, in the order given: the child runs the same function on the same
 objects, in a process of its own.
 
-Where fork is not offered (not Linux or macOS), with one CPU, or with one job, the jobs run in turn
-in this process. A job that raises in a child raises here (its exception pickled back, or a
-``ForkedJobError`` naming it when that fails): no job starts after it, the running ones are waited
-for, and of those that failed the first in ``items`` order raises, as it would have in turn.
+Elsewhere than on Linux (``workers_available``), with one CPU, or with one job, the jobs run in turn in
+this process. A job that raises in a child raises here (its exception pickled back, or a
+``ForkedJobError`` with its text when it does not pickle): no job starts after it, the running ones are
+waited for, and of those that failed the first in ``items`` order raises, as it would have in turn. A
+child that ends without a word (killed, out of memory) loses nothing: its job runs again here, and the
+log says so (``forked_job_rerun``).
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 from ..errors import TuneError
+from ..logs import get_logger
+
+log = get_logger(__name__)
 
 __all__ = ["ForkedJobError", "beside", "run_side_by_side", "workers_available"]
 
@@ -35,12 +40,13 @@ R = TypeVar("R")
 
 
 class ForkedJobError(TuneError):
-    """A job in a forked child ended without a result that could be read back."""
+    """A job in a forked child raised an exception that could not be carried back (its text is)."""
 
 
 def workers_available() -> int:
-    """How many jobs may run at once: the CPUs this process may use (1 where fork is not offered)."""
-    if not hasattr(os, "fork"):
+    """How many jobs may run at once: the CPUs this process may use; 1 but on Linux, where a forked child
+    of a process that has used numpy is safe (macOS's Accelerate is not fork-safe; Windows has no fork)."""
+    if not sys.platform.startswith("linux") or not hasattr(os, "fork"):
         return 1
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -59,7 +65,7 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
         cpus = workers_available()
         workers = 1 if cpus == 1 else min(len(items), 2 * cpus)
     workers = max(1, workers)
-    if workers == 1 or len(items) < 2 or not hasattr(os, "fork"):
+    if workers == 1 or len(items) < 2 or not sys.platform.startswith("linux"):
         in_turn = []
         for item in items:
             answer = _answer(before_each, item)
@@ -67,6 +73,7 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
         return in_turn
     results: list[Any] = [None] * len(items)
     failed: dict[int, BaseException] = {}  # once a job fails no other starts; the first one's error is raised
+    lost: list[tuple[int, Exception]] = []  # jobs whose child died without a word: run again here
     running: dict[int, tuple[int, int, bytearray]] = {}  # read end -> (item index, child pid, bytes read)
     selector = selectors.DefaultSelector()
     upcoming = iter(range(len(items)))
@@ -97,6 +104,8 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
                 os.waitpid(pid, 0)
                 try:
                     results[index] = _result(data, index)
+                except _ChildDied as died:
+                    lost.append((index, died))
                 except Exception as err:  # noqa: BLE001 - raised below, once the running jobs have ended
                     failed[index] = err
     finally:
@@ -111,6 +120,9 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
         selector.close()
     if failed:
         raise failed[min(failed)]
+    for index, died in lost:
+        log.warning("forked_job_rerun", job=index, reason=str(died))
+        results[index] = job(items[index])
     return results
 
 
@@ -137,7 +149,11 @@ def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
     finally:
         os.close(read_end)
         os.waitpid(pid, 0)
-    return mine, _result(data, 0)
+    try:
+        return mine, _result(data, 0)
+    except _ChildDied as died:
+        log.warning("forked_job_rerun", job=0, reason=str(died))
+        return mine, there()
 
 
 def _answer(before_each: Callable[[Any], Any] | None, item: Any) -> Any:
@@ -173,12 +189,16 @@ def _start(job: Callable[[Any], Any], item: Any) -> tuple[int, int]:
     return read_end, pid
 
 
+class _ChildDied(Exception):
+    """A child that ended without writing its result (killed, out of memory)."""
+
+
 def _result(data: bytearray, index: int) -> Any:
     """What the child of job ``index`` sent back: its result, or its exception raised here."""
     try:
         tag, value = pickle.loads(bytes(data))
-    except Exception as err:  # noqa: BLE001 - a child that died before writing (killed, out of memory)
-        raise ForkedJobError(f"forked job {index} ended without a result ({err})") from None
+    except Exception as err:  # noqa: BLE001 - nothing or half a result was written
+        raise _ChildDied(f"forked job {index} ended without a result ({err})") from None
     if tag == "error":
         raise value
     return value
