@@ -8,7 +8,9 @@ worst), or nothing (in between: the reflection replaces the worst). A replay is 
 the machine has more than one core, so the second point is replayed beside the reflection instead of
 after it: the one the previous iteration's outcome makes likely (``_guess``). When the guess was the
 point needed, the iteration took one replay's time instead of two; otherwise the guess cost another
-core's time and the iteration what it would have anyway.
+core's time and the iteration what it would have anyway. A guess is replayed on a one-CPU machine too
+(after the reflection): tune's bound counts replays, and so where it binds the fit it ends at does not
+depend on the machine.
 
 The points asked for, and so the fit, are scipy's ``minimize(method="Nelder-Mead")`` with
 ``initial_simplex`` and ``bounds`` (scipy 1.17's ``_minimize_neldermead``, its arithmetic in numpy as
