@@ -128,7 +128,7 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
 
 def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
     """``(here(), there())``: ``there`` in a forked child while ``here`` runs in this process (what ``here``
-    logs or keeps stays here); in turn, here first, where fork is not offered or with one CPU."""
+    logs or keeps stays here); in turn, here first, where ``workers_available`` is 1 (not Linux, one CPU)."""
     if workers_available() == 1:
         return here(), there()
     read_end, pid = _start(lambda _: there(), None)
