@@ -74,6 +74,7 @@ FATOL = 0.5
 
 
 T = TypeVar("T")
+_NOT_REPLAYED = object()  # ``_Objective.many``'s answer for a replay the budget did not start
 
 
 class _OutOfBudget(Exception):
@@ -180,10 +181,10 @@ class _Objective:
             return [self(theta) for theta in thetas]
         started = 0
 
-        def before(_key: tuple[float, ...]) -> float | None:
+        def before(_key: tuple[float, ...]) -> object:
             nonlocal started
             if self._spent(started):
-                return math.nan  # not replayed
+                return _NOT_REPLAYED
             started += 1
             return None
 
@@ -192,7 +193,7 @@ class _Objective:
                 return score(replay_records(self.config(key), self.samples, self.backend), self.ref).neg_loglik
 
         for key, f in zip(todo, run_side_by_side(job, todo, before_each=before)):
-            if f == f:
+            if f is not _NOT_REPLAYED:
                 self._note(key, f)
         if started < len(todo):
             raise _OutOfBudget

@@ -214,3 +214,24 @@ def test_replays_side_by_side_tune_as_replays_in_turn(gps_recording, monkeypatch
     for field in ("fit_before", "fit_after", "heldback_before", "heldback_after", "prediction_before",
                   "prediction_after"):
         assert getattr(side_by_side, field) == getattr(in_turn, field), field
+
+
+def test_replays_side_by_side_stop_at_the_bound_keeping_what_was_replayed(gps_recording):
+    """``_Objective.many`` under a replay bound: the replays it starts are counted, cached and equal to
+    the same points replayed in turn; the ones past the bound are not started, and the fit is told."""
+    from fusiond.tune.fit import _Objective, _OutOfBudget, _Progress
+    from fusiond.tune.params import select, tunable_params
+
+    cfg = robot_config(gps="position_noise = [1.2, 1.2, 1.2]\nvertical_error_sigma = 0.0")
+    samples = [s for s in gps_recording if s.stamp <= gps_recording[0].stamp + 20.0]
+    params = [p for p in select(tunable_params(cfg, samples), ["gps.position_noise"]) if not p.skipped]
+    points = [[0.3 * (k + 1)] + [0.0] * (len(params) - 1) for k in range(4)]
+    side_by_side = _Objective(cfg, params, samples, math.inf, 3, _Progress(False, 0))
+    side_by_side([0.0] * len(params))  # the reference replay
+    with pytest.raises(_OutOfBudget):
+        side_by_side.many(points)
+    assert side_by_side.replays == 3 and side_by_side.stopped == "maxfev" and len(side_by_side.cache) == 3
+    in_turn = _Objective(cfg, params, samples, math.inf, 10, _Progress(False, 0))
+    in_turn([0.0] * len(params))
+    for p in points[:2]:
+        assert side_by_side.many([p]) == [in_turn(p)]  # a cached point costs no replay: no bound asked
