@@ -106,17 +106,28 @@ def run(args: argparse.Namespace) -> int:
             backend=backend,
             lookahead=fused is not None,  # the recording is kept in memory for the advice's proof anyway
         )
-        if fused:
+        evaluation = None
+
+        def prove():
             from ..tune.advice import prove_advice
 
-            result.proven = prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend)
-        evaluation = None
-        if recorder is not None:
+            return prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend)
+
+        def score():
             from ..replay.evaluate import evaluate
 
-            evaluation = evaluate([Path(p) for p in args.bags], cfg, reference, result.trajectory, recorder,
-                                  segment_gap_s=args.segment_gap, rpe_s=args.rpe_s,
-                                  heading_known=result.heading_known, smoothed=result.smoothed)
+            return evaluate([Path(p) for p in args.bags], cfg, reference, result.trajectory, recorder,
+                            segment_gap_s=args.segment_gap, rpe_s=args.rpe_s,
+                            heading_known=result.heading_known, smoothed=result.smoothed)
+
+        if fused and recorder is not None:  # neither reads the other: the advice's replays beside the scoring
+            from ..tune.forked import beside
+
+            evaluation, result.proven = beside(score, prove)
+        elif fused:
+            result.proven = prove()
+        elif recorder is not None:
+            evaluation = score()
     except ReplayError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         return EXIT_USAGE

@@ -33,3 +33,22 @@ def test_fusiond_never_loses_to_a_plain_baseline_beyond_the_reference_noise() ->
     assert rows
     lost = [(r.case.what, r.segment, r.ours, r.best, r.noise) for r in rows if r.verdict in ("NO", "-")]
     assert not lost, lost
+
+
+def test_the_advice_replayed_beside_the_scoring_prints_what_it_prints_in_turn(capsys, monkeypatch) -> None:
+    """`replay --reference` with advice: the advice's replay runs in a forked process beside the scoring
+    (neither reads the other); the printed summary, verdicts, proof and scores are those of one after the
+    other in the process."""
+    import fusiond.tune.forked as forked
+    from fusiond.cli import main
+
+    argv = ["replay", str(DATA / "comma2k19_ex1"), "--config", str(ROOT / "examples" / "comma2k19.toml"),
+            "--reference", "/ground_truth"]
+    assert main(argv) == 0
+    beside = capsys.readouterr().out
+    monkeypatch.setattr(forked, "workers_available", lambda: 1)
+    assert main(argv) == 0
+    in_turn = capsys.readouterr().out
+    assert "(replayed: likelihood" in beside and "reference   /ground_truth" in beside and "aligned m" in beside
+    drop_rate = lambda text: [line for line in text.splitlines() if "msg/s" not in line]  # noqa: E731
+    assert drop_rate(beside) == drop_rate(in_turn)
