@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from fusiond.errors import EstimatorError
 from fusiond.estimator import (ErrorStateEKF, GpsErrorBlock, GyroBiasBlock, GyroScaleBlock, MotionInput, PoseBlock,
-                               PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock, predict)
+                               PredictWorkspace, StateBlock, StateLayout, WheelScaleBlock)
 from fusiond.estimator import motion as motion_module
 from fusiond.estimator import observations
 from fusiond.estimator.twist_pitch import TwistPitchBlock

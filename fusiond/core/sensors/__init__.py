@@ -37,6 +37,6 @@ __all__ = [
     "ImuModel", "ImuPolicy", "ImuSample", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
     "OdomSample", "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSample", "PoseSensor", "Rejected", "SensorContext",
     "SensorKind", "SensorModel", "build_models", "codec_named", "codec_of", "config_types", "discover",
-    "encode_sample", "kind_named", "kind_of", "quiet_bound",
+    "encode_sample", "kind_named", "kind_of", "make_decoder", "quiet_bound",
     "register", "require", "unregister",
 ]

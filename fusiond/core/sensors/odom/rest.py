@@ -34,7 +34,6 @@ raises) is not rest noise, and no window holding it could pass.
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 from statistics import NormalDist
 
