@@ -769,6 +769,27 @@ static PyObject *add_motion_noise(PyObject *self, PyObject *const *args, Py_ssiz
     Py_RETURN_NONE;
 }
 
+/* A tuple of at most MAX_N ints into out: their count, or -1 with a TypeError. */
+static Py_ssize_t indices(PyObject *tuple, Py_ssize_t *out, const char *what) {
+    Py_ssize_t count = PyTuple_Check(tuple) ? PyTuple_GET_SIZE(tuple) : -1;
+    if (count < 0 || count > MAX_N) {
+        PyErr_SetString(PyExc_TypeError, "nominal_zero and error_zero must be tuples of ints");
+        return -1;
+    }
+    return count == 0 || ints(tuple, out, count, what) == 0 ? count : -1;
+}
+
+/* Does every one of the count indices lie in [0, limit)? Else a ValueError saying `outside`. */
+static int within(const Py_ssize_t *idx, Py_ssize_t count, Py_ssize_t limit, const char *outside) {
+    for (Py_ssize_t k = 0; k < count; k++) {
+        if (idx[k] < 0 || idx[k] >= limit) {
+            PyErr_SetString(PyExc_ValueError, outside);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 PyDoc_STRVAR(hold_planar_doc,
 "hold_planar(x, P, nominal_zero, error_zero) -> None\n\n"
 "ErrorStateEKF.hold_planar's writes in one call: the attitude x[3:7] turned into the rotation about z\n"
@@ -781,14 +802,9 @@ static PyObject *hold_planar(PyObject *self, PyObject *const *args, Py_ssize_t n
         return NULL;
     }
     Py_ssize_t nominal[MAX_N], error[MAX_N];
-    Py_ssize_t n_nominal = PyTuple_Check(args[2]) ? PyTuple_GET_SIZE(args[2]) : -1;
-    Py_ssize_t n_error = PyTuple_Check(args[3]) ? PyTuple_GET_SIZE(args[3]) : -1;
-    if (n_nominal < 0 || n_nominal > MAX_N || n_error < 0 || n_error > MAX_N) {
-        PyErr_SetString(PyExc_TypeError, "nominal_zero and error_zero must be tuples of ints");
-        return NULL;
-    }
-    if ((n_nominal && ints(args[2], nominal, n_nominal, "nominal_zero") < 0) ||
-        (n_error && ints(args[3], error, n_error, "error_zero") < 0)) {
+    Py_ssize_t n_nominal = indices(args[2], nominal, "nominal_zero");
+    Py_ssize_t n_error = n_nominal < 0 ? -1 : indices(args[3], error, "error_zero");
+    if (n_error < 0) {
         return NULL;
     }
     Held held = {.count = 0};
@@ -805,19 +821,9 @@ static PyObject *hold_planar(PyObject *self, PyObject *const *args, Py_ssize_t n
         release(&held);
         return NULL;
     }
-    for (Py_ssize_t k = 0; k < n_nominal; k++) {
-        if (nominal[k] < 0 || nominal[k] >= nx) {
-            PyErr_SetString(PyExc_ValueError, "nominal_zero outside x");
-            release(&held);
-            return NULL;
-        }
-    }
-    for (Py_ssize_t k = 0; k < n_error; k++) {
-        if (error[k] < 0 || error[k] >= n) {
-            PyErr_SetString(PyExc_ValueError, "error_zero outside P");
-            release(&held);
-            return NULL;
-        }
+    if (!within(nominal, n_nominal, nx, "nominal_zero outside x") || !within(error, n_error, n, "error_zero outside P")) {
+        release(&held);
+        return NULL;
     }
     double qx = x[3], qy = x[4], qz = x[5], qw = x[6];
     if (qx != 0.0 || qy != 0.0) {

@@ -165,8 +165,7 @@ class _Objective:
             return hit
         if self.ref is not None and self._spent(0):  # the reference replay is never refused
             raise _OutOfBudget
-        with muted():  # the recording's warnings are said once, by the held-back check's first replay
-            records = replay_records(self.config(key), self.samples, self.backend)
+        records = self._replay(key)
         if self.ref is None:
             self.ref = reference(records, self.cfg)
         return self._note(key, score(records, self.ref).neg_loglik)
@@ -189,8 +188,7 @@ class _Objective:
             return None
 
         def job(key: tuple[float, ...]) -> float:
-            with muted():
-                return score(replay_records(self.config(key), self.samples, self.backend), self.ref).neg_loglik
+            return score(self._replay(key), self.ref).neg_loglik
 
         for key, f in zip(todo, run_side_by_side(job, todo, before_each=before)):
             if f is not _NOT_REPLAYED:
@@ -198,6 +196,11 @@ class _Objective:
         if started < len(todo):
             raise _OutOfBudget
         return [self.cache[k] for k in keys]
+
+    def _replay(self, key: tuple[float, ...]) -> list:
+        """The records of one replay of the fit part at ``key``."""
+        with muted():  # the recording's warnings are said once, by the held-back check's first replay
+            return replay_records(self.config(key), self.samples, self.backend)
 
     def _spent(self, started: int) -> bool:
         """Is the budget spent, with ``started`` replays under way besides those made? (``stopped`` says how)"""

@@ -43,10 +43,15 @@ class ForkedJobError(TuneError):
     """A job in a forked child raised an exception that could not be carried back (its text is)."""
 
 
+def _forks() -> bool:
+    """Are jobs run in forked children here? On Linux, where a forked child of a process that has used
+    numpy is safe (macOS's Accelerate is not fork-safe; Windows has no fork)."""
+    return sys.platform.startswith("linux") and hasattr(os, "fork")
+
+
 def workers_available() -> int:
-    """How many jobs may run at once: the CPUs this process may use; 1 but on Linux, where a forked child
-    of a process that has used numpy is safe (macOS's Accelerate is not fork-safe; Windows has no fork)."""
-    if not sys.platform.startswith("linux") or not hasattr(os, "fork"):
+    """How many jobs may run at once: the CPUs this process may use; 1 where jobs are not forked (``_forks``)."""
+    if not _forks():
         return 1
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -65,7 +70,7 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
         cpus = workers_available()
         workers = 1 if cpus == 1 else min(len(items), 2 * cpus)
     workers = max(1, workers)
-    if workers == 1 or len(items) < 2 or not sys.platform.startswith("linux"):
+    if workers == 1 or len(items) < 2 or not _forks():
         in_turn = []
         for item in items:
             answer = _answer(before_each, item)
@@ -111,18 +116,12 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
     finally:
         for fd, (_, pid, _) in running.items():  # an error here: no child outlives the call
             selector.unregister(fd)
-            os.close(fd)
-            try:
-                os.kill(pid, 9)
-                os.waitpid(pid, 0)
-            except OSError:
-                pass
+            _stop(fd, pid)
         selector.close()
     if failed:
         raise failed[min(failed)]
     for index, died in lost:
-        log.warning("forked_job_rerun", job=index, reason=str(died))
-        results[index] = job(items[index])
+        results[index] = _rerun(lambda: job(items[index]), index, died)
     return results
 
 
@@ -135,12 +134,7 @@ def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
     try:
         mine = here()
     except BaseException:
-        os.close(read_end)
-        try:
-            os.kill(pid, 9)
-        except OSError:
-            pass
-        os.waitpid(pid, 0)
+        _stop(read_end, pid)
         raise
     data = bytearray()
     try:
@@ -152,8 +146,23 @@ def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
     try:
         return mine, _result(data, 0)
     except _ChildDied as died:
-        log.warning("forked_job_rerun", job=0, reason=str(died))
-        return mine, there()
+        return mine, _rerun(there, 0, died)
+
+
+def _stop(read_end: int, pid: int) -> None:
+    """Close a running child's pipe, kill it and reap it (a call that raises leaves no child behind)."""
+    os.close(read_end)
+    try:
+        os.kill(pid, 9)
+    except OSError:  # it had ended already
+        pass
+    os.waitpid(pid, 0)
+
+
+def _rerun(job: Callable[[], R], index: int, died: Exception) -> R:
+    """A job whose child ended without a word, run again in this process: nothing is lost, and the log says so."""
+    log.warning("forked_job_rerun", job=index, reason=str(died))
+    return job()
 
 
 def _answer(before_each: Callable[[Any], Any] | None, item: Any) -> Any:
