@@ -353,10 +353,12 @@ def smoothed_trajectory(core: FusionCore) -> array:
 
 
 def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False,
-                backend: Backend | None = None) -> ReplayResult:
+                backend: Backend | None = None, records: list | None = None) -> ReplayResult:
     """Replay samples already in memory (a simulation) exactly as a bag would be replayed (``backend``: the
-    estimator's, ``FusionCore``)."""
+    estimator's, ``FusionCore``; ``records``: every diagnostics record is appended to it, as ``replay``'s)."""
     runner = Runner(cfg, keep_trace, smooth=smooth, backend=backend)
+    if records is not None:
+        runner.on_record = records.append
     samples = samples if isinstance(samples, Sequence) else list(samples)
     for s, keep in zip(samples, runner.core.snapshot_plan(samples)):  # all here: FusionCore.snapshot_plan
         runner.feed(s, keep)

@@ -15,6 +15,7 @@ the table says what the doctor measured and by how much it lost.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -45,15 +46,17 @@ def _group(key: str) -> tuple[str, str] | None:
     return (where[1], where[2]) if where[0] == "sensors" else (FILTER, where[2])
 
 
-def diagnose(cfg: Config, samples: Sequence[object],
-             backend: Backend | None = None) -> tuple[list[Verdict], list[tuple[float, float]]]:
+def diagnose(cfg: Config, samples: Sequence[object], backend: Backend | None = None, records: list | None = None,
+             quiet: bool = True) -> tuple[list[Verdict], list[tuple[float, float]]]:
     """One replay of the recording with the doctor: its verdicts, and the filter's standstills it was told of
     (``Series.rest_spans``, in filter time), which ``floors`` measures the noise at rest over. ``backend``:
-    the estimator's (``FusionCore``)."""
+    the estimator's (``FusionCore``). ``records``: every diagnostics record of the replay is appended to it
+    (tune scores the original config's held-back part on them: the same replay). ``quiet``: the replay's
+    warnings are not logged (False: they are, as the recording's, said once)."""
     from ..replay.run import run_samples
 
-    with muted():
-        result = run_samples(samples, cfg, backend=backend)
+    with muted() if quiet else nullcontext():
+        result = run_samples(samples, cfg, backend=backend, records=records)
         verdicts = result.verdicts()
     return verdicts, list(result.doctor.series().rest_spans) if result.doctor is not None else []
 

@@ -25,7 +25,8 @@
 Replays that do not depend on each other run side by side, each in a forked process (``forked``): the
 probes of step 2, each of Nelder-Mead's reflections beside a guess of the point its step asks for next
 (``simplex``: scipy's steps, held to scipy's points by a test), and in steps 4-6 each held-back check
-beside its prediction of the held-back fixes.
+beside its prediction of the held-back fixes. The original config's check is the doctor's replay (step 6's
+values, the floors' standstills), made once, beside the original's prediction, before the fit.
 
 No fitted white noise goes below what the recording shows at rest (``floors``): the scatter of each
 sensor's readings over the filter's own standstills bounds the fit from below, beside the sensors'
@@ -285,15 +286,27 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     """Fit ``cfg``'s noise to ``samples`` (a recording's configured-sensor samples in bag order; the
     module doc says how). ``keys``: the parameters to fit (``params.select``; ConfigError for an
     unknown one). ``maxfev`` (default 60 per parameter) and ``budget_s`` bound the fit's replays;
-    validation adds 2 + one per changed key replays of the whole recording. ``backend``: the estimator's
+    validation adds 1 + one per changed key replays of the whole recording (the original's is the doctor's). ``backend``: the estimator's
     in every replay (``FusionCore``)."""
     t_start = time.perf_counter()
     samples = list(samples)
     if not samples:
         raise ReplayError("nothing to tune: the recording has no sample of a configured sensor")
     params = select(tunable_params(cfg, samples), keys)
-    # one replay with the doctor: its paste lines (step 6) and the standstills the floors are measured over
-    verdicts, spans = diagnose(cfg, samples, backend)
+    # One replay of the whole recording with the original config and the doctor: its paste lines (step 6),
+    # the standstills the floors are measured over, and the records step 4 scores the original on (its
+    # warnings are the recording's, said once); beside it, the original's prediction of the held-back fixes.
+    held_back = split_fixes(samples, cfg)
+    original: list = []
+
+    def diagnosed() -> tuple[list, list]:
+        return diagnose(cfg, samples, backend, records=original, quiet=False)
+
+    if held_back[1]:
+        (verdicts, spans), pred_before = beside(diagnosed, lambda: _predicted(cfg, held_back, backend))
+    else:
+        (verdicts, spans), pred_before = diagnosed(), None
+    first_replays = 1 if pred_before is None else 2
     params = with_floors(params, measured_floors(cfg, samples, params, spans))
     active = [p for p in params if not p.skipped]
     n = len(active)
@@ -302,7 +315,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     lo = min(s.stamp for s in samples)
     split = lo + fit_fraction * (max(s.stamp for s in samples) - lo)
     fit_part = [s for s in samples if s.stamp <= split]
-    bar = _Progress(progress, total=2 * n + maxfev + 2 * (2 + n))
+    bar = _Progress(progress, total=2 * n + maxfev + 2 * (1 + n))
     try:
         obj = _Objective(cfg, active, fit_part, t_start + budget_s, maxfev, bar, backend)
         informed = [False] * n
@@ -323,7 +336,8 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
                 theta = [0.0] * n
                 f_best = f_start
         floored = [informed[i] and theta[i] <= active[i].lowest() + 1e-9 for i in range(n)]
-        result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts, backend)
+        result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts, original,
+                           pred_before, held_back, backend)
     finally:
         bar.close()
     rows, config, before, after, comments, replays, predicted = result
@@ -331,45 +345,44 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     rows = rows + skipped
     order = {p.name: i for i, p in enumerate(params)}
     rows.sort(key=lambda r: order[r.param.name])
-    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays + 1,
+    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays + first_replays,
                       time.perf_counter() - t_start, stopped,
                       residuals(obj.ref) if n and obj.ref is not None else 0, comments=comments,
                       prediction_before=predicted[0], prediction_after=predicted[1])
 
 
+def _predicted(c: Config, held_back: tuple[list, list], backend: Backend | None) -> Prediction:
+    """``c``'s prediction of the held-back fixes (step 5; ``held_back``: ``prediction.split``'s)."""
+    with muted():
+        return predict(c, held_back[0], held_back[1], backend)
+
+
 def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
               informed: list[bool], split: float, bar: _Progress, floored: list[bool], verdicts: Sequence[object],
+              original: list, pred_before: Prediction | None, held_back: tuple[list, list],
               backend: Backend | None = None):
     """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays).
-    ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6."""
+    ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6; ``original``:
+    the records of that replay, and ``pred_before`` its prediction of ``held_back``'s fixes (None: none held)."""
     replays = 0
 
     def run(c: Config) -> list:
         nonlocal replays
         replays += 1
         bar.step("held-back check")
-        if replays == 1:  # the user's config over the whole recording: its warnings are the recording's
-            return replay_records(c, samples, backend)
         with muted():
             return replay_records(c, samples, backend)
-
-    kept_samples, held = split_fixes(samples, cfg)
-
-    def predicted(c: Config) -> Prediction:
-        with muted():
-            return predict(c, kept_samples, held, backend)
 
     def and_predicted(here: Callable[[], T], c: Config) -> tuple[T, Prediction | None]:
         """``here()`` and, where fixes are held back, ``c``'s prediction of them beside it (a replay of its
         own, independent of ``here``'s: in a forked process, ``forked.beside``)."""
         nonlocal replays
-        if not held:
+        if not held_back[1]:
             return here(), None
         replays += 1
         bar.step("held-back fixes")
-        return beside(here, lambda: predicted(c))
+        return beside(here, lambda: _predicted(c, held_back, backend))
 
-    original, pred_before = and_predicted(lambda: run(cfg), cfg)
     ref = reference(original, cfg, after=split)
     before = score(original, ref)
     pred_after = pred_before
