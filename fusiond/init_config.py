@@ -108,7 +108,7 @@ def _odometry_lines(t: TopicInfo) -> list[str]:
         lines.append("twist_measured = [true, true, true, false, false, false]  # the yaw rate reads exactly 0 while "
                      "driving: the driver does not measure it (the gyro turns the robot)")
     if t.twist_zero_covariance:
-        lines.append("# every twist covariance is 0: floored at filter.twist_min_sigma; state twist_noise (m/s, "
+        lines.append("# every twist covariance is 0: floored at twist_min_sigma (this table); state twist_noise (m/s, "
                      "rad/s) once measured (`fusiond tune` fits it)")
     return lines
 

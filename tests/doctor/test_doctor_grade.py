@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from fusiond.doctor.checks.lean import grade_fit
+from fusiond.doctor.checks.lean import WANDER_SIGMAS, GradeFit, grade_fit, grade_verdict
 from fusiond.core.fusion import FusionCore
 from fusiond.replay.run import run_samples
 
@@ -38,8 +38,12 @@ def up_rms(samples, imu: str = "", odom: str = "") -> float:
 def test_a_pitched_imu_is_found_from_the_gps_climb_and_pasting_it_keeps_z_on_the_ground():
     samples = sim_gps.simulate(sim_gps.World(**WORLD, imu_mount_pitch=MOUNT))
     v = attitude_of(samples)
-    assert v is not None and v.level == "warn" and v.key == "sensors.imu.extrinsic_rpy", v
-    assert "GPS altitude" in v.message
+    # 5 cm a metre over ~750 m of chords is ~37 m of climb, beyond 3 x the default vertical error state's 5 m:
+    # no receiver wander, and the published height leaves the fixes by about that: a problem
+    assert v is not None and v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy", v
+    assert "GPS altitude" in v.message and "pitch_estimation = true" in v.message
+    climb = v.evidence["unmodelled_climb_m"]
+    assert abs(climb - abs(v.evidence["mount_pitch_error_rad"]) * v.evidence["grade_distance_m"]) < 1e-6, v.evidence
     delta, se = v.evidence["mount_pitch_error_rad"], v.evidence["mount_pitch_error_se"]
     assert abs(delta - MOUNT) < 3 * se, v.evidence
     pasted = v.suggestion
@@ -69,3 +73,17 @@ def test_a_level_imu_is_not_named_and_without_gps_altitude_the_grade_says_nothin
     pitched = sim_gps.simulate(sim_gps.World(**WORLD, imu_mount_pitch=MOUNT))
     lean = attitude_of(pitched, gps="position_noise = [0.5, 0.5, 1e6]")
     assert lean is not None and "mount_pitch_error_rad" not in lean.evidence and "lean_pitch_rad" in lean.evidence, lean
+
+
+def test_the_climb_is_a_problem_only_beyond_what_the_vertical_error_state_allows():
+    """The level of a named mount pitch: a problem when the climb over the drive exceeds WANDER_SIGMAS of the
+    vertical error state's sigma (the state takes it, the height leaves the fixes), else a warning; a warning
+    too when the filter learns the pitch itself, or when there is no such state (the fixes then hold z)."""
+    imu = robot_config(gps="").sensor("imu")
+    fit = lambda sigma: GradeFit(0.05, 0.004, 0.004, 20, 750.0, 1, sigma)  # 37.5 m of climb  # noqa: E731
+    assert grade_verdict(fit(5.0), imu, None).level == "problem"
+    assert grade_verdict(fit(37.5 / WANDER_SIGMAS - 0.1), imu, None).level == "problem"
+    assert grade_verdict(fit(37.5 / WANDER_SIGMAS + 0.1), imu, None).level == "warn"
+    assert grade_verdict(fit(0.0), imu, None).level == "warn"
+    learned = grade_verdict(fit(5.0), imu, None, learned=True)
+    assert learned.level == "warn" and "twist_pitch state learns" in learned.message

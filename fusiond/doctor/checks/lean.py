@@ -54,6 +54,10 @@ __all__ = ["GradeFit", "Lean", "grade_fit", "grade_verdict", "lean_verdict"]
 # A pitch error delta sinks or lifts the dead-reckoned z by delta per metre driven: at 0.01 rad, 1 %
 # of the distance, twice the 0.5 % below which mounting.py names no yaw error. Smaller: not named.
 MOUNT_PITCH_RAD = 0.01
+# A Gauss-Markov error state lies within this many of its stationary sigmas but with probability 0.27 %
+# (a normal law): a climb over the drive beyond it is no receiver wander, and the vertical error state that
+# takes it drags the published height away from the fixes by about that much.
+WANDER_SIGMAS = 3.0
 
 
 @dataclass
@@ -66,6 +70,7 @@ class GradeFit:
     chords: int
     distance_m: float  # driven over the chords
     runs: int  # unbroken runs of consecutive chords
+    state_sigma_m: float = 0.0  # the stationary sigma of the GPS's vertical error state (0: it has none)
 
     @property
     def se(self) -> float:
@@ -158,7 +163,8 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
             start = None
     se_model = math.sqrt(var_n) / abs(total)
     se_emp = math.sqrt(newey_west((r_ - delta * d_) / total) * n / (n - 1))
-    return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs)
+    stated = gps.vertical_error_sigma > 0.0 or (gps.error_tau_s > 0.0 and gps.error_sigma is not None)
+    return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs, sigma_m if stated else 0.0)
 
 
 def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None,
@@ -171,15 +177,24 @@ def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw |
     ev = fit.evidence()
     if fit.named:
         yaw = mount.delta if mount is not None and mount.named else 0.0
-        return Verdict(imu.name, "attitude", "warn",
+        height = abs(fit.delta) * fit.distance_m  # the climb the drive's twist makes that the ground does not
+        beyond = not learned and fit.state_sigma_m > 0.0 and height > WANDER_SIGMAS * fit.state_sigma_m
+        if learned:
+            fate = "which the filter's twist_pitch state learns as the fixes come; stated, it holds from the " \
+                   "first metre and in the published attitude too"
+        elif beyond:
+            ev["unmodelled_climb_m"] = height
+            fate = (f"{height:.0f} m over this drive, which the GPS's vertical error state then takes for receiver "
+                    f"wander, {height / fit.state_sigma_m:.0f} times the {fit.state_sigma_m:g} m it allows: the "
+                    "published height leaves the fixes by up to about that, while the altitude's NIS looks normal; "
+                    "pitch_estimation = true on the odometry learns it instead")
+        else:
+            fate = "which the GPS's vertical error state then takes for receiver wander"
+        return Verdict(imu.name, "attitude", "problem" if beyond else "warn",
                        f"the GPS altitude climbs against the estimate's pitch by {deg:+.2f} deg (+- {se_deg:.2f}) "
                        f"over {fit.distance_m:.0f} m of driving ({fit.chords} chords): the IMU is pitched by that in "
                        "its mount and extrinsic_rpy does not say so, so the body-frame twist climbs or sinks "
-                       f"({abs(fit.delta) * 100:.1f} m of height per 100 m driven, "
-                       + ("which the filter's twist_pitch state learns as the fixes come; stated, it holds from the "
-                          "first metre and in the published attitude too" if learned else
-                          "which the GPS's vertical error state then takes for receiver wander")
-                       + "). The full mount is below",
+                       f"({abs(fit.delta) * 100:.1f} m of height per 100 m driven, {fate}). The full mount is below",
                        sensor_key(imu.name, "extrinsic_rpy"), paste_mount(full_mount(imu, (0.0, fit.delta), yaw)), ev)
     if fit.resolved:
         return Verdict(imu.name, "attitude", "ok",
