@@ -143,17 +143,26 @@ class GapHeading(BaseCheck):
         start, length, imu_turn, est_turn = worst
         evidence = {"gaps_with_missed_turn": float(len(missed)),
                     "largest_missed_turn_rad": rot.wrap(imu_turn - est_turn),
-                    "gap_s": length}
+                    "estimate_turn_rad": est_turn, "gap_s": length}
         msg = (f"across {len(missed)} logging gap(s) the IMU's own yaw turned by more than the estimate (the largest: "
                f"{length:.1f} s from {start - (t0 or 0.0):.1f} s{' into the run' if t0 is not None else ''}, the IMU "
                f"turned {math.degrees(imu_turn):+.0f} deg beyond its own drift, the estimate "
                f"{math.degrees(est_turn):+.0f} deg): nothing "
-               "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused), so it drives "
-               "on along the heading it had")
+               "else tells the filter the heading after a gap (no GPS or pose, the IMU's yaw not fused)")
+        held = ", so it drives on along the heading it had"
+        if imu.roll_pitch_only and imu.yaw_across_gaps and abs(est_turn) >= GAP_TURN_RAD:
+            # on, and it turned the heading, by less: the drift it took off the IMU's change is measured against
+            # the filter's heading before the gap, which drifts with a gyro bias not learned yet
+            return [Verdict(imu.name, "heading_across_gaps", "warn",
+                            msg + f". yaw_across_gaps turned it by {math.degrees(est_turn):+.0f} deg: it "
+                            "takes off the IMU's change the drift the yaw showed against the filter's heading before "
+                            "the gap (drift_rad in the heading_turned_across_gap log line), and that heading drifts "
+                            "itself while the gyro's bias is not learned yet (start at rest: see imu/heading). Log "
+                            "without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
         if imu.roll_pitch_only and imu.yaw_across_gaps:
             # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
             return [Verdict(imu.name, "heading_across_gaps", "warn",
-                            msg + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
+                            msg + held + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
                             "above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the "
                             "vehicle stood still before and after the gap (see the heading_not_turned_across_gap log "
                             "lines). Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
@@ -166,11 +175,11 @@ class GapHeading(BaseCheck):
                     f"the largest gap, turned in with the turn (fused as relative, over the whole run)")
         if imu.roll_pitch_only:
             return [Verdict(imu.name, "heading_across_gaps", "warn",
-                            msg + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
+                            msg + held + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
                             f"heading{cost}", sensor_key(imu.name, "yaw_across_gaps"),
                             "yaw_across_gaps = true", evidence)]
         return [Verdict(imu.name, "heading_across_gaps", "warn",
-                        msg + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, "
+                        msg + held + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, "
                         "and with yaw_across_gaps its "
                         f"yaw change across a gap turns the heading{cost}", sensor_key(imu.name, "orientation"),
                         'orientation = "roll_pitch"\nyaw_across_gaps = true', evidence)]

@@ -69,7 +69,8 @@ class LateBias(BaseCheck):
         if drift < LATE_DRIFT_RAD:
             return []
         evidence = {"first_standstill_s": first.t0 - t_start, "gyro_at_rest_rad_s": b, "heading_drift_rad": drift}
-        unknown = f"for the first {before:.0f} s" if accepted else f"for the whole run ({before:.0f} s)"
+        unknown = f"for the first {before:.0f} s (its first accepted update)" if accepted else \
+            f"for the whole run ({before:.0f} s)"
         msg = (f"the gyro's z bias was unknown {unknown}: the first standstill, at "
                f"{first.t0 - t_start:.0f} s, shows the gyro reading {b:+.4f} rad/s at rest, so until then the heading "
                f"turned by up to {drift:.2f} rad ({math.degrees(drift):.0f} deg) that the vehicle did not, and the "
