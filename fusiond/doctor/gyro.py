@@ -223,7 +223,8 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                        f"x and y only): no standstill of {fc.standstill_s:g} s in {duration:.0f} s "
                        f"and no heading reference, so heading uncertainty grows by gyro_bias_sigma x t "
                        f"({fc.gyro_bias_sigma:g} rad/s -> {drift:.2f} rad over the run). Stop the robot now and then, "
-                       "or state the bias spread measured by `fusiond calibrate-imu`",
+                       "or state the bias spread `fusiond calibrate-imu` measures on a minute of the IMU at rest "
+                       "(a recording of its own: this one never stands still)",
                        filter_key("gyro_bias_sigma"), evidence={"duration_s": duration, "standstills": 0.0})
     _count_updates(episodes, ch)
     evidence: dict[str, float] = {"standstills": float(len(episodes))}

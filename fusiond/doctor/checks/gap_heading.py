@@ -162,8 +162,8 @@ class GapHeading(BaseCheck):
         if imu.roll_pitch_only and imu.yaw_across_gaps:
             # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
             return [Verdict(imu.name, "heading_across_gaps", "warn",
-                            msg + held + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured (covariance "
-                            "above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the "
+                            msg + held + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured "
+                            "(covariance above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the "
                             "vehicle stood still before and after the gap (see the heading_not_turned_across_gap log "
                             "lines). Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
         cost = ""
@@ -175,8 +175,8 @@ class GapHeading(BaseCheck):
                     f"the largest gap, turned in with the turn (fused as relative, over the whole run)")
         if imu.roll_pitch_only:
             return [Verdict(imu.name, "heading_across_gaps", "warn",
-                            msg + held + ". The IMU kept its yaw through the gaps: let its yaw change across a gap turn the "
-                            f"heading{cost}", sensor_key(imu.name, "yaw_across_gaps"),
+                            msg + held + ". The IMU kept its yaw through the gaps: let its yaw change across a gap "
+                            f"turn the heading{cost}", sensor_key(imu.name, "yaw_across_gaps"),
                             "yaw_across_gaps = true", evidence)]
         return [Verdict(imu.name, "heading_across_gaps", "warn",
                         msg + held + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, "
