@@ -23,4 +23,5 @@ def run(args: argparse.Namespace) -> int:
     from ..init_config import write_init
 
     code = write_init(args.bags, args.out, force=args.force)
-    return code or run_replay(as_replay(args.bags, args.out, "--advice-budget-s", "0"))
+    # the replay as `fusiond replay` makes it, its paste lines replayed too: a new user's first advice is proven
+    return code or run_replay(as_replay(args.bags, args.out))

@@ -77,6 +77,10 @@ def test_init_on_each_shared_recording_fuses_every_sensor_it_offers_and_never_it
     out = tmp_path / f"{name}.toml"
     proc = fusiond("init", str(bag), "--out", str(out))
     assert proc.returncode == 0, proc.stderr
+    # its replay is `fusiond replay`'s: every paste line the doctor prints was replayed
+    pasted = [line for line in proc.stdout.splitlines() if line.lstrip().startswith(("->", "tried in"))]
+    assert pasted and all("not replayed" not in line for line in proc.stdout.splitlines()), proc.stdout
+    assert proc.stdout.count("likelihood") + proc.stdout.count("changes none") >= len(pasted), proc.stdout
     cfg = load(out)
     assert {s.name: s.key for s in cfg.sensors} == sensors
     assert "/ground_truth" in out.read_text() and all("ground_truth" not in s.key for s in cfg.sensors)
