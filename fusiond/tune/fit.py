@@ -286,8 +286,8 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     """Fit ``cfg``'s noise to ``samples`` (a recording's configured-sensor samples in bag order; the
     module doc says how). ``keys``: the parameters to fit (``params.select``; ConfigError for an
     unknown one). ``maxfev`` (default 60 per parameter) and ``budget_s`` bound the fit's replays;
-    validation adds 1 + one per changed key replays of the whole recording (the original's is the doctor's). ``backend``: the estimator's
-    in every replay (``FusionCore``)."""
+    validation adds 1 + one per changed key replays of the whole recording (the original's is the doctor's).
+    ``backend``: the estimator's in every replay (``FusionCore``)."""
     t_start = time.perf_counter()
     samples = list(samples)
     if not samples:
@@ -345,8 +345,8 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     rows = rows + skipped
     order = {p.name: i for i, p in enumerate(params)}
     rows.sort(key=lambda r: order[r.param.name])
-    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after, obj.replays + replays + first_replays,
-                      time.perf_counter() - t_start, stopped,
+    return TuneResult(cfg, config, rows, split, f_start, f_best, before, after,
+                      obj.replays + replays + first_replays, time.perf_counter() - t_start, stopped,
                       residuals(obj.ref) if n and obj.ref is not None else 0, comments=comments,
                       prediction_before=predicted[0], prediction_after=predicted[1])
 

@@ -163,9 +163,9 @@ class GapHeading(BaseCheck):
             # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
             return [Verdict(imu.name, "heading_across_gaps", "warn",
                             msg + held + ". yaw_across_gaps did not turn it: the IMU's yaw is marked not measured "
-                            "(covariance above orientation_max_sigma), never moved, read 0 after the gap (a restart), or the "
-                            "vehicle stood still before and after the gap (see the heading_not_turned_across_gap log "
-                            "lines). Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
+                            "(covariance above orientation_max_sigma), never moved, read 0 after the gap (a restart), "
+                            "or the vehicle stood still before and after the gap (see the heading_not_turned_across_gap "
+                            "log lines). Log without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
         cost = ""
         if drift is not None:
             wander, rate = drift
