@@ -6,7 +6,9 @@
 # The default config (deploy/docker.toml) listens on tcp/0.0.0.0:7447; the
 # HEALTHCHECK dials the config's listen endpoint on loopback and queries the
 # health key: healthy while the status is ok or degraded, unhealthy when failed
-# (no sensor alive, filter non-finite) or not answering. A replacement config
+# (no sensor alive, no odometry, filter non-finite), still starting once the
+# start period is over (no odometry sample yet: nothing published) or not
+# answering. A replacement config
 # must keep a listen endpoint (or change the HEALTHCHECK to pass --connect).
 # CI checks these install steps without Docker (tests/e2e/test_deploy.py).
 

@@ -11,10 +11,12 @@ Threads: subscriber callbacks count arrivals and queue drops, the worker reports
 accepted samples and core counters, the queryable reads a report. One lock
 guards it all; every call is a few dict/list updates.
 
-Status: `starting` while the daemon waits for its first samples (nothing
-accepted, nothing dropped yet: not an error); `failed` when no sensor is alive,
-the filter state is non-finite or the worker has stopped; `degraded` when any
-configured sensor is not alive; else `ok`.
+Status: `starting` while the daemon waits for its first samples (nothing accepted of
+the sensors whose samples prompt a publish, the odometry, and nothing dropped yet: not
+an error, though nothing is published yet); `failed` when no sensor is alive, none of
+those publishing ones is (nothing is published: a daemon whose odometry died serves no
+pose however alive its IMU), the filter state is non-finite or the worker has stopped;
+`degraded` when any configured sensor is not alive; else `ok`.
 
 `ros_statuses` turns a report into diagnostic_msgs DiagnosticStatus entries (one
 per sensor, one for the filter) for ROS's rqt_robot_monitor / diagnostic_aggregator.
@@ -154,10 +156,16 @@ class Health:
     """Thread-safe health state; `report()` is the queryable's answer."""
 
     def __init__(self, sensors: Sequence[tuple[str, float]], *, clock: Callable[[], float] = time.monotonic,
-                 queue_capacity: int = 0, queue_depth: Callable[[], int] | None = None) -> None:
+                 queue_capacity: int = 0, queue_depth: Callable[[], int] | None = None,
+                 publishing: Sequence[bool] | None = None) -> None:
+        """``sensors``: (name, timeout_s) each; ``publishing``: per sensor, whether its samples prompt a publish
+        (``SensorKind.prompts_publish``; None: every sensor's do)."""
         self._clock = clock
         self._lock = threading.Lock()
         self._sensors = [_Tracker(name, timeout) for name, timeout in sensors]
+        self._publishing = list(publishing) if publishing is not None else [True] * len(self._sensors)
+        if len(self._publishing) != len(self._sensors) or not any(self._publishing):
+            raise ValueError("publishing: one flag per sensor, and at least one sensor whose samples publish")
         self._core: CoreCounters | None = None
         self._queue_capacity = queue_capacity
         self._queue_depth = queue_depth or (lambda: 0)
@@ -250,11 +258,13 @@ class Health:
                         problems.append(f"{s.name}: silent for {age:.2f} s (timeout {timeout:.2f} s)")
             filt = core.filter if core is not None else FilterHealth()
             any_alive = any(v.alive for v in sensors.values())
-            # Waiting for the first samples is not a failure: nothing was accepted and nothing
-            # dropped yet (a sample in the queue is not a drop; garbage is, and fails).
-            starting = (self._worker_alive and filt.finite and all(s.last is None for s in self._sensors)
+            publishers = [s for s, p in zip(self._sensors, self._publishing) if p]
+            publishing = any(sensors[s.name].alive for s in publishers)
+            # Waiting for the first samples is not a failure: nothing of a publishing sensor was accepted and
+            # nothing dropped yet (a sample in the queue is not a drop; garbage is, and fails).
+            starting = (self._worker_alive and filt.finite and all(s.last is None for s in publishers)
                         and not any(v.dropped for v in sensors.values()))
-            failed = not starting and (not any_alive or not filt.finite or not self._worker_alive)
+            failed = not starting and (not publishing or not filt.finite or not self._worker_alive)
             if not filt.finite:
                 problems.append("filter: non-finite state")
             if not self._worker_alive:
@@ -263,6 +273,9 @@ class Health:
                 problems.append("starting: waiting for the first samples")
             elif not any_alive:
                 problems.append("no sensor alive")
+            elif not publishing:
+                names = ", ".join(s.name for s in publishers)
+                problems.append(f"nothing is published: {names}, whose samples prompt every publish, not alive")
             waiting = filt.initialised and not filt.ready
             if waiting:
                 problems.append(f"filter: {filt.not_ready_reason} (nothing is published until then)")

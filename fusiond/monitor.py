@@ -45,6 +45,9 @@ from .presence import Presence, withdrawn
 ALIVE_SUFFIX = "/alive"
 DIAGNOSTICS_SUFFIX = "fusiond/diagnostics"
 RATE_WINDOW_S = 5.0
+# discovery asks for the daemons' liveliness tokens once a period at most (a daemon that comes up is seen within
+# it): a query with nothing on the link to serve it returns at once, and asked again at once it spins a core
+DISCOVER_S = 1.0
 
 # The diagnostics key carries one record or a JSON array of them (the daemon's batches,
 # `[output] diagnostics_batch_s`): one decoder for both, no guessing from the first byte.
@@ -412,7 +415,11 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     deadline = time.monotonic() + timeout
     found: list[str] = []
     while not found and time.monotonic() < deadline and not stop.is_set():
-        found = mon.discover(timeout=min(1.0, max(deadline - time.monotonic(), 0.1)))
+        asked = time.monotonic()
+        period = min(DISCOVER_S, max(deadline - asked, 0.1))
+        found = mon.discover(timeout=period)
+        if not found:  # a query ends at once when nothing on the link serves it: the next one a period on
+            stop.wait(max(asked + period - time.monotonic(), 0.0))
     if not found:
         mon.close()
         where = f"{namespace}/{health_key}{ALIVE_SUFFIX}" if namespace else \

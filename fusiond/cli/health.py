@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from .common import EXIT_UNHEALTHY, add_daemon_client_arguments
-from .tool_session import in_namespace, reached, tool_session
+from .tool_session import how_long, in_namespace, reached, tool_session
 
 __all__ = ["add_arguments", "run"]
 
@@ -15,11 +16,13 @@ __all__ = ["add_arguments", "run"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_daemon_client_arguments(p, reads="health key", key="health key (default: output.health_key of the config)",
                                 timeout=True)
-    p.add_argument("--min-status", choices=["ok", "degraded", "failed"], default="degraded",
-                   help="worst status that still exits 0 (default degraded; failed = any answer)")
+    p.add_argument("--min-status", choices=["ok", "degraded", "starting", "failed"], default="degraded",
+                   help="worst status that still exits 0 (default degraded: a daemon still starting, which "
+                        "publishes nothing yet, exits 1, inside a container's start period; failed = any answer)")
 
 
-_STATUS_RANK = {"failed": 0, "starting": 1, "degraded": 1, "ok": 2}
+# `starting` publishes nothing yet: below `degraded` (a silent sensor, poses still published), above `failed`
+_STATUS_RANK = {"failed": 0, "starting": 1, "degraded": 2, "ok": 3}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,13 +32,15 @@ def run(args: argparse.Namespace) -> int:
 
     cfg, session = tool_session(args, unreachable_exit=EXIT_UNHEALTHY)
     key = args.key or cfg.output.health_key
+    started = time.monotonic()
     try:
         answers = query_health(session, key, args.timeout)
     finally:
         session.close()
     if not answers:
-        print(f"fusiond: no health answer on {key!r}{in_namespace(cfg)} within {args.timeout} s "
-              f"({reached(args, cfg)})", file=sys.stderr)
+        waited = how_long(started, args.timeout)
+        print(f"fusiond: no health answer on {key!r}{in_namespace(cfg)} {waited} ({reached(args, cfg)})",
+              file=sys.stderr)
         return EXIT_UNHEALTHY
     worst = None
     for raw in answers:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from .common import EXIT_USAGE, add_daemon_client_arguments, load_config, non_negative, positive
-from .tool_session import in_namespace, tool_session
+from .tool_session import in_namespace, reached, tool_session
 
 __all__ = ["add_arguments", "run"]
 
@@ -58,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
     per = " ".join(f"{k}={v}" for k, v in result.per_sensor.items())
     print(f"played {result.messages} messages ({per}), {result.bag_seconds:.3f} s of bag in {result.seconds:.3f} s"
           + (" (interrupted)" if result.interrupted else ""))
+    if result.no_daemon:
+        print(f"fusiond: no daemon answered on {cfg.output.health_key!r}{in_namespace(cfg)} within --wait "
+              f"{args.wait:g} s ({reached(args, cfg)}): nothing sent is known to be fused (--wait 0 plays without "
+              "asking)", file=sys.stderr)
+        return 1
     if result.daemon_stopped:
         print(f"fusiond: the daemon stopped answering on {cfg.output.health_key!r}{in_namespace(cfg)} while this "
               f"played ({result.daemon_stopped}): what it was sent after that went nowhere", file=sys.stderr)

@@ -73,6 +73,8 @@ class PlayResult:
     unfused: dict[str, dict[str, int]] = field(default_factory=dict)
     # why the daemon(s) that answered before playing did not after (None: they did, or none was awaited)
     daemon_stopped: str | None = None
+    # a daemon was awaited (``wait_s`` > 0) and none answered: nothing sent is known to be fused
+    no_daemon: bool = False
 
 
 def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> list[bytes]:
@@ -122,6 +124,7 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
     try:
         answers = wait_for_daemon(session, cfg.output.health_key, wait_s) if wait_s > 0 else []
         if wait_s > 0 and not answers:
+            result.no_daemon = True
             log.warning("play_no_daemon", waited_s=wait_s, health_key=cfg.output.health_key,
                         keys=[s.key for s in cfg.sensors if s.name in pubs])
         dropped_before = _queue_dropped(answers)

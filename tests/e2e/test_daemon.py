@@ -94,6 +94,11 @@ def test_daemon_fuses_the_jackal_bag_over_zenoh_like_replay(jackal_bag, tmp_path
         out = Collector(session)
         first = wait_daemon_ready(session, proc, log)
         assert first["status"] == "starting" and "starting: waiting for the first samples" in first["problems"]
+        # a HEALTHCHECK's probe: a daemon that has published nothing yet is not healthy, though it answers
+        for min_status, code in (("degraded", 1), ("starting", 0)):
+            probe = subprocess.run(fusiond_cmd("health", "--config", str(config), "--min-status", min_status),
+                                   cwd=ROOT, capture_output=True, text=True, timeout=30)
+            assert probe.returncode == code and json.loads(probe.stdout)["status"] == "starting", probe
         pubs = sensor_publishers(session, cfg)
 
         # -- the whole bag (but its last odometry message) at PACE x, health sampled meanwhile

@@ -125,3 +125,32 @@ def test_monitor_without_a_daemon_says_so_and_fails(tmp_path):
                           timeout=60)
     assert proc.returncode != 0
     assert "no fusiond daemon reachable" in proc.stderr or "cannot open" in proc.stderr
+
+
+def test_monitor_waiting_for_a_daemon_asks_once_a_discovery_period_not_in_a_busy_loop(monkeypatch):
+    """Nothing on the link: each liveliness query returns at once, so discovery must pace itself
+    (``DISCOVER_S``) rather than spin a core until its timeout; a real session on a port nobody serves."""
+    import zenoh
+
+    import fusiond.monitor as monitor
+
+    calls = []
+    real = monitor.Monitor.discover
+
+    def counted(self, timeout):
+        calls.append(time.monotonic())
+        return real(self, timeout)
+
+    monkeypatch.setattr(monitor.Monitor, "discover", counted)
+    monkeypatch.setattr(monitor, "DISCOVER_S", 0.5)
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("peer"))
+    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{free_port()}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(conf)
+    try:
+        code = monitor.run(session, timeout=2.0, duration=0.0, as_json=True)
+    finally:
+        session.close()
+    assert code == 1
+    assert 1 <= len(calls) <= 8, len(calls)  # about 2.0 / 0.5 queries, not thousands

@@ -36,3 +36,17 @@ def test_play_exits_1_naming_what_the_daemon_did_not_fuse(jackal_bag, tmp_path):
     assert 0 < int(m.group(1)) == int(m.group(2)) == int(m.group(3))
     assert "sensor 'wheel'" not in play.stderr.split("play_finished")[-1]  # the odometry was all fused
     assert re.search(r"played \d+ messages", play.stdout)  # the summary still on stdout
+
+
+def test_play_exits_1_when_no_daemon_answers_and_0_when_told_not_to_ask(jackal_bag, tmp_path):
+    """No daemon on the config's endpoint: nothing sent can be known fused, so play says so and exits 1 after
+    playing (it may feed a daemon it cannot reach for health); `--wait 0` asks nothing and exits 0."""
+    config = write_config(tmp_path / "jackal.toml", free_port())
+    common = ("play", str(jackal_bag), "--config", str(config), "--rate", "0", "--duration", "1", "--no-multicast")
+    play = subprocess.run(fusiond_cmd(*common, "--wait", "0.5"), capture_output=True, text=True, timeout=120,
+                          cwd=ROOT)
+    assert play.returncode == 1 and re.search(r"played \d+ messages", play.stdout), (play.stdout, play.stderr)
+    assert "no daemon answered on 'fusiond/health'" in play.stderr and "within --wait 0.5 s" in play.stderr
+    unasked = subprocess.run(fusiond_cmd(*common, "--wait", "0"), capture_output=True, text=True, timeout=120,
+                             cwd=ROOT)
+    assert unasked.returncode == 0 and "no daemon answered" not in unasked.stderr, unasked.stderr

@@ -77,6 +77,33 @@ def test_starting_then_ok_then_degraded_naming_the_sensor_then_failed():
     assert h.report().status == "ok"
 
 
+def test_without_its_odometry_a_daemon_publishes_nothing_and_is_starting_then_failed_however_alive_its_imu():
+    """Only the odometry's samples prompt a publish: an IMU alone keeps the daemon `starting` (nothing published
+    yet, not an error) until the first odometry sample, and an odometry that dies later leaves nothing published:
+    `failed`, naming it, though the IMU is alive. Every sensor counts when the flags are not given."""
+    clock = Clock()
+    h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock, publishing=[True, False])
+    t0 = clock.t
+    feed(h, clock, t0 + 1.0, {1: 0.01})  # the IMU first (its driver came up first, or the odometry's key is wrong)
+    rep = h.report()
+    assert rep.status == "starting" and rep.sensors["imu"].alive, rep
+    assert "wheel: no sample yet" in rep.problems and "starting: waiting for the first samples" in rep.problems
+    feed(h, clock, t0 + 2.0, {0: 0.02, 1: 0.01})
+    assert h.report().status == "ok"
+    feed(h, clock, t0 + 3.0, {1: 0.01})  # the odometry dies
+    rep = h.report()
+    assert rep.status == "failed" and rep.sensors["imu"].alive and not rep.sensors["wheel"].alive, rep
+    assert "nothing is published: wheel, whose samples prompt every publish, not alive" in rep.problems
+    feed(h, clock, t0 + 3.5, {0: 0.02, 1: 0.01})  # back
+    assert h.report().status == "ok"
+
+    every = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)  # no flags: any sensor's samples count
+    feed(every, clock, clock.t + 1.0, {1: 0.01})
+    assert every.report().status == "degraded"
+    with pytest.raises(ValueError, match="publishing"):
+        Health([("wheel", 0.2), ("imu", 0.2)], clock=clock, publishing=[False, False])
+
+
 def test_timeout_follows_a_slow_sensor_so_it_does_not_flap():
     """5 Hz odometry with 0.4 s gaps: timeout max(0.2, 3 x period) ~ 0.6-1.2 s, never flagged."""
     clock = Clock()
