@@ -164,7 +164,7 @@ class Health:
         self._lock = threading.Lock()
         self._sensors = [_Tracker(name, timeout) for name, timeout in sensors]
         self._publishing = list(publishing) if publishing is not None else [True] * len(self._sensors)
-        if len(self._publishing) != len(self._sensors) or not any(self._publishing):
+        if len(self._publishing) != len(self._sensors) or (self._sensors and not any(self._publishing)):
             raise ValueError("publishing: one flag per sensor, and at least one sensor whose samples publish")
         self._core: CoreCounters | None = None
         self._queue_capacity = queue_capacity
