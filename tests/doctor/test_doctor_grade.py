@@ -87,3 +87,21 @@ def test_the_climb_is_a_problem_only_beyond_what_the_vertical_error_state_allows
     assert grade_verdict(fit(0.0), imu, None).level == "warn"
     learned = grade_verdict(fit(5.0), imu, None, learned=True)
     assert learned.level == "warn" and "twist_pitch state learns" in learned.message
+
+
+def test_the_wander_the_grade_is_judged_by_is_the_state_the_gps_puts_in_the_filter():
+    """The three-axis error state (error_tau_s) is the filter's when configured, whatever vertical_error_sigma says
+    (``GpsKind.state_blocks``); else the vertical one; with neither, a wander is only assumed, and no state holds
+    a climb (``GradeFit.state_sigma_m`` 0)."""
+    from fusiond.core.layout import state_layout
+    from fusiond.doctor.checks.lean import _vertical_noise
+    from fusiond.doctor.series import Series
+
+    for gps, expect in (("", (5.0, 300.0, True)),
+                        ("error_tau_s = 60.0\nerror_sigma = [1.0, 1.0, 2.0]", (2.0, 60.0, True)),
+                        ("vertical_error_sigma = 0.0", (None, None, False))):
+        cfg = robot_config(gps=gps)
+        _, sigma_m, tau, state = _vertical_noise(Series(), cfg.sensor("gps"))
+        assert state == expect[2] == state_layout(cfg).has("gps_error"), gps
+        if state:
+            assert (sigma_m, tau) == expect[:2], gps

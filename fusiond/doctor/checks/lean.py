@@ -97,18 +97,20 @@ class GradeFit:
                 "grade_chords": float(self.chords), "grade_distance_m": self.distance_m}
 
 
-def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float]:
-    """(sigma_w, sigma_m, tau) of the fixes' altitude: white part and slow wander."""
+def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float, bool]:
+    """(sigma_w, sigma_m, tau, state) of the fixes' altitude: white part and slow wander; ``state``: the wander
+    is the GPS's own error state, the one its kind puts in the filter (``GpsKind.state_blocks``: the
+    three-axis one with ``error_tau_s``, else the vertical one), not the one assumed without such a state."""
     if gps.position_noise is not None:
         sigma_w = float(gps.position_noise[2])
     else:
         stated = [v for v in series.gps_sigma_up if math.isfinite(v)]
         sigma_w = float(median(stated)) if stated else float(gps.unknown_position_sigma[2])
-    if gps.vertical_error_sigma > 0.0:
-        return sigma_w, float(gps.vertical_error_sigma), float(gps.vertical_error_tau_s)
     if gps.error_tau_s > 0.0 and gps.error_sigma is not None:
-        return sigma_w, float(gps.error_sigma[2]), float(gps.error_tau_s)
-    return sigma_w, sigma_w, ASSUMED_TAU_S
+        return sigma_w, float(gps.error_sigma[2]), float(gps.error_tau_s), True
+    if gps.vertical_error_sigma > 0.0:
+        return sigma_w, float(gps.vertical_error_sigma), float(gps.vertical_error_tau_s), True
+    return sigma_w, sigma_w, ASSUMED_TAU_S, False
 
 
 def _tilt_from_imu(imu: ImuSensor) -> bool:
@@ -129,7 +131,7 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     pitch = np.interp(to, te, np.asarray(series.est_pitch))
     climb = cumulative(to, -v * np.sin(pitch))
     along = cumulative(to, v * np.cos(pitch))
-    sigma_w, sigma_m, tau = _vertical_noise(series, gps)
+    sigma_w, sigma_m, tau, state = _vertical_noise(series, gps)
     breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
     gt, gu = series.gps_t, series.gps_u
     r, d, ends = [], [], []
@@ -163,8 +165,7 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
             start = None
     se_model = math.sqrt(var_n) / abs(total)
     se_emp = math.sqrt(newey_west((r_ - delta * d_) / total) * n / (n - 1))
-    stated = gps.vertical_error_sigma > 0.0 or (gps.error_tau_s > 0.0 and gps.error_sigma is not None)
-    return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs, sigma_m if stated else 0.0)
+    return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs, sigma_m if state else 0.0)
 
 
 def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None,
