@@ -65,6 +65,7 @@ def _check_struct(obj: msgspec.Struct, at: typing.Callable[[str], str]) -> None:
 
 
 ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "serial", "vsock")
+_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")  # their address is HOST:PORT
 
 
 def check_endpoint(endpoint: str, where: str) -> None:
@@ -75,6 +76,11 @@ def check_endpoint(endpoint: str, where: str) -> None:
                           f"got {endpoint!r}")
     if proto not in ZENOH_PROTOCOLS:
         raise ConfigError(f"{where}: unknown protocol {proto!r} in {endpoint!r}; valid: {', '.join(ZENOH_PROTOCOLS)}")
+    if proto in _IP_PROTOCOLS:  # the address before Zenoh's ?metadata and #config parts
+        host, colon, port = address.split("?", 1)[0].split("#", 1)[0].rpartition(":")
+        if not colon or not host or not port.isdigit() or int(port) > 65535:
+            raise ConfigError(f"{where}: a {proto} endpoint is {proto}/HOST:PORT with a port in 0-65535 "
+                              f"(e.g. {proto}/10.0.0.2:7447; port 0: any free port), got {endpoint!r}")
 
 
 def metrics_address(listen: str, where: str = "metrics.listen") -> tuple[str, int]:

@@ -64,7 +64,9 @@ class FilterHealth(msgspec.Struct, kw_only=True):
     finite: bool = True
     covariance_resets: int = 0
     time_resets: int = 0  # backwards time jumps that reset the filter
-    ready: bool = True  # world frame defined (False until a GPS/absolute pose sensor's first message)
+    # a pose can be published: a sample fused, and the world frame defined (a GPS/absolute pose sensor's first
+    # message, where one is configured); not_ready_reason says which is missing
+    ready: bool = True
     not_ready_reason: str = ""
     heading_known: bool = True  # False while a GPS-referenced heading waits for the first metres of travel
     scales: dict[str, float] = {}  # estimated wheel_scale / gyro_scale, when in the state
@@ -118,7 +120,7 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
         dropped=[dict(s.dropped) for s in core.stats],
         filter=FilterHealth(initialised=core.initialised, time=core.time, finite=finite,
                             covariance_resets=core.covariance_resets, time_resets=core.resets,
-                            ready=core.ready or not core.initialised, not_ready_reason=core.not_ready_reason,
+                            ready=core.ready, not_ready_reason=core.not_ready_reason,
                             heading_known=core.heading_known, scales=core.scales),
         consistency=core.consistency(),
         published=published,

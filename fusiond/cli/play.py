@@ -20,6 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pace relative to the recording (default 1: the recorded pace); 0 = as fast as possible, "
                         "which a daemon may not keep up with (play reports what its queue dropped)")
     p.add_argument("--duration", type=positive, help="play only the first S seconds of the bag")
+    p.add_argument("--allow-missing", action="store_true",
+                   help="play without a configured sensor whose topic is not in the bag (a warning); default: "
+                        "that is an error naming the topic")
     p.add_argument("--listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on (repeatable)")
     p.add_argument("--wait", type=non_negative, default=5.0,
                    help="wait up to S seconds for the config's daemon to answer on its health key before "
@@ -32,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     import threading
 
     from ..replay.bag import BagError, open_bag_samples
+    from ..replay.run import missing_topics
     from ..transport.player import play
 
     cfg = load_config(args.config, needs="play")
@@ -39,6 +43,11 @@ def run(args: argparse.Namespace) -> int:
         bag = open_bag_samples([Path(b) for b in args.bags], cfg.sensors)
     except BagError as err:
         print(f"fusiond: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    if bag.missing and not args.allow_missing:  # a misspelt key would play a bag the daemon never hears part of
+        print(f"fusiond: {missing_topics(bag, cfg)}. Fix the key in the config, or pass --allow-missing to play "
+              "without it", file=sys.stderr)
+        bag.close()
         return EXIT_USAGE
     stop = threading.Event()
     try:

@@ -94,6 +94,15 @@ def _variances(core: FusionCore) -> tuple[float, float]:
     return max(v[0], v[1], v[2]), max(v[3], v[4], v[5])
 
 
+def missing_topics(bag: BagSamples, cfg: Config) -> str:
+    """Each configured sensor whose topic is not in the bag, with the bag topic its key may have meant, and
+    the topics the bag has (the text of an error: ``check_topics``, and play's)."""
+    have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items())) or "none"
+    absent = "; ".join(f"sensor {name!r}: topic /{cfg.sensor(name).key} is not in the bag"
+                       f"{did_you_mean(cfg.sensor(name).key, bag.bag_topics)}" for name in bag.missing)
+    return f"{absent}; the bag has: {have}"
+
+
 def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | None,
                  allow_missing: bool = True) -> None:
     """Before anything is fused: the odometry drives the prediction, and a GPS or absolute pose
@@ -115,9 +124,7 @@ def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | Non
         raise BagError(f"the topic {names} that defines the world frame is not in the bag: nothing would be "
                        f"published; the bag has: {have}")
     if bag.missing and not allow_missing:
-        absent = "; ".join(f"sensor {name!r}: topic /{cfg.sensor(name).key} is not in the bag"
-                           f"{did_you_mean(cfg.sensor(name).key, bag.bag_topics)}" for name in bag.missing)
-        raise BagError(f"{absent}; the bag has: {have}. Fix the key in the config, or pass --allow-missing to "
+        raise BagError(f"{missing_topics(bag, cfg)}. Fix the key in the config, or pass --allow-missing to "
                        "replay without it")
     if bag.missing and warn is not None:
         for name in bag.missing:

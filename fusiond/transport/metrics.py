@@ -98,7 +98,7 @@ def families(a: HealthAnswer) -> list[Any]:
     gauge("filter_finite", "1 while the filter's state and covariance are finite").add_metric([ns], float(f.finite))
     gauge("filter_heading_known", "0 while a GPS-referenced heading is still unknown").add_metric(
         [ns], float(f.heading_known))
-    gauge("filter_ready", "0 while the world frame waits for its absolute sensor").add_metric([ns], float(f.ready))
+    gauge("filter_ready", "0 until the first sample is fused, and while the world frame waits for its absolute sensor").add_metric([ns], float(f.ready))
     if f.time is not None:
         gauge("filter_time_seconds", "message time of the newest estimate").add_metric([ns], f.time)
     counter("filter_covariance_resets", "non-finite covariances reset").add_metric([ns], f.covariance_resets)

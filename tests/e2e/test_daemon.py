@@ -292,6 +292,7 @@ def test_play_feeds_run_like_the_bridge_would(jackal_bag, tmp_path):
 @pytest.mark.parametrize("zenoh_toml, needle", [
     ('mode = "mesh"', "zenoh.mode"),
     ('listen = ["nonsense"]', "zenoh.listen: Endpoints must be of the form"),
+    ('listen = ["tcp/127.0.0.1:99999"]', "zenoh.listen: a tcp endpoint is tcp/HOST:PORT with a port in 0-65535"),
     ('config_file = "nowhere.json5"', "zenoh.config_file: no such file"),
 ])
 def test_run_with_a_bad_config_exits_2_with_one_line(tmp_path, zenoh_toml, needle):

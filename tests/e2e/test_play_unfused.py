@@ -50,3 +50,18 @@ def test_play_exits_1_when_no_daemon_answers_and_0_when_told_not_to_ask(jackal_b
     unasked = subprocess.run(fusiond_cmd(*common, "--wait", "0"), capture_output=True, text=True, timeout=120,
                              cwd=ROOT)
     assert unasked.returncode == 0 and "no daemon answered" not in unasked.stderr, unasked.stderr
+
+
+def test_play_refuses_a_configured_topic_the_bag_lacks_unless_allowed(jackal_bag, tmp_path):
+    """A misspelt key would play a bag the daemon never hears part of: exit 2 naming the sensor and the bag topic
+    it may have meant, before any session is opened; `--allow-missing` plays without it."""
+    config = write_config(tmp_path / "jackal.toml", free_port())
+    config.write_text(config.read_text().replace('key = "imu/data"', 'key = "imu/dat"'))
+    common = ("play", str(jackal_bag), "--config", str(config), "--rate", "0", "--duration", "1", "--no-multicast",
+              "--wait", "0")
+    refused = subprocess.run(fusiond_cmd(*common), capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert refused.returncode == 2 and "sensor 'imu': topic /imu/dat is not in the bag" in refused.stderr, refused
+    assert "/imu/data" in refused.stderr and "--allow-missing" in refused.stderr and not refused.stdout
+    allowed = subprocess.run(fusiond_cmd(*common, "--allow-missing"), capture_output=True, text=True, timeout=120,
+                             cwd=ROOT)
+    assert allowed.returncode == 0 and re.search(r"played \d+ messages \(wheel=\d+ imu=0\)", allowed.stdout), allowed

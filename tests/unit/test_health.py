@@ -219,6 +219,8 @@ def test_health_says_when_the_world_frame_is_not_defined_yet():
 
     cfg = loads(sensor_tables("angular_velocity = true", gps="", gps_key="gps/fix"))
     core = FusionCore(cfg)
+    f = core_counters(core).filter
+    assert not f.initialised and not f.ready and f.not_ready_reason == "no sample fused yet"  # no pose to publish
     core.ingest(ImuSample("imu", 10.0, (0.0, 0.0, 0.0, 1.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0.0, 0.0, 0.0),
                           (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6)))
     f = core_counters(core).filter

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusiond.codecs import encode_odometry_cdr, encode_pose_cdr, encode_tf_cdr, encode_tf_tree_cdr
-from fusiond.config import ConfigError, ZenohConfig
+from fusiond.config import ConfigError, ZenohConfig, check_endpoint
 from fusiond.transport.session import (
     build_config,
     client_config,
@@ -122,3 +122,16 @@ def test_namespace_prefixes_keys_on_the_wire_only():
     finally:
         other.close()
         robot.close()
+
+
+@pytest.mark.parametrize("endpoint, ok", [
+    ("tcp/127.0.0.1:7447", True), ("tcp/[::1]:0", True), ("udp/10.0.0.2:65535", True),
+    ("tcp/localhost:7447?iface=eth0", True), ("unixsock-stream//tmp/zenoh.sock", True), ("serial//dev/ttyUSB0", True),
+    ("tcp/127.0.0.1:99999", False), ("tcp/127.0.0.1", False), ("tcp/:7447", False), ("quic/host:port", False),
+])
+def test_an_ip_endpoint_needs_a_host_and_a_port_in_range(endpoint, ok):
+    if ok:
+        check_endpoint(endpoint, "zenoh.listen")
+    else:
+        with pytest.raises(ConfigError, match=r"^zenoh.listen: a \w+ endpoint is \w+/HOST:PORT"):
+            check_endpoint(endpoint, "zenoh.listen")
