@@ -1,9 +1,9 @@
 """The doctor's word on a logging gap where yaw_across_gaps did turn the heading, by less than the IMU's yaw
 says (``doctor/checks/gap_heading.py``), on the F1/10 recording: its 26.4 s gap at 116 s comes before the first
 standstill (146 s), so the gyro's bias is not learned yet and the filter's heading drifts with it; the drift
-the core takes off the IMU's change across the gap is measured against that heading. The verdict must say
-the heading was turned, by how much, and why by less: not that it was left as it was. Skipped without the
-recording."""
+the core takes off the IMU's change across the gap is measured against that heading (a share of it taken).
+The verdict must say the heading was turned, by how much, and why by less: not that it was left as it was.
+Skipped without the recording."""
 
 from __future__ import annotations
 

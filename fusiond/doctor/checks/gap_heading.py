@@ -156,9 +156,10 @@ class GapHeading(BaseCheck):
             return [Verdict(imu.name, "heading_across_gaps", "warn",
                             msg + f". yaw_across_gaps turned it by {math.degrees(est_turn):+.0f} deg: it "
                             "takes off the IMU's change the drift the yaw showed against the filter's heading before "
-                            "the gap (drift_rad in the heading_turned_across_gap log line), and that heading drifts "
-                            "itself while the gyro's bias is not learned yet (start at rest: see imu/heading). Log "
-                            "without gaps, or add an absolute heading (GPS, pose)", evidence=evidence)]
+                            "the gap (drift_rad in the heading_turned_across_gap log line), a share of it while that "
+                            "heading may drift itself, its gyro's bias not learned yet (start at rest: see "
+                            "imu/heading). Log without gaps, or add an absolute heading (GPS, pose)",
+                            evidence=evidence)]
         if imu.roll_pitch_only and imu.yaw_across_gaps:
             # on, and it did not turn the heading: the messages' yaw is marked not measured, or never moved
             return [Verdict(imu.name, "heading_across_gaps", "warn",

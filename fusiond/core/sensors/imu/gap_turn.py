@@ -8,8 +8,10 @@ is the turn. At the first orientation after the IMU was silent longer than the g
 - The IMU's turn is its yaw change less its drift: outside gaps the yaw's drift against the
   filter's heading is measured in DRIFT_BLOCK_S blocks and averaged over DRIFT_TAU_S
   (``_learn_drift``; a 6-axis AHRS integrating a 0.02 rad/s bias would otherwise turn a car
-  parked through a 25 s gap by 0.5 rad). Its variance: that drift's uncertainty and how far it
-  may move (DRIFT_CHANGE) over the gap, and the yaw's noise at both ends.
+  parked through a 25 s gap by 0.5 rad). That heading drifts too while the gyro's bias is not
+  learned (no standstill yet): the measured drift is weighed against it (``drift_rate``). Its
+  variance: that drift's uncertainty and how far it may move (DRIFT_CHANGE) over the gap, and
+  the yaw's noise at both ends.
 - A logging gap (the filter's inputs ended in it, ``FilterState.turn_unseen``): the filter's
   own change says nothing, the heading turns by the IMU's.
 - Only the IMU silent: the wheels' yaw rate drove the heading meanwhile. Their part of the turn
@@ -58,6 +60,7 @@ class GapTurnImu(Protocol):
     gap_s: float  # filter.gap_s
     bias_sigma: float  # filter.gyro_bias_sigma
     bias_z: int  # the z gyro bias's index in the state, -1 without one
+    bias_z_error: int  # ... and in its error state (the covariance's rows), -1 without one
     gap_turns: int  # headings turned across gaps so far (counted here)
 
 GAP_YAW_DRIFT = 0.01  # rad/s: how fast an IMU's own yaw may drift through a gap before its drift is measured
@@ -136,7 +139,7 @@ def _turn_across_gap(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float
             log.warning("heading_not_turned_across_gap", sensor=imu.cfg.name, stamp=stamp, gap_s=silent,
                         reason=why)
         return heading
-    rate, rate_var = drift_rate(drift)
+    rate, rate_var = drift_rate(drift, heading_drift_var(imu, s))
     imu_turn = rot.wrap(yaw - yaw0)
     filter_turn = rot.wrap(heading - heading0)
     corrected = imu_turn - rate * silent
@@ -216,15 +219,32 @@ def _restart_drift(drift: tuple | None, t: float, diff: float) -> tuple:
     return (t, diff, diff, *drift[3:])
 
 
-def drift_rate(drift: tuple | None) -> tuple[float, float]:
-    """(rate rad/s, its variance) of the IMU yaw's drift against the heading: the blocks' average and
-    its standard error (their scatter over the effective number of blocks averaged); before
-    DRIFT_MIN_BLOCKS blocks, none measured: 0 with GAP_YAW_DRIFT as its standard deviation."""
+def heading_drift_var(imu: "GapTurnImu", s: "FilterState") -> float:
+    """The variance (rad^2/s^2) of how fast the filter's heading drifts: its z gyro bias's error, from the
+    state's covariance (0 without a bias state)."""
+    if imu.bias_z_error < 0:
+        return 0.0
+    return float(s.ekf.P[imu.bias_z_error, imu.bias_z_error])
+
+
+def drift_rate(drift: tuple | None, heading_var: float = 0.0) -> tuple[float, float]:
+    """(rate rad/s, its variance) of the IMU yaw's drift, measured against the filter's heading.
+
+    The blocks' average has their scatter over the effective number of blocks averaged as its variance,
+    and the heading's own drift (``heading_var``: its gyro bias's error) besides: one error common to every
+    block, which averaging does not shrink. A gyro bias not learned yet (no standstill) drifts the heading
+    as much as the IMU's yaw may drift. So the measured drift is weighed against GAP_YAW_DRIFT, the prior on
+    any IMU's drift (zero mean), as a Gaussian posterior: a drift measured against a heading as unsure as
+    the drift itself is taken at half its value. Before DRIFT_MIN_BLOCKS blocks, none measured: 0 with
+    GAP_YAW_DRIFT as its standard deviation."""
+    prior = GAP_YAW_DRIFT**2
     if drift is None or drift[3] < DRIFT_MIN_BLOCKS:
-        return 0.0, GAP_YAW_DRIFT**2
+        return 0.0, prior
     n, mean, m2 = drift[3], drift[4], drift[5]
     effective = min(float(n), 2.0 * DRIFT_TAU_S / DRIFT_BLOCK_S)  # (1 + a) / (1 - a) of the weights, about
-    return mean, max(m2, DRIFT_FLOOR**2) / effective
+    measured = max(m2, DRIFT_FLOOR**2) / effective + heading_var
+    gain = prior / (prior + measured)
+    return gain * mean, gain * measured
 
 
 def _learn_wheel_yaw(sums: tuple | None, t: float, gyro_z: float, wheel_z: float) -> tuple:
@@ -260,4 +280,4 @@ def wheel_yaw_scale(sums: tuple | None) -> tuple[float, float]:
     return k, misfit / (k * k * gg) + k_var / (k * k)
 
 
-__all__ = ["carry_yaw", "drift_rate", "wheel_yaw_scale"]
+__all__ = ["carry_yaw", "drift_rate", "heading_drift_var", "wheel_yaw_scale"]

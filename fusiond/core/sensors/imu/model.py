@@ -203,6 +203,7 @@ class ImuModel(SensorModel):
         self.gap_s = ctx.filter.gap_s
         self.bias_sigma = ctx.filter.gyro_bias_sigma
         self.bias_z = ctx.layout.index("gyro_bias", 2)
+        self.bias_z_error = ctx.layout.index("gyro_bias", 2, error=True)
         self.gap_turns = 0  # headings turned across gaps (``gap_turn.carry_yaw``)
 
     @property
