@@ -111,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         def prove():
             from ..tune.advice import prove_advice
 
-            return prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend)
+            return prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend,
+                                base_final=result.final)
 
         def score():
             from ..replay.evaluate import evaluate

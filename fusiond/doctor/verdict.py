@@ -20,6 +20,9 @@ class Proof(msgspec.Struct):
     advised: bool
     effect: str  # e.g. "likelihood +812, NIS/dof 0.04 -> 0.93"; or why it was not tried
     tried: bool = True
+    # False: the replay moved the estimate but no update measures what it moved (a heading with no heading
+    # reference), so it cannot say whether the line helps: the verdict's evidence is the case for it
+    judged: bool = True
 
 
 class Verdict(msgspec.Struct):
@@ -71,7 +74,7 @@ def format_verdicts(verdicts: list[Verdict]) -> str:
         where = f"{where_to_set(v.key)}: {v.suggestion}".replace("\n", "\n          ")
         if p is None:
             lines.append(f"       -> {where}")
-        elif p.advised:
+        elif p.advised or not p.judged:
             lines.append(f"       -> {where}\n          ({'replayed' if p.tried else 'not replayed'}: {p.effect})")
         else:
             lines.append(f"       {'tried' if p.tried else 'not replayed'} {where}\n          ({p.effect}; not advised)")

@@ -95,7 +95,7 @@ def write_report(result: ReplayResult, directory: Path, title: str, evaluation: 
         f"</td><td>{html.escape(v.message)}</td><td><code>{html.escape(v.key)}</code>"
         + (f"<br><code>{html.escape(v.suggestion)}</code>" if v.suggestion else "")
         + (f"<br>{'replayed' if v.proof.tried else 'not replayed'}: {html.escape(v.proof.effect)}"
-           f"{'' if v.proof.advised else '; not advised'}" if v.proof is not None else "") + "</td></tr>"
+           f"{'' if v.proof.advised or not v.proof.judged else '; not advised'}" if v.proof is not None else "") + "</td></tr>"
         for v in verdicts
     )
     cons = "\n".join(

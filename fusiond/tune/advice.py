@@ -13,17 +13,21 @@ are left out of both scores, and the change is judged by how well the filter
 then predicts everything else. The line is advised only when -log L improves by more than the number of keys it
 sets: Akaike's penalty of one per free parameter, the smallest improvement that a change fitted to
 this recording has to beat to be expected to hold on the next one. Otherwise it is printed as tried,
-with what it did.
+with what it did. A line that moves the estimate but none of its updates (a heading turned where nothing
+measures the heading) cannot be judged by the likelihood: it is printed as the doctor's, with how far it
+moved the final pose and why the replay cannot tell.
 """
 
 from __future__ import annotations
 
+import math
 import time
 import tomllib
 from collections.abc import Sequence
 
 import msgspec
 
+from ..estimator import rotation as rot
 from ..estimator.backend import Backend
 from ..collector import skips_the_caller
 from ..config import Config, ConfigError, convert, validate
@@ -104,10 +108,12 @@ def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                  budget_s: float = 60.0, base_records: Sequence[object] | None = None,
-                 backend: Backend | None = None, workers: int | None = None) -> list[Verdict]:
+                 backend: Backend | None = None, workers: int | None = None,
+                 base_final: Sequence[float] | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
     recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
-    when the caller kept them (else the recording is replayed once more for them). Then one replay per
+    when the caller kept them (else the recording is replayed once more for them), and ``base_final`` its
+    final pose (t, x y z, qx qy qz qw; else replayed for, where a line changes no update). Then one replay per
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
     recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
     ``backend``: the estimator's in these replays (``FusionCore``). ``workers``: how many lines are replayed
@@ -117,12 +123,21 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
         return list(verdicts)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
         return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,
-                       backend, workers)
+                       backend, workers, base_final)
+
+
+def _moved(before: Sequence[float] | None, after: Sequence[float] | None) -> str:
+    """How far ``after``'s final pose is from ``before``'s ("" when the same, or either unknown)."""
+    if before is None or after is None or tuple(before) == tuple(after):
+        return ""
+    shift = math.dist(before[1:4], after[1:4])
+    turn = math.degrees(abs(rot.wrap(rot.yaw(tuple(after[4:8])) - rot.yaw(tuple(before[4:8])))))
+    return f"{shift:.2f} m and {turn:.0f} deg of heading"
 
 
 def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
             deadline: float, budget_s: float, base_records: Sequence[object] | None,
-            backend: Backend | None, workers: int | None) -> list[Verdict]:
+            backend: Backend | None, workers: int | None, base_final: Sequence[float] | None) -> list[Verdict]:
     """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
@@ -149,12 +164,24 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
 
     def prove(job: tuple[tuple[str, str], Verdict, Config, int]) -> Proof:
         _, v, changed, n_keys = job
+        ends: list = []
         with muted():
-            records = replay_records(changed, samples, backend)
+            records = replay_records(changed, samples, backend, ends)
         ref, dropped = _comparable(full, records)
         before, after = score(base_records, ref), score(records, ref)
         gain = before.neg_loglik - after.neg_loglik
         if gain == 0.0 and not dropped and after.rejected == before.rejected:
+            start = base_final
+            if start is None:
+                start_ends: list = []
+                with muted():
+                    replay_records(cfg, samples, backend, start_ends)
+                start = start_ends[0] if start_ends else None
+            moved = _moved(start, ends[0] if ends else None)
+            if moved:  # the estimate moved where no update looks (a heading with nothing measuring it)
+                return Proof(False, f"it moves the final pose by {moved} but changes none of the filter's "
+                                    "updates: nothing on this recording measures what it changes, so the replay "
+                                    "cannot judge it; the evidence above is the case for it", judged=False)
             # a key the filter does not use here (a floor of a channel only the doctor's check reads)
             return Proof(False, "it changes none of the filter's updates on this recording, only the "
                                 "doctor's own check")

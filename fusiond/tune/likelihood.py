@@ -52,9 +52,11 @@ DEFAULT_GATE = ZERO_RATE_GATE  # sigma: the cap of a rejected update of a sensor
 TermKey = tuple[str, str, float, int]  # sensor, channel, stamp, occurrence (records sharing the first three)
 
 
-def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | None = None) -> list[DiagnosticsRecord]:
+def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | None = None,
+                   ends: list | None = None) -> list[DiagnosticsRecord]:
     """Every diagnostics record of one replay of ``samples`` (in the order given: a bag's) through a
-    fresh FusionCore with ``cfg`` (and ``backend``, the estimator's: ``FusionCore``)."""
+    fresh FusionCore with ``cfg`` (and ``backend``, the estimator's: ``FusionCore``). ``ends``: the final
+    pose (t, x y z, qx qy qz qw) is appended to it, when any sample was fused."""
     core = FusionCore(cfg, backend)
     ingest = core.ingest
     records: list[DiagnosticsRecord] = []
@@ -64,6 +66,9 @@ def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | No
         step = ingest(s, keep)
         if step.records:
             records.extend(step.records)
+    if ends is not None and core.initialised:
+        t, x = core.pose()
+        ends.append((t, *x.tolist()))
     return records
 
 

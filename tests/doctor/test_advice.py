@@ -152,3 +152,20 @@ def test_the_doctor_command_prints_the_replayed_effect(drive, tmp_path: Path, ca
     assert "gyro_noise = 0.00" in out and "replayed" not in out, out
     assert main(["replay", str(tmp_path / "bag"), "--config", str(cfg), "--advice-budget-s", "-1"]) == 2
     assert "--advice-budget-s" in capsys.readouterr().err
+
+
+def test_a_line_that_turns_a_heading_nothing_measures_is_shown_as_unjudged_not_refused() -> None:
+    """A two-D robot whose IMU kept its yaw through an 8 s logging gap in which it turned 0.9 rad, its orientation
+    not used: the line that lets that yaw turn the heading moves the estimate, but no update measures a heading
+    (the gyro drives it, nothing absolute), so the likelihood cannot tell. The proof says so, with how far the
+    final pose moved, and the line is printed as the doctor's advice, not as refused."""
+    samples = [s for s in simulate(SimConfig(duration=20.0)) if not 1004.0 <= s.stamp < 1012.0]  # stamps from 1000 s
+    cfg = robot_config(orientation="off", filt="two_d_mode = true")
+    line = Verdict("imu", "heading_across_gaps", "warn", "planted", "sensors.imu.orientation",
+                   'orientation = "roll_pitch"\nyaw_across_gaps = true')
+    (v,) = prove_advice(cfg, samples, [line])
+    assert v.proof is not None and v.proof.tried and not v.proof.advised and not v.proof.judged, v.proof
+    turned = float(v.proof.effect.split(" m and ")[1].split(" deg")[0])
+    assert turned > 30.0 and "the replay cannot judge it" in v.proof.effect, v.proof  # ~0.9 rad turned in
+    text = format_verdicts([v])
+    assert "       -> in the [[sensors]] table" in text and "not advised" not in text, text

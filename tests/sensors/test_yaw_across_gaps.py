@@ -185,6 +185,24 @@ def _drifting(samples, rate: float):
 DRIFT = 0.02  # rad/s: a drifting 6-axis AHRS
 
 
+def test_in_two_d_mode_the_imu_yaw_still_carries_a_gap_turn():
+    """two_d_mode holds roll and pitch at 0, so no orientation row is fused; the IMU's yaw still kept the turn
+    made in a logging gap, and turns the heading across it as in three dimensions (the first test's gap)."""
+    gap = (4.0, 12.0)
+    samples = [s for s in simulate(SimConfig(duration=20.0)) if not T0 + gap[0] <= s.stamp < T0 + gap[1]]
+    turned = truth_turn(3.0, 13.0)
+    core = FusionCore(make_config("roll_pitch", extra_imu="yaw_across_gaps = true", extra_filter="two_d_mode = true"))
+    poses, channels = [], set()
+    for s in samples:
+        step = core.ingest(s)
+        channels.update(r.channel for r in step.records)
+        if step.publish:
+            poses.append((core.time, rot.yaw(tuple(core.pose()[1][3:7].tolist()))))
+    assert imu_model(core).gap_turns == 1 and "orientation" not in channels  # no row fused, the yaw carried
+    carried = rot.wrap(yaw_at(poses, T0 + 13.0) - yaw_at(poses, T0 + 3.0))
+    assert abs(rot.wrap(carried - turned)) < 0.02, (carried, turned)
+
+
 REST = 2.0  # s at rest before the robot moves: the gyro's bias is learned, the heading does not drift
 
 

@@ -179,8 +179,9 @@ class GapHeading(BaseCheck):
                             msg + held + ". The IMU kept its yaw through the gaps: let its yaw change across a gap "
                             f"turn the heading{cost}", sensor_key(imu.name, "yaw_across_gaps"),
                             "yaw_across_gaps = true", evidence)]
+        fuse = ("take its orientation as roll_pitch (two_d_mode holds roll and pitch at 0: only its yaw's turns "
+                "across gaps are used)" if cfg.filter.two_d_mode else "fuse its roll/pitch")
         return [Verdict(imu.name, "heading_across_gaps", "warn",
-                        msg + held + ". The IMU kept its yaw through the gaps: fuse its roll/pitch, "
-                        "and with yaw_across_gaps its "
+                        msg + held + f". The IMU kept its yaw through the gaps: {fuse}, and with yaw_across_gaps its "
                         f"yaw change across a gap turns the heading{cost}", sensor_key(imu.name, "orientation"),
                         'orientation = "roll_pitch"\nyaw_across_gaps = true', evidence)]

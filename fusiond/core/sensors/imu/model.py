@@ -70,6 +70,8 @@ class ImuPolicy:
         self._gyro_floor = cfg.gyro_min_sigma**2
         self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
         self._gravity_tilt = cfg.tilt_from_gravity
+        # roll_pitch with yaw_across_gaps reads the yaw for the gap turn even where no row is fused (two-D mode)
+        self._reads_yaw = cfg.yaw_across_gaps and cfg.roll_pitch_only
         # The last covariance tuple of each kind and what it resolved to: a driver sends the same
         # covariance in every message, so its checks, floors and rotation into base_link are done
         # once per distinct value (a tuple compares equal only if finite: NaN != NaN).
@@ -129,7 +131,7 @@ class ImuPolicy:
         q_base = rpy_cov = None
         rows: tuple[int, ...] = ()
         yaw_measured = False
-        if self._rows and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
+        if (self._rows or self._reads_yaw) and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             oc = s.orientation_covariance
             known = oc == self._ori_seen
             if not (known or finite(oc)):
@@ -199,7 +201,8 @@ class ImuModel(SensorModel):
         self._fixed_yaw = cfg.yaw_offset + cfg.magnetic_declination  # navsat_transform's convention
         self.orientation_period = 1.0 / cfg.orientation_rate_hz if cfg.orientation_rate_hz > 0.0 else 0.0
         self.thinned = 0  # orientations not fused for ``orientation_rate_hz`` (the gyro of the sample is)
-        self.carries_yaw = cfg.yaw_across_gaps and cfg.roll_pitch_only and not ctx.two_d
+        # in two-D mode too: roll and pitch are held at 0 there, the IMU's yaw still kept its turns in a gap
+        self.carries_yaw = cfg.yaw_across_gaps and cfg.roll_pitch_only
         self.gap_s = ctx.filter.gap_s
         self.bias_sigma = ctx.filter.gyro_bias_sigma
         self.bias_z = ctx.layout.index("gyro_bias", 2)
@@ -222,11 +225,11 @@ class ImuModel(SensorModel):
             s.gyro, s.gyro_cov, s.gyro_last = inp.gyro, inp.gyro_cov, (self.index, stamp)
             if self.learns_bias:
                 records.extend(learn_bias_at_rest(self, s, inp, stamp, emit, late))
-        if inp.attitude is not None and inp.rows and self._orientation_due(s, stamp, emit):
+        if inp.attitude is not None and (inp.rows or self.carries_yaw) and self._orientation_due(s, stamp, emit):
             rpy, rows = inp.rpy, inp.rows
             if self.absolute and self._fixed_yaw:
                 rpy = (rpy[0], rpy[1], rot.wrap(rpy[2] + self._fixed_yaw))
-            if not s.attitude_ready:
+            if rows and not s.attitude_ready:
                 initialise_attitude(s, rpy, self.absolute)
             if self.carries_yaw and inp.yaw_measured:
                 carry_yaw(self, s, rpy[2], inp.rpy_cov[8], inp.gyro, inp.gyro_cov, stamp, emit)
