@@ -20,8 +20,9 @@ class Proof(msgspec.Struct):
     advised: bool
     effect: str  # e.g. "likelihood +812, NIS/dof 0.04 -> 0.93"; or why it was not tried
     tried: bool = True
-    # False: the replay moved the estimate but no update measures what it moved (a heading with no heading
-    # reference), so it cannot say whether the line helps: the verdict's evidence is the case for it
+    # False: the line changed none of the replay's updates (it moved only what no update measures, such as a
+    # heading with no heading reference, or nothing but the doctor's own check), so the likelihood cannot say
+    # whether it helps: the verdict's evidence is the case for it
     judged: bool = True
 
 

@@ -13,9 +13,9 @@ are left out of both scores, and the change is judged by how well the filter
 then predicts everything else. The line is advised only when -log L improves by more than the number of keys it
 sets: Akaike's penalty of one per free parameter, the smallest improvement that a change fitted to
 this recording has to beat to be expected to hold on the next one. Otherwise it is printed as tried,
-with what it did. A line that moves the estimate but none of its updates (a heading turned where nothing
-measures the heading) cannot be judged by the likelihood: it is printed as the doctor's, with how far it
-moved the final pose and why the replay cannot tell.
+with what it did. A line that changes none of the updates cannot be judged by the likelihood (a heading
+turned where nothing measures the heading; a key only the doctor's own check reads): it is printed as the
+doctor's, with how far it moved the final pose, if at all, and why the replay cannot tell.
 """
 
 from __future__ import annotations
@@ -182,9 +182,10 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                 return Proof(False, f"it moves the final pose by {moved} but changes none of the filter's "
                                     "updates: nothing on this recording measures what it changes, so the replay "
                                     "cannot judge it; the evidence above is the case for it", judged=False)
-            # a key the filter does not use here (a floor of a channel only the doctor's check reads)
+            # a key the filter does not use here (a floor of a channel only the doctor's check reads; a channel
+            # the filter already leaves out): nothing against it, and its case is the doctor's
             return Proof(False, "it changes none of the filter's updates on this recording, only the "
-                                "doctor's own check")
+                                "doctor's own check: the replay cannot judge it", judged=False)
         return Proof(gain > n_keys, _effect(before, after, v.sensor, dropped))
 
     # each line's replay is independent of the others': side by side on the machine's cores (``forked``)

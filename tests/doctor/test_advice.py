@@ -80,6 +80,8 @@ def test_a_key_the_filter_does_not_use_here_is_said_to_change_nothing(drive) -> 
                     "twist_min_sigma = [0.01, 0.03]")
     (v,) = prove_advice(cfg, drive, [floor])
     assert v.proof is not None and not v.proof.advised and "changes none of the filter's updates" in v.proof.effect
+    assert not v.proof.judged and "moves the final pose" not in v.proof.effect  # nothing to judge it by
+    assert "not advised" not in format_verdicts([v])
 
 
 def test_lines_replayed_side_by_side_get_the_proofs_of_lines_replayed_in_turn(drive) -> None:
