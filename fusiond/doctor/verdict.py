@@ -24,6 +24,9 @@ class Proof(msgspec.Struct):
     # heading with no heading reference, or nothing but the doctor's own check), so the likelihood cannot say
     # whether it helps: the verdict's evidence is the case for it
     judged: bool = True
+    # True: it made the likelihood worse by more than the keys it sets (the advice rule's margin the other way):
+    # the replay contradicts the check, and a problem it came with is shown as a warning
+    refuted: bool = False
 
 
 class Verdict(msgspec.Struct):

@@ -15,7 +15,8 @@ sets: Akaike's penalty of one per free parameter, the smallest improvement that 
 this recording has to beat to be expected to hold on the next one. Otherwise it is printed as tried,
 with what it did. A line that changes none of the updates cannot be judged by the likelihood (a heading
 turned where nothing measures the heading; a key only the doctor's own check reads): it is printed as the
-doctor's, with how far it moved the final pose, if at all, and why the replay cannot tell.
+doctor's, with how far it moved the final pose, if at all, and why the replay cannot tell. A problem
+whose line makes -log L worse by more than its keys is shown as a warning: the replay contradicts it.
 """
 
 from __future__ import annotations
@@ -186,10 +187,20 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             # the filter already leaves out): nothing against it, and its case is the doctor's
             return Proof(False, "it changes none of the filter's updates on this recording, only the "
                                 "doctor's own check: the replay cannot judge it", judged=False)
-        return Proof(gain > n_keys, _effect(before, after, v.sensor, dropped))
+        return Proof(gain > n_keys, _effect(before, after, v.sensor, dropped), refuted=gain < -n_keys)
 
     # each line's replay is independent of the others': side by side on the machine's cores (``forked``)
     for job, proof in zip(to_replay, run_side_by_side(prove, to_replay, workers, out_of_time)):
         proofs[job[0]] = proof
-    return [msgspec.structs.replace(v, proof=proofs[(v.key, v.suggestion)]) if v.suggestion else v
-            for v in verdicts]
+    return [_with_proof(v, proofs[(v.key, v.suggestion)]) if v.suggestion else v for v in verdicts]
+
+
+def _with_proof(v: Verdict, proof: Proof) -> Verdict:
+    """``v`` with its line's proof; a problem whose line the replay refutes is a warning that says so: two
+    independent tests of the same claim disagree, and the doctor does not call it a problem on one of them."""
+    if v.level == "problem" and proof.refuted:
+        return msgspec.structs.replace(
+            v, level="warn", proof=proof,
+            message=v.message + ". Replayed, its line makes the filter's predictions worse (below): the replay "
+                                "does not bear this check out on this recording, so it is a warning, not a problem")
+    return msgspec.structs.replace(v, proof=proof)
