@@ -12,12 +12,13 @@ import math
 
 import numpy as np
 
-from ..config import GpsSensor
+from ..config import Config, GpsSensor, ImuSensor
+from .gyro import quiet_episodes
 from .median import median
 from .series import Series
 
 __all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro",
-           "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning", "wheel_yaw_fit",
+           "imu_yaw_drift", "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning", "wheel_yaw_fit",
            "wrap"]
 
 WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
@@ -55,6 +56,23 @@ def imu_vs_gyro(series: Series) -> tuple[float, float] | None:
     the gyro's bias: yaw - gyro heading drifts at r - b."""
     ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
     return vs_gyro(series, ti, yi, series.imu_breaks)
+
+
+def imu_yaw_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, float, bool] | None:
+    """(wander, drift rate r, measured at rest) of the IMU's own yaw against the bias-corrected gyro: ``imu_vs_gyro``'s
+    slope is r - b, and b is the gyro's z bias as it reads at rest, the median over the run's standstills (the
+    first alone can be a false standstill, and the bias moves over a run; one figure for every check that
+    names the drift). Without a fused gyro or a standstill b is unknown: 0, and r - b is all that can be told
+    (the third item False). None without the IMU's yaw and a gyro heading to compare."""
+    compared = imu_vs_gyro(series)
+    if compared is None or not all(math.isfinite(v) for v in compared):
+        return None
+    wander, slope = compared
+    rest, _ = quiet_episodes(series, cfg, imu) if imu.angular_velocity else ([], [])
+    means = [e.gyro_mean for e in rest if math.isfinite(e.gyro_mean)]
+    if not means:
+        return wander, slope, False
+    return wander, slope + float(median(means)), True
 
 
 def vs_gyro(series: Series, t: np.ndarray, y: np.ndarray, breaks: list[float]) -> tuple[float, float] | None:

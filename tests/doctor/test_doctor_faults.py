@@ -103,6 +103,32 @@ def test_a_turn_hidden_by_a_logging_gap_is_carried_by_the_imu_yaw_or_named_when_
     assert v.key == "sensors.imu.orientation" and v.suggestion == 'orientation = "roll_pitch"\nyaw_across_gaps = true', v
 
 
+def test_a_gap_turn_that_took_off_too_little_drift_is_named_as_turned():
+    """An AHRS whose yaw drifts 0.05 rad/s, every topic silent from 1 s to 11 s of the drive (after REST s at rest):
+    the core has no block of the drift measured yet (DRIFT_MIN_BLOCKS of 5 s), so it turns the heading by the IMU's
+    whole change, the drift's 0.5 rad with it; the doctor measures the drift over the run, finds the turn beyond
+    it ~0.5 rad short of the estimate's (beyond GAP_TURN_RAD + GAP_DRIFT_RATE x 10 s = 0.3 rad), and says the
+    heading was turned, by how much, and that the drift taken off is the core's, not that nothing turned it."""
+    from fusiond.core.sensors import ImuSample
+    from fusiond.doctor.checks.gap_heading import GAP_DRIFT_RATE, GAP_TURN_RAD
+
+    rest, drift, gap = 2.0, 0.05, (3.0, 13.0)
+    samples = []
+    for s in drop_span(simulate(SimConfig(duration=60.0, standstill=rest)), T0 + gap[0], T0 + gap[1]):
+        if isinstance(s, ImuSample):
+            r, p, y = rot.to_rpy(s.orientation)
+            s = ImuSample(s.sensor, s.stamp, rot.from_rpy(r, p, rot.wrap(y + drift * (s.stamp - T0))),
+                        s.orientation_covariance, s.angular_velocity, s.angular_velocity_covariance)
+        samples.append(s)
+    assert drift * (gap[1] - gap[0]) > GAP_TURN_RAD + GAP_DRIFT_RATE * (gap[1] - gap[0])  # the trait
+    r = run_samples(samples, make_config(orientation="roll_pitch", gyro=True))
+    (v,) = [v for v in r.verdicts() if v.channel == "heading_across_gaps"]
+    turned = v.evidence["estimate_turn_rad"]
+    assert abs(v.evidence["largest_missed_turn_rad"] + drift * (gap[1] - gap[0])) < 0.1, v.evidence
+    assert f"yaw_across_gaps turned it by {math.degrees(turned):+.0f} deg" in v.message, v.message
+    assert "did not turn it" not in v.message and "heading_turned_across_gap" in v.message and not v.suggestion, v
+
+
 def test_gap_heading_reads_the_series_nearest_the_gap_and_nothing_farther():
     """The bins compared must lie within BIN_S of the estimate's times (the IMU) and GAP_EDGE_S of the gap (the
     estimate): a series that stops before the gap, or one with a single bin, gives no comparison."""

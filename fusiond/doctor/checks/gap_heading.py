@@ -36,8 +36,7 @@ from ...config import Config, ImuSensor
 from ...core.sensors.registry import kind_of
 from ...estimator import rotation as rot
 from ..bins import BIN_S
-from ..gyro import quiet_episodes
-from ..heading import imu_vs_gyro, timed
+from ..heading import imu_yaw_drift, timed
 from ..series import Series
 from ..check import BaseCheck
 from ..evidence import Evidence
@@ -79,19 +78,10 @@ def _at(t: np.ndarray, y: np.ndarray, when: float) -> float | None:
 
 
 def _relative_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, float] | None:
-    """(wander, drift rate) of the IMU's yaw against the bias-corrected gyro: ``heading.imu_vs_gyro``'s slope
-    is r - b, b the gyro's z bias, read at the first standstill (0 without one: then r - b is all that can be
-    told, and it is the drift a relative yaw adds to the gyro's). None without a gyro to compare with."""
-    compared = imu_vs_gyro(series)
-    if compared is None or not all(math.isfinite(v) for v in compared):
-        return None
-    wander, slope = compared
-    b = 0.0
-    if imu.angular_velocity:
-        standstills, _ = quiet_episodes(series, cfg, imu)
-        if standstills and math.isfinite(standstills[0].gyro_mean):
-            b = standstills[0].gyro_mean
-    return wander, slope + b
+    """(wander, drift rate) of the IMU's yaw against the bias-corrected gyro (``heading.imu_yaw_drift``; without a
+    standstill r - b, the drift a relative yaw adds to the gyro's). None without a gyro to compare with."""
+    drift = imu_yaw_drift(series, cfg, imu)
+    return None if drift is None else drift[:2]
 
 
 class GapHeading(BaseCheck):

@@ -23,9 +23,7 @@ from ...core.sensors.registry import kind_of
 from ...core.sensors.gps import HEADING_READY_SIGMA
 from ..check import BaseCheck, found
 from ..evidence import Evidence
-from ..gyro import quiet_episodes
-from ..heading import WANDER_RAD, detrended_rms, gps_sigma, imu_vs_gyro, timed, vs_gyro, wrap
-from ..median import median
+from ..heading import WANDER_RAD, detrended_rms, gps_sigma, imu_vs_gyro, imu_yaw_drift, timed, vs_gyro, wrap
 from ..series import Series
 from ..verdict import Verdict, sensor_key
 
@@ -122,7 +120,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                     notes.append(f"the wheels agree with the gyro to {wheel_vs_gyro:.3f} rad rms")
                 elif math.isfinite(wheel_vs_imu) and wheel_vs_imu < WANDER_RAD <= wander:
                     culprit_gyro = True
-    own_drift = _own_drift(series, cfg, imu, compared)
+    own_drift = _own_drift(series, cfg, imu)
     if math.isfinite(own_drift):
         evidence["imu_yaw_drift_rad_s"] = own_drift
     if abs(own_drift) > DRIFT_RAD_S and not culprit_gyro:
@@ -219,17 +217,12 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
     return None
 
 
-def _own_drift(series: Series, cfg: Config, imu: ImuSensor, compared: tuple[float, float] | None) -> float:
-    """The IMU yaw's own drift rate, rad/s: the median slope of (yaw - integrated raw gyro), r - b, plus the
-    gyro's bias b as it reads at rest (the standstills' median). The filter's bias estimate will not do:
-    a fused drifting yaw drags it to b - r (the gyro verdict's "moved by another source"). NaN without
-    standstills."""
-    if compared is None or not math.isfinite(compared[1]):
-        return math.nan
-    rest, _ = quiet_episodes(series, cfg, imu)
-    if not rest:
-        return math.nan
-    return compared[1] + float(median([e.gyro_mean for e in rest]))
+def _own_drift(series: Series, cfg: Config, imu: ImuSensor) -> float:
+    """The IMU yaw's own drift rate, rad/s (``imu_yaw_drift``: against the gyro, its bias as it reads at rest).
+    The filter's bias estimate will not do: a fused drifting yaw drags it to b - r (the gyro verdict's "moved
+    by another source"). NaN without standstills."""
+    drift = imu_yaw_drift(series, cfg, imu)
+    return drift[1] if drift is not None and drift[2] else math.nan
 
 
 class Heading(BaseCheck):

@@ -31,7 +31,7 @@ from ..gyro import quiet_episodes
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
-from ..heading import WANDER_RAD, imu_vs_gyro
+from ..heading import WANDER_RAD, imu_yaw_drift
 
 
 __all__ = ["LateBias"]
@@ -79,10 +79,10 @@ class LateBias(BaseCheck):
                   if cfg.filter.continuous_odom else
                   "The bias update turns the heading back as far as the filter's correlations allow; the track driven "
                   "meanwhile stays bent"))
-        wander, slope = imu_vs_gyro(series) or (math.nan, math.nan)
-        if math.isfinite(wander) and math.isfinite(slope):
-            # yaw - raw gyro heading drifts at r - b: the IMU's own drift against the bias-corrected gyro is r
-            rate = slope + b
+        drift = imu_yaw_drift(series, cfg, imu)
+        if drift is not None:
+            # the IMU's own drift against the bias-corrected gyro, r: the figure every check names
+            wander, rate, _ = drift
             run = t_end - t_start
             late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured ...
             if cfg.filter.continuous_odom:  # ... plus the drift left in the heading after the update
@@ -97,10 +97,16 @@ class LateBias(BaseCheck):
                                 f"the start, off by ~{relative_cost:.3f} rad on average over the run against "
                                 f"~{late_cost:.3f} now", sensor_key(imu.name, "orientation"),
                                 'orientation = "relative"', evidence)]
-            msg += (". The IMU's own yaw would not do better: it "
-                    + (f"wanders by {wander:.3f} rad rms" if wander >= WANDER_RAD
-                       else f"drifts {rate:+.5f} rad/s, ~{relative_cost:.3f} rad off on average over the run "
-                       f"against ~{late_cost:.3f} now"))
+            if wander >= WANDER_RAD:
+                msg += f". The IMU's own yaw would not do better: it wanders by {wander:.3f} rad rms"
+            elif relative_cost >= late_cost:
+                msg += (f". The IMU's own yaw would not do better: it drifts {rate:+.5f} rad/s, ~{relative_cost:.3f} "
+                        f"rad off on average over the run against ~{late_cost:.3f} now")
+            else:  # better on this estimate, not by the margin its confounders (the gyro's scale, a moving bias) need
+                msg += (f". The IMU's own yaw, fused as relative (orientation = \"relative\"), would be off by "
+                        f"~{relative_cost:.3f} rad on average over the run against ~{late_cost:.3f} now (it drifts "
+                        f"{rate:+.5f} rad/s): better on this estimate, though not by the half it needs to be advised "
+                        "without a heading reference to judge the two by")
         return [Verdict(imu.name, "heading", "warn", msg + ". Start recordings with the vehicle at rest for at least "
                         f"standstill_s ({cfg.filter.standstill_s:g} s) so that the bias is learned before it drives",
                         evidence=evidence)]
