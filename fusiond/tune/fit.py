@@ -475,11 +475,15 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         s = sensor_of(p) or ""
         note = notes[i] or ("the likelihood changes by less than 1 over a factor of 2" if status[i] == "not informed"
                             else "")
-        if floored[i] and status[i] in ("tuned", "unchanged"):
-            note = (f"held at the noise the recording shows at rest, {p.measured_note}: the fit would go lower"
-                    if p.held_by_measured() else
-                    f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower")
         below = _below_measured(p, value(config, p))
+        if floored[i] and status[i] in ("tuned", "unchanged"):
+            if below and p.held_by_measured():  # not held there: it started below it, and the fit does not lift it
+                note, below = (f"the fit would go lower still; {below}, where it started (lifting it is the "
+                               "user's call)"), ""
+            else:
+                note = (f"held at the noise the recording shows at rest, {p.measured_note}: the fit would go lower"
+                        if p.held_by_measured() else
+                        f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower")
         if below:
             note = f"{note}; {below}" if note else below
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),
