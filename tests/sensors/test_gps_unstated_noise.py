@@ -101,3 +101,20 @@ def test_no_bound_from_too_few_increments() -> None:
     from fusiond.core.sensors.gps.model import _upper_variance
 
     assert _upper_variance(1.0, 0) is None and _upper_variance(1.0, 1) is None
+
+
+def test_an_unstated_altitude_whose_nis_is_low_names_unknown_position_sigma():
+    """Fixes 0.3 m noisy on every axis stating no accuracy: their altitude is taken at unknown_position_sigma's
+    5 m, so its NIS per dof is about (0.3 / 5)^2, far below its bounds. The verdict names the key that set that
+    noise (position_noise would replace the horizontal noise the filter measures from the fixes too); stated,
+    the same fixes are consistent."""
+    from fusiond.replay.run import run_samples
+
+    w = World(duration=60.0, gps_rate=10.0, gps_sigma=0.3)
+    samples = simulate(w)
+    cfg = robot_config(gps="")
+    (v,) = [v for v in run_samples(_unstated(samples), cfg).verdicts() if v.channel == "altitude"]
+    assert v.level == "warn" and "NIS low" in v.message and v.key == "sensors.gps.unknown_position_sigma", v
+    assert "which state none" in v.message, v.message
+    (stated,) = [v for v in run_samples(samples, cfg).verdicts() if v.channel == "altitude"]
+    assert stated.level == "ok" and stated.key == "", stated  # stated, the same fixes' noise is their own

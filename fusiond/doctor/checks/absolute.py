@@ -33,8 +33,11 @@ def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
 
 
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
-                     up: ChannelStats | None = None) -> Verdict:
-    """GPS and pose channels: NIS against the stated noise."""
+                     up: ChannelStats | None = None, unstated: bool = False) -> Verdict:
+    """GPS and pose channels: NIS against the stated noise. ``unstated``: a receiver whose fixes state no
+    accuracy, so the noise the filter took for them is the config's ``unknown_position_sigma`` (a verdict
+    without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
+    filter measures from the fixes)."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
@@ -43,6 +46,10 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     if ch.n and not ch.n_nis:
         return Verdict(name, channel, "ok", figures(ch, t0), evidence=ev)
     line = _measured_noise(ch, up)
+    stated = "the stated noise"
+    if unstated and not line:
+        key = sensor_key(name, "unknown_position_sigma")
+        stated = "the noise taken for its fixes, which state none (unknown_position_sigma),"
     # the innovations' rms as a pasteable line when it covers every axis of the key, else said in the text
     rms = "the value below" if line else "their rms per axis (" + ", ".join(
         f"{c} {ch.component(i)[1]:.2g} m" for i, c in enumerate(ch.components)) + ")"
@@ -70,12 +77,12 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        evidence=ev)
     if verdict == "nis_high":
         return Verdict(name, channel, "problem",
-                       f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small, a mounting offset "
+                       f"NIS high ({figures(ch, t0)}; {detail}): {stated} is too small, a mounting offset "
                        "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation); "
                        f"if it is the noise, the innovations (an upper bound) suggest {rms}", key, line, evidence=ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
-                       f"NIS low ({figures(ch, t0)}; {detail}): the stated noise is larger than the innovations show "
+                       f"NIS low ({figures(ch, t0)}; {detail}): {stated} is larger than the innovations show "
                        f"({rms}: an upper bound of the sensor's own noise)", key, line, evidence=ev)
     return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)
 
@@ -86,4 +93,16 @@ class AbsoluteNis(PerChannel):
     name = kind = "absolute"
 
     def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
-        return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key))]
+        return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key), _unstated(ev, key[0]))]
+
+
+def _unstated(ev: Evidence, name: str) -> bool:
+    """Did sensor ``name``'s fixes state no accuracy, the config stating none for them either (a receiver's
+    covariance type UNKNOWN)? False where the doctor has no config or series (the live monitor)."""
+    if ev.config is None or ev.series is None:
+        return False
+    sc = next((s for s in ev.config.sensors if s.name == name), None)
+    if sc is None or getattr(sc, "unknown_position_sigma", None) is None or getattr(sc, "position_noise", 1) is not None:
+        return False
+    up = ev.series.gps_sigma_up
+    return bool(up) and not any(math.isfinite(v) for v in up)
