@@ -347,3 +347,22 @@ def test_an_imu_dropout_while_the_drive_reads_zero_takes_the_imu_turn():
     _, off = run(samples, "yaw_across_gaps = false")
     missed = rot.wrap(rot.wrap(yaw_at(off, T0 + 6.0) - yaw_at(off, T0 + 1.0)) - turned)
     assert abs(missed) > 0.9 - 0.3 * 0.2 - 0.1
+
+
+def test_in_two_d_mode_a_bad_orientation_costs_the_gap_turn_not_the_gyro():
+    """Read only for the gap turn there, an orientation that is no rotation (all zeros, its covariance not
+    marked absent) leaves the sample's gyro fused; in three dimensions, where it would be fused, the sample is
+    refused as before (its reason counted)."""
+    from tests.support.core_samples import odom
+
+    def zeroed(t: float) -> ImuSample:
+        return ImuSample("imu", t, (0.0, 0.0, 0.0, 0.0), (1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4), (0.0, 0.0, 0.1),
+                         (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6))
+
+    planar = FusionCore(make_config("roll_pitch", extra_imu="yaw_across_gaps = true", extra_filter="two_d_mode = true"))
+    spatial = FusionCore(make_config("roll_pitch", extra_imu="yaw_across_gaps = true"))
+    for core in (planar, spatial):
+        core.ingest(odom(T0, v=0.5))
+    assert planar.ingest(zeroed(T0 + 0.01)).accepted and planar.state.gyro == (0.0, 0.0, 0.1)
+    step = spatial.ingest(zeroed(T0 + 0.01))
+    assert not step.accepted and step.reason == "zero_quaternion", step

@@ -127,22 +127,34 @@ class ImuPolicy:
             self._gyro_seen, self._gyro_resolved = gc, cov
         return cov
 
+    def _orientation(self, s: ImuSample) -> tuple[tuple[float, ...], tuple[int, ...], tuple[float, ...], bool]:
+        """(the orientation in base_link, rows to fuse, their covariance, the yaw is measured); Rejected when
+        the orientation or its covariance is not a measurement."""
+        oc = s.orientation_covariance
+        known = oc == self._ori_seen
+        if not (known or finite(oc)):
+            raise Rejected(reasons.NON_FINITE, "orientation")
+        q_imu = near_unit(s.orientation)  # a unit quaternion is finite: the usual message's one check
+        if q_imu is None:
+            if not finite(s.orientation):
+                raise Rejected(reasons.NON_FINITE, "orientation")
+            q_imu = unit_quaternion(s.orientation)  # raises: zero or not of unit norm
+        q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
+        rows, rpy_cov, yaw_measured = self._ori_resolved if known else self._orientation_noise(oc)
+        return q_base, rows, rpy_cov, yaw_measured
+
     def convert(self, s: ImuSample) -> ImuInput:
         q_base = rpy_cov = None
         rows: tuple[int, ...] = ()
         yaw_measured = False
         if (self._rows or self._reads_yaw) and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
-            oc = s.orientation_covariance
-            known = oc == self._ori_seen
-            if not (known or finite(oc)):
-                raise Rejected(reasons.NON_FINITE, "orientation")
-            q_imu = near_unit(s.orientation)  # a unit quaternion is finite: the usual message's one check
-            if q_imu is None:
-                if not finite(s.orientation):
-                    raise Rejected(reasons.NON_FINITE, "orientation")
-                q_imu = unit_quaternion(s.orientation)  # raises: zero or not of unit norm
-            q_base = rot.mul(q_imu, self.q_ext_inv) if not self._identity else q_imu
-            rows, rpy_cov, yaw_measured = self._ori_resolved if known else self._orientation_noise(oc)
+            try:
+                q_base, rows, rpy_cov, yaw_measured = self._orientation(s)
+            except Rejected:
+                if self._rows:
+                    raise
+                # read for the gap turn alone (two-D mode): a bad orientation costs that, not the sample's gyro
+                q_base, rows, rpy_cov, yaw_measured = None, (), None, False
         elif len(s.orientation_covariance) != 9:
             raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
