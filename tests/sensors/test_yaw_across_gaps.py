@@ -352,7 +352,7 @@ def test_an_imu_dropout_while_the_drive_reads_zero_takes_the_imu_turn():
 def test_in_two_d_mode_a_bad_orientation_costs_the_gap_turn_not_the_gyro():
     """Read only for the gap turn there, an orientation that is no rotation (all zeros, its covariance not
     marked absent) leaves the sample's gyro fused; in three dimensions, where it would be fused, the sample is
-    refused as before (its reason counted)."""
+    refused (its reason counted)."""
     from tests.support.core_samples import odom
 
     def zeroed(t: float) -> ImuSample:
