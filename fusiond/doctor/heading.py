@@ -18,8 +18,8 @@ from .median import median
 from .series import Series
 
 __all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro",
-           "imu_yaw_drift", "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning", "wheel_yaw_fit",
-           "wrap"]
+           "imu_yaw_drift", "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning",
+           "wheel_yaw_fit", "wrap"]
 
 WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
 # 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)

@@ -102,7 +102,9 @@ def _unstated(ev: Evidence, name: str) -> bool:
     if ev.config is None or ev.series is None:
         return False
     sc = next((s for s in ev.config.sensors if s.name == name), None)
-    if sc is None or getattr(sc, "unknown_position_sigma", None) is None or getattr(sc, "position_noise", 1) is not None:
+    if getattr(sc, "unknown_position_sigma", None) is None:  # not a receiver with that default (a pose)
+        return False
+    if sc.position_noise is not None:  # the config states the fixes' noise
         return False
     up = ev.series.gps_sigma_up
     return bool(up) and not any(math.isfinite(v) for v in up)

@@ -79,10 +79,10 @@ class LateBias(BaseCheck):
                   if cfg.filter.continuous_odom else
                   "The bias update turns the heading back as far as the filter's correlations allow; the track driven "
                   "meanwhile stays bent"))
-        drift = imu_yaw_drift(series, cfg, imu)
-        if drift is not None:
+        own = imu_yaw_drift(series, cfg, imu)
+        if own is not None:
             # the IMU's own drift against the bias-corrected gyro, r: the figure every check names
-            wander, rate, _ = drift
+            wander, rate, _ = own
             run = t_end - t_start
             late_cost = abs(b) * before * before / (2.0 * run)  # mean heading error, as configured ...
             if cfg.filter.continuous_odom:  # ... plus the drift left in the heading after the update
