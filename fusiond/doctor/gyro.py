@@ -63,6 +63,14 @@ def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
     return any(kind_of(s).heading_reference(s) and delivered(s.name) for s in cfg.sensors)
 
 
+def rest_bias(episodes: list[Episode]) -> float:
+    """The gyro's z bias as it reads at rest: the median of the standstills' means (NaN without one). One
+    figure for every check that names it: the first standstill alone can be a short, noisy one (a few
+    samples whose mean is off by twice its scatter) or a false one, and the bias moves over a run."""
+    means = [e.gyro_mean for e in episodes if math.isfinite(e.gyro_mean)]
+    return float(median(means)) if means else math.nan
+
+
 def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
     """The standstills lasting at least standstill_s, with the gyro over them: the runs of bins reading
     exactly zero, and the filter's own where a replay reported them (``Series.rest_spans``: its odometry
@@ -232,7 +240,7 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         evidence["turning_at_rest"] = float(len(turning))
     drift = bias_drift(episodes, fc.gyro_bias_walk)
     if len(episodes) >= 2:
-        ref = float(median([e.gyro_mean for e in episodes]))
+        ref = rest_bias(episodes)
         evidence["gyro_at_rest_rad_s"] = ref
 
         def odd(e: Episode) -> bool:

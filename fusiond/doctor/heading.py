@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from ..config import Config, GpsSensor, ImuSensor
-from .gyro import quiet_episodes
+from .gyro import quiet_episodes, rest_bias
 from .median import median
 from .series import Series
 
@@ -69,10 +69,10 @@ def imu_yaw_drift(series: Series, cfg: Config, imu: ImuSensor) -> tuple[float, f
         return None
     wander, slope = compared
     rest, _ = quiet_episodes(series, cfg, imu) if imu.angular_velocity else ([], [])
-    means = [e.gyro_mean for e in rest if math.isfinite(e.gyro_mean)]
-    if not means:
+    b = rest_bias(rest)
+    if not math.isfinite(b):
         return wander, slope, False
-    return wander, slope + float(median(means)), True
+    return wander, slope + b, True
 
 
 def vs_gyro(series: Series, t: np.ndarray, y: np.ndarray, breaks: list[float]) -> tuple[float, float] | None:

@@ -4,7 +4,8 @@ With the gyro driving heading and nothing absolute to correct it (no GPS, no pos
 not fused), the gyro's z bias b is learned only at standstills. Until the first one the filter
 integrates it with its prior (zero), so the heading turns by b x t, and the track with it: a race
 car that sets off at once with b = 0.004 rad/s has turned 0.24 rad (14 deg) when it first stops a
-minute later. The first standstill measures b directly (the gyro at rest), so the drift is known
+minute later. The standstills measure b directly (the gyro at rest: ``gyro.rest_bias``, the figure every
+check names, not the first standstill's alone, which can be a few noisy samples), so the drift is known
 after the fact: |b| x (time until the core's first accepted bias update, T_b). With the odom frame
 continuous (``filter.continuous_odom``, the default: REP-105) that update corrects the heading's rate
 from then on and leaves the heading where the old bias bent it, so averaged over a run of T seconds
@@ -27,7 +28,7 @@ from __future__ import annotations
 import math
 
 from ...core.sensors.registry import kind_of
-from ..gyro import quiet_episodes
+from ..gyro import quiet_episodes, rest_bias
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
@@ -49,8 +50,8 @@ class LateBias(BaseCheck):
         """The verdict on a gyro bias first learned long after the start, without a heading reference (module doc).
 
         ``ch``: the IMU's gyro_bias channel. The bias counts as learned at its first accepted update (the core's
-        own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the first
-        standstill's gyro reading says."""
+        own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the gyro at rest
+        says (``rest_bias``)."""
         series, cfg, gyro_fused, ch = ev.series, ev.config, ev.gyro_fused, ev.gyro_bias_stats
         imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
         if imu is None or not gyro_fused or len(series.odom_t) < 2:
@@ -58,21 +59,23 @@ class LateBias(BaseCheck):
         if any(kind_of(s).heading_reference(s) for s in cfg.sensors):
             return []  # a heading reference corrects the drift as it happens
         episodes, _ = quiet_episodes(series, cfg, imu)
-        if not episodes or not math.isfinite(episodes[0].gyro_mean):
+        b = rest_bias(episodes)
+        if not math.isfinite(b):
             return []  # never learned: bias_check's verdict
         first = episodes[0]
         t_start, t_end = series.odom_t[0], series.odom_t[-1]
         accepted = [t for t, rejected in zip(ch.stamps, ch.rejected_flags) if not rejected] if ch is not None else []
         before = (min(accepted) if accepted else t_end) - t_start
-        b = first.gyro_mean
         drift = abs(b) * before
         if drift < LATE_DRIFT_RAD:
             return []
         evidence = {"first_standstill_s": first.t0 - t_start, "gyro_at_rest_rad_s": b, "heading_drift_rad": drift}
         unknown = f"for the first {before:.0f} s (its first accepted update)" if accepted else \
             f"for the whole run ({before:.0f} s)"
-        msg = (f"the gyro's z bias was unknown {unknown}: the first standstill, at "
-               f"{first.t0 - t_start:.0f} s, shows the gyro reading {b:+.4f} rad/s at rest, so until then the heading "
+        where = (f"at its first standstill, {first.t0 - t_start:.0f} s in" if len(episodes) == 1 else
+                 f"the median of its {len(episodes)} standstills, the first {first.t0 - t_start:.0f} s in")
+        msg = (f"the gyro's z bias was unknown {unknown}: the gyro reads {b:+.4f} rad/s at rest ({where}), "
+               "so until then the heading "
                f"turned by up to {drift:.2f} rad ({math.degrees(drift):.0f} deg) that the vehicle did not, and the "
                "track with it; nothing configured holds the heading (no GPS or pose, the IMU's yaw not fused). "
                + ("The odom frame being continuous (filter.continuous_odom), the heading stays off by that from then on"
