@@ -116,6 +116,22 @@ def _zero_runs(series: Series, standstill_s: float) -> list[Episode]:
     return out
 
 
+def rest_windows(series: Series, cfg: Config) -> list[tuple[float, float]]:
+    """Where the robot stood, as the doctor reads a noise at rest: each standstill (``standstill_episodes``) from
+    standstill_s after the filter took it, when its rest is confirmed (before that a vehicle still settling on
+    its suspension, or still rolling as its drive reads zero, shows as noise), to its end; with a gyro fused,
+    not one whose gyro turns (``quiet_episodes``). Tune's floors (``tune/floors.py``) measure over these, so the
+    doctor and tune read one noise at rest from the same stretches of the recording."""
+    standstill_s = cfg.filter.standstill_s
+    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
+    if imu is not None and series.gyro_t:
+        episodes, _ = quiet_episodes(series, cfg, imu)
+    else:
+        episodes = standstill_episodes(series, standstill_s)
+    half = BIN_S / 2  # the episodes' bounds are on bin middles: a bin reaches half a bin either side
+    return [(e.t0 - half + standstill_s, e.t1 + half) for e in episodes if e.t1 + half > e.t0 - half + standstill_s]
+
+
 def turning_by_own_scatter(e: Episode, bias_sigma: float, min_sigma: float) -> bool:
     """Does the episode's mean rate exceed the quiet bound of its readings' OWN scatter? The core's test
     of a closed standstill window (``core/sensors/imu/gyro_bias._turning``, called here on the episode's z

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 
 from ..config import Config, ConfigError
 from ..doctor import Verdict
+from ..doctor.gyro import rest_windows
 from ..logs import muted
 from .advice import split_key, with_suggestion
 from .params import FILTER, Param
@@ -48,8 +49,8 @@ def _group(key: str) -> tuple[str, str] | None:
 
 def diagnose(cfg: Config, samples: Sequence[object], backend: Backend | None = None, records: list | None = None,
              quiet: bool = True) -> tuple[list[Verdict], list[tuple[float, float]]]:
-    """One replay of the recording with the doctor: its verdicts, and the filter's standstills it was told of
-    (``Series.rest_spans``, in filter time), which ``floors`` measures the noise at rest over. ``backend``:
+    """One replay of the recording with the doctor: its verdicts, and the standstills it reads a noise at rest
+    over (``doctor.gyro.rest_windows``: the filter's, confirmed, in filter time), which ``floors`` measures over. ``backend``:
     the estimator's (``FusionCore``). ``records``: every diagnostics record of the replay is appended to it
     (tune scores the original config's held-back part on them: the same replay). ``quiet``: the replay's
     warnings are not logged (False: they are, as the recording's, said once)."""
@@ -58,7 +59,9 @@ def diagnose(cfg: Config, samples: Sequence[object], backend: Backend | None = N
     with muted() if quiet else nullcontext():
         result = run_samples(samples, cfg, backend=backend, records=records)
         verdicts = result.verdicts()
-    return verdicts, list(result.doctor.series().rest_spans) if result.doctor is not None else []
+    if result.doctor is None:
+        return verdicts, []
+    return verdicts, rest_windows(result.doctor.series(), cfg)
 
 
 def doctor_lines(cfg: Config, verdicts: Sequence[Verdict], params: Sequence[Param]) -> dict[tuple[str, str], DoctorLine]:

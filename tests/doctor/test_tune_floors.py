@@ -49,6 +49,26 @@ def test_the_standstills_measure_each_noise_from_below(noisy_rest):
     assert FLOOR_ALPHA == 0.01
 
 
+def test_a_vehicle_settling_after_it_stops_does_not_lift_the_floor():
+    """The standstills of the test above, the vehicle rocking on its suspension for 0.25 s after each stop (every
+    gyro axis 0.03 rad/s noisier, ten times its noise) while its wheels read zero. The filter confirms rest only
+    standstill_s (0.3 s) after the wheels read zero, and the floors are measured over the doctor's standstills,
+    which start there: the gyro's floor is the noise at rest as above (within 10 % below it), where the rocking
+    alone, ~50 differences of variance 2 x 0.03^2 among ~1,000 of 2 x 0.003^2, would lift a floor taken from the
+    wheels' first zero to ~0.007."""
+    cfg = robot_config()
+    assert cfg.filter.standstill_s > 0.25  # the simulation has the trait: the rocking ends before rest is confirmed
+    segments = [Segment(5.0), Segment(20.0, speed=0.5, yaw_rate=0.2), Segment(3.0),
+                Segment(20.0, speed=0.5, yaw_rate=-0.2), Segment(3.0), Segment(5.0, speed=0.5)]
+    world = RestWorld(segments, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=GYRO_SIGMA, ramp_s=0.5,
+                      settle_s=0.25, settle_sigma=0.03)
+    samples = simulate(world)
+    _, spans = diagnose(cfg, samples)
+    floors = measured_floors(cfg, samples, tunable_params(cfg, samples), spans)
+    gyro = floors["imu.gyro_noise"].sigmas[0]
+    assert 0.9 * GYRO_SIGMA < gyro < GYRO_SIGMA, gyro
+
+
 def test_a_floor_bounds_the_fit_from_below_and_never_lifts_a_start():
     """lowest() is the log-scale at which the highest-bound component reaches its floor; a start already below
     the measured noise may stay (0: the fit keeps it), as with the sensor's constant floor."""

@@ -50,6 +50,8 @@ class RestWorld:
     accel_scale: float = 1.0  # 1 / 9.80665: a driver reporting in g
     accel_gravity_removed: bool = False  # a driver publishing linear acceleration without gravity
     accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2, added to the specific force
+    settle_s: float = 0.0  # > 0: for this long after the vehicle stops, it rocks on its suspension: the gyro ...
+    settle_sigma: float = 0.0  # ... reads this much more white noise on every axis (its drive reads zero throughout)
     seed: int = 11
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
@@ -93,6 +95,10 @@ def simulate(w: RestWorld) -> list[OdomSample | ImuSample]:
                 if w.gyro_bias_drift:
                     b = (b[0], b[1], b[2] + w.gyro_bias_drift * t)
                 gyro = (b[0] + rng.normal(0, gs), b[1] + rng.normal(0, gs), seg.yaw_rate + b[2] + rng.normal(0, gs))
+                stopped_for = t - t_seg - max(ramp_s, 0.0)  # since the vehicle stopped, in a rest after a drive
+                if (w.settle_sigma > 0.0 and seg.speed == 0.0 and seg.yaw_rate == 0.0 and v_prev != 0.0
+                        and 0.0 <= stopped_for < w.settle_s):
+                    gyro = tuple(g + rng.normal(0, w.settle_sigma) for g in gyro)
                 ocov = (-1.0,) + (0.0,) * 8 if w.orientation_absent else (os_**2, 0, 0, 0, os_**2, 0, 0, 0, os_**2)
                 acc, acov = (0.0, 0.0, 0.0), (-1.0,) + (0.0,) * 8
                 if w.accel_sigma is not None:  # flat ground: gravity up, centripetal v w to the left
