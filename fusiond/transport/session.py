@@ -135,11 +135,17 @@ def client_endpoints(zc: ZenohConfig, connect: Sequence[str] | None) -> list[str
 def client_config(zc: ZenohConfig, *, base_dir: Path | None = None, connect: Sequence[str] | None = None,
                   listen: Sequence[str] | None = None) -> zenoh.Config:
     """The session of a tool talking to a daemon: same namespace and scouting, never the daemon's listen
-    endpoints (the port is the daemon's), a peer (a router mode in the file is the daemon's role)."""
+    endpoints (the port is the daemon's), a peer (a router mode in the file is the daemon's role).
+
+    Without ``listen`` a peer tool listens where Zenoh's default puts a peer, a random TCP port: two peers
+    that both dial a third peer (``play`` and a live ``calibrate-imu``, each connected to the daemon) reach
+    each other only by connecting to each other, at the locators the daemon's gossip tells them, since a
+    peer routes nothing between two others (Zenoh's peer-to-peer routing). Listening nowhere, neither
+    could be dialled, and the IMU ``play`` published never reached ``calibrate-imu``."""
     tool = msgspec.structs.replace(zc, listen=[], connect=[] if connect else client_endpoints(zc, None),
                                    mode="peer" if zc.mode == "router" else zc.mode)
     return build_config(tool, base_dir=base_dir, connect=list(connect) if connect else None,
-                        listen=list(listen or []))
+                        listen=list(listen) if listen else None)
 
 
 def query_health(session: zenoh.Session, key: str, timeout: float) -> list[bytes]:

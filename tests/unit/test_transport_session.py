@@ -93,9 +93,34 @@ def test_tools_dial_the_daemons_listen_endpoints_and_never_take_its_port():
     assert client_endpoints(zc, ["tcp/h:1"]) == ["tcp/h:1"]
     assert loopback("tcp/localhost:1") == "tcp/localhost:1"
     conf = client_config(zc)
-    assert json.loads(conf.get_json("listen/endpoints")) == []
+    assert json.loads(conf.get_json("listen/endpoints"))["peer"] == ["tcp/[::]:0"]  # Zenoh's own: a random port
     assert json.loads(conf.get_json("mode")) == "peer"
     assert json.loads(conf.get_json("connect/endpoints"))[0] == "tcp/127.0.0.1:7447"
+    assert json.loads(client_config(zc, listen=["tcp/127.0.0.1:9"]).get_json("listen/endpoints")) == ["tcp/127.0.0.1:9"]
+
+
+def test_two_tools_that_dial_one_peer_daemon_hear_each_other():
+    """``play`` publishing a bag and a live ``calibrate-imu`` listening, both dialling the daemon (a peer, no
+    router, no multicast): a peer routes nothing between two other peers, so they must connect to each other,
+    at the locators the daemon's gossip passes on. Each tool's session is ``client_config``'s; the IMU key
+    put by one reaches the other within the deadline."""
+    port = free_port()
+    zc = ZenohConfig(listen=[f"tcp/127.0.0.1:{port}"], multicast_scouting=False)
+    daemon = open_session(build_config(zc))
+    player = open_session(client_config(zc))
+    listener = open_session(client_config(zc))
+    try:
+        heard: list[bytes] = []
+        sub = listener.declare_subscriber("imu", lambda s: heard.append(s.payload.to_bytes()))
+        deadline = time.monotonic() + 10
+        while not heard and time.monotonic() < deadline:
+            player.put("imu", b"x")
+            time.sleep(0.05)
+        assert heard == [b"x"] * len(heard) and heard
+        sub.undeclare()
+    finally:
+        for s in (listener, player, daemon):
+            s.close()
 
 
 def test_namespace_prefixes_keys_on_the_wire_only():
