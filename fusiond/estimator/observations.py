@@ -150,7 +150,9 @@ def _select_rows(y6, H6: np.ndarray, cov: tuple[float, ...], rows: tuple[int, ..
     if len(rows) == 6:
         return np.array(y6), H6, C
     idx = list(rows)
-    return np.array([y6[i] for i in rows]), H6[idx], C[idx][:, idx]  # the rows' block (np.ix_ costs more)
+    # the rows' block (np.ix_ costs more); the column pick leaves it in Fortran order, which the compiled update
+    # refuses (the Python reference would run it): copied in C order
+    return np.array([y6[i] for i in rows]), H6[idx], C[idx][:, idx].copy()
 
 
 def pose(

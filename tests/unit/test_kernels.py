@@ -588,3 +588,38 @@ def test_compiled_planar_hold_checks_every_index_before_writing():
         assert x.tobytes() == before.tobytes() and (P == 1.0).all()
     with pytest.raises(TypeError, match="tuples of ints"):
         k.hold_planar(x, P, [2], (2,))
+
+
+def test_a_fix_measuring_two_axes_reaches_the_compiled_update():
+    """A GPS whose altitude is not measured (its variance above max_sigma^2: the highway car's receiver) is
+    fused as its two horizontal rows. The rows picked from its 3x3 noise must stay an array the kernel reads
+    (C order): a column pick leaves Fortran order, and every such update took the Python reference
+    (``CompiledBackend.update``'s BufferError fallback), a quarter of a fix's cost. Counted: none falls back.
+    The pose's row pick (``observations._select_rows``) likewise."""
+    import msgspec
+
+    from fusiond.core.fusion import FusionCore
+    from fusiond.core.sensors import GpsSample
+    from fusiond.estimator.backend import PythonBackend
+    from tests.support.configs import robot_config
+    from tests.support.sim_gps import World, simulate
+
+    fell_back: list[int] = []
+    real = PythonBackend.update
+
+    def counted(self, *args):
+        fell_back.append(len(args[5]))
+        return real(self, *args)
+
+    assert COMPILED is not None
+    core = FusionCore(robot_config(gps=""), backend=COMPILED)
+    samples = [msgspec.structs.replace(s, position_covariance=(0.09, 0.0, 0.0, 0.0, 0.09, 0.0, 0.0, 0.0, 1.0e7))
+               if isinstance(s, GpsSample) else s for s in simulate(World(duration=30.0, speed=5.0, gps_rate=10.0))]
+    PythonBackend.update = counted
+    try:
+        fixes = [r for s in samples for r in core.ingest(s).records if r.sensor == "gps" and r.dof == 2]
+    finally:
+        PythonBackend.update = real
+    assert len(fixes) > 200 and fell_back == []
+    y, H, R = observations._select_rows(np.zeros(6), np.ones((6, 15)), tuple(np.eye(6).ravel()), (0, 1, 5))
+    assert all(a.flags["C_CONTIGUOUS"] for a in (y, H, R))

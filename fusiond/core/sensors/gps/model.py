@@ -421,7 +421,9 @@ class GpsModel(SensorModel):
         y, H, R = obs.position(self.ctx.layout, ekf.x, z, cov, self.cfg.extrinsic_xyz, self.error)
         if len(rows) < 3:
             idx = list(rows)
-            y, H, R = y[idx], H[idx], R[idx][:, idx]  # np.ix_ costs more than the update it feeds
+            # np.ix_ costs more than the update it feeds; the column pick leaves R in Fortran order, which the
+            # compiled update refuses (BufferError: the Python reference then ran every such update): copied in C order
+            y, H, R = y[idx], H[idx], R[idx][:, idx].copy()
         return y, H, R
 
     def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
