@@ -419,12 +419,15 @@ class GpsModel(SensorModel):
     def _block(self, ekf, z, cov, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The fix's rows ``rows`` (east north up indices) as a measurement of the state now."""
         y, H, R = obs.position(self.ctx.layout, ekf.x, z, cov, self.cfg.extrinsic_xyz, self.error)
-        if len(rows) < 3:
-            idx = list(rows)
-            # np.ix_ costs more than the update it feeds; the column pick leaves R in Fortran order, which the
-            # compiled update refuses (BufferError: the Python reference then ran every such update): copied in C order
-            y, H, R = y[idx], H[idx], R[idx][:, idx].copy()
-        return y, H, R
+        if len(rows) == 3:
+            return y, H, R
+        lo, hi = rows[0], rows[-1] + 1
+        if hi - lo == len(rows):  # the horizontal pair, the altitude: slices, cheaper than the fancy picks below
+            return y[lo:hi], H[lo:hi], R[lo:hi, lo:hi].copy()  # a block of R is strided: copied in C order
+        idx = list(rows)
+        # np.ix_ costs more than the update it feeds; the column pick leaves R in Fortran order, which the
+        # compiled update refuses (BufferError: the Python reference would run it): copied in C order
+        return y[idx], H[idx], R[idx][:, idx].copy()
 
     def _first_fix(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
                    emit: bool) -> None:
