@@ -47,9 +47,10 @@ from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor
 __all__ = ["Doctor", "Evidence", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose",
            "format_verdicts", "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
-# channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, and the
-# GPS innovations whose autocorrelation tells a wandering receiver error from white noise
-KEPT_CHANNELS = ("gyro_bias", "position", "altitude")
+# channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, the GPS
+# innovations whose autocorrelation tells a wandering receiver error from white noise, and the receiver's
+# steps (each fix's innovation is the step it took)
+KEPT_CHANNELS = ("gyro_bias", "position", "altitude", "position_step")
 GATE_CHANNELS = ("yaw_jump",)  # every record is a reading its gate kept out: no NIS test (ChannelStats.judged)
 _SENSOR, _STAMP = attrgetter("sensor"), attrgetter("stamp")
 CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)

@@ -69,6 +69,10 @@ def geodetic(s: object | None) -> bool:
     return s is not None and kind_of(s).geodetic
 
 
+# the channels of a GPS's fixes fused once its heading was found (or a step or a loss was taken from them)
+JUDGED_FIX_CHANNELS = ("position", "position_provisional", "position_reacquired", "position_step")
+
+
 def channel_kind(ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> str:
     """Which check judges channel ``key``: the ``kind`` of one of the checks below."""
     name, channel = key
@@ -77,11 +81,12 @@ def channel_kind(ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> str:
         return channel
     if channel == "position_reacquired" and geodetic(s):
         return "reacquired"
+    if channel == "position_step" and geodetic(s):
+        return "step"
     if channel == "position_frozen":
         return "frozen"
     if (channel == "position_unaligned" and geodetic(s) and ch.n >= UNALIGNED_MIN_FIXES
-            and not any(n == name and c in ("position", "position_provisional", "position_reacquired") and c_.n
-                        for (n, c), c_ in ev.channels.items())):
+            and not any(n == name and c in JUDGED_FIX_CHANNELS and c_.n for (n, c), c_ in ev.channels.items())):
         # a heading never found is worth a verdict of its own only when no fix was ever judged
         return "unaligned"
     if channel in ABSOLUTE_CHANNELS:

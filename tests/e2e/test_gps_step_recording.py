@@ -100,7 +100,7 @@ def test_a_7_m_step_of_a_real_receiver_is_taken_within_6_fixes(tmp_path: Path) -
     fx = np.array([(t, *enu.enu(la, lo, al)[:2]) for t, la, lo, al in fixes])
     first_moved = min(t for t, *_ in fixes if t - start >= T0 - 0.05)
     tum, gps = _replay(bag, tmp_path, "")
-    taken = [t for t, ch, _ in gps if ch == "position_reacquired"]
+    taken = [t for t, ch, _ in gps if ch == "position_step"]
     assert len(taken) == 1
     moved_before = [t for t, *_ in fixes if first_moved <= t <= taken[0]]
     assert len(moved_before) <= 6, moved_before

@@ -93,14 +93,30 @@ def test_a_7_m_step_of_the_receiver_error_is_taken_at_its_sixth_fix_and_the_head
     samples = _edited(simulate(w), None, step=(7.0, 0.0))
     core, records, errors, heading_lost = _run(w, samples, _config(), shift=(7.0, 0.0))
     channels = [r.channel for r in records]
-    k = channels.index("position_reacquired")
+    k = channels.index("position_step")
     assert k == 5  # the 6th fix of the step: 5 rejected before it
     assert all(r.rejected for r in records[:5])
-    assert channels.count("position_reacquired") == 1
+    assert channels.count("position_step") == 1 and "position_reacquired" not in channels  # a step, not a loss
     after = records[k + 1:]
     assert sum(r.rejected for r in after) <= 0.01 * len(after)  # the gate's own few: the new level is fused
     assert not heading_lost and core.heading_known
     assert max(e for t, e in errors if t >= STEP_AT + 1.0) < 3 * SIGMA
+
+
+def test_the_doctor_names_the_receivers_step_not_the_motion_model():
+    """The 7 m step above, through the doctor: its verdict on the step says the receiver stepped, by how much
+    and which way (the step fix's innovation, 7 m east within the fixes' noise and the few fixes the filter
+    moved meanwhile: 1 m allowed), and that the wheels and the IMU did not cause it. No verdict says the
+    filter lost the GPS (which points the user at the wheels' and the IMU's keys)."""
+    from tests.support.verdicts import one, verdicts_of
+
+    w = _car()
+    verdicts = verdicts_of(_config(), _edited(simulate(w), None, step=(7.0, 0.0)))
+    v = one(verdicts, "gps", "position_step")
+    assert v.level == "warn" and not v.suggestion and "did not cause it" in v.message, v
+    assert abs(v.evidence["largest_step_east_m"] - 7.0) < 1.0 and abs(v.evidence["largest_step_north_m"]) < 1.0, v
+    assert v.evidence["steps"] == 1.0
+    assert not [u for u in verdicts if u.channel == "position_reacquired"]
 
 
 @pytest.mark.parametrize("offsets", [
@@ -117,7 +133,7 @@ def test_outlier_bursts_stay_rejected(offsets):
     _, records, errors, _ = _run(w, samples, _config())
     burst = records[:len(offsets)]
     assert all(r.rejected for r in burst)
-    assert "position_reacquired" not in [r.channel for r in records]
+    assert not {"position_step", "position_reacquired"} & {r.channel for r in records}
     assert max(e for t, e in errors if t <= STEP_AT + 3.0) < 3 * SIGMA
 
 
@@ -129,7 +145,7 @@ def test_a_burst_that_holds_its_offset_past_the_minimum_is_followed_and_left_at_
     w = _car()
     samples = _edited(simulate(w), [(7.0, 0.0)] * 12)
     _, records, errors, heading_lost = _run(w, samples, _config())
-    taken = [i for i, r in enumerate(records) if r.channel == "position_reacquired"]
+    taken = [i for i, r in enumerate(records) if r.channel == "position_step"]
     assert len(taken) == 2 and taken[0] == 5
     assert 12 <= taken[1] <= 13  # the 1st or 2nd fix after the burst
     assert not heading_lost
@@ -160,10 +176,10 @@ def test_scattered_outliers_take_no_more_steps_than_the_stated_rate(alpha):
     w = _car(duration=300.0)
     samples, n = _scattered(simulate(w), 0.5, seed=4)
     _, records, _, _ = _run(w, samples, _config(f"step_false_alarm = {alpha}"))
-    rejected = [r.rejected for r in records if r.channel in ("position", "position_reacquired")]
+    rejected = [r.rejected for r in records if r.channel in ("position", "position_step")]
     runs = sum(1 for a, b in zip(rejected, rejected[1:]) if b and not a)
     long_runs = sum(1 for i in range(len(rejected) - 3) if not rejected[i] and all(rejected[i + 1:i + 4]))
-    steps = sum(r.channel == "position_reacquired" for r in records)
+    steps = sum(r.channel == "position_step" for r in records)
     assert n > 1000 and runs > 300 and long_runs > 30  # the world is what it says
     allowed = alpha * runs
     assert steps <= allowed + 3.0 * math.sqrt(allowed), (steps, runs)
@@ -175,9 +191,9 @@ def test_white_noise_behind_a_tight_gate_takes_no_step_beyond_the_rate():
     taken stay within alpha per run (3 sigma, as above)."""
     w = _car(duration=300.0)
     _, records, _, _ = _run(w, simulate(w), _config("mahalanobis_threshold = 2.0"))
-    rejected = [r.rejected for r in records if r.channel in ("position", "position_reacquired")]
+    rejected = [r.rejected for r in records if r.channel in ("position", "position_step")]
     runs = sum(1 for a, b in zip(rejected, rejected[1:]) if b and not a)
-    steps = sum(r.channel == "position_reacquired" for r in records)
+    steps = sum(r.channel == "position_step" for r in records)
     assert runs > 100
     allowed = 1e-3 * runs
     assert steps <= allowed + 3.0 * math.sqrt(allowed), (steps, runs)

@@ -57,7 +57,7 @@ CUSUM's mean run length, >= 1 / alpha tests). The cap sets the fewest fixes a st
 noise, and a 7 m step in 0.5 m fixes (each increment ~1.5) is taken at its 6th fix, 0.5 s at 10 Hz.
 Taken, the state's horizontal position moves by the run's mean offset and its covariance grows by that
 mean's (``_take_step``); the heading, the scales and their correlations stay: the receiver moved, not
-the robot (the fix's record: channel position_reacquired; the log line: gps_step_taken). A burst
+the robot (the fix's record: channel position_step; the log line: gps_step_taken). A burst
 that holds one offset for more than 5 fixes is taken so, and when it ends the fixes return to the
 level it left: for REACQUIRE_JUMP_S after a step that level is a known hypothesis (``_back_llr``, no
 offset to estimate, no cap), which one or two fixes decide at the same threshold. A run that did not
@@ -362,7 +362,7 @@ class GpsModel(SensorModel):
                     step = self._step_test(s, res.rejected, y, H, R)
                 if step is not None:
                     self._take_step(s, step, stamp, emit)
-                    channel = "position_reacquired"
+                    channel = "position_step"  # the receiver moved, not the robot: the doctor tells the two apart
                 elif lost:
                     self._reacquire(s, z, inp, horizontal, stamp, emit)
                     channel = "position_reacquired"
