@@ -22,7 +22,7 @@ from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from .bins import BIN_S
 from .median import median
-from .nis import ChannelStats
+from .nis import ChannelStats, judge_nis
 from .series import Series
 from .verdict import Verdict, filter_key, sensor_key
 
@@ -197,6 +197,19 @@ def bias_drift(episodes: list[Episode], walk: float) -> tuple[tuple[float, float
     return (float(t[0]), float(b[0])), (float(t[-1]), float(b[-1])), shown
 
 
+def _high_axes(ch: ChannelStats) -> dict[str, float]:
+    """The standstill windows' axes whose own mean NIS (one dof each, over the channel's updates) is beyond
+    the channel's upper bound, with that NIS: which bias the standstills disagree with."""
+    out = {}
+    for i, axis in enumerate(ch.components):
+        _, rms, predicted = ch.component(i)
+        if predicted > 0.0 and math.isfinite(rms):
+            nis = (rms / predicted) ** 2
+            if judge_nis(nis, ch.n_comp, 1.0, ch.confidence) == "nis_high":
+                out[axis] = nis
+    return out
+
+
 def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Episode], list[Episode]]:
     """(standstills, stretches that only look like one): the standstill episodes, split by the gyro.
 
@@ -347,9 +360,22 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         # disagree with is the bias estimate, moved between them by something else; pasting the measured
         # noise would change nothing (it would tell the user to paste the gyro_noise already configured)
         yaw = imu.fuses_yaw
+        high = _high_axes(ch)
+        if high and "gyro_z" not in high:
+            # z, the heading's, agrees: the x/y biases disagree, which the roll/pitch updates move too
+            evidence.update({f"nis_{a}": v for a, v in high.items()})
+            shown = ", ".join(f"{a[-1]} {v:.1f}" for a, v in high.items())
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"standstill gyro NIS high ({ch.nis_per_dof:.1f} per dof over {ch.n} updates) on the "
+                           f"x/y axes only (per axis: {shown}; z within its bounds), although the gyro's noise at "
+                           f"rest is as stated ({measured:.5f} rad/s measured, {stated:.5f} stated): the x/y bias "
+                           "estimates, which the roll/pitch updates also move (a tilting or rocking robot at rest, "
+                           "or IMU roll/pitch that errs while driving: see imu/orientation), disagree with the "
+                           "standstills; heading is not affected", evidence=evidence)
         est = evidence.get("bias_estimate_rad_s", math.nan)
-        at_rest = f", {est:+.5f} estimated against {episodes[-1].gyro_mean:+.5f} at rest" if (
-            episodes and math.isfinite(est)) else ""
+        last = episodes[-1] if episodes else None
+        at_rest = (f", {est:+.5f} estimated against {last.gyro_mean:+.5f} read at the last standstill "
+                   f"({last.t0 - series.odom_t[0]:.0f} s in)") if last is not None and math.isfinite(est) else ""
         evidence["bias_moved"] = 1.0
         return Verdict(imu.name, "gyro_bias", "warn",
                        f"standstill gyro NIS high ({ch.nis_per_dof:.1f} per dof over {ch.n} updates) although the "
