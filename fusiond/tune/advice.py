@@ -32,7 +32,7 @@ from ..estimator import rotation as rot
 from ..estimator.backend import Backend
 from ..collector import skips_the_caller
 from ..config import Config, ConfigError, convert, validate
-from ..doctor import Proof, Verdict
+from ..doctor import ChannelStats, Proof, Verdict
 from ..logs import muted
 from .forked import run_side_by_side
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
@@ -105,6 +105,29 @@ def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
     if after.rejected != before.rejected:
         text += f", {after.rejected} gated (was {before.rejected})"
     return text
+
+
+def _still(v: Verdict, before: Sequence[object], after: Sequence[object]) -> str:
+    """What the line leaves of a NIS verdict on its own channel: a noise fitted to the innovations of a filter
+    that trusted the sensor more is not yet the noise of the filter that trusts it less (its own innovations
+    grow as it follows the sensor less, where the sensor's error is slow), so a pasted value can still read
+    high, and the next replay's innovations say the rest. "" when the channel's whole-run verdict changed."""
+    def judged(records: Sequence[object]) -> tuple[str, float]:
+        mine = [r for r in records if r.sensor == v.sensor and r.channel == v.channel]
+        if not mine:
+            return "no_updates", math.nan
+        ch = ChannelStats(list(mine[0].components))
+        ch.extend(mine)
+        return ch.verdict(), ch.nis_per_dof
+
+    was, _ = judged(before)
+    if was not in ("nis_high", "nis_low"):
+        return ""
+    now, nis = judged(after)
+    if now != was:
+        return ""
+    return (f"; {v.sensor}/{v.channel} still reads NIS {'high' if now == 'nis_high' else 'low'} with it "
+            f"({nis:.2f} per dof): paste it and replay, the next verdict's value goes on from there")
 
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
@@ -187,7 +210,9 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             # the filter already leaves out): nothing against it, and its case is the doctor's
             return Proof(False, "it changes none of the filter's updates on this recording, only the "
                                 "doctor's own check: the replay cannot judge it", judged=False)
-        return Proof(gain > n_keys, _effect(before, after, v.sensor, dropped), refuted=gain < -n_keys)
+        advised = gain > n_keys
+        still = _still(v, base_records, records) if advised else ""  # what the next round would say of an advised one
+        return Proof(advised, _effect(before, after, v.sensor, dropped) + still, refuted=gain < -n_keys)
 
     # each line's replay is independent of the others': side by side on the machine's cores (``forked``)
     for job, proof in zip(to_replay, run_side_by_side(prove, to_replay, workers, out_of_time)):

@@ -171,3 +171,23 @@ def test_a_line_that_turns_a_heading_nothing_measures_is_shown_as_unjudged_not_r
     assert turned > 30.0 and "the replay cannot judge it" in v.proof.effect, v.proof  # ~0.9 rad turned in
     text = format_verdicts([v])
     assert "       -> in the [[sensors]] table" in text and "not advised" not in text, text
+
+
+def test_an_advised_noise_that_leaves_its_channel_still_high_says_so():
+    """A noise read off the innovations of a filter that trusted the sensor more is not yet the noise of the
+    one that trusts it less (its innovations grow as it follows the sensor less where the sensor errs slowly):
+    the proof says when the channel's whole-run NIS verdict is still the one the line was meant to mend, so
+    the user knows a next round is coming (the F1/10 orientation: 49 -> 7.4 -> 2.2 -> ok over three rounds),
+    and says nothing once it is mended. Records of 200 scalar updates whose NIS is 9, 4 and 1."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.tune.advice import _still
+
+    def records(nis: float) -> list[DiagnosticsRecord]:
+        return [DiagnosticsRecord(100.0 + 0.1 * k, "imu", ["roll"], [0.01], [0.01**2 / nis], nis, 1, False,
+                                  channel="orientation") for k in range(200)]
+
+    v = Verdict("imu", "orientation", "problem", "NIS high", "sensors.imu.orientation_noise",
+                "orientation_noise = [0.01, 0.01, 1.0]")
+    assert "imu/orientation still reads NIS high with it (4.00 per dof)" in _still(v, records(9.0), records(4.0))
+    assert _still(v, records(9.0), records(1.0)) == ""
+    assert _still(v, records(1.0), records(1.0)) == ""  # nothing to mend
