@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     held = f"; held-back -log L {b.neg_loglik:.1f} -> {a.neg_loglik:.1f}" if b is not None and a is not None else ""
     header = (f"fusiond tune of {bags} from {args.config}: {len(result.changed)} key(s) tuned{held}.\n"
               "Keys at their default are left out; config.toml documents them.")
-    write(args.out, result.config, result.comments, header)
+    # the user's own file with the tuned keys edited in (its comments kept), else the whole config written
+    write(args.out, result.config, result.comments, header, original=(Path(args.config).read_text(), cfg))
     print(format_table(result))
     print(f"tuned config {args.out}")
     return 0

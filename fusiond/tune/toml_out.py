@@ -1,14 +1,18 @@
-"""The tuned config as TOML: every table, the keys that differ from their defaults, a comment per tuned key.
+"""The tuned config as TOML: the user's own file with the tuned keys edited in, or written whole.
 
-A complete config: it loads (``fusiond.config.load``) to exactly the Config it was written from, so
-``replay`` and ``run`` take it as it is. Keys at their default are left out (they keep following
-the documented defaults, config.toml); the tables are all written, [[sensors]] in config order.
+A complete config either way: it loads (``fusiond.config.load``) to exactly the Config it was written
+from, so ``replay`` and ``run`` take it as it is. Edited in (``edited``): the user's file, its comments
+and layout kept (``fusiond init`` explains each choice in them), each changed key's line replaced in its
+table, or added at the end of it, with a comment saying it was tuned; kept only when it loads to that
+Config. Written whole (``dumps``): the keys that differ from their defaults (the others keep following
+the documented defaults, config.toml), a table only when it has one, [[sensors]] in config order.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -73,9 +77,9 @@ def dumps(cfg: Config, comments: Mapping[tuple[str, str], str] | None = None, he
         out.append("")
     for table in _TABLES:
         mine = {k: c for (t, k), c in comments.items() if t == table}
-        out.append(f"[{table}]")
-        out += _lines(getattr(cfg, table), mine)
-        out.append("")
+        lines = _lines(getattr(cfg, table), mine)
+        if lines:  # a table of defaults only says nothing
+            out += [f"[{table}]", *lines, ""]
     for s in cfg.sensors:
         mine = {k: c for (t, k), c in comments.items() if t == s.name}
         out.append("[[sensors]]")
@@ -86,11 +90,93 @@ def dumps(cfg: Config, comments: Mapping[tuple[str, str], str] | None = None, he
     return "\n".join(out)
 
 
+_HEADER = re.compile(r"^\s*\[\s*([A-Za-z0-9_]+)\s*\]\s*(#.*)?$")
+_SENSORS = re.compile(r"^\s*\[\[\s*sensors\s*\]\]\s*(#.*)?$")
+_ANY_HEADER = re.compile(r"^\s*\[")
+_NAME = re.compile(r"^\s*name\s*=\s*(\"[^\"]*\"|'[^']*')")
+
+
+def _blocks(lines: list[str]) -> dict[str, tuple[int, int]]:
+    """Table (a top-level name, or a sensor's name) -> (first line after its header, end of its block)."""
+    out: dict[str, tuple[int, int]] = {}
+    current: str | None = None
+    start = 0
+    sensor = False
+    for i, line in enumerate(lines + ["[end]"]):
+        header = _HEADER.match(line) if i < len(lines) else None
+        if i == len(lines) or header or _SENSORS.match(line) or _ANY_HEADER.match(line):
+            if current is not None:
+                out.setdefault(current, (start, i))
+            current, start, sensor = (header.group(1) if header else None), i + 1, bool(_SENSORS.match(line))
+            continue
+        if sensor and current is None:
+            m = _NAME.match(line)
+            if m:
+                current = m.group(1)[1:-1]
+    return out
+
+
+def _changed(before: msgspec.Struct, after: msgspec.Struct) -> list[str]:
+    return [f.name for f in msgspec.structs.fields(after) if getattr(after, f.name) != getattr(before, f.name)]
+
+
+def edited(text: str, original: Config, cfg: Config, comments: Mapping[tuple[str, str], str] | None = None,
+           header: str = "") -> str | None:
+    """``text`` (the file ``original`` was loaded from) with the keys ``cfg`` changes edited in (module doc);
+    None where that cannot be done line by line (a key written over several lines, a table written inline, a
+    sensor added): ``dumps`` then."""
+    import tomllib
+
+    from ..config import loads
+
+    comments = comments or {}
+    if [s.name for s in original.sensors] != [s.name for s in cfg.sensors]:
+        return None
+    edits: list[tuple[str, str, str]] = []  # (table, key, line)
+    pairs = [(t, getattr(original, t), getattr(cfg, t)) for t in _TABLES]
+    pairs += [(a.name, a, b) for a, b in zip(original.sensors, cfg.sensors)]
+    for table, a, b in pairs:
+        for key in _changed(a, b):
+            value = getattr(b, key)
+            if value is None:
+                return None
+            line = f"{key} = {_value(value)}"
+            note = comments.get((table, key))
+            edits.append((table, key, line + f"  # {note}" if note else line + "  # tuned"))
+    lines = text.splitlines()
+    for table, key, new in edits:
+        blocks = _blocks(lines)
+        pattern = re.compile(rf"^\s*{re.escape(key)}\s*=")
+        if table in blocks:
+            start, end = blocks[table]
+            at = next((i for i in range(start, end) if pattern.match(lines[i])), None)
+            if at is not None:
+                lines[at] = new
+            else:
+                last = max((i for i in range(start, end) if lines[i].strip() and not lines[i].lstrip().startswith("#")),
+                           default=start - 1)
+                lines.insert(last + 1, new)
+        elif table in _TABLES:
+            lines += ["", f"[{table}]", new]
+        else:
+            return None
+    out = "\n".join([*(f"# {h}" if h else "#" for h in header.splitlines()), *lines]) + "\n"
+    try:
+        tomllib.loads(out)
+        if loads(out) != cfg:
+            return None
+    except Exception:  # noqa: BLE001 - any doubt: the whole config is written instead
+        return None
+    return out
+
+
 def write(path: Path | str, cfg: Config, comments: Mapping[tuple[str, str], str] | None = None,
-          header: str = "") -> None:
+          header: str = "", original: tuple[str, Config] | None = None) -> None:
+    """The tuned config at ``path``; ``original``: the user's file (text, Config) to edit the keys into."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(dumps(cfg, comments, header))
+    text = edited(original[0], original[1], cfg, comments, header) if original is not None else None
+    p.write_text(text if text is not None else dumps(cfg, comments, header))
 
 
-__all__ = ["dumps", "write"]
+__all__ = ["dumps", "edited", "write"]

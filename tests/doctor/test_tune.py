@@ -137,6 +137,37 @@ def test_the_written_config_loads_back_to_the_same_config(example):
     assert loads(dumps(cfg, {("filter", "process_noise"): "a comment"}, header="a header\nline two")) == cfg
 
 
+@pytest.mark.parametrize("example", sorted((ROOT / "examples").glob("*.toml")) + [ROOT / "config.toml"],
+                         ids=lambda p: p.name)
+def test_the_tuned_keys_are_edited_into_the_users_own_file(example):
+    """The user's file with its comments (``fusiond init`` explains each choice in them): a key it has is
+    replaced on its line, a key it lacks is added to its table (a sensor's, or a top-level table the file
+    may not have), each with its comment; every line the file had but the edited ones stays, and the text
+    loads to the tuned config. A sensor added or removed is no edit: None (the whole config is written)."""
+    import msgspec
+
+    from fusiond.tune.toml_out import edited
+
+    text = example.read_text()
+    cfg = load(example)
+    last = cfg.sensors[-1]
+    noise = "gyro_noise" if hasattr(last, "gyro_noise") else "twist_noise" if hasattr(last, "twist_noise") else None
+    sensors = list(cfg.sensors)
+    if noise == "gyro_noise":
+        sensors[-1] = msgspec.structs.replace(last, gyro_noise=0.00123)
+    elif noise == "twist_noise":
+        sensors[-1] = msgspec.structs.replace(last, twist_noise=[0.1, 0.1, 0.1, 0.2, 0.2, 0.2])
+    tuned = msgspec.structs.replace(cfg, sensors=sensors,
+                                    filter=msgspec.structs.replace(cfg.filter, gyro_bias_walk=3.25e-5))
+    out = edited(text, cfg, tuned, {("filter", "gyro_bias_walk"): "fitted here"}, header="a header")
+    assert out is not None and loads(out) == tuned
+    assert out.startswith("# a header\n") and "gyro_bias_walk = 3.25e-05  # fitted here" in out
+    kept = set(out.splitlines())
+    edited_keys = ("gyro_bias_walk", noise or "-")
+    assert all(line in kept for line in text.splitlines() if not line.lstrip().startswith(edited_keys))
+    assert edited(text, cfg, msgspec.structs.replace(cfg, sensors=cfg.sensors[:-1])) is None
+
+
 # --- through the real CLI --------------------------------------------------------------------------
 
 def fusiond(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
