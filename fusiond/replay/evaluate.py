@@ -134,6 +134,7 @@ class Score(msgspec.Struct):
     aligned_h: float | None = None  # RMS horizontal error after a 2-D rigid (Umeyama) alignment
     heading_deg: float | None = None  # RMS heading error less its mean offset over the segment
     rpe_m: float | None = None  # RMS relative (drift) error over rpe_s, 2-D
+    world_offset: tuple[float, float] | None = None  # the mean horizontal error in the world frame (east, north)
 
 
 class Segment(msgspec.Struct):
@@ -381,6 +382,7 @@ def _score(segment: str, track, ts, ref_xyz, ref_h, world: bool, max_gap: float,
     if world and track.world:
         d = xyz - rx
         sc.world_h = float(np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2)))
+        sc.world_offset = (float(np.mean(d[:, 0])), float(np.mean(d[:, 1])))
         sc.world_up = float(np.sqrt(np.mean(d[:, 2] ** 2)))
     if n >= 2:
         sc.aligned_h = _aligned_rms(xyz[:, :2], rx[:, :2])
@@ -482,6 +484,13 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
             sc = _score(seg.name, track, ts, rxyz, rh, world, segment_gap_s, rpe_s)
             if sc is not None:
                 scores.append(sc)
+    whole = next((sc for sc in scores if sc.segment == "all" and sc.method == "fusiond"), None)
+    if whole is not None and whole.world_offset is not None and whole.world_h:
+        east, north = whole.world_offset
+        if east * east + north * north > 0.5 * whole.world_h**2:  # the larger part of its mean square error
+            notes.append(f"fusiond's world error is mostly one constant offset ({east:+.1f} m east, {north:+.1f} m "
+                         "north): the reference's origin is not the filter's world origin (a GPS's datum: its "
+                         "first fix unless `datum` is set), or the receiver's own bias")
     return Evaluation(reference=ref_name(reference), reference_type=msgtype, world=world, fuse_every=rec.fuse_every,
                       scored_at=scored_at, rpe_s=rpe_s, segments=segments, scores=scores, notes=notes)
 
@@ -499,7 +508,8 @@ def format_evaluation(ev: Evaluation) -> str:
     out = [f"reference   {ev.reference} ({ev.reference_type}), scored at {ev.scored_at}"
            + (f", fixes fused 1 in {ev.fuse_every}" if ev.fuse_every > 1 else "")
            + ("; unaligned errors in the filter's world frame" if ev.world
-              else "; no world frame: aligned errors only")]
+              else "; no world frame: aligned errors only")
+           + "; head deg: the heading's RMS error less its mean offset over the segment"]
     out += [f"note        {n}" for n in ev.notes]
     header = f"{'segment':<14} {'method':<26} {'n':>6} {'world m':>8} {'up m':>7} {'aligned m':>9} " \
              f"{'head deg':>8} {'RPE/' + format(ev.rpe_s, 'g') + 's m':>10}"

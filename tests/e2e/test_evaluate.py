@@ -206,3 +206,31 @@ def test_a_track_reads_no_heading_where_it_was_not_known() -> None:
     tr = Track.build("t", [0.0, 1.0, 2.0, 3.0], np.zeros((4, 3)), [0.0, 0.0, 1.0, 1.0], heading_known=[0, 0, 1, 1])
     _, h, valid = tr.at(np.array([0.5, 1.5, 2.5]), 5.0)
     assert valid.all() and np.isnan(h[0]) and np.isnan(h[1]) and h[2] == pytest.approx(1.0)
+
+
+def test_a_world_error_that_is_one_constant_offset_says_so(drive, tmp_path: Path) -> None:
+    """The GPS's datum set 100 m south of the first fix: the filter's world origin is 100 m from the
+    reference's, and its world error is that offset (the track itself is as good: aligned the same). The
+    evaluation says the world error is mostly one constant offset, and gives it (the positions 100 m north of
+    the reference's, within the fixes' noise); with the datum at the first fix nothing is said."""
+    bag, cfg, w = drive
+    _, e0, n0 = w.fixes[0]
+    lat0, lon0, alt0 = w.datum
+    # the first fix's own geodetic position, then 100 m south of it (a small-angle step on the sphere)
+    from fusiond.estimator.geodesy import EnuFrame, enu_to_geodetic
+
+    first = enu_to_geodetic(EnuFrame(lat0, lon0, alt0), e0, n0, 0.0)
+    south = (first[0] - math.degrees(100.0 / 6378137.0), first[1], first[2])
+    moved = tmp_path / "moved.toml"
+    moved.write_text(robot_config_text(gps=f"datum = [{south[0]!r}, {south[1]!r}, {south[2]!r}]"))
+    notes = {}
+    for name, config in (("moved", moved), ("first fix", cfg)):
+        out = tmp_path / f"{name}.json"
+        assert main(["replay", str(bag), "--config", str(config), "--reference", "/ground_truth", "--quiet",
+                     "--evaluation", str(out)]) == 0
+        notes[name] = [n for n in json.loads(out.read_text())["notes"] if "constant offset" in n]
+        if name == "moved":
+            offset = _scores(out)["fusiond"]["world_offset"]
+            assert abs(offset[1] - 100.0) < 2.0 and abs(offset[0]) < 2.0, offset
+    assert len(notes["moved"]) == 1 and "datum" in notes["moved"][0]
+    assert notes["first fix"] == []
