@@ -118,3 +118,28 @@ def test_an_unstated_altitude_whose_nis_is_low_names_unknown_position_sigma():
     assert "which state none" in v.message, v.message
     (stated,) = [v for v in run_samples(samples, cfg).verdicts() if v.channel == "altitude"]
     assert stated.level == "ok" and stated.key == "", stated  # stated, the same fixes' noise is their own
+
+
+def test_an_unstated_receivers_horizontal_verdict_names_the_measured_noise_and_position_noise():
+    """Fixes stating no accuracy: the filter measures their horizontal noise from the wheels and takes their
+    altitude's from unknown_position_sigma. A NIS-low verdict on the horizontal says the noise taken for them
+    was measured (not "stated": they state none) and names position_noise, which states it instead; on the
+    altitude, without a paste line, it names unknown_position_sigma. 300 updates of NIS 0.05 per dof."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.doctor.checks.absolute import absolute_verdict
+    from fusiond.doctor.nis import ChannelStats
+
+    def stats(channel: str, comps: list[str]) -> ChannelStats:
+        k = len(comps)
+        ch = ChannelStats(comps)
+        ch.extend([DiagnosticsRecord(100.0 + 0.1 * i, "gps", comps, [0.1] * k, [0.2] * k, 0.05 * k, k, False,
+                                     channel=channel) for i in range(300)])
+        return ch
+
+    horizontal = absolute_verdict("gps", "position", stats("position", ["x", "y"]), 100.0, unstated=True)
+    assert "NIS low" in horizontal.message and "measured from the wheels" in horizontal.message, horizontal
+    assert "the stated noise" not in horizontal.message and horizontal.key == "sensors.gps.position_noise"
+    altitude = absolute_verdict("gps", "altitude", stats("altitude", ["up"]), 100.0, unstated=True)
+    assert altitude.key == "sensors.gps.unknown_position_sigma" and "which state none" in altitude.message
+    stated = absolute_verdict("gps", "position", stats("position", ["x", "y"]), 100.0)
+    assert "the stated noise" in stated.message and stated.key == "sensors.gps.position_noise"

@@ -35,9 +35,10 @@ def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
                      up: ChannelStats | None = None, unstated: bool = False) -> Verdict:
     """GPS and pose channels: NIS against the stated noise. ``unstated``: a receiver whose fixes state no
-    accuracy, so the noise the filter took for them is the config's ``unknown_position_sigma`` (a verdict
-    without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
-    filter measures from the fixes)."""
+    accuracy: the filter took its altitude's noise from the config's ``unknown_position_sigma`` (a verdict on
+    it without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
+    filter measures), and measured its horizontal noise from the wheels (which ``position_noise`` states
+    instead)."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
@@ -47,9 +48,13 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
         return Verdict(name, channel, "ok", figures(ch, t0), evidence=ev)
     line = _measured_noise(ch, up)
     stated = "the stated noise"
-    if unstated and not line:
-        key = sensor_key(name, "unknown_position_sigma")
+    if unstated and channel == "altitude":
         stated = "the noise taken for its fixes, which state none (unknown_position_sigma),"
+        if not line:
+            key = sensor_key(name, "unknown_position_sigma")
+    elif unstated:  # the horizontal noise of fixes that state none is measured from the wheels (GpsModel)
+        stated = ("the noise taken for its fixes, which state none (measured from the wheels, at the upper end of "
+                  "its uncertainty; position_noise states it instead),")
     # the innovations' rms as a pasteable line when it covers every axis of the key, else said in the text
     rms = "the value below" if line else "their rms per axis (" + ", ".join(
         f"{c} {ch.component(i)[1]:.2g} m" for i, c in enumerate(ch.components)) + ")"
@@ -70,7 +75,7 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     if applied != verdict:
         ev["applied_nis_per_dof"] = ch.kept_nis_per_dof
         if applied == "nis_low":
-            return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, below their bounds: the stated noise is "
+            return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, below their bounds: {stated} is "
                            "larger than the applied updates show", key, evidence=ev)
         return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, consistent with the stated noise; the rejected "
                        "ones are outliers the gate kept out (mahalanobis_threshold), nothing to change in the noise",
