@@ -90,29 +90,31 @@ def dumps(cfg: Config, comments: Mapping[tuple[str, str], str] | None = None, he
     return "\n".join(out)
 
 
-_HEADER = re.compile(r"^\s*\[\s*([A-Za-z0-9_]+)\s*\]\s*(#.*)?$")
-_SENSORS = re.compile(r"^\s*\[\[\s*sensors\s*\]\]\s*(#.*)?$")
-_ANY_HEADER = re.compile(r"^\s*\[")
+_HEADER = re.compile(r"^\s*\[\s*([A-Za-z0-9_]+)\s*\]\s*(#.*)?$")  # [filter]
+_SENSORS = re.compile(r"^\s*\[\[\s*sensors\s*\]\]\s*(#.*)?$")  # [[sensors]]
+_ANY_HEADER = re.compile(r"^\s*\[")  # any other header ends a block too (a line of an array spread over lines
+# may look like one: what is written is checked by loading it)
 _NAME = re.compile(r"^\s*name\s*=\s*(\"[^\"]*\"|'[^']*')")
 
 
 def _blocks(lines: list[str]) -> dict[str, tuple[int, int]]:
     """Table (a top-level name, or a sensor's name) -> (first line after its header, end of its block)."""
     out: dict[str, tuple[int, int]] = {}
-    current: str | None = None
-    start = 0
-    sensor = False
-    for i, line in enumerate(lines + ["[end]"]):
-        header = _HEADER.match(line) if i < len(lines) else None
-        if i == len(lines) or header or _SENSORS.match(line) or _ANY_HEADER.match(line):
-            if current is not None:
-                out.setdefault(current, (start, i))
-            current, start, sensor = (header.group(1) if header else None), i + 1, bool(_SENSORS.match(line))
-            continue
-        if sensor and current is None:
-            m = _NAME.match(line)
-            if m:
-                current = m.group(1)[1:-1]
+    current: str | None = None  # the block's table; a [[sensors]] block's once its name line is read
+    start, in_sensor = 0, False
+
+    def close(end: int) -> None:
+        if current is not None:
+            out.setdefault(current, (start, end))
+
+    for i, line in enumerate(lines):
+        if _ANY_HEADER.match(line):
+            close(i)
+            header = _HEADER.match(line)
+            current, start, in_sensor = (header.group(1) if header else None), i + 1, bool(_SENSORS.match(line))
+        elif in_sensor and current is None and (m := _NAME.match(line)):
+            current = m.group(1)[1:-1]
+    close(len(lines))
     return out
 
 
@@ -125,9 +127,7 @@ def edited(text: str, original: Config, cfg: Config, comments: Mapping[tuple[str
     """``text`` (the file ``original`` was loaded from) with the keys ``cfg`` changes edited in (module doc);
     None where that cannot be done line by line (a key written over several lines, a table written inline, a
     sensor added): ``dumps`` then."""
-    import tomllib
-
-    from ..config import loads
+    from ..config import ConfigError, loads
 
     comments = comments or {}
     if [s.name for s in original.sensors] != [s.name for s in cfg.sensors]:
@@ -162,12 +162,10 @@ def edited(text: str, original: Config, cfg: Config, comments: Mapping[tuple[str
             return None
     out = "\n".join([*(f"# {h}" if h else "#" for h in header.splitlines()), *lines]) + "\n"
     try:
-        tomllib.loads(out)
-        if loads(out) != cfg:
-            return None
-    except Exception:  # noqa: BLE001 - any doubt: the whole config is written instead
-        return None
-    return out
+        same = loads(out) == cfg
+    except ConfigError:
+        same = False
+    return out if same else None  # any doubt: the whole config is written instead
 
 
 def write(path: Path | str, cfg: Config, comments: Mapping[tuple[str, str], str] | None = None,
