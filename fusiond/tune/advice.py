@@ -12,8 +12,11 @@ incomparable: the terms whose dof the change altered, and those of a channel the
 are left out of both scores, and the change is judged by how well the filter
 then predicts everything else. The line is advised only when -log L improves by more than the number of keys it
 sets: Akaike's penalty of one per free parameter, the smallest improvement that a change fitted to
-this recording has to beat to be expected to hold on the next one. Otherwise it is printed as tried,
-with what it did. A line that changes none of the updates cannot be judged by the likelihood (a heading
+this recording has to beat to be expected to hold on the next one; and when it does not make the run's
+last 30 % worse, held back as tune validates its own fit (``recording.FIT_FRACTION``): a sensor that errs
+slowly rewards a larger white noise in the whole run's likelihood round after round (its own innovations
+read consistent) while the filter, following it less, predicts the run's end worse. Otherwise it is
+printed as tried, with what it did. A line that changes none of the updates cannot be judged by the likelihood (a heading
 turned where nothing measures the heading; a key only the doctor's own check reads): it is printed as the
 doctor's, with how far it moved the final pose, if at all, and why the replay cannot tell. A problem
 whose line makes -log L worse by more than its keys is shown as a warning: the replay contradicts it.
@@ -36,6 +39,7 @@ from ..doctor import ChannelStats, Proof, Verdict
 from ..logs import muted
 from .forked import run_side_by_side
 from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
+from .recording import split_stamp
 
 __all__ = ["prove_advice", "split_key", "with_suggestion"]
 
@@ -167,6 +171,7 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         with muted():
             base_records = replay_records(cfg, samples, backend)
     full = reference(base_records, cfg)
+    held = reference(base_records, cfg, after=split_stamp(samples))  # the run's last 30 %, as tune holds it back
     proofs: dict[tuple[str, str], Proof] = {}
     to_replay: list[tuple[tuple[str, str], Verdict, Config, int]] = []
     # problems first: if the budget runs out, the lines left unproven are the least urgent ones
@@ -210,9 +215,16 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             # the filter already leaves out): nothing against it, and its case is the doctor's
             return Proof(False, "it changes none of the filter's updates on this recording, only the "
                                 "doctor's own check: the replay cannot judge it", judged=False)
+        effect = _effect(before, after, v.sensor, dropped)
+        if gain > n_keys:
+            held_ref, _ = _comparable(held, records)
+            held_gain = score(base_records, held_ref).neg_loglik - score(records, held_ref).neg_loglik
+            if held_gain < 0.0:  # better over the run, worse over its end: fitted to the run, not predicting it
+                return Proof(False, effect + f"; but over the run's last 30 % (held back, as tune validates) "
+                                             f"likelihood {held_gain:+.0f}: it does not predict the run's end better")
         advised = gain > n_keys
         still = _still(v, base_records, records) if advised else ""  # what the next round would say of an advised one
-        return Proof(advised, _effect(before, after, v.sensor, dropped) + still, refuted=gain < -n_keys)
+        return Proof(advised, effect + still, refuted=gain < -n_keys)
 
     # each line's replay is independent of the others': side by side on the machine's cores (``forked``)
     for job, proof in zip(to_replay, run_side_by_side(prove, to_replay, workers, out_of_time)):

@@ -63,6 +63,7 @@ from .likelihood import Reference, Score, reference, replay_records, residuals, 
 from .params import Param, apply, select, sensor_of, tunable_params, value
 from .prediction import HOLD_EVERY, Prediction, predict
 from .prediction import split as split_fixes
+from .recording import FIT_FRACTION, split_stamp
 from .simplex import nelder_mead
 
 PROBE = math.log(2.0)  # the informedness probe and the first simplex step: a factor of 2
@@ -281,7 +282,7 @@ def _fmt(v: object) -> str:
 
 
 def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = None, budget_s: float = 120.0,
-         maxfev: int | None = None, progress: bool = False, fit_fraction: float = 0.7,
+         maxfev: int | None = None, progress: bool = False, fit_fraction: float = FIT_FRACTION,
          backend: Backend | None = None) -> TuneResult:
     """Fit ``cfg``'s noise to ``samples`` (a recording's configured-sensor samples in bag order; the
     module doc says how). ``keys``: the parameters to fit (``params.select``; ConfigError for an
@@ -312,8 +313,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     n = len(active)
     if maxfev is None:
         maxfev = 60 * max(n, 1)
-    lo = min(s.stamp for s in samples)
-    split = lo + fit_fraction * (max(s.stamp for s in samples) - lo)
+    split = split_stamp(samples, fit_fraction)
     fit_part = [s for s in samples if s.stamp <= split]
     bar = _Progress(progress, total=2 * n + maxfev + 2 * (1 + n))
     try:
