@@ -119,6 +119,19 @@ def test_the_doctor_names_the_receivers_step_not_the_motion_model():
     assert not [u for u in verdicts if u.channel == "position_reacquired"]
 
 
+def test_the_doctor_names_a_burst_that_came_back_and_the_key_that_stops_following_one():
+    """12 fixes at one 7 m offset, then back (the burst the test below follows and leaves): two steps 0.6-0.8 s
+    apart that undo each other. The doctor names it a burst, says it was followed, and names step_false_alarm
+    with what 0 and 1e-6 do, without a paste line (no replay without a reference can judge it)."""
+    from tests.support.verdicts import one, verdicts_of
+
+    w = _car()
+    v = one(verdicts_of(_config(), _edited(simulate(w), [(7.0, 0.0)] * 12)), "gps", "position_step")
+    assert v.level == "warn" and "came back 1 time(s)" in v.message and "followed" in v.message, v
+    assert v.key == "sensors.gps.step_false_alarm" and not v.suggestion, v
+    assert abs(v.evidence["largest_burst_m"] - 7.0) < 1.0 and 0.5 <= v.evidence["largest_burst_s"] <= 1.0, v
+
+
 @pytest.mark.parametrize("offsets", [
     [(7.0, 0.0)] * 3,  # one jump for 3 fixes, then back
     [(7.0, 0.0), (0.0, -12.0), (-9.0, 5.0)],  # three outliers in different directions and sizes

@@ -1,14 +1,16 @@
-"""A receiver whose fixes stepped to a new level, which the filter followed (a step, not a loss)."""
+"""A receiver whose fixes stepped to a new level, which the filter followed (a step, not a loss), and a burst
+that came back: the same step test followed it while it lasted."""
 
 from __future__ import annotations
 
 import bisect
 import math
 
+from ...core.sensors.gps import REACQUIRE_JUMP_S
 from ..channels import PerChannel
 from ..evidence import Evidence
 from ..nis import ChannelStats
-from ..verdict import Verdict
+from ..verdict import Verdict, sensor_key
 
 __all__ = ["GpsSteps"]
 
@@ -30,6 +32,21 @@ class GpsSteps(PerChannel):
         fixes = ev.channels.get((name, "position"))
         steps = [(t, _step(fixes, t, y)) for t, y in zip(ch.stamps, ch.innovations) if len(y) >= 2]
         evidence = {"steps": float(ch.n)}
+        bursts = _bursts(steps)
+        if bursts:
+            held, (east, north) = max(bursts, key=lambda b: math.hypot(*b[1]))
+            evidence.update({"bursts": float(len(bursts)), "largest_burst_m": math.hypot(east, north),
+                             "largest_burst_s": held})
+            return [Verdict(name, "position_step", "warn",
+                            f"the receiver's fixes left their level and came back {len(bursts)} time(s) (the largest "
+                            f"{math.hypot(east, north):.1f} m: {east:+.1f} m east, {north:+.1f} m north, followed for "
+                            f"{held:.1f} s): a burst (multipath) that held one offset for more than the step test's fewest fixes "
+                            "is a step until it ends, so the filter followed it meanwhile. A receiver that bursts so "
+                            "wants the step test off (step_false_alarm = 0: a run of gated-out fixes that began with "
+                            f"a jump is then followed only after {REACQUIRE_JUMP_S:g} s) or stricter (1e-6: 10 fixes "
+                            "at least). No replay can judge that without a reference: a fix the gate rejects costs "
+                            "the innovations' likelihood more than one accepted at the burst's level",
+                            sensor_key(name, "step_false_alarm"), evidence=evidence)]
         largest = ""
         if steps:
             t, (east, north) = max(steps, key=lambda st: math.hypot(*st[1]))
@@ -59,3 +76,14 @@ def _step(fixes: ChannelStats | None, stamp: float, y: list[float]) -> tuple[flo
             east, north, n = east + fixes.innovations[k][0], north + fixes.innovations[k][1], n + 1
             k -= 1
     return east / n, north / n
+
+
+def _bursts(steps: list[tuple[float, tuple[float, float]]]) -> list[tuple[float, tuple[float, float]]]:
+    """(how long it held, its offset) of each step followed by one that came back at least half way to the level
+    it left, within REACQUIRE_JUMP_S: the time the core holds that level as a hypothesis the fixes may return to
+    (``GpsModel._step_test``), so a return is a burst that ended, not a second step."""
+    out = []
+    for (t0, d0), (t1, d1) in zip(steps, steps[1:]):
+        if t1 - t0 <= REACQUIRE_JUMP_S and math.hypot(d0[0] + d1[0], d0[1] + d1[1]) <= 0.5 * math.hypot(*d0):
+            out.append((t1 - t0, d0))
+    return out
