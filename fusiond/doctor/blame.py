@@ -198,6 +198,15 @@ def _inverted_imu(b: Blame, v: Verdict) -> Verdict | None:
     return next((a for a in b.filed((imu.name, "attitude")) if a.evidence.get("inverted")), None)
 
 
+def _climb(b: Blame, v: Verdict) -> Verdict | None:
+    """The IMU's attitude verdict whose climb the GPS's vertical error state could not hold (``checks/lean``):
+    what a GPS altitude channel that is not ok shows (its fixes gated as the height leaves them)."""
+    if v.channel != "altitude" or v.level == "ok":
+        return None
+    return next((a for e in b.entries if e.verdict is not None and (a := e.verdict).channel == "attitude"
+                 and "unmodelled_climb_m" in a.evidence), None)
+
+
 def _gaps_advice(b: Blame, v: Verdict) -> Verdict | None:
     if v.suggestion:
         return None
@@ -239,6 +248,9 @@ RULES: tuple[Rule, ...] = (
     Rule(("absolute",), lambda b, v: b.culprit if b.culprit_explains(v) else None,
          lambda b, v, c: explained(v, c, b.stats(v), b.ev.t0),
          "a wrong source explains an absolute channel's NIS"),
+    Rule(("absolute",), _climb, lambda b, v, c: explained(v, c, b.stats(v), b.ev.t0),
+         "a mount's climb the vertical error state could not hold puts the altitude's fixes out of its gate: "
+         "not their noise, not the gate"),
     Rule(("absolute",), _wander_in_place, _with_caveat,
          "a wandering receiver error reads as NIS low (the filter follows it): not \"lower position_noise\""),
     Rule(("unmeasured_yaw_rate", "slip"), _inverted_imu,

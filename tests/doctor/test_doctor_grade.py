@@ -89,6 +89,36 @@ def test_the_climb_is_a_problem_only_beyond_what_the_vertical_error_state_allows
     assert learned.level == "warn" and "twist_pitch state learns" in learned.message
 
 
+def test_the_climb_verdict_quotes_what_the_altitude_channel_shows_and_explains_its_gated_fixes():
+    """The problem's message says what the altitude's own channel shows of the climb: "looks normal" only where its
+    NIS is ok, the share gated where the fixes left the gate (a highway car starting at speed: 38 %). And a GPS
+    altitude verdict that is not ok beside that problem is explained by it and names its key (extrinsic_rpy), not
+    the gate or the noise (pasting mahalanobis_threshold = 10 made the altitude read ok, its error still 38 m: on
+    the recording, tests/e2e/test_climb_recording.py)."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.doctor.nis import ChannelStats
+
+    def altitude(rejected: int, nis: float = 1.0) -> ChannelStats:
+        ch = ChannelStats(["up"])
+        ch.extend([DiagnosticsRecord(100.0 + i, "gps", ["up"], [1.0], [1.0 / nis], nis, 1, i < rejected,
+                                     channel="altitude") for i in range(200)])
+        return ch
+
+    imu = robot_config(gps="").sensor("imu")
+    fit = GradeFit(0.05, 0.004, 0.004, 20, 750.0, 1, 5.0)  # 37.5 m of climb
+    assert "looks normal" in grade_verdict(fit, imu, None, altitude=altitude(0)).message
+    gated = grade_verdict(fit, imu, None, altitude=altitude(76, 20.0)).message
+    assert "38% gated" in gated and "looks normal" not in gated, gated
+    assert "reads high" in grade_verdict(fit, imu, None, altitude=altitude(0, 20.0)).message
+
+    # the check reads the run's own altitude channel: here ok (the state absorbed the climb), and said so
+    samples = sim_gps.simulate(sim_gps.World(**WORLD, imu_mount_pitch=MOUNT))
+    verdicts = run_samples(samples, robot_config(gps="")).verdicts()
+    up = next(v for v in verdicts if v.sensor == "gps" and v.channel == "altitude")
+    attitude = next(v for v in verdicts if v.sensor == "imu" and v.channel == "attitude")
+    assert up.level == "ok" and attitude.level == "problem" and "looks normal" in attitude.message, attitude
+
+
 def test_the_wander_the_grade_is_judged_by_is_the_state_the_gps_puts_in_the_filter():
     """The three-axis error state (error_tau_s) is the filter's when configured, whatever vertical_error_sigma says
     (``GpsKind.state_blocks``); else the vertical one; with neither, a wander is only assumed, and no state holds

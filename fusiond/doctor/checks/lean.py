@@ -46,6 +46,7 @@ from ..evidence import Evidence
 from ..heading import gps_sigma
 from ..median import median
 from ..mounting import MountYaw
+from ..nis import ChannelStats
 from ..series import Series
 from ..verdict import Verdict, sensor_key
 
@@ -169,9 +170,11 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
 
 
 def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None,
-                  learned: bool = False) -> Verdict | None:
+                  learned: bool = False, altitude: ChannelStats | None = None) -> Verdict | None:
     """The GPS climb's verdict on the IMU's mounting pitch; None when the drive could not tell. ``learned``:
-    the filter estimates the twist's pitch (``pitch_estimation``), so the climb itself is already corrected."""
+    the filter estimates the twist's pitch (``pitch_estimation``), so the climb itself is already corrected.
+    ``altitude``: the GPS altitude's channel, whose verdict the message quotes (the climb can hide in it, or
+    push the fixes out of its gate)."""
     if fit is None or imu is None:
         return None
     deg, se_deg = math.degrees(fit.delta), math.degrees(fit.se)
@@ -187,7 +190,7 @@ def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw |
             ev["unmodelled_climb_m"] = height
             fate = (f"{height:.0f} m over this drive, which the GPS's vertical error state then takes for receiver "
                     f"wander, {height / fit.state_sigma_m:.0f} times the {fit.state_sigma_m:g} m it allows: the "
-                    "published height leaves the fixes by up to about that, while the altitude's NIS looks normal; "
+                    f"published height leaves the fixes by up to about that, {_altitude_reads(altitude)}; "
                     "pitch_estimation = true on the odometry learns it instead")
         else:
             fate = "which the GPS's vertical error state then takes for receiver wander"
@@ -230,6 +233,19 @@ def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50,
                    {"lean_roll_rad": means[0], "lean_pitch_rad": means[1]})
 
 
+def _altitude_reads(altitude: ChannelStats | None) -> str:
+    """What the altitude's own channel shows of a climb its error state took: often nothing (the state absorbs
+    it), or, once the height is off by more than the gate allows, fixes gated out."""
+    if altitude is None or not altitude.n:
+        return "and the altitude's innovations cannot show it"
+    if altitude.rejected:
+        return (f"and the altitude's fixes leave the gate as it does ({100 * altitude.rejected / altitude.n:.0f}% "
+                "gated): not their noise, nor the gate")
+    if altitude.verdict() == "ok":
+        return "while the altitude's NIS looks normal"
+    return f"and the altitude's NIS reads {altitude.verdict().removeprefix('nis_')} for it"
+
+
 class Lean(BaseCheck):
     """The estimate's lean: against the grade the GPS altitude measures when there is enough driving to
     tell (it replaces "on level ground"), else its mean over the run."""
@@ -237,6 +253,7 @@ class Lean(BaseCheck):
     name = "lean"
 
     def run(self, ev: Evidence) -> list[Verdict]:
+        gps = next((s.name for s in ev.config.sensors if kind_of(s).geodetic), None) if ev.config else None
         graded = grade_verdict(grade_fit(ev.series, ev.config), ev.run_imu, ev.mount,
-                               state_layout(ev.config).has("twist_pitch"))
+                               state_layout(ev.config).has("twist_pitch"), ev.channels.get((gps, "altitude")))
         return found(graded if graded is not None else lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount))

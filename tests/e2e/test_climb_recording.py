@@ -1,0 +1,56 @@
+"""The highway car with no fix for 20 s from 25 s in (``scripts/recording_variants.py``'s ``comma_outage20``), as
+`fusiond init` writes its config: the IMU pitched in its mount, unstated, and no pitch_estimation. The twist climbs
+7 m per 100 m; the GPS's vertical error state takes it, through the outage too, until the height is off by more
+than the altitude's gate allows, and the fixes' altitudes are then gated out. The doctor's problem on the mount says so (not "the altitude's NIS looks
+normal"), and the altitude's own verdict is explained by it and names extrinsic_rpy, not the gate. Skipped without
+the recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fusiond.config import loads
+from fusiond.replay.run import replay
+
+from tests.support.scripts import load_script
+
+ROOT = Path(__file__).resolve().parents[2]
+COMMA = ROOT.parent / "shared" / "data" / "comma2k19_ex1"
+
+pytestmark = [pytest.mark.e2e,
+              pytest.mark.skipif(not COMMA.exists(), reason="needs ../shared/data/comma2k19_ex1 (the highway car)")]
+
+CONFIG = """
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+twist_frame = "body"
+
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+orientation = "off"
+angular_velocity = true
+
+[[sensors]]
+name = "gps"
+kind = "gps"
+key = "fix"
+"""
+
+
+def test_the_altitude_gated_by_an_unstated_mount_is_put_down_to_the_mount(tmp_path):
+    variants = load_script("recording_variants")
+    bag = tmp_path / "comma_outage20"
+    variants.write_variant(COMMA, bag, next(v for v in variants.VARIANTS if v.name == "comma_outage20"))
+    result = replay([bag], loads(CONFIG), progress=False)
+    verdicts = result.verdicts()
+    attitude = next(v for v in verdicts if v.sensor == "imu" and v.channel == "attitude")
+    up = next(v for v in verdicts if v.sensor == "gps" and v.channel == "altitude")
+    assert result.doctor.channels[("gps", "altitude")].rejected > 0  # the recording has the trait
+    assert attitude.level == "problem" and "gated" in attitude.message and "looks normal" not in attitude.message
+    assert up.key == "sensors.imu.extrinsic_rpy" and "explained by imu/attitude" in up.message, up
