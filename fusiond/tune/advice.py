@@ -98,14 +98,32 @@ def _nis(s: Score, sensor: str) -> float | None:
     return s.nis_per_dof.get(sensor, s.nis_per_dof.get(""))
 
 
-def _effect(before: Score, after: Score, sensor: str, dropped: int) -> str:
+def _channel(records: Sequence[object], v: Verdict) -> ChannelStats | None:
+    """The verdict's own channel over ``records`` (the figures its message quotes), None where it has none (a
+    check's channel that is no update's: the IMU's attitude, a heading)."""
+    mine = [r for r in records if r.sensor == v.sensor and r.channel == v.channel]
+    if not mine:
+        return None
+    ch = ChannelStats(list(mine[0].components))
+    ch.extend(mine)
+    return ch
+
+
+def _effect(before: Score, after: Score, v: Verdict, dropped: int, base_records: Sequence[object],
+            records: Sequence[object]) -> str:
+    """The likelihood's gain, and the NIS per dof of the verdict's own channel before and after (the figure
+    its message quotes), else of its sensor's scored updates, named so."""
     gain = before.neg_loglik - after.neg_loglik
     text = f"likelihood {gain:+.0f}"
     if dropped:
         text += f" over the {after.terms} updates it leaves measured as they were"
-    b, a = _nis(before, sensor), _nis(after, sensor)
-    if b is not None and a is not None:
-        text += f", NIS/dof {b:.2f} -> {a:.2f}"
+    was, now = _channel(base_records, v), _channel(records, v)
+    if was is not None and now is not None and math.isfinite(was.nis_per_dof) and math.isfinite(now.nis_per_dof):
+        text += f", {v.sensor}/{v.channel} NIS/dof {was.nis_per_dof:.2f} -> {now.nis_per_dof:.2f}"
+    else:
+        b, a = _nis(before, v.sensor), _nis(after, v.sensor)
+        if b is not None and a is not None:
+            text += f", {v.sensor}'s NIS/dof {b:.2f} -> {a:.2f}"
     if after.rejected != before.rejected:
         text += f", {after.rejected} gated (was {before.rejected})"
     return text
@@ -116,22 +134,11 @@ def _still(v: Verdict, before: Sequence[object], after: Sequence[object]) -> str
     that trusted the sensor more is not yet the noise of the filter that trusts it less (its own innovations
     grow as it follows the sensor less, where the sensor's error is slow), so a pasted value can still read
     high, and the next replay's innovations say the rest. "" when the channel's whole-run verdict changed."""
-    def judged(records: Sequence[object]) -> tuple[str, float]:
-        mine = [r for r in records if r.sensor == v.sensor and r.channel == v.channel]
-        if not mine:
-            return "no_updates", math.nan
-        ch = ChannelStats(list(mine[0].components))
-        ch.extend(mine)
-        return ch.verdict(), ch.nis_per_dof
-
-    was, _ = judged(before)
-    if was not in ("nis_high", "nis_low"):
+    was, now = _channel(before, v), _channel(after, v)
+    if was is None or now is None or was.verdict() not in ("nis_high", "nis_low") or now.verdict() != was.verdict():
         return ""
-    now, nis = judged(after)
-    if now != was:
-        return ""
-    return (f"; {v.sensor}/{v.channel} still reads NIS {'high' if now == 'nis_high' else 'low'} with it "
-            f"({nis:.2f} per dof): paste it and replay, the next verdict's value goes on from there")
+    return (f"; {v.sensor}/{v.channel} still reads NIS {now.verdict().removeprefix('nis_')} with it "
+            f"({now.nis_per_dof:.2f} per dof): paste it and replay, the next verdict's value goes on from there")
 
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
@@ -215,7 +222,7 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             # the filter already leaves out): nothing against it, and its case is the doctor's
             return Proof(False, "it changes none of the filter's updates on this recording, only the "
                                 "doctor's own check: the replay cannot judge it", judged=False)
-        effect = _effect(before, after, v.sensor, dropped)
+        effect = _effect(before, after, v, dropped, base_records, records)
         if gain > n_keys:
             held_ref, _ = _comparable(held, records)
             held_gain = score(base_records, held_ref).neg_loglik - score(records, held_ref).neg_loglik
