@@ -77,6 +77,14 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_USAGE
         if not reference:  # score on the held-back messages of the absolute sensor themselves
             reference = cfg.sensor(recorder.absolute).key
+        else:  # a mistyped topic is refused before the recording is fused, not after
+            from ..replay.evaluate import check_reference
+
+            try:
+                check_reference([Path(p) for p in args.bags], reference)
+            except ReplayError as err:
+                print(f"fusiond: {err}", file=sys.stderr)
+                return EXIT_USAGE
     if not args.advice_budget_s >= 0.0:
         print(f"fusiond: --advice-budget-s {args.advice_budget_s:g}: must be 0 or a positive number of seconds",
               file=sys.stderr)

@@ -215,6 +215,33 @@ class Recorder:
             yield original
 
 
+def _reference_topic(reader, topic: str) -> str:
+    """The bag's name of the reference topic, refused when absent or of a type the scoring cannot read."""
+    from .bag import BagError, did_you_mean
+
+    name = topic if topic in reader.topics else "/" + topic.lstrip("/")
+    if name not in reader.topics:
+        have = ", ".join(sorted(reader.topics)) or "none"
+        raise BagError(f"--reference {topic}: no such topic in the bag{did_you_mean(name, reader.topics)}; "
+                       f"the bag has: {have}")
+    msgtype = reader.topics[name].connections[0].msgtype
+    if msgtype not in REFERENCE_TYPES:
+        raise BagError(f"--reference {name} has type {msgtype}; expected one of {', '.join(REFERENCE_TYPES)}")
+    return name
+
+
+def check_reference(paths: Sequence[Path], topic: str) -> None:
+    """``read_reference``'s checks of the topic itself, made before a replay: a mistyped --reference is refused
+    at once, not after the whole recording was fused."""
+    from .bag import _open_reader
+
+    reader = _open_reader(list(paths))
+    try:
+        _reference_topic(reader, topic)
+    finally:
+        reader.close()
+
+
 def read_reference(paths: Sequence[Path], topic: str) -> tuple[str, np.ndarray, np.ndarray, np.ndarray | None,
                                                                  tuple[float, float, float] | None]:
     """(message type, stamps, positions, headings or None, first NavSatFix lla or None) of a bag topic,
@@ -226,14 +253,9 @@ def read_reference(paths: Sequence[Path], topic: str) -> tuple[str, np.ndarray, 
 
     reader: AnyReader = _open_reader(list(paths))
     try:
-        name = topic if topic in reader.topics else "/" + topic.lstrip("/")
-        if name not in reader.topics:
-            have = ", ".join(sorted(reader.topics)) or "none"
-            raise BagError(f"--reference {topic}: no such topic in the bag; the bag has: {have}")
+        name = _reference_topic(reader, topic)
         conns = reader.topics[name].connections
         msgtype = conns[0].msgtype
-        if msgtype not in REFERENCE_TYPES:
-            raise BagError(f"--reference {name} has type {msgtype}; expected one of {', '.join(REFERENCE_TYPES)}")
         t, pos, head = [], [], []
         for c, _, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, c.msgtype)

@@ -234,3 +234,14 @@ def test_a_world_error_that_is_one_constant_offset_says_so(drive, tmp_path: Path
             assert abs(offset[1] - 100.0) < 2.0 and abs(offset[0]) < 2.0, offset
     assert len(notes["moved"]) == 1 and "datum" in notes["moved"][0]
     assert notes["first fix"] == []
+
+
+def test_a_mistyped_reference_is_refused_before_the_recording_is_fused(drive, tmp_path: Path, capsys) -> None:
+    """Exit 2 naming the topic it may have meant, and nothing fused: the TUM file the replay would write is
+    not written."""
+    bag, cfg, _ = drive
+    tum = tmp_path / "never.tum"
+    assert main(["replay", str(bag), "--config", str(cfg), "--reference", "/ground_trut", "--tum", str(tum)]) == 2
+    err = capsys.readouterr().err
+    assert "--reference /ground_trut: no such topic" in err and "did you mean /ground_truth?" in err, err
+    assert not tum.exists()
