@@ -77,7 +77,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser(_commands_in(argv)).parse_args(argv)
     from ..logs import configure
 
-    configure(args.log_level or getattr(args, "default_log_level", "warning"))
+    # --quiet (replay's): the log's warnings too, unless a --log-level asks for them
+    quiet = getattr(args, "quiet", False) is True and args.command == "replay"
+    configure(args.log_level or ("error" if quiet else getattr(args, "default_log_level", "warning")))
     # The estimator's backend: compiled when built (the default, "auto"), or the numpy reference
     # (FUSIOND_KERNELS=numpy; estimator/backend.py). Each command that fuses passes
     # ``common.chosen_backend()`` to the cores it builds; an unknown name is refused here, before any runs.

@@ -23,7 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", help="write a PNG of the trajectory and NIS per sensor")
     p.add_argument("--report", metavar="DIR", help="write an HTML report (plots, doctor's verdicts) into DIR")
     p.add_argument("--quiet", action="store_true",
-                   help="no progress bar, no summary (and no doctor, unless --plot or --report reads it)")
+                   help="no progress bar, no summary, no log lines below error unless --log-level says "
+                        "(and no doctor, unless --plot or --report reads it)")
     p.add_argument("--reference", metavar="TOPIC",
                    help="score the published trajectory against this bag topic (PoseStamped, "
                         "PoseWithCovarianceStamped, Odometry or NavSatFix; never fused), beside plain baselines")

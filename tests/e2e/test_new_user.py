@@ -858,3 +858,19 @@ def test_bench_with_a_bag_directory_says_it_takes_a_file(tmp_path, capsys, monke
     assert code == 2 and out == ""
     assert one_line(err) == (f"fusiond: bench: --bag {ros2} is a directory (a ROS 2 bag?); bench takes one bag file, "
                              "a ROS 1 .bag or a ROS 2 .mcap")
+
+
+F110_BAG = ROOT.parent / "shared" / "data" / "f110_ds2"
+
+
+@pytest.mark.skipif(not F110_BAG.exists(), reason="needs ../shared/data/f110_ds2 (the F1/10 recording)")
+def test_a_quiet_replay_logs_no_warnings_unless_a_log_level_asks(capsys, tmp_path):
+    """`replay --quiet` writes its files and nothing else (the F1/10 car's config logs twist_component_lost and
+    time_jump_forward as warnings): its stderr is empty; `--log-level warning` brings the log lines back."""
+    config = str(ROOT / "examples" / "f110_new_user.toml")
+    code, out, err = run_cli(capsys, "replay", str(F110_BAG), "--config", config, "--quiet",
+                             "--tum", str(tmp_path / "q.tum"))
+    assert code == 0 and out == "" and err == "", err
+    code, _, err = run_cli(capsys, "replay", str(F110_BAG), "--config", config, "--quiet", "--log-level", "warning",
+                           "--tum", str(tmp_path / "w.tum"))
+    assert code == 0 and "twist_component_lost" in err, err
