@@ -874,3 +874,16 @@ def test_a_quiet_replay_logs_no_warnings_unless_a_log_level_asks(capsys, tmp_pat
     code, _, err = run_cli(capsys, "replay", str(F110_BAG), "--config", config, "--quiet", "--log-level", "warning",
                            "--tum", str(tmp_path / "w.tum"))
     assert code == 0 and "twist_component_lost" in err, err
+
+
+def test_an_imu_yaw_that_agrees_is_said_in_words_not_evidence_keys(capsys, tmp_path):
+    """The Jackal's IMU yaw fused as absolute agrees with the gyro: the ok verdict says by how much in words (no
+    evidence field names such as imu_vs_gyro_wander_rad in the text a user reads)."""
+    text = JACKAL_TOML.read_text()
+    assert 'orientation = "roll_pitch"' in text
+    cfg = tmp_path / "absolute.toml"
+    cfg.write_text(text.replace('orientation = "roll_pitch"', 'orientation = "absolute"'))
+    code, out, _ = run_cli(capsys, "replay", str(JACKAL), "--config", str(cfg))
+    line = next(x for x in out.splitlines() if "imu/orientation:" in x and x.startswith("doctor"))
+    assert code == 0 and "agrees with the other heading sources" in line and "wanders" in line, line
+    assert "_rad" not in line and "_rad_s" not in line, line

@@ -212,9 +212,22 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                        'orientation = "roll_pitch" with the gyro', sensor_key(key_sensor, "yaw_offset"),
                        f"yaw_offset = {getattr(imu, 'yaw_offset', 0.0) - offset:.4f}", evidence)
     if evidence:
-        return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources "
-                       + ", ".join(f"{k} {v:.3f}" for k, v in evidence.items()), evidence=evidence)
+        said = [text.format(evidence[k]) for k, text in _SAID if k in evidence]
+        return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources: "
+                       + "; ".join(said), evidence=evidence)
     return None
+
+
+# the ok verdict's figures, in words (key, text with the value's place)
+_SAID = (
+    ("imu_vs_gyro_wander_rad", "it wanders {:.3f} rad rms against the integrated gyro"),
+    ("imu_vs_gyro_drift_rad_s", "drifts {:+.5f} rad/s against it"),
+    ("imu_yaw_drift_rad_s", "its own drift {:+.5f} rad/s (the gyro's bias at rest taken off)"),
+    ("imu_vs_gps_track_offset_rad", "it sits {:+.3f} rad off the GPS track"),
+    ("imu_vs_gps_track_wander_rad", "wanders {:.3f} rad about it"),
+    ("wheel_vs_gyro_wander_rad", "the wheels' heading wanders {:.3f} rad against the gyro"),
+    ("estimate_vs_gyro_wander_rad", "the estimate's heading wanders {:.3f} rad against the gyro"),
+)
 
 
 def _own_drift(series: Series, cfg: Config, imu: ImuSensor) -> float:
