@@ -477,7 +477,8 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
         known = np.asarray(heading_known, dtype=bool)
         unknown_until = float(tr[~known, 0].max() - tr[0, 0])
         notes.append(f"fusiond's heading and RPE skip the {int((~known).sum())} poses published before its heading "
-                     f"was known (their yaw variance says unknown; the last of them {unknown_until:.1f} s after the first)")
+                     f"was known (their yaw variance says unknown; the last of them {unknown_until:.1f} s after the "
+                     "first)")
     fused = Track.build("fusiond", tr[:, 0], tr[:, 1:4],
                         np.array([yaw(tuple(q)) for q in tr[:, 4:8]]) if tr.size else None, world=world,
                         heading_known=known)

@@ -1,9 +1,9 @@
 """The highway car with no fix for 20 s from 25 s in (``scripts/recording_variants.py``'s ``comma_outage20``), as
 `fusiond init` writes its config: the IMU pitched in its mount, unstated, and no pitch_estimation. The twist climbs
 7 m per 100 m; the GPS's vertical error state takes it, through the outage too, until the height is off by more
-than the altitude's gate allows, and the fixes' altitudes are then gated out. The doctor's problem on the mount says so (not "the altitude's NIS looks
-normal"), and the altitude's own verdict is explained by it and names extrinsic_rpy, not the gate. Skipped without
-the recording."""
+than the altitude's gate allows, and the fixes' altitudes are then gated out. The doctor's problem on the mount
+says so (not "the altitude's NIS looks normal"), and the altitude's own verdict is explained by it and names
+extrinsic_rpy, not the gate. Skipped without the recording."""
 
 from __future__ import annotations
 

@@ -40,8 +40,8 @@ class GpsSteps(PerChannel):
             return [Verdict(name, "position_step", "warn",
                             f"the receiver's fixes left their level and came back {len(bursts)} time(s) (the largest "
                             f"{math.hypot(east, north):.1f} m: {east:+.1f} m east, {north:+.1f} m north, followed for "
-                            f"{held:.1f} s): a burst (multipath) that held one offset for more than the step test's fewest fixes "
-                            "is a step until it ends, so the filter followed it meanwhile. A receiver that bursts so "
+                            f"{held:.1f} s): a burst (multipath) that held one offset for more than the step test's "
+                            "fewest fixes is a step until it ends, so the filter followed it meanwhile. A receiver that bursts so "
                             "wants the step test off (step_false_alarm = 0: a run of gated-out fixes that began with "
                             f"a jump is then followed only after {REACQUIRE_JUMP_S:g} s) or stricter (1e-6: 10 fixes "
                             "at least). No replay can judge that without a reference: a fix the gate rejects costs "
