@@ -51,8 +51,7 @@ def diagnose(cfg: Config, samples: Sequence[object], backend: Backend | None = N
              quiet: bool = True) -> tuple[list[Verdict], list[tuple[float, float]]]:
     """One replay of the recording with the doctor: its verdicts, and the standstills it reads a noise at rest
     over (``doctor.gyro.rest_windows``: the filter's, confirmed, in filter time), which ``floors`` measures over.
-    ``backend``:
-    the estimator's (``FusionCore``). ``records``: every diagnostics record of the replay is appended to it
+    ``backend``: the estimator's (``FusionCore``). ``records``: every diagnostics record of the replay is appended to it
     (tune scores the original config's held-back part on them: the same replay). ``quiet``: the replay's
     warnings are not logged (False: they are, as the recording's, said once)."""
     from ..replay.run import run_samples
