@@ -59,6 +59,14 @@ def t_quantile(z: float, dof: float) -> float:
 REJECTED_SHARE = 0.1
 
 
+# The practical band of a mean NIS per dof, beside its chi-square bounds: a window of 50 updates of 2 dof is
+# "consistent" between 1.5 and 2.6 by chi-square alone, which real sensors' coloured errors leave at once while
+# the filter is fine. A verdict needs the mean beyond both (the doctor's whole-run and latest-window verdicts
+# and this window, which the health report and the monitor show, alike).
+NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): noise understated
+NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
+
+
 class NisWindow:
     """Sliding window of NIS values for one sensor channel.
 
@@ -91,12 +99,12 @@ class NisWindow:
         self._since_exact = 0  # additions since the sum was last recomputed exactly
 
     def bounds(self, dof: int) -> tuple[float, float]:
-        """Two-sided bounds on the window's mean NIS."""
+        """Two-sided bounds on the window's mean NIS: chi-square's, widened to the practical band."""
         b = self._bounds.get(dof)
         if b is None:
             n = self.window
             a = (1.0 - self.confidence) / 2.0
-            b = (chi2_ppf(a, n * dof) / n, chi2_ppf(1.0 - a, n * dof) / n)
+            b = (min(chi2_ppf(a, n * dof) / n, NIS_LOW * dof), max(chi2_ppf(1.0 - a, n * dof) / n, NIS_HIGH * dof))
             self._bounds[dof] = b
         return b
 

@@ -25,11 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..core.diagnostics import DiagnosticsRecord, chi2_ppf
-
-
-NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): noise understated
-NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
+from ..core.diagnostics import NIS_HIGH, NIS_LOW, DiagnosticsRecord, chi2_ppf
 
 # a record's fields, read off a chunk of records by map (no Python frame per record, as a generator has)
 _STAMP, _NIS, _DOF = attrgetter("stamp"), attrgetter("nis"), attrgetter("dof")

@@ -121,3 +121,19 @@ def test_running_mean_is_the_window_mean(window, steps):
             lo, hi = w.bounds(dof)
             if min(abs(want - lo), abs(want - hi)) > 1e-8:
                 assert verdict == ("nis_high" if want > hi else "nis_low" if want < lo else "ok")
+
+
+def test_the_windows_bounds_are_the_doctors_so_health_and_the_monitor_agree():
+    """The core's window (health, the diagnostics records' consistency) judges a mean NIS by the doctor's rule:
+    chi-square's bounds widened to the practical band [NIS_LOW, NIS_HIGH] per dof. A window of 50 two-dof
+    updates at 1.2 per dof (mean 2.4) is within it; by chi-square alone ([1.48, 2.59] on the mean) a mean of 1.4
+    would read nis_low while the doctor's latest window read ok."""
+    from fusiond.core.diagnostics import NIS_HIGH, NIS_LOW
+    from fusiond.doctor.nis import judge_nis, nis_bounds
+
+    w = NisWindow(window=50, confidence=0.95)
+    assert w.bounds(2) == nis_bounds(50, 2, 0.95)
+    assert w.bounds(2)[0] <= 2 * NIS_LOW and w.bounds(2)[1] >= 2 * NIS_HIGH
+    for _ in range(50):
+        w.add(1.4, 2, False)
+    assert w.verdict() == judge_nis(1.4, 50, 2, 0.95) == "ok"
