@@ -133,12 +133,15 @@ def _still(v: Verdict, before: Sequence[object], after: Sequence[object]) -> str
     """What the line leaves of a NIS verdict on its own channel: a noise fitted to the innovations of a filter
     that trusted the sensor more is not yet the noise of the filter that trusts it less (its own innovations
     grow as it follows the sensor less, where the sensor's error is slow), so a pasted value can still read
-    high, and the next replay's innovations say the rest. "" when the channel's whole-run verdict changed."""
+    high, and the next replay's innovations say the rest; or, no nearer 1, the line's gain is not its channel's.
+    "" when the channel's whole-run verdict changed."""
     was, now = _channel(before, v), _channel(after, v)
     if was is None or now is None or was.verdict() not in ("nis_high", "nis_low") or now.verdict() != was.verdict():
         return ""
-    return (f"; {v.sensor}/{v.channel} still reads NIS {now.verdict().removeprefix('nis_')} with it "
-            f"({now.nis_per_dof:.2f} per dof): paste it and replay, the next verdict's value goes on from there")
+    name, side = f"{v.sensor}/{v.channel}", now.verdict().removeprefix("nis_")
+    if abs(math.log(now.nis_per_dof)) >= abs(math.log(was.nis_per_dof)):  # no nearer 1 per dof
+        return f"; {name} itself reads NIS {side}, no nearer 1 with it: what it gains is the other updates'"
+    return f"; {name} still reads NIS {side} with it: paste it and replay, the next verdict's value goes on from there"
 
 
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
