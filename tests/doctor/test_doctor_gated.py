@@ -121,3 +121,13 @@ def test_a_receiver_that_lost_its_fix_and_republishes_it_is_named_as_the_fault()
     assert frozen.level == "warn" and "lost its fix" in frozen.message and not frozen.key, frozen
     assert frozen.evidence["frozen_fixes"] >= 45, frozen  # ~50 repeats at 5 Hz, the first ones inside 0.5 m
     assert one(verdicts, "gps", "position").level == "ok"
+
+
+def test_a_short_correlation_time_is_pasted_as_itself_never_as_zero():
+    """error_tau_s = 0 turns the error state off: a wander of ~0.5 s (the highway car's fixes with a 7 m step,
+    20 % persisting at 10 Hz) is pasted as 0.5, not rounded to 0 (a line that changed nothing, beside a verdict
+    that said the error wanders); whole seconds from 10 s on."""
+    from fusiond.doctor.checks.gps_wander import _secs
+
+    assert _secs(0.49913788) == "0.5" and _secs(3.14159) == "3.1" and _secs(60.2) == "60" and _secs(9.96) == "10"
+    assert float(_secs(0.11)) > 0.0

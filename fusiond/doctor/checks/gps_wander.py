@@ -110,7 +110,11 @@ class GpsWander(PerChannel):
         k = int(below[0]) + 1  # first lag below A/e; interpolate between k-1 and k
         lo, hi = acf[k - 1], acf[k]
         lag = (k - 1) + (lo - share / math.e) / (lo - hi) if lo > hi else float(k)
-        tau = float(max(lag * dt, dt))
+        if lag < 2.0:
+            # gone within two fix intervals (its amplitude is read at the first): an error state that forgets it
+            # that fast is white noise to the filter at this rate, and its correlation time rounds to nothing
+            return []
+        tau = float(lag * dt)
         yc = y - y.mean(axis=0)
         rms = np.sqrt(np.mean(yc * yc, axis=0))
         sigma_h = [float(math.sqrt(share) * r) for r in rms]
@@ -128,13 +132,19 @@ class GpsWander(PerChannel):
         evidence = {"innovation_lag1_correlation": share, "error_tau_s": tau, "error_sigma_east_m": sigma[0],
                     "error_sigma_north_m": sigma[1], "white_sigma_m": max(white), "fixes": float(n),
                     "fix_interval_s": dt}
-        msg = head + (f"the innovations are strongly autocorrelated from fix to fix ({100 * share:.0f}% of their "
-                      f"variance persists to the next fix, correlation time ~{tau:.0f} s over {n} fixes): the "
+        msg = head + (f"the innovations are autocorrelated from fix to fix ({100 * share:.0f}% of their "
+                      f"variance persists to the next fix, correlation time ~{_secs(tau)} s over {n} fixes): the "
                       "receiver's error wanders (multipath, atmosphere), it is not white noise. The filter follows the "
                       "wander, so the NIS understates the error and the covariance is overconfident: do not lower "
                       "position_noise; model the wander (error_tau_s, error_sigma), leaving position_noise "
                       f"~{max(white):.2f} m for the white part. Estimated from the innovations, which the filter "
                       "already smooths: lower bounds")
         return [Verdict(gps.name, "position", "warn", msg, sensor_key(gps.name, "error_tau_s"),
-                        f"error_tau_s = {tau:.0f}\nerror_sigma = [{sigma[0]:.2f}, {sigma[1]:.2f}, {sigma[2]:.2f}]",
+                        f"error_tau_s = {_secs(tau)}\nerror_sigma = [{sigma[0]:.2f}, {sigma[1]:.2f}, {sigma[2]:.2f}]",
                         evidence)]
+
+
+def _secs(tau: float) -> str:
+    """A correlation time as pasted: whole seconds from 10 s on, two significant digits below (never 0, which
+    turns the error state off)."""
+    return f"{tau:.0f}" if tau >= 10.0 else f"{tau:.2g}"
