@@ -58,7 +58,8 @@ class GpsSteps(PerChannel):
                         f"the receiver's fixes stepped {ch.n} time(s){largest}: from a jump on they held a new "
                         "level, agreeing with each other and moving with the wheels, so the filter took each "
                         "as the receiver's error stepping (the step test, at its false-alarm rate "
-                        "step_false_alarm) and moved its position with the fixes, keeping its heading. The wheels "
+                        "step_false_alarm) and followed the fixes: the published position jumped with them, the "
+                        "heading kept. The wheels "
                         "and the IMU did not cause it: the receiver changed its solution (an RTK fix won or lost, "
                         "another satellite set, multipath that stays). Nothing to change in the config; a "
                         "receiver that steps often has a sky view or antenna to look at",
