@@ -221,8 +221,8 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
 # the ok verdict's figures, in words (key, text with the value's place)
 _SAID = (
     ("imu_vs_gyro_wander_rad", "it wanders {:.3f} rad rms against the integrated gyro"),
-    ("imu_vs_gyro_drift_rad_s", "drifts {:+.5f} rad/s against it"),
-    ("imu_yaw_drift_rad_s", "its own drift {:+.5f} rad/s (the gyro's bias at rest taken off)"),
+    ("imu_vs_gyro_drift_rad_s", "moves {:+.5f} rad/s against it"),
+    ("imu_yaw_drift_rad_s", "its own rate {:+.5f} rad/s (the gyro's bias at rest taken off)"),
     ("imu_vs_gps_track_offset_rad", "it sits {:+.3f} rad off the GPS track"),
     ("imu_vs_gps_track_wander_rad", "wanders {:.3f} rad about it"),
     ("wheel_vs_gyro_wander_rad", "the wheels' heading wanders {:.3f} rad against the gyro"),
