@@ -300,5 +300,6 @@ class ChannelStats:
                     "nis_bounds": None, "verdict": "learning", "now": "learning",
                     "now_note": "not judged: every update learned the state"}
         return {"updates": self.n, "rejected": self.rejected, "dof": self.dof, "nis_mean": self.nis_mean,
+                "nis_per_dof": self.nis_per_dof if self.nis_mean is not None else None,
                 "nis_bounds": list(b) if b else None, "verdict": self.verdict(),
                 "now": self.now_verdict, "now_note": self.now_note(t0)}

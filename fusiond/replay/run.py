@@ -414,6 +414,8 @@ def summary(result: ReplayResult) -> str:
         out.append("estimated   " + "  ".join(f"{k}={v:.4f}" for k, v in learned.items()))
     for name, c in result.doctor.channel_summaries().items():
         mean = "n/a" if c["nis_mean"] is None else f"{c['nis_mean']:.3f}"
+        if c.get("nis_per_dof") is not None and c["nis_mean"] is not None:  # the figure the verdicts quote
+            mean += f" ({c['nis_per_dof']:.2f} per dof)"
         bounds = "" if not c["nis_bounds"] else f" bounds [{c['nis_bounds'][0]:.2f}, {c['nis_bounds'][1]:.2f}]"
         now = f"; {c['now_note']}" if c["now_note"] else ""
         out.append(f"NIS {name:<22} whole run mean={mean} dof={c['dof']}{bounds} -> {c['verdict']} "

@@ -385,3 +385,18 @@ def test_the_wander_advice_keeps_the_altitude_error_state_it_replaces():
 
     assert z_max(v.suggestion) < 1.0
     assert z_max(re.sub(r", [0-9.]+\]$", ", 0.6]", v.suggestion)) > 3.0
+
+
+def test_the_summary_row_gives_the_nis_per_dof_the_verdicts_quote():
+    """The replay's NIS rows give a channel's whole-run mean NIS (per update, over its dof) and, beside it, per
+    dof: the figure every verdict quotes ("consistent (0.36 per dof ...)" beside "mean=0.720 dof=2" read as two
+    figures). None where nothing was judged, as the mean."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.doctor.nis import ChannelStats
+
+    ch = ChannelStats(["x", "y"])
+    assert ch.summary()["nis_per_dof"] is None and ch.summary()["nis_mean"] is None
+    ch.extend([DiagnosticsRecord(float(i), "gps", ["x", "y"], [0.1, 0.1], [0.1, 0.1], 0.72, 2, False,
+                                 channel="position") for i in range(100)])
+    row = ch.summary()
+    assert abs(row["nis_mean"] - 0.72) < 1e-9 and abs(row["nis_per_dof"] - 0.36) < 1e-9, row
