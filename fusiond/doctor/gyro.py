@@ -63,6 +63,11 @@ def has_heading_reference(cfg: Config, stats: dict[str, dict] | None) -> bool:
     return any(kind_of(s).heading_reference(s) and delivered(s.name) for s in cfg.sensors)
 
 
+def gyro_imu(cfg: Config) -> ImuSensor | None:
+    """The configured IMU whose gyro is fused (the one whose bias the standstills learn), if any."""
+    return next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
+
+
 def rest_bias(episodes: list[Episode]) -> float:
     """The gyro's z bias as it reads at rest: the median of the standstills' means (NaN without one). One
     figure for every check that names it: the first standstill alone can be a short, noisy one (a few
@@ -123,7 +128,7 @@ def rest_windows(series: Series, cfg: Config) -> list[tuple[float, float]]:
     not one whose gyro turns (``quiet_episodes``). Tune's floors (``tune/floors.py``) measure over these, so the
     doctor and tune read one noise at rest from the same stretches of the recording."""
     standstill_s = cfg.filter.standstill_s
-    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
+    imu = gyro_imu(cfg)
     if imu is not None and series.gyro_t:
         episodes, _ = quiet_episodes(series, cfg, imu)
     else:
@@ -229,7 +234,7 @@ def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Ep
 
 def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused: bool,
                stats: dict[str, dict] | None = None) -> Verdict | None:
-    imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
+    imu = gyro_imu(cfg)
     if imu is None or not gyro_fused:
         return None
     fc = cfg.filter

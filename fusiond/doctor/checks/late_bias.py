@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 
 from ...core.sensors.registry import kind_of
-from ..gyro import quiet_episodes, rest_bias
+from ..gyro import gyro_imu, quiet_episodes, rest_bias
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
@@ -53,7 +53,7 @@ class LateBias(BaseCheck):
         own moment: it also waits out a coast, core/sensors/odom/model.py), or never; what it is, the gyro at rest
         says (``rest_bias``)."""
         series, cfg, gyro_fused, ch = ev.series, ev.config, ev.gyro_fused, ev.gyro_bias_stats
-        imu = next((s for s in cfg.sensors if kind_of(s).inertial and kind_of(s).fuses_gyro(s)), None)
+        imu = gyro_imu(cfg)
         if imu is None or not gyro_fused or len(series.odom_t) < 2:
             return []
         if any(kind_of(s).heading_reference(s) for s in cfg.sensors):
