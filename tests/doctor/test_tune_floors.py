@@ -15,15 +15,16 @@ from tests.support.sim_rest import RestWorld, Segment, simulate
 
 GYRO_SIGMA = 0.003
 REST_NOISE = 0.02
+# three standstills (5, 3, 3 s) between drives
+STOPS = [Segment(5.0), Segment(20.0, speed=0.5, yaw_rate=0.2), Segment(3.0),
+         Segment(20.0, speed=0.5, yaw_rate=-0.2), Segment(3.0), Segment(5.0, speed=0.5)]
 
 
 @pytest.fixture(scope="module")
 def noisy_rest():
     """Three standstills (5, 3, 3 s) between drives; the wheels read 0.02 of noise at rest, the gyro 0.003 while
     its messages state 0.14."""
-    segments = [Segment(5.0), Segment(20.0, speed=0.5, yaw_rate=0.2), Segment(3.0),
-                Segment(20.0, speed=0.5, yaw_rate=-0.2), Segment(3.0), Segment(5.0, speed=0.5)]
-    world = RestWorld(segments, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=GYRO_SIGMA, gyro_stated_sigma=0.14,
+    world = RestWorld(STOPS, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=GYRO_SIGMA, gyro_stated_sigma=0.14,
                       ramp_s=0.5, rest_noise=REST_NOISE)
     return simulate(world)
 
@@ -58,9 +59,7 @@ def test_a_vehicle_settling_after_it_stops_does_not_lift_the_floor():
     wheels' first zero to ~0.007."""
     cfg = robot_config()
     assert cfg.filter.standstill_s > 0.25  # the simulation has the trait: the rocking ends before rest is confirmed
-    segments = [Segment(5.0), Segment(20.0, speed=0.5, yaw_rate=0.2), Segment(3.0),
-                Segment(20.0, speed=0.5, yaw_rate=-0.2), Segment(3.0), Segment(5.0, speed=0.5)]
-    world = RestWorld(segments, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=GYRO_SIGMA, ramp_s=0.5,
+    world = RestWorld(STOPS, gyro_bias=(0.002, -0.001, 0.006), gyro_sigma=GYRO_SIGMA, ramp_s=0.5,
                       settle_s=0.25, settle_sigma=0.03)
     samples = simulate(world)
     _, spans = diagnose(cfg, samples)

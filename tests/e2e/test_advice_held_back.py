@@ -14,17 +14,12 @@ import json
 import re
 from pathlib import Path
 
-import pytest
 
 from fusiond.cli import main
 
-from tests.support.scripts import load_script
+from tests.support.recordings import needs, write_variant
 
-ROOT = Path(__file__).resolve().parents[2]
-F110 = ROOT.parent / "shared" / "data" / "f110_ds2"
-
-pytestmark = [pytest.mark.e2e,
-              pytest.mark.skipif(not F110.exists(), reason="needs ../shared/data/f110_ds2 (the F1/10 recording)")]
+pytestmark = needs("f110_ds2", "the F1/10 recording")
 
 ROUND_ONE = """
 [[sensors]]
@@ -56,9 +51,7 @@ def test_a_line_that_predicts_the_runs_end_worse_is_not_advised(tmp_path, capsys
     """The orientation verdict's next line raises the whole run's likelihood (more than its one key) but lowers
     the held-back part's: tried, not advised, the held-back figure given. Pasted anyway, the reference agrees:
     the aligned error over the run is worse with it."""
-    variants = load_script("recording_variants")
-    bag = tmp_path / "f110_off_start60"
-    variants.write_variant(F110, bag, next(v for v in variants.VARIANTS if v.name == "f110_off_start60"))
+    bag = write_variant("f110_off_start60", tmp_path / "f110_off_start60")
     config = tmp_path / "round_one.toml"
     config.write_text(ROUND_ONE)
     assert main(["replay", str(bag), "--config", str(config)]) == 0

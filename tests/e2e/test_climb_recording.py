@@ -7,20 +7,12 @@ extrinsic_rpy, not the gate. Skipped without the recording."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import pytest
-
 from fusiond.config import loads
 from fusiond.replay.run import replay
 
-from tests.support.scripts import load_script
+from tests.support.recordings import needs, write_variant
 
-ROOT = Path(__file__).resolve().parents[2]
-COMMA = ROOT.parent / "shared" / "data" / "comma2k19_ex1"
-
-pytestmark = [pytest.mark.e2e,
-              pytest.mark.skipif(not COMMA.exists(), reason="needs ../shared/data/comma2k19_ex1 (the highway car)")]
+pytestmark = needs("comma2k19_ex1", "the highway car")
 
 CONFIG = """
 [[sensors]]
@@ -44,9 +36,7 @@ key = "fix"
 
 
 def test_the_altitude_gated_by_an_unstated_mount_is_put_down_to_the_mount(tmp_path):
-    variants = load_script("recording_variants")
-    bag = tmp_path / "comma_outage20"
-    variants.write_variant(COMMA, bag, next(v for v in variants.VARIANTS if v.name == "comma_outage20"))
+    bag = write_variant("comma_outage20", tmp_path / "comma_outage20")
     result = replay([bag], loads(CONFIG), progress=False)
     verdicts = result.verdicts()
     attitude = next(v for v in verdicts if v.sensor == "imu" and v.channel == "attitude")

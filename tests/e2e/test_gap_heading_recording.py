@@ -7,19 +7,15 @@ its tolerance: nothing named. Off, the doctor names the missed turn and the key.
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import pytest
-
 from fusiond.config import loads
 from fusiond.doctor.checks.gap_heading import GAP_TURN_RAD
 from fusiond.replay.run import replay
 
-ROOT = Path(__file__).resolve().parents[2]
-F110 = ROOT.parent / "shared" / "data" / "f110_ds2"
+from tests.support.recordings import DATA, needs
 
-pytestmark = [pytest.mark.e2e,
-              pytest.mark.skipif(not F110.exists(), reason="needs ../shared/data/f110_ds2 (the F1/10 recording)")]
+F110 = DATA / "f110_ds2"
+
+pytestmark = needs("f110_ds2", "the F1/10 recording")
 
 CONFIG = """
 [[sensors]]
