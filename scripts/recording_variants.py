@@ -121,6 +121,16 @@ def _step(t0: float, east: float, north: float) -> Callable:
     return edit
 
 
+def _wheel_yaw_offset(offset: float) -> Callable:
+    """Every odometry message's yaw rate (twist.angular.z) read ``offset`` rad/s high: a driver's offset, which
+    a road that hardly turns shows alone (no scale to part it from)."""
+    def edit(topic: str, rel: float, msg) -> object | None:
+        if topic == "/odom":
+            msg.twist.twist.angular.z += offset
+        return msg
+    return edit
+
+
 class _NoisyRest:
     """Gaussian noise (sigma m/s, seeded) added to the wheel speed (twist.linear.x) of every odometry
     message stamped where the reference says the vehicle is at rest: the reference's displacement between
@@ -197,6 +207,9 @@ VARIANTS = (
             "the same step, 1 fix in 10 fused (scored at the other 9, against the reference)",
             _step(30.0, 7.0, 0.0), edits=("/fix",), segments=("all", "a", "b"), fuse_every=10,
             baselines=("hold last fused fix", "fixes at constant velocity")),
+    Variant("comma_wz_offset", COMMA, "comma2k19.toml",
+            "highway car, the wheels' yaw rate read 0.05 rad/s high (a driver's offset; the gyro fused)",
+            _wheel_yaw_offset(0.05), edits=("/odom",)),
     Variant("f110_copy", F110, "f110.toml", "F1/10 car, orientation off, as recorded (the control)", _keep,
             metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
     Variant("f110_noisy_rest", F110, "f110.toml",

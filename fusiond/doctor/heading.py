@@ -9,17 +9,20 @@ against the gyro's (``wheel_yaw_fit``). The thresholds here judge those shared f
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
 from ..config import Config, GpsSensor, ImuSensor
 from .gyro import quiet_episodes, rest_bias
 from .median import median
+from .bins import BIN_S
 from .series import Series
 
 __all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro",
            "imu_yaw_drift", "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning",
-           "wheel_yaw_fit", "wrap"]
+           "wheel_yaw_fit", "wheel_yaw_offset", "WheelOffset", "wrap"]
 
 WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
 # 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)
@@ -29,6 +32,9 @@ MIN_TURN_RAD = 0.5  # total turn needed to measure a yaw scale
 WHEEL_SCALE_TOLERANCE = 0.1  # wheel yaw within 10 % of the gyro's is fine for a prediction
 WHEEL_OFFSET_RAD_S = 0.02  # a wheel yaw-rate offset that turns the heading by a radian a minute
 ZERO_TURNING_RAD_S = 0.05  # the gyro turning this fast while the wheels read exactly zero: not at rest
+OFFSET_BLOCK_S = 1.0  # s: the wheel-gyro difference averaged per block before its scatter is taken (batch means)
+OFFSET_MIN_BLOCKS = 10  # fewer blocks than this measure no offset (a standard error from a handful says little)
+OFFSET_ALPHA = 1e-3  # two-sided false-alarm rate of the offset test on a run that hardly turns
 
 
 def wrap(a: np.ndarray) -> np.ndarray:
@@ -167,3 +173,62 @@ def wheel_yaw_fit(series: Series) -> tuple[float, float] | None:
         return None
     (offset, k), *_ = np.linalg.lstsq(np.vstack([np.ones_like(g), g]).T, wz[m], rcond=None)
     return float(k), float(offset)
+
+
+@dataclass(frozen=True)
+class WheelOffset:
+    """The wheels' yaw rate less the gyro's over a run that hardly turns (``wheel_yaw_offset``), the gyro's
+    own bias taken off as far as it is known, and whether that offset is the wheels' beyond what the gyro's
+    bias may still be (``significant``)."""
+
+    offset: float  # rad/s: wheel yaw rate - (gyro rate - the gyro's bias at rest, where known)
+    se: float  # rad/s: the offset's standard error from the driving (batch means)
+    bias_sigma: float  # rad/s: what the gyro's bias may still be (module doc of the check)
+    seconds: float  # s of driving compared
+    bias_at_rest: float  # rad/s: the gyro's z bias read at the standstills (NaN: none)
+
+    @property
+    def bound(self) -> float:
+        """The offset a wheel reading the turn exactly would stay within but once in 1 / OFFSET_ALPHA runs."""
+        z = NormalDist().inv_cdf(1.0 - OFFSET_ALPHA / 2.0)
+        return z * math.hypot(self.se, self.bias_sigma)
+
+    @property
+    def significant(self) -> bool:
+        return abs(self.offset) > self.bound
+
+
+def wheel_yaw_offset(series: Series, cfg: Config, imu: ImuSensor) -> WheelOffset | None:
+    """The wheels' yaw-rate offset against the gyro where the run hardly turns (``wheel_yaw_fit`` needs turns
+    to part a scale from an offset; on a straight road only the offset shows, and it is what bends a heading
+    the wheels drive).
+
+    The difference wheel - gyro is taken over the bins where the wheels move (neither at rest nor reading
+    exactly zero while the gyro turns), averaged per OFFSET_BLOCK_S and its standard error taken from the
+    blocks' scatter, which holds for a drive whose filter correlates neighbouring bins. The gyro's own z bias
+    is in that difference: where the run has standstills (``quiet_episodes``) it is their median reading, off
+    by at most what its random walk (``gyro_bias_walk``) moves it over the run; without one, anything the
+    filter's own prior allows (``gyro_bias_sigma``). None with fewer than OFFSET_MIN_BLOCKS blocks."""
+    if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
+        return None
+    to, wz = np.array(series.odom_t), np.array(series.odom_wz)
+    tg, gz = np.array(series.gyro_t), np.array(series.gyro_z)
+    g, zero = zero_while_turning(to, wz, tg, gz)
+    rest = np.array(series.odom_rest, dtype=bool) if len(series.odom_rest) == len(to) else np.zeros(len(to), bool)
+    m = (to >= tg[0]) & (to <= tg[-1]) & ~zero & ~rest & np.isfinite(wz) & np.isfinite(g)
+    if m.sum() < 10:
+        return None
+    t, d = to[m], wz[m] - g[m]
+    block = np.floor((t - t[0]) / OFFSET_BLOCK_S).astype(np.int64)
+    ids, inverse, counts = np.unique(block, return_inverse=True, return_counts=True)
+    if len(ids) < OFFSET_MIN_BLOCKS:
+        return None
+    means = np.bincount(inverse, weights=d) / counts
+    fc = cfg.filter
+    stood, _ = quiet_episodes(series, cfg, imu)
+    b = rest_bias(stood)
+    span = float(t[-1] - t[0])
+    bias_sigma = fc.gyro_bias_walk * math.sqrt(span) if math.isfinite(b) else fc.gyro_bias_sigma
+    return WheelOffset(float(np.mean(means)) + (b if math.isfinite(b) else 0.0),
+                       float(np.std(means, ddof=1) / math.sqrt(len(means))), bias_sigma,
+                       float(len(d) * BIN_S), b)

@@ -26,6 +26,8 @@ class SimConfig:
     orientation_sigma: float = 0.002
     wheel_sigma: float = 0.01
     wheel_yaw_scale: float = 1.0  # skid-steer wheels misread the turn rate
+    wheel_yaw_offset: float = 0.0  # rad/s a driver adds to the wheels' yaw rate while they move
+    turn_amplitude: float = 0.3  # rad/s of the commanded weave (0: a straight road)
     standstill: float = 0.0  # seconds at rest before moving
     imu_yaw_offset: float = 0.0  # the IMU's own yaw reference (magnetic north, ...)
     imu_yaw_wander: float = 0.0  # amplitude (rad) of a slow magnetic disturbance of the IMU's yaw
@@ -34,6 +36,7 @@ class SimConfig:
     speed: float = 1.0  # m/s while driving
     stops: tuple[tuple[float, float], ...] = ()  # (t0, t1) relative: genuine standstills
     false_stops: tuple[tuple[float, float, float], ...] = ()  # (t0, t1, yaw rate): wheels read 0, robot turns
+    dropouts: tuple[tuple[float, float], ...] = ()  # (t0, t1) relative: wheels read 0, the robot drives on
     wheel_yaw_lost: bool = False  # the driver lost the yaw rate: it reports 0 with variance 0
     imu_mount_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the IMU's true mounting in base_link
     imu_axis_sigma: tuple[float, float, float] | None = None  # orientation noise about the IMU's own axes
@@ -52,7 +55,8 @@ def commanded_seen(t: float, cfg: SimConfig) -> tuple[float, float, bool]:
     for a, b, rate in cfg.false_stops:
         if a <= t < b:
             return 0.0, rate, False
-    return cfg.speed, 0.3 * math.sin(0.5 * (t - cfg.standstill)), True
+    w = cfg.turn_amplitude * math.sin(0.5 * (t - cfg.standstill))
+    return cfg.speed, w, not any(a <= t < b for a, b in cfg.dropouts)
 
 
 def simulate(cfg: SimConfig) -> list[OdomSample | ImuSample]:
@@ -73,7 +77,7 @@ def simulate(cfg: SimConfig) -> list[OdomSample | ImuSample]:
             for i in range(6):
                 cov[7 * i] = ws**2
             moving = seen and (v != 0.0 or w != 0.0)  # encoders read exactly zero when the wheels stand
-            wz = (cfg.wheel_yaw_scale * w if seen else 0.0) + moving * rng.normal(0, ws)
+            wz = (cfg.wheel_yaw_scale * w if seen else 0.0) + moving * (cfg.wheel_yaw_offset + rng.normal(0, ws))
             if cfg.wheel_yaw_lost:
                 wz, cov[35] = 0.0, 0.0
             out.append(OdomSample("wheel", t, ((v if seen else 0.0) + moving * rng.normal(0, ws), 0.0, 0.0),

@@ -71,10 +71,11 @@ class YawRateSlip(PerChannel):
                             "the vehicle still coasts or turns); the other samples agree with the stated noise. The "
                             "gyro drives heading, so this is only reported",
                             evidence={"slip_fraction": frac, "rms_rad_s": rms})]
-        if abs(mean) > 0.02:
+        if abs(mean) > WHEEL_OFFSET_RAD_S:
             return [Verdict(odom.name, "yaw_rate", "warn",
                             f"wheel yaw rate offset of {mean:+.3f} rad/s against the gyro: a driver offset or "
-                            "uncorrected gyro bias", key, evidence={"mean_rad_s": mean})]
+                            "uncorrected gyro bias. The gyro drives heading, so this is only reported",
+                            evidence={"mean_rad_s": mean})]
         _, _, predicted = ch.component(0)
         floor = odom.twist_min_sigma[1]
         rest = max(predicted * predicted - floor * floor, 0.0)  # S less the floor's variance: gyro, bias estimate

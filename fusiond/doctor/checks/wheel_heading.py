@@ -14,8 +14,8 @@ import numpy as np
 from ...core.sensors.registry import kind_of
 from ..check import BaseCheck
 from ..evidence import Evidence
-from ..heading import (MIN_TURN_RAD, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, rate_fit_text, segments, timed,
-                       wheel_yaw_fit, zero_while_turning)
+from ..heading import (MIN_TURN_RAD, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, WheelOffset, rate_fit_text, segments,
+                       timed, wheel_yaw_fit, wheel_yaw_offset, zero_while_turning)
 from ..series import Series
 from ..verdict import Verdict, sensor_key
 
@@ -79,9 +79,11 @@ class WheelHeading(BaseCheck):
             return []
         if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
             return []
+        imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
         fit = wheel_yaw_fit(series)
-        if fit is None:
-            return []
+        if fit is None:  # the run hardly turns: only an offset shows
+            off = wheel_yaw_offset(series, cfg, imu) if imu is not None else None
+            return [] if off is None else [_offset_verdict(odom.name, imu.name, off)]
         k, offset = fit
         tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
         evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
@@ -90,7 +92,6 @@ class WheelHeading(BaseCheck):
                  else math.nan)
         if math.isfinite(k_imu):
             evidence["imu_vs_gyro_yaw_scale"] = k_imu
-        imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
         missed, seconds = _missed_turn(series)
         if missed > MISSED_TURN_RAD and imu is not None:
             evidence.update({"turn_missed_rad": missed, "zero_while_turning_s": seconds})
@@ -114,3 +115,23 @@ class WheelHeading(BaseCheck):
             return [Verdict(odom.name, "heading", "warn", msg, evidence=evidence)]
         return [Verdict(odom.name, "heading", "problem", msg + "; fuse the gyro so it drives heading",
                         sensor_key(imu.name, "angular_velocity"), "angular_velocity = true", evidence)]
+
+
+def _offset_verdict(odom: str, imu: str, off: WheelOffset) -> Verdict:
+    """The wheels' yaw-rate offset on a run that hardly turns, with the gyro not fused: a problem when it is the
+    wheels' beyond what the gyro's own bias may be (``WheelOffset.significant``), since that offset then turns
+    the predicted heading all run long; otherwise said with the bound it stays within."""
+    bias = (f"the gyro's bias at rest ({off.bias_at_rest:+.4f} rad/s) taken off" if math.isfinite(off.bias_at_rest)
+            else f"the gyro's own bias unknown without a standstill (gyro_bias_sigma {off.bias_sigma:g} rad/s)")
+    evidence = {"wheel_vs_gyro_yaw_offset_rad_s": off.offset, "wheel_vs_gyro_yaw_offset_se": off.se,
+                "gyro_bias_sigma_rad_s": off.bias_sigma, "offset_bound_rad_s": off.bound, "driving_s": off.seconds}
+    figure = (f"over {off.seconds:.0f} s of driving that hardly turns, the wheels' yaw rate reads {off.offset:+.4f} "
+              f"rad/s against the gyro ({bias}; +- {off.bound:.4f} would be chance)")
+    if not off.significant:
+        return Verdict(odom, "heading", "ok", f"{figure}: within what the gyro's own bias may be, so no offset of "
+                       "the wheels' own can be told from it", evidence=evidence)
+    return Verdict(odom, "heading", "problem",
+                   f"{figure}: the wheels' own offset. The gyro is not fused, so it turns the predicted heading by "
+                   f"{abs(off.offset) * off.seconds:.2f} rad over the run and every heading update fights it; fuse "
+                   "the gyro so it drives heading (its bias is then learned)",
+                   sensor_key(imu, "angular_velocity"), "angular_velocity = true", evidence)
