@@ -20,6 +20,7 @@ import numpy as np
 from ..config import Config, ImuSensor
 from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
+from ..core.sensors.odom.model import impossible_stop
 from .bins import BIN_S
 from .median import median
 from .nis import ChannelStats, judge_nis
@@ -76,12 +77,12 @@ def rest_bias(episodes: list[Episode]) -> float:
     return float(median(means)) if means else math.nan
 
 
-def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
+def standstill_episodes(series: Series, standstill_s: float, coast_decel: float = 0.0) -> list[Episode]:
     """The standstills lasting at least standstill_s, with the gyro over them: the runs of bins reading
     exactly zero, and the filter's own where a replay reported them (``Series.rest_spans``: its odometry
     rest test, which also finds a drive reading noise at rest). A zero run the filter did not take for rest
-    (a coast) stays: ``quiet_episodes`` tells it by its gyro."""
-    out = _zero_runs(series, standstill_s)
+    stays unless it began as a coast (``_zero_runs``); ``quiet_episodes`` tells a turning one by its gyro."""
+    out = _zero_runs(series, standstill_s, coast_decel)
     if series.rest_spans:
         # bounds on the bins' middles: a gyro bin is taken whole inside the standstill, never half in the drive
         half = BIN_S / 2
@@ -105,20 +106,38 @@ def standstill_episodes(series: Series, standstill_s: float) -> list[Episode]:
     return out
 
 
-def _zero_runs(series: Series, standstill_s: float) -> list[Episode]:
-    """Runs of odometry bins exactly at rest lasting at least standstill_s."""
-    t = series.odom_t
-    out: list[Episode] = []
-    start = None
-    for i, rest in enumerate(series.odom_rest):
-        if rest and start is None:
-            start = t[i]
-        if (not rest or i == len(t) - 1) and start is not None:
-            end = t[i] if rest else t[i - 1]
-            if end - start >= standstill_s:
-                out.append(Episode(start, end))
+def _runs(series: Series, coast_decel: float) -> list[tuple[float, float, float]]:
+    """(first bin, last bin, end of the coast) of each run of odometry bins exactly at rest. A run the drive
+    dropped into from a speed no vehicle stops from within a bin (``impossible_stop``, the core's own test) is a
+    coast while that speed would last at ``coast_decel``, as the core rolls the position on over it
+    (core/sensors/odom/model.py): a highway car whose drive reads zero for 3 s at 19 m/s is still doing 18 m/s,
+    its gyro as quiet as at rest on a straight road. The coast's end is the run's first bin otherwise."""
+    t, v, rest = series.odom_t, series.odom_v, series.odom_rest
+    out: list[tuple[float, float, float]] = []
+    start = coast_end = None
+    for i, r in enumerate(rest):
+        if r and start is None:
+            start = coast_end = t[i]
+            if coast_decel > 0.0 and i > 0 and not rest[i - 1] and math.isfinite(v[i - 1]):
+                speed = abs(v[i - 1])
+                if impossible_stop(speed, t[i] - t[i - 1], BIN_S):
+                    coast_end = start + speed / coast_decel
+        if (not r or i == len(t) - 1) and start is not None:
+            out.append((start, t[i] if r else t[i - 1], coast_end))
             start = None
     return out
+
+
+def _zero_runs(series: Series, standstill_s: float, coast_decel: float = 0.0) -> list[Episode]:
+    """Runs of odometry bins exactly at rest lasting at least standstill_s once their coast (``_runs``) is over."""
+    return [Episode(coast_end, end) for _, end, coast_end in _runs(series, coast_decel) if end - coast_end >= standstill_s]
+
+
+def coasts(series: Series, cfg: Config) -> list[tuple[float, float]]:
+    """(first, last bin) of the drive's zero runs that began as a coast (``_runs``), up to the coast's end or the
+    run's: the wheels' travel stopped there while the vehicle did not (the speed check leaves them out)."""
+    return [(start, min(end, coast_end)) for start, end, coast_end in _runs(series, _coast_decel(cfg))
+            if coast_end > start]
 
 
 def rest_windows(series: Series, cfg: Config) -> list[tuple[float, float]]:
@@ -132,7 +151,7 @@ def rest_windows(series: Series, cfg: Config) -> list[tuple[float, float]]:
     if imu is not None and series.gyro_t:
         episodes, _ = quiet_episodes(series, cfg, imu)
     else:
-        episodes = standstill_episodes(series, standstill_s)
+        episodes = standstill_episodes(series, standstill_s, _coast_decel(cfg))
     half = BIN_S / 2  # the episodes' bounds are on bin middles: a bin reaches half a bin either side
     return [(e.t0 - half + standstill_s, e.t1 + half) for e in episodes if e.t1 + half > e.t0 - half + standstill_s]
 
@@ -148,6 +167,12 @@ def turning_by_own_scatter(e: Episode, bias_sigma: float, min_sigma: float) -> b
     sq = (e.gyro_sigma**2 * (n - 1) / n + e.gyro_mean**2) * n  # sum of squares with this mean and scatter
     window = (e.t0, n, 0.0, 0.0, e.gyro_mean * n, 0.0, 0.0, 0.0, 0.0, 0.0, sq)
     return _turning(window, bias_sigma, min_sigma)
+
+
+def _coast_decel(cfg: Config) -> float:
+    """The odometry's coast-down (m/s^2; 0: no coast held, and none without an odometry sensor)."""
+    odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
+    return float(getattr(odom, "coast_decel", 0.0)) if odom is not None else 0.0
 
 
 def _count_updates(episodes: list[Episode], ch: ChannelStats | None) -> None:
@@ -224,7 +249,7 @@ def quiet_episodes(series: Series, cfg: Config, imu: ImuSensor) -> tuple[list[Ep
     of the readings' own scatter (the stated noise may be overstated tenfold), as the core judges a closed
     window; their scatter (the turn rate changing) must not enter the measured noise at rest."""
     fc = cfg.filter
-    episodes = [e for e in standstill_episodes(series, fc.standstill_s) if e.samples > 1]
+    episodes = [e for e in standstill_episodes(series, fc.standstill_s, _coast_decel(cfg)) if e.samples > 1]
     stated = series.gyro_stated_sigma if math.isfinite(series.gyro_stated_sigma) else 0.0
     bound = quiet_bound(stated, fc.gyro_bias_sigma)
     turns = [abs(e.gyro_mean) > bound or turning_by_own_scatter(e, fc.gyro_bias_sigma, imu.gyro_min_sigma)
@@ -414,6 +439,10 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                            f"reads at rest ({last.gyro_mean:+.5f}) although the standstill updates were accepted: "
                            "they are weighted too little (gyro noise overstated)",
                            sensor_key(imu.name, "gyro_noise"), noise_hint, evidence)
+    if not ch.n_nis:  # every update learned the bias (its prior still wide): no NIS to judge
+        return Verdict(imu.name, "gyro_bias", "ok",
+                       f"{ch.n} standstill bias updates, all while the bias was being learned: not judged against "
+                       f"the stated noise{against}", evidence=evidence)
     return Verdict(imu.name, "gyro_bias", "ok",
                    f"standstill bias updates consistent ({ch.nis_per_dof:.2f} per dof over {ch.n} updates{against})",
                    evidence=evidence)

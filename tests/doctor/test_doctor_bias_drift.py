@@ -11,7 +11,9 @@ from __future__ import annotations
 from fusiond.doctor.gyro import Episode, bias_drift
 from fusiond.doctor.gyro import DISAGREE_RAD_S
 
+from tests.support import sim
 from tests.support.configs import robot_config
+from tests.support.core_samples import make_config
 from tests.support.sim_rest import RestWorld, Segment, simulate
 from tests.support.verdicts import one, verdicts_of
 
@@ -86,3 +88,11 @@ def test_standstills_that_disagree_on_x_alone_are_not_put_down_to_the_heading():
     assert v.level == "warn" and "x/y axes only" in v.message and "heading is not affected" in v.message, v
     assert not v.suggestion and "bias_moved" not in v.evidence and v.evidence["nis_gyro_x"] > 10.0, v
     assert "nis_gyro_z" not in v.evidence
+
+
+def test_standstill_updates_that_all_learned_are_said_so_not_given_a_nan_nis():
+    """A bias walk so large (0.005 rad/s/sqrt(s)) that the prior never narrows: every standstill bias update
+    learns the state and none is judged. The verdict says so instead of 'consistent (nan per dof ...)'."""
+    samples = sim.simulate(sim.SimConfig(duration=20.0, standstill=3.0, stops=((10.0, 13.0),)))
+    v = one(verdicts_of(make_config(extra_filter="gyro_bias_walk = 0.005"), samples), "imu", "gyro_bias")
+    assert v.level == "ok" and "nan" not in v.message and "being learned" in v.message, v
