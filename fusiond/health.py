@@ -3,9 +3,10 @@
 Pure logic with an injected clock, so it is testable without Zenoh. Liveness is
 wall clock (the core's time is message time, which stops when input stops): a
 sensor is alive while its newest *accepted* sample arrived less than
-`max(timeout_s, 3 x its observed wall-clock period)` ago, so a 5 Hz sensor with
-jitter does not flap and a sensor sending only garbage or stale stamps is not
-counted as alive.
+`max(timeout_s, 3 x its observed wall-clock period, 1.5 x its longest recent interval
+under gap_s)` ago (core/inputs.py's rule), so a 5 Hz sensor with jitter, or a drive
+whose logger pauses 0.4 s every 2 s, does not flap, and a sensor sending only garbage
+or stale stamps is not counted as alive.
 
 Threads: subscriber callbacks count arrivals and queue drops, the worker reports
 accepted samples and core counters, the queryable reads a report. One lock
@@ -32,7 +33,7 @@ from typing import Any, Literal
 
 import msgspec
 
-from .core.inputs import silent_after, smoothed_period
+from .core.inputs import recent_longest, silent_after, smoothed_period
 from .health_pose import PoseHealth, pose_health
 from .reasons import QUEUE_FULL
 from .codecs.ros_messages import ERROR, OK, WARN, DiagnosticStatus
@@ -129,19 +130,21 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
 
 
 class _Tracker:
-    __slots__ = ("name", "timeout_s", "received", "dropped", "last", "period", "floored")
+    __slots__ = ("name", "timeout_s", "gap_s", "received", "dropped", "last", "period", "longest", "floored")
 
-    def __init__(self, name: str, timeout_s: float) -> None:
+    def __init__(self, name: str, timeout_s: float, gap_s: float) -> None:
         self.name = name
         self.timeout_s = timeout_s
+        self.gap_s = gap_s
         self.received = 0
         self.dropped: dict[str, int] = {}
         self.last: float | None = None  # wall arrival of the newest accepted sample
         self.period = 0.0  # EMA of wall-clock intervals between accepted samples
+        self.longest = 0.0  # the longest recent interval under gap_s (``recent_longest``), as the core's
         self.floored = 0  # accepted samples whose covariance was floored (all-zero covariances of real drivers)
 
     def timeout(self) -> float:
-        return silent_after(self.timeout_s, self.period)
+        return silent_after(self.timeout_s, self.period, longest=self.longest)
 
 
 def _accept(s: _Tracker, arrival: float) -> None:
@@ -151,6 +154,7 @@ def _accept(s: _Tracker, arrival: float) -> None:
         if arrival <= last:
             return
         s.period = smoothed_period(s.period, arrival - last)
+        s.longest = recent_longest(s.longest, arrival - last, s.gap_s)
     s.last = arrival
 
 
@@ -159,12 +163,13 @@ class Health:
 
     def __init__(self, sensors: Sequence[tuple[str, float]], *, clock: Callable[[], float] = time.monotonic,
                  queue_capacity: int = 0, queue_depth: Callable[[], int] | None = None,
-                 publishing: Sequence[bool] | None = None) -> None:
+                 publishing: Sequence[bool] | None = None, gap_s: float = 0.5) -> None:
         """``sensors``: (name, timeout_s) each; ``publishing``: per sensor, whether its samples prompt a publish
-        (``SensorKind.prompts_publish``; None: every sensor's do)."""
+        (``SensorKind.prompts_publish``; None: every sensor's do); ``gap_s``: the filter's, the longest
+        interval a sensor's timeout learns from (``core.inputs.recent_longest``), as the core's held inputs."""
         self._clock = clock
         self._lock = threading.Lock()
-        self._sensors = [_Tracker(name, timeout) for name, timeout in sensors]
+        self._sensors = [_Tracker(name, timeout, gap_s) for name, timeout in sensors]
         self._publishing = list(publishing) if publishing is not None else [True] * len(self._sensors)
         if len(self._publishing) != len(self._sensors) or (self._sensors and not any(self._publishing)):
             raise ValueError("publishing: one flag per sensor, and at least one sensor whose samples publish")

@@ -541,7 +541,7 @@ class FusionCore:
         assert s is not None
         if old is not None:
             s.ekf.keep_beyond_pose(old.ekf)  # biases, scales, offsets: what the filter has learnt
-            s.period = list(old.period)
+            s.period, s.longest = list(old.period), list(old.longest)
             s.frame_ready, s.enu, s.heading_ready = old.frame_ready, old.enu, old.heading_ready
         s.t = stamp
         s.tilt_seen = stamp
@@ -722,7 +722,7 @@ class FusionCore:
         elif stamp > s.t:
             self._predict(s, stamp - s.t)
             s.t = stamp
-        note_period(s, idx, stamp)
+        note_period(s, idx, stamp, self._gap_s)
         records = self.models[idx].apply(s, inp, stamp, emit, late)
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)

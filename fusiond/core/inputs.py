@@ -3,8 +3,18 @@
 The odometry twist and the gyro rate drive the prediction from their sensor's message
 until the next one. A silent sensor's input is not held forever: only for its
 ``timeout_s``, or TIMEOUT_PERIODS of its typical period when that is longer (a 5 Hz
-drive is not "silent" after 0.3 s). Past that, the prediction runs with zero twist and no
+drive is not "silent" after 0.3 s), or GAP_HOLD times the longest interval it showed
+recently when that is longer still. Past that, the prediction runs with zero twist and no
 rotation, and the core splits a prediction step at the moment an input expires.
+
+The longest recent interval is what a stream with recurring short gaps needs: a drive at
+83 Hz whose logger pauses 0.4 s every 2 s has a typical period of 12 ms, so three periods
+expire its twist halfway through every pause, and the filter stops a car doing 17 m/s
+for 0.2 s in each (a tenth of the distance lost). Only intervals up to the filter's
+``gap_s`` count: a longer silence is a logging gap, which the gap rules handle (the
+covariance inflated for it), and must not keep the last twist held. An interval is
+remembered for RECENT_S of message time after it (a decaying maximum): a pattern that
+recurs keeps it, a single hiccup is forgotten.
 """
 
 from __future__ import annotations
@@ -17,6 +27,8 @@ from .state import FilterState
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
 TILT_STALE_S = 5.0  # no roll/pitch information for this long: roll/pitch rates are no longer integrated
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
+GAP_HOLD = 1.5  # ... or this many times its longest recent interval: a recurring pause varies in length
+RECENT_S = 30.0  # s of message time over which an interval counts as recent (it decays by e over this)
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
@@ -42,7 +54,7 @@ class HeldInputs:
         base = self._timeout_base[idx]
         if s is None:
             return base
-        return silent_after(base, s.period[idx])
+        return silent_after(base, s.period[idx], longest=s.longest[idx])
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
@@ -52,11 +64,11 @@ class HeldInputs:
         odom_timeout = gyro_timeout = 0.0
         if odom >= 0 and s.last[odom] is not None:
             base, period = self._timeout_base[odom], s.period[odom]
-            odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period)
+            odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[odom])
         if s.gyro is not None:
             idx = s.gyro_last[0]
             base, period = self._timeout_base[idx], s.period[idx]
-            gyro_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period)
+            gyro_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[idx])
         return odom_timeout, gyro_timeout
 
     def timeouts_and_expiries(self, s: FilterState) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -145,12 +157,21 @@ def next_expiry(expiries: tuple[float, float], t: float, end: float) -> float:
     return end
 
 
-def silent_after(timeout_s: float, period: float, periods: float = TIMEOUT_PERIODS) -> float:
+def silent_after(timeout_s: float, period: float, periods: float = TIMEOUT_PERIODS, longest: float = 0.0) -> float:
     """How long after its last message a sensor is silent: its ``timeout_s``, or ``periods`` of its
-    typical period (0: none yet) when that is longer. The core's held inputs (message time) and the
-    service's liveness (wall time) both use it with TIMEOUT_PERIODS; the IMU's gap rule with its own
-    count (core/sensors/imu/gap_turn.py)."""
-    return timeout_s if period <= 0.0 else max(timeout_s, periods * period)
+    typical period (0: none yet), or GAP_HOLD times its longest recent interval (``recent_longest``),
+    whichever is longest. The core's held inputs (message time) and the service's liveness (wall time)
+    both use it with TIMEOUT_PERIODS; the IMU's gap rule with its own count and no recent interval
+    (core/sensors/imu/gap_turn.py)."""
+    return timeout_s if period <= 0.0 else max(timeout_s, periods * period, GAP_HOLD * longest)
+
+
+def recent_longest(longest: float, interval: float, gap_s: float) -> float:
+    """The longest recent interval under a gap (module doc) after one more interval: the previous one
+    decayed over this interval (by e per RECENT_S), or this one if it is longer and no longer than
+    ``gap_s``."""
+    decayed = longest * math.exp(-interval / RECENT_S) if longest > 0.0 else 0.0
+    return interval if decayed < interval <= gap_s else decayed
 
 
 def smoothed_period(period: float, interval: float) -> float:
@@ -160,15 +181,19 @@ def smoothed_period(period: float, interval: float) -> float:
     return d if period <= 0.0 else period + PERIOD_SMOOTHING * (d - period)
 
 
-def note_period(s: FilterState, idx: int, stamp: float) -> None:
-    """Sensor idx's newest stamp and its typical message period (``smoothed_period``)."""
+def note_period(s: FilterState, idx: int, stamp: float, gap_s: float) -> None:
+    """Sensor idx's newest stamp, its typical message period (``smoothed_period``) and its longest recent
+    interval under ``gap_s`` (``recent_longest``)."""
     last = s.last[idx]
     if last is None:
         s.last[idx] = stamp
     elif stamp > last:
-        s.period[idx] = smoothed_period(s.period[idx], stamp - last)
+        d = stamp - last
+        s.period[idx] = smoothed_period(s.period[idx], d)
+        s.longest[idx] = recent_longest(s.longest[idx], d, gap_s)
         s.last[idx] = stamp
 
 
-__all__ = ["HeldInputs", "next_expiry", "note_period", "silent_after", "smoothed_period", "TIMEOUT_PERIODS",
+__all__ = ["HeldInputs", "next_expiry", "note_period", "recent_longest", "silent_after", "smoothed_period",
+           "GAP_HOLD", "RECENT_S", "TIMEOUT_PERIODS",
            "TILT_STALE_S"]

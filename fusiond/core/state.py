@@ -21,7 +21,7 @@ class FilterState:
     """
 
     __slots__ = (
-        "t", "ekf", "last", "period",
+        "t", "ekf", "last", "period", "longest",
         "linear", "linear_cov", "linear_world", "wheel_angular", "wheel_angular_cov", "wheel_yaw_measured",
         "gyro", "gyro_cov", "gyro_last",
         "still_since", "attitude_ready", "tilt_seen", "turn_unseen", "wheel_turn",
@@ -39,6 +39,7 @@ class FilterState:
         s.ekf = ekf
         s.last = [None] * sensors
         s.period = [0.0] * sensors
+        s.longest = [0.0] * sensors  # the longest recent interval under a gap (``inputs.recent_longest``)
         s.linear, s.linear_cov = _ZERO3, linear_cov
         s.wheel_angular, s.wheel_angular_cov = _ZERO3, angular_cov
         s.linear_world = False  # the held linear twist is in the world frame (twist_frame = "world", no pose)
@@ -67,6 +68,7 @@ class FilterState:
         c.t = self.t
         c.last = list(self.last)
         c.period = list(self.period)
+        c.longest = list(self.longest)
         # numpy inputs are replaced on update, never mutated, so sharing them is safe
         c.linear, c.linear_cov = self.linear, self.linear_cov
         c.wheel_angular, c.wheel_angular_cov = self.wheel_angular, self.wheel_angular_cov

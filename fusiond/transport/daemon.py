@@ -151,7 +151,8 @@ class Daemon:
         self._prompt = [kind_of(s).prompts_publish for s in cfg.sensors]  # samples that publish: fused at once
         self.capacity = queue_size
         self.health = Health([(s.name, s.timeout_s) for s in cfg.sensors], clock=clock,
-                             queue_capacity=queue_size, queue_depth=self.inbox.__len__, publishing=self._prompt)
+                             queue_capacity=queue_size, queue_depth=self.inbox.__len__, publishing=self._prompt,
+                             gap_s=cfg.filter.gap_s)
         self._clock = clock
         self._express = express
         self._direct = direct_callbacks

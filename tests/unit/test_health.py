@@ -226,3 +226,30 @@ def test_health_says_when_the_world_frame_is_not_defined_yet():
     f = core_counters(core).filter
     assert f.initialised and not f.ready and "first GPS fix" in f.not_ready_reason
     assert not f.heading_known
+
+
+def test_a_fast_drive_whose_logger_pauses_does_not_flap_after_the_first_pause():
+    """83 Hz odometry (period 12 ms: 3 periods is under the 0.2 s timeout) that pauses 0.4 s every 2 s. The
+    first pause is longer than anything seen: the sensor reads silent in it. From then on the timeout holds
+    1.5 x the longest recent interval (core/inputs.py), 0.6 s: every later pause stays ok. A pause longer than
+    gap_s (a logging gap) is not learned."""
+    clock = Clock()
+    h = Health([("wheel", 0.2)], clock=clock, gap_s=0.5)
+    t = clock.t
+    statuses = []
+    for k in range(800):
+        t += 0.4 if k % 166 == 165 else 1.0 / 83.0
+        while clock.t < t:
+            clock.t = min(clock.t + 0.05, t)
+            statuses.append((k, h.report().status))
+        h.on_received(0)
+        h.on_accepted(0, t)
+    bad = [k for k, st in statuses if st not in ("ok", "starting")]
+    assert bad and max(bad) <= 166, bad  # the first pause only
+    # 1.5 x 0.4 s, decayed by e per 30 s over the 1.6 s since the last pause
+    assert h.report().sensors["wheel"].timeout_s == pytest.approx(0.6 * math.exp(-1.6 / 30.0), rel=0.02)
+    long = Health([("wheel", 0.2)], clock=clock, gap_s=0.5)
+    for dt in (0.012, 0.012, 0.8, 0.012):
+        clock.t += dt
+        long.on_accepted(0, clock.t)
+    assert long.report().sensors["wheel"].timeout_s < 0.3  # 3 periods of the EMA the gap moved, not 1.5 x 0.8 s
