@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             from ..tune.advice import prove_advice
 
             return prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend,
-                                base_final=result.final)
+                                base_final=result.final, base_applied=result.applied)
 
         def score():
             from ..replay.evaluate import evaluate

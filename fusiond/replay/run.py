@@ -81,6 +81,11 @@ class ReplayResult:
                                     scales=core.scales)
 
     @property
+    def applied(self) -> dict[str, int]:
+        """Each sensor's count of samples the filter applied."""
+        return {s.name: st.applied for s, st in zip(self.core.sensors, self.core.stats)}
+
+    @property
     def final(self) -> tuple[float, ...] | None:
         if not self.core.initialised:
             return None

@@ -94,6 +94,17 @@ def _comparable(ref: Reference, records: Sequence[object]) -> tuple[Reference, i
     return Reference(keep), len(ref.terms) - len(keep)
 
 
+def _brought_back(was: dict[str, int] | None, now: dict[str, int]) -> str:
+    """The sensors whose samples a change makes the filter apply more than twice as often as the run as
+    configured did (``was``: its applied counts; most of a sensor's samples dropped there, as far from filter
+    time: a clock the line corrects), said with how many each; "" when there is none or ``was`` is unknown."""
+    if was is None:
+        return ""
+    back = [f"{n - was.get(name, 0)} more samples of {name}" for name, n in sorted(now.items())
+            if n > 2 * was.get(name, 0)]
+    return ", ".join(back)
+
+
 def _nis(s: Score, sensor: str) -> float | None:
     return s.nis_per_dof.get(sensor, s.nis_per_dof.get(""))
 
@@ -147,11 +158,14 @@ def _still(v: Verdict, before: Sequence[object], after: Sequence[object]) -> str
 def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                  budget_s: float = 60.0, base_records: Sequence[object] | None = None,
                  backend: Backend | None = None, workers: int | None = None,
-                 base_final: Sequence[float] | None = None) -> list[Verdict]:
+                 base_final: Sequence[float] | None = None,
+                 base_applied: dict[str, int] | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
     recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
     when the caller kept them (else the recording is replayed once more for them), and ``base_final`` its
-    final pose (t, x y z, qx qy qz qw; else replayed for, where a line changes no update). Then one replay per
+    final pose (t, x y z, qx qy qz qw; else replayed for, where a line changes no update), and ``base_applied``
+    each sensor's count of samples it applied (else a line that brings dropped samples back is judged as any
+    other). Then one replay per
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
     recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
     ``backend``: the estimator's in these replays (``FusionCore``). ``workers``: how many lines are replayed
@@ -161,7 +175,7 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
         return list(verdicts)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
         return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,
-                       backend, workers, base_final)
+                       backend, workers, base_final, base_applied)
 
 
 def _moved(before: Sequence[float] | None, after: Sequence[float] | None) -> str:
@@ -175,7 +189,8 @@ def _moved(before: Sequence[float] | None, after: Sequence[float] | None) -> str
 
 def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
             deadline: float, budget_s: float, base_records: Sequence[object] | None,
-            backend: Backend | None, workers: int | None, base_final: Sequence[float] | None) -> list[Verdict]:
+            backend: Backend | None, workers: int | None, base_final: Sequence[float] | None,
+            base_applied: dict[str, int] | None = None) -> list[Verdict]:
     """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
@@ -204,8 +219,14 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
     def prove(job: tuple[tuple[str, str], Verdict, Config, int]) -> Proof:
         _, v, changed, n_keys = job
         ends: list = []
+        applied: dict[str, int] = {}
         with muted():
-            records = replay_records(changed, samples, backend, ends)
+            records = replay_records(changed, samples, backend, ends, applied)
+        back = _brought_back(base_applied, applied)
+        if back:  # the run as configured dropped most of a sensor: its likelihood has nothing to compare
+            return Proof(False, f"it fuses {back} the run as configured dropped: the likelihood over the run's own "
+                                "updates cannot judge a change of what is fused; the evidence above is the case for it",
+                         judged=False)
         ref, dropped = _comparable(full, records)
         before, after = score(base_records, ref), score(records, ref)
         gain = before.neg_loglik - after.neg_loglik

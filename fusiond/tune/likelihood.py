@@ -53,10 +53,11 @@ TermKey = tuple[str, str, float, int]  # sensor, channel, stamp, occurrence (rec
 
 
 def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | None = None,
-                   ends: list | None = None) -> list[DiagnosticsRecord]:
+                   ends: list | None = None, applied: dict[str, int] | None = None) -> list[DiagnosticsRecord]:
     """Every diagnostics record of one replay of ``samples`` (in the order given: a bag's) through a
     fresh FusionCore with ``cfg`` (and ``backend``, the estimator's: ``FusionCore``). ``ends``: the final
-    pose (t, x y z, qx qy qz qw) is appended to it, when any sample was fused."""
+    pose (t, x y z, qx qy qz qw) is appended to it, when any sample was fused; ``applied``: each sensor's
+    count of samples the filter applied is put in it."""
     core = FusionCore(cfg, backend)
     ingest = core.ingest
     records: list[DiagnosticsRecord] = []
@@ -69,6 +70,8 @@ def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | No
     if ends is not None and core.initialised:
         t, x = core.pose()
         ends.append((t, *x.tolist()))
+    if applied is not None:
+        applied.update({sc.name: st.applied for sc, st in zip(core.sensors, core.stats)})
     return records
 
 

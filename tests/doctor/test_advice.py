@@ -194,3 +194,24 @@ def test_an_advised_noise_that_leaves_its_channel_still_high_says_so():
     assert "no nearer 1 with it" in _still(v, records(4.0), records(9.0))
     assert _still(v, records(9.0), records(1.0)) == ""
     assert _still(v, records(1.0), records(1.0)) == ""  # nothing to mend
+
+
+def test_a_clock_line_that_brings_dropped_samples_back_is_not_judged_by_the_runs_own_updates():
+    """The IMU stamped 1000 s behind and first in the recording: the filter followed its clock and dropped the
+    wheels. The line that corrects the IMU's clock fuses them again; the likelihood over the run's own updates
+    (the IMU's, alone) cannot weigh that, so the line is the doctor's, not 'not advised' on a score that lost
+    its wheels' terms."""
+    from tests.support import sim_gps
+    from tests.support.sim_faults import shift_stamps
+
+    samples = [s for s in sim_gps.simulate(sim_gps.World(duration=30.0, gps_rate=1.0)) if s.sensor != "gps"]
+    start = samples[0].stamp + 0.5
+    samples = shift_stamps([s for s in samples if s.sensor == "imu" or s.stamp >= start], "imu", -1000.0)
+    cfg = robot_config()
+    result = run_samples(samples, cfg)
+    clock = [v for v in result.verdicts() if v.channel == "time"]
+    (v,) = prove_advice(cfg, samples, clock, base_applied=result.applied)
+    assert v.proof is not None and not v.proof.judged and not v.proof.refuted, v.proof
+    assert "samples of wheel the run as configured dropped" in v.proof.effect, v.proof
+    (blind,) = prove_advice(cfg, samples, clock)  # without the run's counts: judged on its updates, as any line
+    assert blind.proof is not None and blind.proof.judged, blind.proof

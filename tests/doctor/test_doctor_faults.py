@@ -351,6 +351,33 @@ def test_gps_stamped_in_gps_time_is_named_with_its_offset():
     assert re.search(r"\b(\d+) of \1 samples stamped ~18\.0 s ahead", v.message), v.message
 
 
+@pytest.mark.parametrize("gps", [True, False])
+def test_an_imu_far_behind_that_the_filter_followed_is_named_not_the_sensors_it_dropped(gps):
+    """The IMU stamped 1000 s behind, arriving with the others: the filter's time follows the IMU's stamps
+    (the recording's first half second is the IMU's alone), so the wheels (and the GPS) are the ones dropped as far from it, while
+    their own offsets against the others' newest stamp are a fraction of a second. The verdict names the IMU,
+    with the line that brings it onto their clock. With no GPS the two offsets mirror each other (+1000,
+    -1000): the odometry is the reference."""
+    samples = sim_gps.simulate(sim_gps.World(duration=30.0, gps_rate=1.0))
+    start = samples[0].stamp + 0.5  # the recording's first half second: the IMU's alone
+    samples = [s for s in samples if (s.sensor == "imu" or s.stamp >= start) and (gps or s.sensor != "gps")]
+    result = run_samples(shift_stamps(samples, "imu", -1000.0), robot_config(gps="" if gps else None))
+    clock = [v for v in result.verdicts() if v.channel == "time"]
+    assert [v.sensor for v in clock] == ["imu"], clock
+    assert clock[0].suggestion == "stamp_offset_s = 1000.000" or re.fullmatch(
+        r"stamp_offset_s = 1000\.0\d\d|stamp_offset_s = 999\.9\d\d", clock[0].suggestion), clock[0]
+    assert "behind the other sensors'" in clock[0].message and "wheel's" in clock[0].message
+
+
+def test_the_culprit_is_the_largest_offset_and_of_a_mirrored_pair_not_the_odometry():
+    from fusiond.doctor.checks.clocks import _culprit
+
+    assert _culprit({"wheel": 0.1, "gps": 0.0, "imu": -1000.0}, "wheel") == "imu"
+    assert _culprit({"wheel": 5.0, "imu": -5.0}, "wheel") == "imu"
+    assert _culprit({"gps": 18.0, "wheel": 0.01, "imu": 0.0}, "wheel") == "gps"
+    assert _culprit({"wheel": 18.0, "imu": -0.05, "gps": -0.04}, "wheel") == "wheel"
+
+
 def test_gps_on_the_same_clock_gets_no_clock_verdict():
     samples = sim_gps.simulate(sim_gps.World(duration=60.0, gps_rate=1.0))
     result = run_samples(samples, robot_config(gps=""))

@@ -1,8 +1,15 @@
 """A sensor whose clock is offset from the others: its samples dropped as far from filter time.
 
-``clock.ClockOffsets`` measures each sensor's stamps against the others' newest at arrival; a sensor whose
-samples were mostly dropped as ``future_stamp``/``stale_stamp`` gets one plain verdict with that offset
-and the ``stamp_offset_s`` that brings it onto the others' clock.
+``clock.ClockOffsets`` measures each sensor's stamps against the others' newest at arrival; where a sensor's
+samples were mostly dropped as ``future_stamp``/``stale_stamp``, the sensor whose clock is off gets one plain
+verdict with its offset and the ``stamp_offset_s`` that brings it onto the others' clock.
+
+That is not always the sensor dropped. The filter's time follows the first stamps it takes: an IMU stamped
+1000 s behind the wheels and the GPS, and first in the recording, makes the wheels and the GPS look "ahead"
+and they are the ones dropped, while their own offsets against the others' newest stamp are a fraction of a
+second (the GPS's against the wheels'). The odd one out is the sensor whose offset is largest (``_culprit``):
+the IMU at -1000 s. With two sensors the two offsets mirror each other (+5 s and -5 s): the odometry, whose
+stamps the published poses carry, is then the reference, and the other sensor's clock is named.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ __all__ = ["Clocks"]
 
 CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
 CLOCK_DROP_SHARE = 0.5  # this share of a sensor's samples dropped as far from filter time: its clock, not a glitch
+MIRROR = 2.0  # two offsets within this factor of each other are one offset seen from either side (module doc)
 
 
 class Clocks(BaseCheck):
@@ -26,28 +34,47 @@ class Clocks(BaseCheck):
     needs_config = False  # the core's counters, which a run without a config has too
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        """A verdict for each sensor whose samples were mostly dropped as far from filter time; ``sensors`` (by
-        name: their configs) gives the stamp_offset_s that brings them onto the others' clock."""
+        """One verdict per sensor whose clock is off (``_culprit``) among those whose samples were mostly
+        dropped as far from filter time; ``sensors`` (by name: their configs) gives the stamp_offset_s that
+        brings it onto the others' clock."""
         if not ev.stats or ev.clocks is None:
             return []
-        stats, clocks, sensors = ev.stats, ev.clocks, ev.sensors
-        out = []
+        stats, clocks, sensors = ev.stats, ev.clocks, ev.sensors or {}
+        offsets = {name: o for name in stats if (o := clocks.offset(name)) is not None}
+        odom = ev.odom.name if ev.known and ev.odom is not None else None
+        out: dict[str, Verdict] = {}
         for name, st in stats.items():
             received = st.get("received", 0)
             far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
-            if received <= 0 or far < CLOCK_DROP_SHARE * received:
+            if received <= 0 or far < CLOCK_DROP_SHARE * received or name not in offsets:
                 continue
-            offset = clocks.offset(name)
-            if offset is None:
+            culprit = _culprit(offsets, odom)
+            if culprit is None or culprit in out:
                 continue
+            offset = offsets[culprit]
             side = "ahead of" if offset > 0 else "behind"
-            configured = getattr((sensors or {}).get(name), "stamp_offset_s", 0.0)
-            out.append(Verdict(name, "time", "problem",
-                               f"{far} of {received} samples stamped ~{abs(offset):.1f} s {side} the other sensors: "
-                               "its clock is offset (GPS time vs UTC?), so they were dropped as far from filter time. "
-                               "Stamp them with the same clock as the other sensors (the driver's time source), or "
-                               "shift them here", sensor_key(name, "stamp_offset_s"),
-                               f"stamp_offset_s = {configured - offset:.3f}",
-                               evidence={"clock_offset_s": offset, "dropped_far": float(far),
-                                         "received": float(received)}))
-        return out
+            configured = getattr(sensors.get(culprit), "stamp_offset_s", 0.0)
+            dropped = (f"{far} of {received} samples stamped ~{abs(offset):.1f} s {side} the other sensors"
+                       if culprit == name else
+                       f"its stamps are ~{abs(offset):.1f} s {side} the other sensors', and the filter's time followed "
+                       f"them: {far} of {name}'s {received} samples were dropped as far from it")
+            out[culprit] = Verdict(culprit, "time", "problem",
+                                   f"{dropped}: its clock is offset (GPS time vs UTC? another computer's clock?). "
+                                   "Stamp it with the same clock as the other sensors (the driver's time source), or "
+                                   "shift it here", sensor_key(culprit, "stamp_offset_s"),
+                                   f"stamp_offset_s = {configured - offset:.3f}",
+                                   evidence={"clock_offset_s": offset, "dropped_far": float(far),
+                                             "received": float(received), "dropped_sensor_offset_s": offsets[name]})
+        return list(out.values())
+
+
+def _culprit(offsets: dict[str, float], odom: str | None) -> str | None:
+    """The sensor whose clock is off: the largest offset; of two that mirror each other (within MIRROR), not
+    the odometry (module doc)."""
+    ranked = sorted(offsets, key=lambda n: -abs(offsets[n]))
+    if not ranked:
+        return None
+    top = ranked[0]
+    if len(ranked) > 1 and top == odom and abs(offsets[ranked[1]]) * MIRROR >= abs(offsets[top]):
+        return ranked[1]
+    return top
