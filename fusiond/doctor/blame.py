@@ -27,14 +27,15 @@ from .nis import ChannelStats
 from .checks.heading import TRACK_OFFSET_RAD
 from .verdict import Verdict, sensor_key
 
-__all__ = ["Entry", "Rule", "RULES", "CULPRITS", "CANDIDATES", "apply_rules"]
+__all__ = ["ANY_CHECK", "Entry", "Rule", "RULES", "CULPRITS", "CANDIDATES", "apply_rules"]
 
 Key = tuple[str, str]
 
-# Whose wrong finding explains the other channels' (the first that applies): a body-frame twist read as
+# Whose wrong finding explains the other channels' (the first that applies): a gyro in the wrong unit; a body-frame twist read as
 # a world one sends the dead reckoning sideways, and every check that compares against the wheels'
 # motion reads it; else the first cross-source check that is not ok. (check, the levels that blame)
 CULPRITS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("gyro_units", ("problem",)),  # a gyro in deg/s: every figure that reads the gyro is 57 times off
     ("twist_frame", ("problem",)),
     ("heading", ("warn", "problem")),
     ("wheel_heading", ("warn", "problem")),
@@ -213,6 +214,9 @@ def _gaps_advice(b: Blame, v: Verdict) -> Verdict | None:
     return next((g for g in b.filed((v.sensor, "heading_across_gaps")) if g.suggestion), None)
 
 
+ANY_CHECK = ("*",)  # a rule's ``explains`` for the findings of every check
+
+
 @dataclass(frozen=True)
 class Rule:
     """``culprit(blame, finding)``: what explains the finding (None: the rule does not apply to it);
@@ -224,7 +228,21 @@ class Rule:
     why: str
 
 
+def _units(b: Blame, v: Verdict) -> Verdict | None:
+    """The gyro-units problem (``checks/gyro_units``) for any other finding that is not ok."""
+    if v.level == "ok" or v.channel == "units":
+        return None
+    return b.first("gyro_units")
+
+
+def _explained_by_units(v: Verdict, units: Verdict) -> Verdict:
+    return Verdict(v.sensor, v.channel, "warn", v.message + f": explained by {units.sensor}/units (see it): a gyro "
+                   "in deg/s puts everything that reads it 57 times off; fix that first", evidence=v.evidence)
+
+
 RULES: tuple[Rule, ...] = (
+    Rule(ANY_CHECK, _units, lambda b, v, units: _explained_by_units(v, units),
+         "a gyro in deg/s explains every other finding: nothing it drives or is compared with reads right"),
     Rule(("heading",), lambda b, v: b.ev.mount, lambda b, v, mount: mount_explains_offset(v, mount, b.ev.imu),
          "an IMU yaw off the GPS track by the accelerometer's mounting yaw is that mounting, not a declination"),
     Rule(("speed", "mounting"), Blame.wrong_frame, lambda b, v, frame: blamed(v, frame),
@@ -275,7 +293,7 @@ def apply_rules(ev: Evidence, entries: list[Entry]) -> list[Entry]:
     b = Blame(ev, entries)
     for rule in RULES:
         for e in entries:
-            if e.verdict is None or e.check not in rule.explains:
+            if e.verdict is None or (rule.explains != ANY_CHECK and e.check not in rule.explains):
                 continue
             culprit = rule.culprit(b, e.verdict)
             if culprit is not None:

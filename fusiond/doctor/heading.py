@@ -22,7 +22,7 @@ from .series import Series
 
 __all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro",
            "imu_yaw_drift", "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning",
-           "wheel_yaw_fit", "wheel_yaw_offset", "WheelOffset", "wrap"]
+           "wheel_yaw_fit", "wheel_yaw_offset", "WheelOffset", "wrap", "yaw_scale"]
 
 WINDOW_S = 60.0  # detrending window: a gyro bias is constant over a minute
 # 7 deg a minute, far beyond a magnetometer's (no secular drift) and a learned gyro bias's (~1e-4 rad/s)
@@ -92,6 +92,27 @@ def vs_gyro(series: Series, t: np.ndarray, y: np.ndarray, breaks: list[float]) -
         return None
     gyro_at = np.interp(t[m], tg, hg)
     return detrended_rms(t[m], y[m] - gyro_at, gyro_at, [*series.gyro_breaks, *breaks])
+
+
+def yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
+    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns. Each stretch
+    between breaks (a heading not integrated across a gap) gets its own a: the turn made in a gap is
+    missing from h_ref only, not a scale."""
+    m = (t >= t_ref[0]) & (t <= t_ref[-1])
+    if m.sum() < 10:
+        return math.nan
+    ref = np.interp(t[m], t_ref, h_ref)
+    if np.ptp(ref) < MIN_TURN_RAD:
+        return math.nan
+    tm = t[m]
+    offsets = []
+    for idx in segments(tm, breaks):
+        col = np.zeros(len(tm))
+        col[idx] = 1.0
+        offsets.append(col)
+    A = np.vstack([*offsets, ref, tm - tm[0]]).T
+    coef, *_ = np.linalg.lstsq(A, h[m], rcond=None)
+    return float(coef[len(offsets)])
 
 
 def segments(t: np.ndarray, breaks) -> list[np.ndarray]:

@@ -14,8 +14,8 @@ import numpy as np
 from ...core.sensors.registry import kind_of
 from ..check import BaseCheck
 from ..evidence import Evidence
-from ..heading import (MIN_TURN_RAD, WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, WheelOffset, rate_fit_text, segments,
-                       timed, wheel_yaw_fit, wheel_yaw_offset, zero_while_turning)
+from ..heading import (WHEEL_OFFSET_RAD_S, WHEEL_SCALE_TOLERANCE, WheelOffset, rate_fit_text, timed, wheel_yaw_fit,
+                       wheel_yaw_offset, yaw_scale, zero_while_turning)
 from ..series import Series
 from ..verdict import Verdict, sensor_key
 
@@ -23,27 +23,6 @@ __all__ = ["WheelHeading"]
 
 MISSED_INTERVAL_S = 0.5  # s: an odometry interval counts for at most this much turn time (gaps count nothing)
 MISSED_TURN_RAD = 0.2  # rad (11 deg) of turn the wheels missed in all: worth fusing the gyro for
-
-
-def _yaw_scale(t: np.ndarray, h: np.ndarray, t_ref: np.ndarray, h_ref: np.ndarray, breaks=()) -> float:
-    """k in h = a + k h_ref + b t (least squares), or NaN when the reference hardly turns. Each stretch
-    between breaks (a heading not integrated across a gap) gets its own a: the turn made in a gap is
-    missing from h_ref only, not a scale."""
-    m = (t >= t_ref[0]) & (t <= t_ref[-1])
-    if m.sum() < 10:
-        return math.nan
-    ref = np.interp(t[m], t_ref, h_ref)
-    if np.ptp(ref) < MIN_TURN_RAD:
-        return math.nan
-    tm = t[m]
-    offsets = []
-    for idx in segments(tm, breaks):
-        col = np.zeros(len(tm))
-        col[idx] = 1.0
-        offsets.append(col)
-    A = np.vstack([*offsets, ref, tm - tm[0]]).T
-    coef, *_ = np.linalg.lstsq(A, h[m], rcond=None)
-    return float(coef[len(offsets)])
 
 
 def _missed_turn(series: Series) -> tuple[float, float]:
@@ -88,7 +67,7 @@ class WheelHeading(BaseCheck):
         tg, hg = timed(series.gyro_heading_at, series.gyro_heading)
         evidence = {"wheel_vs_gyro_yaw_scale": k, "wheel_vs_gyro_yaw_offset_rad_s": offset}
         ti, yi = timed(series.imu_yaw_at, series.imu_yaw)
-        k_imu = (_yaw_scale(ti, yi, tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if len(ti) >= 10 and len(tg)
+        k_imu = (yaw_scale(ti, yi, tg, hg, [*series.gyro_breaks, *series.imu_breaks]) if len(ti) >= 10 and len(tg)
                  else math.nan)
         if math.isfinite(k_imu):
             evidence["imu_vs_gyro_yaw_scale"] = k_imu
