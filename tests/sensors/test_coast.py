@@ -162,3 +162,20 @@ def test_the_doctor_says_what_the_position_did_while_the_drive_read_zero(coast_d
         assert f"ran on from the last speed, slowing at {coast_decel:g} m/s^2 until it stopped" in v.message
     else:
         assert "does not advance while the wheels read zero (sensors.wheel.coast_decel = 0" in v.message
+
+
+def test_a_coasts_acceleration_is_unknown_to_the_gravity_tilt():
+    """Through a coast the forward speed is the assumed slowing at coast_decel, anything from none to twice
+    that: its slope is no measurement of the vehicle's acceleration, which an IMU taking roll/pitch from
+    gravity would read as 3 deg of pitch per 0.5 m/s^2. ``forward_accel`` says unknown (NaN) there, as where
+    the speeds do not fit a line, and the driving either side of it is known again."""
+    core = FusionCore(robot_config(orientation="off"))
+    odom = core.models[core.odom_index]
+    known, coasting = [], []
+    for s in simulate(_coasting_world(2.0)):
+        step = core.ingest(s)
+        if step.accepted and isinstance(s, OdomSample):
+            a = odom.forward_accel(core.state)
+            (coasting if core.state.own[core.odom_index].coast is not None else known).append(a)
+    assert coasting and all(math.isnan(a) for a in coasting), coasting[:5]
+    assert sum(math.isfinite(a) for a in known) > 0.8 * len(known)

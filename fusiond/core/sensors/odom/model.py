@@ -361,10 +361,13 @@ class OdomModel(SensorModel):
         A line fits the speeds only while the acceleration is steady: where it changes (a robot
         starting off, the brakes coming on) the slope lags by half the window. There the fit's
         residual exceeds the speed noise, and the acceleration is "unknown" (NaN): the IMU skips
-        those samples rather than read the lag as tilt."""
+        those samples rather than read the lag as tilt. So is a coast's: its slowing at ``coast_decel``
+        is assumed, anything from none to twice that (module doc), and half a m/s^2 is 3 deg of pitch."""
         own = s.own[self.index]
         if own is None or not own.window:
             return 0.0
+        if own.coast is not None:
+            return math.nan
         window, linear_var = own.window, own.previous_cov[0]
         last_fit = self._last_fit  # the IMU asks at its own rate, the window moves at the odometry's
         if last_fit[0] is window and last_fit[1] == linear_var:
