@@ -121,6 +121,12 @@ def _step(t0: float, east: float, north: float) -> Callable:
     return edit
 
 
+def _odom_pauses(every: float, pause: float) -> Callable:
+    """No odometry message in the last ``pause`` s of every ``every`` s: a logger or a CAN bridge that pauses
+    briefly and often (shorter than the filter's gap_s)."""
+    return lambda topic, rel, msg: None if topic == "/odom" and rel % every >= every - pause else msg
+
+
 def _wheel_yaw_offset(offset: float) -> Callable:
     """Every odometry message's yaw rate (twist.angular.z) read ``offset`` rad/s high: a driver's offset, which
     a road that hardly turns shows alone (no scale to part it from)."""
@@ -207,6 +213,11 @@ VARIANTS = (
             "the same step, 1 fix in 10 fused (scored at the other 9, against the reference)",
             _step(30.0, 7.0, 0.0), edits=("/fix",), segments=("all", "a", "b"), fuse_every=10,
             baselines=("hold last fused fix", "fixes at constant velocity")),
+    Variant("comma_odom_pauses", COMMA, "comma2k19.toml",
+            "highway car, no odometry for 0.4 s every 2 s (a logger pausing briefly and often)", _odom_pauses(2.0, 0.4)),
+    Variant("comma_odom_pauses_no_gps", COMMA, "comma2k19_odom_imu.toml",
+            "the same pauses, wheels and gyro alone", _odom_pauses(2.0, 0.4), metrics=("aligned_h", "heading_deg"),
+            baselines=("gyro + wheel speed", "wheel odometry")),
     Variant("comma_wz_offset", COMMA, "comma2k19.toml",
             "highway car, the wheels' yaw rate read 0.05 rad/s high (a driver's offset; the gyro fused)",
             _wheel_yaw_offset(0.05), edits=("/odom",)),
