@@ -42,6 +42,13 @@ __all__ = ["GpsWander"]
 # the more the fixes are distrusted; at 10 Hz on a car at 25 m/s it follows more of it and leaves 0.18-0.25
 # (a highway car: 0.18; a threshold of 0.3 misses it, and the advice would be "lower position_noise").
 PERSISTING_SHARE = 0.15
+# The range that threshold was measured over: fixes stated up to 3.7x their noise, a NIS per dof down to 1/3.7^2.
+# Below it the filter hardly corrects by the fixes, so its own slow dead-reckoning error persists from fix to
+# fix whatever the receiver does: a receiver stating 10 m for 0.2 m of innovations (NIS 0.0006 per dof) reads as
+# a wander there, and "do not lower position_noise" keeps a highway car's aligned error at 1.56 m (0.26 m with
+# the innovations' rms as its noise). There the NIS verdict speaks (the stated noise is too large), and this
+# check can tell a wander once the noise is stated nearer the truth.
+MIN_NIS_PER_DOF = 1.0 / 3.7**2
 WANDER_MIN_FIXES = 50  # fixes for an autocorrelation: at lag 1 its standard error is ~1/sqrt(50) = 0.14
 MAX_LAG_FRACTION = 0.25  # autocorrelation lags up to this share of the run (beyond, too few pairs)
 
@@ -83,7 +90,7 @@ class GpsWander(PerChannel):
         gps = ev.sensors.get(key[0])
         if key[1] != "position" or not geodetic(gps) or gated_out(ch):
             return []
-        if applied_verdict(ch) not in ("nis_low", "ok"):
+        if applied_verdict(ch) not in ("nis_low", "ok") or not ch.kept_nis_per_dof >= MIN_NIS_PER_DOF:
             return []
         head, up_ch = f"{nis_head(ch, ev.t0)}: ", gps_up(ev, key)
         if gps.error_tau_s > 0.0:
