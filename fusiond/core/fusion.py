@@ -72,6 +72,7 @@ class Step(msgspec.Struct, gc=False):
     reason: str = ""  # drop reason when not accepted
     late: bool = False
     publish: bool = False  # an odometry sample: the daemon publishes the newest estimate now
+    measured: bool = True  # False: applied, but it measured nothing (``SensorModel.unmeasured``): no sign of life
     records: list[DiagnosticsRecord] = msgspec.field(default_factory=list)
     # Samples held for a time jump and applied at once: (stamp, [x y z qx qy qz qw]) of the estimate
     # after each odometry sample among them, in order (a replay writes one pose per odometry message).
@@ -291,7 +292,9 @@ class FusionCore:
             if r.rejected and r.channel != "yaw_rate":
                 st.rejected += 1
         publish = self._publishes[idx] and (self.frame_index < 0 or self.state.frame_ready)
-        return Step(self.sensors[idx].name, True, late=late, publish=publish, records=records)
+        unmeasured = self.models[idx].unmeasured
+        measured = not (unmeasured and any(r.channel in unmeasured for r in records))
+        return Step(self.sensors[idx].name, True, late=late, publish=publish, records=records, measured=measured)
 
     # -- time jumps ------------------------------------------------------------------------------------
     def _hold_jump(self, idx: int, inp, stamp: float) -> Step:

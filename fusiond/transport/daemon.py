@@ -495,8 +495,9 @@ class Daemon:
                 step = ingest(sample)
                 if not step.accepted:
                     continue  # counted (and logged) by the core
-                check = zero_cov[idx]
-                accepted.append((idx, arrival, check is not None and check(sample)))
+                if step.measured:  # a frozen receiver's repeat is applied but is no sign of its life (health)
+                    check = zero_cov[idx]
+                    accepted.append((idx, arrival, check is not None and check(sample)))
                 if step.publish:
                     self._publish_estimate()
                 records = step.records

@@ -74,6 +74,9 @@ class SensorModel:
     policy_type: ClassVar[type]  # raw sample -> input, or Rejected
     predicts: ClassVar[bool] = False  # has an ``on_predict`` hook (called on every prediction step)
     shows_position: ClassVar[bool] = False  # has a ``shown_position`` hook (asked at every published pose)
+    # the channels whose record says the sample, though applied, measured nothing (a receiver repeating its last
+    # fix): such a sample is no sign of the sensor's life (``Step.measured``, the service's liveness)
+    unmeasured: ClassVar[frozenset[str]] = frozenset()
 
     def __init__(self, cfg: Any, index: int, ctx: SensorContext) -> None:
         self.cfg = cfg

@@ -230,6 +230,7 @@ class GpsModel(SensorModel):
     policy_type = GpsPolicy
     predicts = True  # accumulates the dead-reckoned travel between fixes
     shows_position = True  # publishes the expected position while the heading is searched for
+    unmeasured = frozenset({"position_frozen"})  # a frozen receiver's repeat (``_frozen``)
 
     def __init__(self, cfg: GpsSensor, index: int, ctx: SensorContext) -> None:
         super().__init__(cfg, index, ctx)
