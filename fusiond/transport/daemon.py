@@ -179,6 +179,7 @@ class Daemon:
             path = Path(cfg.state.path).expanduser()
             self.state_path = path if path.is_absolute() else (base_dir or Path.cwd()) / path
         self._saver: StateSaver | None = None
+        self._fused_wall = time.time()  # wall time of the newest pass that fused samples (the saved state's age)
         self.resumed = False
         self.link: LinkWatch | None = None  # the session's link to routers and peers (link.py), from start
         self.metrics: Any = None  # the /metrics server (metrics.py) when [metrics] listen is set
@@ -195,7 +196,7 @@ class Daemon:
         self.link.start()
         if self.state_path is not None:
             self.resumed = resume_from_file(self.core, self.state_path, self.cfg.state.max_age_s) is None
-            self._saver = StateSaver(self.state_path, time.time)
+            self._saver = StateSaver(self.state_path)
         if self.cfg.ros.interop == "rmw_zenoh":
             self.node = RmwNode(s, self.cfg.ros.domain_id, self.cfg.ros.node_name)
         self.outputs = Outputs(self.cfg, s, self.node, self._express)
@@ -249,7 +250,7 @@ class Daemon:
     def _save_state(self) -> None:
         """Worker (or after it ended): hand the core's state to the saver thread."""
         if self._saver is not None and self.core.initialised:
-            self._saver.offer(self.core.export_state())
+            self._saver.offer(self.core.export_state(), self._fused_wall)
 
     def stop(self, drain_s: float = DRAIN_S) -> None:
         """Stop input, let the worker finish what is queued (bounded), undeclare outputs."""
@@ -271,7 +272,7 @@ class Daemon:
         if left:
             log.warning("samples_discarded_at_stop", count=left)
         if self._saver is not None:  # the worker has ended (or was abandoned between samples): the last state
-            self._saver.flush(self.core.export_state() if self.core.initialised else None)
+            self._saver.flush(self.core.export_state() if self.core.initialised else None, self._fused_wall)
         if self._monitor is not None:
             self._monitor.join(1.0)
         for obj in reversed(self._declared):  # the node's token last: rmw_zenoh undeclares entities first
@@ -416,6 +417,7 @@ class Daemon:
                 if inbox:
                     self.wakeups += 1
                     dirty = unsaved = True
+                    self._fused_wall = time.time()  # the state's age runs from here (transport/state_file.py)
                     started = clock()
                     fuse(schedule)
                     if backlog:

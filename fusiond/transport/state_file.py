@@ -3,8 +3,8 @@
 The estimate itself comes from the core (``FusionCore.export_state`` / ``resume``); this module
 is the I/O around it, and the only place the file is read or written.
 
-- Format: one msgpack ``StateFile`` (msgspec): a format version, the wall time it was saved,
-  and the core's ``ResumeState``, whose own fingerprint names the config it belongs to.
+- Format: one msgpack ``StateFile`` (msgspec): a format version, the wall time of the newest sample
+  fused into it, and the core's ``ResumeState``, whose own fingerprint names the config it belongs to.
 - Atomic: the bytes go to a temporary file beside the target, are fsynced, then
   ``os.replace``d over it, and the directory is fsynced. A reader (or a restart after a power
   cut or kill -9) sees the old file or the new one, never half of one; a failed write leaves
@@ -12,7 +12,9 @@ is the I/O around it, and the only place the file is read or written.
 - Resume: ``load`` refuses, with a reason, a file that is missing, unreadable or truncated
   (``corrupt``), of another format version or config (``foreign``), or older than
   `max_age_s` by wall clock (``stale``: the robot may have been moved while the daemon was
-  down). The caller logs one event either way.
+  down, or idle before it). The age runs from the newest sample fused, not from the write: a
+  daemon stopped cleanly after minutes without input writes its state at the stop, and that
+  state is as old as its data. The caller logs one event either way.
 - ``StateSaver``: writes off the worker's thread (an fsync can take milliseconds; the worker
   publishes poses). The worker hands it the newest export; a write in progress is never
   queued behind, the newest state wins.
@@ -45,7 +47,7 @@ class StateFile(msgspec.Struct, frozen=True, kw_only=True):
     """What the file holds."""
 
     version: int = FILE_VERSION
-    saved_wall: float  # time.time() when written: its age decides whether a restart resumes it
+    saved_wall: float  # time.time() when its newest sample was fused: its age decides whether a restart resumes it
     state: ResumeState
 
 
@@ -143,11 +145,10 @@ class StateSaver:
     ``flush`` writes what is pending on the caller's thread and stops the thread: at a clean stop
     the last state must be on disk before the process exits."""
 
-    def __init__(self, path: Path, clock_wall) -> None:
+    def __init__(self, path: Path) -> None:
         self.path = path
-        self._wall = clock_wall
         self._cond = threading.Condition()
-        self._pending: ResumeState | None = None
+        self._pending: tuple[ResumeState, float] | None = None
         self._closed = False
         self.saved = 0  # files written
         self.failed = 0  # writes that raised
@@ -159,24 +160,26 @@ class StateSaver:
         self._thread = threading.Thread(target=self._run, name="fusiond-state", daemon=True)
         self._thread.start()
 
-    def offer(self, state: ResumeState) -> None:
-        """Hand over the newest state (never blocks on the disk; an unwritten older one is replaced)."""
+    def offer(self, state: ResumeState, fused_wall: float) -> None:
+        """Hand over the newest state and the wall time its newest sample was fused (never blocks on the
+        disk; an unwritten older one is replaced)."""
         with self._cond:
-            self._pending = state
+            self._pending = (state, fused_wall)
             self._cond.notify()
 
-    def flush(self, state: ResumeState | None = None, timeout: float = 5.0) -> None:
-        """Stop the thread, then write ``state`` (or whatever is still pending) now."""
+    def flush(self, state: ResumeState | None = None, fused_wall: float = 0.0, timeout: float = 5.0) -> None:
+        """Stop the thread, then write ``state`` (fused last at wall time ``fused_wall``; or whatever is
+        still pending) now."""
         with self._cond:
             self._closed = True
             if state is not None:
-                self._pending = state
+                self._pending = (state, fused_wall)
             self._cond.notify()
         self._thread.join(timeout)
         with self._cond:
             last, self._pending = self._pending, None
         if last is not None:
-            self._write(last)
+            self._write(*last)
 
     def _run(self) -> None:
         while True:
@@ -185,12 +188,12 @@ class StateSaver:
                     self._cond.wait()
                 if self._closed:
                     return  # flush writes what is left, on its own thread
-                state, self._pending = self._pending, None
-            self._write(state)
+                pending, self._pending = self._pending, None
+            self._write(*pending)
 
-    def _write(self, state: ResumeState) -> None:
+    def _write(self, state: ResumeState, fused_wall: float) -> None:
         try:
-            save_state(self.path, state, self._wall())
+            save_state(self.path, state, fused_wall)
         except OSError as err:
             self.failed += 1
             if self.failed == 1 or self.failed % 100 == 0:

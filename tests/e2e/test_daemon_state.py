@@ -149,3 +149,27 @@ def test_a_restart_resumes_the_saved_pose_and_kill_9_loses_at_most_one_interval(
         wait_daemon_ready(session, proc, log3)
         events = [e for e in log_events(log3) if e["event"] in ("state_resumed", "state_resume_refused")]
         assert [(e["event"], e["reason"]) for e in events] == [("state_resume_refused", "stale")]
+
+
+def test_a_daemon_stopped_after_idling_does_not_pass_its_old_state_off_as_fresh(tmp_path):
+    """Fed for a second, idle for 2.5 s (the robot may be carried off meanwhile), then stopped cleanly: the
+    state written at the stop is as old as its newest sample, so a restart with max_age_s = 2 s refuses it
+    as stale instead of resuming a pose 2.5 s out of date."""
+    port = free_port()
+    state = tmp_path / "fusiond.state"
+    config = write_config(tmp_path / "robot.toml", port, state, max_age_s=2.0)
+    log1, log2 = tmp_path / "first.log", tmp_path / "second.log"
+    with daemon_process(config, log1) as proc, client_session(port) as session:
+        feed = Feed(session)
+        wait_daemon_ready(session, proc, log1)
+        last = feed.run(1000.0, 1.0)
+        wait_until(lambda: feed.pose_at(last), 10, "the pose of the last odometry")
+        idle_until = time.monotonic() + 2.5
+        while time.monotonic() < idle_until:
+            time.sleep(0.05)  # the robot stands unobserved: no input for 2.5 s
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(15) == 0
+    with daemon_process(config, log2) as proc, client_session(port) as session:
+        wait_daemon_ready(session, proc, log2)
+        events = [e for e in log_events(log2) if e["event"] in ("state_resumed", "state_resume_refused")]
+        assert [(e["event"], e["reason"]) for e in events] == [("state_resume_refused", "stale")], events

@@ -139,18 +139,29 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(driven, tmp_path, m
 def test_the_saver_writes_the_newest_state_and_flush_writes_the_last(driven, tmp_path):
     path = tmp_path / "sub" / "state.msgpack"
     path.parent.mkdir()
-    saver = StateSaver(path, clock_wall=lambda: 1000.0)
+    saver = StateSaver(path)
     first = driven.export_state()
-    saver.offer(first)
+    saver.offer(first, 1000.0)
     deadline = time.monotonic() + 5.0
     while saver.saved == 0:  # the thread writes it: wait on that, with a deadline
         assert time.monotonic() < deadline, "the saver wrote nothing in 5 s"
         time.sleep(0.01)
     assert load_state(path, driven.fingerprint, 30.0, 1000.0).state == first
     last = ResumeState(**{**_fields(first), "stamp": first.stamp + 5.0})
-    saver.flush(last)
-    assert load_state(path, driven.fingerprint, 30.0, 1000.0).state.stamp == first.stamp + 5.0
+    saver.flush(last, 1005.0)
+    assert load_state(path, driven.fingerprint, 30.0, 1005.0).state.stamp == first.stamp + 5.0
     assert saver.last_stamp == first.stamp + 5.0
+
+
+def test_a_state_is_as_old_as_its_newest_fused_sample_not_its_write(driven, tmp_path):
+    """A daemon idle for five minutes, then stopped cleanly, writes its state at the stop: that state's age
+    runs from its newest sample (the robot may have been carried off meanwhile), so a restart refuses it."""
+    path = tmp_path / "state.msgpack"
+    saver = StateSaver(path)
+    fused_at, stopped_at = 1000.0, 1300.0
+    saver.flush(driven.export_state(), fused_at)
+    with pytest.raises(StateRefused, match="stale"):
+        load_state(path, driven.fingerprint, 30.0, stopped_at + 1.0)
 
 
 def test_export_before_any_sample_is_a_core_error():
