@@ -378,6 +378,15 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
                            "whose bias the roll/pitch updates also move (a tilting or rocking robot at rest, or IMU "
                            "roll/pitch that wanders); heading is not affected",
                            evidence=evidence)
+        if not (math.isfinite(measured) and math.isfinite(stated)):
+            # no standstill of the gyro in the series (the live monitor has only the updates): the noise at rest,
+            # which tells an understated noise from a bias estimate moved by another source, is not measured
+            return Verdict(imu.name, "gyro_bias", "warn",
+                           f"{100 * frac:.0f}% of standstill bias updates rejected ({ch.n} updates): the standstills "
+                           "disagree with the filter's bias estimate. Its gyro's noise at rest is not measured here "
+                           "(no standstill in what the doctor saw of the gyro): `fusiond doctor` on a recording of "
+                           "the robot tells an understated gyro_noise from a bias estimate moved by another source",
+                           evidence=evidence)
         evidence["bias_moved"] = 1.0
         return Verdict(imu.name, "gyro_bias", "warn",
                        f"{100 * frac:.0f}% of standstill bias updates rejected although the gyro is quiet at rest "

@@ -632,3 +632,18 @@ def test_an_imu_that_sent_nothing_is_named_as_such_not_as_a_bias_never_learned()
     samples = [s for s in simulate(SimConfig(duration=30.0)) if not isinstance(s, ImuSample)]
     v = one(verdicts_of(make_config(), samples), "imu", "gyro_bias")
     assert v.level == "warn" and v.key == "sensors.imu.key" and "no gyro sample" in v.message, v
+
+
+def test_a_doctor_that_saw_only_the_updates_does_not_call_the_gyro_quiet_at_rest():
+    """The live monitor's doctor has the config and the diagnostics records, no samples: standstill bias
+    updates 40 % rejected, and no noise at rest measured. It says so; no 'quiet at rest (nan rad/s ...)'."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.doctor import Doctor
+
+    d = Doctor(make_config())
+    for k in range(20):
+        d.add(DiagnosticsRecord(100.0 + 5 * k, "imu", ["gyro_x", "gyro_y", "gyro_z"], [0.01, 0.01, 0.01],
+                                [1e-5, 1e-5, 1e-5], 30.0 if k % 5 < 2 else 2.0, 3, k % 5 < 2, channel="gyro_bias"))
+    v = one(d.verdicts(), "imu", "gyro_bias")
+    assert "nan" not in v.message and "quiet at rest" not in v.message, v
+    assert "not measured" in v.message, v
