@@ -149,8 +149,13 @@ class NisWindow:
             return None
         return math.inf if self._infinite else self._sum / n
 
+    @property
+    def gated_out(self) -> bool:
+        """Is the verdict nis_high by the share of rejected updates (not by the applied ones' mean)?"""
+        return len(self.flags) == self.window and self.recent_rejected > REJECTED_SHARE * self.window
+
     def verdict(self) -> str:
-        if len(self.flags) == self.window and self.recent_rejected > REJECTED_SHARE * self.window:
+        if self.gated_out:
             return "nis_high"
         n = len(self.values)
         if n < self.window:
@@ -166,7 +171,11 @@ class NisWindow:
             "rejected": self.rejected,
             "recent_rejected": self.recent_rejected,  # of the last ``window`` updates
             "dof": self.dof,
-            "nis_mean": self.mean,
+            "nis_mean": self.mean,  # of the applied updates: a rejected one's NIS is the gate's
             "nis_bounds": list(lo_hi) if lo_hi else None,
             "verdict": self.verdict(),
+            # "rejected": nis_high by the share of the last ``window`` updates the gate kept out (beyond
+            # REJECTED_SHARE), whatever the applied ones' mean; "mean": by the mean against its bounds
+            "cause": "rejected" if self.gated_out else "mean",
+            "rejected_share": self.recent_rejected / len(self.flags) if self.flags else 0.0,
         }

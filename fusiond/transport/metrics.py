@@ -78,6 +78,8 @@ def families(a: HealthAnswer) -> list[Any]:
     upper = gauge("nis_upper_bound", "chi-square upper bound of that mean", ("sensor", "channel"))
     out_of = gauge("nis_out_of_bounds", "1 when the channel's NIS verdict is nis_high or nis_low",
                    ("sensor", "channel", "verdict"))
+    share = gauge("nis_rejected_share", "share of the window's updates the gate rejected (nis_high beyond a tenth)",
+                  ("sensor", "channel"))
     updates = counter("channel_updates", "updates of a sensor channel", ("sensor", "channel"))
     for key, c in sorted(a.consistency.items()):
         sensor, _, channel = key.partition("/")
@@ -91,6 +93,7 @@ def families(a: HealthAnswer) -> list[Any]:
             upper.add_metric(labels, bounds[1])
         verdict = str(c.get("verdict"))
         out_of.add_metric([*labels, verdict], 1.0 if verdict in _BAD_VERDICTS else 0.0)
+        share.add_metric(labels, float(c.get("rejected_share", 0.0)))
         updates.add_metric(labels, c.get("updates", 0))
 
     f = a.filter

@@ -113,6 +113,7 @@ def test_the_metrics_say_what_the_health_answer_says(tmp_path):
             assert v("fusiond_nis_upper_bound", sensor=sensor, channel=channel) == pytest.approx(c["nis_bounds"][1])
         assert v("fusiond_nis_out_of_bounds", sensor=sensor, channel=channel, verdict=c["verdict"]) == \
             float(c["verdict"] in ("nis_high", "nis_low"))
+        assert v("fusiond_nis_rejected_share", sensor=sensor, channel=channel) == pytest.approx(c["rejected_share"])
     assert h["consistency"], "no NIS channel to compare"
     assert v("fusiond_filter_finite") == float(h["filter"]["finite"])
     assert v("fusiond_filter_heading_known") == float(h["filter"]["heading_known"])

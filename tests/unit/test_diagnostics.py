@@ -80,6 +80,10 @@ def test_a_sensor_the_gate_keeps_out_often_reads_high(share, verdict):
     if share < 1.0:
         assert lo < w.mean < hi  # the applied ones are consistent either way
     assert w.verdict() == verdict
+    # the summary says which: a mean within its bounds beside nis_high is the gate's share, not the mean
+    summary = w.summary()
+    assert summary["cause"] == ("rejected" if verdict == "nis_high" else "mean")
+    assert summary["rejected_share"] == pytest.approx(w.recent_rejected / 50)
 
 
 class _Reference:
