@@ -17,14 +17,16 @@ def verdicts_of(cfg, samples) -> list[Verdict]:
 
 def agree(doctor, verdicts: list[Verdict]) -> None:
     """One verdict per channel, and it never contradicts the channel's whole-run NIS verdict (what the
-    summary prints): no 'ok' beside a NIS high or low, no 'NIS high' beside an ok."""
+    summary prints): no 'ok' beside a NIS high or low unless it says that NIS and why it is expected (a slow
+    altitude error over a short run), no 'NIS high' beside an ok."""
     keys = [(v.sensor, v.channel) for v in verdicts]
     assert len(keys) == len(set(keys)), keys
     by_key = dict(zip(keys, verdicts))
     for key, ch in doctor.channels.items():
         v = by_key[key]
         if ch.verdict() in ("nis_high", "nis_low"):
-            assert v.level != "ok", (key, ch.verdict(), v)
+            said = ch.verdict().replace("nis_", "NIS ")
+            assert v.level != "ok" or (v.message.startswith(said) and "expects" in v.message), (key, ch.verdict(), v)
         else:
             assert "NIS high" not in v.message and "NIS low" not in v.message, (key, v)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 from ..channels import GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, nis_head
+from ...core.sensors.registry import kind_of
 from ..evidence import Evidence
 from ..nis import ChannelStats
 from ..verdict import Verdict, sensor_key
@@ -33,12 +34,15 @@ def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
 
 
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
-                     up: ChannelStats | None = None, unstated: bool = False) -> Verdict:
+                     up: ChannelStats | None = None, unstated: bool = False,
+                     slow_vertical: tuple[float, float, float] | None = None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise. ``unstated``: a receiver whose fixes state no
     accuracy: the filter took its altitude's noise from the config's ``unknown_position_sigma`` (a verdict on
     it without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
     filter measures), and measured its horizontal noise from the wheels (which ``position_noise`` states
-    instead)."""
+    instead). ``slow_vertical``: (sigma, tau, span) of the altitude's Gauss-Markov error state where the run
+    spans too few of its time constants to identify it (the kind's ``slow_errors``): an altitude NIS low is then the
+    model's, not a noise to change (``_slow_altitude``)."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
@@ -85,11 +89,28 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        f"NIS high ({figures(ch, t0)}; {detail}): {stated} is too small, a mounting offset "
                        "(extrinsic_xyz) is missing, or an odometry scale error is unmodelled (scale_estimation); "
                        f"if it is the noise, the innovations (an upper bound) suggest {rms}", key, line, evidence=ev)
+    if verdict == "nis_low" and channel == "altitude" and slow_vertical is not None:
+        return _slow_altitude(name, ch, t0, slow_vertical, ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
                        f"NIS low ({figures(ch, t0)}; {detail}): {stated} is larger than the innovations show "
                        f"({rms}: an upper bound of the sensor's own noise)", key, line, evidence=ev)
     return Verdict(name, channel, "ok", f"consistent ({figures(ch, t0)})", evidence=ev)
+
+
+def _slow_altitude(name: str, ch: ChannelStats, t0: float | None, slow: tuple[float, float, float],
+                   ev: dict) -> Verdict:
+    """The altitude's NIS low beside a slow vertical error state: the filter takes the receiver's altitude to
+    wander by sigma over tau (minutes), and every fix's predicted spread carries that whole wander; a run shorter
+    than a few tau shows only a slice of it, so the innovations sit far inside that spread. That is the model
+    over a short run, not a noise stated too large: a smaller position_noise changes next to nothing (the wander
+    is most of the spread), and a smaller wander is for a recording that spans it to tell (tune fits it there)."""
+    sigma, tau, span = slow
+    return Verdict(name, "altitude", "ok",
+                   f"NIS low ({figures(ch, t0)}), as the altitude's error model expects over {span:.0f} s: it takes "
+                   f"the receiver's altitude to wander by {sigma:g} m over {tau:g} s (vertical_error_sigma, "
+                   "vertical_error_tau_s), a slice of which this run spans; nothing to change from it (a recording "
+                   "spanning several of those time constants tells whether the wander is smaller)", evidence=ev)
 
 
 class AbsoluteNis(PerChannel):
@@ -98,7 +119,29 @@ class AbsoluteNis(PerChannel):
     name = kind = "absolute"
 
     def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
-        return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key), _unstated(ev, key[0]))]
+        return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key), _unstated(ev, key[0]),
+                                 _slow_vertical(ev, key[0], ch))]
+
+
+def _slow_vertical(ev: Evidence, name: str, ch: ChannelStats) -> tuple[float, float, float] | None:
+    """(vertical_error_sigma, its tau, the run's span) when the sensor's kind calls its vertical error slow
+    against that span (``slow_errors``), else None (no config: the live monitor)."""
+    if ev.config is None or not ch.stamps:
+        return None
+    sc = ev.sensors.get(name)
+    if sc is None:
+        return None
+    span = float(max(ch.stamps) - min(ch.stamps))
+    tau = kind_of(sc).slow_errors(sc, span).get("vertical")
+    sigma = float(getattr(sc, "vertical_error_sigma", 0.0))
+    if tau is None or not ch.components or sigma <= 0.0:
+        return None
+    # the model's only where its wander alone puts the NIS below its bound: then no noise of the fixes, however
+    # small, brings it up (else a noise stated too large is part of it, and the NIS verdict names that)
+    rms, bounds = ch.component(0)[1], ch.bounds()
+    if bounds is None or not (math.isfinite(rms) and rms * rms < bounds[0] / ch.mean_dof * sigma * sigma):
+        return None
+    return sigma, float(tau), span
 
 
 def _unstated(ev: Evidence, name: str) -> bool:
