@@ -45,6 +45,10 @@ def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: fl
         order = np.arange(len(t))
     ts = t[order]
     inside = (ts >= to[0]) & (ts <= to[-1])
+    # a fix repeating the one before it to the bit (a frozen receiver republishing its last fix with new stamps,
+    # which the core refuses while the wheels move) measured nothing: no chord ends on it
+    e, n = np.asarray(series.gps_e)[order], np.asarray(series.gps_n)[order]
+    inside[1:] &= (e[1:] != e[:-1]) | (n[1:] != n[:-1])
     s = np.where(inside, np.interp(ts, to, travelled), np.nan)
     out = []
     i = 0

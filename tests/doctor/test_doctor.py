@@ -148,6 +148,20 @@ def test_wheel_scale_error_against_gps_names_scale_estimation():
     assert v.key != "sensors.wheel.scale_estimation" and "estimated wheel scale" in v.message, v
 
 
+def test_a_frozen_receivers_repeats_end_no_chord_of_the_wheel_scale():
+    """The wheels 5 % slow, the receiver repeating its last fix for 30 s of the 120 (its stamps advancing while
+    the car drives 30 m): a chord ending on a repeat compares the wheels' travel with none. Left out, the scale
+    is the wheels' within its standard error, and named."""
+    cfg = robot_config(gps="", odom="scale_estimation = false")
+    plain = one(verdicts_of(cfg, sim_gps.simulate(sim_gps.World(duration=120.0, gps_rate=1.0, wheel_scale=0.95))),
+                "wheel", "speed")
+    world = sim_gps.World(duration=120.0, gps_rate=1.0, wheel_scale=0.95, gps_freeze=((40.0, 70.0),))
+    v = one(verdicts_of(cfg, sim_gps.simulate(world)), "wheel", "speed")
+    assert v.level == "problem" and v.key == "sensors.wheel.scale_estimation", v
+    assert v.evidence["wheel_scale_vs_gps"] == pytest.approx(0.95, abs=3 * v.evidence["wheel_scale_se"]), v
+    assert v.evidence["wheel_scale_se"] < 2.0 * plain.evidence["wheel_scale_se"], (v, plain)
+
+
 def test_a_learned_wheel_scale_the_gps_chords_do_not_support_is_a_defect():
     """Wheels without error beside a GPS: the chord fit says 1 within its band. A wheel_scale state that
     learned 0.89 meanwhile (what a gate drowning good fixes in a bad altitude taught it on a real
