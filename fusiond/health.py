@@ -33,7 +33,7 @@ from typing import Any, Literal
 
 import msgspec
 
-from .core.inputs import recent_longest, silent_after, smoothed_period
+from .core.inputs import NO_RECENT, recent_longest, silent_after, smoothed_period
 from .health_pose import PoseHealth, pose_health
 from .reasons import QUEUE_FULL
 from .codecs.ros_messages import ERROR, OK, WARN, DiagnosticStatus
@@ -140,11 +140,11 @@ class _Tracker:
         self.dropped: dict[str, int] = {}
         self.last: float | None = None  # wall arrival of the newest accepted sample
         self.period = 0.0  # EMA of wall-clock intervals between accepted samples
-        self.longest = 0.0  # the longest recent interval under gap_s (``recent_longest``), as the core's
+        self.longest = NO_RECENT  # the longest recent interval under gap_s (``recent_longest``), as the core's
         self.floored = 0  # accepted samples whose covariance was floored (all-zero covariances of real drivers)
 
     def timeout(self) -> float:
-        return silent_after(self.timeout_s, self.period, longest=self.longest)
+        return silent_after(self.timeout_s, self.period, longest=self.longest[0])
 
 
 def _accept(s: _Tracker, arrival: float) -> None:
@@ -154,7 +154,7 @@ def _accept(s: _Tracker, arrival: float) -> None:
         if arrival <= last:
             return
         s.period = smoothed_period(s.period, arrival - last)
-        s.longest = recent_longest(s.longest, arrival - last, s.gap_s)
+        s.longest = recent_longest(s.longest, arrival - last, arrival, s.gap_s)
     s.last = arrival
 
 

@@ -12,9 +12,10 @@ The longest recent interval is what a stream with recurring short gaps needs: a 
 expire its twist halfway through every pause, and the filter stops a car doing 17 m/s
 for 0.2 s in each (a tenth of the distance lost). Only intervals up to the filter's
 ``gap_s`` count: a longer silence is a logging gap, which the gap rules handle (the
-covariance inflated for it), and must not keep the last twist held. An interval is
-remembered for RECENT_S of message time after it (a decaying maximum): a pattern that
-recurs keeps it, a single hiccup is forgotten.
+covariance inflated for it), and must not keep the last twist held. The maximum is taken
+over the current and the previous RECENT_S / 2 of message time (a windowed maximum in two
+halves, a comparison a message): a pattern that recurs within that keeps it, a single
+hiccup is forgotten after RECENT_S / 2 to RECENT_S.
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
 TILT_STALE_S = 5.0  # no roll/pitch information for this long: roll/pitch rates are no longer integrated
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
 GAP_HOLD = 1.5  # ... or this many times its longest recent interval: a recurring pause varies in length
-RECENT_S = 30.0  # s of message time over which an interval counts as recent (it decays by e over this)
+RECENT_S = 30.0  # s of message time over which an interval counts as recent (two halves: module doc)
+NO_RECENT = (0.0, 0.0, -math.inf)  # (longest recent interval, the current half's, when that half ends): none yet
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
@@ -54,7 +56,7 @@ class HeldInputs:
         base = self._timeout_base[idx]
         if s is None:
             return base
-        return silent_after(base, s.period[idx], longest=s.longest[idx])
+        return silent_after(base, s.period[idx], longest=s.longest[idx][0])
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
@@ -64,11 +66,11 @@ class HeldInputs:
         odom_timeout = gyro_timeout = 0.0
         if odom >= 0 and s.last[odom] is not None:
             base, period = self._timeout_base[odom], s.period[odom]
-            odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[odom])
+            odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[odom][0])
         if s.gyro is not None:
             idx = s.gyro_last[0]
             base, period = self._timeout_base[idx], s.period[idx]
-            gyro_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[idx])
+            gyro_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[idx][0])
         return odom_timeout, gyro_timeout
 
     def timeouts_and_expiries(self, s: FilterState) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -159,19 +161,25 @@ def next_expiry(expiries: tuple[float, float], t: float, end: float) -> float:
 
 def silent_after(timeout_s: float, period: float, periods: float = TIMEOUT_PERIODS, longest: float = 0.0) -> float:
     """How long after its last message a sensor is silent: its ``timeout_s``, or ``periods`` of its
-    typical period (0: none yet), or GAP_HOLD times its longest recent interval (``recent_longest``),
+    typical period (0: none yet), or GAP_HOLD times its longest recent interval (``recent_longest``'s first),
     whichever is longest. The core's held inputs (message time) and the service's liveness (wall time)
     both use it with TIMEOUT_PERIODS; the IMU's gap rule with its own count and no recent interval
     (core/sensors/imu/gap_turn.py)."""
     return timeout_s if period <= 0.0 else max(timeout_s, periods * period, GAP_HOLD * longest)
 
 
-def recent_longest(longest: float, interval: float, gap_s: float) -> float:
-    """The longest recent interval under a gap (module doc) after one more interval: the previous one
-    decayed over this interval (by e per RECENT_S), or this one if it is longer and no longer than
-    ``gap_s``."""
-    decayed = longest * math.exp(-interval / RECENT_S) if longest > 0.0 else 0.0
-    return interval if decayed < interval <= gap_s else decayed
+def recent_longest(recent: tuple[float, float, float], interval: float, stamp: float,
+                   gap_s: float) -> tuple[float, float, float]:
+    """``recent`` (``NO_RECENT`` at first: the longest interval under ``gap_s`` over the current and the previous
+    half of RECENT_S, the current half's, and when it ends) after one more ``interval``, ended at ``stamp``."""
+    longest, current, end = recent
+    counts = interval <= gap_s
+    if stamp >= end:  # a new half: the one ending carries its maximum into the next
+        now = interval if counts else 0.0
+        return max(current, now), now, stamp + 0.5 * RECENT_S
+    if counts and interval > current:
+        return max(longest, interval), interval, end
+    return recent
 
 
 def smoothed_period(period: float, interval: float) -> float:
@@ -190,10 +198,12 @@ def note_period(s: FilterState, idx: int, stamp: float, gap_s: float) -> None:
     elif stamp > last:
         d = stamp - last
         s.period[idx] = smoothed_period(s.period[idx], d)
-        s.longest[idx] = recent_longest(s.longest[idx], d, gap_s)
+        recent = s.longest[idx]
+        if stamp >= recent[2] or recent[1] < d <= gap_s:  # else unchanged (nearly every message)
+            s.longest[idx] = recent_longest(recent, d, stamp, gap_s)
         s.last[idx] = stamp
 
 
 __all__ = ["HeldInputs", "next_expiry", "note_period", "recent_longest", "silent_after", "smoothed_period",
-           "GAP_HOLD", "RECENT_S", "TIMEOUT_PERIODS",
+           "GAP_HOLD", "NO_RECENT", "RECENT_S", "TIMEOUT_PERIODS",
            "TILT_STALE_S"]

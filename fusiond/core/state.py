@@ -8,6 +8,8 @@ reproduces the same numbers.
 
 from __future__ import annotations
 
+import math
+
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
@@ -39,7 +41,7 @@ class FilterState:
         s.ekf = ekf
         s.last = [None] * sensors
         s.period = [0.0] * sensors
-        s.longest = [0.0] * sensors  # the longest recent interval under a gap (``inputs.recent_longest``)
+        s.longest = [(0.0, 0.0, -math.inf)] * sensors  # per sensor ``inputs.recent_longest``'s (its NO_RECENT)
         s.linear, s.linear_cov = _ZERO3, linear_cov
         s.wheel_angular, s.wheel_angular_cov = _ZERO3, angular_cov
         s.linear_world = False  # the held linear twist is in the world frame (twist_frame = "world", no pose)

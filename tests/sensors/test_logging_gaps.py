@@ -179,3 +179,25 @@ def test_a_drive_that_pauses_briefly_and_often_keeps_its_twist_through_the_pause
     truth = min(sim.truth, key=lambda r: abs(r[0] - t))
     lost_in_first = 5.0 * (0.4 - 0.2)
     assert abs(math.hypot(x[0], x[1]) - math.hypot(truth[1], truth[2])) < lost_in_first + 0.5
+
+
+def test_the_longest_recent_interval_keeps_a_recurring_pause_and_forgets_a_single_one():
+    """``recent_longest`` over 100 Hz intervals: a 0.4 s pause every 2 s stays the longest as long as it recurs;
+    a single one is forgotten within RECENT_S (two halves of 15 s); a 0.8 s silence (beyond gap_s) is a logging
+    gap, never learned."""
+    from fusiond.core.inputs import NO_RECENT, RECENT_S, recent_longest
+
+    def run(intervals, t=1000.0, recent=NO_RECENT):
+        seen = []
+        for d in intervals:
+            t += d
+            recent = recent_longest(recent, d, t, 0.5)
+            seen.append(recent[0])
+        return seen, t, recent
+
+    recurring = ([0.01] * 160 + [0.4]) * 40  # 80 s
+    seen, t, recent = run(recurring)
+    assert min(seen[200:]) == 0.4
+    quiet, _, _ = run([0.01] * int(RECENT_S / 0.01 + 10), t, recent)  # then 30 s without a pause
+    assert quiet[-1] == pytest.approx(0.01)
+    assert max(run([0.01] * 100 + [0.8] + [0.01] * 100)[0]) == pytest.approx(0.01)

@@ -246,8 +246,7 @@ def test_a_fast_drive_whose_logger_pauses_does_not_flap_after_the_first_pause():
         h.on_accepted(0, t)
     bad = [k for k, st in statuses if st not in ("ok", "starting")]
     assert bad and max(bad) <= 166, bad  # the first pause only
-    # 1.5 x 0.4 s, decayed by e per 30 s over the 1.6 s since the last pause
-    assert h.report().sensors["wheel"].timeout_s == pytest.approx(0.6 * math.exp(-1.6 / 30.0), rel=0.02)
+    assert h.report().sensors["wheel"].timeout_s == pytest.approx(1.5 * 0.4, rel=0.01)  # its pauses, recurring
     long = Health([("wheel", 0.2)], clock=clock, gap_s=0.5)
     for dt in (0.012, 0.012, 0.8, 0.012):
         clock.t += dt
