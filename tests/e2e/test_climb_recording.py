@@ -10,29 +10,11 @@ from __future__ import annotations
 from fusiond.config import loads
 from fusiond.replay.run import replay
 
-from tests.support.recordings import needs, write_variant
+from tests.support.recordings import HIGHWAY_CONFIG, needs, write_variant
 
 pytestmark = needs("comma2k19_ex1", "the highway car")
 
-CONFIG = """
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-twist_frame = "body"
-
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "off"
-angular_velocity = true
-
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "fix"
-"""
+CONFIG = HIGHWAY_CONFIG
 
 
 def test_the_altitude_gated_by_an_unstated_mount_is_put_down_to_the_mount(tmp_path):

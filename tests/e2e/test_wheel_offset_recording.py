@@ -11,29 +11,11 @@ from pathlib import Path
 
 from fusiond.cli import main
 
-from tests.support.recordings import needs, write_variant
+from tests.support.recordings import HIGHWAY_CONFIG, needs, write_variant
 
 pytestmark = needs("comma2k19_ex1", "the highway car")
 
-CONFIG = """
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-twist_frame = "body"
-
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "off"
-angular_velocity = {gyro}
-
-[[sensors]]
-name = "gps"
-kind = "gps"
-key = "fix"
-"""
+CONFIG = HIGHWAY_CONFIG.replace("angular_velocity = true", "angular_velocity = {gyro}")
 
 
 def _world(bag: Path, gyro: str, tmp: Path) -> float:

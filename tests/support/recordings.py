@@ -12,6 +12,28 @@ from tests.support.scripts import load_script
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
+# The highway car's config as a new user writes it from the README (wheels, the gyro fused, the GPS with its
+# defaults), for the tests that replay that recording or its variants
+HIGHWAY_CONFIG = """
+[[sensors]]
+name = "wheel"
+kind = "odom"
+key = "odom"
+twist_frame = "body"
+
+[[sensors]]
+name = "imu"
+kind = "imu"
+key = "imu"
+orientation = "off"
+angular_velocity = true
+
+[[sensors]]
+name = "gps"
+kind = "gps"
+key = "fix"
+"""
+
 
 def needs(recording: str, what: str) -> list:
     """The e2e mark and a skip naming ``recording`` (a folder or file of ../shared/data) and ``what`` it is."""
