@@ -75,9 +75,13 @@ def test_a_stated_or_absent_lever_reads_ok():
 
 def test_a_vehicle_that_hardly_turns_cannot_tell_a_lever():
     """A car at 25 m/s on straight road with a lane change a minute (0.02 rad/s arcs), 10 Hz fixes: the
-    heading changes too little between fixes for the fit to reach its precision: no verdict at all
-    (README: measure the antenna's position)."""
+    heading changes too little between fixes for the fit to reach its precision: no lever named, and with the
+    antenna left at the base (extrinsic_xyz unset) the verdict says it cannot be measured here, at level ok
+    (README: measure the antenna's position). Stated, nothing is said."""
     w = sim_gps.World(duration=120.0, speed=25.0, gps_rate=10.0, gps_sigma=0.6, gps_lever=(1.2, 0.0, 1.5),
                       arcs=((30.0, 35.0, 0.02), (90.0, 95.0, -0.02)))
-    v, _ = lever_of(sim_gps.simulate(w))
-    assert v is None, v
+    samples = sim_gps.simulate(w)
+    v, _ = lever_of(samples)
+    assert v is not None and v.level == "ok" and "cannot be measured" in v.message and not v.suggestion, v
+    stated, _ = lever_of(samples, "extrinsic_xyz = [1.2, 0.0, 1.5]")
+    assert stated is None, stated

@@ -125,6 +125,20 @@ def lever_fit(series: Series, stated: tuple[float, float]) -> tuple[np.ndarray, 
     return x[:2], cov[:2, :2], int(keep.sum())
 
 
+def _unmeasured(gps, series: Series, why: str) -> list[Verdict]:
+    """Said, at level ok, where the antenna is left where ``extrinsic_xyz`` puts it by default (at the base) and
+    this run cannot show a lever (module doc: only turns do): a user whose antenna sits on a mast should not read
+    the silence as "no lever"."""
+    if any(float(v) != 0.0 for v in gps.extrinsic_xyz):
+        return []  # stated: nothing here contradicts it, and nothing to add
+    turned = series.gyro_heading or series.odom_heading  # what the vehicle turned (not the heading search's jumps)
+    span = math.degrees(float(np.ptp(np.asarray(turned)))) if turned else 0.0
+    return [Verdict(gps.name, "lever_arm", "ok",
+                    f"the antenna's lever arm cannot be measured on this run ({why}; the vehicle turned through "
+                    f"{span:.0f} deg): extrinsic_xyz puts the antenna at the base. If it sits elsewhere (a mast, the roof's "
+                    "back), state it, or record a drive with turns and ask again", evidence={"heading_span_deg": span})]
+
+
 class LeverArm(BaseCheck):
     """The GPS antenna's lever arm, from how the fixes swing as the vehicle turns."""
 
@@ -140,16 +154,18 @@ class LeverArm(BaseCheck):
         stated = (float(gps.extrinsic_xyz[0]), float(gps.extrinsic_xyz[1]))
         fit = lever_fit(series, stated)
         if fit is None:
-            return []
+            return _unmeasured(gps, series, f"fewer than {MIN_PAIRS} pairs of fixes {PAIR_S:g} s apart with the "
+                                            "wheels reporting between them")
         dl, cov, pairs = fit
         se = math.sqrt(max(float(np.max(np.diag(cov))), 0.0))
         try:
             chi2 = float(dl @ np.linalg.solve(cov, dl))
         except np.linalg.LinAlgError:
-            return []
+            return _unmeasured(gps, series, f"{pairs} pairs of fixes, too little turning among them to fit one")
         named = math.hypot(*dl) >= LEVER_TOL and chi2 >= LEVER_Z_SIGMAS**2 and se <= MAX_SE_NAMED
         if not (named or se <= MAX_SE):
-            return []
+            return _unmeasured(gps, series, f"{pairs} pairs of fixes, the fit's standard error {se:.2f} m (at most "
+                                            f"{MAX_SE:g} m tells one)")
         lever = (stated[0] + float(dl[0]), stated[1] + float(dl[1]), float(gps.extrinsic_xyz[2]))
         evidence = {"lever_x_m": lever[0], "lever_y_m": lever[1], "lever_dx_m": float(dl[0]),
                     "lever_dy_m": float(dl[1]),
