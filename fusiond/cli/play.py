@@ -76,6 +76,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"fusiond: the daemon stopped answering on {cfg.output.health_key!r}{in_namespace(cfg)} while this "
               f"played ({result.daemon_stopped}): what it was sent after that went nowhere", file=sys.stderr)
         return 1
+    if result.daemon_restarted:
+        print(f"fusiond: the daemon on {cfg.output.health_key!r}{in_namespace(cfg)} restarted while this played "
+              f"(Zenoh id {result.daemon_restarted}): its counts started over, so what it fused of these samples is "
+              "not known, and what was sent while it was down went nowhere (its log says whether it resumed: "
+              "state_resumed)", file=sys.stderr)
+        return 1
     if result.daemon_dropped:
         print(f"fusiond: the daemon dropped {result.daemon_dropped} of these samples, its input queue full "
               f"(health: queue.dropped): it did not keep up with --rate {args.rate:g}; play slower", file=sys.stderr)

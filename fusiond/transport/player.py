@@ -75,6 +75,9 @@ class PlayResult:
     daemon_stopped: str | None = None
     # a daemon was awaited (``wait_s`` > 0) and none answered: nothing sent is known to be fused
     no_daemon: bool = False
+    # the daemon answering after playing is another session than before (restarted while this played: its
+    # counts started over, so what it fused of this play is not known): "old -> new" Zenoh ids, else None
+    daemon_restarted: str | None = None
 
 
 def wait_for_daemon(session: zenoh.Session, health_key: str, timeout: float) -> list[bytes]:
@@ -167,6 +170,9 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             result.daemon_stopped = (f"{len(answers)} answered before playing, {len(after)} after "
                                      f"{result.messages} messages{went}")
             log.error("play_daemon_stopped", detail=result.daemon_stopped, health_key=cfg.output.health_key)
+        elif (was := _daemon_id(answers)) != (now := _daemon_id(after)) and was and now:
+            result.daemon_restarted = f"{was} -> {now}"
+            log.error("play_daemon_restarted", zids=result.daemon_restarted, health_key=cfg.output.health_key)
         elif counts_before is not None and not result.interrupted:
             result.unfused = _unfused(session, cfg.output.health_key, counts_before, result.per_sensor, stop)
     finally:
@@ -188,6 +194,22 @@ def _queue_dropped(answers: list[bytes]) -> int | None:
         return decode_report(answers[0]).queue.dropped
     except msgspec.DecodeError:
         return None
+
+
+def _daemon_id(answers: list[bytes]) -> str:
+    """The Zenoh id of the one daemon that answered ("" unless exactly one answered, with a readable id)."""
+    if len(answers) != 1:
+        return ""
+    try:
+        return str(msgspec.json.decode(answers[0], type=_Identity).zid)
+    except msgspec.DecodeError:
+        return ""
+
+
+class _Identity(msgspec.Struct):
+    """The part of a health answer that names its daemon (``transport.answer.HealthAnswer``)."""
+
+    zid: str = ""
 
 
 Counts = dict[str, tuple[int, dict[str, int]]]  # per sensor: (applied, dropped by reason)

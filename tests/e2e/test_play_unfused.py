@@ -13,7 +13,7 @@ import subprocess
 import pytest
 
 from tests.support.daemon import (
-    ROOT, client_session, daemon_process, free_port, fusiond_cmd, wait_daemon_ready, write_config,
+    ROOT, client_session, daemon_process, free_port, fusiond_cmd, health, wait_daemon_ready, wait_until, write_config,
 )
 
 pytestmark = pytest.mark.e2e
@@ -65,3 +65,26 @@ def test_play_refuses_a_configured_topic_the_bag_lacks_unless_allowed(jackal_bag
     allowed = subprocess.run(fusiond_cmd(*common, "--allow-missing"), capture_output=True, text=True, timeout=120,
                              cwd=ROOT)
     assert allowed.returncode == 0 and re.search(r"played \d+ messages \(wheel=\d+ imu=0\)", allowed.stdout), allowed
+
+
+def test_play_says_when_the_daemon_restarted_while_it_played(jackal_bag, tmp_path):
+    """The daemon stopped and started again 2 s into a 6 s play at the recorded pace: the health answering after
+    the play is another Zenoh session, whose counts started over. play says the daemon restarted (its ids), exit
+    1, rather than calling the first daemon's fused samples "unaccounted"."""
+    port = free_port()
+    config = write_config(tmp_path / "jackal.toml", port)
+    log1, log2 = tmp_path / "first.log", tmp_path / "second.log"
+    with daemon_process(config, log1) as proc, client_session(port) as session:
+        wait_daemon_ready(session, proc, log1)
+        play = subprocess.Popen(fusiond_cmd("play", str(jackal_bag), "--config", str(config), "--rate", "1",
+                                            "--duration", "6", "--connect", f"tcp/127.0.0.1:{port}"),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+        wait_until(lambda: health(session, 0.5) and health(session, 0.5)["sensors"]["wheel"]["applied"] > 0, 20,
+                   "the play's first samples fused")
+        proc.terminate()
+        assert proc.wait(15) == 0
+    with daemon_process(config, log2) as proc2, client_session(port) as session:
+        wait_daemon_ready(session, proc2, log2)
+        out, err = play.communicate(timeout=120)
+    assert play.returncode == 1, (out, err)
+    assert "restarted while this played" in err and "unaccounted" not in err, err
