@@ -5,8 +5,8 @@ wall clock (the core's time is message time, which stops when input stops): a
 sensor is alive while its newest *accepted* sample arrived less than
 `max(timeout_s, 3 x its observed wall-clock period, 1.5 x its longest recent interval
 under gap_s)` ago (core/inputs.py's rule), so a 5 Hz sensor with jitter, or a drive
-whose logger pauses 0.4 s every 2 s, does not flap, and a sensor sending only garbage
-or stale stamps is not counted as alive.
+whose logger pauses 0.4 s every 2 s, does not flap, and a sensor sending only garbage,
+stale stamps or a frozen receiver's repeats (``Step.measured``) is not counted as alive.
 
 Threads: subscriber callbacks count arrivals and queue drops, the worker reports
 accepted samples and core counters, the queryable reads a report. One lock
