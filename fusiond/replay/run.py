@@ -71,7 +71,8 @@ class ReplayResult:
         if self.doctor is None:
             raise ReplayError("this replay was run without the doctor (replay(..., doctor=False))")
         core = self.core
-        stats = {s.name: {"received": st.received, "dropped": st.dropped} for s, st in zip(core.sensors, core.stats)}
+        stats = {s.name: {"received": st.received, "applied": st.applied, "late": st.late, "dropped": st.dropped}
+                 for s, st in zip(core.sensors, core.stats)}
         at_cap = False
         if core.initialised:
             pos_var, att_var = _variances(core)

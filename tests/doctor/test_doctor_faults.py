@@ -383,6 +383,33 @@ def test_an_imu_far_behind_that_the_filter_followed_is_named_not_the_sensors_it_
     assert "behind the other sensors'" in clock[0].message and "wheel's" in clock[0].message
 
 
+@pytest.mark.parametrize("shift", [0.3, -0.3])
+def test_an_imu_clock_ahead_within_the_history_is_named_and_one_behind_is_not_read_as_a_clock(shift):
+    """The IMU's stamps 0.3 s off the wheels', arriving with them: nothing is dropped (the history holds 0.3 s),
+    but the wheels' samples (ahead) or the IMU's (behind) are nearly all applied late. Ahead, no delivery
+    explains stamps from the future: the IMU's clock is named with the shift that mends it. Behind, a sensor
+    stamped right and delivered late looks the same: nothing is said."""
+    from tests.support.sim import SimConfig, simulate as simulate_drive
+
+    samples = shift_stamps(simulate_drive(SimConfig(duration=30.0, standstill=2.0)), "imu", shift)
+    clock = [v for v in verdicts_of(robot_config(), samples) if v.channel == "time"]
+    if shift < 0:
+        assert clock == [], clock
+        return
+    assert [v.sensor for v in clock] == ["imu"] and clock[0].level == "warn", clock
+    assert float(clock[0].suggestion.split("=")[1]) == pytest.approx(-shift, abs=0.02), clock[0]
+    assert "applied late" in clock[0].message, clock[0]
+
+
+def test_a_sensor_stamped_right_and_delivered_late_gets_no_clock_verdict():
+    """The IMU's samples delivered 0.3 s after their (right) stamps: all applied late, from the history, as
+    designed; its stamps are behind the others' at arrival, which is no clock."""
+    from tests.support.sim import SimConfig, arrival_order, simulate as simulate_drive
+
+    samples = arrival_order(simulate_drive(SimConfig(duration=30.0, standstill=2.0)), {"imu": 0.3})
+    assert not [v for v in verdicts_of(robot_config(), samples) if v.channel == "time"]
+
+
 def test_the_culprit_is_the_largest_offset_and_of_a_mirrored_pair_not_the_odometry():
     from fusiond.doctor.checks.clocks import _culprit
 

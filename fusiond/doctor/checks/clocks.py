@@ -10,6 +10,15 @@ and they are the ones dropped, while their own offsets against the others' newes
 second (the GPS's against the wheels'). The odd one out is the sensor whose offset is largest (``_culprit``):
 the IMU at -1000 s. With two sensors the two offsets mirror each other (+5 s and -5 s): the odometry, whose
 stamps the published poses carry, is then the reference, and the other sensor's clock is named.
+
+An offset within the history (an IMU on another computer's clock, 0.5 s ahead) drops nothing: every sample
+of the sensor behind is applied late, re-applying the others after it, and the estimate pairs each wheel
+speed with a gyro rate half a second away (the F1/10's heading error 9.5 -> 25 deg). Jitter makes a share
+of a sensor late (the Jackal's wheels, one in five); a standing offset makes most of them late, by about the
+same amount: past CLOCK_LATE_SHARE the same verdict names the odd clock out, when its stamps are AHEAD of
+the others'. Stamps behind them are also what a sensor correctly stamped but delivered late shows (a
+receiver's fixes 0.2 s after their epoch), which the history is there to absorb: nothing in the stamps tells
+that from a clock behind, so nothing is said of it. No delivery puts a stamp in the future.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ __all__ = ["Clocks"]
 
 CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
 CLOCK_DROP_SHARE = 0.5  # this share of a sensor's samples dropped as far from filter time: its clock, not a glitch
+CLOCK_LATE_SHARE = 0.5  # ... or applied late (behind the others' newest stamp): a standing offset, not jitter
 MIRROR = 2.0  # two offsets within this factor of each other are one offset seen from either side (module doc)
 
 
@@ -46,25 +56,34 @@ class Clocks(BaseCheck):
         for name, st in stats.items():
             received = st.get("received", 0)
             far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
-            if received <= 0 or far < CLOCK_DROP_SHARE * received or name not in offsets:
+            late = st.get("late", 0)
+            behind = late >= CLOCK_LATE_SHARE * max(st.get("applied", 0), 1) and far < CLOCK_DROP_SHARE * received
+            if received <= 0 or (far < CLOCK_DROP_SHARE * received and not behind) or name not in offsets:
                 continue
             culprit = _culprit(offsets, odom)
-            if culprit is None or culprit in out:
+            if culprit is None or culprit in out or (behind and offsets[culprit] <= 0.0):
                 continue
             offset = offsets[culprit]
             side = "ahead of" if offset > 0 else "behind"
             configured = getattr(sensors.get(culprit), "stamp_offset_s", 0.0)
-            dropped = (f"{far} of {received} samples stamped ~{abs(offset):.1f} s {side} the other sensors"
-                       if culprit == name else
-                       f"its stamps are ~{abs(offset):.1f} s {side} the other sensors', and the filter's time followed "
-                       f"them: {far} of {name}'s {received} samples were dropped as far from it")
-            out[culprit] = Verdict(culprit, "time", "problem",
+            if behind:
+                dropped = (f"its stamps are ~{abs(offset):.2f} s {side} the other sensors': {late} of {name}'s "
+                           f"{st.get('applied', 0)} samples were applied late (behind the others' newest stamp), "
+                           "re-applying the others after each, and each is fused beside the others' samples taken "
+                           f"{abs(offset):.2f} s {'later' if offset > 0 else 'earlier'} than it")
+            elif culprit == name:
+                dropped = f"{far} of {received} samples stamped ~{abs(offset):.1f} s {side} the other sensors"
+            else:
+                dropped = (f"its stamps are ~{abs(offset):.1f} s {side} the other sensors', and the filter's time "
+                           f"followed them: {far} of {name}'s {received} samples were dropped as far from it")
+            out[culprit] = Verdict(culprit, "time", "warn" if behind else "problem",
                                    f"{dropped}: its clock is offset (GPS time vs UTC? another computer's clock?). "
                                    "Stamp it with the same clock as the other sensors (the driver's time source), or "
                                    "shift it here", sensor_key(culprit, "stamp_offset_s"),
                                    f"stamp_offset_s = {configured - offset:.3f}",
                                    evidence={"clock_offset_s": offset, "dropped_far": float(far),
-                                             "received": float(received), "dropped_sensor_offset_s": offsets[name]})
+                                             "applied_late": float(late), "received": float(received),
+                                             "dropped_sensor_offset_s": offsets[name]})
         return list(out.values())
 
 
