@@ -42,3 +42,18 @@ def test_a_stop_a_vehicle_can_make_stays_a_standstill():
     rest, _ = quiet_episodes(series, cfg, cfg.sensors[1])
     assert len(rest) == 2, rest
     assert coasts(series, cfg) == []
+
+
+def test_a_rest_span_that_begins_in_a_turn_keeps_its_quiet_stretch():
+    """A drive at 5 Hz reads zero from 10 s to 18 s while the robot still turns (0.2 rad/s) until 12 s, then
+    stands: the filter's rest test, on so few messages, takes the span whole. Averaged whole its gyro turns (no
+    standstill at all); split at its turning bins, the 6 s it stood are a standstill with the gyro's own noise
+    (0.002 rad/s), and the turn is not. (At 50 Hz the filter's span begins at 11.7 s: nothing to split.)"""
+    series, cfg = _series(speed=1.0, turn_amplitude=0.0, standstill=3.0, false_stops=((10.0, 12.0, 0.2),),
+                          stops=((12.0, 18.0),), odom_rate=5.0)
+    assert any(a < 1010.5 < b for a, b in series.rest_spans), series.rest_spans  # the trait
+    rest, turning = quiet_episodes(series, cfg, cfg.sensors[1])
+    late = [e for e in rest if e.t0 > 1009.0]
+    assert len(late) == 1 and late[0].t0 >= 1011.5 and late[0].t1 == pytest.approx(1018.0, abs=0.6), late
+    assert late[0].gyro_sigma < 0.004, late[0]
+    assert any(e.t0 < 1011.0 for e in turning), turning
