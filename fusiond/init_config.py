@@ -190,8 +190,11 @@ def generate_config(info: BagInfo, bags: Sequence[str]) -> str:
                            f"`fusiond replay BAG --config THIS_FILE --reference {t.topic}`")
         elif t in other_odom or t in other_imu or t in other_gps:
             chosen = odom if t in other_odom else imu if t in other_imu else gps
+            also = (": if it is another source of this robot's motion (visual odometry, a localizer), a kind = "
+                    "\"pose\" sensor fuses it (README step 3; differential = true for odometry that drifts)"
+                    if t in other_odom else "")
             skipped.append(f"# {t.topic} ({t.msgtype}): a second one of its kind, not fused ({chosen.topic} is, "
-                           "having more messages)")
+                           f"having more messages){also}")
         elif t.msgtype in POSES:
             skipped.append(f"# {t.topic} ({t.msgtype}): not fused; if it measures this robot add a kind = \"pose\" "
                            "sensor (README step 3)")

@@ -21,6 +21,14 @@ __all__ = ["AbsoluteNis", "absolute_verdict"]
 MOST_GATED = 0.5
 
 
+_ANGLES = frozenset({"roll", "pitch", "yaw", "drx", "dry", "drz"})  # a pose's rotation components (and deltas)
+
+
+def _unit(component: str) -> str:
+    """A component's unit: rad for a pose's rotation, m for a position."""
+    return "rad" if component in _ANGLES else "m"
+
+
 def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
     """``position_noise = [...]`` from the innovations' rms per axis (east north up), when the channel
     has the three, or the horizontal two and ``up`` (the fix's altitude channel) the third: the sensor's
@@ -61,7 +69,7 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                   "its uncertainty; position_noise states it instead),")
     # the innovations' rms as a pasteable line when it covers every axis of the key, else said in the text
     rms = "the value below" if line else "their rms per axis (" + ", ".join(
-        f"{c} {ch.component(i)[1]:.2g} m" for i, c in enumerate(ch.components)) + ")"
+        f"{c} {ch.component(i)[1]:.2g} {_unit(c)}" for i, c in enumerate(ch.components)) + ")"
     if frac > MOST_GATED:
         # Jumps (multipath, relocalisation) come in bursts among good fixes; a gate that rejects most
         # of them is cutting into the ordinary noise, which is then larger than stated.
