@@ -38,6 +38,7 @@ class TwistStats:
         self._sums = [0.0, 0.0, 0.0]
         self._turned = 0
         self._along_x = 0
+        self._along_pose = 0
 
     def add(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
             orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
@@ -53,6 +54,7 @@ class TwistStats:
     abs_wz = Settled("_sums", 2)
     turned = Settled("_turned")  # moving messages whose pose yaw is beyond TURNED_RAD ...
     along_x = Settled("_along_x")  # ... whose twist points along the odom frame's x (body-frame, or the robot heads x)
+    along_pose = Settled("_along_pose")  # ... whose twist points where that pose heads (world-frame)
 
     def _settle(self) -> None:
         n = len(self._linear)
@@ -68,6 +70,7 @@ class TwistStats:
         turned = (np.hypot(linear[:, 0], linear[:, 1]) > MOVING_M_S) & (np.abs(np.sin(pose_yaw)) > math.sin(TURNED_RAD))
         self._turned += int(turned.sum())
         self._along_x += int((turned & (np.abs(np.sin(direction)) < ALONG_SIN)).sum())
+        self._along_pose += int((turned & (np.abs(np.sin(direction - pose_yaw)) < ALONG_SIN)).sum())
         rows = np.abs(np.column_stack((linear[:, 0], linear[:, 1], angular[:, 2])))
         self._n += n
         self._sums = np.cumsum(np.concatenate(([self._sums], rows)), axis=0)[-1].tolist()

@@ -44,6 +44,14 @@ class TwistFrame(BaseCheck):
                             "twist configured in the world frame, but its lateral velocity stays near zero while "
                             "the robot turns: it is a body-frame twist, and the trajectory heading will run away",
                             key, 'twist_frame = "body"')]
+        if odom.twist_frame == "body" and t.turned >= MIN_UPDATES and t.along_pose >= 0.9 * t.turned:
+            # the mirror of the world-frame rule: a twist that keeps pointing where the message's own pose heads
+            # while that pose turns away from x is that pose's (the odom frame's), not the body's
+            return [Verdict(odom.name, "twist", "problem",
+                            f"twist configured in the body frame, but in {100 * t.along_pose / t.turned:.0f}% of the "
+                            f"{t.turned} moving messages whose own pose is turned beyond {TURNED_RAD:g} rad from the "
+                            "odom frame's x it points where that pose heads, not along the body's x: it is the odom "
+                            "frame's twist, and the trajectory runs off sideways", key, 'twist_frame = "world"')]
         if odom.twist_frame == "body" and lateral > 0.35:
             return [Verdict(odom.name, "twist", "warn",
                             f"lateral velocity is {100 * lateral:.0f}% of the motion: a wheeled robot's body twist "
