@@ -300,11 +300,11 @@ def test_car_that_never_stops_reaches_the_cap_through_an_unlearned_bias():
 
 
 def test_covariance_cap_after_a_dropout_names_the_gap_inflation():
-    """A 30 s silence of every sensor inflates the position variance by gap_inflation^2 x 30 =
-    0.05^2 x 30 = 0.075 m^2, above a cap of 0.05 m^2; driving without the gap stays far below it
-    (odometry noise 0.01 m/s per message over 30 s: ~1e-4 m^2)."""
-    samples = [s for s in simulate(SimConfig(duration=60.0, standstill=2.0)) if not 1020.0 <= s.stamp < 1050.0]
-    v = one(verdicts_of(make_config(extra_filter="covariance_cap = [0.05, 10.0]"), samples), "filter", "covariance")
+    """A 30 s silence of every sensor from 5 s, while driving at 1 m/s, widens the position by what the gap
+    hides (its last speed x the 30 s not covered, a variance of ~900 m^2) and the gap inflation, far above a cap
+    of 1 m^2, which the dead-reckoning before it (nothing references the position) reaches only after 15 s."""
+    samples = [s for s in simulate(SimConfig(duration=60.0, standstill=2.0)) if not 1005.0 <= s.stamp < 1035.0]
+    v = one(verdicts_of(make_config(extra_filter="covariance_cap = [1.0, 10.0]"), samples), "filter", "covariance")
     assert v.key == "filter.gap_inflation" and v.evidence["gap_longest_s"] == pytest.approx(30.0, abs=0.1)
 
 
@@ -315,6 +315,16 @@ def test_covariance_cap_from_process_noise_names_it():
     v = one(verdicts_of(make_config(extra_filter="covariance_cap = [10.0, 10.0]\nprocess_noise = [5.0, 0.002]"),
                         samples), "filter", "covariance")
     assert v.key == "filter.process_noise"
+
+
+def test_a_cap_reached_before_any_dropout_is_not_put_on_the_dropouts():
+    """The process noise takes the position to its 10 m^2 cap within a second (as above); a 30 s silence of
+    every sensor comes later, at 20 s. The cap came first: the verdict names the process noise, not the gap's
+    inflation."""
+    samples = [s for s in simulate(SimConfig(duration=60.0, standstill=2.0)) if not 1020.0 <= s.stamp < 1050.0]
+    v = one(verdicts_of(make_config(extra_filter="covariance_cap = [10.0, 10.0]\nprocess_noise = [5.0, 0.002]"),
+                        samples), "filter", "covariance")
+    assert v.key == "filter.process_noise" and "before the first odometry silence" in v.message, v
 
 
 # -- IMU mounting and noise frames -----------------------------------------------------------------------
