@@ -195,6 +195,9 @@ class ImuStream:
                                     for s in sensors])
         self.gyro_noise = np.array([s.gyro_noise if s.gyro_noise is not None else math.nan for s in sensors])
         self.gyro_floor = np.array([s.gyro_min_sigma ** 2 for s in sensors])
+        # the cap the core applies to a stated gyro noise (a driver's 1e6 "unknown"); read with getattr so that a
+        # config without the key reads as no cap
+        self.gyro_cap = np.array([max(getattr(s, "gyro_max_sigma", math.inf), s.gyro_min_sigma) ** 2 for s in sensors])
         # the accelerometer series is the first IMU's (the one the mounting check judges): two IMUs' axes
         # averaged into one bin would show neither mounting
         self.acc_index = 0
@@ -285,7 +288,8 @@ class ImuStream:
         series.gyro_breaks.extend(t[dt > MAX_STEP_S].tolist())
         noise = self.gyro_noise[idx]
         with np.errstate(invalid="ignore"):
-            stated = np.where(noise == noise, noise, np.sqrt(np.maximum(gc8, self.gyro_floor[idx])))
+            stated = np.where(noise == noise, noise,
+                              np.sqrt(np.minimum(np.maximum(gc8, self.gyro_floor[idx]), self.gyro_cap[idx])))
         if len(stated):
             self.stated_sum = float(np.cumsum(np.concatenate(([self.stated_sum], stated)))[-1])
             self.stated_n += len(stated)

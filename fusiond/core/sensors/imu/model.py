@@ -68,6 +68,7 @@ class ImuPolicy:
         self._ori_unmeasured = cfg.orientation_max_sigma**2
         self._ori_override = None if cfg.orientation_noise is None else [s * s for s in cfg.orientation_noise]
         self._gyro_floor = cfg.gyro_min_sigma**2
+        self._gyro_cap = max(cfg.gyro_max_sigma, cfg.gyro_min_sigma) ** 2
         self._gyro_override = None if cfg.gyro_noise is None else cfg.gyro_noise**2
         self._gravity_tilt = cfg.tilt_from_gravity
         # roll_pitch with yaw_across_gaps reads the yaw for the gap turn even where no row is fused (two-D mode)
@@ -121,7 +122,7 @@ class ImuPolicy:
             diag = [gc[0], gc[4], gc[8]]
             if any(d < 0.0 for d in diag):
                 raise Rejected(reasons.NEGATIVE_COVARIANCE, "angular_velocity")
-            var = [max(d, self._gyro_floor) for d in diag]
+            var = [min(max(d, self._gyro_floor), self._gyro_cap) for d in diag]
         cov = self._rotate_cov(var)
         if type(gc) is tuple:
             self._gyro_seen, self._gyro_resolved = gc, cov
