@@ -71,8 +71,9 @@ class ReplayResult:
         if self.doctor is None:
             raise ReplayError("this replay was run without the doctor (replay(..., doctor=False))")
         core = self.core
-        stats = {s.name: {"received": st.received, "applied": st.applied, "late": st.late, "dropped": st.dropped}
-                 for s, st in zip(core.sensors, core.stats)}
+        periods = core.state.period if core.state is not None else [0.0] * len(core.sensors)
+        stats = {s.name: {"received": st.received, "applied": st.applied, "late": st.late, "dropped": st.dropped,
+                          "period": period} for s, st, period in zip(core.sensors, core.stats, periods)}
         at_cap = False
         if core.initialised:
             pos_var, att_var = _variances(core)

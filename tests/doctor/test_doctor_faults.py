@@ -401,6 +401,16 @@ def test_an_imu_clock_ahead_within_the_history_is_named_and_one_behind_is_not_re
     assert "applied late" in clock[0].message, clock[0]
 
 
+def test_an_imu_a_few_milliseconds_ahead_is_in_step_not_a_clock():
+    """The IMU's stamps 12 ms ahead of the wheels' (a skew between two drivers, under the 20 ms odometry period):
+    every wheel sample arrives behind the newest IMU stamp, but by less than a message period: in step, no
+    verdict."""
+    from tests.support.sim import SimConfig, simulate as simulate_drive
+
+    samples = shift_stamps(simulate_drive(SimConfig(duration=30.0, standstill=2.0)), "imu", 0.012)
+    assert not [v for v in verdicts_of(robot_config(), samples) if v.channel == "time"]
+
+
 def test_a_sensor_stamped_right_and_delivered_late_gets_no_clock_verdict():
     """The IMU's samples delivered 0.3 s after their (right) stamps: all applied late, from the history, as
     designed; its stamps are behind the others' at arrival, which is no clock."""

@@ -15,8 +15,9 @@ An offset within the history (an IMU on another computer's clock, 0.5 s ahead) d
 of the sensor behind is applied late, re-applying the others after it, and the estimate pairs each wheel
 speed with a gyro rate half a second away (the F1/10's heading error 9.5 -> 25 deg). Jitter makes a share
 of a sensor late (the Jackal's wheels, one in five); a standing offset makes most of them late, by about the
-same amount: past CLOCK_LATE_SHARE the same verdict names the odd clock out, when its stamps are AHEAD of
-the others'. Stamps behind them are also what a sensor correctly stamped but delivered late shows (a
+same amount: past CLOCK_LATE_SHARE, and by more than any sensor's message period (sensors in step, one a
+few milliseconds ahead, make the other's samples late by less than a period), the same verdict names the odd
+clock out, when its stamps are AHEAD of the others'. Stamps behind them are also what a sensor correctly stamped but delivered late shows (a
 receiver's fixes 0.2 s after their epoch), which the history is there to absorb: nothing in the stamps tells
 that from a clock behind, so nothing is said of it. No delivery puts a stamp in the future.
 """
@@ -61,7 +62,8 @@ class Clocks(BaseCheck):
             if received <= 0 or (far < CLOCK_DROP_SHARE * received and not behind) or name not in offsets:
                 continue
             culprit = _culprit(offsets, odom)
-            if culprit is None or culprit in out or (behind and offsets[culprit] <= 0.0):
+            period = max((float(v.get("period", 0.0)) for v in stats.values()), default=0.0)
+            if culprit is None or culprit in out or (behind and not offsets[culprit] > max(period, 0.0)):
                 continue
             offset = offsets[culprit]
             side = "ahead of" if offset > 0 else "behind"
