@@ -296,9 +296,9 @@ def test_lying_covariances_are_floored_or_ignored():
 
 
 def test_a_gyro_stating_an_unknown_noise_is_capped():
-    """A driver stating 1e6 on the gyro's diagonal ("unknown"): taken as gyro_max_sigma (0.1 rad/s), the
-    attitude's variance after 10 s of 100 Hz rates stays under a few degrees, where 1e6 taken literally (a
-    variance growth of 1e6 rad^2/s) had it at the covariance cap."""
+    """A driver stating 1e6 on the gyro's diagonal ("unknown"): taken as gyro_max_sigma (0.2 rad/s), the
+    attitude's variance after 10 s of 100 Hz rates stays under a fraction of a radian squared, where 1e6 taken
+    literally (a variance growth of 1e6 rad^2/s) had it at the covariance cap."""
     core = FusionCore(make_config(orientation="off"))
     unknown = (1e6, 0.0, 0.0, 0.0, 1e6, 0.0, 0.0, 0.0, 1e6)
     for k in range(1000):
@@ -308,7 +308,7 @@ def test_a_gyro_stating_an_unknown_noise_is_capped():
         core.ingest(ImuSample("imu", t + 0.001, (0.0, 0.0, 0.0, 1.0), (-1.0,) + (0.0,) * 8, (0.0, 0.0, 0.01),
                               unknown, (0.0, 0.0, 9.81), (0.01, 0, 0, 0, 0.01, 0, 0, 0, 0.01)))
     att = core.state.ekf.P[3:6, 3:6]
-    assert np.isfinite(att).all() and float(np.max(np.diag(att))) < 0.1**2 * 10.0 + 0.01, np.diag(att)
+    assert np.isfinite(att).all() and float(np.max(np.diag(att))) < 0.2**2 * 10.0 + 0.01, np.diag(att)
 
 
 def test_noise_override_replaces_message_covariance():

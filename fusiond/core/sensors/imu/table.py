@@ -22,7 +22,7 @@ class ImuSensor(SensorTable, tag="imu"):
     gyro_min_sigma: float = 0.0005  # floor, rad/s
     # cap, rad/s: a stated gyro noise above it is a driver's "unknown" (1e6), taken as this; used literally it turns
     # the attitude's covariance (and, at speed, the position's) into kilometres while the estimate itself is fine
-    gyro_max_sigma: float = 0.1
+    gyro_max_sigma: float = 0.2
     # highest rate (Hz) at which the orientation is fused (the gyro is taken at every sample); 0: every sample
     orientation_rate_hz: float = 100.0
     # orientation = "roll_pitch": after a silence of the IMU longer than filter.gap_s (a logging gap), turn
