@@ -23,14 +23,13 @@ from __future__ import annotations
 import math
 
 from ..estimator import MotionInput, StateLayout, corrected_inputs, mat3
-from .state import FilterState
+from .state import NO_RECENT, FilterState
 
 PERIOD_SMOOTHING = 0.1  # EMA weight of a new inter-message interval
 TILT_STALE_S = 5.0  # no roll/pitch information for this long: roll/pitch rates are no longer integrated
 TIMEOUT_PERIODS = 3.0  # a sensor is silent after max(timeout_s, this many typical periods)
 GAP_HOLD = 1.5  # ... or this many times its longest recent interval: a recurring pause varies in length
 RECENT_S = 30.0  # s of message time over which an interval counts as recent (two halves: module doc)
-NO_RECENT = (0.0, 0.0, -math.inf)  # (longest recent interval, the current half's, when that half ends): none yet
 _ZERO3 = (0.0, 0.0, 0.0)
 
 

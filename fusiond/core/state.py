@@ -11,6 +11,9 @@ from __future__ import annotations
 import math
 
 _ZERO3 = (0.0, 0.0, 0.0)
+# a sensor's longest recent interval before it has one (``inputs.recent_longest``: that interval, the current
+# half-window's, when that half ends)
+NO_RECENT = (0.0, 0.0, -math.inf)
 
 
 class FilterState:
@@ -41,7 +44,7 @@ class FilterState:
         s.ekf = ekf
         s.last = [None] * sensors
         s.period = [0.0] * sensors
-        s.longest = [(0.0, 0.0, -math.inf)] * sensors  # per sensor ``inputs.recent_longest``'s (its NO_RECENT)
+        s.longest = [NO_RECENT] * sensors  # per sensor ``inputs.recent_longest``
         s.linear, s.linear_cov = _ZERO3, linear_cov
         s.wheel_angular, s.wheel_angular_cov = _ZERO3, angular_cov
         s.linear_world = False  # the held linear twist is in the world frame (twist_frame = "world", no pose)

@@ -12,9 +12,12 @@ import math
 
 import numpy as np
 
+from ..config import Config
+from .gyro import coasts
 from .series import Series
 
-__all__ = ["ASSUMED_TAU_S", "CHORD_M", "MIN_CHORDS", "SCALE_Z_SIGMAS", "chord_ends", "cumulative", "newey_west"]
+__all__ = ["ASSUMED_TAU_S", "CHORD_M", "MIN_CHORDS", "SCALE_Z_SIGMAS", "chord_ends", "cumulative", "newey_west",
+           "wheel_chords"]
 
 CHORD_M = 10.0  # chords at least this long (or 20 sigma_w): short and consecutive (checks/speed.py's docstring)
 CHORD_MAX_S = 60.0  # a chord spans at most this long (slower: the robot is standing or creeping)
@@ -64,6 +67,24 @@ def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: fl
         j = i + 1 + int(far[0])
         out.append((int(order[i]), int(order[j])))
         i = j
+    return out
+
+
+def wheel_chords(series: Series, cfg: Config, to: np.ndarray, travelled: np.ndarray,
+                 length: float) -> list[tuple[int, int]]:
+    """``chord_ends``, less the chords whose wheels' travel is not all there: across a logging gap (the wheels'
+    travel and the gyro's turn in the gap are missing from the dead reckoning, not from the GPS) or across a
+    coast (``gyro.coasts``: the drive read zero while the vehicle rolled on)."""
+    breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
+    dropped = coasts(series, cfg)
+    out = []
+    for i, j in chord_ends(series, to, travelled, length):
+        t0, t1 = series.gps_t[i], series.gps_t[j]
+        if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
+            continue
+        if any(a <= t1 and t0 <= b for a, b in dropped):
+            continue
+        out.append((i, j))
     return out
 
 

@@ -53,6 +53,7 @@ class Clocks(BaseCheck):
         stats, clocks, sensors = ev.stats, ev.clocks, ev.sensors or {}
         offsets = {name: o for name in stats if (o := clocks.offset(name)) is not None}
         odom = ev.odom.name if ev.known and ev.odom is not None else None
+        period = max((float(v.get("period", 0.0)) for v in stats.values()), default=0.0)  # the slowest sensor's
         out: dict[str, Verdict] = {}
         for name, st in stats.items():
             received = st.get("received", 0)
@@ -62,7 +63,6 @@ class Clocks(BaseCheck):
             if received <= 0 or (far < CLOCK_DROP_SHARE * received and not behind) or name not in offsets:
                 continue
             culprit = _culprit(offsets, odom)
-            period = max((float(v.get("period", 0.0)) for v in stats.values()), default=0.0)
             if culprit is None or culprit in out or (behind and not offsets[culprit] > max(period, 0.0)):
                 continue
             offset = offsets[culprit]

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 
-from ...core.sensors.registry import kind_of
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..heading import timed, yaw_scale
@@ -40,8 +39,7 @@ class GyroUnits(BaseCheck):
     group = "cross"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        imu = next((s for s in ev.config.sensors if kind_of(s).inertial), None)
-        series = ev.series
+        imu, series = ev.imu, ev.series
         if imu is None or series is None or len(series.gyro_t) < 10:
             return []
         seen: list[tuple[str, float]] = []

@@ -41,8 +41,7 @@ from ...core.diagnostics import t_quantile
 from ...core.layout import fuses_height, state_layout
 from ..attitude import TiltStats, full_mount, inverted_lean, lean_of, paste_mount
 from ..check import MIN_UPDATES, BaseCheck, found
-from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, chord_ends, cumulative, newey_west
-from ..gyro import coasts
+from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, cumulative, newey_west, wheel_chords
 from ..evidence import Evidence
 from ..heading import gps_sigma
 from ..median import median
@@ -134,18 +133,13 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     climb = cumulative(to, -v * np.sin(pitch))
     along = cumulative(to, v * np.cos(pitch))
     sigma_w, sigma_m, tau, state = _vertical_noise(series, gps)
-    breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
-    dropped = coasts(series, cfg)
     gt, gu = series.gps_t, series.gps_u
     r, d, ends = [], [], []
-    for i, j in chord_ends(series, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
+    # not across a logging gap or a coast, where the wheels' travel is missing, not the GPS's climb
+    for i, j in wheel_chords(series, cfg, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
         t0, t1 = gt[i], gt[j]
         if t0 < te[0] or t1 > te[-1]:
             continue  # before the first estimate (or after the last): no pitch to compare
-        if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
-            continue  # across a logging gap the wheels' travel is missing, not the GPS's climb
-        if any(a <= t1 and t0 <= b for a, b in dropped):
-            continue  # the drive read zero while the vehicle rolled on: its travel is missing there too
         dist = float(np.interp(t1, to, along) - np.interp(t0, to, along))
         r.append((gu[j] - gu[i]) - float(np.interp(t1, to, climb) - np.interp(t0, to, climb)))
         d.append(dist)

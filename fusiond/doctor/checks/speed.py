@@ -54,8 +54,7 @@ from ...config import Config, GpsSensor
 from ...core.sensors.registry import kind_of
 from ...core.diagnostics import t_quantile
 from ..check import BaseCheck
-from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, chord_ends, cumulative, newey_west
-from ..gyro import coasts
+from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, cumulative, newey_west, wheel_chords
 from ..evidence import Evidence
 from ..heading import gps_sigma, timed
 from ..series import Series
@@ -115,16 +114,9 @@ def wheel_scale_fit(series: Series, cfg: Config) -> ScaleFit | None:
     x = cumulative(to, v * np.cos(heading))
     y = cumulative(to, v * np.sin(heading))
     g, d, dt, ta, tb, u = [], [], [], [], [], []
-    # a chord across a logging gap: the wheels' travel (and the gyro's turn) in the gap is missing from
-    # the dead reckoning, not from the GPS: that chord is no evidence of a scale
-    breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
-    dropped = coasts(series, cfg)
-    for i, j in chord_ends(series, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * sigma_w)):
+    # a chord across a logging gap or a coast is no evidence of a scale (``wheel_chords``)
+    for i, j in wheel_chords(series, cfg, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * sigma_w)):
         t0, t1 = series.gps_t[i], series.gps_t[j]
-        if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
-            continue
-        if any(a <= t1 and t0 <= b for a, b in dropped):  # the drive read zero while the vehicle rolled on
-            continue
         de, dn = series.gps_e[j] - series.gps_e[i], series.gps_n[j] - series.gps_n[i]
         wheel = math.hypot(np.interp(t1, to, x) - np.interp(t0, to, x), np.interp(t1, to, y) - np.interp(t0, to, y))
         if wheel > 0.0:

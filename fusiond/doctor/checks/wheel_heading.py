@@ -58,7 +58,7 @@ class WheelHeading(BaseCheck):
             return []
         if len(series.odom_t) < 10 or len(series.gyro_t) < 10:
             return []
-        imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
+        imu = ev.imu
         fit = wheel_yaw_fit(series)
         if fit is None:  # the run hardly turns: only an offset shows
             off = wheel_yaw_offset(series, cfg, imu) if imu is not None else None
