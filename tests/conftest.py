@@ -39,6 +39,7 @@ FAST_MODULES = frozenset({
     "test_two_d_mode", "test_bag", "test_trajectory_pin", "test_standstill_bias", "test_tf_tree", "test_state_file",
     "test_toy_kind", "test_cli_parser", "test_kind_questions", "test_doctor_median", "test_smoother",
     "test_smoother_core", "test_fixed_lag", "test_lag_window", "test_doctor_order", "test_forked", "test_simplex",
+    "test_read_ahead",
 })
 
 

@@ -60,7 +60,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"fusiond: --fuse-every {args.fuse_every}: must be 1 (fuse every message) or more", file=sys.stderr)
         return EXIT_USAGE
     from ..errors import ReplayError
-    from ..replay.run import replay, summary
 
     reference = args.reference
     fuse_every = args.fuse_every
@@ -97,10 +96,21 @@ def run(args: argparse.Namespace) -> int:
     through = recorder.filter if recorder is not None else None
     if fused is not None:
         through = _kept(fused, through)
+    # the bags opened and read in a child from here on, while the filter and the doctor are imported and built
+    from ..replay.read_ahead import reading_ahead
+
+    bags = [Path(p) for p in args.bags]
+    reading = reading_ahead(bags, cfg.sensors)
+    try:
+        from ..replay.run import replay, summary
+    except BaseException:
+        if reading is not None:
+            reading.close()
+        raise
     backend = chosen_backend()
     try:
         result = replay(
-            [Path(p) for p in args.bags],
+            bags,
             cfg,
             tum=Path(args.tum) if args.tum else None,
             diagnostics=Path(args.diagnostics) if args.diagnostics else None,
@@ -114,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
             smooth=args.smooth,
             backend=backend,
             lookahead=fused is not None,  # the recording is kept in memory for the advice's proof anyway
+            reading=reading,
         )
         evaluation = None
 

@@ -2,6 +2,9 @@
 
 Replay and `fusiond play` read bags through here, so both see the same topics,
 the same order (bag receive time) and the same samples the live codecs make.
+
+rosbags and the codecs are imported where a bag is opened or read, not with this module: a replay
+reading ahead (``read_ahead``) opens its bags in a child, and the fusing process never needs them.
 """
 
 from __future__ import annotations
@@ -12,15 +15,13 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
-from rosbags.highlevel import AnyReader, AnyReaderError
-
-from fusiond.codecs import bag_fast_path, typestore
 from fusiond.core.sensors.registry import KINDS, kind_of
 from fusiond.samples import Sample
 from fusiond.replay import bag1_records
 from fusiond.errors import BagError  # importable from here, as before
 
 if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
     from rosbags.typesys.store import Typestore
 
@@ -59,6 +60,8 @@ class BagSamples:
         self.decode_errors = 0
 
     def __iter__(self) -> Iterator[Sample]:
+        from fusiond.codecs import bag_fast_path
+
         reader = self._reader
         ros1 = not reader.is2
         convert = {}
@@ -90,6 +93,8 @@ class BagSamples:
         ROS 2 bags already hold CDR. ROS 1 messages are converted at byte level
         against the ROS 2 (Humble) types, which drops the ROS 1 header's `seq`.
         """
+        from fusiond.codecs import typestore
+
         is2 = self._reader.is2
         for connection, bag_time, raw in self._messages():
             sensor = self._by_topic[connection.topic]
@@ -159,6 +164,8 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
         if p.is_file() and p.suffix == ".bag" and not _starts_as_ros1(p):
             raise BagError(f"{p}: not a readable ROS 1/ROS 2 bag (a ROS 1 bag starts with "
                            f"{ROS1_MAGIC.decode().strip()!r}: this file does not)")
+    from rosbags.highlevel import AnyReaderError  # here, not at import: a replay reading ahead reads in a child
+
     try:
         return _opened(paths, None)
     except AnyReaderError as err:
@@ -167,6 +174,8 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
         if "default_typestore" not in str(err):
             raise BagError(damaged_ros2(_names(paths), err, paths)
                            or unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
+    from fusiond.codecs import typestore
+
     return _opened(paths, typestore())  # the standard (Humble) definitions
 
 
@@ -177,6 +186,8 @@ def _names(paths: Sequence[Path]) -> str:
 def unreadable(names: str, err: BaseException) -> str:
     """One line: which files could not be read as a bag and what rosbags said (its messages can
     span lines, a YAML parser's for one; builtins such as AssertionError can carry no text)."""
+    from rosbags.highlevel import AnyReaderError
+
     text = " ".join(str(err).split())
     if not isinstance(err, AnyReaderError):
         text = f"{type(err).__name__}: {text}" if text else type(err).__name__
@@ -239,6 +250,8 @@ def _repair_hint(paths: Sequence[Path], err: Exception) -> str:
 def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
     """An open AnyReader; BagError when the files cannot be read. Types come from the bag's own
     definitions; ``default`` (the Humble store, ~70 ms to build) only for a bag that has none."""
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
     try:
         reader = AnyReader(list(paths), default_typestore=default)
         reader.open()

@@ -11,7 +11,7 @@ import time
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import IO, TYPE_CHECKING, Callable
 
 import msgspec
@@ -29,6 +29,7 @@ from ..estimator.rotation import to_rpy
 from ..samples import Sample
 from ..core.sensors import OdomSample
 from .bag import BagError, BagSamples, did_you_mean, open_bag_samples
+from .read_ahead import ReadAhead, reading_ahead
 
 if TYPE_CHECKING:  # the doctor is imported only by a replay that runs it (not by --quiet)
     from ..doctor import Doctor, Verdict
@@ -101,7 +102,7 @@ def _variances(core: FusionCore) -> tuple[float, float]:
     return max(v[0], v[1], v[2]), max(v[3], v[4], v[5])
 
 
-def missing_topics(bag: BagSamples, cfg: Config) -> str:
+def missing_topics(bag: BagSamples | ReadAhead, cfg: Config) -> str:
     """Each configured sensor whose topic is not in the bag, with the bag topic its key may have meant, and
     the topics the bag has (the text of an error: ``check_topics``, and play's)."""
     have = ", ".join(f"{t} [{m}]" for t, m in sorted(bag.bag_topics.items())) or "none"
@@ -110,7 +111,7 @@ def missing_topics(bag: BagSamples, cfg: Config) -> str:
     return f"{absent}; the bag has: {have}"
 
 
-def check_topics(bag: BagSamples, cfg: Config, warn: Callable[[str], None] | None,
+def check_topics(bag: BagSamples | ReadAhead, cfg: Config, warn: Callable[[str], None] | None,
                  allow_missing: bool = True) -> None:
     """Before anything is fused: the odometry drives the prediction, and a GPS or absolute pose
     defines the world frame (nothing is published before it), so a config whose odometry topic,
@@ -220,6 +221,8 @@ def replay(
     smooth: bool = False,
     backend: Backend | None = None,
     lookahead: bool = False,
+    read_ahead: bool = True,
+    reading: ReadAhead | None = None,
 ) -> ReplayResult:
     """Fuse the bags' samples in bag order, as the daemon would have received them. ``doctor``:
     also feed the tuning doctor (its verdicts are the summary, the report and the plots read
@@ -233,13 +236,20 @@ def replay(
     ``backend``: the estimator's (``FusionCore``'s; None: compiled when built). ``lookahead``: the samples
     are read in full before the first is fused, so that the core takes a history snapshot only where a later
     sample can land (``FusionCore.snapshot_plan``): the same estimates, for the recording held in memory
-    (as a caller that keeps it for the advice's proof does anyway)."""
+    (as a caller that keeps it for the advice's proof does anyway). ``read_ahead``: on a machine with two
+    cores or more, a forked child opens and decodes the bags while this process fuses (``replay.read_ahead``);
+    with ``lookahead``, the samples are then fused as they come, each keeping its snapshot, until the child
+    is done, and the plan covers the rest (the same estimates). ``reading``: that child, started by the
+    caller (``reading_ahead``) before it imported the filter, so that the two overlap too; closed here."""
     diag_out = _JsonLines(diagnostics) if diagnostics else None
+    if reading is None and read_ahead:
+        reading = reading_ahead(paths, cfg.sensors)
     t0 = time.perf_counter()
     try:
-        with skips_the_caller(), open_bag_samples(paths, cfg.sensors) as bag:
+        runner = Runner(cfg, keep_trace, doctor, smooth, backend)  # built while a reading child opens the bags
+        opened = reading.opened() if reading is not None else open_bag_samples(paths, cfg.sensors)
+        with skips_the_caller(), opened as bag:
             check_topics(bag, cfg, warn, allow_missing)
-            runner = Runner(cfg, keep_trace, doctor, smooth, backend)
             if diag_out is not None and records is not None:
                 def keep(r, add=diag_out.add, append=records.append) -> None:
                     add(r)
@@ -251,20 +261,19 @@ def replay(
                 runner.on_record = records.append
             bar = _Progress(bag.total if progress else 0)
             samples = bag if through is None else through(iter(bag))
-            if lookahead:
+            if lookahead and reading is None:
                 samples = list(samples)
-                for sample, keep in zip(samples, runner.core.snapshot_plan(samples)):
-                    runner.feed(sample, keep)
-                    if runner.messages % 256 == 0:
-                        bar.update(runner.messages)
-            for sample in () if lookahead else samples:
-                runner.feed(sample)
-                if runner.messages % 256 == 0:
-                    bar.update(runner.messages)
+                _feed(runner, zip(samples, runner.core.snapshot_plan(samples)), bar)
+            elif lookahead:
+                _feed_until_read(runner, iter(samples), reading, bar)
+            else:
+                _feed(runner, ((sample, True) for sample in samples), bar)
             bar.update(runner.messages)
             bar.close()
             missing, decode_errors = list(bag.missing), bag.decode_errors
     finally:
+        if reading is not None:
+            reading.close()
         if diag_out is not None:
             diag_out.close()
     seconds = time.perf_counter() - t0
@@ -273,6 +282,31 @@ def replay(
         tum.parent.mkdir(parents=True, exist_ok=True)
         tum.write_text(tum_text(result.smoothed if smooth else runner.trajectory))
     return result
+
+
+def _feed(runner: Runner, planned: Iterable[tuple[Sample, bool]], bar: _Progress) -> None:
+    """Each sample through the runner with its ``keep`` (``FusionCore.snapshot_plan``)."""
+    for sample, keep in planned:
+        runner.feed(sample, keep)
+        if runner.messages % 256 == 0:
+            bar.update(runner.messages)
+
+
+def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead, bar: _Progress) -> None:
+    """``samples`` as they come from ``ahead``, each keeping its snapshot (a plan needs every later sample),
+    until the child has read the whole recording; then the rest as ``snapshot_plan`` says, planned over the
+    whole recording as fed (so what the rest keeps is what a plan made before the first sample would say)."""
+    fed: list[Sample] = []
+    for sample in samples:
+        fed.append(sample)
+        runner.feed(sample)
+        if runner.messages % 256 == 0:
+            bar.update(runner.messages)
+        if ahead.complete:
+            rest = list(samples)
+            plan = runner.core.snapshot_plan(fed + rest)
+            _feed(runner, zip(rest, plan[len(fed):]), bar)
+            return
 
 
 class Runner:

@@ -27,6 +27,8 @@ from typing import Any, TypeVar
 
 from ..errors import TuneError
 from ..logs import get_logger
+from ..processes import forks as _forks
+from ..processes import workers_available
 
 log = get_logger(__name__)
 
@@ -41,22 +43,6 @@ R = TypeVar("R")
 
 class ForkedJobError(TuneError):
     """A job in a forked child raised an exception that could not be carried back (its text is)."""
-
-
-def _forks() -> bool:
-    """Are jobs run in forked children here? On Linux, where a forked child of a process that has used
-    numpy is safe (macOS's Accelerate is not fork-safe; Windows has no fork)."""
-    return sys.platform.startswith("linux") and hasattr(os, "fork")
-
-
-def workers_available() -> int:
-    """How many jobs may run at once: the CPUs this process may use; 1 where jobs are not forked (``_forks``)."""
-    if not _forks():
-        return 1
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | None = None,

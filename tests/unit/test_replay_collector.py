@@ -20,11 +20,11 @@ def test_a_replay_freezes_what_existed_and_unfreezes_it_after(jackal_bag: Path, 
     thresholds = gc.get_threshold()
     real_feed = run.Runner.feed
 
-    def feed(self, sample) -> None:
+    def feed(self, sample, keep: bool = True) -> None:
         if not seen:
             seen.append(gc.get_freeze_count())
             young.append(gc.get_threshold()[0])
-        real_feed(self, sample)
+        real_feed(self, sample, keep)
 
     monkeypatch.setattr(run.Runner, "feed", feed)
     assert gc.get_freeze_count() == 0

@@ -1,0 +1,286 @@
+"""A bag opened and decoded in a forked child while this process gets ready and fuses.
+
+Opening a bag (rosbags' import, its reader, the index), reading it and decoding its samples is a
+third of a replay's time and needs nothing the fusion computes; fusing needs each sample in turn. On
+a machine with two cores the two run side by side: a child forked before the filter is imported opens
+the bags, sends what they hold (the header: the topics, which configured ones are missing, the message
+count), then their samples in bag order, pickled in batches, through a pipe. This process meanwhile
+imports and builds the filter and the doctor, then takes the samples as it fuses. The child decodes
+three to four times faster than the filter fuses, so it is done early (``complete``), and the rest of
+the recording is in memory from then on.
+
+Nothing differs from reading in this process: the same BagError when the bags cannot be opened, the
+same header, the same samples in the same order, the same count of messages that did not decode
+(``decode_errors``, known once every sample has been taken), and a bag damaged halfway raises its
+BagError after the samples before the damage, as reading in turn does. A child that ends without a
+word (killed, out of memory) loses nothing: the bags are opened and read here, past the samples
+already taken, and the log says so (``read_ahead_rerun``). Closing early (the consumer stopped)
+stops and reaps the child.
+
+``BagSamples`` is what reading here gives (``replay.bag``); a ``ReadAhead`` answers the same
+questions a replay asks of it (``missing``, ``bag_topics``, ``total``, ``decode_errors``, iteration).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import pickle
+import signal
+import struct
+import sys
+from collections import deque
+from collections.abc import Iterator, Sequence
+from itertools import islice
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING
+
+from ..errors import ReplayError
+from ..logs import get_logger
+from ..processes import workers_available
+
+if TYPE_CHECKING:
+    from ..config import SensorConfig
+    from ..samples import Sample
+    from .bag import BagSamples
+
+log = get_logger(__name__)
+
+__all__ = ["ReadAhead", "reading_ahead"]
+
+BATCH = 128  # samples a pickled batch carries: ~17 kB, each a few us to unpickle
+PIPE_BYTES = 1 << 20  # the pipe's buffer, asked of Linux (its unprivileged maximum): the child rarely waits
+# Batches taken in ahead of the filter at most (~130k samples, tens of MB): beyond, the pipe holds the child
+# back, so that a replay streaming an hour of 1 kHz IMU holds what it did reading in turn, not the hour
+BACKLOG = 1024
+_LENGTH = struct.Struct("<Q")  # a frame: its length, then a pickled (tag, value)
+# the child's frames, in order: ("opened", (missing, bag topics, total)), ("batch", samples)...,
+# then ("end", decode errors); ("error", exception) in place of any of them ends the stream
+
+
+def reading_ahead(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]) -> ReadAhead | None:
+    """The bags read ahead in a forked child (``ReadAhead``), or None where that would not help (one CPU,
+    or no fork here: ``processes.workers_available``) or cannot be had (no process or pipe left: the log
+    says so): the caller reads them itself then."""
+    if workers_available() < 2:
+        return None
+    try:
+        return ReadAhead(paths, sensors)
+    except OSError as err:
+        log.warning("read_ahead_unavailable", reason=str(err))
+        return None
+
+
+class ReadAhead:
+    """``open_bag_samples(paths, sensors)`` in a forked child. ``opened()`` waits for the bags to be
+    open (raising what opening them raised) and returns this reader; iterate once; then ``decode_errors``.
+    Use it as a context manager, or ``close()`` it."""
+
+    def __init__(self, paths: Sequence[Path | str], sensors: Sequence[SensorConfig]) -> None:
+        self._paths, self._sensors = [Path(p) for p in paths], list(sensors)
+        self.missing: list[str] = []
+        self.bag_topics: dict[str, str] = {}
+        self.total = 0
+        self.decode_errors = 0
+        self.complete = False  # every sample has arrived (the child is done): the rest is in memory
+        self._header = False
+        self._taken = 0  # samples handed to the consumer
+        self._batches: deque[list[Sample]] = deque()
+        self._buffer = bytearray()
+        self._ended: tuple[str, object] | None = None  # the child's last frame ("end" or "error")
+        self._eof = False  # the pipe closed: with no last frame, the child died
+        self._local: BagSamples | None = None  # the bags opened here, once the child died
+        self._read_end, self.pid = self._fork()
+
+    def opened(self) -> ReadAhead:
+        """This reader once the bags are open (their header known); what opening them raised, raised here."""
+        while not self._header and self._ended is None and not self._eof:
+            self._pump(block=True)
+        if self._header:
+            return self
+        if self._ended is not None:  # the bags could not be opened: the child's BagError
+            self.close()
+            raise self._ended[1]  # type: ignore[misc]
+        self._died()  # before the header: open the bags here
+        from .bag import open_bag_samples
+
+        try:
+            self._local = open_bag_samples(self._paths, self._sensors)
+        except BaseException:
+            self.close()
+            raise
+        self._take_header((self._local.missing, self._local.bag_topics, self._local.total))
+        return self
+
+    def __iter__(self) -> Iterator[Sample]:
+        try:
+            while True:
+                if self._batches:
+                    batch = self._batches.popleft()
+                    if len(self._batches) < BACKLOG:
+                        self._pump(block=False)  # take what the child has sent meanwhile: it seldom waits
+                    self._taken += len(batch)
+                    yield from batch
+                elif self._ended is not None:
+                    tag, value = self._ended
+                    if tag == "error":
+                        raise value  # type: ignore[misc]  # as reading here would, after the samples before it
+                    return
+                elif self._eof:  # the pipe closed without a last frame: the child died
+                    yield from self._rerun()
+                    return
+                else:
+                    self._pump(block=True)
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop the child if it still runs and reap it; close bags opened here (idempotent)."""
+        if self._local is not None:
+            self._local.close()
+            self._local = None
+        if self._read_end < 0:
+            return
+        os.close(self._read_end)
+        self._read_end = -1
+        if self._ended is None:  # still running, or died: a kill is harmless either way
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except OSError:
+                pass
+        os.waitpid(self.pid, 0)
+
+    def __enter__(self) -> ReadAhead:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def _fork(self) -> tuple[int, int]:
+        read_end, write_end = os.pipe()
+        try:
+            fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, PIPE_BYTES)
+        except (AttributeError, OSError):  # an older kernel or a lower limit: the default buffer still works
+            pass
+        sys.stdout.flush()  # what the parent has buffered is written once, by the parent
+        sys.stderr.flush()
+        try:
+            pid = os.fork()
+        except OSError:
+            os.close(read_end)
+            os.close(write_end)
+            raise
+        if pid == 0:  # the child: never returns into the caller's code
+            status = 0
+            try:
+                os.close(read_end)
+                signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it stops us
+                self._send_all(write_end)
+            except BaseException:  # noqa: BLE001 - the parent sees the pipe close without a last frame
+                status = 1
+            finally:
+                os._exit(status)  # no atexit handlers, no second flush of the parent's buffers
+        os.close(write_end)
+        return read_end, pid
+
+    def _send_all(self, fd: int) -> None:
+        """In the child: the header, every sample in batches, then the decode errors; an exception in place."""
+        from .bag import open_bag_samples
+
+        batch: list[Sample] = []
+        try:
+            with open_bag_samples(self._paths, self._sensors) as bag:
+                _write(fd, ("opened", (bag.missing, bag.bag_topics, bag.total)))
+                for sample in bag:
+                    batch.append(sample)
+                    if len(batch) == BATCH:
+                        _write(fd, ("batch", batch))
+                        batch = []
+                last: tuple[str, object] = ("end", bag.decode_errors)
+        except Exception as err:  # noqa: BLE001 - carried to the parent, which raises it in its place
+            last = ("error", err)
+        if batch:  # the samples before the end, or before what was raised
+            _write(fd, ("batch", batch))
+        try:
+            _write(fd, last)
+        except (pickle.PicklingError, TypeError, AttributeError):  # an exception that does not pickle: its text
+            _write(fd, ("error", ReplayError(f"{type(last[1]).__name__}: {last[1]}")))
+
+    def _pump(self, block: bool) -> None:
+        """Read what the pipe holds (``block``: wait until a frame is whole, or the pipe closes) and unpickle
+        the whole frames."""
+        fd, buf = self._read_end, self._buffer
+        if fd < 0 or self._eof:
+            return
+        while True:
+            if not block:
+                os.set_blocking(fd, False)
+            try:
+                chunk = os.read(fd, PIPE_BYTES)
+            except BlockingIOError:
+                return
+            finally:
+                if not block:
+                    os.set_blocking(fd, True)
+            if not chunk:  # the child closed its end: nothing more comes
+                self._eof = True
+                self._frames()
+                return
+            buf.extend(chunk)
+            if self._frames() or not block:
+                return
+
+    def _frames(self) -> bool:
+        """Unpickle the whole frames in the buffer; did any arrive?"""
+        buf, got, at = self._buffer, False, 0
+        while len(buf) - at >= _LENGTH.size:
+            (n,) = _LENGTH.unpack_from(buf, at)
+            start = at + _LENGTH.size
+            if len(buf) - start < n:
+                break
+            with memoryview(buf) as whole, whole[start:start + n] as frame:
+                tag, value = pickle.loads(frame)  # the views released before the buffer is cut below
+            at = start + n
+            got = True
+            if tag == "batch":
+                self._batches.append(value)
+            elif tag == "opened":
+                self._take_header(value)
+            else:
+                self._ended = (tag, value)
+                self.complete = True
+                if tag == "end":
+                    self.decode_errors = int(value)
+        if at:
+            del buf[:at]
+        return got
+
+    def _take_header(self, header: tuple[list[str], dict[str, str], int]) -> None:
+        self.missing, self.bag_topics, self.total = list(header[0]), dict(header[1]), int(header[2])
+        self._header = True
+
+    def _died(self) -> None:
+        log.warning("read_ahead_rerun", samples_taken=self._taken,
+                    reason="the child reading the bags ended without a word: reading them here")
+
+    def _rerun(self) -> Iterator[Sample]:
+        """The child died: read the bags here from the start, past the samples already taken."""
+        if self._local is None:  # (``opened`` said so when the child died before the header)
+            self._died()
+        from .bag import open_bag_samples
+
+        bag = self._local = self._local or open_bag_samples(self._paths, self._sensors)
+        for sample in islice(bag, self._taken, None):
+            self._taken += 1
+            yield sample
+        self.decode_errors = bag.decode_errors
+        self._ended = ("end", self.decode_errors)
+
+
+def _write(fd: int, frame: tuple[str, object]) -> None:
+    payload = pickle.dumps(frame, protocol=pickle.HIGHEST_PROTOCOL)
+    view = memoryview(_LENGTH.pack(len(payload)) + payload)
+    while view:
+        view = view[os.write(fd, view):]
