@@ -16,6 +16,7 @@ configuration go through structlog.
 from __future__ import annotations
 
 import sys
+import weakref
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -44,6 +45,8 @@ _PROCESS: dict[str, Any] = {}
 
 # configure()'s settings, waiting for structlog's import (None: nothing asked, structlog's defaults)
 _pending: tuple[str, bool | None] | None = None
+# every logger handed out (``get_logger``): a later configure() drops what structlog cached in each
+_LOGGERS: "weakref.WeakSet[_LazyLogger]" = weakref.WeakSet()
 
 
 def configure(level: str = "info", json: bool | None = None) -> None:
@@ -70,6 +73,8 @@ def _apply() -> None:
     if json is None:
         json = not sys.stderr.isatty()
     renderer = structlog.processors.JSONRenderer() if json else structlog.dev.ConsoleRenderer(colors=False)
+    for logger in list(_LOGGERS):  # structlog caches a logger at its first event: a new level reaches those too
+        logger._logger = None
     structlog.configure(
         processors=[
             _drop_when_muted,
@@ -215,4 +220,6 @@ def _json_default(obj: Any) -> Any:
 
 def get_logger(name: str) -> Any:
     """A logger named ``name`` (structlog's bound-logger API: ``log.info("event", key=value)``)."""
-    return _LazyLogger(name)
+    logger = _LazyLogger(name)
+    _LOGGERS.add(logger)
+    return logger
