@@ -481,6 +481,13 @@ class FusionCore:
             return None
         return float(self.state.ekf.x[self.layout.nominal["yaw_offset"].start])
 
+    def estimated_keys(self) -> dict[str, float]:
+        """Config keys whose value the filter estimated, as "sensor.key": each as the key states it
+        (``SensorModel.estimated_keys``); empty before the filter starts."""
+        if not self.initialised:
+            return {}
+        return {f"{m.cfg.name}.{k}": v for m in self.models for k, v in m.estimated_keys(self.state).items()}
+
     @property
     def twist_pitch(self) -> float | None:
         """The estimated pitch of the wheels' twist in the body (rad), when it is in the state."""

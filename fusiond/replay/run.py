@@ -447,8 +447,7 @@ def summary(result: ReplayResult) -> str:
     if bias is not None:
         out.append("gyro bias   [" + ", ".join(f"{b:+.5f}" for b in bias) + "] rad/s")
     learned = dict(core.scales)
-    if core.yaw_offset is not None:
-        learned["yaw_offset"] = core.yaw_offset
+    learned.update(core.estimated_keys())  # as the keys state them (an IMU's yaw_offset: pasted, it holds)
     if core.twist_pitch is not None:
         learned["twist_pitch"] = core.twist_pitch
     if learned:

@@ -105,10 +105,6 @@ def _brought_back(was: dict[str, int] | None, now: dict[str, int]) -> str:
     return ", ".join(back)
 
 
-def _nis(s: Score, sensor: str) -> float | None:
-    return s.nis_per_dof.get(sensor, s.nis_per_dof.get(""))
-
-
 def _channel(records: Sequence[object], v: Verdict) -> ChannelStats | None:
     """The verdict's own channel over ``records`` (the figures its message quotes), None where it has none (a
     check's channel that is no update's: the IMU's attitude, a heading)."""
@@ -131,10 +127,13 @@ def _effect(before: Score, after: Score, v: Verdict, dropped: int, base_records:
     was, now = _channel(base_records, v), _channel(records, v)
     if was is not None and now is not None and math.isfinite(was.nis_per_dof) and math.isfinite(now.nis_per_dof):
         text += f", {v.sensor}/{v.channel} NIS/dof {was.nis_per_dof:.2f} -> {now.nis_per_dof:.2f}"
-    else:
-        b, a = _nis(before, v.sensor), _nis(after, v.sensor)
+    else:  # the sensor's own scored updates, else all of them, named for what they are
+        b, a = before.nis_per_dof.get(v.sensor), after.nis_per_dof.get(v.sensor)
+        whose = f"{v.sensor}'s"
+        if b is None or a is None:
+            b, a, whose = before.nis_per_dof.get(""), after.nis_per_dof.get(""), "the scored updates'"
         if b is not None and a is not None:
-            text += f", {v.sensor}'s NIS/dof {b:.2f} -> {a:.2f}"
+            text += f", {whose} NIS/dof {b:.2f} -> {a:.2f}"
     if after.rejected != before.rejected:
         text += f", {after.rejected} gated (was {before.rejected})"
     return text
@@ -228,6 +227,10 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                                 "updates cannot judge a change of what is fused; the evidence above is the case for it",
                          judged=False)
         ref, dropped = _comparable(full, records)
+        if dropped and not ref.terms:  # every update it leaves is measured otherwise (a yaw no longer fused)
+            return Proof(False, f"it changes how each of the run's {dropped} updates is measured, so none is left "
+                                "to compare: the likelihood over the run's own updates cannot judge it; the "
+                                "evidence above is the case for it", judged=False)
         before, after = score(base_records, ref), score(records, ref)
         gain = before.neg_loglik - after.neg_loglik
         if gain == 0.0 and not dropped and after.rejected == before.rejected:

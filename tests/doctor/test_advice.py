@@ -215,3 +215,35 @@ def test_a_clock_line_that_brings_dropped_samples_back_is_not_judged_by_the_runs
     assert "samples of wheel the run as configured dropped" in v.proof.effect, v.proof
     (blind,) = prove_advice(cfg, samples, clock)  # without the run's counts: judged on its updates, as any line
     assert blind.proof is not None and blind.proof.judged, blind.proof
+
+
+def test_a_line_that_measures_every_update_otherwise_is_not_judged_by_them() -> None:
+    """Absolute yaw without GPS, the only updates the IMU's orientation: the line to take only roll and pitch
+    from it changes every update's dof, so none is left to compare. The proof says so, not "likelihood +0 ...
+    not advised", and the line is printed as the doctor's advice."""
+    samples = simulate(SimConfig(duration=30.0, standstill=2.0, imu_yaw_offset=0.4, imu_yaw_wander=0.3))
+    cfg = robot_config(orientation="absolute", odom='twist_measured = [true, false, false, false, false, false]')  # no wheel yaw rate
+    line = Verdict("imu", "orientation", "problem", "planted", "sensors.imu.orientation", 'orientation = "roll_pitch"')
+    records: list = []
+    base = run_samples(samples, cfg, records=records)
+    assert {(r.sensor, r.channel) for r in records} <= {("imu", "orientation"), ("imu", "gyro_bias")}
+    (v,) = prove_advice(cfg, samples, [line], base_records=records, base_final=base.final, base_applied=base.applied)
+    assert v.proof is not None and v.proof.tried and not v.proof.advised and not v.proof.judged, v.proof
+    assert "none is left to compare" in v.proof.effect, v.proof
+    text = format_verdicts([v])
+    assert "       -> in the [[sensors]] table" in text and "not advised" not in text, text
+
+
+def test_the_replayed_nis_is_named_for_the_updates_it_is_of() -> None:
+    """A line on the wheels (angular_velocity on the IMU, say, judged on the IMU's updates) whose sensor has no
+    scored update of its own: the NIS figure quoted is all scored updates', and named so, not the wheels'."""
+    from fusiond.tune.advice import _effect
+    from fusiond.tune.likelihood import Score
+
+    before = Score(100.0, 50, 50, 0, 0, {"": 0.58, "imu": 0.58})
+    after = Score(90.0, 50, 50, 0, 0, {"": 0.46, "imu": 0.46})
+    wheel = Verdict("wheel", "heading", "problem", "planted", "sensors.imu.angular_velocity", "angular_velocity = true")
+    text = _effect(before, after, wheel, 0, [], [])
+    assert text == "likelihood +10, the scored updates' NIS/dof 0.58 -> 0.46", text
+    imu = Verdict("imu", "heading", "problem", "planted", "sensors.imu.angular_velocity", "angular_velocity = true")
+    assert _effect(before, after, imu, 0, [], []) == "likelihood +10, imu's NIS/dof 0.58 -> 0.46"

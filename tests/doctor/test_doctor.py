@@ -82,14 +82,24 @@ def test_magnetometer_offset_and_disturbance_with_gps_blames_the_imu_not_the_gps
     never_trusts_more(verdicts, "imu")
 
 
-def test_magnetometer_offset_alone_with_gps_gets_a_yaw_offset():
+@pytest.mark.parametrize("offset_sigma", [0.5, 0.0])
+def test_magnetometer_offset_alone_with_gps_gets_a_yaw_offset(offset_sigma: float):
+    """Estimated beside the GPS (the default yaw_offset_sigma 0.5 rad), the offset is said with its value and
+    nothing to change; taken as given (yaw_offset_sigma = 0), it is a problem with its line."""
     w = sim_gps.World(duration=120.0, gps_rate=1.0, imu_yaw_offset=0.4, imu_yaw_sigma=0.002)
-    verdicts = verdicts_of(robot_config(gps="", orientation="absolute"), sim_gps.simulate(w))
+    cfg = robot_config(gps="", orientation="absolute")
+    cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, yaw_offset_sigma=offset_sigma)
+                                                if s.name == "imu" else s for s in cfg.sensors])
+    verdicts = verdicts_of(cfg, sim_gps.simulate(w))
     v = one(verdicts, "imu", "orientation")
-    assert v.level == "problem" and v.key == "sensors.imu.yaw_offset"
+    if offset_sigma > 0.0:
+        assert v.level == "ok" and not v.key and not v.suggestion and "the filter estimates beside the GPS" in v.message, v
+        value = float(re.search(r"yaw_offset = (-?\d+\.\d+)", v.message).group(1))
+    else:
+        assert v.level == "problem" and v.key == "sensors.imu.yaw_offset"
+        (value,) = [float(x) for x in re.findall(r"-?\d+\.\d+", v.suggestion)]
     # corrected = raw + yaw_offset: the offset to state is -0.4; its standard error (GPS sigma 0.3 m over
     # 10 m chords: 0.04 rad per chord, ~20 chords) is about 0.01 rad, so 0.05 is > 3 standard errors
-    (value,) = [float(x) for x in re.findall(r"-?\d+\.\d+", v.suggestion)]
     assert value == pytest.approx(-0.4, abs=0.05)
     gps = one(verdicts, "gps", "position")  # consistent thanks to the estimated offset, or blaming it
     assert gps.level == "ok" or gps.key == "sensors.imu.yaw_offset", gps

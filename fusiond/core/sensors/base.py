@@ -103,6 +103,11 @@ class SensorModel:
         motion model leaves out of it, or None."""
         return None
 
+    def estimated_keys(self, s: "FilterState") -> dict[str, float]:
+        """This sensor's config keys whose value the filter estimated, each as the key would state it
+        (its own sign and convention: pasted, it says what the filter learned); empty by default."""
+        return {}
+
     def shown_position(self, s: "FilterState") -> tuple[float, float] | None:
         """The horizontal position to publish instead of the state's (only when ``shows_position``), or
         None: the state's. For a sensor whose frame leaves the state's position a device of the

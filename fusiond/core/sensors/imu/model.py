@@ -232,6 +232,14 @@ class ImuModel(SensorModel):
     def on_start(self, s: "FilterState") -> None:
         s.own[self.index] = ImuOwn()
 
+    def estimated_keys(self, s: "FilterState") -> dict[str, float]:
+        """``yaw_offset`` when the absolute yaw's offset is in the state: there the yaw reads heading + o,
+        and the key adds to the reading (ENU yaw = reading + yaw_offset + magnetic_declination), so the key
+        that states o is the configured yaw_offset - o."""
+        if not self.offset:
+            return {}
+        return {"yaw_offset": self.cfg.yaw_offset - float(s.ekf.x[self._offset_index])}
+
     def apply(self, s: "FilterState", inp: ImuInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         records: list[DiagnosticsRecord] = []
         if inp.gyro is not None:
