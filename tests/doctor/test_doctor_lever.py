@@ -59,7 +59,15 @@ def test_an_antenna_off_base_link_and_not_stated_is_found_and_pasting_it_helps(a
     assert position.level == "ok" or "gps/lever_arm" in position.message, position
     pasted = v.suggestion
     assert rms(samples, w, pasted) < 0.8 * rms(samples, w, "")
+    # pasted, the verdict reads ok; or, the first fit (from a run whose fixes swung, some gated and taken back)
+    # off by a residual beyond LEVER_TOL, it names that residual, nearer the antenna, and the next paste reads ok
     after, _ = lever_of(samples, pasted)
+    if after is not None and after.level == "warn":
+        def miss(line: str) -> float:
+            x, y, _ = (float(c) for c in line.split("[")[1].split("]")[0].split(","))
+            return math.hypot(x - antenna[0], y - antenna[1])
+        assert miss(after.suggestion) < miss(pasted), (pasted, after)
+        after, _ = lever_of(samples, after.suggestion)
     assert after is not None and after.level == "ok", after
 
 

@@ -146,6 +146,43 @@ def test_a_gps_locked_out_by_its_gate_is_reacquired():
     assert "just after a logging gap (the longest 20.0 s)" in v.message and "motion model" not in v.message, v
 
 
+def test_a_filter_driving_along_a_wrong_heading_takes_the_gps_back():
+    """The car at 30 m/s, set to its true position but a heading 0.5 rad off (a wrong set_pose, its
+    covariance tight): the fixes fall behind the dead-reckoning by 15 m more each second, so they are gated
+    out and their innovations do not stay at one offset. They are the dead-reckoned track turned and
+    shifted, though: the filter is what is wrong, and after the run's wait it takes the GPS again and finds
+    the heading from it (it stayed locked out, kilometres off, while "agree" meant one constant offset)."""
+    from fusiond.estimator import rotation as rot
+    from tests.support.configs import robot_config
+    from tests.support.sim_gps import World, simulate as simulate_gps, truth_at
+
+    w = World(duration=100.0, speed=30.0, gps_rate=10.0, gps_sigma=2.0, odom_rate=50.0, imu_rate=100.0,
+              datum=(48.137, 11.575, 520.0))
+    core = FusionCore(robot_config(gps="datum = [48.137, 11.575, 520.0]\nmahalanobis_threshold = 5.0"))
+    t_set, gps_after = 1050.0, []
+    for s in simulate_gps(w):
+        if t_set is not None and s.stamp >= t_set:
+            t, x = core.pose()
+            tx, ty, tyaw = truth_at(w, t)
+            cov = [0.0] * 36
+            for i, v in enumerate((0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-6)):
+                cov[7 * i] = v
+            core.set_pose(t, (tx, ty, float(x[2])), tuple(rot.from_rpy(0.0, 0.0, tyaw + 0.5)), cov)
+            t_set = None
+        step = core.ingest(s)
+        if t_set is None:
+            gps_after += [r for r in step.records if r.sensor == "gps" and r.channel.startswith("position")]
+    channels = [r.channel for r in gps_after]
+    assert gps_after[10].rejected and channels.count("position_reacquired") == 1, channels[:40]
+    k = channels.index("position_reacquired")
+    # within the jump rule's REACQUIRE_JUMP_S after the first gated fix at most (41.5 s, 409 fixes gated, while
+    # "agree" meant one constant offset: until the drive's turns happened to line them up)
+    assert gps_after[k].stamp - 1050.0 < 12.0 and sum(r.rejected for r in gps_after) < 120
+    t, x = core.pose()
+    tx, ty, _ = truth_at(w, t)
+    assert math.hypot(x[0] - tx, x[1] - ty) < 2.0  # back to the fixes' accuracy by the end
+
+
 def test_after_a_long_gap_every_odometry_message_still_gets_its_pose():
     """A 26.4 s gap is beyond jump_s: the samples after it are held until the new timeline is
     confirmed (jump_persist_s), then applied at once. The replay's contract is one TUM line per
@@ -201,3 +238,15 @@ def test_the_longest_recent_interval_keeps_a_recurring_pause_and_forgets_a_singl
     quiet, _, _ = run([0.01] * int(RECENT_S / 0.01 + 10), t, recent)  # then 30 s without a pause
     assert quiet[-1] == pytest.approx(0.01)
     assert max(run([0.01] * 100 + [0.8] + [0.01] * 100)[0]) == pytest.approx(0.01)
+
+
+def test_the_rigid_residual_is_what_no_turn_and_shift_of_the_track_explains():
+    from fusiond.core.sensors.gps.model import _rigid_residual
+
+    track = [(3.0 * k, 0.5 * k * k) for k in range(10)]  # a curved dead-reckoned track
+    turn, (ox, oy) = 0.7, (40.0, -12.0)
+    fixes = [(ox + math.cos(turn) * x - math.sin(turn) * y, oy + math.sin(turn) * x + math.cos(turn) * y)
+             for x, y in track]
+    assert _rigid_residual(fixes, track) == pytest.approx(0.0, abs=1e-9)
+    bumped = [(x, y + (1.0 if k % 2 else -1.0)) for k, (x, y) in enumerate(fixes)]  # +-1 m that no turn explains
+    assert 0.8 < _rigid_residual(bumped, track) <= 1.0

@@ -458,9 +458,11 @@ class GpsModel(SensorModel):
         """Is the filter locked out of the GPS? A gate protects against outliers, but once the
         estimate is far off (a gap longer than its covariance allows, a wrong heading) every fix
         is an "outlier" and the gate never lets the truth back in. Fixes rejected for
-        REACQUIRE_S in a row (at least REACQUIRE_FIXES) whose innovations agree with each other
-        (a constant offset, not a multipath burst whose error jumps around) and which moved with
-        the wheels say so. A receiver that lost its fix and repeats it with a little noise (its
+        REACQUIRE_S in a row (at least REACQUIRE_FIXES) that agree with each other and moved with
+        the wheels say so. "Agree": the fixes are the dead-reckoned track turned and shifted (one
+        rotation and one offset fitted, ``_rigid_residual``), to within the fixes' noise or a tenth of
+        the offset: a filter off by a constant offset, or driving along a wrong heading, whose error
+        grows with the distance, not a multipath burst whose error jumps around the track. A receiver that lost its fix and repeats it with a little noise (its
         covariance then as unknown, wide enough for the growing innovations to "agree") stays where
         it was while the wheels drive on (a car at 28 m/s would be pulled back hundreds of metres): no evidence that
         the filter is wrong. Wheels spinning on the spot look the same until the robot moves again."""
@@ -474,10 +476,8 @@ class GpsModel(SensorModel):
         s.own[self.index] = msgspec.structs.replace(own, rejected=run)
         if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < self._reacquire_after(own, run[0]):
             return False
-        de = [r[1] for r in run]
-        dn = [r[2] for r in run]
-        me, mn = sum(de) / len(de), sum(dn) / len(dn)
-        spread = math.sqrt(sum((a - me) ** 2 + (b - mn) ** 2 for a, b in zip(de, dn)) / len(run))
+        me, mn = sum(r[1] for r in run) / len(run), sum(r[2] for r in run) / len(run)
+        spread = _rigid_residual([(r[4], r[5]) for r in run], [(r[6], r[7]) for r in run])
         noise = REACQUIRE_SIGMAS * math.sqrt(max(r[3] for r in run))
         allowed = max(REACQUIRE_AGREE * math.hypot(me, mn), noise)
         first, last = run[0], run[-1]
@@ -689,6 +689,27 @@ class GpsModel(SensorModel):
         for i in rows:
             J[i, eb + i] = -1.0
         s.ekf.map_errors(J)
+
+
+def _rigid_residual(fixes: list[tuple[float, float]], track: list[tuple[float, float]]) -> float:
+    """RMS distance (m) of the fixes from the dead-reckoned track at their stamps once the track is turned
+    and shifted onto them (the least-squares rotation and offset in the plane): what no error of the
+    filter's heading and position explains."""
+    n = len(fixes)
+    fx, fy = sum(p[0] for p in fixes) / n, sum(p[1] for p in fixes) / n
+    tx, ty = sum(p[0] for p in track) / n, sum(p[1] for p in track) / n
+    dot = cross = 0.0
+    for (a, b), (c, d) in zip(fixes, track):
+        a, b, c, d = a - fx, b - fy, c - tx, d - ty
+        dot += a * c + b * d
+        cross += b * c - a * d
+    turn = math.atan2(cross, dot)
+    cos_t, sin_t = math.cos(turn), math.sin(turn)
+    sq = 0.0
+    for (a, b), (c, d) in zip(fixes, track):
+        c, d = c - tx, d - ty
+        sq += (a - fx - (cos_t * c - sin_t * d)) ** 2 + (b - fy - (sin_t * c + cos_t * d)) ** 2
+    return math.sqrt(sq / n)
 
 
 def _jumped(own: GpsOwn, first: tuple) -> bool:
