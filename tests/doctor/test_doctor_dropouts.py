@@ -57,3 +57,18 @@ def test_a_rest_span_that_begins_in_a_turn_keeps_its_quiet_stretch():
     assert len(late) == 1 and late[0].t0 >= 1011.5 and late[0].t1 == pytest.approx(1018.0, abs=0.6), late
     assert late[0].gyro_sigma < 0.004, late[0]
     assert any(e.t0 < 1011.0 for e in turning), turning
+
+
+def test_a_push_with_the_wheels_at_zero_leaves_no_standstill_between_its_turns():
+    """Pushed by hand from 10 s to 19 s: the wheels read zero while the robot rolls at 1 m/s, straight but for a
+    short turn every second (0.3 s at 0.3 rad/s, the last one ending the push). Between the turns its gyro is as
+    quiet as at rest: taken as standstills, those pieces gave the noise and the bias "at rest" of a moving
+    vehicle. A parked vehicle does not start to turn with its wheels at zero: no piece before a turn is a
+    standstill; the genuine stop after the push (25-30 s) is."""
+    turns = tuple((10.0 + k, 10.3 + k, 0.3 if k % 2 else -0.3) for k in range(8)) + ((18.7, 19.0, 0.3),)
+    series, cfg = _series(speed=1.0, standstill=3.0, dropouts=((10.0, 19.0),), false_stops=turns,
+                          stops=((25.0, 30.0),))
+    rest, turning = quiet_episodes(series, cfg, cfg.sensors[1])
+    assert not [e for e in rest if e.t1 > 1010.0 and e.t0 < 1019.0], rest
+    assert [e for e in rest if e.t0 >= 1024.9 and e.t1 == pytest.approx(1030.0, abs=0.3)], rest
+    assert any(e.t0 < 1019.0 and e.t1 > 1018.0 for e in turning), turning  # the push: a zero run that turned
