@@ -121,6 +121,19 @@ def _step(t0: float, east: float, north: float) -> Callable:
     return edit
 
 
+def _multipath_arc(t0: float, seconds: float, metres: float) -> Callable:
+    """The fixes from t0 for ``seconds`` moved by ``metres`` x sin(pi s / seconds) along a direction that turns
+    from east to north meanwhile, their covariance as recorded: a slow multipath wander off a row of buildings
+    that the filter follows, then returns."""
+    def edit(topic: str, rel: float, msg) -> object | None:
+        if topic == "/fix" and t0 <= rel < t0 + seconds:
+            s = (rel - t0) / seconds
+            off, turn = metres * math.sin(math.pi * s), 0.5 * math.pi * s
+            _shift(msg, off * math.cos(turn), off * math.sin(turn))
+        return msg
+    return edit
+
+
 def _odom_pauses(every: float, pause: float) -> Callable:
     """No odometry message in the last ``pause`` s of every ``every`` s: a logger or a CAN bridge that pauses
     briefly and often (shorter than the filter's gap_s)."""
@@ -213,6 +226,9 @@ VARIANTS = (
             "the same step, 1 fix in 10 fused (scored at the other 9, against the reference)",
             _step(30.0, 7.0, 0.0), edits=("/fix",), segments=("all", "a", "b"), fuse_every=10,
             baselines=("hold last fused fix", "fixes at constant velocity")),
+    Variant("comma_multipath_arc", COMMA, "comma2k19.toml",
+            "highway car, the fixes from 5 s to 25 s wandering up to 8 m off along a slow arc (multipath)",
+            _multipath_arc(5.0, 20.0, 8.0), edits=("/fix",)),
     Variant("comma_odom_pauses", COMMA, "comma2k19.toml",
             "highway car, no odometry for 0.4 s every 2 s (a logger pausing briefly and often)", _odom_pauses(2.0, 0.4)),
     Variant("comma_odom_pauses_no_gps", COMMA, "comma2k19_odom_imu.toml",
