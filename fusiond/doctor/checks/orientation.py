@@ -7,12 +7,17 @@ check's wander figure is passed on, and a NIS high beside it is the yaw's own no
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from ..attitude import noise_suggestion
+from ...core.sensors.imu.axes import weights
+from ..attitude import AXES, noise_suggestion
 from ..channels import PerChannel, figures
 from ..evidence import Evidence
 from ..nis import ChannelStats
 from ..verdict import Verdict, sensor_key
+
+if TYPE_CHECKING:
+    from ...config import ImuSensor
 
 __all__ = ["OrientationNis"]
 
@@ -66,10 +71,23 @@ class OrientationNis(PerChannel):
                                    f"lies{agrees}; the measured innovations, {note}, suggest the value below",
                                    key, line))
         elif verdict == "nis_low":
-            line, note = noise_suggestion(ch, imu)
-            out.append(Verdict(imu.name, "orientation", "warn",
-                               f"NIS low ({figures(ch, t0)}; {detail}): the stated orientation noise is larger than "
-                               f"the innovations show (or the process noise is); measured {note}", key, line))
+            over = _prediction_overstated(ch, imu) if ev.gyro_fused else None
+            if over is not None:
+                c, seen, alone = over
+                out.append(Verdict(imu.name, "orientation", "warn",
+                                   f"NIS low ({figures(ch, t0)}; {detail}): the {c} innovations (rms {seen:.4f}) are "
+                                   f"smaller than the prediction's own uncertainty before each update ({alone:.4f}: "
+                                   "the predicted rms less the orientation_noise stated), so no orientation_noise "
+                                   "brings the NIS to 1. The prediction is what is overstated: the gyro's noise (its "
+                                   "messages' covariance, or gyro_noise) or filter.process_noise.attitude. State the "
+                                   "gyro's noise measured at rest (fusiond calibrate-imu), or let fusiond tune fit it",
+                                   sensor_key(imu.name, "gyro_noise"),
+                                   evidence={"innovation_rms": seen, "prediction_alone_rms": alone}))
+            else:
+                line, note = noise_suggestion(ch, imu)
+                out.append(Verdict(imu.name, "orientation", "warn",
+                                   f"NIS low ({figures(ch, t0)}; {detail}): the stated orientation noise is larger "
+                                   f"than the innovations show (or the process noise is); measured {note}", key, line))
         else:
             out.append(Verdict(imu.name, "orientation", "ok", f"consistent ({figures(ch, t0)})"))
         for i, c in enumerate(comps):
@@ -81,3 +99,25 @@ class OrientationNis(PerChannel):
         for v in out:
             v.evidence = {**v.evidence, "nis_per_dof": ch.nis_per_dof}
         return out
+
+
+def _prediction_overstated(ch: ChannelStats, imu: ImuSensor) -> tuple[str, float, float] | None:
+    """(component, innovation rms, rms of the prediction alone) of the component whose innovations are the
+    furthest below what the prediction alone claims, where they are below it: S = H P H^T + R, so with R the
+    orientation_noise stated (in base axes through the mount) the prediction's share is S - R, and
+    innovations smaller than that share cannot be explained by any R. None without a stated
+    orientation_noise (the messages' R is not known here), or when no component is below."""
+    if imu.orientation_noise is None:
+        return None
+    W = weights(imu.extrinsic_rpy)
+    worst = None
+    for i, c in enumerate(ch.components):
+        _, rms, pred = ch.component(i)
+        k = AXES.index(c)
+        r_var = sum(W[k][j] * imu.orientation_noise[j] ** 2 for j in range(3))
+        alone_var = pred * pred - r_var
+        if alone_var > 0.0 and rms * rms < alone_var:
+            ratio = rms / math.sqrt(alone_var)
+            if worst is None or ratio < worst[0]:
+                worst = (ratio, c, rms, math.sqrt(alone_var))
+    return None if worst is None else worst[1:]
