@@ -887,3 +887,5 @@ def test_an_imu_yaw_that_agrees_is_said_in_words_not_evidence_keys(capsys, tmp_p
     line = next(x for x in out.splitlines() if "imu/orientation:" in x and x.startswith("doctor"))
     assert code == 0 and "agrees with the other heading sources" in line and "wanders" in line, line
     assert "_rad" not in line and "_rad_s" not in line, line
+    # without a GPS nothing measures its constant offset (a declination, a mount), and the verdict says so
+    assert "its offset (yaw_offset, magnetic_declination) cannot be checked" in line, line

@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from ...config import Config, ImuSensor
+from ...core.layout import absolute_sensor
 from ...core.sensors.registry import kind_of
 from ...core.sensors.gps import HEADING_READY_SIGMA
 from ..check import BaseCheck, found
@@ -226,6 +227,10 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                        value, evidence)
     if evidence:
         said = [text.format(evidence[k]) for k, text in _SAID if k in evidence]
+        if imu.absolute_yaw and not any(absolute_sensor(s) for s in cfg.sensors):
+            # its wander and drift are measured against the gyro; its constant offset against nothing
+            said.append("nothing here gives the heading in the world (no GPS or absolute pose), so its offset "
+                        "(yaw_offset, magnetic_declination) cannot be checked: the heading carries whatever it is")
         return Verdict(imu.name, "orientation", "ok", "IMU yaw agrees with the other heading sources: "
                        + "; ".join(said), evidence=evidence)
     return None
