@@ -313,8 +313,9 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
         t_start = series.odom_t[0]
         worst = max(turning, key=lambda e: abs(e.gyro_mean))
         return Verdict(imu.name, "gyro_bias", "warn",
-                       f"the wheels read exactly zero in {len(turning)} stretch(es) while the gyro turned (up to "
-                       f"{worst.gyro_mean:+.3f} rad/s at {worst.t0 - t_start:.1f} s): the vehicle coasted or turned "
+                       f"the wheels read exactly zero in {len(turning)} stretch(es) while the gyro turned (the "
+                       f"most by {worst.gyro_mean * (worst.t1 - worst.t0):+.2f} rad in {worst.t1 - worst.t0:.1f} s "
+                       f"from {worst.t0 - t_start:.1f} s in): the vehicle coasted or turned "
                        "with its drive reporting zero. Those are rightly not taken as standstills (the gyro bias is "
                        f"not learned there). {_coast_note(cfg)}",
                        evidence={"turning_at_rest": float(len(turning)), "turning_rate_rad_s": worst.gyro_mean})
