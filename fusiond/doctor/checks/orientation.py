@@ -71,7 +71,10 @@ class OrientationNis(PerChannel):
                                    f"lies{agrees}; the measured innovations, {note}, suggest the value below",
                                    key, line))
         elif verdict == "nis_low":
-            over = _prediction_overstated(ch, imu) if ev.gyro_fused else None
+            line, note = noise_suggestion(ch, imu)
+            # only where the line would lower no stated component (it is the noise the innovations show, or its
+            # floor): a stated noise too large keeps the prediction's own uncertainty large too, and is the fix
+            over = _prediction_overstated(ch, imu) if ev.gyro_fused and _settled(line, imu) else None
             if over is not None:
                 c, seen, alone = over
                 out.append(Verdict(imu.name, "orientation", "warn",
@@ -84,7 +87,6 @@ class OrientationNis(PerChannel):
                                    sensor_key(imu.name, "gyro_noise"),
                                    evidence={"innovation_rms": seen, "prediction_alone_rms": alone}))
             else:
-                line, note = noise_suggestion(ch, imu)
                 out.append(Verdict(imu.name, "orientation", "warn",
                                    f"NIS low ({figures(ch, t0)}; {detail}): the stated orientation noise is larger "
                                    f"than the innovations show (or the process noise is); measured {note}", key, line))
@@ -101,12 +103,22 @@ class OrientationNis(PerChannel):
         return out
 
 
+def _settled(line: str, imu: ImuSensor) -> bool:
+    """Would the orientation_noise line lower none of the components the config states (as printed)?"""
+    if imu.orientation_noise is None:
+        return False
+    suggested = [float(v) for v in line.split("[")[1].split("]")[0].split(",")]
+    return all(round(s, 4) >= round(t, 4) for s, t in zip(suggested, imu.orientation_noise))
+
+
 def _prediction_overstated(ch: ChannelStats, imu: ImuSensor) -> tuple[str, float, float] | None:
     """(component, innovation rms, rms of the prediction alone) of the component whose innovations are the
     furthest below what the prediction alone claims, where they are below it: S = H P H^T + R, so with R the
     orientation_noise stated (in base axes through the mount) the prediction's share is S - R, and
-    innovations smaller than that share cannot be explained by any R. None without a stated
-    orientation_noise (the messages' R is not known here), or when no component is below."""
+    innovations smaller than that share cannot be explained by this R. None without a stated
+    orientation_noise (the messages' R is not known here), or when no component is below. (An R stated too
+    large keeps H P H^T large as well, the updates being weak: the caller asks this only of an R the
+    innovations do not ask to lower, ``_settled``.)"""
     if imu.orientation_noise is None:
         return None
     W = weights(imu.extrinsic_rpy)
