@@ -56,6 +56,8 @@ class TopicInfo(msgspec.Struct, kw_only=True):
     # IMU
     orientation_valid: bool | None = None  # None: not an IMU; False: covariance[0] = -1 (no orientation)
     gyro_measured: bool | None = None
+    orientation_zero_covariance: bool | None = None  # every sampled orientation variance exactly 0
+    gyro_zero_covariance: bool | None = None  # every sampled angular-velocity variance exactly 0
     # odometry
     lateral_body: float | None = None  # median |vy| / speed of the moving samples, as stated
     lateral_rotated: float | None = None  # ... with the twist turned from the pose's frame into the body
@@ -139,6 +141,9 @@ def _read_imu(t: TopicInfo, msgs: list[Any]) -> None:
     q = [(m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w) for m in msgs]
     t.orientation_valid = not any(c == -1.0 for c in first) and any(sum(c * c for c in x) > 0.5 for x in q)
     t.gyro_measured = not any(m.angular_velocity_covariance[0] == -1.0 for m in msgs)
+    t.orientation_zero_covariance = t.orientation_valid and all(
+        v == 0.0 for m in msgs for v in _diag(m.orientation_covariance, 3))
+    t.gyro_zero_covariance = t.gyro_measured and all(v == 0.0 for m in msgs for v in _diag(m.angular_velocity_covariance, 3))
     parts = []
     if t.orientation_valid:
         parts.append(f"orientation sigma {_sigmas(_diag(msgs[0].orientation_covariance, 3))} rad")

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .bag_info import IMU, NAVSATFIX, ODOMETRY, POSES, BagInfo, StaticTransform, TopicInfo, inspect_bags, is_reference
-from .config import loads
+from .config import ImuSensor, loads
 from .estimator import rotation as rot
 
 __all__ = ["generate_config", "mount", "pick", "write_init"]
@@ -130,6 +130,15 @@ def _imu_lines(t: TopicInfo, info: BagInfo, base: str, notes: list[str]) -> list
                      "standstills")
     else:
         lines.append("angular_velocity = false      # covariance[0] = -1: no gyro")
+    floors = ImuSensor(name="imu", key=_key(t.topic))  # the floors' defaults, which this table keeps
+    if t.gyro_zero_covariance:
+        lines.append(f"# every gyro covariance is 0: floored at gyro_min_sigma ({floors.gyro_min_sigma:g} rad/s), "
+                     "trusted beyond most gyros; state gyro_noise (rad/s) once measured at rest (`fusiond "
+                     "calibrate-imu`; the doctor says what it measures at standstills)")
+    if t.orientation_zero_covariance:
+        lines.append(f"# every orientation covariance is 0: floored at orientation_min_sigma "
+                     f"({floors.orientation_min_sigma:g} rad); state orientation_noise (rad) once measured (`fusiond "
+                     "tune` fits it)")
     found = mount(info.static, base, t.frame_id) if t.frame_id else None
     if found is not None:
         rpy = rot.to_rpy(found[1])

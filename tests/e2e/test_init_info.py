@@ -90,17 +90,32 @@ def test_init_on_each_shared_recording_fuses_every_sensor_it_offers_and_never_it
     assert set(applied) == set(sensors) and all(n > 100 for n in applied.values()), proc.stdout
 
 
+def test_an_imu_stating_zero_covariances_is_said_to_be_floored():
+    """An IMU whose every gyro and orientation variance is 0: each is floored at its table's *_min_sigma, and the
+    config says so with the key to state; an IMU stating its noise gets no such line."""
+    info = _info()
+    imu = next(t for t in info.topics if t.msgtype == "sensor_msgs/msg/Imu")
+    assert "covariance is 0" not in generate_config(info, ["x"])
+    imu.gyro_zero_covariance = imu.orientation_zero_covariance = True
+    text = generate_config(info, ["x"])
+    assert "# every gyro covariance is 0: floored at gyro_min_sigma (0.0005 rad/s)" in text and "gyro_noise" in text
+    assert "# every orientation covariance is 0: floored at orientation_min_sigma (0.001 rad)" in text, text
+    tomllib.loads(text)
+
+
 def test_the_recordings_own_traits_are_read(tmp_path):
     """comma2k19's IMU publishes no orientation (covariance[0] = -1): orientation off; the F1/10 driver lost its
-    yaw rate (exactly 0 while driving) and states zero covariances: twist_measured says so."""
-    for name, expect in (("comma2k19_ex1", 'orientation = "off"'),
-                         ("f110_ds2", "twist_measured = [true, true, true, false, false, false]")):
+    yaw rate (exactly 0 while driving) and states zero covariances: twist_measured says so, and the IMU's zero
+    covariances are said to be floored."""
+    for name, expect in (("comma2k19_ex1", ('orientation = "off"',)),
+                         ("f110_ds2", ("twist_measured = [true, true, true, false, false, false]",
+                                       "# every gyro covariance is 0"))):
         bag = DATA / name
         if not bag.exists():
             pytest.skip(f"the recording is not in {bag} (see docs/RESULTS.md)")
         out = tmp_path / f"{name}.toml"
         assert fusiond("init", str(bag), "--out", str(out)).returncode == 0
-        assert any(line.startswith(expect) for line in out.read_text().splitlines()), out.read_text()
+        assert all(any(line.startswith(e) for line in out.read_text().splitlines()) for e in expect), out.read_text()
 
 
 def test_init_refuses_to_overwrite_without_force(jackal_bag, tmp_path):
