@@ -216,6 +216,11 @@ def generate_config(info: BagInfo, bags: Sequence[str]) -> str:
         out += ["# Topics not fused:", *skipped, ""]
     if notes:
         out += ["# To check:", *(f"# - {n}" for n in notes), ""]
+    out += ["# On the robot, `fusiond run` is a Zenoh peer found by UDP multicast: a monitor on the same host, or on a",
+            "# network that passes multicast, finds it. Where none passes, listen on an endpoint an operator can dial",
+            "# (`fusiond monitor --connect tcp/ROBOT:7447`; docs/FLEET.md):",
+            "# [zenoh]",
+            '# listen = ["tcp/0.0.0.0:7447"]', ""]
     text = "\n".join(out)
     loads(text)  # what replay would refuse is refused here, naming the key
     return text

@@ -103,6 +103,19 @@ def test_an_imu_stating_zero_covariances_is_said_to_be_floored():
     tomllib.loads(text)
 
 
+def test_the_config_says_how_an_operator_reaches_the_robot():
+    """The listen endpoint an operator's monitor dials where multicast does not pass, commented out (the
+    defaults stand until a user asks), so that uncommenting it gives a config the loader accepts."""
+    text = generate_config(_info(), ["x"])
+    assert "# [zenoh]" in text and '# listen = ["tcp/0.0.0.0:7447"]' in text and "fusiond monitor --connect" in text
+    assert "zenoh" not in tomllib.loads(text)
+    opened = text.replace("# [zenoh]", "[zenoh]").replace('# listen = ["tcp/0.0.0.0:7447"]', 'listen = ["tcp/0.0.0.0:7447"]')
+    assert tomllib.loads(opened)["zenoh"]["listen"] == ["tcp/0.0.0.0:7447"]
+    from fusiond.config import loads
+
+    assert loads(opened).zenoh.listen == ["tcp/0.0.0.0:7447"]
+
+
 def test_the_recordings_own_traits_are_read(tmp_path):
     """comma2k19's IMU publishes no orientation (covariance[0] = -1): orientation off; the F1/10 driver lost its
     yaw rate (exactly 0 while driving) and states zero covariances: twist_measured says so, and the IMU's zero
