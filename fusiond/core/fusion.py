@@ -474,13 +474,6 @@ class FusionCore:
             return None
         return self.state.ekf.x[self.layout.nominal["gyro_bias"]].copy()
 
-    @property
-    def yaw_offset(self) -> float | None:
-        """The estimated offset of an absolute IMU yaw from the heading (rad), when it is in the state."""
-        if not self.initialised or not self.layout.has("yaw_offset"):
-            return None
-        return float(self.state.ekf.x[self.layout.nominal["yaw_offset"].start])
-
     def estimated_keys(self) -> dict[str, float]:
         """Config keys whose value the filter estimated, as "sensor.key": each as the key states it
         (``SensorModel.estimated_keys``); empty before the filter starts."""

@@ -100,15 +100,15 @@ def imu_axis_sigmas(ch: ChannelStats, imu: ImuSensor) -> tuple[list[float], list
     return out, lands
 
 
-def noise_suggestion(ch: ChannelStats, imu: ImuSensor) -> tuple[str, str]:
-    """('orientation_noise = [...]', a note on the frame) in the IMU's axes."""
+def noise_suggestion(ch: ChannelStats, imu: ImuSensor) -> tuple[str, str, list[float]]:
+    """('orientation_noise = [...]', a note on the frame, the line's values) in the IMU's axes."""
     sig, lands = imu_axis_sigmas(ch, imu)
     filled = [s if math.isfinite(s) else 1.0 for s in sig]
     note = "in the IMU's own axes (the key applies before extrinsic_rpy)"
     moved = [f"IMU {AXES[j]} lands on base {lands[j]}" for j in range(3) if lands[j] != AXES[j]]
     if moved:
         note += ": " + ", ".join(moved)
-    return "orientation_noise = [" + ", ".join(f"{v:.4f}" for v in filled) + "]", note
+    return "orientation_noise = [" + ", ".join(f"{v:.4f}" for v in filled) + "]", note, filled
 
 
 def full_mount(imu: ImuSensor, lean: tuple[float, float] = (0.0, 0.0), yaw: float = 0.0) -> tuple[float, ...]:

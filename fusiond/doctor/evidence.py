@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
-from ..config import Config, ImuSensor, OdomSensor
+from ..config import Config, GpsSensor, ImuSensor, OdomSensor
 from ..core.sensors.registry import kind_of
 from .attitude import TiltStats
 from .clock import ClockOffsets
@@ -101,6 +101,11 @@ class Evidence:
     def imu(self) -> ImuSensor | None:
         """The first configured IMU: the one the cross-source checks compare."""
         return next((s for s in self.config.sensors if kind_of(s).inertial), None)
+
+    @cached_property
+    def gps(self) -> GpsSensor | None:
+        """The first configured GPS: the one the cross-source checks compare."""
+        return next((s for s in self.config.sensors if kind_of(s).geodetic), None)
 
     @cached_property
     def gyro_fused(self) -> bool:

@@ -23,12 +23,10 @@ questions a replay asks of it (``missing``, ``bag_topics``, ``total``, ``decode_
 
 from __future__ import annotations
 
-import fcntl
 import os
 import pickle
 import signal
 import struct
-import sys
 from collections import deque
 from collections.abc import Iterator, Sequence
 from itertools import islice
@@ -38,7 +36,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import ReplayError
 from ..logs import get_logger
-from ..processes import workers_available
+from ..processes import fork_writer, stop_child, workers_available, write_all
 
 if TYPE_CHECKING:
     from ..config import SensorConfig
@@ -142,14 +140,12 @@ class ReadAhead:
             self._local = None
         if self._read_end < 0:
             return
-        os.close(self._read_end)
-        self._read_end = -1
+        fd, self._read_end = self._read_end, -1
         if self._ended is None:  # still running, or died: a kill is harmless either way
-            try:
-                os.kill(self.pid, signal.SIGKILL)
-            except OSError:
-                pass
-        os.waitpid(self.pid, 0)
+            stop_child(fd, self.pid)
+        else:
+            os.close(fd)
+            os.waitpid(self.pid, 0)
 
     def __enter__(self) -> ReadAhead:
         return self
@@ -159,31 +155,11 @@ class ReadAhead:
         self.close()
 
     def _fork(self) -> tuple[int, int]:
-        read_end, write_end = os.pipe()
-        try:
-            fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, PIPE_BYTES)
-        except (AttributeError, OSError):  # an older kernel or a lower limit: the default buffer still works
-            pass
-        sys.stdout.flush()  # what the parent has buffered is written once, by the parent
-        sys.stderr.flush()
-        try:
-            pid = os.fork()
-        except OSError:
-            os.close(read_end)
-            os.close(write_end)
-            raise
-        if pid == 0:  # the child: never returns into the caller's code
-            status = 0
-            try:
-                os.close(read_end)
-                signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it stops us
-                self._send_all(write_end)
-            except BaseException:  # noqa: BLE001 - the parent sees the pipe close without a last frame
-                status = 1
-            finally:
-                os._exit(status)  # no atexit handlers, no second flush of the parent's buffers
-        os.close(write_end)
-        return read_end, pid
+        def write(fd: int) -> None:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it stops us
+            self._send_all(fd)
+
+        return fork_writer(write, PIPE_BYTES)
 
     def _send_all(self, fd: int) -> None:
         """In the child: the header, every sample in batches, then the decode errors; an exception in place."""
@@ -281,6 +257,4 @@ class ReadAhead:
 
 def _write(fd: int, frame: tuple[str, object]) -> None:
     payload = pickle.dumps(frame, protocol=pickle.HIGHEST_PROTOCOL)
-    view = memoryview(_LENGTH.pack(len(payload)) + payload)
-    while view:
-        view = view[os.write(fd, view):]
+    write_all(fd, _LENGTH.pack(len(payload)) + payload)

@@ -21,14 +21,13 @@ from __future__ import annotations
 import os
 import pickle
 import selectors
-import sys
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 from ..errors import TuneError
 from ..logs import get_logger
+from ..processes import fork_writer, stop_child, workers_available, write_all
 from ..processes import forks as _forks
-from ..processes import workers_available
 
 log = get_logger(__name__)
 
@@ -102,7 +101,7 @@ def run_side_by_side(job: Callable[[T], R], items: Sequence[T], workers: int | N
     finally:
         for fd, (_, pid, _) in running.items():  # an error here: no child outlives the call
             selector.unregister(fd)
-            _stop(fd, pid)
+            stop_child(fd, pid)
         selector.close()
     if failed:
         raise failed[min(failed)]
@@ -120,7 +119,7 @@ def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
     try:
         mine = here()
     except BaseException:
-        _stop(read_end, pid)
+        stop_child(read_end, pid)
         raise
     data = bytearray()
     try:
@@ -133,16 +132,6 @@ def beside(here: Callable[[], A], there: Callable[[], B]) -> tuple[A, B]:
         return mine, _result(data, 0)
     except _ChildDied as died:
         return mine, _rerun(there, 0, died)
-
-
-def _stop(read_end: int, pid: int) -> None:
-    """Close a running child's pipe, kill it and reap it (a call that raises leaves no child behind)."""
-    os.close(read_end)
-    try:
-        os.kill(pid, 9)
-    except OSError:  # it had ended already
-        pass
-    os.waitpid(pid, 0)
 
 
 def _rerun(job: Callable[[], R], index: int, died: Exception) -> R:
@@ -158,30 +147,17 @@ def _answer(before_each: Callable[[Any], Any] | None, item: Any) -> Any:
 def _start(job: Callable[[Any], Any], item: Any) -> tuple[int, int]:
     """Fork a child that runs ``job(item)`` and writes ("ok", result) or ("error", exception), pickled,
     to a pipe; (the pipe's read end, the child's pid)."""
-    read_end, write_end = os.pipe()
-    sys.stdout.flush()  # what the parent has buffered is written once, by the parent
-    sys.stderr.flush()
-    pid = os.fork()
-    if pid == 0:  # the child: never returns into the caller's code
-        status = 0
+    def write(fd: int) -> None:
         try:
-            os.close(read_end)
+            payload = pickle.dumps(("ok", job(item)), protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException as err:  # noqa: BLE001 - carried back to the parent, which raises it
             try:
-                payload = pickle.dumps(("ok", job(item)), protocol=pickle.HIGHEST_PROTOCOL)
-            except BaseException as err:  # noqa: BLE001 - carried back to the parent, which raises it
-                try:
-                    payload = pickle.dumps(("error", err), protocol=pickle.HIGHEST_PROTOCOL)
-                except Exception:  # noqa: BLE001 - an exception that does not pickle: its text
-                    payload = pickle.dumps(("error", ForkedJobError(f"{type(err).__name__}: {err}")))
-            view = memoryview(payload)
-            while view:
-                view = view[os.write(write_end, view):]
-        except BaseException:  # noqa: BLE001 - the parent sees a pipe closed without a result
-            status = 1
-        finally:
-            os._exit(status)  # no atexit handlers, no second flush of the parent's buffers
-    os.close(write_end)
-    return read_end, pid
+                payload = pickle.dumps(("error", err), protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception:  # noqa: BLE001 - an exception that does not pickle: its text
+                payload = pickle.dumps(("error", ForkedJobError(f"{type(err).__name__}: {err}")))
+        write_all(fd, payload)
+
+    return fork_writer(write)
 
 
 class _ChildDied(Exception):

@@ -37,6 +37,11 @@ OFFSET_PRIOR_SIGMAS = 3.0
 DRIFT_RAD_S = 0.002  # the IMU yaw's own drift (against the gyro, its bias at rest removed) that is no heading:
 
 
+def _offset_line(imu: ImuSensor, offset: float) -> str:
+    """The line that states an absolute yaw's offset from the GPS track (corrected = raw + yaw_offset)."""
+    return f"yaw_offset = {imu.yaw_offset - offset:.4f}"
+
+
 def estimate_vs_gyro(series: Series) -> float:
     """How far the filter's own heading wanders against the integrated raw gyro (as ``imu_vs_gyro``: a bias
     and a scale removed per window): what of a disturbed IMU yaw reached the estimate, once its heading is
@@ -167,6 +172,8 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
     disturbed = (math.isfinite(wander) and wander > WANDER_RAD and not culprit_gyro) or (
         not math.isfinite(wander) and math.isfinite(track_wander) and track_wander > WANDER_RAD)
     key_sensor = imu.name
+    # the filter's yaw-offset state, which the IMU kind adds beside the GPS (its prior yaw_offset_sigma)
+    offset_estimated = gps is not None and imu.absolute_yaw and imu.yaw_offset_sigma > 0.0
     if culprit_gyro:
         return Verdict(imu.name, "orientation", "warn",
                        f"the integrated gyro wanders against both the IMU yaw and the wheels by {wander:.3f} rad rms "
@@ -181,8 +188,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                "magnetometer-disturbed yaw (motors, steel)")
         if notes:
             msg += "; " + "; ".join(notes)
-        held = estimate_vs_gyro(series) if (gps is not None and imu.absolute_yaw
-                                            and imu.yaw_offset_sigma > 0.0) else math.nan
+        held = estimate_vs_gyro(series) if offset_estimated else math.nan
         if math.isfinite(held):
             evidence["estimate_vs_gyro_wander_rad"] = held
         if held <= WANDER_RAD:
@@ -196,7 +202,7 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
                 return Verdict(imu.name, "orientation", "warn",
                                msg + f"; it sits {offset:+.3f} rad off the GPS track: correct that (corrected = raw "
                                "+ yaw_offset)", sensor_key(key_sensor, "yaw_offset"),
-                               f"yaw_offset = {getattr(imu, 'yaw_offset', 0.0) - offset:.4f}", evidence)
+                               _offset_line(imu, offset), evidence)
             return Verdict(imu.name, "orientation", "warn", msg, evidence=evidence)
         if math.isfinite(offset):
             msg += f"; it also sits {offset:+.3f} rad off the GPS track"
@@ -212,8 +218,8 @@ def heading_check(series: Series, cfg: Config) -> Verdict | None:
         said = (f"the IMU's absolute yaw sits {offset:+.3f} rad ({math.degrees(offset):+.1f} deg) off the GPS track "
                 f"direction (standard error {evidence['imu_vs_gps_track_offset_se_rad']:.3f} rad): a declination or "
                 "mounting offset")
-        value = f"yaw_offset = {getattr(imu, 'yaw_offset', 0.0) - offset:.4f}"
-        if gps is not None and imu.yaw_offset_sigma > 0.0 and abs(offset) <= OFFSET_PRIOR_SIGMAS * imu.yaw_offset_sigma:
+        value = _offset_line(imu, offset)
+        if offset_estimated and abs(offset) <= OFFSET_PRIOR_SIGMAS * imu.yaw_offset_sigma:
             # beside the GPS the state's yaw offset, its prior this wide, takes it up from the first fixes: stating
             # it changes the run by the few fixes the estimate needs (the highway car with 0.3 rad added: 1.480 m
             # world stated, 1.481 m estimated)

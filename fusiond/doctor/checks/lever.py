@@ -32,7 +32,6 @@ import math
 
 import numpy as np
 
-from ...core.sensors.registry import kind_of
 from ..median import median
 from ..series import Series
 from ..check import BaseCheck
@@ -147,8 +146,7 @@ class LeverArm(BaseCheck):
 
     def run(self, ev: Evidence) -> list[Verdict]:
         """A verdict on the first GPS's ``extrinsic_xyz`` (module doc); none when the run cannot tell."""
-        series, cfg = ev.series, ev.config
-        gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
+        series, gps = ev.series, ev.gps
         if gps is None:
             return []
         stated = (float(gps.extrinsic_xyz[0]), float(gps.extrinsic_xyz[1]))

@@ -62,7 +62,7 @@ class OrientationNis(PerChannel):
                                    "rate is wrong. Take heading from the gyro", sensor_key(imu.name, "orientation"),
                                    'orientation = "roll_pitch" and angular_velocity = true'))
             else:
-                line, note = noise_suggestion(ch, imu)
+                line, note, _ = noise_suggestion(ch, imu)
                 agrees = (f"; the yaw agrees with the integrated gyro to {yaw_vs_gyro:.3f} rad rms once a bias and "
                           "scale are removed, so it is not a disturbed yaw" if yaw_dominates and yaw_vs_gyro is not None
                           else "")
@@ -71,10 +71,10 @@ class OrientationNis(PerChannel):
                                    f"lies{agrees}; the measured innovations, {note}, suggest the value below",
                                    key, line))
         elif verdict == "nis_low":
-            line, note = noise_suggestion(ch, imu)
+            line, note, values = noise_suggestion(ch, imu)
             # only where the line would lower no stated component (it is the noise the innovations show, or its
             # floor): a stated noise too large keeps the prediction's own uncertainty large too, and is the fix
-            over = _prediction_overstated(ch, imu) if ev.gyro_fused and _settled(line, imu) else None
+            over = _prediction_overstated(ch, imu) if ev.gyro_fused and _settled(values, imu) else None
             if over is not None:
                 c, seen, alone = over
                 out.append(Verdict(imu.name, "orientation", "warn",
@@ -103,11 +103,11 @@ class OrientationNis(PerChannel):
         return out
 
 
-def _settled(line: str, imu: ImuSensor) -> bool:
-    """Would the orientation_noise line lower none of the components the config states (as printed)?"""
+def _settled(suggested: list[float], imu: ImuSensor) -> bool:
+    """Would the orientation_noise line (``suggested``, its values) lower none of the components the config
+    states, as the line prints them (4 decimals)?"""
     if imu.orientation_noise is None:
         return False
-    suggested = [float(v) for v in line.split("[")[1].split("]")[0].split(",")]
     return all(round(s, 4) >= round(t, 4) for s, t in zip(suggested, imu.orientation_noise))
 
 

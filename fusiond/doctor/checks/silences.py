@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.sensors.registry import kind_of
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..streams import MAX_STEP_S
@@ -67,7 +66,7 @@ class Silences(BaseCheck):
                                    f"gyro drove nothing then, {meanwhile}. An IMU that drops out is its link or "
                                    "driver (USB, serial): check its logs for resets",
                                    evidence={"silences": float(len(found)), "longest_s": longest}))
-        gps = next((s for s in ev.config.sensors if kind_of(s).geodetic), None)
+        gps = ev.gps
         if gps is not None and len(series.gps_t) >= 3:
             period = float(np.median(np.diff(series.gps_t)))
             found = silences(series.gps_t, max(GPS_SILENT_PERIODS * period, MAX_STEP_S), series.odom_t)

@@ -168,8 +168,7 @@ class Speed(BaseCheck):
 
     def run(self, ev: Evidence) -> list[Verdict]:
         series, cfg, scales = ev.series, ev.config, ev.scales
-        odom = next((s for s in cfg.sensors if kind_of(s).drives_prediction), None)
-        gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
+        odom, gps = ev.odom, ev.gps
         if odom is None or gps is None:
             return []
         fit = wheel_scale_fit(series, cfg)

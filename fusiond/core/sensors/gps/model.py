@@ -462,9 +462,10 @@ class GpsModel(SensorModel):
         the wheels say so. "Agree": the fixes are the dead-reckoned track turned and shifted (one
         rotation and one offset fitted, ``_rigid_residual``), to within the fixes' noise or a tenth of
         the offset: a filter off by a constant offset, or driving along a wrong heading, whose error
-        grows with the distance, not a multipath burst whose error jumps around the track. A receiver that lost its fix and repeats it with a little noise (its
-        covariance then as unknown, wide enough for the growing innovations to "agree") stays where
-        it was while the wheels drive on (a car at 28 m/s would be pulled back hundreds of metres): no evidence that
+        grows with the distance, not a multipath burst whose error jumps around the track. A
+        receiver that lost its fix and repeats it with a little noise (its covariance then as
+        unknown, wide enough for the growing innovations to "agree") stays where it was while the
+        wheels drive on (a car at 28 m/s would be pulled back hundreds of metres): no evidence that
         the filter is wrong. Wheels spinning on the spot look the same until the robot moves again."""
         own: GpsOwn = s.own[self.index]
         if not rejected:
