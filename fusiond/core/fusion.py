@@ -665,8 +665,9 @@ class FusionCore:
         its last message; a step that crosses that moment is split there and the rest runs
         without it (zero twist, no rotation), so a logging gap of any length moves the pose
         by at most speed x timeout and cannot integrate the last gyro rate into a tumble. The
-        covariance grows for the rest of the gap by the gap inflation (added once per step) and
-        by the motion the held inputs no longer describe (``HeldInputs.unheld_motion_var``).
+        covariance grows by the gap inflation (added once per step longer than gap_s) and, past
+        the odometry's timeout (in a gap, or while the IMU streams on), by the motion the held
+        inputs no longer describe (``HeldInputs.unheld_motion_var``).
         """
         t0 = s.t
         t_end = t0 + dt
@@ -688,12 +689,15 @@ class FusionCore:
                 extra = m.on_predict(s, ekf.x, x)
                 if extra is not None:  # what the linearised model leaves out of this step's horizontal motion
                     ekf.backend.add_motion_noise(Q, *extra)
-            if gap and t1 >= t_end:
-                Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
-                pos_var, yaw_var = held.unheld_motion_var(s, t_end, timeouts)
-                ekf.backend.add_motion_noise(Q, pos_var, 0.0, pos_var, yaw_var)
-                if u.angular_period == 0.0:  # no yaw rate held at the gap's end: its turn was not seen
-                    s.turn_unseen = t_end
+            if t1 >= t_end:
+                if gap:
+                    Q[np.diag_indices_from(Q)] += self.gap_var * (dt - self.cfg.filter.gap_s)
+                    if u.angular_period == 0.0:  # no yaw rate held at the gap's end: its turn was not seen
+                        s.turn_unseen = t_end
+                if t_end > expiries[0]:  # past the odometry's timeout, in a gap or between other sensors' samples
+                    pos_var, yaw_var = held.unheld_motion_var(s, t_end, timeouts, expiries)
+                    if pos_var > 0.0 or yaw_var > 0.0:
+                        ekf.backend.add_motion_noise(Q, pos_var, 0.0, pos_var, yaw_var)
             ekf.propagate(x, F, Q)  # a reset is counted in _place, once: re-applications repeat it
             if t1 >= t_end:
                 break

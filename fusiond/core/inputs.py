@@ -122,8 +122,10 @@ class HeldInputs:
         gyro_expiry = s.gyro_last[1] + timeouts[1] if s.gyro_last is not None else -math.inf
         return odom_expiry, gyro_expiry
 
-    def unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float]) -> tuple[float, float]:
-        """Variance of the motion a logging gap hides: (horizontal position per axis m^2, yaw rad^2).
+    def unheld_motion_var(self, s: FilterState, t_end: float, timeouts: tuple[float, float],
+                          expiries: tuple[float, float] | None = None) -> tuple[float, float]:
+        """Variance the motion the held inputs no longer describe adds from s.t to t_end: (horizontal
+        position per axis m^2, yaw rad^2).
 
         Past its sensor's timeout the prediction holds no input (the robot may have stopped),
         but a vehicle that was moving may as well have kept going: at its last speed v for the
@@ -132,19 +134,27 @@ class HeldInputs:
         deviation each: a car at 30 m/s after a 20 s gap is ~600 m uncertain, so the first GPS
         fix after it is believed instead of gated out, and its jump is not explained as a wheel
         scale. A robot that stood still before the gap gets only the gap inflation.
+
+        The silence is one unknown however many predictions it spans (a logging gap is one step; an
+        odometry that pauses while the IMU streams on is many): each step adds what it adds to
+        (v T)^2, (v T1)^2 - (v T0)^2 with T0 and T1 the time past the timeout at its start and end, so
+        the variance at the end of the silence is (v T)^2 whatever the steps. ``expiries``: ``expiries(s,
+        timeouts)`` when the caller has them.
         """
-        odom_expiry, gyro_expiry = self.expiries(s, timeouts)
-        unheld_linear = t_end - max(s.t, odom_expiry)
-        if odom_expiry == -math.inf or unheld_linear <= 0.0:
+        odom_expiry, gyro_expiry = self.expiries(s, timeouts) if expiries is None else expiries
+        if odom_expiry == -math.inf or t_end <= odom_expiry:
             return 0.0, 0.0
         # the last inputs as the prediction used them (bias and scales applied)
         from_gyro = s.gyro is not None
         linear, angular = corrected_inputs(self._layout, s.ekf.x, s.linear, s.gyro if from_gyro else s.wheel_angular,
                                            from_gyro)
-        v = math.hypot(linear[0], linear[1])
-        w = abs(angular[2])
-        unheld_angular = max(t_end - max(s.t, odom_expiry, gyro_expiry), 0.0)
-        return (v * unheld_linear) ** 2, (w * unheld_angular) ** 2
+        v2 = linear[0] * linear[0] + linear[1] * linear[1]
+        pos_var = v2 * ((t_end - odom_expiry) ** 2 - max(s.t - odom_expiry, 0.0) ** 2)
+        turn_from = max(odom_expiry, gyro_expiry)
+        yaw_var = 0.0
+        if t_end > turn_from:
+            yaw_var = angular[2] * angular[2] * ((t_end - turn_from) ** 2 - max(s.t - turn_from, 0.0) ** 2)
+        return pos_var, yaw_var
 
 
 def next_expiry(expiries: tuple[float, float], t: float, end: float) -> float:

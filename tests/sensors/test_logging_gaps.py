@@ -250,3 +250,69 @@ def test_the_rigid_residual_is_what_no_turn_and_shift_of_the_track_explains():
     assert _rigid_residual(fixes, track) == pytest.approx(0.0, abs=1e-9)
     bumped = [(x, y + (1.0 if k % 2 else -1.0)) for k, (x, y) in enumerate(fixes)]  # +-1 m that no turn explains
     assert 0.8 < _rigid_residual(bumped, track) <= 1.0
+
+
+# -- the odometry silent while the IMU streams on -------------------------------------------------------------------
+
+def _straight_then_odometry_silent(imu_rate: float, speed: float = 10.0, silent: float = 0.45):
+    """A straight drive at ``speed`` (odometry 50 Hz, IMU at ``imu_rate``), then the odometry silent for
+    ``silent`` s (below gap_s: no logging gap) while the IMU goes on. (core, the odometry's timeout, the
+    position variances east and north when it expired and just before the next odometry message)."""
+    from tests.support.core_samples import imu, odom
+
+    core = FusionCore(make_config("roll_pitch"))
+    t0, end = 1000.0, 1002.0
+    stamps = sorted({(round(t0 + k / 50.0, 6), "odom") for k in range(int(2.0 * 50) + 1)}
+                    | {(round(t0 + k / imu_rate, 6), "imu") for k in range(int((end + silent - t0) * imu_rate))})
+    at_expiry = None
+    for t, kind in stamps:
+        if kind == "odom":
+            core.ingest(odom(t, v=speed))
+            continue
+        timeout = core.timeout(core.odom_index)
+        if at_expiry is None and t > end + timeout:
+            P = core.state.ekf.P
+            at_expiry = (P[0, 0], P[1, 1])
+        core.ingest(imu(t))
+    P = core.state.ekf.P
+    return core, timeout, at_expiry, (P[0, 0], P[1, 1]), core.state.t
+
+
+@pytest.mark.parametrize("imu_rate", [100.0, 400.0])
+def test_an_odometry_silent_past_its_timeout_widens_the_position_by_its_speed_while_the_imu_streams(imu_rate):
+    """Past the odometry's timeout the prediction holds no twist (the robot may have stopped), and the position
+    widens by what it may have driven at its last speed, v T per axis after T s, as across a logging gap. The
+    IMU streaming on splits the silence into many short predictions: they add up to (v T)^2 whatever their
+    number, not to the sum of each one's (v dt)^2 (which leaves the filter sure of a car it stopped), so a
+    fix after a brief pause of the wheels is believed instead of being taken for a receiver's step."""
+    core, timeout, before, after, t_end = _straight_then_odometry_silent(imu_rate)
+    unheld = t_end - (1002.0 + timeout)
+    assert unheld > 0.1
+    expected = (10.0 * unheld) ** 2
+    for axis in (0, 1):
+        assert after[axis] - before[axis] == pytest.approx(expected, rel=0.05)
+
+
+def test_the_fixes_after_a_first_brief_pause_of_the_wheels_are_believed():
+    """A car at 17 m/s with 10 Hz fixes of 0.1 m: the wheels pause once for 0.4 s (no recent pause to hold the
+    twist through it, as core/inputs.py does for recurring ones), the IMU streams on. The filter stops the car
+    for the 0.2 s past the timeout, 3.4 m short; the fixes in the pause and after it say so, and the position's
+    widening lets them: none gated, and the track back on the fixes within a few of them."""
+    from tests.support.configs import robot_config
+    from tests.support.sim_gps import World, simulate as simulate_gps, truth_at
+
+    w = World(duration=30.0, speed=17.0, gps_rate=10.0, gps_sigma=0.1, odom_rate=50.0, imu_rate=100.0)
+    pause = (1000.0 + 20.0, 1000.0 + 20.4)
+    samples = [s for s in simulate_gps(w) if not (s.sensor == "wheel" and pause[0] <= s.stamp < pause[1])]
+    core = FusionCore(robot_config(gps="datum = [48.137, 11.575, 520.0]\nmahalanobis_threshold = 5.0"))
+    gated, errors = 0, []
+    for s in samples:
+        step = core.ingest(s)
+        if pause[0] <= s.stamp < pause[1] + 2.0:
+            gated += sum(r.rejected for r in step.records if r.sensor == "gps")
+            if s.sensor == "wheel" and s.stamp > pause[1] + 0.5:
+                t, x = core.pose()
+                tx, ty, _ = truth_at(w, t)
+                errors.append(math.hypot(x[0] - tx, x[1] - ty))
+    assert gated == 0
+    assert max(errors) < 0.5
