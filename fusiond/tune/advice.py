@@ -24,6 +24,7 @@ whose line makes -log L worse by more than its keys is shown as a warning: the r
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 import tomllib
@@ -92,6 +93,48 @@ def _comparable(ref: Reference, records: Sequence[object]) -> tuple[Reference, i
         channels.add((k[0], k[1]))
     keep = {k: t for k, t in ref.terms.items() if (k[0], k[1]) in channels and dof.get(k, t[2]) == t[2]}
     return Reference(keep), len(ref.terms) - len(keep)
+
+
+# A record's stamp is its sample's stamp plus its sensor's stamp_offset_s: a line that shifts a sensor's clock
+# shifts every one of its records, and a term is paired across two replays by its stamp. Shifted back, a
+# record lands within rounding of its sample's stamp in the replay as configured (a few 1e-7 s at 1.7e9 s),
+# far inside any sensor's period.
+RESTAMP_TOLERANCE_S = 1e-6
+
+
+def _shifts(cfg: Config, changed: Config) -> dict[str, float]:
+    """Per sensor whose clock ``changed`` shifts: how much later it stamps its samples than ``cfg`` does."""
+    before = {sc.name: sc.stamp_offset_s for sc in cfg.sensors}
+    return {sc.name: sc.stamp_offset_s - before[sc.name] for sc in changed.sensors
+            if sc.name in before and sc.stamp_offset_s != before[sc.name]}
+
+
+def _restamped(records: Sequence[object], shifts: dict[str, float], base: Sequence[object]) -> list:
+    """``records`` of a replay whose config shifts some sensors' clocks (``_shifts``), each record of those
+    sensors at the stamp its sample has in ``base``, the replay as configured: the nearest of that sensor's
+    and channel's stamps there within RESTAMP_TOLERANCE_S of its own less the shift (else its own less the
+    shift: a sample the configured replay did not fuse). So the two replays' terms pair up sample by sample,
+    and the likelihood judges a clock shift by what it does to the updates, not by every shifted one going
+    missing."""
+    stamps: dict[tuple[str, str], list[float]] = {}
+    for r in base:
+        if r.sensor in shifts:
+            stamps.setdefault((r.sensor, r.channel), []).append(r.stamp)
+    for v in stamps.values():
+        v.sort()
+    out = []
+    for r in records:
+        shift = shifts.get(r.sensor)
+        if shift is None:
+            out.append(r)
+            continue
+        t = r.stamp - shift
+        near = stamps.get((r.sensor, r.channel), [])
+        i = bisect.bisect_left(near, t)
+        best = min((near[j] for j in (i - 1, i) if 0 <= j < len(near)), key=lambda b: abs(b - t), default=None)
+        out.append(msgspec.structs.replace(r, stamp=best if best is not None and abs(best - t) <= RESTAMP_TOLERANCE_S
+                                           else t))
+    return out
 
 
 def _brought_back(was: dict[str, int] | None, now: dict[str, int]) -> str:
@@ -221,6 +264,9 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         applied: dict[str, int] = {}
         with muted():
             records = replay_records(changed, samples, backend, ends, applied)
+        shifts = _shifts(cfg, changed)
+        if shifts:  # a clock shifted: its records paired with the configured replay's by their samples' stamps
+            records = _restamped(records, shifts, base_records)
         back = _brought_back(base_applied, applied)
         if back:  # the run as configured dropped most of a sensor: its likelihood has nothing to compare
             return Proof(False, f"it fuses {back} the run as configured dropped: the likelihood over the run's own "

@@ -247,3 +247,23 @@ def test_the_replayed_nis_is_named_for_the_updates_it_is_of() -> None:
     assert text == "likelihood +10, the scored updates' NIS/dof 0.58 -> 0.46", text
     imu = Verdict("imu", "heading", "problem", "planted", "sensors.imu.angular_velocity", "angular_velocity = true")
     assert _effect(before, after, imu, 0, [], []) == "likelihood +10, imu's NIS/dof 0.58 -> 0.46"
+
+
+def test_a_clock_line_is_judged_sample_by_sample_and_advised_when_it_fits():
+    """A car at 10 m/s whose GPS stamps its fixes 0.25 s after their epoch (stamped on arrival): each fix is
+    fused 2.5 m along the road from where it was taken. The doctor's clock line shifts every fix's stamp, so
+    every GPS update of its replay has another stamp than the run's: paired by stamp, all of them read as
+    missing, charged at the gate, and the line that restores the track was 'not advised' (likelihood -1000s).
+    Paired by their samples, the replay is judged by what it does to those updates: advised."""
+    from tests.support import sim_gps
+    from tests.support.sim_faults import shift_stamps
+
+    w = sim_gps.World(duration=60.0, speed=10.0, gps_rate=10.0, gps_sigma=0.3)
+    samples = shift_stamps(sim_gps.simulate(w), "gps", 0.25)
+    cfg = robot_config(gps="datum = [48.137, 11.575, 520.0]")
+    result = run_samples(samples, cfg)
+    clock = [v for v in result.verdicts() if v.sensor == "gps" and v.channel == "time" and v.suggestion]
+    assert clock, [v.message for v in result.verdicts()]
+    (v,) = prove_advice(cfg, samples, clock, base_records=None, base_applied=result.applied)
+    assert "stamp_offset_s = -0.2" in v.suggestion, v.suggestion
+    assert v.proof is not None and v.proof.judged and v.proof.advised, v.proof

@@ -401,6 +401,19 @@ def test_an_imu_clock_ahead_within_the_history_is_named_and_one_behind_is_not_re
     assert "applied late" in clock[0].message, clock[0]
 
 
+def test_a_gps_clock_ahead_is_named_beside_an_imu_stamped_behind():
+    """A car's GPS stamps 0.25 s after the epoch (ahead of the others' clock: the wheels' samples are applied
+    late) and its IMU's 0.06 s behind (delivered late, which the history absorbs and nothing says). Measured
+    against the others' newest stamp, the IMU reads the GPS's lead as its own, -0.31 s, the largest offset of
+    all: taken for the culprit and, being behind, not said, it hid the GPS. Only a clock ahead makes the others
+    late: the GPS is named, with the line that brings it back."""
+    w = sim_gps.World(duration=60.0, speed=10.0, gps_rate=10.0, gps_sigma=0.3)
+    samples = shift_stamps(shift_stamps(sim_gps.simulate(w), "gps", 0.25), "imu", -0.06)
+    clock = [v for v in run_samples(samples, robot_config(gps="")).verdicts() if v.channel == "time"]
+    assert [v.sensor for v in clock] == ["gps"], clock
+    assert float(clock[0].suggestion.split("=")[1]) == pytest.approx(-0.25, abs=0.03), clock[0]
+
+
 def test_an_imu_a_few_milliseconds_ahead_is_in_step_not_a_clock():
     """The IMU's stamps 12 ms ahead of the wheels' (a skew between two drivers, under the 20 ms odometry period):
     every wheel sample arrives behind the newest IMU stamp, but by less than a message period: in step, no
@@ -427,6 +440,8 @@ def test_the_culprit_is_the_largest_offset_and_of_a_mirrored_pair_not_the_odomet
     assert _culprit({"wheel": 5.0, "imu": -5.0}, "wheel") == "imu"
     assert _culprit({"gps": 18.0, "wheel": 0.01, "imu": 0.0}, "wheel") == "gps"
     assert _culprit({"wheel": 18.0, "imu": -0.05, "gps": -0.04}, "wheel") == "wheel"
+    assert _culprit({"wheel": -0.01, "imu": -0.31, "gps": 0.25}, "wheel", ahead_only=True) == "gps"
+    assert _culprit({"wheel": 0.3, "imu": -0.3}, "wheel", ahead_only=True) is None  # a late IMU mirrored
 
 
 def test_gps_on_the_same_clock_gets_no_clock_verdict():

@@ -19,7 +19,8 @@ same amount: past CLOCK_LATE_SHARE, and by more than any sensor's message period
 few milliseconds ahead, make the other's samples late by less than a period), the same verdict names the odd
 clock out, when its stamps are AHEAD of the others'. Stamps behind them are also what a sensor correctly stamped but delivered late shows (a
 receiver's fixes 0.2 s after their epoch), which the history is there to absorb: nothing in the stamps tells
-that from a clock behind, so nothing is said of it. No delivery puts a stamp in the future.
+that from a clock behind, so nothing is said of it. No delivery puts a stamp in the future, so a sensor behind
+is never the culprit of late samples: the one ahead is, however large the offset behind.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ class Clocks(BaseCheck):
             behind = late >= CLOCK_LATE_SHARE * max(st.get("applied", 0), 1) and far < CLOCK_DROP_SHARE * received
             if received <= 0 or (far < CLOCK_DROP_SHARE * received and not behind) or name not in offsets:
                 continue
-            culprit = _culprit(offsets, odom)
+            culprit = _culprit(offsets, odom, ahead_only=behind)
             if culprit is None or culprit in out or (behind and not offsets[culprit] > max(period, 0.0)):
                 continue
             offset = offsets[culprit]
@@ -89,13 +90,19 @@ class Clocks(BaseCheck):
         return list(out.values())
 
 
-def _culprit(offsets: dict[str, float], odom: str | None) -> str | None:
+def _culprit(offsets: dict[str, float], odom: str | None, ahead_only: bool = False) -> str | None:
     """The sensor whose clock is off: the largest offset; of two that mirror each other (within MIRROR), not
-    the odometry (module doc)."""
+    the odometry (module doc). ``ahead_only`` (samples applied late): only a clock ahead makes the others late.
+    When the largest offset is one behind (a receiver's delivery lag, which the history absorbs; or a sensor
+    measuring another's lead as part of its own: an IMU 0.06 s behind beside a GPS 0.25 s ahead reads
+    -0.31 s), the culprit is the sensor furthest ahead but the odometry, the reference where two mirror each
+    other; None when there is none."""
     ranked = sorted(offsets, key=lambda n: -abs(offsets[n]))
     if not ranked:
         return None
     top = ranked[0]
     if len(ranked) > 1 and top == odom and abs(offsets[ranked[1]]) * MIRROR >= abs(offsets[top]):
-        return ranked[1]
-    return top
+        top = ranked[1]
+    if not ahead_only or offsets[top] > 0.0:
+        return top
+    return max((n for n in offsets if offsets[n] > 0.0 and n != odom), key=offsets.__getitem__, default=None)
