@@ -681,3 +681,32 @@ def test_a_doctor_that_saw_only_the_updates_does_not_call_the_gyro_quiet_at_rest
     v = one(d.verdicts(), "imu", "gyro_bias")
     assert "nan" not in v.message and "quiet at rest" not in v.message, v
     assert "not measured" in v.message, v
+
+
+def test_an_imu_upside_down_beside_a_gps_is_named_with_the_pitch_the_gps_climb_measures():
+    """A car with a GPS whose IMU is mounted upside down and pitched 0.05 rad. The GPS climb's check measures the
+    mount's pitch and keeps its roll: its line left the IMU upside down (a highway car's height 37 m off, 74 m
+    with it pasted), and it stood in place of the upside-down verdict. Upside down is said first, GPS or not,
+    with the roll of the mean up vector and the pitch the climb measures (not the mean pitch, which holds the
+    road's grade); pasted, the estimate stands upright."""
+    from fusiond.estimator import rotation as rot
+    from fusiond.core.sensors import ImuSample
+
+    w = sim_gps.World(duration=90.0, speed=10.0, gps_rate=10.0, gps_sigma=0.3, imu_mount_pitch=0.05)
+    flip = rot.from_rpy(math.pi, 0.0, 0.0)
+
+    def inverted(s):  # the sensor turned by roll pi in its mount: v_s = Rx(pi)^T v, q_ws = q ⊗ Rx(pi)
+        if not isinstance(s, ImuSample):
+            return s
+        gx, gy, gz = s.angular_velocity
+        return msgspec.structs.replace(s, orientation=rot.mul(s.orientation, flip), angular_velocity=(gx, -gy, -gz))
+
+    samples = [inverted(s) for s in sim_gps.simulate(w)]
+    cfg = robot_config(gps="datum = [48.137, 11.575, 520.0]")
+    v = one(run_samples(samples, cfg).verdicts(), "imu", "attitude")
+    assert v.level == "problem" and "upside down" in v.message, v
+    named = rot.from_rpy(*vector(v.suggestion))
+    truth = rot.from_rpy(math.pi, 0.05, 0.0)
+    assert 2.0 * math.acos(min(1.0, abs(sum(a * b for a, b in zip(named, truth))))) < MOUNT_TOLERANCE_RAD, v.suggestion
+    fixed = run_samples(samples, robot_config(gps="datum = [48.137, 11.575, 520.0]", imu=v.suggestion))
+    assert abs(fixed.final[4]) < 0.1 and abs(fixed.final[5]) < 0.1, fixed.final  # qx, qy: upright

@@ -206,14 +206,17 @@ def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw |
 
 
 def lean_verdict(tilt: TiltStats, imu: ImuSensor | None, min_updates: int = 50,
-                 mount: MountYaw | None = None) -> Verdict | None:
-    """``mount``: the accelerometer's yaw fit; when it names a yaw error, the suggestion includes it."""
+                 mount: MountYaw | None = None, grade: GradeFit | None = None) -> Verdict | None:
+    """``mount``: the accelerometer's yaw fit; when it names a yaw error, the suggestion includes it.
+    ``grade``: the GPS climb's fit of the mount's pitch, which the suggestion takes instead of the mean
+    pitch (that holds the road's own grade too)."""
     if imu is None:
         return None
     means, stds, leaning = lean_of(tilt, min_updates)
     if not leaning:
         return None
-    rpy = full_mount(imu, (means[0], means[1]), mount.delta if mount is not None and mount.named else 0.0)
+    pitch = means[1] if grade is None else grade.delta
+    rpy = full_mount(imu, (means[0], pitch), mount.delta if mount is not None and mount.named else 0.0)
     what = " and ".join(f"{('roll', 'pitch')[k]} {means[k]:+.3f} rad (std {stds[k]:.3f})" for k in leaning)
     if inverted_lean(tilt) is not None:
         return Verdict(imu.name, "attitude", "problem",
@@ -246,12 +249,17 @@ def _altitude_reads(altitude: ChannelStats | None) -> str:
 
 class Lean(BaseCheck):
     """The estimate's lean: against the grade the GPS altitude measures when there is enough driving to
-    tell (it replaces "on level ground"), else its mean over the run."""
+    tell (it replaces "on level ground"), else its mean over the run. An estimate upside down is said first,
+    GPS or not: the grade's chords measure a pitch of the IMU's mount and keep its roll, so their mount
+    would leave the IMU upside down (an inverted car's height 37 m off, and 74 m with that line pasted)."""
 
     name = "lean"
 
     def run(self, ev: Evidence) -> list[Verdict]:
+        fit = grade_fit(ev.series, ev.config)
+        if inverted_lean(ev.tilt) is not None:
+            return found(lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount, fit))
         gps = next((s.name for s in ev.config.sensors if kind_of(s).geodetic), None) if ev.config else None
-        graded = grade_verdict(grade_fit(ev.series, ev.config), ev.run_imu, ev.mount,
+        graded = grade_verdict(fit, ev.run_imu, ev.mount,
                                state_layout(ev.config).has("twist_pitch"), ev.channels.get((gps, "altitude")))
         return found(graded if graded is not None else lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount))
