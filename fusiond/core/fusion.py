@@ -43,7 +43,7 @@ from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History, snapshots_read
 from .inputs import HeldInputs, next_expiry, note_period
 from .layout import absolute_sensor, state_layout, update_masks
-from .resume import RESUME_VERSION, ResumeState, state_fingerprint
+from .resume import RESUME_VERSION, HeldMotion, ResumeState, state_fingerprint
 from .time_jumps import HeldTimeline
 from .sensors import Rejected, SensorContext, build_models, kind_of
 from .state import FilterState
@@ -564,17 +564,25 @@ class FusionCore:
             raise CoreError("no sample has been fused yet")
         s = self.state
         x, P = s.ekf.snapshot()
+        floats = _floats
+        held = HeldMotion(
+            last=[None if v is None else float(v) for v in s.last], linear=floats(s.linear),
+            linear_cov=floats(s.linear_cov), linear_world=bool(s.linear_world), wheel_angular=floats(s.wheel_angular),
+            wheel_angular_cov=floats(s.wheel_angular_cov), wheel_yaw_measured=bool(s.wheel_yaw_measured),
+            gyro=None if s.gyro is None else floats(s.gyro), gyro_cov=None if s.gyro_cov is None else floats(s.gyro_cov),
+            gyro_sensor=-1 if s.gyro_last is None else int(s.gyro_last[0]))
         return ResumeState(
             fingerprint=self.fingerprint, stamp=float(s.t), x=x.tolist(), P=P.ravel().tolist(),
             frame_ready=bool(s.frame_ready), heading_ready=bool(s.heading_ready),
-            datum=tuple(s.enu.datum) if s.enu is not None else None, period=[float(v) for v in s.period])
+            datum=tuple(s.enu.datum) if s.enu is not None else None, period=[float(v) for v in s.period], held=held)
 
     def resume(self, saved: ResumeState) -> None:
         """Go on from a state ``export_state`` gave, typically the previous run's.
 
         As ``set_pose`` does, the filter is re-initialised at the saved stamp with the history cleared
-        (nothing older is placed) and the motion inputs forgotten, but here every block of the state
-        and its full covariance are the saved ones, and so is the world frame. Raises CoreError, with
+        (nothing older is placed), but here every block of the state and its full covariance are the
+        saved ones, and so are the world frame and the motion inputs held then (core/resume.py: across
+        the restart they end at their timeouts, as in a logging gap). Raises CoreError, with
         nothing changed, for a state of another version or config (fingerprint) or one that does not
         fit or is not sound (``ErrorStateEKF.restore``)."""
         if saved.version != RESUME_VERSION:
@@ -584,6 +592,9 @@ class FusionCore:
                             f"this config {self.fingerprint})")
         if not (math.isfinite(saved.stamp) and saved.stamp > 0.0) or len(saved.period) != len(self.sensors):
             raise CoreError("saved state has no valid stamp or does not list this config's sensors")
+        held = saved.held
+        if held is not None and not _usable(held, len(self.sensors), saved.stamp):
+            raise CoreError("saved state's held motion inputs do not fit this config's sensors or are not sound")
         ekf = ErrorStateEKF(self.layout, backend=self.backend)
         try:
             ekf.restore(saved.x, saved.P)
@@ -603,6 +614,14 @@ class FusionCore:
         if enu is not None:
             s.enu = enu
         s.attitude_ready = True
+        if held is not None:
+            s.last = list(held.last)
+            s.linear, s.linear_cov, s.linear_world = held.linear, held.linear_cov, held.linear_world
+            s.wheel_angular, s.wheel_angular_cov = held.wheel_angular, held.wheel_angular_cov
+            s.wheel_yaw_measured = held.wheel_yaw_measured
+            if held.gyro is not None and held.gyro_cov is not None and held.last[held.gyro_sensor] is not None:
+                s.gyro, s.gyro_cov = held.gyro, held.gyro_cov
+                s.gyro_last = (held.gyro_sensor, held.last[held.gyro_sensor])
         if self.two_d:
             s.ekf.hold_planar(self._planar_nominal, self._planar_error)
         self._anchor(saved.stamp)
@@ -738,3 +757,18 @@ class FusionCore:
             shown = self._shown_position(s) if self._showing else None
             s.ekf.anchor(stamp, shown, None if shown is None else self._shown_origin(s))
         return records
+
+
+def _floats(v) -> tuple[float, ...]:
+    """Numpy or tuple inputs as a tuple of plain floats (what a saved state encodes)."""
+    return tuple(float(a) for a in v)
+
+
+def _usable(held: HeldMotion, sensors: int, stamp: float) -> bool:
+    """Held inputs that fit ``sensors`` and a state at ``stamp``: finite, no stamp after it."""
+    vectors = (held.linear, held.wheel_angular, *(() if held.gyro is None else (held.gyro,)))
+    covs = (held.linear_cov, held.wheel_angular_cov, *(() if held.gyro_cov is None else (held.gyro_cov,)))
+    return (len(held.last) == sensors and all(v is None or (math.isfinite(v) and v <= stamp) for v in held.last)
+            and all(len(v) == 3 and all(map(math.isfinite, v)) for v in vectors)
+            and all(len(c) == 9 and all(map(math.isfinite, c)) for c in covs)
+            and (held.gyro is None or 0 <= held.gyro_sensor < sensors))

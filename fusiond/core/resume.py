@@ -5,9 +5,15 @@ origin with every learnt quantity at its prior: gyro bias, wheel and gyro scales
 offset of a magnetometer, the GPS datum and heading. ``ResumeState`` is the filter's state
 at one stamp, reduced to what defines it: the nominal state and its full covariance (every
 block, so biases keep their correlations), the world frame (defined, heading known, the
-ENU datum) and each sensor's observed period. What re-forms in the first seconds is left
-out on purpose, as ``FusionCore.set_pose`` leaves it: held inputs (the robot is taken to be
-at rest until the next odometry), the late-data history, a relative IMU's yaw offset and a
+ENU datum) and each sensor's observed period. And the motion inputs held at that stamp
+(``HeldMotion``): a daemon restarted while the robot drives resumes across a gap as long as
+the restart took, and as across a logging gap the held twist ends at its timeout and what
+the robot may have driven meanwhile at its last speed widens the pose
+(``HeldInputs.unheld_motion_var``): a car at 17 m/s restarted 26 s later is ~450 m from the
+saved pose, and the first fix must be believed, not gated as an outlier while the published
+pose stays 450 m off with a sigma of metres. A state saved without them (an older file) is
+taken at rest. What re-forms in the first seconds is left out on purpose, as
+``FusionCore.set_pose`` leaves it: the late-data history, a relative IMU's yaw offset and a
 differential sensor's previous pose, so neither drags the estimate back.
 
 ``fingerprint`` says which configuration a state belongs to: the state layout (block names
@@ -27,9 +33,24 @@ from ..config_tables import Config
 from .layout import state_layout
 from .sensors.registry import kind_of
 
-__all__ = ["RESUME_VERSION", "ResumeState", "state_fingerprint"]
+__all__ = ["RESUME_VERSION", "HeldMotion", "ResumeState", "state_fingerprint"]
 
 RESUME_VERSION = 1  # bumped when the fields or their meaning change: an older state is then refused
+
+
+class HeldMotion(msgspec.Struct, frozen=True, kw_only=True):
+    """The motion inputs a filter held at its stamp (``FilterState``'s fields of the same names)."""
+
+    last: list[float | None]  # each sensor's newest stamp (None: none yet)
+    linear: tuple[float, float, float]
+    linear_cov: tuple[float, ...]  # 9
+    linear_world: bool
+    wheel_angular: tuple[float, float, float]
+    wheel_angular_cov: tuple[float, ...]  # 9
+    wheel_yaw_measured: bool
+    gyro: tuple[float, float, float] | None = None
+    gyro_cov: tuple[float, ...] | None = None
+    gyro_sensor: int = -1  # the index of the sensor whose rate ``gyro`` is (-1: none held)
 
 
 class ResumeState(msgspec.Struct, frozen=True, kw_only=True):
@@ -44,6 +65,7 @@ class ResumeState(msgspec.Struct, frozen=True, kw_only=True):
     heading_ready: bool  # a GPS-referenced heading has been measured
     datum: tuple[float, float, float] | None = None  # the ENU origin (lat deg, lon deg, alt m) a GPS set
     period: list[float] = []  # each sensor's typical message period (s; 0 before it was measured)
+    held: HeldMotion | None = None  # the motion inputs held at ``stamp`` (None: taken at rest)
 
 
 def state_fingerprint(cfg: Config) -> str:

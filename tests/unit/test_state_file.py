@@ -189,3 +189,39 @@ def test_resume_from_file_resumes_or_says_why_not(driven, tmp_path):
     path.write_bytes(path.read_bytes()[:-7])  # truncated by something other than save_state
     assert resume_from_file(FusionCore(robot_config(gps=GPS)), path, max_age_s=30.0) == "corrupt"
     assert resume_from_file(FusionCore(robot_config(gps=GPS)), tmp_path / "none", max_age_s=30.0) == "missing"
+
+
+def test_a_core_resumed_after_the_robot_drove_on_believes_the_first_fix(driven):
+    """A daemon restarted while the robot drives: the saved state's held twist ends at its timeout across the
+    restart's gap, as in a logging gap, and the position widens by what the robot may have driven at its last
+    speed. Taken at rest instead (a state without its held inputs), the resumed filter was sure of a pose 26 m
+    behind the robot: the fixes were gated as outliers until the re-acquisition rule gave in, seconds later."""
+    saved = driven.export_state()
+    assert saved.held is not None and saved.held.linear[0] == pytest.approx(1.0)
+
+    def after_gap(state) -> float:
+        core = FusionCore(robot_config(gps=GPS))
+        core.resume(state)
+        t = drive(core, 600 + 1300, 150)  # 26 s later, 3 s of driving (1 s of it held to confirm the jump)
+        a = 0.1 * (t - 100.0)
+        return math.dist(core.pose()[1][0:2], (math.sin(a) / 0.1, (1.0 - math.cos(a)) / 0.1))
+
+    assert after_gap(saved) < 2.0  # the first fix taken: the heading the robot turned to is what is left
+    import msgspec
+
+    assert after_gap(msgspec.structs.replace(saved, held=None)) > 10.0  # at rest: the fixes gated, 19 m off
+
+
+def test_a_saved_state_without_held_inputs_still_resumes_and_unsound_ones_are_refused(driven):
+    import msgspec
+
+    saved = driven.export_state()
+    old = msgspec.json.decode(msgspec.json.encode(msgspec.structs.replace(saved, held=None)), type=ResumeState)
+    FusionCore(robot_config(gps=GPS)).resume(old)  # a file from before held inputs were saved
+    bad = msgspec.structs.replace(saved, held=msgspec.structs.replace(saved.held, linear=(math.nan, 0.0, 0.0)))
+    with pytest.raises(CoreError, match="held motion"):
+        FusionCore(robot_config(gps=GPS)).resume(bad)
+    late = msgspec.structs.replace(saved, held=msgspec.structs.replace(
+        saved.held, last=[saved.stamp + 1.0 if v is not None else None for v in saved.held.last]))
+    with pytest.raises(CoreError, match="held motion"):
+        FusionCore(robot_config(gps=GPS)).resume(late)
