@@ -107,6 +107,20 @@ def families(a: HealthAnswer) -> list[Any]:
     counter("filter_covariance_resets", "non-finite covariances reset").add_metric([ns], f.covariance_resets)
     counter("filter_time_resets", "backwards time jumps that reset the filter").add_metric([ns], f.time_resets)
 
+    if a.pose is not None:  # absent before the first published pose, as the health answer's null
+        p = a.pose
+        gauge("pose_stamp_seconds", "message time of the newest published pose").add_metric([ns], p.stamp)
+        position = gauge("pose_position_meters", "the newest published pose's position in its frame", ("axis",))
+        for axis, value in zip("xyz", p.position):
+            position.add_metric([ns, axis], value)
+        gauge("pose_yaw_radians", "the newest published pose's heading").add_metric([ns], p.yaw)
+        # how sure the filter is: what an operator alerts on (a widening sigma is a robot the sensors lost)
+        gauge("pose_sigma_xy_meters", "horizontal position std dev along its worst direction").add_metric(
+            [ns], p.sigma_xy)
+        gauge("pose_sigma_z_meters", "height std dev").add_metric([ns], p.sigma_z)
+        gauge("pose_sigma_yaw_radians", "heading std dev (large while the heading is unknown)").add_metric(
+            [ns], p.sigma_yaw)
+
     q = a.queue
     gauge("queue_depth", "samples waiting for the worker").add_metric([ns], q.depth)
     gauge("queue_capacity", "input queue capacity").add_metric([ns], q.capacity)

@@ -117,6 +117,13 @@ def test_the_metrics_say_what_the_health_answer_says(tmp_path):
     assert h["consistency"], "no NIS channel to compare"
     assert v("fusiond_filter_finite") == float(h["filter"]["finite"])
     assert v("fusiond_filter_heading_known") == float(h["filter"]["heading_known"])
+    pose = h["pose"]
+    assert v("fusiond_pose_stamp_seconds") == pose["stamp"]
+    assert [v("fusiond_pose_position_meters", axis=a) for a in "xyz"] == pytest.approx(pose["position"])
+    assert v("fusiond_pose_yaw_radians") == pytest.approx(pose["yaw"])
+    assert v("fusiond_pose_sigma_xy_meters") == pytest.approx(pose["sigma_xy"])
+    assert v("fusiond_pose_sigma_z_meters") == pytest.approx(pose["sigma_z"])
+    assert v("fusiond_pose_sigma_yaw_radians") == pytest.approx(pose["sigma_yaw"])
     assert v("fusiond_zenoh_link_up") == float(h["link"] == "connected") == 1.0
     assert v("fusiond_zenoh_reconnections_total") == h["link_stats"]["reconnections"]
     assert all(k.startswith("fusiond_") and dict(labels).get("namespace") == "robot7" for k, labels in m)
