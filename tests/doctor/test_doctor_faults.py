@@ -401,6 +401,26 @@ def test_an_imu_clock_ahead_within_the_history_is_named_and_one_behind_is_not_re
     assert "applied late" in clock[0].message, clock[0]
 
 
+def test_samples_stamped_in_groups_are_said_to_be_a_drivers_fifo_stamping():
+    """The IMU's samples stamped four at a time (each group with its last's stamp: a driver reading a FIFO):
+    three in four are dropped as duplicate stamps. The verdict says how they are grouped and what to change
+    (the driver's stamping), not only the reason's count; a message republished now and then is no group."""
+    import msgspec
+
+    from tests.support.sim import SimConfig, simulate as simulate_drive
+
+    samples = simulate_drive(SimConfig(duration=30.0, standstill=2.0))
+    imu = [s for s in samples if s.sensor == "imu"]
+    last_of_group = {id(s): imu[min(4 * (k // 4) + 3, len(imu) - 1)].stamp for k, s in enumerate(imu)}
+    bunched = [msgspec.structs.replace(s, stamp=last_of_group[id(s)]) if s.sensor == "imu" else s for s in samples]
+    v = one(verdicts_of(robot_config(), bunched), "imu", "input")
+    assert "duplicate_stamp=" in v.message and "groups of about 4.0" in v.message and "FIFO" in v.message, v
+    first = next(k for k, s in enumerate(samples) if s.sensor == "imu")
+    once = samples[:first + 1] + samples[first:]  # one message sent twice
+    said = [v for v in verdicts_of(robot_config(), once) if v.sensor == "imu" and v.channel == "input"]
+    assert said and "groups" not in said[0].message and "already had a sample with this exact stamp" in said[0].message
+
+
 def test_a_gps_clock_ahead_is_named_beside_an_imu_stamped_behind():
     """A car's GPS stamps 0.25 s after the epoch (ahead of the others' clock: the wheels' samples are applied
     late) and its IMU's 0.06 s behind (delivered late, which the history absorbs and nothing says). Measured

@@ -5,11 +5,17 @@ from __future__ import annotations
 
 import math
 
+from ... import reasons
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, filter_key
 
 __all__ = ["Drops"]
+
+# A share of a sensor's samples dropped as duplicate stamps beyond which they are stamped in groups, not
+# republished now and then: a message sent twice is rare; at a fifth, every fifth sample at least shares
+# its stamp, which only a driver stamping several samples at once gives
+BUNCHED_SHARE = 0.2
 
 
 class Drops(BaseCheck):
@@ -41,8 +47,26 @@ class Drops(BaseCheck):
                 out.append(Verdict(name, "time", "warn", msg, filter_key("history_s"), line))
             bad = {k: v for k, v in dropped.items() if k != "too_old"}
             if bad:
-                reasons = ", ".join(f"{k}={v}" for k, v in sorted(bad.items()))
-                out.append(Verdict(name, "input", "warn", f"dropped samples: {reasons}"))
+                said = "; ".join(f"{k}={v} ({reasons.MEANINGS.get(k, k)})" for k, v in sorted(bad.items()))
+                out.append(Verdict(name, "input", "warn", f"dropped samples: {said}{_bunched(bad, received)}"))
         return out
+
+
+def _bunched(dropped: dict[str, int], received: int) -> str:
+    """What a share of samples dropped as duplicate stamps says: a few, a message republished; a steady
+    share, samples stamped in groups (k = received / kept of them share one stamp), which a driver that
+    reads its sensor's FIFO and stamps the read, not each sample, gives. The filter keeps one sample a
+    stamp, the group's first, so it fuses 1/k of the data, each sample (k - 1) periods older than its
+    stamp says."""
+    d = dropped.get(reasons.DUPLICATE_STAMP, 0)
+    if d < BUNCHED_SHARE * received:
+        return ""
+    k = received / max(received - d, 1)
+    return (f". {100 * d / received:.0f}% of its samples shared their stamp with the one before: groups of about "
+            f"{k:.1f} consecutive samples carry one stamp, as a driver gives that reads the sensor's FIFO and stamps "
+            "the read, not each sample. The filter keeps the first of each stamp and drops the rest, so it fuses "
+            f"1 in {k:.1f} of them, each older than its stamp by up to the group's span. Stamp each sample at its own "
+            "time in the driver (the read stamp less the FIFO's sample period per place), or publish each as it is "
+            "measured; no setting here recovers the dropped ones")
 
 
