@@ -178,11 +178,34 @@ class DaemonView:
                     rows.append(row)
                 verdicts = self.doctor.verdicts()
             answer = (self.health or {}) if current else {}
+            verdicts = as_of_silence(verdicts, answer.get("sensors"))
         health = answer if current else {"status": state.status, "since": state.since, "reason": state.reason}
         return {"daemon": self.prefix or "(no namespace)", "namespace": answer.get("namespace", self.prefix),
                 "zid": answer.get("zid") or None, "status": state.status, "current": current, "since": state.since,
                 "reason": state.reason, "link": answer.get("link") or None, "health_age_s": state.health_age_s,
                 "health": health, "channels": rows, "verdicts": [msgspec.to_builtins(v) for v in verdicts]}
+
+
+def as_of_silence(verdicts: list[Verdict], sensors: object) -> list[Verdict]:
+    """``verdicts`` with those of a sensor the health answer reports silent (``sensors``: its ``sensors``
+    table) said to be as of its last sample, after one line that says it is silent: the doctor judges the
+    records it was sent, and a sensor that stopped sends none, so its last "ok" would read as now."""
+    if not isinstance(sensors, dict):
+        return verdicts
+    silent = {name: s for name, s in sensors.items() if isinstance(s, dict) and s.get("alive") is False}
+    if not silent:
+        return verdicts
+    out: list[Verdict] = []
+    for name, s in silent.items():
+        age = s.get("age_s")
+        since = f"for {age:.1f} s" if isinstance(age, (int, float)) else "with no sample yet"
+        out.append(Verdict(name, "input", "warn", f"silent {since} (timeout {s.get('timeout_s', 0.0):.2f} s): "
+                           "its verdicts below are as of its last sample, not now"))
+    for v in verdicts:
+        if v.sensor in silent:
+            v = msgspec.structs.replace(v, message=f"as of its last sample: {v.message}")
+        out.append(v)
+    return out
 
 
 def prefix_of(key: str, suffix: str) -> str:
@@ -474,5 +497,5 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     return 0
 
 
-__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "decode_diagnostics", "nis_figures", "plain_lines",
+__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "as_of_silence", "decode_diagnostics", "nis_figures", "plain_lines",
            "render", "run", "state_note"]

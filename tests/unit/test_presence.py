@@ -176,3 +176,26 @@ def test_the_fleet_lines_and_table_say_lost_with_since_and_the_rest_with_their_f
     console.print(render_fleet(rows))
     text = console.export_text().splitlines()
     assert text[1].split()[:2] == ["robot2", "lost"] and text[2].split()[:3] == ["robot1", "ok", "connected"]
+
+
+def test_a_silent_sensors_verdicts_are_said_to_be_as_of_its_last_sample():
+    """The IMU stopped 28 s ago (the health answer says so) while the doctor's verdicts, judged on the records it
+    was sent, still read ok: they are said to be as of its last sample, after a line that says it is silent."""
+    from fusiond.core.diagnostics import DiagnosticsRecord
+    from fusiond.monitor import DaemonView
+
+    view = DaemonView("robot2", window=10)
+    view.presence.token_up(10.0, 1000.0)
+    for k in range(60):
+        view.add(DiagnosticsRecord(float(k), "imu", ["roll", "pitch"], [0.01, -0.01], [1e-4, 1e-4], 2.0, 2, False,
+                                   channel="orientation"), now=10.0 + 0.02 * k)
+    sensors = {"imu": {"alive": False, "age_s": 28.6, "timeout_s": 0.2, "received": 60},
+               "wheel": {"alive": True, "age_s": 0.01, "timeout_s": 0.2, "received": 90}}
+    view.on_health({"status": "degraded", "zid": "a", "sensors": sensors}, 11.3, 1001.3)
+    verdicts = view.snapshot(11.4, 1001.4, 5.0)["verdicts"]
+    imu = [v for v in verdicts if v["sensor"] == "imu"]
+    assert imu[0]["channel"] == "input" and imu[0]["level"] == "warn" and "silent for 28.6 s" in imu[0]["message"]
+    assert len(imu) > 1 and all(v["message"].startswith("as of its last sample: ") for v in imu[1:]), imu
+    sensors["imu"] = {**sensors["imu"], "alive": True, "age_s": 0.01}
+    view.on_health({"status": "ok", "zid": "a", "sensors": sensors}, 11.5, 1001.5)
+    assert not [v for v in view.snapshot(11.6, 1001.6, 5.0)["verdicts"] if "last sample" in v["message"]]
