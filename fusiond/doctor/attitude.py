@@ -136,6 +136,8 @@ def inverted_lean(tilt: TiltStats) -> tuple[list[float], list[float], list[int]]
     down on average, its roll/pitch are the mount, and its length (1 when it never moves) gives
     the spread as the circular standard deviation sqrt(-2 ln |mean|)."""
     n = tilt.n
+    if n <= 0:  # no attitude estimated (nothing published): nothing leans
+        return None
     ux, uy, uz = (v / n for v in tilt.up)
     if not uz < 0.0:
         return None

@@ -30,7 +30,7 @@ from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
 
-__all__ = ["Clocks"]
+__all__ = ["Clocks", "dropped_by_clock"]
 
 CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
 CLOCK_DROP_SHARE = 0.5  # this share of a sensor's samples dropped as far from filter time: its clock, not a glitch
@@ -88,6 +88,14 @@ class Clocks(BaseCheck):
                                              "applied_late": float(late), "received": float(received),
                                              "dropped_sensor_offset_s": offsets[name]})
         return list(out.values())
+
+
+def dropped_by_clock(st: dict) -> int:
+    """How many of a sensor's samples (its core counters ``st``) were dropped as far from filter time, when
+    they are the share that says its clock is off (CLOCK_DROP_SHARE), else 0: another check then knows its
+    samples are not on the others' time."""
+    far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
+    return far if far > 0 and far >= CLOCK_DROP_SHARE * max(st.get("received", 0), 1) else 0
 
 
 def _culprit(offsets: dict[str, float], odom: str | None, ahead_only: bool = False) -> str | None:

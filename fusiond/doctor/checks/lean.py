@@ -257,7 +257,7 @@ class Lean(BaseCheck):
 
     def run(self, ev: Evidence) -> list[Verdict]:
         fit = grade_fit(ev.series, ev.config)
-        if inverted_lean(ev.tilt) is not None:
+        if ev.tilt.n >= MIN_UPDATES and inverted_lean(ev.tilt) is not None:  # as lean_of asks of a lean
             return found(lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount, fit))
         gps = next((s.name for s in ev.config.sensors if kind_of(s).geodetic), None) if ev.config else None
         graded = grade_verdict(fit, ev.run_imu, ev.mount,

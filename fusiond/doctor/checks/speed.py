@@ -54,6 +54,7 @@ from ...config import Config, GpsSensor
 from ...core.sensors.registry import kind_of
 from ...core.diagnostics import t_quantile
 from ..check import BaseCheck
+from .clocks import dropped_by_clock
 from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, cumulative, newey_west, wheel_chords
 from ..evidence import Evidence
 from ..heading import gps_sigma, timed
@@ -171,6 +172,13 @@ class Speed(BaseCheck):
         odom, gps = ev.odom, ev.gps
         if odom is None or gps is None:
             return []
+        far = dropped_by_clock((ev.stats or {}).get(gps.name, {}))
+        if far:
+            # fixes on another clock than the wheels' (the GPS's time verdict): their chords pair the wheels'
+            # travel with the GPS's over another stretch of the drive, which agrees only where speed is steady
+            return [Verdict(odom.name, "speed", "ok",
+                            f"the wheel speed cannot be checked against the GPS: {far} of its fixes were dropped as "
+                            "far from the filter's time (its clock: see gps/time); ask again once it is mended")]
         fit = wheel_scale_fit(series, cfg)
         if fit is None:
             return []
