@@ -24,6 +24,12 @@ the doctor's statistics of that channel: the whole run's mean, bounds and verdic
 side, and the latest window's mean, bounds and verdict side by side, each verdict judged
 on the very mean and bounds printed beside it (a verdict beside another window's mean
 read "ok" next to a NIS outside its bounds).
+
+Given the robot's config (``--config`` with its ``[[sensors]]``), a daemon whose health answer lists those
+sensors is judged by a doctor that knows them, as the replay's doctor does (a GPS altitude whose NIS reads
+low is what its configured error model expects, not an overstated noise): without it, the same stream read
+a warning the offline doctor contradicted. A daemon with other sensors (another robot of the fleet) is
+judged without the config.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from dataclasses import dataclass, field
 
 import msgspec
 
+from .config import Config
 from .core.diagnostics import DiagnosticsRecord
 from .doctor import ChannelStats, Doctor, Verdict, judge_nis, nis_bounds
 from .fleet import STATUS_STYLE
@@ -128,12 +135,14 @@ class DaemonView:
     """One daemon (one namespace prefix): its channels and a doctor fed from the stream, and whether it
     is there (``presence``)."""
 
-    def __init__(self, prefix: str, window: int = 50, confidence: float = 0.95) -> None:
+    def __init__(self, prefix: str, window: int = 50, confidence: float = 0.95, cfg: Config | None = None) -> None:
         self.prefix = prefix
         self.window = window
         self.confidence = confidence
         self.channels: dict[tuple[str, str], ChannelView] = {}
-        self.doctor = Doctor(None, window, confidence)
+        # the robot's config (module doc), while the daemon's health does not say it has other sensors
+        self.cfg = cfg if cfg is not None and cfg.sensors else None
+        self.doctor = Doctor(self.cfg, window, confidence)
         self.health: dict | None = None  # the latest health answer (shown only while presence says current)
         self.presence = Presence()
         self.lock = threading.Lock()
@@ -143,9 +152,13 @@ class DaemonView:
         statistics start again."""
         with self.lock:
             zid = health.get("zid") if isinstance(health, dict) else None
+            sensors = health.get("sensors") if isinstance(health, dict) else None
+            if self.cfg is not None and isinstance(sensors, dict) and set(sensors) != {sc.name for sc in self.cfg.sensors}:
+                self.cfg = None  # another robot's sensors: its records are judged without the config from now on
+                self.doctor = Doctor(None, self.window, self.confidence)
             if zid and self.health is not None and self.health.get("zid") not in (None, "", zid):
                 self.channels.clear()
-                self.doctor = Doctor(None, self.window, self.confidence)
+                self.doctor = Doctor(self.cfg, self.window, self.confidence)
             self.health = health
             self.presence.answered(now, wall)
 
@@ -221,8 +234,9 @@ class Monitor:
     """
 
     def __init__(self, session, health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX,
-                 window: int = 50, namespace: str = "") -> None:
+                 window: int = 50, namespace: str = "", cfg: Config | None = None) -> None:
         self.session = session
+        self.cfg = cfg  # the robot's config, for the doctors of the daemons that have its sensors (module doc)
         self.health_key = health_key
         self.diagnostics_key = diagnostics_key
         self.window = window
@@ -240,7 +254,7 @@ class Monitor:
         with self._lock:
             d = self.daemons.get(prefix)
             if d is None:
-                d = self.daemons[prefix] = DaemonView(prefix, self.window)
+                d = self.daemons[prefix] = DaemonView(prefix, self.window, cfg=self.cfg)
             return d
 
     def start(self) -> None:
@@ -422,7 +436,7 @@ def plain_lines(snapshots: list[dict], wall: float) -> list[str]:
 def run(session, *, timeout: float, duration: float | None, as_json: bool, interval: float = 1.0,
         health_key: str = "fusiond/health", diagnostics_key: str = DIAGNOSTICS_SUFFIX, window: int = 50,
         stop: threading.Event | None = None, out=sys.stdout, fleet: bool = False, namespace: str = "",
-        stale_s: float | None = None) -> int:
+        stale_s: float | None = None, cfg: Config | None = None) -> int:
     """Discover daemons (up to ``timeout``), then show them until ``duration`` or Ctrl-C.
 
     ``stale_s`` (default ``max(3 x interval, 2 s)``): a health answer older than this is not current and
@@ -431,7 +445,7 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     """
     from .fleet import fleet_lines, fleet_rows, render_fleet
 
-    mon = Monitor(session, health_key, diagnostics_key, window, namespace=namespace)
+    mon = Monitor(session, health_key, diagnostics_key, window, namespace=namespace, cfg=cfg)
     mon.start()
     stale = max(3.0 * interval, 2.0) if stale_s is None else stale_s
     stop = stop or threading.Event()

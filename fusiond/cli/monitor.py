@@ -12,7 +12,8 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to reach the daemons")
-    p.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional)")
+    p.add_argument("--config", help="TOML config: [zenoh] table and output keys (optional); with the robot's "
+                   "[[sensors]], its daemon's verdicts are judged knowing them, as the replay's doctor does")
     p.add_argument("--no-multicast", action="store_true", help="do not scout for peers by multicast")
     p.add_argument("--timeout", type=positive, default=5.0,
                    help="seconds to find a daemon before giving up (default 5)")
@@ -34,6 +35,6 @@ def run(args: argparse.Namespace) -> int:
         return monitor.run(session, timeout=args.timeout, duration=args.duration, as_json=args.json,
                            interval=args.interval, health_key=cfg.output.health_key,
                            diagnostics_key=cfg.output.diagnostics_key, window=cfg.filter.nis_window,
-                           fleet=args.fleet, namespace=args.namespace or "", stale_s=args.stale)
+                           fleet=args.fleet, namespace=args.namespace or "", stale_s=args.stale, cfg=cfg)
     finally:
         session.close()

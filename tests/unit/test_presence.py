@@ -13,6 +13,8 @@ from fusiond.presence import Presence, rank
 from fusiond.transport.link import LinkWatch
 from fusiond.transport.session import build_config
 
+from tests.support.recordings import DATA
+
 OK = {"status": "ok", "zid": "a"}
 
 
@@ -199,3 +201,37 @@ def test_a_silent_sensors_verdicts_are_said_to_be_as_of_its_last_sample():
     sensors["imu"] = {**sensors["imu"], "alive": True, "age_s": 0.01}
     view.on_health({"status": "ok", "zid": "a", "sensors": sensors}, 11.5, 1001.5)
     assert not [v for v in view.snapshot(11.6, 1001.6, 5.0)["verdicts"] if "last sample" in v["message"]]
+
+
+@pytest.mark.e2e
+@pytest.mark.skipif(not (DATA / "comma2k19_ex1").exists(), reason="needs ../shared/data/comma2k19_ex1 (the highway car)")
+def test_the_monitor_judges_a_daemon_with_the_robots_config_as_the_replay_does():
+    """The highway car's records (its example config) as its daemon streams them: without the config, the monitor's doctor read the
+    GPS altitude's low NIS as an overstated noise (a warning with no value); with the robot's config it knows
+    the altitude's error model, as the replay's doctor does, and agrees with it. A daemon whose health lists
+    other sensors is judged without the config."""
+    from pathlib import Path
+
+    from fusiond.config import load
+    from fusiond.monitor import DaemonView
+    from fusiond.replay.bag import open_bag_samples
+    from fusiond.replay.run import run_samples
+
+    cfg = load(Path(__file__).resolve().parents[2] / "examples" / "comma2k19.toml")
+    with open_bag_samples([DATA / "comma2k19_ex1"], cfg.sensors) as bag:
+        samples = list(bag)
+    records: list = []
+    result = run_samples(samples, cfg, records=records)
+    replayed = next(v for v in result.verdicts() if (v.sensor, v.channel) == ("gps", "altitude"))
+
+    def altitude(view: DaemonView) -> dict:
+        for r in records:
+            view.add(r, 0.0)
+        return next(v for v in view.snapshot(1.0, 1.0)["verdicts"] if (v["sensor"], v["channel"]) == ("gps", "altitude"))
+
+    blind = altitude(DaemonView("car", cfg=None))
+    assert blind["level"] == "warn" and replayed.level == "ok", (blind, replayed)
+    assert altitude(DaemonView("car", cfg=cfg))["message"] == replayed.message
+    other = DaemonView("rover", cfg=cfg)
+    other.on_health({"status": "ok", "zid": "b", "sensors": {"wheels": {"alive": True}}}, 0.5, 0.5)
+    assert altitude(other)["level"] == "warn"
