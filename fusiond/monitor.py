@@ -153,7 +153,8 @@ class DaemonView:
         with self.lock:
             zid = health.get("zid") if isinstance(health, dict) else None
             sensors = health.get("sensors") if isinstance(health, dict) else None
-            if self.cfg is not None and isinstance(sensors, dict) and set(sensors) != {sc.name for sc in self.cfg.sensors}:
+            theirs = set(sensors) if isinstance(sensors, dict) else None
+            if self.cfg is not None and theirs is not None and theirs != {sc.name for sc in self.cfg.sensors}:
                 self.cfg = None  # another robot's sensors: its records are judged without the config from now on
                 self.doctor = Doctor(None, self.window, self.confidence)
             if zid and self.health is not None and self.health.get("zid") not in (None, "", zid):
@@ -511,5 +512,6 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
     return 0
 
 
-__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "as_of_silence", "decode_diagnostics", "nis_figures", "plain_lines",
+__all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "as_of_silence", "decode_diagnostics", "nis_figures",
+           "plain_lines",
            "render", "run", "state_note"]

@@ -568,7 +568,8 @@ class FusionCore:
             last=[None if v is None else float(v) for v in s.last], linear=_floats(s.linear),
             linear_cov=_floats(s.linear_cov), linear_world=bool(s.linear_world), wheel_angular=_floats(s.wheel_angular),
             wheel_angular_cov=_floats(s.wheel_angular_cov), wheel_yaw_measured=bool(s.wheel_yaw_measured),
-            gyro=None if s.gyro is None else _floats(s.gyro), gyro_cov=None if s.gyro_cov is None else _floats(s.gyro_cov),
+            gyro=None if s.gyro is None else _floats(s.gyro),
+            gyro_cov=None if s.gyro_cov is None else _floats(s.gyro_cov),
             gyro_sensor=-1 if s.gyro_last is None else int(s.gyro_last[0]))
         return ResumeState(
             fingerprint=self.fingerprint, stamp=float(s.t), x=x.tolist(), P=P.ravel().tolist(),
