@@ -513,5 +513,4 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
 
 
 __all__ = ["Monitor", "DaemonView", "ChannelView", "Verdict", "as_of_silence", "decode_diagnostics", "nis_figures",
-           "plain_lines",
-           "render", "run", "state_note"]
+           "plain_lines", "render", "run", "state_note"]
