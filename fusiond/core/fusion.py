@@ -145,7 +145,7 @@ class FusionCore:
             error_zero += [eb, eb + 1]
         self._planar_nominal = tuple(nominal_zero)
         self._planar_error = tuple(error_zero)  # indices: the compiled backend holds them in one call
-        self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d, self.layout)
+        self.inputs = HeldInputs(self.sensors, self.odom_index, self.two_d, self.layout, self.cfg.filter.gap_s)
         # The sensor models, with the narrow view of the core they are allowed (core/sensors/base.py).
         self.context = SensorContext(
             self.layout, fc, two_d=self.two_d, absolute_yaw=self.absolute_yaw, odom_index=self.odom_index,

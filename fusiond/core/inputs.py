@@ -16,6 +16,12 @@ covariance inflated for it), and must not keep the last twist held. The maximum 
 over the current and the previous RECENT_S / 2 of message time (a windowed maximum in two
 halves, a comparison a message): a pattern that recurs within that keeps it, a single
 hiccup is forgotten after RECENT_S / 2 to RECENT_S.
+
+The odometry's twist, the input that moves the position, is held at least through the filter's ``gap_s``
+(``HeldInputs.timeouts``): a silence shorter than that is jitter by the filter's own definition, not a
+logging gap, and the first such pause of a stream comes before any recent interval can teach the hold. A
+car at 17 m/s whose wheels paused 0.4 s once was stopped for the 0.2 s past its timeout: 3.4 m short, for
+good where nothing absolute corrects it. Its sensor's liveness (health, the doctor) keeps ``timeout_s``.
 """
 
 from __future__ import annotations
@@ -36,8 +42,10 @@ _ZERO3 = (0.0, 0.0, 0.0)
 class HeldInputs:
     """Which inputs hold at a time t in a state s, as one reused ``MotionInput``."""
 
-    def __init__(self, sensors: list, odom_index: int, two_d: bool, layout: StateLayout) -> None:
+    def __init__(self, sensors: list, odom_index: int, two_d: bool, layout: StateLayout,
+                 gap_s: float = 0.0) -> None:
         self.odom_index = odom_index
+        self._odom_hold = gap_s  # the odometry's twist holds at least this long (module doc)
         self._layout = layout  # its input blocks correct the last inputs (``unheld_motion_var``)
         self.two_d = two_d
         self.tilt_reference = True  # set by the core once the sensor models say whether any gives tilt
@@ -60,11 +68,12 @@ class HeldInputs:
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
         during a prediction, so it reads them once for all its segments. ``timeout`` of each, written
-        out (``silent_after``): the core asks for them two or three times a message."""
+        out (``silent_after``): the core asks for them two or three times a message; the odometry's at
+        least ``gap_s`` (module doc)."""
         odom = self.odom_index
         odom_timeout = gyro_timeout = 0.0
         if odom >= 0 and s.last[odom] is not None:
-            base, period = self._timeout_base[odom], s.period[odom]
+            base, period = max(self._timeout_base[odom], self._odom_hold), s.period[odom]
             odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[odom][0])
         if s.gyro is not None:
             idx = s.gyro_last[0]

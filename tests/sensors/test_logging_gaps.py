@@ -38,14 +38,15 @@ def test_a_long_gap_moves_the_pose_by_at_most_speed_times_timeout(orientation, c
             break
     t1, x1 = core.pose()
     # The robot drives at 1 m/s and turns at |w| <= 0.3 rad/s (tests/support/sim.py). Inputs are held
-    # for the odometry/gyro timeout (0.2 s at 50/100 Hz: max(timeout_s, 3 periods)); after the
-    # gap the filter integrates the held post-gap samples (t1 - (GAP_START + GAP)). Anything
-    # beyond that bound is the gap integrated with stale inputs (26.4 m before the fix).
-    timeout = 0.2
+    # for their timeout (the gyro's 0.2 s at 100 Hz: max(timeout_s, 3 periods); the odometry's twist at
+    # least through filter.gap_s, 0.5 s, a shorter silence being jitter); after the gap the filter
+    # integrates the held post-gap samples (t1 - (GAP_START + GAP)). Anything beyond that bound is the
+    # gap integrated with stale inputs (26.4 m before the fix).
+    timeout, odom_hold = 0.2, core.cfg.filter.gap_s
     post = t1 - (GAP_START + GAP)
     assert 0.0 < post < 1.5
     moved = math.dist(x0[0:3], x1[0:3])
-    assert moved <= 1.0 * (timeout + post) + 0.05
+    assert moved <= 1.0 * (odom_hold + post) + 0.05
     # Attitude: the gyro's last rates (x/y bias 0.02 rad/s) are held for 0.2 s at most, the yaw
     # rate likewise; before the fix, 26.4 s of them tumbled the attitude by ~0.5 rad.
     r0, p0, y0 = rot.to_rpy(tuple(x0[3:7].tolist()))
@@ -79,8 +80,9 @@ def test_a_gap_shorter_than_the_jump_threshold_is_bounded_too():
             t1, x1 = core.pose()
             break
         core.ingest(s)
-    # held input 0.2 s at 1 m/s, then the first sample after the gap is predicted to at zero speed
-    assert math.dist(x0[0:3], x1[0:3]) <= 1.0 * 0.2 + 1e-6
+    # the twist held through filter.gap_s (0.5 s) at 1 m/s, then the first sample after the gap is predicted
+    # to at zero speed
+    assert math.dist(x0[0:3], x1[0:3]) <= 1.0 * core.cfg.filter.gap_s + 1e-6
     assert t1 - t0 > 2.9
 
 
@@ -254,10 +256,11 @@ def test_the_rigid_residual_is_what_no_turn_and_shift_of_the_track_explains():
 
 # -- the odometry silent while the IMU streams on -------------------------------------------------------------------
 
-def _straight_then_odometry_silent(imu_rate: float, speed: float = 10.0, silent: float = 0.45):
+def _straight_then_odometry_silent(imu_rate: float, speed: float = 10.0, silent: float = 0.8):
     """A straight drive at ``speed`` (odometry 50 Hz, IMU at ``imu_rate``), then the odometry silent for
-    ``silent`` s (below gap_s: no logging gap) while the IMU goes on. (core, the odometry's timeout, the
-    position variances east and north when it expired and just before the next odometry message)."""
+    ``silent`` s while the IMU goes on (no prediction step longer than gap_s: no logging gap). (core, the
+    odometry's timeout, the position variances east and north when it expired and just before the next
+    odometry message)."""
     from tests.support.core_samples import imu, odom
 
     core = FusionCore(make_config("roll_pitch"))
@@ -269,7 +272,7 @@ def _straight_then_odometry_silent(imu_rate: float, speed: float = 10.0, silent:
         if kind == "odom":
             core.ingest(odom(t, v=speed))
             continue
-        timeout = core.timeout(core.odom_index)
+        timeout = core.inputs.timeouts(core.state)[0] if core.initialised else math.inf  # the twist's hold
         if at_expiry is None and t > end + timeout:
             P = core.state.ekf.P
             at_expiry = (P[0, 0], P[1, 1])
@@ -294,15 +297,16 @@ def test_an_odometry_silent_past_its_timeout_widens_the_position_by_its_speed_wh
 
 
 def test_the_fixes_after_a_first_brief_pause_of_the_wheels_are_believed():
-    """A car at 17 m/s with 10 Hz fixes of 0.1 m: the wheels pause once for 0.4 s (no recent pause to hold the
-    twist through it, as core/inputs.py does for recurring ones), the IMU streams on. The filter stops the car
-    for the 0.2 s past the timeout, 3.4 m short; the fixes in the pause and after it say so, and the position's
-    widening lets them: none gated, and the track back on the fixes within a few of them."""
+    """A car at 17 m/s with 10 Hz fixes of 0.1 m: the wheels pause once for 0.7 s (longer than the twist's hold,
+    filter.gap_s; no recent pause to hold it longer, as core/inputs.py does for recurring ones), the IMU
+    streams on. The filter stops the car for the 0.2 s past the hold, 3.4 m short; the fixes in the pause and
+    after it say so, and the position's widening lets them: none gated, and the track back on the fixes within
+    a few of them."""
     from tests.support.configs import robot_config
     from tests.support.sim_gps import World, simulate as simulate_gps, truth_at
 
     w = World(duration=30.0, speed=17.0, gps_rate=10.0, gps_sigma=0.1, odom_rate=50.0, imu_rate=100.0)
-    pause = (1000.0 + 20.0, 1000.0 + 20.4)
+    pause = (1000.0 + 20.0, 1000.0 + 20.7)
     samples = [s for s in simulate_gps(w) if not (s.sensor == "wheel" and pause[0] <= s.stamp < pause[1])]
     core = FusionCore(robot_config(gps="datum = [48.137, 11.575, 520.0]\nmahalanobis_threshold = 5.0"))
     gated, errors = 0, []
