@@ -22,7 +22,7 @@ from tests.support import sim_gps
 from tests.support.configs import robot_config
 from tests.support.sim import SimConfig, simulate
 from tests.support.sim_faults import drop_span, mark_yaw_rate_unmeasured, shift_stamps, state_gyro_variance
-from tests.support.verdicts import agree, one, verdicts_of
+from tests.support.verdicts import agree, one, verdicts_of, vector
 from tests.support.core_samples import make_config
 from tests.support.gps_wander import STATED_HDOP, WANDER
 
@@ -517,3 +517,35 @@ def test_the_summary_row_gives_the_nis_per_dof_the_verdicts_quote():
                                  channel="position") for i in range(100)])
     row = ch.summary()
     assert abs(row["nis_mean"] - 0.72) < 1e-9 and abs(row["nis_per_dof"] - 0.36) < 1e-9, row
+
+
+def test_the_horizontal_noise_line_keeps_the_altitude_noise_the_filter_took():
+    """Fixes stating 1 m on every axis where they are good to 0.3 m (the horizontal NIS reads low), on a car whose
+    IMU is pitched in its mount: the altitude's innovations are the climb the mount makes, which the lean check
+    names. The horizontal channel's position_noise line took its third value from those innovations: pasted (as
+    tune takes it), the altitude's noise grew to tens of metres and hid the climb (a highway car's height 41 m
+    off, the mount's verdict gone). It keeps the altitude's noise as the filter took it: 1 m."""
+    w = sim_gps.World(duration=90.0, speed=10.0, gps_rate=10.0, gps_sigma=0.3, imu_mount_pitch=0.05)
+    result = run_samples(sim_gps.simulate(w), robot_config(gps="datum = [48.137, 11.575, 520.0]\n"
+                                                                "position_noise = [1.0, 1.0, 1.0]"))
+    v = one(result.verdicts(), "gps", "position")
+    assert v.suggestion.startswith("position_noise = [") and vector(v.suggestion)[2] == 1.0, v
+    assert vector(v.suggestion)[0] < 0.6 and vector(v.suggestion)[1] < 0.6, v.suggestion
+
+
+@pytest.mark.parametrize("twist, noise, overstated", [(0.5, 0.1, True), (None, 1.0, False)])
+def test_a_gps_nis_low_that_no_position_noise_raises_names_the_prediction(twist, noise, overstated):
+    """1 Hz fixes of 0.1 m. The odometry's twist stated 0.5 m/s, far wider than the wheels' 0.02: between two fixes
+    the prediction alone claims more than the innovations show, so the NIS reads low whatever position_noise is,
+    and lowering it round after round (the line the doctor gave each time) left the NIS where it was. The
+    verdict says the prediction is stated too wide, with no position_noise line. With the twist as the wheels
+    state it and position_noise 10x too large, the NIS low is the fixes' noise: its line stays."""
+    w = sim_gps.World(duration=90.0, speed=10.0, gps_rate=1.0, gps_sigma=0.1)
+    wheel = "" if twist is None else f"twist_noise = [{twist}, {twist}, {twist}, 0.02, 0.02, 0.05]"
+    cfg = robot_config(odom=wheel, gps=f"datum = [48.137, 11.575, 520.0]\nposition_noise = [{noise}, {noise}, {noise}]")
+    v = one(run_samples(sim_gps.simulate(w), cfg).verdicts(), "gps", "position")
+    assert v.level == "warn" and "NIS low" in v.message, v
+    if overstated:
+        assert not v.suggestion and "prediction" in v.message and "twist_noise" in v.message, v
+    else:
+        assert v.suggestion.startswith("position_noise = ["), v

@@ -12,6 +12,7 @@ import math
 from ..channels import GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, nis_head
 from ...core.sensors.registry import kind_of
 from ..evidence import Evidence
+from ..median import median
 from ..nis import ChannelStats
 from ..verdict import Verdict, sensor_key
 
@@ -29,12 +30,17 @@ def _unit(component: str) -> str:
     return "rad" if component in _ANGLES else "m"
 
 
-def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
+def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None, up_sigma: float | None = None) -> str:
     """``position_noise = [...]`` from the innovations' rms per axis (east north up), when the channel
-    has the three, or the horizontal two and ``up`` (the fix's altitude channel) the third: the sensor's
-    noise plus the filter's own uncertainty, so an upper bound."""
+    has the three, or the horizontal two and a third: ``up_sigma``, the altitude's noise as the filter took
+    it, which the horizontal's line keeps (the altitude is judged by its own channel, whose error another
+    check may explain: a mount's pitch climbing the height 40 m off read as a 31 m noise that hid it), else
+    the rms of ``up`` (the fix's altitude channel) where that is not known (no config: the live monitor). The
+    rms is the sensor's noise plus the filter's own uncertainty, so an upper bound."""
     rms = [ch.component(i)[1] for i in range(len(ch.components))]
-    if len(rms) == 2 and up is not None and up.n and up.components == ["up"]:
+    if len(rms) == 2 and up_sigma is not None:
+        rms.append(up_sigma)
+    elif len(rms) == 2 and up is not None and up.n and up.components == ["up"]:
         rms.append(up.component(0)[1])
     if len(rms) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rms):
         return ""
@@ -43,14 +49,18 @@ def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None) -> str:
 
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
                      up: ChannelStats | None = None, unstated: bool = False,
-                     slow_vertical: tuple[float, float, float] | None = None) -> Verdict:
+                     slow_vertical: tuple[float, float, float] | None = None,
+                     up_sigma: float | None = None, stated_noise: list[float] | None = None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise. ``unstated``: a receiver whose fixes state no
     accuracy: the filter took its altitude's noise from the config's ``unknown_position_sigma`` (a verdict on
     it without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
     filter measures), and measured its horizontal noise from the wheels (which ``position_noise`` states
     instead). ``slow_vertical``: (sigma, tau, span) of the altitude's Gauss-Markov error state where the run
     spans too few of its time constants to identify it (the kind's ``slow_errors``): an altitude NIS low is then the
-    model's, not a noise to change (``_slow_altitude``)."""
+    model's, not a noise to change (``_slow_altitude``). ``up_sigma``: the altitude's noise as the filter took it,
+    the third value of a horizontal channel's line (``_measured_noise``). ``stated_noise``: the config's
+    position_noise (east north up), with which a NIS low that no smaller noise can raise is told apart
+    (``_prediction_overstated``)."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
@@ -58,7 +68,7 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     ev = {"nis_per_dof": ch.nis_per_dof, "gated_fraction": frac}
     if ch.n and not ch.n_nis:
         return Verdict(name, channel, "ok", figures(ch, t0), evidence=ev)
-    line = _measured_noise(ch, up)
+    line = _measured_noise(ch, up, up_sigma)
     stated = "the stated noise"
     if unstated and channel == "altitude":
         stated = "the noise taken for its fixes, which state none (unknown_position_sigma),"
@@ -99,6 +109,17 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        f"if it is the noise, the innovations (an upper bound) suggest {rms}", key, line, evidence=ev)
     if verdict == "nis_low" and channel == "altitude" and slow_vertical is not None:
         return _slow_altitude(name, ch, t0, slow_vertical, ev)
+    if verdict == "nis_low" and stated_noise is not None and channel != "altitude" and _settled(ch, stated_noise):
+        over = _prediction_overstated(ch, stated_noise)
+        if over is not None:
+            c, got, alone = over
+            ev["innovation_rms_m"], ev["prediction_alone_rms_m"] = got, alone
+            return Verdict(name, channel, "warn",
+                           f"NIS low ({figures(ch, t0)}; {detail}): the innovations ({c} rms {got:.3f} m) are smaller "
+                           f"than what the filter's prediction alone claims between fixes ({alone:.3f} m, S less the "
+                           "stated position_noise): no position_noise brings the NIS up, the prediction is what is "
+                           "stated too wide (the odometry's twist_noise, filter.process_noise); with sparse fixes a "
+                           "receiver's wandering error is modelled by error_tau_s and error_sigma", evidence=ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
                        f"NIS low ({figures(ch, t0)}; {detail}): {stated} is larger than the innovations show "
@@ -127,8 +148,62 @@ class AbsoluteNis(PerChannel):
     name = kind = "absolute"
 
     def judge(self, ev: Evidence, key: tuple[str, str], ch: ChannelStats) -> list[Verdict]:
+        up_sigma = _stated_vertical(ev, key[0]) if key[1] != "altitude" else None
+        sc = ev.sensors.get(key[0]) if ev.config is not None else None
+        stated = getattr(sc, "position_noise", None)
         return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key), _unstated(ev, key[0]),
-                                 _slow_vertical(ev, key[0], ch))]
+                                 _slow_vertical(ev, key[0], ch), up_sigma,
+                                 None if stated is None else [float(v) for v in stated])]
+
+
+def _settled(ch: ChannelStats, noise: list[float]) -> bool:
+    """Would the position_noise line (the innovations' rms, as it prints them: 2 digits) lower none of the
+    horizontal components the config states? Only then is a NIS low asked of the prediction
+    (``_prediction_overstated``): a noise stated too large keeps the filter's own uncertainty large as well,
+    its updates being weak, and its line comes first."""
+    for i, c in enumerate(ch.components):
+        if c in ("east", "north"):
+            stated = noise[("east", "north").index(c)]
+            if float(f"{ch.component(i)[1]:.2g}") < float(f"{stated:.2g}"):
+                return False
+    return True
+
+
+def _prediction_overstated(ch: ChannelStats, noise: list[float]) -> tuple[str, float, float] | None:
+    """(component, innovation rms, rms of the prediction alone) of the horizontal component whose innovations are
+    the furthest below what the prediction alone claims, where every horizontal one is below it: S = H P H^T + R,
+    so with R the position_noise stated the prediction's share is S - R, and innovations smaller than that share
+    cannot be explained by R (the innovations between 1 Hz fixes are the fixes' scatter, while the prediction
+    claims a second's dead-reckoning: lowering position_noise round after round left the NIS where it was).
+    None when a component is not below, or has no stated noise."""
+    worst = None
+    for i, c in enumerate(ch.components):
+        axis = ("east", "north").index(c) if c in ("east", "north") else None
+        if axis is None:
+            continue
+        _, rms, pred = ch.component(i)
+        alone_var = pred * pred - noise[axis] ** 2
+        if not (alone_var > 0.0 and rms * rms < alone_var):
+            return None
+        ratio = rms / math.sqrt(alone_var)
+        if worst is None or ratio < worst[0]:
+            worst = (ratio, c, rms, math.sqrt(alone_var))
+    return None if worst is None else worst[1:]
+
+
+def _stated_vertical(ev: Evidence, name: str) -> float | None:
+    """The altitude's noise (m) as the filter took it for sensor ``name``'s fixes: the config's position_noise,
+    else the fixes' own (their median), else unknown_position_sigma for fixes that state none; None without a
+    config or series (the live monitor), or for a sensor without those keys (a pose)."""
+    if ev.config is None or ev.series is None:
+        return None
+    sc = ev.sensors.get(name)
+    if sc is None or getattr(sc, "unknown_position_sigma", None) is None:
+        return None
+    if sc.position_noise is not None:
+        return float(sc.position_noise[2])
+    stated = [v for v in ev.series.gps_sigma_up if math.isfinite(v)]
+    return float(median(stated)) if stated else float(sc.unknown_position_sigma[2])
 
 
 def _slow_vertical(ev: Evidence, name: str, ch: ChannelStats) -> tuple[float, float, float] | None:
