@@ -319,6 +319,11 @@ def decode_report(payload: bytes) -> HealthReport:
 _LEVEL_OF_STATUS = {"ok": OK, "degraded": WARN, "starting": WARN, "failed": ERROR}
 _BAD_VERDICTS = {"nis_high": "NIS high (R too small, or the sensor lies)",
                  "nis_low": "NIS low (R too large)"}
+# A channel that is a consistency check, not an update: the wheels' yaw rate against the fused gyro. Its NIS is
+# slip (a skid-steer's scale, a driver's offset), which is only reported: a ROS status saying "R too small" of it
+# sent users to raise a noise the doctor says not to; a NIS low of it is a stated wheel noise nothing uses
+_CHECK_VERDICTS = {"yaw_rate": {"nis_high": "disagrees with the gyro (slip, or a driver's scale or offset): only "
+                                            "reported, the gyro drives heading; see the doctor"}}
 
 
 def _num(v: float | None, digits: int = 3) -> str:
@@ -347,8 +352,9 @@ def ros_statuses(report: HealthReport, node_name: str, hardware_ids: dict[str, s
     )]
     for name, s in report.sensors.items():
         channels = {k.split("/", 1)[1]: v for k, v in report.consistency.items() if k.split("/", 1)[0] == name}
-        bad = [f"{ch}: {_BAD_VERDICTS[v['verdict']]}" for ch, v in channels.items()
-               if v.get("verdict") in _BAD_VERDICTS]
+        bad = [f"{ch}: {_CHECK_VERDICTS[ch][v['verdict']] if ch in _CHECK_VERDICTS else _BAD_VERDICTS[v['verdict']]}"
+               for ch, v in channels.items()
+               if v.get("verdict") in _CHECK_VERDICTS.get(ch, _BAD_VERDICTS)]
         if s.alive:
             level, message = (WARN, "; ".join(bad)) if bad else (OK, "alive")
         elif s.age_s is None:

@@ -252,3 +252,25 @@ def test_a_fast_drive_whose_logger_pauses_does_not_flap_after_the_first_pause():
         clock.t += dt
         long.on_accepted(0, clock.t)
     assert long.report().sensors["wheel"].timeout_s < 0.3  # 3 periods of the EMA the gap moved, not 1.5 x 0.8 s
+
+
+def test_the_ros_status_of_the_wheels_yaw_rate_check_says_slip_not_a_noise():
+    """The wheels' yaw rate is a consistency check against the fused gyro, not an update: its NIS high is slip,
+    only reported. A ROS status reading "R too small" of it sent a user to raise the wheels' yaw-rate noise, the
+    doctor's opposite; its NIS low (a stated wheel noise nothing uses) is no warning. An update's NIS keeps the
+    noise wording."""
+    from fusiond.health import FilterHealth, HealthReport, QueueHealth, SensorHealth, ros_statuses
+
+    def status(verdicts: dict[str, str]):
+        sensor = SensorHealth(alive=True, age_s=0.01, rate_hz=50.0, received=100, dropped=0, rejected=0)
+        report = HealthReport(status="ok", sensors={"wheel": sensor}, problems=[], filter=FilterHealth(),
+                              queue=QueueHealth(), consistency={f"wheel/{ch}": {"nis_mean": 1.0, "verdict": v}
+                                                                for ch, v in verdicts.items()})
+        (s,) = [s for s in ros_statuses(report, "fusiond", {}) if s.name == "fusiond: wheel"]
+        return int(s.level), s.message
+
+    level, message = status({"yaw_rate": "nis_high"})
+    assert level == 1 and "slip" in message and "R too small" not in message, message
+    assert status({"yaw_rate": "nis_low"}) == (0, "alive")
+    level, message = status({"twist": "nis_high"})
+    assert level == 1 and "R too small" in message, message
