@@ -19,6 +19,7 @@ from fusiond.core.sensors.registry import KINDS, kind_of
 from fusiond.samples import Sample
 from fusiond.replay import bag1_records
 from fusiond.errors import BagError  # importable from here, as before
+from fusiond.logs import get_logger
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -26,6 +27,9 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
     from fusiond.config import SensorConfig
+
+log = get_logger(__name__)
+
 
 def expected(sensor: SensorConfig) -> tuple[str, Callable[[Any, str], Sample]]:
     """(ROS message type, message -> sample) of a sensor, as its kind's descriptor says (a pose
@@ -155,12 +159,12 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
     ros1 = [p.suffix == ".bag" for p in paths]
     if any(ros1) and not all(ros1):
         raise BagError("cannot mix ROS 1 .bag files and ROS 2 bags in one replay")
-    if len(paths) > 1 and not any(ros1):
-        raise BagError("give one ROS 2 bag (directory) at a time; several ROS 1 .bag files can be merged")
+    paths = [_storage_file(p) if p.is_dir() and not (p / "metadata.yaml").exists() else p for p in paths]
     for p in paths:  # what rosbags would say in its own words, said in the user's
-        if p.is_dir() and not (p / "metadata.yaml").exists() and not any(p.glob("*.mcap")):
+        if p.is_dir() and not (p / "metadata.yaml").exists():
             raise BagError(f"{p}: not a readable ROS 1/ROS 2 bag (a ROS 2 bag directory holds metadata.yaml and "
-                           "its .db3 or .mcap files: this one has no metadata.yaml)")
+                           "its .db3 or .mcap files: this one has no metadata.yaml, and not one storage file "
+                           "to read without it)")
         if p.is_file() and p.suffix == ".bag" and not _starts_as_ros1(p):
             raise BagError(f"{p}: not a readable ROS 1/ROS 2 bag (a ROS 1 bag starts with "
                            f"{ROS1_MAGIC.decode().strip()!r}: this file does not)")
@@ -177,6 +181,18 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
     from fusiond.codecs import typestore
 
     return _opened(paths, typestore())  # the standard (Humble) definitions
+
+
+def _storage_file(directory: Path) -> Path:
+    """A ROS 2 bag directory without its metadata.yaml (a recorder cut off before writing it) that holds one
+    storage file (.db3 or .mcap): that file, which rosbags reads on its own (the log says so); else the
+    directory, refused by the caller."""
+    files = sorted(directory.glob("*.db3")) + sorted(directory.glob("*.mcap"))
+    if len(files) != 1:
+        return directory
+    log.warning("bag_metadata_missing", bag=str(directory), reading=str(files[0]),
+                reason="no metadata.yaml: its one storage file is read on its own")
+    return files[0]
 
 
 def _names(paths: Sequence[Path]) -> str:
@@ -229,8 +245,9 @@ def damaged_ros2(names: str, err: BaseException, paths: Sequence[Path] = ()) -> 
     (an index at the end of the file); a ROS 2 .db3 is an SQLite database and an .mcap file has its own tool."""
     if SQLITE_DAMAGE in str(err):
         return (f"{names}: the ROS 2 bag's SQLite file is damaged or cut short (recording stopped mid-write), so it "
-                "cannot be replayed as it is; recover what it holds with `sqlite3 IN.db3 .recover | sqlite3 "
-                "OUT.db3`, then `ros2 bag reindex` on a folder holding OUT.db3, and replay that folder")
+                "cannot be replayed as it is; copy out every row it still reads with `sqlite3 IN.db3 .dump | sed "
+                "'s/^ROLLBACK;.*/COMMIT;/' | sqlite3 OUT.db3` (the dump ends in ROLLBACK where the file breaks) and "
+                "replay OUT.db3 itself (no metadata.yaml needed; `ros2 bag reindex` writes one for ROS 2 tools)")
     if _mcap_cut_short(paths):
         return (f"{names}: the ROS 2 bag's MCAP file is cut short (recording stopped mid-write, no footer), so it "
                 "cannot be replayed as it is; `mcap recover IN.mcap -o OUT.mcap` (the mcap CLI) rewrites what "

@@ -12,17 +12,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from rosbags.rosbag2 import Writer
 
 from fusiond.cli import main
-from fusiond.codecs import typestore
 from fusiond.config import ConfigError
 from fusiond.doctor import Verdict, format_verdicts
 from fusiond.replay.run import run_samples
-from fusiond.core.sensors import ImuSample, OdomSample, encode_sample
 from fusiond.tune.advice import prove_advice, with_suggestion
 
 from tests.support.configs import robot_config, robot_config_text
+from tests.support.ros2_bags import write_ros2_bag
 from tests.support.sim import SimConfig, simulate
 
 GYRO_SIGMA = 0.002  # the simulation's gyro noise, rad/s
@@ -129,21 +127,8 @@ def test_a_line_that_does_not_apply_is_a_config_error(key: str, line: str, said:
         with_suggestion(robot_config(), Verdict("imu", "x", "warn", "", key, line))
 
 
-def _write_bag(path: Path, samples: list) -> None:
-    store = typestore()
-    types = {OdomSample: "nav_msgs/msg/Odometry", ImuSample: "sensor_msgs/msg/Imu"}
-    topics = {"wheel": "/odom", "imu": "/imu"}
-    with Writer(path, version=9) as writer:
-        conns = {}
-        for s in samples:
-            msgtype = types[type(s)]
-            if s.sensor not in conns:
-                conns[s.sensor] = writer.add_connection(topics[s.sensor], msgtype, typestore=store)
-            writer.write(conns[s.sensor], int(s.stamp * 1e9), encode_sample(s, "ros2-cdr", msgtype=msgtype))
-
-
 def test_the_doctor_command_prints_the_replayed_effect(drive, tmp_path: Path, capsys) -> None:
-    _write_bag(tmp_path / "bag", drive)
+    write_ros2_bag(tmp_path / "bag", drive)
     cfg = tmp_path / "robot.toml"
     cfg.write_text(robot_config_text(imu="gyro_noise = 0.02"))
     assert main(["doctor", str(tmp_path / "bag"), "--config", str(cfg)]) == 0

@@ -51,7 +51,7 @@ def test_a_ros2_bag_cut_short_gets_one_plain_sentence_naming_the_right_tools(jac
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
-    assert "damaged or cut short" in lines[0] and "sqlite3" in lines[0] and "ros2 bag reindex" in lines[0]
+    assert "damaged or cut short" in lines[0] and "sqlite3 IN.db3 .dump" in lines[0] and "replay OUT.db3" in lines[0]
     assert "rosbag reindex" not in lines[0].replace("ros2 bag reindex", "")
     assert "Traceback" not in proc.stderr and proc.stdout == ""
 

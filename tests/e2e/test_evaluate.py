@@ -14,15 +14,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosbags.rosbag2 import Writer
 
 from fusiond.cli import main
-from fusiond.codecs import typestore
 from fusiond.estimator import rotation as rot
 from fusiond.replay.evaluate import Track, _aligned_rms
 from fusiond.core.sensors.pose import PoseSample
-from fusiond.core.sensors import GpsSample, ImuSample, OdomSample, encode_sample
+from fusiond.core.sensors import GpsSample, ImuSample, OdomSample
 from tests.support.configs import robot_config_text
+from tests.support.ros2_bags import write_ros2_bag
 from tests.support.sim_gps import World, simulate
 
 TYPES = {OdomSample: "nav_msgs/msg/Odometry", ImuSample: "sensor_msgs/msg/Imu",
@@ -37,15 +36,7 @@ def _write_bag(path: Path, w: World) -> None:
     # recorded in ENU at the receiver's first fix is
     _, e0, n0 = w.fixes[0]
     truth = [PoseSample("truth", t, (x - e0, y - n0, 0.0), rot.from_rpy(0.0, 0.0, h)) for t, x, y, h in w.truth]
-    rows = sorted(samples + truth, key=lambda s: s.stamp)
-    store = typestore()
-    with Writer(path, version=9) as writer:
-        conns = {}
-        for s in rows:
-            msgtype = TYPES[type(s)]
-            if s.sensor not in conns:
-                conns[s.sensor] = writer.add_connection(TOPICS[s.sensor], msgtype, typestore=store)
-            writer.write(conns[s.sensor], int(s.stamp * 1e9), encode_sample(s, "ros2-cdr", msgtype=msgtype))
+    write_ros2_bag(path, sorted(samples + truth, key=lambda s: s.stamp), TOPICS, TYPES)
 
 
 @pytest.fixture(scope="module")
