@@ -326,6 +326,15 @@ _CHECK_VERDICTS = {"yaw_rate": {"nis_high": "disagrees with the gyro (slip, or a
                                             "reported, the gyro drives heading; see the doctor"}}
 
 
+def _persists(v: dict) -> bool:
+    """Is a channel's windowed verdict the whole run's too (where the answer carries it)? A coloured error (an
+    AHRS's orientation, a skid-steer's turns) moves one window's NIS out of its bounds and back: a status that
+    followed each window flapped between OK and WARN twenty times a minute while the doctor read the channel
+    consistent."""
+    run = v.get("run_verdict")
+    return run is None or run == "warming_up" or run == v.get("verdict")
+
+
 def _num(v: float | None, digits: int = 3) -> str:
     return "" if v is None else f"{v:.{digits}f}"
 
@@ -334,8 +343,9 @@ def ros_statuses(report: HealthReport, node_name: str, hardware_ids: dict[str, s
     """The health report as DiagnosticStatus entries: `<node>: filter` first, then `<node>: <sensor>`.
 
     Levels: the filter is OK / WARN (degraded, starting) / ERROR (failed). A sensor is
-    OK while alive, WARN while alive with a windowed NIS verdict out of its bounds (the
-    live doctor's signal) or before its first sample, ERROR when it has gone silent.
+    OK while alive, WARN while alive with a windowed NIS verdict out of its bounds that the
+    whole run's shares (the live doctor's signal, ``_persists``) or before its first sample,
+    ERROR when it has gone silent.
     Key-values carry rates, ages and counters as strings (DiagnosticStatus has no numbers).
     """
     f, q = report.filter, report.queue
@@ -354,7 +364,7 @@ def ros_statuses(report: HealthReport, node_name: str, hardware_ids: dict[str, s
         channels = {k.split("/", 1)[1]: v for k, v in report.consistency.items() if k.split("/", 1)[0] == name}
         bad = [f"{ch}: {_CHECK_VERDICTS[ch][v['verdict']] if ch in _CHECK_VERDICTS else _BAD_VERDICTS[v['verdict']]}"
                for ch, v in channels.items()
-               if v.get("verdict") in _CHECK_VERDICTS.get(ch, _BAD_VERDICTS)]
+               if v.get("verdict") in _CHECK_VERDICTS.get(ch, _BAD_VERDICTS) and _persists(v)]
         if s.alive:
             level, message = (WARN, "; ".join(bad)) if bad else (OK, "alive")
         elif s.age_s is None:

@@ -97,6 +97,10 @@ class NisWindow:
         self._sum = 0.0  # of the finite values in the window
         self._infinite = 0  # +inf values in the window
         self._since_exact = 0  # additions since the sum was last recomputed exactly
+        # the whole run's applied updates (since the dof last changed): a windowed verdict alone flaps with
+        # each window of a coloured error, the whole run's says whether it persists (``run_verdict``)
+        self._run_sum = 0.0
+        self._run_n = 0
 
     def bounds(self, dof: int) -> tuple[float, float]:
         """Two-sided bounds on the window's mean NIS: chi-square's, widened to the practical band."""
@@ -116,6 +120,7 @@ class NisWindow:
             flags.clear()
             self.dof = dof
             self._sum, self._infinite, self._since_exact = 0.0, 0, 0
+            self._run_sum, self._run_n = 0.0, 0
             self.recent_rejected = 0
         if len(flags) == self.window and flags[0]:
             self.recent_rejected -= 1
@@ -136,6 +141,8 @@ class NisWindow:
                 self._infinite += 1
             else:
                 self._sum += nis
+                self._run_sum += nis
+                self._run_n += 1
             self._since_exact += 1
             if self._since_exact >= self.window:
                 self._sum = math.fsum(v for v in values if v != math.inf)
@@ -164,6 +171,18 @@ class NisWindow:
         m = math.inf if self._infinite else self._sum / n
         return "nis_high" if m > hi else "nis_low" if m < lo else "ok"
 
+    def run_verdict(self) -> str:
+        """The verdict of every finite NIS applied since the dof last changed, against the chi-square bounds of
+        that many (widened to the practical band, as the window's): "warming_up" before a window's worth."""
+        n = self._run_n
+        if n < self.window or not self.dof:
+            return "warming_up"
+        a = (1.0 - self.confidence) / 2.0
+        lo = min(chi2_ppf(a, n * self.dof) / n, NIS_LOW * self.dof)
+        hi = max(chi2_ppf(1.0 - a, n * self.dof) / n, NIS_HIGH * self.dof)
+        m = self._run_sum / n
+        return "nis_high" if m > hi else "nis_low" if m < lo else "ok"
+
     def summary(self) -> dict:
         lo_hi = self.bounds(self.dof) if self.dof else None
         return {
@@ -178,4 +197,7 @@ class NisWindow:
             # REJECTED_SHARE), whatever the applied ones' mean; "mean": by the mean against its bounds
             "cause": "rejected" if self.gated_out else "mean",
             "rejected_share": self.recent_rejected / len(self.flags) if self.flags else 0.0,
+            # the whole run's mean and verdict (``run_verdict``): a window's verdict that the run's shares persists
+            "run_nis_mean": self._run_sum / self._run_n if self._run_n else None,
+            "run_verdict": self.run_verdict(),
         }

@@ -274,3 +274,32 @@ def test_the_ros_status_of_the_wheels_yaw_rate_check_says_slip_not_a_noise():
     assert status({"yaw_rate": "nis_low"}) == (0, "alive")
     level, message = status({"twist": "nis_high"})
     assert level == 1 and "R too small" in message, message
+
+
+def test_a_window_out_of_its_bounds_warns_on_ros_only_while_the_whole_run_is_too():
+    """One window of an AHRS's coloured error reads NIS low and the next ok: the ROS status followed each window
+    and flapped between OK and WARN twenty times a minute while the doctor read the channel consistent. The
+    window's verdict warns only when the whole run's (``NisWindow.run_verdict``) is the same."""
+    from fusiond.core.diagnostics import NisWindow
+    from fusiond.health import FilterHealth, HealthReport, QueueHealth, SensorHealth, ros_statuses
+
+    w = NisWindow(50, 0.95)
+    for _ in range(500):
+        w.add(2.0, 2, False)  # consistent for the dof
+    for _ in range(50):
+        w.add(0.1, 2, False)  # one low window
+    summary = w.summary()
+    assert summary["verdict"] == "nis_low" and summary["run_verdict"] == "ok", summary
+    for _ in range(5000):
+        w.add(0.1, 2, False)  # low for good: the run says so too
+    assert w.summary()["run_verdict"] == "nis_low"
+
+    def level(window: str, run: str) -> int:
+        sensor = SensorHealth(alive=True, age_s=0.01, rate_hz=50.0, received=100, dropped=0, rejected=0)
+        report = HealthReport(status="ok", sensors={"imu": sensor}, problems=[], filter=FilterHealth(),
+                              queue=QueueHealth(),
+                              consistency={"imu/orientation": {"nis_mean": 0.1, "verdict": window, "run_verdict": run}})
+        (s,) = [s for s in ros_statuses(report, "fusiond", {}) if s.name == "fusiond: imu"]
+        return int(s.level)
+
+    assert level("nis_low", "ok") == 0 and level("nis_low", "nis_low") == 1 and level("nis_low", "warming_up") == 1
