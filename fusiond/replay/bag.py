@@ -69,8 +69,12 @@ class BagSamples:
         reader = self._reader
         ros1 = not reader.is2
         convert = {}
+        recorded = {c.topic: c.msgtype for c in self._connections}
         for topic, s in self._by_topic.items():
             msgtype, from_ros = expected(s)
+            if recorded.get(topic, msgtype) != msgtype:  # the same definition under another name (_select):
+                convert[topic] = (s.name, recorded[topic], from_ros, None)  # read as recorded, fields alike
+                continue
             # a struct fast path only where the kind's codec offers one: a pose sensor reading
             # nav_msgs/msg/Odometry makes poses, not the odometry's samples
             codec = kind_of(s).codec()
@@ -295,8 +299,8 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
             missing.append(sensor.name)
             continue
         want = expected(sensor)[0]
-        found = {c.msgtype for c in topics[topic].connections}
-        if found != {want}:
+        found = {c.msgtype for c in topics[topic].connections if not _same_definition(c, want, reader.is2)}
+        if found and found != {want}:
             hint = " (set its msgtype)" if len(KINDS[kind].ros_types) > 1 else ""
             raise BagError(
                 f"topic {topic} (sensor {sensor.name!r}) has type {', '.join(sorted(found))}, "
@@ -308,6 +312,27 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
         have = ", ".join(f"{t} [{i.msgtype}]" for t, i in topics.items()) or "none"
         raise BagError(f"none of the configured topics is in the bag: wanted {wanted}; the bag has {have}")
     return selected, missing
+
+
+def _same_definition(connection: Connection, want: str, ros2: bool) -> bool:
+    """A ROS 1 connection of another type name whose definition is ``want``'s: its MD5 sum (which ROS 1
+    computes from the fields, not the name) is ``want``'s in ROS 1 Noetic's definitions. A driver that
+    re-registers nav_msgs/Odometry under its own package (``my_msgs/Odometry``) records the same bytes; the
+    log says which type the topic is read as. ROS 2's type hash holds the name: no such match there."""
+    if ros2 or connection.msgtype == want or not connection.digest:
+        return False
+    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.base import TypesysError
+
+    try:
+        digest = get_typestore(Stores.ROS1_NOETIC).generate_msgdef(want, ros_version=1)[1]
+    except TypesysError:
+        return False
+    if connection.digest != digest:
+        return False
+    log.warning("topic_read_as", topic=connection.topic, msgtype=connection.msgtype, read_as=want,
+                reason="the same ROS 1 definition (MD5) under another name")
+    return True
 
 
 def open_bag_samples(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]) -> BagSamples:
