@@ -27,6 +27,16 @@ def test_an_imu_that_drops_out_while_the_wheels_report_is_named():
     assert v.evidence["longest_s"] == pytest.approx(5.0, abs=0.3), v
 
 
+def test_an_imu_lost_for_good_while_the_wheels_report_is_named():
+    """The IMU stops 15 s into a 40 s drive and never comes back: no interval between its own stamps shows it,
+    the wheels' last stamp does. It had gone unsaid (the live daemon said it; the replay's doctor did not)."""
+    samples = [s for s in simulate(SimConfig(duration=40.0, standstill=2.0))
+               if not (type(s) is ImuSample and s.stamp >= T0 + 15.0)]
+    (v,) = _inputs(verdicts_of(robot_config(), samples), "imu")
+    assert v.level == "warn" and "silent 1 time(s)" in v.message, v
+    assert v.evidence["longest_s"] == pytest.approx(25.0, abs=0.3), v
+
+
 def test_a_logging_gap_of_every_sensor_is_no_silence_of_one():
     samples = [s for s in simulate(SimConfig(duration=40.0, standstill=2.0))
                if not T0 + 20.0 <= s.stamp < T0 + 25.0]

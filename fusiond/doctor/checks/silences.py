@@ -28,14 +28,16 @@ def silences(t: list[float] | np.ndarray, longer_than: float, odom_t: list[float
              ) -> list[tuple[float, float]]:
     """(start, length s) of each interval between consecutive stamps ``t`` longer than ``longer_than`` across
     which the odometry kept reporting (no interval of its own that long inside it): the sensor's own silences,
-    not a logging gap of every sensor."""
+    not a logging gap of every sensor. The odometry's first and last stamps bound ``t`` too: a sensor that
+    starts late or stops for good (an IMU lost 20 s into a 60 s drive) is silent there as well."""
     ts, to = np.asarray(t, dtype=float), np.asarray(odom_t, dtype=float)
     if ts.size < 2 or to.size == 0:
         return []
-    d = np.diff(ts)
+    bounded = np.concatenate(([to[0]] if to[0] < ts[0] else [], ts, [to[-1]] if to[-1] > ts[-1] else []))
+    d = np.diff(bounded)
     out = []
     for i in np.nonzero(d > longer_than)[0].tolist():
-        a, b = ts[i], ts[i + 1]
+        a, b = bounded[i], bounded[i + 1]
         inside = to[np.searchsorted(to, a, side="right"):np.searchsorted(to, b, side="left")]
         if inside.size and np.max(np.diff(np.concatenate(([a], inside, [b])))) <= longer_than:
             out.append((float(a), float(b - a)))
