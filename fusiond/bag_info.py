@@ -20,7 +20,7 @@ from typing import Any
 
 import msgspec
 
-from .replay.bag import open_reader
+from .replay.bag import open_reader, same_definition
 
 __all__ = ["BagInfo", "StaticTransform", "TopicInfo", "format_info", "inspect_bags", "is_reference", "print_info",
            "topic_use"]
@@ -49,6 +49,7 @@ class TopicInfo(msgspec.Struct, kw_only=True):
     topic: str
     msgtype: str
     count: int
+    recorded_as: str = ""  # another type name with msgtype's definition (ROS 1 MD5), as the bag names it
     rate_hz: float  # by receive time over the recording (count - 1 over the span)
     frame_id: str = ""
     child_frame_id: str = ""  # odometry
@@ -177,7 +178,9 @@ def inspect_bags(paths: Sequence[Path | str]) -> BagInfo:
         static: list[StaticTransform] = []
         for name, info in sorted(reader.topics.items()):
             conns = list(info.connections)
-            msgtype = info.msgtype or ""
+            msgtype = recorded = info.msgtype or ""
+            if msgtype not in _READERS and conns:  # a known type re-registered under another name: read as it
+                msgtype = next((k for k in _READERS if same_definition(conns[0], k, reader.is2)), msgtype)
             times: list[int] = []
             sample: list[Any] = []
             wanted = msgtype in _READERS or msgtype == TF and name.endswith("tf_static")
@@ -190,7 +193,8 @@ def inspect_bags(paths: Sequence[Path | str]) -> BagInfo:
                         pass
             span = (times[-1] - times[0]) * 1e-9 if len(times) > 1 else 0.0
             t = TopicInfo(topic=name, msgtype=msgtype, count=len(times),
-                          rate_hz=(len(times) - 1) / span if span > 0.0 else 0.0)
+                          rate_hz=(len(times) - 1) / span if span > 0.0 else 0.0,
+                          recorded_as=recorded if recorded != msgtype else "")
             if sample and getattr(sample[0], "header", None) is not None:
                 t.frame_id = sample[0].header.frame_id
             if sample and msgtype in _READERS:
@@ -217,7 +221,8 @@ def format_info(info: BagInfo) -> str:
         frame = f" frame {t.frame_id}" if t.frame_id else ""
         if t.child_frame_id:
             frame += f" -> {t.child_frame_id}"
-        out.append(f"{t.topic}  {t.msgtype}  {t.count} msgs  {t.rate_hz:.1f} Hz{frame}")
+        recorded = f" (recorded as {t.recorded_as}, its definition)" if t.recorded_as else ""
+        out.append(f"{t.topic}  {t.msgtype}{recorded}  {t.count} msgs  {t.rate_hz:.1f} Hz{frame}")
         if t.covariance:
             out.append(f"    stated: {t.covariance}")
         out.append(f"    use:    {topic_use(t)}")

@@ -72,7 +72,7 @@ class BagSamples:
         recorded = {c.topic: c.msgtype for c in self._connections}
         for topic, s in self._by_topic.items():
             msgtype, from_ros = expected(s)
-            if recorded.get(topic, msgtype) != msgtype:  # the same definition under another name (_select):
+            if recorded.get(topic, msgtype) != msgtype:  # the same definition under another name (same_definition):
                 convert[topic] = (s.name, recorded[topic], from_ros, None)  # read as recorded, fields alike
                 continue
             # a struct fast path only where the kind's codec offers one: a pose sensor reading
@@ -299,7 +299,7 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
             missing.append(sensor.name)
             continue
         want = expected(sensor)[0]
-        found = {c.msgtype for c in topics[topic].connections if not _same_definition(c, want, reader.is2)}
+        found = {c.msgtype for c in topics[topic].connections if not same_definition(c, want, reader.is2)}
         if found and found != {want}:
             hint = " (set its msgtype)" if len(KINDS[kind].ros_types) > 1 else ""
             raise BagError(
@@ -314,7 +314,7 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
     return selected, missing
 
 
-def _same_definition(connection: Connection, want: str, ros2: bool) -> bool:
+def same_definition(connection: Connection, want: str, ros2: bool) -> bool:
     """A ROS 1 connection of another type name whose definition is ``want``'s: its MD5 sum (which ROS 1
     computes from the fields, not the name) is ``want``'s in ROS 1 Noetic's definitions. A driver that
     re-registers nav_msgs/Odometry under its own package (``my_msgs/Odometry``) records the same bytes; the

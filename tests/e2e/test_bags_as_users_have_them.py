@@ -77,3 +77,9 @@ def test_a_ros1_topic_of_another_type_name_with_the_same_definition_is_read_as_i
         got = replay([renamed], cfg, doctor=False, progress=False, read_ahead=False).trajectory
     assert got == original and len(got) > 1000
     assert any(e["event"] == "topic_read_as" and e["msgtype"] == "my_msgs/msg/Odometry" for e in logs), logs
+    # `fusiond info` and `init` read it as its kind too, and say what the bag calls it
+    from fusiond.bag_info import format_info, inspect_bags
+
+    odom = next(t for t in inspect_bags([renamed]).topics if t.topic == "/jackal_velocity_controller/odom")
+    assert (odom.msgtype, odom.recorded_as) == ("nav_msgs/msg/Odometry", "my_msgs/msg/Odometry"), odom
+    assert "recorded as my_msgs/msg/Odometry" in format_info(inspect_bags([renamed]))
