@@ -24,7 +24,7 @@ from contextvars import ContextVar
 from functools import partial
 from typing import Any
 
-__all__ = ["bind_process", "configure", "get_logger", "muted"]
+__all__ = ["bind_process", "configure", "forget_loggers", "get_logger", "muted"]
 
 # logging's level names and numbers (``logging.getLevelNamesMapping()``), spelled out: importing logging to
 # check a name costs ~10 ms of a replay that logs nothing (a test holds the two equal)
@@ -73,8 +73,7 @@ def _apply() -> None:
     if json is None:
         json = not sys.stderr.isatty()
     renderer = structlog.processors.JSONRenderer() if json else structlog.dev.ConsoleRenderer(colors=False)
-    for logger in list(_LOGGERS):  # structlog caches a logger at its first event: a new level reaches those too
-        logger._logger = None
+    forget_loggers()  # structlog caches a logger at its first event: a new level reaches those too
     structlog.configure(
         processors=[
             _drop_when_muted,
@@ -87,6 +86,14 @@ def _apply() -> None:
         logger_factory=structlog.PrintLoggerFactory(file=_Stderr()),
         cache_logger_on_first_use=True,
     )
+
+
+def forget_loggers() -> None:
+    """Let every logger of this module take structlog's configuration anew at its next event: structlog caches
+    a logger at its first one (``cache_logger_on_first_use``), so a configuration made since (a new level, a
+    test's ``structlog.testing.capture_logs``) would not reach a logger used before it."""
+    for logger in list(_LOGGERS):
+        logger._logger = None
 
 
 def _drop_when_muted(logger: Any, method: str, event: dict) -> dict:

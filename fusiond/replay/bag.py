@@ -163,6 +163,7 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
     ros1 = [p.suffix == ".bag" for p in paths]
     if any(ros1) and not all(ros1):
         raise BagError("cannot mix ROS 1 .bag files and ROS 2 bags in one replay")
+    names = _names(paths)  # errors name the bags as given, a directory read from its storage file included
     paths = [_storage_file(p) if p.is_dir() and not (p / "metadata.yaml").exists() else p for p in paths]
     for p in paths:  # what rosbags would say in its own words, said in the user's
         if p.is_dir() and not (p / "metadata.yaml").exists():
@@ -175,16 +176,16 @@ def _open_reader(paths: Sequence[Path]) -> AnyReader:
     from rosbags.highlevel import AnyReaderError  # here, not at import: a replay reading ahead reads in a child
 
     try:
-        return _opened(paths, None)
+        return _opened(paths, None, names)
     except AnyReaderError as err:
         # rosbags' answer to a ROS 2 bag recorded without message definitions (before Iron): "Bag
         # contains no type definitions. Instantiate AnyReader with a default_typestore argument."
         if "default_typestore" not in str(err):
-            raise BagError(damaged_ros2(_names(paths), err, paths)
-                           or unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
+            raise BagError(damaged_ros2(names, err, paths)
+                           or unreadable(names, err) + _repair_hint(paths, err)) from None
     from fusiond.codecs import typestore
 
-    return _opened(paths, typestore())  # the standard (Humble) definitions
+    return _opened(paths, typestore(), names)  # the standard (Humble) definitions
 
 
 def _storage_file(directory: Path) -> Path:
@@ -268,9 +269,11 @@ def _repair_hint(paths: Sequence[Path], err: Exception) -> str:
     return ""
 
 
-def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
-    """An open AnyReader; BagError when the files cannot be read. Types come from the bag's own
-    definitions; ``default`` (the Humble store, ~70 ms to build) only for a bag that has none."""
+def _opened(paths: Sequence[Path], default: Typestore | None, names: str = "") -> AnyReader:
+    """An open AnyReader; BagError when the files cannot be read, naming them ``names`` (default: ``paths``).
+    Types come from the bag's own definitions; ``default`` (the Humble store, ~70 ms to build) only for a
+    bag that has none."""
+    names = names or _names(paths)
     from rosbags.highlevel import AnyReader, AnyReaderError
 
     try:
@@ -280,8 +283,8 @@ def _opened(paths: Sequence[Path], default: Typestore | None) -> AnyReader:
         # on a PNG named .bag, AssertionError on a damaged ROS 1 index, FileNotFoundError without metadata)
         if default is None and isinstance(err, AnyReaderError) and not damaged_ros2("", err):
             raise
-        raise BagError(damaged_ros2(_names(paths), err, paths)
-                       or unreadable(_names(paths), err) + _repair_hint(paths, err)) from None
+        raise BagError(damaged_ros2(names, err, paths)
+                       or unreadable(names, err) + _repair_hint(paths, err)) from None
     return reader
 
 

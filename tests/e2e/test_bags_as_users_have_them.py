@@ -39,11 +39,14 @@ def test_a_ros2_bag_directory_without_its_metadata_is_read_from_its_one_storage_
     file (rosbags reads it alone), with a log line saying so, instead of refused as not a bag."""
     from structlog.testing import capture_logs
 
+    from fusiond.logs import configure
+
     samples = simulate(SimConfig(duration=10.0, standstill=2.0))
     cfg = robot_config(imu_key="imu")
     whole = _write(tmp_path / "whole", samples)
     expected = replay([whole], cfg, doctor=False, progress=False).trajectory
     (whole / "metadata.yaml").unlink()
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop warnings
     with capture_logs() as logs:  # read here, not in a forked child, for its log line to be captured
         got = replay([whole], cfg, doctor=False, progress=False, read_ahead=False).trajectory
     assert got == expected
@@ -58,6 +61,7 @@ def test_a_ros1_topic_of_another_type_name_with_the_same_definition_is_read_as_i
     from structlog.testing import capture_logs
 
     from fusiond.config import load
+    from fusiond.logs import configure
 
     renamed = tmp_path / "custom.bag"
     with Reader(jackal_bag) as reader:
@@ -73,6 +77,7 @@ def test_a_ros1_topic_of_another_type_name_with_the_same_definition_is_read_as_i
         writer.close()
     cfg = load(Path(__file__).resolve().parents[2] / "examples" / "jackal.toml")
     original = replay([jackal_bag], cfg, doctor=False, progress=False).trajectory
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop warnings
     with capture_logs() as logs:  # read here, not in a forked child, for its log line to be captured
         got = replay([renamed], cfg, doctor=False, progress=False, read_ahead=False).trajectory
     assert got == original and len(got) > 1000

@@ -68,6 +68,11 @@ def _dies_in_a_child(n: int) -> int:
 def test_a_child_that_dies_loses_nothing_its_job_runs_again_here():
     from structlog.testing import capture_logs
 
+    from fusiond.logs import configure
+
+    # capture_logs replaces the processors, not the level's filter: an earlier test's `--quiet` (errors only)
+    # would drop the warning before the capture sees it
+    configure("warning")
     with capture_logs() as logs:
         assert run_side_by_side(_dies_in_a_child, [0, 1], workers=2) == [0, 10]
         assert beside(lambda: 1, lambda: _dies_in_a_child(0)) == (1, 0)
