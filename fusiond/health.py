@@ -326,6 +326,13 @@ _CHECK_VERDICTS = {"yaw_rate": {"nis_high": "disagrees with the gyro (slip, or a
                                             "reported, the gyro drives heading; see the doctor"}}
 
 
+def _said(channel: str, v: dict) -> str:
+    """What a sensor's ROS status says of one of its channels' consistency (``v``), "" when nothing: a verdict
+    out of its bounds that persists, in the words of its kind of channel (an update's noise, a check's slip)."""
+    words = _CHECK_VERDICTS.get(channel, _BAD_VERDICTS).get(v.get("verdict"), "")
+    return words if words and _persists(v) else ""
+
+
 def _persists(v: dict) -> bool:
     """Is a channel's windowed verdict the whole run's too (where the answer carries it)? A coloured error (an
     AHRS's orientation, a skid-steer's turns) moves one window's NIS out of its bounds and back: a status that
@@ -362,9 +369,7 @@ def ros_statuses(report: HealthReport, node_name: str, hardware_ids: dict[str, s
     )]
     for name, s in report.sensors.items():
         channels = {k.split("/", 1)[1]: v for k, v in report.consistency.items() if k.split("/", 1)[0] == name}
-        bad = [f"{ch}: {_CHECK_VERDICTS[ch][v['verdict']] if ch in _CHECK_VERDICTS else _BAD_VERDICTS[v['verdict']]}"
-               for ch, v in channels.items()
-               if v.get("verdict") in _CHECK_VERDICTS.get(ch, _BAD_VERDICTS) and _persists(v)]
+        bad = [f"{ch}: {said}" for ch, v in channels.items() if (said := _said(ch, v))]
         if s.alive:
             level, message = (WARN, "; ".join(bad)) if bad else (OK, "alive")
         elif s.age_s is None:

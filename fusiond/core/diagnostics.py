@@ -67,6 +67,15 @@ NIS_HIGH = 2.0  # mean NIS per dof above this (and above the chi-square bound): 
 NIS_LOW = 0.3  # ... below this (and below the bound): noise overstated
 
 
+def nis_bounds(n: int, dof: float, confidence: float) -> tuple[float, float]:
+    """Two-sided bounds on the mean NIS of n updates (chi-square on n*dof, divided by n),
+    widened to the practical band [NIS_LOW, NIS_HIGH] per dof."""
+    a = (1.0 - confidence) / 2.0
+    lo = chi2_ppf(a, n * dof) / n
+    hi = chi2_ppf(1.0 - a, n * dof) / n
+    return min(lo, NIS_LOW * dof), max(hi, NIS_HIGH * dof)
+
+
 class NisWindow:
     """Sliding window of NIS values for one sensor channel.
 
@@ -106,10 +115,7 @@ class NisWindow:
         """Two-sided bounds on the window's mean NIS: chi-square's, widened to the practical band."""
         b = self._bounds.get(dof)
         if b is None:
-            n = self.window
-            a = (1.0 - self.confidence) / 2.0
-            b = (min(chi2_ppf(a, n * dof) / n, NIS_LOW * dof), max(chi2_ppf(1.0 - a, n * dof) / n, NIS_HIGH * dof))
-            self._bounds[dof] = b
+            b = self._bounds[dof] = nis_bounds(self.window, dof, self.confidence)
         return b
 
     def add(self, nis: float, dof: int, rejected: bool) -> str:
@@ -177,9 +183,7 @@ class NisWindow:
         n = self._run_n
         if n < self.window or not self.dof:
             return "warming_up"
-        a = (1.0 - self.confidence) / 2.0
-        lo = min(chi2_ppf(a, n * self.dof) / n, NIS_LOW * self.dof)
-        hi = max(chi2_ppf(1.0 - a, n * self.dof) / n, NIS_HIGH * self.dof)
+        lo, hi = nis_bounds(n, self.dof, self.confidence)
         m = self._run_sum / n
         return "nis_high" if m > hi else "nis_low" if m < lo else "ok"
 

@@ -582,7 +582,7 @@ class FusionCore:
         As ``set_pose`` does, the filter is re-initialised at the saved stamp with the history cleared
         (nothing older is placed), but here every block of the state and its full covariance are the
         saved ones, and so are the world frame and the motion inputs held then (core/resume.py: across
-        the restart they end at their timeouts, as in a logging gap). Raises CoreError, with
+        the restart they end where their holds end, as in a logging gap). Raises CoreError, with
         nothing changed, for a state of another version or config (fingerprint) or one that does not
         fit or is not sound (``ErrorStateEKF.restore``)."""
         if saved.version != RESUME_VERSION:

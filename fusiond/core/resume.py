@@ -7,7 +7,7 @@ at one stamp, reduced to what defines it: the nominal state and its full covaria
 block, so biases keep their correlations), the world frame (defined, heading known, the
 ENU datum) and each sensor's observed period. And the motion inputs held at that stamp
 (``HeldMotion``): a daemon restarted while the robot drives resumes across a gap as long as
-the restart took, and as across a logging gap the held twist ends at its timeout and what
+the restart took, and as across a logging gap the held twist ends where its hold ends and what
 the robot may have driven meanwhile at its last speed widens the pose
 (``HeldInputs.unheld_motion_var``): a car at 17 m/s restarted 26 s later is ~450 m from the
 saved pose, and the first fix must be believed, not gated as an outlier while the published

@@ -20,7 +20,7 @@ from .median import median
 from .bins import BIN_S
 from .series import Series
 
-__all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro",
+__all__ = ["WANDER_RAD", "WHEEL_OFFSET_RAD_S", "WHEEL_SCALE_TOLERANCE", "MIN_TURN_RAD", "timed", "imu_vs_gyro", "gps_sigma_up",
            "imu_yaw_drift", "vs_gyro", "segments", "detrended_rms", "gps_sigma", "rate_fit_text", "zero_while_turning",
            "wheel_yaw_fit", "wheel_yaw_offset", "WheelOffset", "wrap", "yaw_scale"]
 
@@ -161,6 +161,15 @@ def gps_sigma(series: Series, gps: GpsSensor | None) -> float:
     if s:
         return float(median(s))
     return float(gps.unknown_position_sigma[0]) if gps is not None else 2.5
+
+
+def gps_sigma_up(series: Series, gps: GpsSensor) -> float:
+    """The fixes' altitude noise (m) as the filter takes it (``gps_sigma``'s vertical twin): the config's
+    position_noise, else the fixes' own (their median), else unknown_position_sigma for fixes that state none."""
+    if gps.position_noise is not None:
+        return float(gps.position_noise[2])
+    stated = [v for v in series.gps_sigma_up if math.isfinite(v)]
+    return float(median(stated)) if stated else float(gps.unknown_position_sigma[2])
 
 
 def rate_fit_text(k: float, offset: float) -> str:

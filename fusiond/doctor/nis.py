@@ -25,7 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..core.diagnostics import NIS_HIGH, NIS_LOW, DiagnosticsRecord, chi2_ppf
+from ..core.diagnostics import NIS_HIGH, NIS_LOW, DiagnosticsRecord, nis_bounds  # noqa: F401 - NIS_* read from here too
 
 # a record's fields, read off a chunk of records by map (no Python frame per record, as a generator has)
 _STAMP, _NIS, _DOF = attrgetter("stamp"), attrgetter("nis"), attrgetter("dof")
@@ -36,15 +36,6 @@ VERDICTS = ("ok", "nis_high", "nis_low", "no_updates")  # what judge_nis returns
 
 
 @lru_cache(maxsize=4096)
-def nis_bounds(n: int, dof: float, confidence: float) -> tuple[float, float]:
-    """Two-sided bounds on the mean NIS of n updates (chi-square on n*dof, divided by n),
-    widened to the practical band [NIS_LOW, NIS_HIGH] per dof."""
-    a = (1.0 - confidence) / 2.0
-    lo = chi2_ppf(a, n * dof) / n
-    hi = chi2_ppf(1.0 - a, n * dof) / n
-    return min(lo, NIS_LOW * dof), max(hi, NIS_HIGH * dof)
-
-
 def judge_nis(mean: float | None, n: int, dof: float, confidence: float) -> str:
     """ok | nis_high | nis_low | no_updates."""
     if mean is None or n <= 0 or dof <= 0 or not math.isfinite(mean):

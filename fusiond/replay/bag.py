@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from functools import lru_cache
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -317,21 +318,25 @@ def _select(reader: AnyReader, sensors: Sequence[SensorConfig]
     return selected, missing
 
 
+@lru_cache(maxsize=None)
+def _ros1_digest(msgtype: str) -> str | None:
+    """The ROS 1 MD5 sum of ``msgtype`` in ROS 1 Noetic's definitions (None for a type it does not know),
+    computed once a type: ``fusiond info`` asks it of every topic of an unknown type."""
+    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.base import TypesysError
+
+    try:
+        return get_typestore(Stores.ROS1_NOETIC).generate_msgdef(msgtype, ros_version=1)[1]
+    except TypesysError:
+        return None
+
+
 def same_definition(connection: Connection, want: str, ros2: bool) -> bool:
     """A ROS 1 connection of another type name whose definition is ``want``'s: its MD5 sum (which ROS 1
     computes from the fields, not the name) is ``want``'s in ROS 1 Noetic's definitions. A driver that
     re-registers nav_msgs/Odometry under its own package (``my_msgs/Odometry``) records the same bytes; the
     log says which type the topic is read as. ROS 2's type hash holds the name: no such match there."""
-    if ros2 or connection.msgtype == want or not connection.digest:
-        return False
-    from rosbags.typesys import Stores, get_typestore
-    from rosbags.typesys.base import TypesysError
-
-    try:
-        digest = get_typestore(Stores.ROS1_NOETIC).generate_msgdef(want, ros_version=1)[1]
-    except TypesysError:
-        return False
-    if connection.digest != digest:
+    if ros2 or connection.msgtype == want or not connection.digest or connection.digest != _ros1_digest(want):
         return False
     log.warning("topic_read_as", topic=connection.topic, msgtype=connection.msgtype, read_as=want,
                 reason="the same ROS 1 definition (MD5) under another name")

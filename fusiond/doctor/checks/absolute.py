@@ -12,7 +12,7 @@ import math
 from ..channels import GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, nis_head
 from ...core.sensors.registry import kind_of
 from ..evidence import Evidence
-from ..median import median
+from ..heading import gps_sigma_up
 from ..nis import ChannelStats
 from ..verdict import Verdict, sensor_key
 
@@ -200,10 +200,7 @@ def _stated_vertical(ev: Evidence, name: str) -> float | None:
     sc = ev.sensors.get(name)
     if sc is None or getattr(sc, "unknown_position_sigma", None) is None:
         return None
-    if sc.position_noise is not None:
-        return float(sc.position_noise[2])
-    stated = [v for v in ev.series.gps_sigma_up if math.isfinite(v)]
-    return float(median(stated)) if stated else float(sc.unknown_position_sigma[2])
+    return gps_sigma_up(ev.series, sc)
 
 
 def _slow_vertical(ev: Evidence, name: str, ch: ChannelStats) -> tuple[float, float, float] | None:

@@ -58,7 +58,7 @@ class Clocks(BaseCheck):
         out: dict[str, Verdict] = {}
         for name, st in stats.items():
             received = st.get("received", 0)
-            far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
+            far = _far(st)
             late = st.get("late", 0)
             behind = late >= CLOCK_LATE_SHARE * max(st.get("applied", 0), 1) and far < CLOCK_DROP_SHARE * received
             if received <= 0 or (far < CLOCK_DROP_SHARE * received and not behind) or name not in offsets:
@@ -94,8 +94,13 @@ def dropped_by_clock(st: dict) -> int:
     """How many of a sensor's samples (its core counters ``st``) were dropped as far from filter time, when
     they are the share that says its clock is off (CLOCK_DROP_SHARE), else 0: another check then knows its
     samples are not on the others' time."""
-    far = sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
+    far = _far(st)
     return far if far > 0 and far >= CLOCK_DROP_SHARE * max(st.get("received", 0), 1) else 0
+
+
+def _far(st: dict) -> int:
+    """How many of a sensor's samples (its core counters ``st``) were dropped as far from filter time."""
+    return sum(st.get("dropped", {}).get(r, 0) for r in CLOCK_REASONS)
 
 
 def _culprit(offsets: dict[str, float], odom: str | None, ahead_only: bool = False) -> str | None:

@@ -43,8 +43,7 @@ from ..attitude import TiltStats, full_mount, inverted_lean, lean_of, paste_moun
 from ..check import MIN_UPDATES, BaseCheck, found
 from ..chords import ASSUMED_TAU_S, CHORD_M, MIN_CHORDS, SCALE_Z_SIGMAS, cumulative, newey_west, wheel_chords
 from ..evidence import Evidence
-from ..heading import gps_sigma
-from ..median import median
+from ..heading import gps_sigma, gps_sigma_up
 from ..mounting import MountYaw
 from ..nis import ChannelStats
 from ..series import Series
@@ -102,11 +101,7 @@ def _vertical_noise(series: Series, gps: GpsSensor) -> tuple[float, float, float
     """(sigma_w, sigma_m, tau, state) of the fixes' altitude: white part and slow wander; ``state``: the wander
     is the GPS's own error state, the one its kind puts in the filter (``GpsKind.state_blocks``: the
     three-axis one with ``error_tau_s``, else the vertical one), not the one assumed without such a state."""
-    if gps.position_noise is not None:
-        sigma_w = float(gps.position_noise[2])
-    else:
-        stated = [v for v in series.gps_sigma_up if math.isfinite(v)]
-        sigma_w = float(median(stated)) if stated else float(gps.unknown_position_sigma[2])
+    sigma_w = gps_sigma_up(series, gps)
     if gps.error_tau_s > 0.0 and gps.error_sigma is not None:
         return sigma_w, float(gps.error_sigma[2]), float(gps.error_tau_s), True
     if gps.vertical_error_sigma > 0.0:
