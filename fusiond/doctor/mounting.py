@@ -38,7 +38,7 @@ from .series import BIN_S, Series
 # becomes a 0.005 rad pitch error, a sixth of the lean check's LEAN_RAD (0.03), i.e. 0.5 % of the
 # distance driven in height. Smaller errors are not worth a verdict.
 MOUNT_YAW_RAD = 0.05
-MOUNT_MIN_SPEED = 0.2  # m/s: slower, dv/dt and v w are too small and the wheels too coarse to compare
+MOUNT_MIN_SPEED = 0.2  # m/s either way: slower, dv/dt and v w are too small and the wheels too coarse to compare
 SMOOTH_BINS = 5  # 1 s at 5 Hz: vibration averaged, manoeuvres (seconds long) kept
 MOUNT_MIN_SAMPLES = 20  # decimated driving samples: 20 s of driving
 # |(c, s)| is 1 for an accelerometer that sees the motion turned; at half or twice that it is not a turn
@@ -120,7 +120,9 @@ def mount_yaw_fit(series: Series, imu: ImuSensor | None) -> MountYaw | None:
     v = np.interp(ta, to, vo)
     ex = np.interp(ta, to, dvdt)
     ey = v * np.interp(ta, tw, ww)
-    valid = _near(ta, to) & ok_w & np.isfinite(ex) & np.isfinite(mx) & np.isfinite(my) & (v > MOUNT_MIN_SPEED)
+    # either way: driven backwards, the body still feels (dv/dt, v w) with v signed
+    valid = (_near(ta, to) & ok_w & np.isfinite(ex) & np.isfinite(mx) & np.isfinite(my)
+             & (np.abs(v) > MOUNT_MIN_SPEED))
     # the same box on both sides keeps m = Rz(-delta) e + b; a window is used only when all of it is valid
     whole = _box(valid.astype(float), SMOOTH_BINS) > 1.0 - 1e-9
     cols = [_box(np.where(valid, a, 0.0), SMOOTH_BINS) for a in (mx, my, ex, ey)]

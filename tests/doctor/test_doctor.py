@@ -398,6 +398,20 @@ def test_imu_mounted_yawed_is_named_from_the_accelerometer_without_gps(configure
     assert fixed.level == "ok" and abs(fixed.evidence["mount_yaw_error_rad"]) < MOUNT_TOLERANCE_RAD, fixed
 
 
+def test_imu_mounted_yawed_is_named_when_the_robot_drives_backwards():
+    """The same manoeuvres in reverse gear: the body still feels (dv/dt, v w), with v negative; the mount is
+    named as it is driving forwards (the fit took only forward travel, and a reversing robot got no verdict)."""
+    from tests.support.sim_mount import MountWorld, simulate as simulate_mount
+
+    true_mount = (0.0, 0.0, math.pi / 2)
+    samples = simulate_mount(MountWorld(duration=60.0, imu_mount_rpy=true_mount, direction=-1.0))
+    v = one(verdicts_of(robot_config(), samples), "imu", "attitude")
+    assert v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy", v
+    roll, pitch, yaw = vector(v.suggestion)
+    assert abs(math.remainder(yaw - true_mount[2], 2 * math.pi)) < MOUNT_TOLERANCE_RAD, v
+    assert v.evidence["mount_yaw_error_se"] < MOUNT_TOLERANCE_RAD / 3
+
+
 def test_imu_mounted_yawed_is_named_without_orientation_in_g_units_and_with_a_bias():
     """An IMU that gives no attitude (gravity stays in the accelerometer; on level ground it is on z) and
     reports in g, with a 0.2 m/s^2 accelerometer bias: the fit's constant takes the bias, the turn is named."""

@@ -30,13 +30,16 @@ DRIVE = [Segment(6.0, speed=3.0, yaw_rate=0.3), Segment(6.0, speed=3.0, yaw_rate
          Segment(6.0, speed=V0, yaw_rate=W)]
 
 
-def coasting_car(decel: float) -> tuple[RestWorld, float]:
+def coasting_car(decel: float, direction: float = 1.0) -> tuple[RestWorld, float]:
     """The world and the stamp the first coast ends at: two coasts slowing at ``decel`` (0: the car holds its
-    speed, the drive's zero a dropout under power), weaving between and after them."""
+    speed, the drive's zero a dropout under power), weaving between and after them; ``direction`` -1: all of
+    it in reverse gear."""
     v_end = V0 - decel * COAST_S
-    coast = Segment(COAST_S, speed=v_end, yaw_rate=W, odom_reads_zero=True, ramp_s=COAST_S if decel else None)
-    segments = [*DRIVE, coast, Segment(6.0, speed=3.0, yaw_rate=-0.3), Segment(6.0, speed=V0, yaw_rate=W), coast,
-                Segment(6.0, speed=3.0, yaw_rate=0.2)]
+    coast = Segment(COAST_S, speed=direction * v_end, yaw_rate=W, odom_reads_zero=True,
+                    ramp_s=COAST_S if decel else None)
+    drive = [Segment(s.duration, speed=direction * s.speed, yaw_rate=s.yaw_rate) for s in DRIVE]
+    segments = [*drive, coast, Segment(6.0, speed=direction * 3.0, yaw_rate=-0.3),
+                Segment(6.0, speed=direction * V0, yaw_rate=W), coast, Segment(6.0, speed=direction * 3.0, yaw_rate=0.2)]
     world = RestWorld(segments, ramp_s=1.0, accel_sigma=ACCEL_SIGMA, accel_bias=ACCEL_BIAS, gyro_sigma=0.002)
     return world, T0 + sum(s.duration for s in DRIVE) + COAST_S
 
@@ -70,6 +73,19 @@ def test_a_braking_coast_is_measured_and_the_advice_follows_the_truth():
     assert abs(v.evidence["accel_bias_x"] - ACCEL_BIAS[0]) < 0.05, v
     advised = float(v.suggestion.split("=")[1])
     assert advised == pytest.approx(measured, abs=0.01)
+    assert error_at(world, samples, 0.5, end) > 1.5
+    assert error_at(world, samples, advised, end) < 0.5
+
+
+def test_a_coast_in_reverse_gear_is_measured_along_the_way_the_car_went():
+    """The braking coast of the test above driven backwards: the accelerometer reads +1.2 m/s^2 on x while a
+    negative speed runs down, which is slowing (the core's coast keeps the direction it went in). Measured
+    within DECEL_TOLERANCE of 1.2, as forwards, and pasted it follows the truth as there."""
+    world, end = coasting_car(1.2, direction=-1.0)
+    samples = simulate(world)
+    v = one(verdicts_of(robot_config(), samples), "wheel", "coast")
+    assert v.level == "warn" and abs(v.evidence["coast_decel_measured"] - 1.2) < DECEL_TOLERANCE, v
+    advised = float(v.suggestion.split("=")[1])
     assert error_at(world, samples, 0.5, end) > 1.5
     assert error_at(world, samples, advised, end) < 0.5
 

@@ -42,6 +42,7 @@ class MountWorld:
     accel_scale: float = 1.0  # 1 / 9.80665: a driver reporting in g
     orientation_absent: bool = False  # orientation_covariance[0] = -1: the IMU gives no orientation
     seed: int = 17
+    direction: float = 1.0  # -1: the same manoeuvres in reverse gear (v <= 0, dv/dt and v w signed with it)
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)  # t x y yaw
 
 
@@ -51,7 +52,8 @@ def motion(rel: float, w: MountWorld) -> tuple[float, float, float]:
         return 0.0, 0.0, 0.0
     t = rel - w.standstill
     a, b = w.speed_rate, w.turn_rate
-    return w.speed * (1.0 - math.cos(a * t)), w.speed * a * math.sin(a * t), w.turn * math.sin(b * t)
+    v = w.direction * w.speed
+    return v * (1.0 - math.cos(a * t)), v * a * math.sin(a * t), w.turn * math.sin(b * t)
 
 
 def simulate(w: MountWorld) -> list[OdomSample | ImuSample]:

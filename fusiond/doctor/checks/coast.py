@@ -7,7 +7,8 @@ minus gravity is dv/dt (the centripetal part of a turn is on y). Its own bias b_
 through a tilt the IMU's attitude did not remove) is the constant the mounting fit finds over the
 normal driving, where the wheels give dv/dt (``mounting.mount_yaw_fit``): a coast's deceleration is
 then -(mean(m_x) - b_x) over the bins in those stretches where the gyro still turns (the vehicle still
-moving). Its standard error is the bins' scatter over the number of SMOOTH_BINS-long pieces (vibration
+moving), signed by the way it went when its drive went quiet (the core's coast keeps that direction: a
+car reversing slows with m_x > 0). Its standard error is the bins' scatter over the number of SMOOTH_BINS-long pieces (vibration
 is correlated over a bin or two, manoeuvres over seconds).
 
 A deceleration clearly off the configured one (beyond DECEL_TOLERANCE and COAST_Z_SIGMAS standard errors) is
@@ -27,7 +28,7 @@ from ...core.sensors.imu.gyro_bias import quiet_bound
 from ..gyro import quiet_episodes
 from ..median import median
 from ..mounting import SMOOTH_BINS
-from ..series import BIN_S
+from ..series import BIN_S, Series
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
@@ -68,15 +69,15 @@ class Coast(BaseCheck):
         sigma = sigma if math.isfinite(sigma) else 0.0
         moving = np.abs(np.interp(ta, np.asarray(series.gyro_t), np.asarray(series.gyro_z))) > quiet_bound(
             sigma, cfg.filter.gyro_bias_sigma)
-        inside = np.zeros(len(ta), dtype=bool)
+        along = np.zeros(len(ta))  # +1 / -1: the way the vehicle went into the stretch (0: outside one)
         # a bin clear of the stretch's ends (e.t0, e.t1: the middles of its first and last wheel bins)
         for e in turning:
-            inside |= (ta >= e.t0 + BIN_S) & (ta <= e.t1 - BIN_S)
-        use = inside & moving & (level >= LEVEL_SHARE) & np.isfinite(ax)
+            along[(ta >= e.t0 + BIN_S) & (ta <= e.t1 - BIN_S)] = _travel_sign(series, e.t0)
+        use = (along != 0.0) & moving & (level >= LEVEL_SHARE) & np.isfinite(ax)
         n = int(use.sum())
         if n < MIN_COAST_BINS:
             return []
-        a = ax[use] - mount.bias_x
+        a = (ax[use] - mount.bias_x) * along[use]  # along the way it went
         decel = -float(np.mean(a))
         se = float(np.std(a, ddof=1)) / math.sqrt(n / SMOOTH_BINS)
         coast_s = n * BIN_S
@@ -105,3 +106,12 @@ class Coast(BaseCheck):
                         where + f"slowing at {decel:.2f} m/s^2 (+- {se:.2f}), "
                         f"not the {configured:g} assumed; {cost}", key,
                         f"coast_decel = {decel:.2f}", evidence)]
+
+
+def _travel_sign(series: Series, t0: float) -> float:
+    """+1 when the newest moving wheel bin before ``t0`` went forward, -1 backwards, 0 without one."""
+    to, vo = series.odom_t, series.odom_v
+    for i in range(int(np.searchsorted(np.asarray(to), t0)) - 1, -1, -1):
+        if vo[i] != 0.0:
+            return math.copysign(1.0, vo[i])
+    return 0.0

@@ -134,6 +134,7 @@ class GpsTrack:
     last_lla: tuple[float, float, float] | None = None  # the newest fix's coordinates, as received ...
     last_dr: tuple[float, float] = (0.0, 0.0)  # ... and the dead-reckoned base position when they first came
     last_enu: tuple[float, float] | None = None  # ... and their east/north (the repeat-with-noise check)
+    rest: float | None = None  # the standstill (its ``still_since``) the newest point was taken in; None: moving
 
 
 @dataclass(slots=True)
@@ -611,11 +612,25 @@ class GpsModel(SensorModel):
         a = lever(s.ekf.x, cfg.extrinsic_xyz)
         dx, dy = track.base[0] + t[0] + a[0], track.base[1] + t[1] + a[1]  # dead-reckoned antenna
         var = max(cov[0], cov[4]) + self.wander
-        points = track.points + ((z[0], z[1], dx, dy, 1.0 / var),)
+        point = (z[0], z[1], dx, dy, 1.0 / var)
+        still = s.still_since
+        if still is not None and still == track.rest and track.points:
+            # Standing since the track's newest point: this fix measures the same place, and a receiver's slow
+            # error is common to both. The hundreds of fixes of a parked spell are not as many independent
+            # ones; weighted as such they pinned the track's start to their mean, wherever the receiver had
+            # wandered, and the fit claimed a heading to a degree or two that was ten off. The newest stands
+            # for the standstill: the fix nearest the drive, in time and in the receiver's error.
+            if len(track.points) == 1:  # the track has only stood: it starts here
+                track = replace(track, points=(point,), first=(z[0], z[1]), extent=0.0, t0=stamp, rest=still)
+                s.own[self.index] = msgspec.structs.replace(own, track=track)
+                return
+            points = track.points[:-1] + (point,)
+        else:
+            points = track.points + (point,)
         if len(points) > HEADING_MAX_FIXES:
             points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
         extent = max(track.extent, math.hypot(z[0] - track.first[0], z[1] - track.first[1]))
-        track = replace(track, points=points, extent=extent)
+        track = replace(track, points=points, extent=extent, rest=still)
         s.own[self.index] = msgspec.structs.replace(own, track=track)
         if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
             return
