@@ -269,8 +269,8 @@ def _stamp(msg) -> float:
 
 
 def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] | None = None) -> np.ndarray:
-    """The plain EKF over ``bags`` with fusiond's config ``cfg``: one pose per odometry message, (n, 8)
-    rows t x y z qx qy qz qw. ``fuse_fix(stamp, index)`` (index: the fix's position in bag order) says
+    """The plain EKF over ``bags`` with fusiond's config ``cfg``: one pose per odometry message (with a GPS,
+    from its first fix on), (n, 8) rows t x y z qx qy qz qw. ``fuse_fix(stamp, index)`` (index: the fix's position in bag order) says
     whether a GPS fix is fused; default: every fix."""
     from rosbags.highlevel import AnyReader
 
@@ -303,6 +303,9 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
                  world_twist=odom_cfg.twist_frame == "world")
     enu = Enu(*gps_cfg.datum) if gps_cfg is not None and gps_cfg.datum is not None else None
     yaw_offset = None  # orientation = "relative": filter yaw less the IMU's yaw at the first sample
+    # with a GPS, a pose is published once its first fix has placed the robot (as fusiond does): before it,
+    # the filter's position is the datum's, which a recording that starts away from its datum puts far off
+    placed = gps_cfg is None
     out = []
     for t, _, kind, msg in events:
         f.predict(t)
@@ -314,7 +317,8 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
             if not gyro:
                 f.w = np.array([tw.angular.x, tw.angular.y, tw.angular.z])
                 f.w_var = _diag_floor(cov[3:], unmeasured=True)
-            out.append((t, *f.x.p, *f.x.q))
+            if placed:
+                out.append((t, *f.x.p, *f.x.q))
         elif kind == "imu":
             if gyro and msg.angular_velocity_covariance[0] != -1.0:
                 av = msg.angular_velocity
@@ -346,6 +350,7 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
                 r = np.asarray(msg.position_covariance, dtype=float).reshape(3, 3)
                 r = r + np.diag(_diag_floor(r.diagonal()) - r.diagonal())
             f.update_position(z, r)
+            placed = True
     return np.array(out, dtype=float).reshape(-1, 8)
 
 

@@ -34,8 +34,10 @@ def cumulative(t: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: float) -> list[tuple[int, int]]:
-    """Consecutive chords (indices into the fixes) each spanning ``length`` metres of WHEEL travel.
+def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: float,
+               usable: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """Consecutive chords (indices into the fixes) each spanning ``length`` metres of WHEEL travel;
+    ``usable`` (a flag per fix, in the series' order): the fixes a chord may end on (None: all).
 
     Chosen on the wheels, not on the fixes' own distance: a chord that ends where the GPS distance
     first exceeds a threshold ends preferably on a fix whose error points forward, and is biased
@@ -52,6 +54,8 @@ def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: fl
     # which the core refuses while the wheels move) measured nothing: no chord ends on it
     e, n = np.asarray(series.gps_e)[order], np.asarray(series.gps_n)[order]
     inside[1:] &= (e[1:] != e[:-1]) | (n[1:] != n[:-1])
+    if usable is not None:
+        inside &= np.asarray(usable, dtype=bool)[order]
     s = np.where(inside, np.interp(ts, to, travelled), np.nan)
     out = []
     i = 0
@@ -71,14 +75,14 @@ def chord_ends(series: Series, to: np.ndarray, travelled: np.ndarray, length: fl
 
 
 def wheel_chords(series: Series, cfg: Config, to: np.ndarray, travelled: np.ndarray,
-                 length: float) -> list[tuple[int, int]]:
+                 length: float, usable: np.ndarray | None = None) -> list[tuple[int, int]]:
     """``chord_ends``, less the chords whose wheels' travel is not all there: across a logging gap (the wheels'
     travel and the gyro's turn in the gap are missing from the dead reckoning, not from the GPS) or across a
     coast (``gyro.coasts``: the drive read zero while the vehicle rolled on)."""
     breaks = np.array(sorted([*series.odom_breaks, *series.gyro_breaks]))
     dropped = coasts(series, cfg)
     out = []
-    for i, j in chord_ends(series, to, travelled, length):
+    for i, j in chord_ends(series, to, travelled, length, usable):
         t0, t1 = series.gps_t[i], series.gps_t[j]
         if len(breaks) and np.searchsorted(breaks, t0, side="right") != np.searchsorted(breaks, t1, side="right"):
             continue

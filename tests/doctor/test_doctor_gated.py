@@ -67,6 +67,39 @@ def test_a_noise_stated_too_small_is_still_named_through_the_gate():
     assert v.level == "problem" and v.key == "sensors.gps.position_noise" and "too small" in v.message, v
 
 
+
+def test_a_noise_stated_a_third_of_the_truth_is_named_though_a_quarter_is_gated():
+    """Sigma stated a third of the truth (a receiver claiming an RTK fix it does not have): NIS = 9
+    chi-square(2), rejected beyond 25: exp(-25 / 18) = 25 % gated, past GATED_FRACTION. Jumps among good fixes
+    would leave the applied ones consistent; these read E[chi2(2) | < 2.78] = 2 - 2.78 exp(-1.39) / (1 -
+    exp(-1.39)) = 1.08, x 9 / 2 = 4.9 per dof, above NIS_HIGH: the noise is named, not the gate. The same
+    fraction gated as bursts of jumps (1e4 each) among fixes stated right keeps the gate's warning."""
+    rng = np.random.default_rng(5)
+    nis = 9.0 * rng.chisquare(2, 1000)
+    ch = ChannelStats(["east", "north"])
+    ch.extend(records(nis, nis > GATE**2))
+    assert 0.2 < ch.rejected / ch.n < 0.3 and ch.kept_nis_per_dof > 2 * NIS_HIGH
+    v = absolute_verdict("gps", "position", ch, 1000.0)
+    assert v.level == "problem" and v.key == "sensors.gps.position_noise" and "too small" in v.message, v
+    jumps = rng.chisquare(2, 1000)
+    jumps[rng.random(1000) < 0.25] = 1e4
+    ch = ChannelStats(["east", "north"])
+    ch.extend(records(jumps, jumps > GATE**2))
+    v = absolute_verdict("gps", "position", ch, 1000.0)
+    assert v.level == "warn" and v.key == "sensors.gps.mahalanobis_threshold", v
+
+
+def test_a_receiver_stating_a_third_of_its_noise_gets_the_noise_to_paste():
+    """End to end: fixes of 0.3 m white noise stated as 0.1 m (10 Hz, 10 m/s, 90 s): about a quarter gated,
+    the line pasteable and near the truth (the innovations include the filter's own uncertainty: an upper
+    bound, asserted within 0.3 and 0.4 m)."""
+    w = sim_gps.World(duration=90.0, speed=10.0, gps_rate=10.0, gps_sigma=0.3, arcs=((10.0, 90.0, 0.05),))
+    v = one(verdicts_of(robot_config(gps="position_noise = [0.1, 0.1, 0.3]"), sim_gps.simulate(w)), "gps", "position")
+    assert v.level == "problem" and v.key == "sensors.gps.position_noise", v
+    assert GATED_FRACTION < v.evidence["gated_fraction"] < 0.5, v
+    east, north, _ = (float(x) for x in v.suggestion.split("[")[1].rstrip("]").split(","))
+    assert 0.3 <= east < 0.4 and 0.3 <= north < 0.4, v.suggestion
+
 def outliers(samples: list, every: int, offset_deg: float) -> list:
     """Every ``every``-th GPS fix moved by ``offset_deg`` of latitude (0.002 deg: 220 m)."""
     out, k = [], 0

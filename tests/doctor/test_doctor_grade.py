@@ -60,6 +60,17 @@ def test_a_pitched_imu_is_found_from_the_gps_climb_and_pasting_it_keeps_z_on_the
     assert fit is not None and not fit.named and abs(fit.delta) < 3 * fit.se, fit
 
 
+def test_an_altitude_the_gate_rejected_for_seconds_does_not_hide_the_pitched_mount():
+    """The same pitched IMU, the receiver's altitude 30 m off for 5 s (a switch of its height reference and
+    back): the gate rejects those fixes, so no chord may end on them. Ending there, the chords took 30 m of
+    climb the filter never believed, the fit's band widened past any verdict and the mount went unnamed.
+    Asserted: the problem is named as without the excursion, its pitch within 3 of its standard errors."""
+    samples = sim_gps.simulate(sim_gps.World(**WORLD, imu_mount_pitch=MOUNT, gps_alt_jump=(60.0, 65.0, 30.0)))
+    v = attitude_of(samples)
+    assert v is not None and v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy", v
+    delta, se = v.evidence["mount_pitch_error_rad"], v.evidence["mount_pitch_error_se"]
+    assert abs(delta - MOUNT) < 3 * se, v.evidence
+
 def test_a_level_imu_is_not_named_and_without_gps_altitude_the_grade_says_nothing():
     samples = sim_gps.simulate(sim_gps.World(**WORLD))
     cfg = robot_config(gps="")

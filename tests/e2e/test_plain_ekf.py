@@ -39,3 +39,25 @@ def test_plain_ekf_ends_near_robot_localizations_final_pose_on_the_jackal_bag():
     np.testing.assert_allclose(np.linalg.norm(traj[:, 4:8], axis=1), 1.0, atol=1e-9)
     d = math.dist(traj[-1, 1:4], RL_FINAL)
     assert d < 2.0, f"the plain EKF ends {d:.3f} m from robot_localization's final pose"
+
+
+def test_plain_ekf_with_a_gps_publishes_from_its_first_fix_on():
+    """The highway car with its GPS: the odometry begins before the first fix, and before it the filter's
+    position is the datum's, not the car's (a recording that starts away from its datum scored the plain EKF
+    hundreds of metres off there). Its first pose is at or after the first fix, as fusiond's is."""
+    from rosbags.highlevel import AnyReader
+
+    from fusiond.config import load
+
+    bag = DATA / "comma2k19_ex1"
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic in ("/fix", "/odom")]
+        first = {}
+        for c, _, raw in reader.messages(connections=conns):
+            h = reader.deserialize(raw, c.msgtype).header.stamp
+            first.setdefault(c.topic, h.sec + 1e-9 * h.nanosec)
+            if len(first) == 2:
+                break
+    assert first["/odom"] < first["/fix"]  # the case this is about
+    traj = _plain().run([bag], load(ROOT / "examples" / "comma2k19.toml"))
+    assert traj[0, 0] >= first["/fix"] - 1e-6

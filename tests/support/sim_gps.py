@@ -56,6 +56,7 @@ class World:
     gps_freeze_jitter: float = 0.0  # m (std dev per axis) of noise on those repeats: republished with rounding noise
     gps_alt_error_tau: float = 0.0  # > 0: the altitude alone wanders (Gauss-Markov) beyond the stated sigma
     gps_alt_error_sigma: float = 0.0  # its steady-state std dev, m
+    gps_alt_jump: tuple[float, float, float] | None = None  # (t0, t1, m): the altitude off by m in [t0, t1)
     # an absolute IMU yaw (a magnetometer): off by default (yaw "not measured", as before)
     imu_yaw_offset: float | None = None  # not None: the IMU reports yaw = truth + this + disturbance + noise
     imu_yaw_disturbance: tuple[float, float] = (0.0, 60.0)  # (amplitude rad, period s) of a slow sinusoid
@@ -156,6 +157,8 @@ def simulate(w: World) -> list:
                 a = math.exp(-(1.0 / w.gps_rate) / w.gps_alt_error_tau)
                 alt_err = a * alt_err + math.sqrt(1.0 - a * a) * alt_rng.normal(0, w.gps_alt_error_sigma)
                 u += alt_err
+            if w.gps_alt_jump is not None and w.gps_alt_jump[0] <= rel < w.gps_alt_jump[1]:
+                u += w.gps_alt_jump[2]  # a receiver switching its height reference (geoid, ellipsoid) and back
             if any(f0 <= rel < f1 for f0, f1 in w.gps_freeze) and last_fix is not None:
                 e, n, u = last_fix  # a stuck receiver: same position, new stamp
                 if w.gps_freeze_jitter > 0.0:  # ... republished with noise (the stuck position stays the same)

@@ -88,6 +88,16 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        "which come in bursts among good fixes: the stated noise is too small, and the innovations "
                        f"(an upper bound: they include the filter's own uncertainty) suggest {rms}",
                        key, line, evidence=ev)
+    if frac > GATED_FRACTION and applied_verdict(ch) == "nis_high":
+        # The fixes the gate let through read high too: jumps come in bursts among good fixes, which would read
+        # consistent; here the ordinary noise is larger than stated, and the gate cuts into it (a receiver
+        # claiming an RTK fix it does not have: 16 % gated, the applied ones 2.9 per dof).
+        ev["applied_nis_per_dof"] = ch.kept_nis_per_dof
+        return Verdict(name, channel, "problem",
+                       f"{100 * frac:.0f}% of updates gated and the applied ones read NIS high too "
+                       f"({ch.kept_nis_per_dof:.2f} per dof; {detail}; {figures(ch, t0)}): not jumps among good fixes, "
+                       f"{stated} is too small, and the innovations (an upper bound: they include the filter's own "
+                       f"uncertainty) suggest {rms}", key, line, evidence=ev)
     if frac > GATED_FRACTION:
         return Verdict(name, channel, "warn",
                        f"{100 * frac:.0f}% of updates gated ({detail}; {figures(ch, t0)}): the sensor jumps "

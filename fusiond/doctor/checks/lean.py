@@ -113,8 +113,11 @@ def _tilt_from_imu(imu: ImuSensor) -> bool:
     return imu.tilt_from_imu
 
 
-def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
-    """The chord fit of the mounting pitch, or None without a GPS altitude, an IMU tilt or enough chords."""
+def grade_fit(series: Series, cfg: Config, altitude: ChannelStats | None = None) -> GradeFit | None:
+    """The chord fit of the mounting pitch, or None without a GPS altitude, an IMU tilt or enough chords.
+    ``altitude``: the GPS altitude's channel; a fix its gate rejected ends no chord (a receiver's altitude
+    that jumps 30 m for a few seconds, which the filter never took, made 30 m chords that widened the fit's
+    band past any verdict and left a 37 m height error unnamed)."""
     gps = next((s for s in cfg.sensors if kind_of(s).geodetic), None)
     imu = next((s for s in cfg.sensors if kind_of(s).inertial), None)
     if gps is None or imu is None or not fuses_height(cfg, gps) or not _tilt_from_imu(imu):
@@ -131,7 +134,12 @@ def grade_fit(series: Series, cfg: Config) -> GradeFit | None:
     gt, gu = series.gps_t, series.gps_u
     r, d, ends = [], [], []
     # not across a logging gap or a coast, where the wheels' travel is missing, not the GPS's climb
-    for i, j in wheel_chords(series, cfg, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps))):
+    usable = None
+    if altitude is not None and altitude.keep and any(altitude.rejected_flags):
+        gated = {t for t, rejected in zip(altitude.stamps, altitude.rejected_flags) if rejected}
+        usable = np.array([t not in gated for t in gt], dtype=bool)  # the same stamps: the filter's clock
+    for i, j in wheel_chords(series, cfg, to, cumulative(to, np.abs(v)), max(CHORD_M, 20.0 * gps_sigma(series, gps)),
+                             usable):
         t0, t1 = gt[i], gt[j]
         if t0 < te[0] or t1 > te[-1]:
             continue  # before the first estimate (or after the last): no pitch to compare
@@ -251,10 +259,10 @@ class Lean(BaseCheck):
     name = "lean"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        fit = grade_fit(ev.series, ev.config)
+        gps = next((s.name for s in ev.config.sensors if kind_of(s).geodetic), None) if ev.config else None
+        altitude = ev.channels.get((gps, "altitude"))
+        fit = grade_fit(ev.series, ev.config, altitude)
         if ev.tilt.n >= MIN_UPDATES and inverted_lean(ev.tilt) is not None:  # as lean_of asks of a lean
             return found(lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount, fit))
-        gps = next((s.name for s in ev.config.sensors if kind_of(s).geodetic), None) if ev.config else None
-        graded = grade_verdict(fit, ev.run_imu, ev.mount,
-                               state_layout(ev.config).has("twist_pitch"), ev.channels.get((gps, "altitude")))
+        graded = grade_verdict(fit, ev.run_imu, ev.mount, state_layout(ev.config).has("twist_pitch"), altitude)
         return found(graded if graded is not None else lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount))
