@@ -164,3 +164,19 @@ def test_a_short_correlation_time_is_pasted_as_itself_never_as_zero():
 
     assert _secs(0.49913788) == "0.5" and _secs(3.14159) == "3.1" and _secs(60.2) == "60" and _secs(9.96) == "10"
     assert float(_secs(0.11)) > 0.0
+
+
+def test_an_altitude_low_as_its_slow_error_expects_stays_so_beside_gated_outliers():
+    """The altitude beside a slow vertical error state (5 m over 300 s, a 60 s run): the applied fixes read NIS
+    low, as that model expects over a slice of its time constant (nothing to change). 49 fixes 30 m off (a
+    receiver's height reference switched for 5 s), rejected by the gate, make the whole run's mean high: the
+    verdict on the applied ones is still the model's, not "the noise is larger than they show"."""
+    rng = np.random.default_rng(6)
+    nis = 0.01 * rng.chisquare(1, 600)
+    nis[300:349] = 1e4
+    ch = ChannelStats(["up"])
+    ch.extend([DiagnosticsRecord(1000.0 + 0.1 * k, "gps", ["up"], [0.0], [1.0], float(v), 1, bool(v > GATE**2),
+                                 channel="altitude") for k, v in enumerate(nis)])
+    v = absolute_verdict("gps", "altitude", ch, 1000.0, slow_vertical=(5.0, 300.0, 60.0))
+    assert v.level == "ok" and "as the altitude's error model expects" in v.message, v
+    assert "only because of the 49 update(s) the gate rejected" in v.message, v

@@ -106,6 +106,10 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     applied = applied_verdict(ch)
     if applied != verdict:
         ev["applied_nis_per_dof"] = ch.kept_nis_per_dof
+        if applied == "nis_low" and channel == "altitude" and slow_vertical is not None:
+            # the applied ones low as the slow error state makes them over a short run (below), as without
+            # the rejected ones: the gate's outliers change nothing of that
+            return _slow_altitude(name, ch, t0, slow_vertical, ev, nis_head(ch, t0))
         if applied == "nis_low":
             return Verdict(name, channel, "warn", f"{nis_head(ch, t0)}, below their bounds: {stated} is "
                            "larger than the applied updates show", key, evidence=ev)
@@ -138,15 +142,16 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
 
 
 def _slow_altitude(name: str, ch: ChannelStats, t0: float | None, slow: tuple[float, float, float],
-                   ev: dict) -> Verdict:
+                   ev: dict, head: str = "") -> Verdict:
     """The altitude's NIS low beside a slow vertical error state: the filter takes the receiver's altitude to
     wander by sigma over tau (minutes), and every fix's predicted spread carries that whole wander; a run shorter
     than a few tau shows only a slice of it, so the innovations sit far inside that spread. That is the model
     over a short run, not a noise stated too large: a smaller position_noise changes next to nothing (the wander
-    is most of the spread), and a smaller wander is for a recording that spans it to tell (tune fits it there)."""
+    is most of the spread), and a smaller wander is for a recording that spans it to tell (tune fits it there).
+    ``head``: what opens the message (default: the NIS low and its figures)."""
     sigma, tau, span = slow
     return Verdict(name, "altitude", "ok",
-                   f"NIS low ({figures(ch, t0)}), as the altitude's error model expects over {span:.0f} s: it takes "
+                   f"{head or f'NIS low ({figures(ch, t0)})'}, as the altitude's error model expects over {span:.0f} s: it takes "
                    f"the receiver's altitude to wander by {sigma:g} m over {tau:g} s (vertical_error_sigma, "
                    "vertical_error_tau_s), a slice of which this run spans; nothing to change from it (a recording "
                    "spanning several of those time constants tells whether the wander is smaller)", evidence=ev)
