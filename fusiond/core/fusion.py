@@ -168,7 +168,7 @@ class FusionCore:
         self.windows: dict[tuple[int, str], NisWindow] = {}
         self.state: FilterState | None = None
         self._reset_history()
-        self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max)
+        self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max, self.odom_index)
         self._history_s, self._history_max, self._gap_s = fc.history_s, fc.history_max, fc.gap_s
         self.fingerprint = state_fingerprint(cfg)  # which saved states fit this config (core/resume.py)
         self.resets = 0
@@ -255,7 +255,7 @@ class FusionCore:
         t = self.state.t
         if self._held.far(stamp, t):
             return self._hold_jump(idx, inp, stamp)
-        if self._held.cluster is not None and stamp > t:
+        if self._held.left_by(idx) and stamp > t:  # (a held cluster: t is set)
             self._abandon_jump()  # the stream moved on along the old timeline: the far stamps were a glitch
         return self._place(idx, inp, stamp, keep)
 

@@ -7,6 +7,15 @@ samples can tell: the far ones are held together as one cluster; the cluster is 
 new timeline once it has ``confirm`` samples spanning ``persist_s`` of its own
 stamps, and a glitch when the stream goes on along the old timeline first. The core
 decides what each outcome does to the filter (reset, carry on, drop and count).
+
+One sensor's clock is the filter's: the ``anchor``'s, the odometry's (it drives the prediction and
+every published pose is stamped by it). A cluster that holds its samples is a glitch only when the
+anchor itself goes on along the old timeline, and another sensor's far samples on yet another
+timeline are dropped beside it rather than replacing it: an IMU stamped by its boot clock (46,000 s
+behind, its first sample 10 ms before the odometry's) kept the old timeline going and every odometry
+message and fix was dropped, nothing published; with the odometry first, its real 26 s logging gap was
+never taken, the IMU's far samples replacing its cluster one by one. A sensor on a wrong clock is
+dropped alone, and its doctor's verdict names the offset.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ class Cluster:
     lo: float = math.inf
     hi: float = -math.inf
     samples: list[Held] = field(default_factory=list)
+    anchored: bool = False  # it holds samples of the anchor (the sensor whose clock the filter follows)
 
     def in_order(self) -> list[Held]:
         """The held samples in (stamp, sensor) order, as the history orders events."""
@@ -31,8 +41,9 @@ class Cluster:
 
 
 class HeldTimeline:
-    def __init__(self, jump_s: float, confirm: int, persist_s: float, capacity: int) -> None:
+    def __init__(self, jump_s: float, confirm: int, persist_s: float, capacity: int, anchor: int = -1) -> None:
         self.jump_s = jump_s
+        self.anchor = anchor  # the sensor index whose clock the filter follows (-1: none, every sensor alike)
         self.confirm = confirm
         self.persist_s = persist_s
         self.capacity = capacity
@@ -54,13 +65,22 @@ class HeldTimeline:
         dropped: list[Held] = []
         c = self.cluster
         if c is not None and abs(stamp - c.first) > self.jump_s:
+            if c.anchored and idx != self.anchor:  # another sensor's far clock: this sample goes, not the anchor's
+                return [(stamp, idx, inp)], False
             dropped = self.abandon()  # a different far timeline: the held one did not persist
             c = None
         if c is None:
             c = self.cluster = Cluster(first=stamp)
         c.samples.append((stamp, idx, inp))
+        c.anchored = c.anchored or idx == self.anchor
         c.lo, c.hi = min(c.lo, stamp), max(c.hi, stamp)
         return dropped, len(c.samples) >= self.confirm and c.hi - c.lo >= self.persist_s
+
+    def left_by(self, idx: int) -> bool:
+        """Does a sample of sensor ``idx`` going on along the old timeline show the held cluster a glitch?
+        Any sensor's does, but for a cluster that holds the anchor's samples: only the anchor's."""
+        c = self.cluster
+        return c is not None and (idx == self.anchor or not c.anchored)
 
     def take(self) -> Cluster:
         """The confirmed cluster, no longer held."""

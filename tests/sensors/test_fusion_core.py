@@ -116,6 +116,54 @@ def test_short_clock_glitch_is_dropped_and_the_pose_carries_on():
     assert core.pose()[1][0] == pytest.approx(x_last + 1.0, abs=1e-6)
 
 
+
+UNIX = 1.65e9  # the odometry's clock
+BOOT = 12.5 - UNIX  # an IMU stamped by the clock it counts from boot (12.5 s at the start): decades behind
+
+
+def _wrong_clock_imu(imu_first: bool, gap: tuple[float, float] | None = None) -> list:
+    """Odometry at 50 Hz and an IMU at 100 Hz for 40 s, the IMU on its boot clock; its first sample
+    10 ms before the odometry's first (``imu_first``) or after it. ``gap``: every topic silent in (t0, t1)."""
+    out = []
+    for k in range(4000):
+        t = UNIX + 0.01 * k
+        if gap is not None and UNIX + gap[0] < t < UNIX + gap[1]:
+            continue
+        if k % 2 == 1:
+            out.append(odom(t, v=1.0))
+        if imu_first or k > 1:
+            out.append(imu(t - 0.005 + BOOT))
+    return out
+
+
+@pytest.mark.parametrize("imu_first", [True, False])
+def test_an_imu_on_its_boot_clock_is_dropped_alone_whichever_comes_first(imu_first):
+    """The odometry's clock is the filter's (its poses are what is published): the IMU's far samples are dropped
+    as stale and every odometry message after the first second is fused and published. With the IMU's first
+    sample first, its clock started the filter and kept the old timeline going, so every odometry message was
+    dropped as decades ahead and nothing was published."""
+    core = FusionCore(make_config(gyro=False))
+    steps = feed(core, _wrong_clock_imu(imu_first))
+    wheel, imu_stats = core.stats
+    published = sum(len(s.poses or ()) or int(s.publish) for s in steps)  # a confirmed timeline's held ones at once
+    assert wheel.applied >= wheel.received - 1 and published >= wheel.received - 1
+    assert core.time == pytest.approx(UNIX + 39.99)
+    # the IMU: its samples on its own clock until the odometry's timeline was confirmed (jump_persist_s, 1 s, of
+    # the odometry's stamps: 100 Hz x 1.01 s at most, its first one 10 ms ahead), the rest dropped as stale
+    assert imu_stats.applied <= 102 and imu_stats.dropped.get("stale_stamp", 0) >= imu_stats.received - 102
+
+
+def test_a_logging_gap_is_taken_beside_an_imu_on_its_boot_clock():
+    """Every topic silent for 26 s from 10 s in, the IMU on its boot clock: the odometry's samples after the gap
+    are a new timeline forward, confirmed as without the IMU. The IMU's far samples, on yet another timeline,
+    replaced the odometry's held cluster one by one, and nothing after the gap was ever fused."""
+    core = FusionCore(make_config(gyro=False))
+    samples = _wrong_clock_imu(False, gap=(10.0, 36.0))
+    steps = feed(core, samples)
+    assert core.time == pytest.approx(UNIX + 39.99)
+    after = [s for s, x in zip(steps, samples) if isinstance(x, OdomSample) and x.stamp > UNIX + 37.5]
+    assert after and all(s.accepted and s.publish for s in after)
+
 def test_single_far_future_stamp_is_rejected():
     core = FusionCore(make_config(gyro=False))
     feed(core, [odom(10.0 + 0.1 * k) for k in range(5)])

@@ -27,3 +27,19 @@ def test_a_different_far_timeline_replaces_the_held_one_and_capacity_is_bounded(
     dropped, confirmed = h.hold(500.0, 0, "d")  # far from the held cluster: that one did not persist
     assert [s for s, _, _ in dropped] == [100.0, 100.1] and not confirmed and h.counts(2) == [1, 0]
     assert [s for s, _, _ in h.abandon()] == [500.0] and h.cluster is None
+
+
+def test_a_cluster_holding_the_anchors_samples_is_left_only_by_the_anchor():
+    """The anchor (sensor 0, the odometry) jumped: its held cluster is not replaced by another sensor's far
+    samples on yet another timeline (those are dropped alone) and not left when another sensor goes on along
+    the old timeline; the anchor going on along the old one leaves it."""
+    h = HeldTimeline(jump_s=5.0, confirm=3, persist_s=1.0, capacity=100, anchor=0)
+    h.hold(100.0, 0, "odom")
+    dropped, confirmed = h.hold(-40000.0, 1, "imu")  # the IMU on its boot clock
+    assert [(s, i) for s, i, _ in dropped] == [(-40000.0, 1)] and not confirmed and h.counts(2) == [1, 0]
+    assert not h.left_by(1) and h.left_by(0)
+    h.hold(100.5, 1, "imu on the anchor's timeline")  # joins it
+    assert h.hold(101.0, 0, "odom")[1]  # three samples over 1 s: confirmed
+    unanchored = HeldTimeline(jump_s=5.0, confirm=3, persist_s=1.0, capacity=100, anchor=0)
+    unanchored.hold(-40000.0, 1, "imu")
+    assert unanchored.left_by(0) and unanchored.left_by(1)  # any sensor's old timeline leaves it
