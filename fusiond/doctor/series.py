@@ -89,6 +89,7 @@ class Series(msgspec.Struct):
     gps_sigma: list[float] = []  # stated horizontal sigma, m
     gps_u: list[float] = []  # up, m (ENU at the first fix)
     gps_sigma_up: list[float] = []  # stated vertical sigma, m (NaN: not stated)
+    gps_origin: tuple[float, float, float] | None = None  # the first valid fix (lat deg, lon deg, alt m)
     est_t: list[float] = []
     est_yaw: list[float] = []
     est_roll: list[float] = []
@@ -214,6 +215,8 @@ class SeriesCollector:
             return
         if self._enu is None:
             self._enu = EnuFrame(s.latitude, s.longitude, s.altitude)
+        if self.series.gps_origin is None:
+            self.series.gps_origin = (s.latitude, s.longitude, s.altitude)
         e, n, u = self._enu.enu(s.latitude, s.longitude, s.altitude)
         c = s.position_covariance
         sigma = math.sqrt(max(0.5 * (c[0] + c[4]), 0.0)) if len(c) == 9 and s.covariance_type > 0 else math.nan

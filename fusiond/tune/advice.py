@@ -10,7 +10,11 @@ orientation update into a 2-dof one; ``orientation = "roll_pitch"`` on an IMU wh
 gave the tilt replaces its gravity updates by orientation ones) makes those updates' likelihoods
 incomparable: the terms whose dof the change altered, and those of a channel the change removed,
 are left out of both scores, and the change is judged by how well the filter
-then predicts everything else. The line is advised only when -log L improves by more than the number of keys it
+then predicts everything else. A line that makes a gyro drive the prediction, which the run left to the
+wheels, changes what is fused, not how: a gain still advises it, but a loss is no verdict on it (the run's
+own updates, read against the sharper prediction, score their own noise too: an IMU's orientation updates
+whose noise is understated scored a gyro that took a car from 66 m to 2.8 m at -205,602), and it is then
+printed as the doctor's. The line is advised only when -log L improves by more than the number of keys it
 sets: Akaike's penalty of one per free parameter, the smallest improvement that a change fitted to
 this recording has to beat to be expected to hold on the next one; and when it does not make the run's
 last 30 % worse, held back as tune validates its own fit (``recording.FIT_FRACTION``): a sensor that errs
@@ -35,6 +39,7 @@ import msgspec
 from ..estimator import rotation as rot
 from ..estimator.backend import Backend
 from ..collector import skips_the_caller
+from ..core.sensors.registry import kind_of
 from ..config import Config, ConfigError, convert, validate
 from ..doctor import ChannelStats, Proof, Verdict
 from ..logs import muted
@@ -135,6 +140,11 @@ def _restamped(records: Sequence[object], shifts: dict[str, float], base: Sequen
         out.append(msgspec.structs.replace(r, stamp=best if best is not None and abs(best - t) <= RESTAMP_TOLERANCE_S
                                            else t))
     return out
+
+
+def _gyros(cfg: Config) -> set[str]:
+    """The sensors whose gyro drives the prediction in ``cfg``."""
+    return {sc.name for sc in cfg.sensors if kind_of(sc).fuses_gyro(sc)}
 
 
 def _brought_back(was: dict[str, int] | None, now: dict[str, int]) -> str:
@@ -303,6 +313,12 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                 return Proof(False, effect + f"; but over the run's last 30 % (held back, as tune validates) "
                                              f"likelihood {held_gain:+.0f}: it does not predict the run's end better")
         advised = gain > n_keys
+        added = sorted(_gyros(changed) - _gyros(cfg))
+        if added and not advised:  # a new input to the prediction: a loss is no verdict on it (module doc)
+            return Proof(False, effect + f"; it makes the gyro of {', '.join(added)} drive the prediction, which the "
+                                         "run as configured left to the wheels: the run's own updates, read against a "
+                                         "sharper prediction, score their own noise as much as the gyro, so the "
+                                         "replay cannot judge it; the evidence above is the case for it", judged=False)
         still = _still(v, base_records, records) if advised else ""  # what the next round would say of an advised one
         return Proof(advised, effect + still, refuted=gain < -n_keys)
 

@@ -182,10 +182,10 @@ def test_an_advised_noise_that_leaves_its_channel_still_high_says_so():
 
 
 def test_a_clock_line_that_brings_dropped_samples_back_is_not_judged_by_the_runs_own_updates():
-    """The IMU stamped 1000 s behind and first in the recording: the filter followed its clock and dropped the
-    wheels. The line that corrects the IMU's clock fuses them again; the likelihood over the run's own updates
-    (the IMU's, alone) cannot weigh that, so the line is the doctor's, not 'not advised' on a score that lost
-    its wheels' terms."""
+    """The IMU stamped 1000 s behind and first in the recording: the filter follows the wheels' clock (the
+    odometry's is the filter's) and drops the IMU. The line that corrects the IMU's clock fuses it again; the
+    likelihood over the run's own updates (the wheels', without the IMU's) cannot weigh that, so the line is the
+    doctor's, not 'not advised' on a score that lacks the IMU's terms."""
     from tests.support import sim_gps
     from tests.support.sim_faults import shift_stamps
 
@@ -197,7 +197,7 @@ def test_a_clock_line_that_brings_dropped_samples_back_is_not_judged_by_the_runs
     clock = [v for v in result.verdicts() if v.channel == "time"]
     (v,) = prove_advice(cfg, samples, clock, base_applied=result.applied)
     assert v.proof is not None and not v.proof.judged and not v.proof.refuted, v.proof
-    assert "samples of wheel the run as configured dropped" in v.proof.effect, v.proof
+    assert "samples of imu the run as configured dropped" in v.proof.effect, v.proof
     (blind,) = prove_advice(cfg, samples, clock)  # without the run's counts: judged on its updates, as any line
     assert blind.proof is not None and blind.proof.judged, blind.proof
 
@@ -252,3 +252,24 @@ def test_a_clock_line_is_judged_sample_by_sample_and_advised_when_it_fits():
     (v,) = prove_advice(cfg, samples, clock, base_records=None, base_applied=result.applied)
     assert "stamp_offset_s = -0.2" in v.suggestion, v.suggestion
     assert v.proof is not None and v.proof.judged and v.proof.advised, v.proof
+
+
+def test_a_line_that_makes_the_gyro_drive_the_prediction_is_the_doctors_not_the_likelihoods() -> None:
+    """The wheels' yaw rate 0.02 rad/s off on a straight road, the gyro not fused: the doctor's line fuses it.
+    That changes what drives the prediction, which the run's own updates cannot score: the IMU's orientation
+    updates, their noise stated ten times too small (0.002 for 0.02 rad), scored it at -6,442, and the problem
+    was lowered to a warning the replay "contradicts". A loss is no verdict on a change of what is fused: the
+    line is printed as the doctor's, and the problem stays one."""
+    from tests.support.core_samples import make_config
+    from tests.support.sim import SimConfig, simulate
+
+    samples = simulate(SimConfig(duration=60.0, turn_amplitude=0.0, speed=5.0, standstill=3.0,
+                                 gyro_bias=(0.0, 0.0, 0.004), wheel_yaw_offset=0.02, orientation_sigma=0.02))
+    cfg = make_config(gyro=False, extra_imu="orientation_noise = [0.002, 0.002, 0.002]")
+    result = run_samples(samples, cfg)
+    line = [v for v in result.verdicts() if v.suggestion == "angular_velocity = true"]
+    assert line, [v.message for v in result.verdicts()]
+    (v,) = prove_advice(cfg, samples, line, base_final=result.final, base_applied=result.applied)
+    assert v.level == "problem" and v.proof is not None and not v.proof.judged and not v.proof.refuted, v.proof
+    assert "likelihood -" in v.proof.effect and "drive the prediction" in v.proof.effect, v.proof
+    assert "not advised" not in format_verdicts([v])
