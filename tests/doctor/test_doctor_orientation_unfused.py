@@ -27,3 +27,15 @@ def test_an_orientation_the_driver_calls_unknown_is_said_to_be_unfused():
     assert honest.level == "ok" and "none of its" not in honest.message, honest
     stated = verdicts_of(make_config(extra_imu="orientation_noise = [0.002, 0.002, 1.0]"), _stating_unknown(samples))
     assert not [v for v in stated if "none of its" in v.message], stated
+
+
+def test_nothing_is_said_of_the_orientation_of_samples_never_fused_or_of_a_planar_filter():
+    """Every IMU sample stamped 0 (a driver that never stamps): all dropped, which the input verdict names; the
+    orientation check spoke of covariances that were never read. Under two_d_mode roll and pitch are held,
+    whatever the messages state: not the driver's doing either."""
+    samples = simulate(SimConfig(duration=20.0, standstill=2.0))
+    unstamped = [msgspec.structs.replace(s, stamp=0.0) if type(s) is ImuSample else s for s in samples]
+    verdicts = verdicts_of(make_config(), _stating_unknown(unstamped))
+    assert not [v for v in verdicts if "none of its" in v.message], verdicts
+    planar = verdicts_of(make_config(extra_filter="two_d_mode = true"), _stating_unknown(samples))
+    assert not [v for v in planar if "none of its" in v.message], planar

@@ -29,9 +29,12 @@ class OrientationUnfused(BaseCheck):
         for sc in ev.config.sensors:
             if not (kind_of(sc).inertial and sc.fuses_orientation) or sc.orientation_noise is not None:
                 continue  # not asked for, or stated by the config (a driver's covariance then does not matter)
-            received = (ev.stats or {}).get(sc.name, {}).get("received", 0)
+            stats = (ev.stats or {}).get(sc.name, {})
+            # samples the filter applied: a sensor whose samples were all dropped (stamps of 0, another clock) is the
+            # input verdict's, and two_d_mode holds roll and pitch whatever the messages state
+            received, applied = stats.get("received", 0), stats.get("applied", stats.get("received", 0))
             ch = ev.channels.get((sc.name, "orientation"))
-            if received == 0 or (ch is not None and ch.n > 0):
+            if applied == 0 or ev.config.filter.two_d_mode or (ch is not None and ch.n > 0):
                 continue
             tilt = ("roll and pitch come from its accelerometer's gravity instead (tilt_from_gravity)"
                     if sc.tilt_from_gravity else "nothing gives roll and pitch")
