@@ -307,6 +307,9 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     imu = gyro_imu(cfg)
     if imu is None or not gyro_fused:
         return None
+    st = (stats or {}).get(imu.name, {})
+    if st.get("received", 0) > 0 and st.get("applied", 1) == 0:
+        return None  # none of its samples reached the filter (stamps of 0, another clock): the input verdict says why
     fc = cfg.filter
     episodes, turning = quiet_episodes(series, cfg, imu)
     if turning and (ch is None or ch.n == 0 or not episodes):

@@ -37,5 +37,8 @@ def test_nothing_is_said_of_the_orientation_of_samples_never_fused_or_of_a_plana
     unstamped = [msgspec.structs.replace(s, stamp=0.0) if type(s) is ImuSample else s for s in samples]
     verdicts = verdicts_of(make_config(), _stating_unknown(unstamped))
     assert not [v for v in verdicts if "none of its" in v.message], verdicts
+    # nor of a gyro bias never learned for want of a standstill: the run had one, its samples never reached the filter
+    assert not [v for v in verdicts if v.channel == "gyro_bias" and v.level != "ok"], verdicts
+    assert any(v.sensor == "imu" and "invalid_stamp" in v.message for v in verdicts), verdicts
     planar = verdicts_of(make_config(extra_filter="two_d_mode = true"), _stating_unknown(samples))
     assert not [v for v in planar if "none of its" in v.message], planar
