@@ -39,6 +39,7 @@ class TwistStats:
         self._turned = 0
         self._along_x = 0
         self._along_pose = 0
+        self._posed = 0
 
     def add(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
             orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
@@ -55,6 +56,7 @@ class TwistStats:
     turned = Settled("_turned")  # moving messages whose pose yaw is beyond TURNED_RAD ...
     along_x = Settled("_along_x")  # ... whose twist points along the odom frame's x (body-frame, or the robot heads x)
     along_pose = Settled("_along_pose")  # ... whose twist points where that pose heads (world-frame)
+    posed = Settled("_posed")  # messages carrying a pose orientation (not the identity of a driver that fills none)
 
     def _settle(self) -> None:
         n = len(self._linear)
@@ -65,6 +67,7 @@ class TwistStats:
         q = np.fromiter(chain.from_iterable(self._orientation), dtype=float, count=4 * n).reshape(n, 4)
         self._linear, self._angular, self._orientation = [], [], []
         x, y, z, w = q.T
+        self._posed += int((~((x == 0.0) & (y == 0.0) & (z == 0.0) & (w == 1.0))).sum())
         pose_yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         direction = np.arctan2(linear[:, 1], linear[:, 0])
         turned = (np.hypot(linear[:, 0], linear[:, 1]) > MOVING_M_S) & (np.abs(np.sin(pose_yaw)) > math.sin(TURNED_RAD))

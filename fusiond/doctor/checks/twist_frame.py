@@ -7,6 +7,7 @@ tells them apart).
 
 from __future__ import annotations
 
+from ...core.sensors.registry import kind_of
 from ..check import MIN_UPDATES, BaseCheck
 from ..evidence import Evidence
 from ..twist import TURNED_RAD
@@ -28,6 +29,17 @@ class TwistFrame(BaseCheck):
             return []
         lateral = t.abs_vy / max(t.abs_vx + t.abs_vy, 1e-12)
         key = sensor_key(odom.name, "twist_frame")
+        anchored = [s.name for s in ev.config.sensors if kind_of(s).defines_frame(s) or kind_of(s).absolute_yaw(s)]
+        if odom.twist_frame == "world" and t.posed == 0 and anchored:
+            # a world twist is turned into the body by the message's own pose (core/sensors/odom, body_twist); with
+            # none, it is taken in the filter's world frame as it stands, which the GPS or an absolute yaw sets
+            # apart from the driver's odom frame: on the highway car, east where the fixes went north (42 m aligned)
+            return [Verdict(odom.name, "twist", "problem",
+                            f"twist configured in the world frame (the driver's odom frame), but none of its {t.n} "
+                            "messages carries a pose orientation to turn it into the body with: it is taken in the "
+                            f"filter's world frame as it stands, which {', '.join(anchored)} sets, not the driver's. "
+                            "A driver that fills no pose reports the twist in the body (child_frame_id)", key,
+                            'twist_frame = "body"', evidence={"posed_messages": 0.0})]
         if odom.twist_frame == "world" and t.turned >= MIN_UPDATES and t.along_x >= 0.9 * t.turned:
             # a world-frame twist points where the vehicle heads, which the message's own pose says: one that
             # keeps pointing along x while that pose turns away is a body-frame twist. Gentle curves (a highway:
