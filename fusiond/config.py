@@ -161,6 +161,7 @@ def validate(cfg: Config) -> Config:
 
         k.validate(s, at)
         _check_radians(s, at)
+        _check_metres(s, at)
     return cfg
 
 
@@ -179,6 +180,19 @@ def _check_radians(s: object, at: typing.Callable[[str], str]) -> None:
             shown = list(value) if isinstance(value, tuple) else value
             raise ConfigError(f"{at(name)}: {shown} is beyond {bound:.2f}: angles are in radians "
                               "(degrees x pi / 180)")
+
+
+# Lengths are metres. A sensor mounted farther than this from base_link is not on a wheeled robot (the largest,
+# a mining haul truck, is 15 m long): it is centimetres or millimetres typed as metres (a lever arm of 150 put
+# the antenna 150 m off, 158 m of world error).
+MAX_MOUNT_M: Final = 20.0
+
+
+def _check_metres(s: object, at: typing.Callable[[str], str]) -> None:
+    xyz = getattr(s, "extrinsic_xyz", None)
+    if xyz is not None and not math.hypot(*xyz) <= MAX_MOUNT_M:
+        raise ConfigError(f"{at('extrinsic_xyz')}: {list(xyz)} is {math.hypot(*xyz):g} m from base_link, beyond "
+                          f"{MAX_MOUNT_M:g} m: lengths are in metres (centimetres / 100)")
 
 
 def _check_ros(cfg: Config) -> None:

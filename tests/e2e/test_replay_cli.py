@@ -113,6 +113,9 @@ ODOM_IMU = '[[sensors]]\nname="w"\nkind="odom"\nkey="odom"\n[[sensors]]\nname="i
     (ODOM_IMU + 'yaw_offset=20\n', "sensor \"i\": yaw_offset: 20.0 is beyond 6.28"),
     (ODOM_IMU + 'magnetic_declination=-4.0\n', "angles are in radians"),
     (ODOM_IMU + 'extrinsic_rpy=[0.0, 0.0, 90.0]\n', "sensor \"i\": extrinsic_rpy: [0.0, 0.0, 90.0] is beyond"),
+    # centimetres typed as metres (a GPS lever arm of 150 put the antenna 150 m off: 158 m of world error)
+    (ODOM_IMU + '[[sensors]]\nname="g"\nkind="gps"\nkey="fix"\nextrinsic_xyz=[150.0, 0.0, 120.0]\n',
+     "sensor \"g\": extrinsic_xyz: [150.0, 0.0, 120.0] is 192.094 m from base_link"),
 ])
 def test_bad_config_is_one_line_naming_the_key_and_exit_2(tmp_path, toml, needle):
     cfg = tmp_path / "bad.toml"
