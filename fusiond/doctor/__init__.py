@@ -77,6 +77,9 @@ class Doctor:
         self._records: list = []
         self._samples: list = []
         self.lost = LostSamples()  # lost samples left out of the series (``add_sample``)
+        # per sensor, messages that came twice, stamp and content alike (``add_sample``), and the newest of each
+        self.repeats: dict[str, int] = {}
+        self._newest: dict[str, object] = {}
         self._stamp_offset = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
         self._world_twist = {s.name for s in self.cfg.sensors if kind_of(s).drives_prediction and s.twist_frame == "world"}
 
@@ -103,6 +106,10 @@ class Doctor:
         """A raw sample, as the sensor sent it (for the cross-source series), in arrival order; a lost
         one (``lost.LostSamples``) is left out. Its stamp is shifted by the sensor's ``stamp_offset_s``, as
         the core shifts it: the sources are compared at the instants the filter takes them for."""
+        prev = self._newest.get(sample.sensor)
+        if prev is not None and prev.stamp == sample.stamp and prev == sample:  # the same message again
+            self.repeats[sample.sensor] = self.repeats.get(sample.sensor, 0) + 1
+        self._newest[sample.sensor] = sample
         offset = self._stamp_offset.get(sample.sensor)
         if offset:
             sample = msgspec.structs.replace(sample, stamp=sample.stamp + offset)
@@ -186,7 +193,7 @@ class Doctor:
         """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
         return diagnose(Evidence(self.cfg if self.known else None, self.series(), self.channels, self.twist,
                                  self.tilt, stats=stats, at_cap=at_cap, covariance_resets=covariance_resets,
-                                 scales=scales, t0=self.t0, clocks=self.clocks))
+                                 scales=scales, t0=self.t0, clocks=self.clocks, repeats=self.repeats))
 
 
 def _merge(candidates: list[Verdict]) -> Verdict:

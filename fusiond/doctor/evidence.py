@@ -73,6 +73,7 @@ class Evidence:
     scales: dict[str, float] | None = None  # the scales the core estimated (e.g. wheel_scale)
     t0: float | None = None  # the run's first stamp: times in messages are counted from it
     clocks: ClockOffsets | None = None  # the sensors' stamp offsets measured at arrival
+    repeats: dict[str, int] | None = None  # per sensor, messages that came twice, stamp and content alike
     findings: Findings = field(default_factory=Findings)
     _bias_verdicts: dict[tuple[str, str], Verdict | None] = field(default_factory=dict, init=False, repr=False)
 

@@ -48,18 +48,29 @@ class Drops(BaseCheck):
             bad = {k: v for k, v in dropped.items() if k != "too_old"}
             if bad:
                 said = "; ".join(f"{k}={v} ({reasons.MEANINGS.get(k, k)})" for k, v in sorted(bad.items()))
-                out.append(Verdict(name, "input", "warn", f"dropped samples: {said}{_bunched(bad, received)}"))
+                repeated = (ev.repeats or {}).get(name, 0)
+                out.append(Verdict(name, "input", "warn",
+                                   f"dropped samples: {said}{_repeated(repeated)}{_bunched(bad, received, repeated)}"))
         return out
 
 
-def _bunched(dropped: dict[str, int], received: int) -> str:
+def _repeated(repeated: int) -> str:
+    """What the duplicate stamps that were the same message again say (``Doctor.repeats``)."""
+    if not repeated:
+        return ""
+    return (f". {repeated} of the duplicate stamps were the same message again, stamp and content alike (a second "
+            "publisher, or a bridge or recorder doubling the topic): nothing of the data was lost")
+
+
+def _bunched(dropped: dict[str, int], received: int, repeated: int = 0) -> str:
     """What a share of samples dropped as duplicate stamps says: a few, a message republished; a steady
     share, samples stamped in groups (k = received / kept of them share one stamp), which a driver that
     reads its sensor's FIFO and stamps the read, not each sample, gives. The filter keeps one sample a
     stamp, the group's first, so it fuses 1/k of the data, each sample (k - 1) periods older than its
-    stamp says."""
-    d = dropped.get(reasons.DUPLICATE_STAMP, 0)
-    if d < BUNCHED_SHARE * received:
+    stamp says. ``repeated``: of those, the same message again (``_repeated``), which are no group: left out."""
+    d = dropped.get(reasons.DUPLICATE_STAMP, 0) - repeated
+    received -= repeated
+    if d <= 0 or d < BUNCHED_SHARE * received:
         return ""
     k = received / max(received - d, 1)
     return (f". {100 * d / received:.0f}% of its samples shared their stamp with the one before: groups of about "
