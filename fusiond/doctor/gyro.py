@@ -22,6 +22,7 @@ from ..core.sensors.registry import kind_of
 from ..core.sensors.imu.gyro_bias import _turning, quiet_bound
 from ..core.sensors.odom.model import impossible_stop
 from .bins import BIN_S
+from .lost import none_fused
 from .median import median
 from .nis import ChannelStats, judge_nis
 from .series import Series
@@ -307,9 +308,8 @@ def bias_check(series: Series, cfg: Config, ch: ChannelStats | None, gyro_fused:
     imu = gyro_imu(cfg)
     if imu is None or not gyro_fused:
         return None
-    st = (stats or {}).get(imu.name, {})
-    if st.get("received", 0) > 0 and st.get("applied", 1) == 0:
-        return None  # none of its samples reached the filter (stamps of 0, another clock): the input verdict says why
+    if none_fused(stats, imu.name):
+        return None  # none of its samples reached the filter: the input verdict says why
     fc = cfg.filter
     episodes, turning = quiet_episodes(series, cfg, imu)
     if turning and (ch is None or ch.n == 0 or not episodes):

@@ -23,7 +23,7 @@ from ..core.sensors import ImuSample, OdomSample
 from ..core.inputs import smoothed_period
 from ..core.sensors.odom import impossible_stop
 
-__all__ = ["LostSamples"]
+__all__ = ["LostSamples", "none_fused"]
 
 _ZERO3 = (0.0, 0.0, 0.0)
 
@@ -76,3 +76,12 @@ class LostSamples:
         makes and with nothing after it to make it a coast: lost."""
         self.odom += len(self._waiting)
         self._waiting.clear()
+
+
+def none_fused(stats: dict[str, dict] | None, name: str) -> bool:
+    """Did sensor ``name`` send samples of which the filter applied none (stamps of 0, another clock)? Then the
+    input verdict (its drops by reason) says why, and a check of what its samples stated has nothing to judge.
+    ``stats``: per sensor {"received", "applied", ...} (None: not known, False)."""
+    st = (stats or {}).get(name, {})
+    received = st.get("received", 0)
+    return received > 0 and st.get("applied", received) == 0

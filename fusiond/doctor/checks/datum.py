@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 
-from ...core.sensors.registry import kind_of
 from ...estimator.geodesy import EnuFrame
 from ..check import BaseCheck
 from ..evidence import Evidence
@@ -32,7 +31,7 @@ class Datum(BaseCheck):
     name = "datum"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        gps = next((s for s in ev.config.sensors if kind_of(s).geodetic), None)
+        gps = ev.gps
         origin = ev.series.gps_origin
         if gps is None or gps.datum is None or origin is None:
             return []

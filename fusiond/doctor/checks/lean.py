@@ -259,8 +259,7 @@ class Lean(BaseCheck):
     name = "lean"
 
     def run(self, ev: Evidence) -> list[Verdict]:
-        gps = next((s.name for s in ev.config.sensors if kind_of(s).geodetic), None) if ev.config else None
-        altitude = ev.channels.get((gps, "altitude"))
+        altitude = ev.channels.get((ev.gps.name, "altitude")) if ev.gps is not None else None
         fit = grade_fit(ev.series, ev.config, altitude)
         if ev.tilt.n >= MIN_UPDATES and inverted_lean(ev.tilt) is not None:  # as lean_of asks of a lean
             return found(lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount, fit))

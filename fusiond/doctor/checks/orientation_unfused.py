@@ -14,6 +14,7 @@ from __future__ import annotations
 from ...core.sensors.registry import kind_of
 from ..check import BaseCheck
 from ..evidence import Evidence
+from ..lost import none_fused
 from ..verdict import Verdict, sensor_key
 
 __all__ = ["OrientationUnfused"]
@@ -29,12 +30,11 @@ class OrientationUnfused(BaseCheck):
         for sc in ev.config.sensors:
             if not (kind_of(sc).inertial and sc.fuses_orientation) or sc.orientation_noise is not None:
                 continue  # not asked for, or stated by the config (a driver's covariance then does not matter)
-            stats = (ev.stats or {}).get(sc.name, {})
-            # samples the filter applied: a sensor whose samples were all dropped (stamps of 0, another clock) is the
-            # input verdict's, and two_d_mode holds roll and pitch whatever the messages state
-            received, applied = stats.get("received", 0), stats.get("applied", stats.get("received", 0))
+            received = (ev.stats or {}).get(sc.name, {}).get("received", 0)
             ch = ev.channels.get((sc.name, "orientation"))
-            if applied == 0 or ev.config.filter.two_d_mode or (ch is not None and ch.n > 0):
+            # none applied: the input verdict's; two_d_mode holds roll and pitch whatever the messages state
+            if (received == 0 or none_fused(ev.stats, sc.name) or ev.config.filter.two_d_mode
+                    or (ch is not None and ch.n > 0)):
                 continue
             tilt = ("roll and pitch come from its accelerometer's gravity instead (tilt_from_gravity)"
                     if sc.tilt_from_gravity else "nothing gives roll and pitch")

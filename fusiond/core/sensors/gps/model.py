@@ -620,11 +620,9 @@ class GpsModel(SensorModel):
             # ones; weighted as such they pinned the track's start to their mean, wherever the receiver had
             # wandered, and the fit claimed a heading to a degree or two that was ten off. The newest stands
             # for the standstill: the fix nearest the drive, in time and in the receiver's error.
-            if len(track.points) == 1:  # the track has only stood: it starts here
-                track = replace(track, points=(point,), first=(z[0], z[1]), extent=0.0, t0=stamp, rest=still)
-                s.own[self.index] = msgspec.structs.replace(own, track=track)
-                return
             points = track.points[:-1] + (point,)
+            if len(points) == 1:  # the track has only stood: it starts here
+                track = replace(track, first=(z[0], z[1]), extent=0.0, t0=stamp)
         else:
             points = track.points + (point,)
         if len(points) > HEADING_MAX_FIXES:
