@@ -81,3 +81,30 @@ def test_the_end_of_the_heading_search_is_logged_once_when_fixes_are_re_applied(
     events = logged.names
     assert events.count("gps_heading_initialised") == 1, events
     assert events.count("gps_heading_provisional") <= 1, events
+
+
+def test_the_fixes_fitted_before_the_heading_is_applied_turn_the_published_position() -> None:
+    """Before the track spans heading_init_m, its fit is not applied to the state, but it already says where
+    the car goes: the published displacement since the newest fix is E[R(psi)] D = exp(-v/2) R(theta) D over
+    the fit's (theta, v), not the fifth of D along the placeholder. Two fixes L = v T apart with sigma per axis
+    fit the heading to v_theta = 2 sigma^2 / L^2 (more fixes: less), so a pose D <= L past the newest fix is off
+    by the anchor's 4 sqrt(2) sigma, plus D times 4 sqrt(v_theta) for the turn and 1 - exp(-v_theta / 2) for
+    the shrink. The car does 10 m/s, fixes of 0.02 m at 10 Hz: 0.23 m; the placeholder's mean is ~1 m off."""
+    speed, rate, sigma = 10.0, 10.0, 0.02
+    w = World(duration=4.0, standstill=0.0, speed=speed, start=(0.0, 0.0, math.pi / 2), gps_rate=rate,
+              gps_sigma=sigma, seed=5)
+    core = FusionCore(robot_config(gps=""))
+    errors = []
+    for s in simulate(w):
+        step = core.ingest(s)
+        own = next(o for o in core.state.own if isinstance(o, gps_model.GpsOwn))
+        if step.publish and not core.heading_known and own.track is not None and len(own.track.points) >= 2 \
+                and not own.track.applied:  # fitted, not yet applied
+            t, x = core.pose()
+            tx, ty, _ = truth_at(w, t)
+            errors.append(math.hypot(x[0] - tx, x[1] - ty))
+    assert len(errors) >= 4, "the fit was applied before a guess could be watched"
+    travel = speed / rate
+    v_theta = 2.0 * sigma**2 / travel**2
+    bound = 4.0 * math.sqrt(2.0) * sigma + travel * (4.0 * math.sqrt(v_theta) - math.expm1(-0.5 * v_theta))
+    assert max(errors) <= bound, (max(errors), bound)

@@ -148,3 +148,22 @@ def test_an_unstated_receivers_horizontal_verdict_names_the_measured_noise_and_p
     assert altitude.key == "sensors.gps.unknown_position_sigma" and "which state none" in altitude.message
     stated = absolute_verdict("gps", "position", stats("position", ["x", "y"]), 100.0)
     assert "the stated noise" in stated.message and stated.key == "sensors.gps.position_noise"
+
+
+def test_the_measured_noise_outlives_the_heading_fits() -> None:
+    """Every pair of consecutive fixes is one increment of the noise's measurement, the heading search's fits
+    (applied again at each fix until the heading is known, each turning the track) included: a car driving
+    from its first fix, 90 deg off the placeholder heading, fixes of 0.1 m stating nothing. Dropped at each
+    fit, the fixes of the whole search went in at the unknown default (2.5 m)."""
+    w = World(duration=10.0, speed=15.0, start=(0.0, 0.0, math.pi / 2), standstill=0.0, gps_rate=10.0,
+              gps_sigma=0.1, seed=6)
+    core = FusionCore(robot_config(gps=""))
+    fixes, searched = 0, 0
+    for s in _unstated(simulate(w)):
+        core.ingest(s)
+        if isinstance(s, GpsSample):
+            fixes += 1
+            searched += not core.heading_known
+    assert core.heading_known and searched >= 5, searched  # the search took several fits
+    n, _ = _gps_own(core).increments
+    assert n == fixes - 1, (n, fixes)

@@ -135,6 +135,7 @@ class GpsTrack:
     last_dr: tuple[float, float] = (0.0, 0.0)  # ... and the dead-reckoned base position when they first came
     last_enu: tuple[float, float] | None = None  # ... and their east/north (the repeat-with-noise check)
     rest: float | None = None  # the standstill (its ``still_since``) the newest point was taken in; None: moving
+    guess: tuple[float, float] | None = None  # before a fit is applied: the newest fit's (theta, var_theta)
 
 
 @dataclass(slots=True)
@@ -294,16 +295,29 @@ class GpsModel(SensorModel):
         s2 (pi/sqrt 3 while unknown), and the mean of a displacement D turned by psi ~ N(0, s2) is
         E[R(psi)] D = exp(-s2/2) D. So the published position moves from that fix by a fifth of the
         dead-reckoning while nothing is known of the heading (a car doing 20 m/s north is not
-        published driving east), and by all of it as the fits narrow the heading. None (the state's
-        position) once the heading is known."""
+        published driving east), and by all of it as the fits narrow the heading. Before a fit is applied
+        (the track is shorter than heading_init_m) the fixes so far are fitted already, psi ~ N(theta,
+        var_theta) where that is narrower: the displacement turns by theta and shrinks by exp(-var_theta/2)
+        (``GpsTrack.guess``): a car starting at 19 m/s is published where it goes from its second fix on,
+        not half a metre behind it at each. None (the state's position) once the heading is known."""
         if s.heading_ready:
             return None
-        anchor = s.own[self.index].anchor
+        own = s.own[self.index]
+        anchor = own.anchor
         if anchor is None:
             return None
-        k = math.exp(-0.5 * s.ekf.yaw_variance())
         p = s.ekf.position()
-        return anchor[0] + k * (p[0] - anchor[0]), anchor[1] + k * (p[1] - anchor[1])
+        ex, ey = p[0] - anchor[0], p[1] - anchor[1]
+        var = s.ekf.yaw_variance()
+        guess = own.track.guess if own.track is not None else None
+        if guess is not None and guess[1] < var:
+            # the fixes so far, fitted before any fit is applied: the heading's error psi ~ N(theta, var_theta)
+            # about the placeholder, and E[R(psi)] D = exp(-var_theta/2) R(theta) D
+            theta, var = guess
+            c, sn = math.cos(theta), math.sin(theta)
+            ex, ey = c * ex - sn * ey, sn * ex + c * ey
+        k = math.exp(-0.5 * var)
+        return anchor[0] + k * ex, anchor[1] + k * ey
 
     def apply(self, s: "FilterState", inp: GpsInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         cfg = self.cfg
@@ -578,11 +592,13 @@ class GpsModel(SensorModel):
         self._start_track(s, z, inp.lla, stamp)
 
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
+        """A new track (and heading search) from this fix; the receiver's measured noise goes on (its
+        increments are the receiver's, whatever the filter lost)."""
         self._said_ready = False  # a new track: a new search, whose end is said again
         base = s.ekf.position()
         s.own[self.index] = GpsOwn(GpsTrack((), base, (z[0], z[1]), t0=stamp, last_lla=lla, last_dr=base[0:2],
                                                   last_enu=(z[0], z[1])), last=(stamp, z[0], z[1], base[0], base[1]),
-                                   anchor=(base[0], base[1]))
+                                   anchor=(base[0], base[1]), increments=s.own[self.index].increments)
 
     def _frozen(self, s: "FilterState", lla: tuple[float, float, float], z) -> bool:
         """Is this fix a repeat of the previous one although the robot has moved since those coordinates
@@ -628,28 +644,38 @@ class GpsModel(SensorModel):
         if len(points) > HEADING_MAX_FIXES:
             points = points[::2] + ((points[-1],) if len(points) % 2 == 0 else ())
         extent = max(track.extent, math.hypot(z[0] - track.first[0], z[1] - track.first[1]))
-        track = replace(track, points=points, extent=extent, rest=still)
+        d0 = points[0]
+        made = math.hypot(dx - d0[2], dy - d0[3]) >= HEADING_MIN_TRAVEL * math.hypot(z[0] - d0[0], z[1] - d0[1])
+        fit = self._fit(points, extent, stamp - track.t0) if made else None
+        # the shown position's heading until a fit is applied (``shown_position``): what the track says already
+        guess = (fit.theta, fit.var_theta) if fit is not None and not track.applied else None
+        track = replace(track, points=points, extent=extent, rest=still, guess=guess)
         s.own[self.index] = msgspec.structs.replace(own, track=track)
         if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
             return
-        d0 = points[0]
-        if math.hypot(dx - d0[2], dy - d0[3]) < HEADING_MIN_TRAVEL * math.hypot(z[0] - d0[0], z[1] - d0[1]):
+        if not made:
             # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
             s.own[self.index] = msgspec.structs.replace(own, track=replace(
-                track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]), extent=0.0, t0=stamp))
+                track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]), extent=0.0, t0=stamp,
+                guess=None))
             return
-        fit = fit_rigid(list(points))
-        if fit is None:
-            return
-        if self.wander > 0.0:
-            # A slowly wandering error moves neighbouring fixes together: it bends the track as a
-            # whole, which the residuals cannot show. Over the track's duration T its ends differ by
-            # var(b(T) - b(0)) = 2 sigma_b^2 (1 - exp(-T / tau)), spread over the track's extent.
-            drift = 2.0 * self.wander * -math.expm1(-(stamp - track.t0) / cfg.error_tau_s)
-            fit = replace(fit, var_theta=fit.var_theta + drift / (extent * extent))
-        if fit.var_theta > HEADING_PROVISIONAL_SIGMA**2:
+        if fit is None or fit.var_theta > HEADING_PROVISIONAL_SIGMA**2:
             return
         self._apply_fit(s, fit, track, t, emit)
+
+    def _fit(self, points, extent: float, duration: float) -> RigidFit | None:
+        """The rigid fit of the track's points (``fit_rigid``), its heading variance widened by what a modelled
+        receiver wander can bend a track of this extent and duration by."""
+        fit = fit_rigid(list(points))
+        if fit is None or self.wander <= 0.0:
+            return fit
+        if extent <= 0.0:  # the fixes have not moved: nothing bounds what the wander bends
+            return None
+        # A slowly wandering error moves neighbouring fixes together: it bends the track as a
+        # whole, which the residuals cannot show. Over the track's duration T its ends differ by
+        # var(b(T) - b(0)) = 2 sigma_b^2 (1 - exp(-T / tau)), spread over the track's extent.
+        drift = 2.0 * self.wander * -math.expm1(-duration / self.cfg.error_tau_s)
+        return replace(fit, var_theta=fit.var_theta + drift / (extent * extent))
 
     def _apply_fit(self, s: "FilterState", fit: RigidFit, track: GpsTrack, t: tuple[float, float, float],
                    emit: bool) -> None:
@@ -679,9 +705,15 @@ class GpsModel(SensorModel):
         sigma = math.sqrt(fit.var_theta)
         ready = sigma <= HEADING_READY_SIGMA
         s.heading_ready = ready
+        own: GpsOwn = s.own[self.index]
+        # The receiver's measured noise outlives the turn: its increments are distances, which a turn keeps,
+        # and the previous fix's dead-reckoned point turns with the track. Dropped at each refinement, the
+        # fixes of the whole search went in at the unknown default (2.5 m) where they measured 0.1 m.
+        last = own.last if own.last is None else (*own.last[0:3], *fit.apply(own.last[3], own.last[4]))
         s.own[self.index] = GpsOwn(replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
-                                           applied=True, last_dr=fit.apply(*track.last_dr)),
-                                   accepted=s.own[self.index].accepted)  # the jump check's reference stays
+                                           applied=True, last_dr=fit.apply(*track.last_dr), guess=None),
+                                   accepted=own.accepted,  # the jump check's reference stays
+                                   increments=own.increments, last=last)
         # Said once a search, not again at each re-application after a late sample (the search may also
         # end first in a re-application: fixes stamped ahead of the odometry are re-applied at its every
         # message), so the flag lives on the model, outside the state the history rewinds.
