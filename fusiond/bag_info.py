@@ -25,6 +25,8 @@ from .replay.bag import open_reader, same_definition
 __all__ = ["BagInfo", "StaticTransform", "TopicInfo", "format_info", "inspect_bags", "is_reference", "print_info",
            "topic_use"]
 
+POSE_ONLY_PATH_M = 1.0  # the sampled poses' path with every twist zero: a driver that fills the pose only (a standing
+# robot's integrated pose does not move a metre)
 SAMPLE = 400  # messages of each topic deserialized to read frames, covariances and motion
 ODOMETRY = "nav_msgs/msg/Odometry"
 IMU = "sensor_msgs/msg/Imu"
@@ -64,6 +66,8 @@ class TopicInfo(msgspec.Struct, kw_only=True):
     lateral_rotated: float | None = None  # ... with the twist turned from the pose's frame into the body
     yaw_rate_zero: bool | None = None  # every sampled angular.z exactly 0 (a driver that lost its yaw rate)
     twist_zero_covariance: bool | None = None
+    # the pose travels while every sampled twist reads exactly 0: a driver that fills the pose only
+    pose_only: bool | None = None
     # GPS
     covariance_type: int | None = None
 
@@ -135,6 +139,12 @@ def _read_odometry(t: TopicInfo, msgs: list[Any]) -> None:
     if body:
         t.lateral_body, t.lateral_rotated = statistics.median(body), statistics.median(rotated)
     t.yaw_rate_zero = bool(body) and all(w == 0.0 for w in yaw_rates)
+    still = all(m.twist.twist.linear.x == m.twist.twist.linear.y == m.twist.twist.linear.z == 0.0
+                and m.twist.twist.angular.x == m.twist.twist.angular.y == m.twist.twist.angular.z == 0.0 for m in msgs)
+    path = sum(math.dist((a.pose.pose.position.x, a.pose.pose.position.y, a.pose.pose.position.z),
+                         (b.pose.pose.position.x, b.pose.pose.position.y, b.pose.pose.position.z))
+               for a, b in zip(msgs, msgs[1:]))
+    t.pose_only = still and path >= POSE_ONLY_PATH_M
 
 
 def _read_imu(t: TopicInfo, msgs: list[Any]) -> None:

@@ -95,6 +95,10 @@ def _odometry_lines(t: TopicInfo) -> list[str]:
              f'kind = "odom"                 # {t.topic}: {t.msgtype}, {t.rate_hz:.1f} Hz; its twist drives the '
              "prediction",
              f'key = "{_key(t.topic)}"']
+    if t.pose_only:
+        lines.append("twist_from_pose = true        # its pose travels while every twist reads 0: the driver fills the "
+                     "pose only (as robot_pose_ekf read it); the twist is taken from consecutive poses")
+        return lines
     if (t.lateral_body is not None and t.lateral_rotated is not None and t.lateral_body > LATERAL_BODY
             and t.lateral_rotated < LATERAL_TURNED):
         lines.append(f'twist_frame = "world"         # its lateral speed is {t.lateral_body:.0%} of the speed while '

@@ -307,15 +307,28 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
     # the filter's position is the datum's, which a recording that starts away from its datum puts far off
     placed = gps_cfg is None
     out = []
+    from_pose = getattr(odom_cfg, "twist_from_pose", False)
+    last_pose = None  # twist_from_pose: the previous odometry message's (t, p, q)
     for t, _, kind, msg in events:
         f.predict(t)
         if kind == "odom":
             tw = msg.twist.twist
             cov = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6).diagonal()
-            f.v = np.array([tw.linear.x, tw.linear.y, tw.linear.z])
+            v = np.array([tw.linear.x, tw.linear.y, tw.linear.z])
+            w = np.array([tw.angular.x, tw.angular.y, tw.angular.z])
+            if from_pose:  # the driver fills the pose only: its change since the last message, in the body
+                pp, pq = msg.pose.pose.position, msg.pose.pose.orientation
+                p, q = np.array([pp.x, pp.y, pp.z]), np.array([pq.x, pq.y, pq.z, pq.w])
+                v, w, cov = np.zeros(3), np.zeros(3), np.zeros(6)
+                if last_pose is not None and 0.0 < t - last_pose[0] <= cfg.filter.gap_s:
+                    dt = t - last_pose[0]
+                    v = quat_matrix(last_pose[2]).T @ (p - last_pose[1]) / dt
+                    w = quat_log(quat_mul(quat_conj(last_pose[2]), q)) / dt
+                last_pose = (t, p, q)
+            f.v = v
             f.v_var = _diag_floor(cov[:3], unmeasured=True)
             if not gyro:
-                f.w = np.array([tw.angular.x, tw.angular.y, tw.angular.z])
+                f.w = w
                 f.w_var = _diag_floor(cov[3:], unmeasured=True)
             if placed:
                 out.append((t, *f.x.p, *f.x.q))

@@ -61,6 +61,7 @@ class Variant:
     segments: tuple[str, ...] = ()  # several segments scored (default: ``segment`` alone)
     keep_datum: bool = False  # name the original's first fix as the datum (a variant that starts later)
     fuse_every: int = 1  # as `replay --fuse-every N`: every Nth fix fused, scored at the others
+    odom_keys: tuple[tuple[str, object], ...] = ()  # keys set in the config's odometry table (what `init` writes)
 
 
 def _keep(topic: str, rel: float, msg: object) -> object:
@@ -132,6 +133,15 @@ def _multipath_arc(t0: float, seconds: float, metres: float) -> Callable:
             _shift(msg, off * math.cos(turn), off * math.sin(turn))
         return msg
     return edit
+
+
+def _pose_only(topic: str, rel: float, msg: object) -> object:
+    """The odometry's twist zeroed, its pose as recorded: a driver that fills the pose only (robot_pose_ekf's
+    input)."""
+    if topic == "/odom":
+        tw = msg.twist.twist
+        tw.linear.x = tw.linear.y = tw.linear.z = tw.angular.x = tw.angular.y = tw.angular.z = 0.0
+    return msg
 
 
 def _odom_pauses(every: float, pause: float) -> Callable:
@@ -246,6 +256,10 @@ VARIANTS = (
     Variant("f110_new_user", F110, "f110_new_user.toml",
             "F1/10 car, the config a new user writes (no twist_measured, no [filter])", _keep,
             metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
+    Variant("f110_pose_only", F110, "f110_new_user.toml",
+            "F1/10 car, the driver's twist zeroed (it fills the pose only), twist_from_pose as `fusiond init` writes it",
+            _pose_only, edits=("/odom",), metrics=("aligned_h", "heading_deg"), baselines=(), segments=("a", "c", "d"),
+            odom_keys=(("twist_from_pose", True),)),
     Variant("f110_start20", F110, "f110_imu_yaw.toml", "F1/10 car, IMU yaw relative, starting 20 s in",
             _start_at(20.0), metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segment="a"),
     Variant("f110_start60", F110, "f110_imu_yaw.toml", "F1/10 car, IMU yaw relative, starting 60 s in",
@@ -316,6 +330,9 @@ def score(data: Path, v: Variant, work: Path, tuned: dict | None = None
     bag = work / v.name
     first_fix = write_variant(data / v.recording, bag, v)
     cfg = load(ROOT / "examples" / v.config)
+    if v.odom_keys:
+        cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, **dict(v.odom_keys))
+                                                    if kind_of(s).drives_prediction else s for s in cfg.sensors])
     if v.keep_datum and first_fix is not None:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, datum=first_fix)
                                                     if kind_of(s).geodetic else s for s in cfg.sensors])

@@ -24,6 +24,7 @@ them all; the live monitor only the diagnostics stream) and returns
 
 from __future__ import annotations
 
+import math
 from operator import attrgetter
 
 import msgspec
@@ -31,7 +32,7 @@ import msgspec
 from ..config import Config
 from ..core.sensors.registry import kind_of
 from ..core.sensors import OdomSample
-from ..core.sensors.odom import body_twist
+from ..core.sensors.odom import PoseDifferences, body_twist
 from .attitude import TiltStats
 from .blame import Entry, apply_rules
 from .clock import ClockOffsets
@@ -81,7 +82,12 @@ class Doctor:
         self.repeats: dict[str, int] = {}
         self._newest: dict[str, object] = {}
         self._stamp_offset = {s.name: s.stamp_offset_s for s in self.cfg.sensors if s.stamp_offset_s}
-        self._world_twist = {s.name for s in self.cfg.sensors if kind_of(s).drives_prediction and s.twist_frame == "world"}
+        self._world_twist = {s.name for s in self.cfg.sensors if kind_of(s).drives_prediction
+                             and s.twist_frame == "world" and not s.twist_from_pose}
+        # a twist taken from the poses (twist_from_pose): the series see it as the core takes it, from their own
+        # differences of the same messages in the same order
+        self._from_pose = {s.name: PoseDifferences(self.cfg.filter.gap_s) for s in self.cfg.sensors
+                           if kind_of(s).drives_prediction and s.twist_from_pose}
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:
@@ -94,9 +100,11 @@ class Doctor:
             self._settle_records()
 
     def add_twist(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
-                  orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
-        """The twist of an accepted odometry message (and the message's own pose orientation)."""
-        self.twist.add(linear, angular, orientation)
+                  orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
+                  position: tuple[float, float, float] = (0.0, 0.0, 0.0), stamp: float = math.nan) -> None:
+        """The twist of an accepted odometry message, as its driver wrote it (and the message's own pose, and its
+        stamp: how far that pose travels)."""
+        self.twist.add(linear, angular, orientation, position, stamp)
 
     def add_orientation(self, q: tuple[float, float, float, float]) -> None:
         """The estimate's attitude (x, y, z, w) at a published pose."""
@@ -113,6 +121,9 @@ class Doctor:
         offset = self._stamp_offset.get(sample.sensor)
         if offset:
             sample = msgspec.structs.replace(sample, stamp=sample.stamp + offset)
+        differences = self._from_pose.get(sample.sensor)
+        if differences is not None and type(sample) is OdomSample:
+            sample = differences(sample)
         if sample.sensor in self._world_twist and type(sample) is OdomSample:
             body = body_twist(sample)  # the twist as the core takes it: turned into the body by the message's pose
             if body is not None:

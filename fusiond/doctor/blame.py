@@ -240,9 +240,26 @@ def _explained_by_units(v: Verdict, units: Verdict) -> Verdict:
                    "in deg/s puts everything that reads it 57 times off; fix that first", evidence=v.evidence)
 
 
+def _pose_only(b: Blame, v: Verdict) -> Verdict | None:
+    """The pose-only odometry problem (``checks/pose_only``) for any other finding that is not ok."""
+    if v.level == "ok":
+        return None
+    culprit = b.first("pose_only")
+    return culprit if culprit is not None and culprit is not v else None
+
+
+def _explained_by_pose_only(v: Verdict, culprit: Verdict) -> Verdict:
+    return Verdict(v.sensor, v.channel, "warn", v.message + f": explained by {culprit.sensor}/{culprit.channel} (see "
+                   "it): the filter took the robot as standing all run, so nothing compared with its motion reads "
+                   "right; fix that first", culprit.key, evidence=v.evidence)
+
+
 RULES: tuple[Rule, ...] = (
     Rule(ANY_CHECK, _units, lambda b, v, units: _explained_by_units(v, units),
          "a gyro in deg/s explains every other finding: nothing it drives or is compared with reads right"),
+    Rule(ANY_CHECK, _pose_only, lambda b, v, culprit: _explained_by_pose_only(v, culprit),
+         "an odometry whose driver fills the pose only keeps the filter's robot standing: every finding that "
+         "reads its motion is that"),
     Rule(("heading",), lambda b, v: b.ev.mount, lambda b, v, mount: mount_explains_offset(v, mount, b.ev.imu),
          "an IMU yaw off the GPS track by the accelerometer's mounting yaw is that mounting, not a declination"),
     Rule(("speed", "mounting"), Blame.wrong_frame, lambda b, v, frame: blamed(v, frame),

@@ -2,7 +2,9 @@
 
 The replay feeds every accepted odometry message's twist (and the message's own pose) here; the sums
 are what the twist-frame check (``checks/twist_frame.py``) judges: a wheeled robot's body twist has
-little lateral velocity, and a world twist points where the message's pose heads.
+little lateral velocity, and a world twist points where the message's pose heads. Beside them, how far the
+messages' own positions travelled and how far their twists say the robot went over the same intervals: a
+driver that fills the pose only (``checks/pose_only.py``) travels with a twist that never moves.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ TURNED_RAD = 0.3  # the message's own pose yaw this far from the odom frame's x:
 ALONG_SIN = 0.05  # |sin| of the angle between the twist and an axis below this: the twist points along it
 MOVING_M_S = 0.1  # speed above which a twist has a direction
 
+MAX_SPEED_M_S = 100.0  # a position that moved faster between two messages was reset, not driven
 CHUNK = 4096  # twists noted before they are summed (bounded memory)
 
 
@@ -34,6 +37,10 @@ class TwistStats:
         self._linear: list[tuple[float, float, float]] = []  # the samples' own tuples: nothing allocated
         self._angular: list[tuple[float, float, float]] = []
         self._orientation: list[tuple[float, float, float, float]] = []
+        self._position: list[tuple[float, float, float]] = []
+        self._stamp: list[float] = []
+        self._last: tuple[float, float, float, float] | None = None  # the previous chunk's last (t, x, y, z)
+        self._travel = [0.0, 0.0]  # the positions' path, the twists' (|v| dt) over the same intervals, m
         self._n = 0
         self._sums = [0.0, 0.0, 0.0]
         self._turned = 0
@@ -42,10 +49,13 @@ class TwistStats:
         self._posed = 0
 
     def add(self, linear: tuple[float, float, float], angular: tuple[float, float, float],
-            orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
+            orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
+            position: tuple[float, float, float] = (0.0, 0.0, 0.0), stamp: float = math.nan) -> None:
         self._linear.append(linear)
         self._angular.append(angular)
         self._orientation.append(orientation)
+        self._position.append(position)
+        self._stamp.append(stamp)
         if len(self._linear) >= CHUNK:
             self._settle()
 
@@ -57,6 +67,8 @@ class TwistStats:
     along_x = Settled("_along_x")  # ... whose twist points along the odom frame's x (body-frame, or the robot heads x)
     along_pose = Settled("_along_pose")  # ... whose twist points where that pose heads (world-frame)
     posed = Settled("_posed")  # messages carrying a pose orientation (not the identity of a driver that fills none)
+    pose_travel = Settled("_travel", 0)  # m the messages' positions moved, message to message (resets left out) ...
+    twist_travel = Settled("_travel", 1)  # ... and how far their twists say the robot went meanwhile, m
 
     def _settle(self) -> None:
         n = len(self._linear)
@@ -65,7 +77,10 @@ class TwistStats:
         linear = np.fromiter(chain.from_iterable(self._linear), dtype=float, count=3 * n).reshape(n, 3)
         angular = np.fromiter(chain.from_iterable(self._angular), dtype=float, count=3 * n).reshape(n, 3)
         q = np.fromiter(chain.from_iterable(self._orientation), dtype=float, count=4 * n).reshape(n, 4)
-        self._linear, self._angular, self._orientation = [], [], []
+        p = np.fromiter(chain.from_iterable(self._position), dtype=float, count=3 * n).reshape(n, 3)
+        t = np.array(self._stamp, dtype=float)
+        self._linear, self._angular, self._orientation, self._position, self._stamp = [], [], [], [], []
+        self._add_travel(t, p, linear)
         x, y, z, w = q.T
         self._posed += int((~((x == 0.0) & (y == 0.0) & (z == 0.0) & (w == 1.0))).sum())
         pose_yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
@@ -77,3 +92,23 @@ class TwistStats:
         rows = np.abs(np.column_stack((linear[:, 0], linear[:, 1], angular[:, 2])))
         self._n += n
         self._sums = np.cumsum(np.concatenate(([self._sums], rows)), axis=0)[-1].tolist()
+
+    def _add_travel(self, t: np.ndarray, p: np.ndarray, linear: np.ndarray) -> None:
+        """The chunk's path of the positions and of the twists (each interval's |v| dt, v the message that ends
+        it), message to message from the previous chunk's last; an interval not forward in time, or whose
+        position jumped faster than MAX_SPEED_M_S (an odometry reset), is left out of both."""
+        last = self._last
+        if last is not None:
+            t = np.concatenate(([last[0]], t))
+            p = np.concatenate(([last[1:]], p))
+        else:
+            linear = linear[1:]
+        self._last = (float(t[-1]), *p[-1].tolist())
+        if len(t) < 2:
+            return
+        dt = np.diff(t)
+        step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        with np.errstate(invalid="ignore"):
+            ok = (dt > 0.0) & np.isfinite(step) & (step <= MAX_SPEED_M_S * dt)
+        driven = np.linalg.norm(linear, axis=1) * dt
+        self._travel = [self._travel[0] + float(step[ok].sum()), self._travel[1] + float(driven[ok].sum())]

@@ -367,7 +367,7 @@ class Runner:
                 doctor.add_rest(sample, since)
         if isinstance(sample, OdomSample) and step.accepted:
             if doctor is not None:
-                doctor.add_twist(sample.linear, sample.angular, sample.orientation)
+                doctor.add_twist(sample.linear, sample.angular, sample.orientation, sample.position, sample.stamp)
             if keep_trace:
                 trace.raw_odom.append((sample.stamp, *sample.position))
         for r in step.records:

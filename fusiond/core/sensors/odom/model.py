@@ -41,6 +41,7 @@ from ..base import SensorContext, SensorModel
 from ..checks import MAX_RATE, MAX_SPEED, Rejected, finite, plausible
 from ..imu.gyro_bias import quiet_bound
 from . import lost_channel
+from .pose_twist import PoseDifferences
 from .rest import rest_window, running_noise
 from .sample import OdomSample
 from .table import OdomSensor
@@ -144,7 +145,8 @@ class OdomPolicy:
         self._all_measured = all(self._declared)
         self._seen: tuple | None = None  # the last twist covariance and its ``_twist_noise``
         self._resolved: tuple = ((), (), (), None)
-        self._world = cfg.twist_frame == "world"
+        self._world = cfg.twist_frame == "world" and not cfg.twist_from_pose
+        self.differences: PoseDifferences | None = None  # twist_from_pose (set by the model: it knows gap_s)
 
     def _twist_noise(self, cov) -> tuple[mat3.Mat3, mat3.Mat3, tuple[bool, ...], itemgetter]:
         """(linear, angular covariance, measured per component vx vy vz wx wy wz, its picker) of a covariance not seen
@@ -180,6 +182,8 @@ class OdomPolicy:
         return resolved
 
     def convert(self, s: OdomSample) -> OdomInput:
+        if self.differences is not None:  # the twist from the pose and the previous message's
+            s = self.differences(s)
         if not (plausible(s.linear, MAX_SPEED) and plausible(s.angular, MAX_RATE)):  # NaN and inf fail it too
             if not (finite(s.linear) and finite(s.angular)):
                 raise Rejected(reasons.NON_FINITE, "twist")
@@ -219,6 +223,8 @@ class OdomModel(SensorModel):
         self._bias_z = self._bias[2]
         self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
         self._last_fit: tuple = ((), math.nan, 0.0)  # (window, linear variance, its forward_accel)
+        if cfg.twist_from_pose:  # an interval longer than the filter's gap_s is a logging gap, no twist
+            self.policy.differences = PoseDifferences(ctx.filter.gap_s)
 
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN

@@ -26,6 +26,9 @@ class OdomSensor(SensorTable, tag="odom"):
     # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
     # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom/model.py); 0: off
     coast_decel: float = 0.5
+    # the driver fills the pose only (as robot_pose_ekf read it) and leaves the twist zero: the twist is taken from
+    # consecutive messages' poses, in the body (core/sensors/odom/pose_twist.py; twist_frame is then not read)
+    twist_from_pose: bool = False
 
 
 __all__ = ["OdomSensor"]
