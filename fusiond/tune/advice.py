@@ -97,7 +97,7 @@ def _comparable(ref: Reference, records: Sequence[object]) -> tuple[Reference, i
         dof[k] = r.dof
         channels.add((k[0], k[1]))
     keep = {k: t for k, t in ref.terms.items() if (k[0], k[1]) in channels and dof.get(k, t[2]) == t[2]}
-    return Reference(keep), len(ref.terms) - len(keep)
+    return Reference(keep, ref.tolerance), len(ref.terms) - len(keep)
 
 
 # A record's stamp is its sample's stamp plus its sensor's stamp_offset_s: a line that shifts a sensor's clock

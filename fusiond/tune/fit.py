@@ -56,7 +56,7 @@ from ..config import Config, ConfigError
 from ..errors import ReplayError
 from ..logs import muted
 from .advice import with_suggestion
-from .doctor_values import diagnose, doctor_lines
+from .doctor_values import diagnose, doctor_lines, untuned_problems
 from .floors import measured_floors, with_floors
 from .forked import beside, run_side_by_side
 from .likelihood import Reference, Score, reference, replay_records, residuals, score
@@ -114,6 +114,8 @@ class TuneResult:
     prediction_before: Prediction | None = None  # the original config at the held-back fixes ...
     prediction_after: Prediction | None = None  # ... and the tuned one (None: no absolute GPS to hold back)
     comments: dict[tuple[str, str], str] = field(default_factory=dict)  # (table, key) -> its TOML comment
+    # the doctor's problems on keys tune does not fit (``doctor_values.untuned_problems``): to fix first
+    problems: list = field(default_factory=list)
 
     @property
     def changed(self) -> list[Row]:
@@ -348,7 +350,8 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     return TuneResult(cfg, config, rows, split, f_start, f_best, before, after,
                       obj.replays + replays + first_replays, time.perf_counter() - t_start, stopped,
                       residuals(obj.ref) if n and obj.ref is not None else 0, comments=comments,
-                      prediction_before=predicted[0], prediction_after=predicted[1])
+                      prediction_before=predicted[0], prediction_after=predicted[1],
+                      problems=untuned_problems(verdicts, params))
 
 
 def _predicted(c: Config, held_back: tuple[list, list], backend: Backend | None) -> Prediction:
@@ -529,6 +532,12 @@ def format_table(result: TuneResult) -> str:
     widths = [max(len(x[k]) for x in [head, *lines]) for k in range(5)]
     out = ["  ".join(h.ljust(w) for h, w in zip(head[:5], widths)) + "  " + head[5]]
     out += ["  ".join(c.ljust(w) for c, w in zip(line[:5], widths)) + "  " + line[5] for line in lines]
+    if result.problems:  # said first: what the table fitted, it fitted around them
+        said = [f"the doctor finds {len(result.problems)} problem(s) on keys tune does not fit; the noise below is "
+                "fitted around them. Fix them first (`fusiond doctor` says why), then tune again:"]
+        for v in result.problems:
+            said.append(f"  {v.sensor}/{v.channel} [{v.key}]" + (f" -> {v.suggestion}" if v.suggestion else ""))
+        out = said + out
     b, a = result.heldback_before, result.heldback_after
     if b is not None and a is not None:
         out.append(f"held-back   -log L {b.neg_loglik:.1f} -> {a.neg_loglik:.1f} over {b.terms} updates after stamp "

@@ -130,6 +130,25 @@ def test_a_replay_scored_on_its_own_terms_is_half_the_sum_of_log_det_and_nis():
     assert empty.missing == len(ref) and empty.neg_loglik > got.neg_loglik
 
 
+def test_an_update_whose_window_slid_is_scored_as_the_same_term_and_one_a_window_away_is_missing():
+    """Windowed updates (the IMU's gravity tilt, every ~0.1 s) whose windows a parameter slides by a fraction of
+    one: the same terms, scored on the replay's own innovations; none of them charged as missing. An update slid
+    by more than the channel's median interval is another window: its term is missing, charged at its gate."""
+    samples = simulate_imu(SimConfig(duration=5.0))
+    cfg = robot_config()
+    records = replay_records(cfg, samples)
+    ref = reference(records, cfg)
+    interval = ref.tolerance[("imu", "orientation")]
+    assert interval > 0.0
+    slid = [msgspec.structs.replace(r, stamp=r.stamp + 0.4 * interval) for r in records]
+    exact, moved = score(records, ref), score(slid, ref)
+    assert moved.missing == 0 and moved.neg_loglik == pytest.approx(exact.neg_loglik, rel=1e-12)
+    terms = [i for i, r in enumerate(records) if r.channel == "orientation" and not r.learning]
+    mid = terms[len(terms) // 2]
+    far = [msgspec.structs.replace(r, stamp=r.stamp + 1.5 * interval) if i == mid else r for i, r in enumerate(records)]
+    assert score(far, ref).missing == 1
+
+
 @pytest.mark.parametrize("example", sorted((ROOT / "examples").glob("*.toml")) + [ROOT / "config.toml"],
                          ids=lambda p: p.name)
 def test_the_written_config_loads_back_to_the_same_config(example):
@@ -266,3 +285,21 @@ def test_replays_side_by_side_stop_at_the_bound_keeping_what_was_replayed(gps_re
     in_turn([0.0] * len(params))
     for p in points[:2]:
         assert side_by_side.many([p]) == [in_turn(p)]  # a cached point costs no replay: no bound asked
+
+
+def test_tune_says_the_doctors_problems_on_keys_it_does_not_fit_before_its_table():
+    """The odom frame's twist configured as the body's (a problem the doctor names with twist_frame, which tune
+    does not fit): tune fits the noise around it, and says first that the problem is to be fixed."""
+    from tests.doctor.test_doctor_twist_frame import _with_pose
+    from tests.support.core_samples import make_config
+    from fusiond.tune import format_table
+
+    samples = _with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=True)
+    result = tune(samples, make_config(), maxfev=4, budget_s=60.0)
+    (v,) = result.problems
+    assert v.key == "sensors.wheel.twist_frame" and v.suggestion == 'twist_frame = "world"', v
+    text = format_table(result)
+    assert text.splitlines()[0].startswith("the doctor finds 1 problem") and 'twist_frame = "world"' in text, text
+    clean = tune(_with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=False), make_config(),
+                 maxfev=4, budget_s=60.0)
+    assert not [p for p in clean.problems if p.key == "sensors.wheel.twist_frame"], clean.problems
