@@ -166,6 +166,9 @@ class FusionCore:
         self._publishes = [k.prompts_publish for k in kinds]  # an applied sample of these is a publish moment
         self.stats = [SensorStats() for _ in self.sensors]
         self.windows: dict[tuple[int, str], NisWindow] = {}
+        # the windowed NIS verdicts (``consistency``, each record's ``consistency``): off for a caller that reads
+        # neither (the likelihood's replays score a record's NIS, never its verdict)
+        self.judge_consistency = True
         self.state: FilterState | None = None
         self._reset_history()
         self._held = HeldTimeline(fc.jump_s, fc.jump_confirm, fc.jump_persist_s, fc.history_max, self.odom_index)
@@ -285,12 +288,8 @@ class FusionCore:
             st.late += 1
         if st.newest_stamp is None or stamp > st.newest_stamp:
             st.newest_stamp = stamp
-        for r in records:
-            w = self._window(idx, r.channel)
-            if not r.learning:
-                r.consistency = w.add(r.nis, r.dof, r.rejected)
-            if r.rejected and r.channel != "yaw_rate":
-                st.rejected += 1
+        if records:
+            self._judge(idx, st, records)
         publish = self._publishes[idx] and (self.frame_index < 0 or self.state.frame_ready)
         unmeasured = self.models[idx].unmeasured
         measured = not (unmeasured and any(r.channel in unmeasured for r in records))
@@ -645,6 +644,18 @@ class FusionCore:
         if n == 1 or n % 1000 == 0:
             log.warning("sample_dropped", sensor=self.sensors[idx].name, reason=reason, stamp=stamp, count=n)
         return Step(self.sensors[idx].name, False, reason)
+
+    def _judge(self, idx: int, st: SensorStats, records: list[DiagnosticsRecord]) -> None:
+        """Count the gated updates among a sample's records and, with ``judge_consistency``, give each record
+        its channel window's verdict."""
+        judge = self.judge_consistency
+        for r in records:
+            if judge:
+                w = self._window(idx, r.channel)
+                if not r.learning:
+                    r.consistency = w.add(r.nis, r.dof, r.rejected)
+            if r.rejected and r.channel != "yaw_rate":
+                st.rejected += 1
 
     def _window(self, idx: int, channel: str) -> NisWindow:
         w = self.windows.get((idx, channel))

@@ -70,6 +70,7 @@ def replay_records(cfg: Config, samples: Iterable[object], backend: Backend | No
     pose (t, x y z, qx qy qz qw) is appended to it, when any sample was fused; ``applied``: each sensor's
     count of samples the filter applied is put in it."""
     core = FusionCore(cfg, backend)
+    core.judge_consistency = False  # a record's windowed verdict is not scored (nor is anything else read of it)
     ingest = core.ingest
     records: list[DiagnosticsRecord] = []
     samples = samples if isinstance(samples, Sequence) else list(samples)
