@@ -153,6 +153,8 @@ class FusionCore:
             tilt_mask=self.tilt_mask, position_mask=self.position_mask, delta_mask=self.delta_mask,
             rest_mask=self.rest_mask, timeout=self.inputs.timeout, inputs_at=self.inputs.at, forward_accel=self._forward_accel)
         self.models = build_models(self.sensors, self.context)
+        if self.context.track_acceleration and self.odom_index >= 0:  # asked at every IMU sample: no forwarding
+            self.context.forward_accel = self.models[self.odom_index].forward_accel
         self._predicting = [m for m in self.models if m.predicts]  # on_predict hooks (GPS track, pose anchors)
         self._showing = [m for m in self.models if m.shows_position]  # shown_position hooks (GPS heading search)
         if self.two_d:

@@ -45,11 +45,12 @@ class HeldInputs:
     def __init__(self, sensors: list, odom_index: int, two_d: bool, layout: StateLayout,
                  gap_s: float = 0.0) -> None:
         self.odom_index = odom_index
-        self._odom_hold = gap_s  # the odometry's twist holds at least this long (module doc)
         self._layout = layout  # its input blocks correct the last inputs (``unheld_motion_var``)
         self.two_d = two_d
         self.tilt_reference = True  # set by the core once the sensor models say whether any gives tilt
         self._timeout_base = [sc.timeout_s for sc in sensors]
+        # the odometry's twist holds at least gap_s (module doc), before its stream's periods count (``timeouts``)
+        self._odom_base = max(self._timeout_base[odom_index], gap_s) if odom_index >= 0 else 0.0
         odom = sensors[odom_index] if odom_index >= 0 else None
         unmeasured = odom.twist_unmeasured_sigma if odom is not None else [0.1, 0.1]
         # the twist nobody measures: zero, with the "not measured" variances
@@ -73,7 +74,7 @@ class HeldInputs:
         odom = self.odom_index
         odom_timeout = gyro_timeout = 0.0
         if odom >= 0 and s.last[odom] is not None:
-            base, period = max(self._timeout_base[odom], self._odom_hold), s.period[odom]
+            base, period = self._odom_base, s.period[odom]
             odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[odom][0])
         if s.gyro is not None:
             idx = s.gyro_last[0]

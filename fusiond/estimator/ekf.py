@@ -297,7 +297,7 @@ class ErrorStateEKF:
 
     def yaw_variance(self) -> float:
         """The heading's variance (rad^2): the global attitude error's z component."""
-        return float(self.P[YAW_ROW, YAW_ROW])
+        return self.P.item(YAW_ROW, YAW_ROW)  # a Python float (asked at every prediction while a GPS keeps a track)
 
     def set_position(self, p, rows: tuple[int, ...] = (0, 1, 2)) -> None:
         """Set the nominal position components ``rows`` (covariance: ``reset_covariance``)."""

@@ -270,18 +270,18 @@ class GpsModel(SensorModel):
         own: GpsOwn = s.own[self.index]
         if own.track is None:
             return None
-        tr = own.travel
+        tr, unaligned = own.travel, own.unaligned
         e0, n0, u0 = x0[:3].tolist()  # the positions as floats: one slice each (a third of three items' cost)
         e1, n1, u1 = x1[:3].tolist()
         dx, dy = e1 - e0, n1 - n0
         d = math.hypot(dx, dy)
         s.own[self.index] = msgspec.structs.replace(own, travel=(tr[0] + dx, tr[1] + dy, tr[2] + (u1 - u0)),
-                                                    unaligned=own.unaligned + d)
+                                                    unaligned=unaligned + d)
         if d == 0.0:
             return None
         s2 = s.ekf.yaw_variance()
         along = 1.5 - 2.0 * math.exp(-0.5 * s2) + 0.5 * math.exp(-2.0 * s2)
-        var = along * ((own.unaligned + d) ** 2 - own.unaligned**2)
+        var = along * ((unaligned + d) ** 2 - unaligned**2)
         ux, uy = dx / d, dy / d
         return var * ux * ux, var * ux * uy, var * uy * uy
 
