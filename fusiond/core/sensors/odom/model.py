@@ -223,6 +223,7 @@ class OdomModel(SensorModel):
         self._bias_z = self._bias[2]
         self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
         self._last_fit: tuple = ((), math.nan, 0.0)  # (window, linear variance, its forward_accel)
+        self._lost_kept: tuple | None = None  # the last ``_lost_noise``: (its three arguments, its answer)
         if cfg.twist_from_pose:  # an interval longer than the filter's gap_s is a logging gap, no twist
             self.policy.differences = PoseDifferences(ctx.filter.gap_s)
 
@@ -295,14 +296,27 @@ class OdomModel(SensorModel):
 
     def _without_lost(self, inp: OdomInput, lost: tuple[bool, bool, bool]) -> OdomInput:
         """The input with the lost angular components taken as not measured: zero, the unmeasured noise."""
-        angular = tuple(0.0 if gone else w for w, gone in zip(inp.angular, lost))
-        cov = list(inp.angular_cov)
+        a0, a1, a2 = inp.angular
+        angular = (0.0 if lost[0] else a0, 0.0 if lost[1] else a1, 0.0 if lost[2] else a2)
+        cov, measured = self._lost_noise(inp.angular_cov, inp.measured, lost)
+        return OdomInput(inp.linear, inp.linear_cov, angular, cov, measured[5],
+                         stationary(inp.linear, angular), inp.world, measured)
+
+    def _lost_noise(self, angular_cov: tuple, measured: tuple, lost: tuple[bool, bool, bool]) -> tuple[tuple, tuple]:
+        """(angular covariance, measured flags) with the lost components not measured. Once a component is
+        lost every message asks this of the same tuples (the policy resolves a repeating covariance once), so
+        the last answer is kept for them (tuples: the same objects hold the same values)."""
+        kept = self._lost_kept
+        if kept is not None and kept[0] is angular_cov and kept[1] is measured and kept[2] == lost:
+            return kept[3], kept[4]
+        cov = list(angular_cov)
         for i, gone in enumerate(lost):
             if gone:
                 cov[4 * i] = self._unmeasured_var
-        measured = inp.measured[:3] + tuple(m and not gone for m, gone in zip(inp.measured[3:], lost))
-        return OdomInput(inp.linear, inp.linear_cov, angular, tuple(cov), measured[5],
-                         stationary(inp.linear, angular), inp.world, measured)
+        out = (tuple(cov), measured[:3] + tuple(m and not gone for m, gone in zip(measured[3:], lost)))
+        if type(angular_cov) is tuple and type(measured) is tuple:
+            self._lost_kept = (angular_cov, measured, lost, *out)
+        return out
 
     def _rest(self, s: "FilterState", own: OdomOwn, inp: OdomInput, stamp: float) -> tuple[tuple, tuple, bool]:
         """The standstill test after this message (``rest.py``): its window, the running noise, and whether
