@@ -69,17 +69,31 @@ class HeldInputs:
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
         during a prediction, so it reads them once for all its segments. ``timeout`` of each, written
-        out (``silent_after``): the core asks for them two or three times a message; the odometry's at
-        least ``gap_s`` (module doc)."""
+        out (``silent_after``, its max as comparisons: the same float, a third of the cost): the core asks
+        for them two or three times a message; the odometry's at least ``gap_s`` (module doc)."""
         odom = self.odom_index
         odom_timeout = gyro_timeout = 0.0
         if odom >= 0 and s.last[odom] is not None:
-            base, period = self._odom_base, s.period[odom]
-            odom_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[odom][0])
+            odom_timeout = self._odom_base
+            period = s.period[odom]
+            if not period <= 0.0:  # silent_after's test
+                held = TIMEOUT_PERIODS * period
+                if held > odom_timeout:
+                    odom_timeout = held
+                held = GAP_HOLD * s.longest[odom][0]
+                if held > odom_timeout:
+                    odom_timeout = held
         if s.gyro is not None:
             idx = s.gyro_last[0]
-            base, period = self._timeout_base[idx], s.period[idx]
-            gyro_timeout = base if period <= 0.0 else max(base, TIMEOUT_PERIODS * period, GAP_HOLD * s.longest[idx][0])
+            gyro_timeout = self._timeout_base[idx]
+            period = s.period[idx]
+            if not period <= 0.0:  # silent_after's test
+                held = TIMEOUT_PERIODS * period
+                if held > gyro_timeout:
+                    gyro_timeout = held
+                held = GAP_HOLD * s.longest[idx][0]
+                if held > gyro_timeout:
+                    gyro_timeout = held
         return odom_timeout, gyro_timeout
 
     def timeouts_and_expiries(self, s: FilterState) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -184,7 +198,15 @@ def silent_after(timeout_s: float, period: float, periods: float = TIMEOUT_PERIO
     whichever is longest. The core's held inputs (message time) and the service's liveness (wall time)
     both use it with TIMEOUT_PERIODS; the IMU's gap rule with its own count and no recent interval
     (core/sensors/imu/gap_turn.py)."""
-    return timeout_s if period <= 0.0 else max(timeout_s, periods * period, GAP_HOLD * longest)
+    if period <= 0.0:
+        return timeout_s
+    # max(timeout_s, periods * period, GAP_HOLD * longest) as comparisons: the same float (max keeps the first
+    # of equals too), without a builtin call (asked at every message)
+    held = periods * period
+    if held > timeout_s:
+        timeout_s = held
+    held = GAP_HOLD * longest
+    return held if held > timeout_s else timeout_s
 
 
 def recent_longest(recent: tuple[float, float, float], interval: float, stamp: float,
@@ -204,7 +226,7 @@ def recent_longest(recent: tuple[float, float, float], interval: float, stamp: f
 def smoothed_period(period: float, interval: float) -> float:
     """A typical message period (0: none yet) after one more interval between messages: an EMA of the
     intervals, each capped at 1 s so that a gap does not make the sensor's timeout long."""
-    d = min(interval, 1.0)
+    d = 1.0 if 1.0 < interval else interval  # min(interval, 1.0), the same float, without a builtin call
     return d if period <= 0.0 else period + PERIOD_SMOOTHING * (d - period)
 
 
