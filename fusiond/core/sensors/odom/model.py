@@ -362,12 +362,12 @@ class OdomModel(SensorModel):
         x = s.ekf.x
         gyro_z = s.gyro[2]
         var = s.gyro_cov[8]
-        if self._bias_z >= 0:
-            gyro_z -= float(x[self._bias_z])
+        if self._bias_z >= 0:  # (item: the same float as float(x[i]), at a third of the cost)
+            gyro_z -= x.item(self._bias_z)
             e = self._bias_z_error
-            var += float(s.ekf.P[e, e])
+            var += s.ekf.P.item(e, e)
         if self._gyro_scale >= 0:
-            gyro_z *= float(x[self._gyro_scale])
+            gyro_z *= x.item(self._gyro_scale)
         return gyro_z, var
 
     def forward_accel(self, s: "FilterState") -> float:

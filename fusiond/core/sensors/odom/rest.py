@@ -87,9 +87,7 @@ def rest_window(window: tuple, values: tuple, measured: tuple, running: tuple | 
 
     ``window`` holds the six twist components (unmeasured ones 0) and stamps of the last ``span``
     seconds, at least MIN_WINDOW messages; ``running`` is ``running_noise``'s variance per component."""
-    k = 0
-    for used in measured:
-        k += used
+    k = sum(measured)
     if k == 0:
         return (), False
     z = normal_bound(0.5 * alpha / MIN_WINDOW, k)
