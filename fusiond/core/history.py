@@ -116,8 +116,10 @@ class History:
             base = self.base = after[end - 1]
             if base is None:  # an entry's filter time is its stamp (keys in stamp order, each applied at its own)
                 self.base_t = keys[end - 1][0]
-            if n > 1:
-                free.extend([s for s in after[start : end - 1] if s is not None])
+            if n > 1:  # a loop, not a comprehension: its frame cost more than the one or two entries it reads
+                for s in after[start : end - 1]:
+                    if s is not None:
+                        free.append(s)
             if end >= COMPACT:
                 del keys[:end], self.events[:end], self.after[:end]
                 end = 0

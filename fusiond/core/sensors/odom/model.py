@@ -409,7 +409,9 @@ def _fitted_accel(window: tuple, linear_var: float, backend: Backend) -> float:
         last = window[-1][1]
         return 0.0 if all(p[1] == last for p in window) else math.nan
     slope, misfit = backend.line_fit(window)
-    noise = max(ACCEL_FIT_SIGMAS * math.sqrt(linear_var), ACCEL_FIT_FLOOR)
+    noise = ACCEL_FIT_SIGMAS * math.sqrt(linear_var)
+    if ACCEL_FIT_FLOOR > noise:  # max(noise, ACCEL_FIT_FLOOR) as a comparison (the same float, no builtin call)
+        noise = ACCEL_FIT_FLOOR
     return slope if misfit <= noise else math.nan
 
 
