@@ -50,7 +50,8 @@ def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None, up_sigma: 
 def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None,
                      up: ChannelStats | None = None, unstated: bool = False,
                      slow_vertical: tuple[float, float, float] | None = None,
-                     up_sigma: float | None = None, stated_noise: list[float] | None = None) -> Verdict:
+                     up_sigma: float | None = None, stated_noise: list[float] | None = None,
+                     prediction_key: str = "") -> Verdict:
     """GPS and pose channels: NIS against the stated noise. ``unstated``: a receiver whose fixes state no
     accuracy: the filter took its altitude's noise from the config's ``unknown_position_sigma`` (a verdict on
     it without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
@@ -60,7 +61,7 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     model's, not a noise to change (``_slow_altitude``). ``up_sigma``: the altitude's noise as the filter took it,
     the third value of a horizontal channel's line (``_measured_noise``). ``stated_noise``: the config's
     position_noise (east north up), with which a NIS low that no smaller noise can raise is told apart
-    (``_prediction_overstated``)."""
+    (``_prediction_overstated``); ``prediction_key``: the key that verdict names (the odometry's twist_noise)."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
@@ -132,8 +133,9 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                            f"NIS low ({figures(ch, t0)}; {detail}): the innovations ({c} rms {got:.3f} m) are smaller "
                            f"than what the filter's prediction alone claims between fixes ({alone:.3f} m, S less the "
                            "stated position_noise): no position_noise brings the NIS up, the prediction is what is "
-                           "stated too wide (the odometry's twist_noise, filter.process_noise); with sparse fixes a "
-                           "receiver's wandering error is modelled by error_tau_s and error_sigma", evidence=ev)
+                           "stated too wide (the odometry's twist_noise, filter.process_noise: `fusiond tune` fits "
+                           "them on this recording); with sparse fixes a receiver's wandering error is modelled by "
+                           "error_tau_s and error_sigma", prediction_key, evidence=ev)
     if verdict == "nis_low":
         return Verdict(name, channel, "warn",
                        f"NIS low ({figures(ch, t0)}; {detail}): {stated} is larger than the innovations show "
@@ -166,9 +168,11 @@ class AbsoluteNis(PerChannel):
         up_sigma = _stated_vertical(ev, key[0]) if key[1] != "altitude" else None
         sc = ev.sensors.get(key[0]) if ev.config is not None else None
         stated = getattr(sc, "position_noise", None)
+        # what drives the prediction between fixes: the odometry's twist noise, named where the fixes say it is wide
+        wheels = sensor_key(ev.odom.name, "twist_noise") if ev.config is not None and ev.odom is not None else ""
         return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key), _unstated(ev, key[0]),
                                  _slow_vertical(ev, key[0], ch), up_sigma,
-                                 None if stated is None else [float(v) for v in stated])]
+                                 None if stated is None else [float(v) for v in stated], wheels)]
 
 
 def _settled(ch: ChannelStats, noise: list[float]) -> bool:
