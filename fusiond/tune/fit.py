@@ -436,11 +436,20 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
     # the doctor's measured values, each a candidate in place of tune's (doctor_values.py)
     doctor = doctor_lines(cfg, verdicts, active)  # type: ignore[arg-type]
     measured: list[object] = [None] * len(active)
+
+    def effective(c: Config, i: int) -> object:
+        """The components of ``active[i]`` as the filter takes them in ``c``: unset, the messages' (the start's),
+        each floored by the sensor (a line stating the floor the messages are held at changes nothing)."""
+        v = value(c, active[i])
+        v = value(start, active[i]) if v is None else v
+        floor = active[i].floor
+        return tuple(max(x, floor) for x in v) if isinstance(v, tuple) else max(v, floor)
+
     for group, line in doctor.items():
         idx = [i for i, p in enumerate(active) if p.group == group]
         for i in idx:
             measured[i] = value(line.config, active[i])
-        if all(measured[i] == value(config, active[i]) for i in idx):
+        if all(effective(line.config, i) == effective(config, i) for i in idx):
             continue
         try:
             trial_cfg, _ = with_suggestion(config, line.verdict)
@@ -451,7 +460,7 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
         mispredicts = trial_pred is not None and pred_after is not None and trial_pred.worse_than(pred_after)
         if not loses and not mispredicts:
             for i in idx:
-                changed = value(trial_cfg, active[i]) != value(cfg, active[i])
+                changed = effective(trial_cfg, i) != effective(cfg, i)
                 status[i] = "tuned" if changed else "unchanged"
                 notes[i] = f"the doctor's measured value (held-back -log L {trial_score.neg_loglik:.1f} against " \
                            f"the fit's {after.neg_loglik:.1f})"

@@ -303,3 +303,19 @@ def test_tune_says_the_doctors_problems_on_keys_it_does_not_fit_before_its_table
     clean = tune(_with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=False), make_config(),
                  maxfev=4, budget_s=60.0)
     assert not [p for p in clean.problems if p.key == "sensors.wheel.twist_frame"], clean.problems
+
+
+def test_a_doctor_line_stating_the_floor_the_messages_are_held_at_is_no_change(jackal_bag):
+    """The Jackal's IMU with its gyro noise stated ten times too large: the orientation NIS reads low and the doctor
+    suggests orientation_noise at its floor, the very noise the messages' covariances are floored to. Tuned, the
+    gyro's noise comes down, and that line changes nothing: not written, not said to be tuned."""
+    from fusiond.tune import read_samples
+
+    text = (ROOT / "examples" / "jackal.toml").read_text()
+    cfg = loads(text.replace("[[sensors]]\nname = \"imu\"", "[[sensors]]\nname = \"imu\"\ngyro_noise = 0.05", 1))
+    assert cfg.sensor("imu").gyro_noise == 0.05 and cfg.sensor("imu").orientation_noise is None
+    result = tune(read_samples([jackal_bag], cfg), cfg, keys=["imu.gyro_noise", "imu.orientation_noise"])
+    rows = {r.param.name: r for r in result.rows}
+    assert rows["imu.gyro_noise"].status == "tuned" and rows["imu.gyro_noise"].after < 0.01
+    orientation = rows["imu.orientation_noise"]
+    assert orientation.status != "tuned" and result.config.sensor("imu").orientation_noise is None, orientation
