@@ -6,37 +6,17 @@ from __future__ import annotations
 
 import math
 
-import msgspec
-
-from fusiond.core.sensors import OdomSample
-from fusiond.estimator import rotation as rot
-
 from tests.support.core_samples import make_config
-from tests.support.sim import SimConfig, simulate
+from tests.support.sim import SimConfig
+from tests.support.twist_frames import with_pose
 from tests.support.verdicts import one, verdicts_of
-
-
-def _with_pose(cfg: SimConfig, world: bool) -> list:
-    """The samples with each odometry message's pose heading the truth's, and its twist turned into the odom
-    frame by that heading when ``world``."""
-    samples = simulate(cfg)
-    yaw = {t: h for t, _, _, h in cfg.truth}
-    out = []
-    for s in samples:
-        if type(s) is OdomSample:
-            h = yaw[s.stamp]
-            vx, vy, vz = s.linear
-            linear = (vx * math.cos(h) - vy * math.sin(h), vx * math.sin(h) + vy * math.cos(h), vz) if world else s.linear
-            s = msgspec.structs.replace(s, linear=linear, orientation=rot.from_rpy(0.0, 0.0, h))
-        out.append(s)
-    return out
 
 
 def test_an_odom_frame_twist_configured_as_body_is_a_problem_naming_world():
     cfg = SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0)
-    v = one(verdicts_of(make_config(), _with_pose(cfg, world=True)), "wheel", "twist")
+    v = one(verdicts_of(make_config(), with_pose(cfg, world=True)), "wheel", "twist")
     assert v.level == "problem" and v.suggestion == 'twist_frame = "world"', v
-    body = [v for v in verdicts_of(make_config(), _with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0),
+    body = [v for v in verdicts_of(make_config(), with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0),
                                                              world=False)) if v.channel == "twist"]
     assert body == [], body
 

@@ -290,17 +290,17 @@ def test_replays_side_by_side_stop_at_the_bound_keeping_what_was_replayed(gps_re
 def test_tune_says_the_doctors_problems_on_keys_it_does_not_fit_before_its_table():
     """The odom frame's twist configured as the body's (a problem the doctor names with twist_frame, which tune
     does not fit): tune fits the noise around it, and says first that the problem is to be fixed."""
-    from tests.doctor.test_doctor_twist_frame import _with_pose
+    from tests.support.twist_frames import with_pose
     from tests.support.core_samples import make_config
     from fusiond.tune import format_table
 
-    samples = _with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=True)
+    samples = with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=True)
     result = tune(samples, make_config(), maxfev=4, budget_s=60.0)
     (v,) = result.problems
     assert v.key == "sensors.wheel.twist_frame" and v.suggestion == 'twist_frame = "world"', v
     text = format_table(result)
     assert text.splitlines()[0].startswith("the doctor finds 1 problem") and 'twist_frame = "world"' in text, text
-    clean = tune(_with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=False), make_config(),
+    clean = tune(with_pose(SimConfig(duration=60.0, turn_amplitude=0.6, speed=2.0), world=False), make_config(),
                  maxfev=4, budget_s=60.0)
     assert not [p for p in clean.problems if p.key == "sensors.wheel.twist_frame"], clean.problems
 
