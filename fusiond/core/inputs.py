@@ -68,32 +68,15 @@ class HeldInputs:
 
     def timeouts(self, s: FilterState) -> tuple[float, float]:
         """(odometry, gyro) input timeouts in state s (0.0 where there is no such input): fixed
-        during a prediction, so it reads them once for all its segments. ``timeout`` of each, written
-        out (``silent_after``, its max as comparisons: the same float, a third of the cost): the core asks
-        for them two or three times a message; the odometry's at least ``gap_s`` (module doc)."""
+        during a prediction, so it reads them once for all its segments. ``timeout`` of each; the
+        odometry's at least ``gap_s`` (module doc)."""
         odom = self.odom_index
         odom_timeout = gyro_timeout = 0.0
         if odom >= 0 and s.last[odom] is not None:
-            odom_timeout = self._odom_base
-            period = s.period[odom]
-            if not period <= 0.0:  # silent_after's test
-                held = TIMEOUT_PERIODS * period
-                if held > odom_timeout:
-                    odom_timeout = held
-                held = GAP_HOLD * s.longest[odom][0]
-                if held > odom_timeout:
-                    odom_timeout = held
+            odom_timeout = silent_after(self._odom_base, s.period[odom], longest=s.longest[odom][0])
         if s.gyro is not None:
             idx = s.gyro_last[0]
-            gyro_timeout = self._timeout_base[idx]
-            period = s.period[idx]
-            if not period <= 0.0:  # silent_after's test
-                held = TIMEOUT_PERIODS * period
-                if held > gyro_timeout:
-                    gyro_timeout = held
-                held = GAP_HOLD * s.longest[idx][0]
-                if held > gyro_timeout:
-                    gyro_timeout = held
+            gyro_timeout = silent_after(self._timeout_base[idx], s.period[idx], longest=s.longest[idx][0])
         return odom_timeout, gyro_timeout
 
     def timeouts_and_expiries(self, s: FilterState) -> tuple[tuple[float, float], tuple[float, float]]:

@@ -14,6 +14,7 @@ from itertools import chain
 
 import numpy as np
 
+from ..core.sensors.checks import MAX_SPEED
 from .settled import Settled
 
 
@@ -21,7 +22,6 @@ TURNED_RAD = 0.3  # the message's own pose yaw this far from the odom frame's x:
 ALONG_SIN = 0.05  # |sin| of the angle between the twist and an axis below this: the twist points along it
 MOVING_M_S = 0.1  # speed above which a twist has a direction
 
-MAX_SPEED_M_S = 100.0  # a position that moved faster between two messages was reset, not driven
 CHUNK = 4096  # twists noted before they are summed (bounded memory)
 
 
@@ -96,7 +96,7 @@ class TwistStats:
     def _add_travel(self, t: np.ndarray, p: np.ndarray, linear: np.ndarray) -> None:
         """The chunk's path of the positions and of the twists (each interval's |v| dt, v the message that ends
         it), message to message from the previous chunk's last; an interval not forward in time, or whose
-        position jumped faster than MAX_SPEED_M_S (an odometry reset), is left out of both."""
+        position jumped faster than the core takes any twist (MAX_SPEED: an odometry reset), is left out of both."""
         last = self._last
         if last is not None:
             t = np.concatenate(([last[0]], t))
@@ -109,6 +109,6 @@ class TwistStats:
         dt = np.diff(t)
         step = np.linalg.norm(np.diff(p, axis=0), axis=1)
         with np.errstate(invalid="ignore"):
-            ok = (dt > 0.0) & np.isfinite(step) & (step <= MAX_SPEED_M_S * dt)
+            ok = (dt > 0.0) & np.isfinite(step) & (step <= MAX_SPEED * dt)
         driven = np.linalg.norm(linear, axis=1) * dt
         self._travel = [self._travel[0] + float(step[ok].sum()), self._travel[1] + float(driven[ok].sum())]

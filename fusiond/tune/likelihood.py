@@ -208,11 +208,11 @@ def score(records: Iterable[DiagnosticsRecord], ref: Reference) -> Score:
     for key, r in keyed:
         if key not in terms and r.channel not in CHECK_CHANNELS and not r.learning:
             spare.append(r)
-    unfound = {k for k in terms}.difference(k for k, _ in keyed)
+    unfound = terms.keys() - {k for k, _ in keyed}
     slid = _slid(terms, list(unfound), sorted(spare, key=lambda r: r.stamp), ref.tolerance) if unfound and spare else []
-    for key, r in [*keyed, *slid]:
+    for key, r in [*keyed, *slid]:  # the keys are distinct: a slid pair's is a term no record found
         t = terms.get(key)
-        if t is None or key in found:
+        if t is None:
             continue
         found.add(key)
         ld = _log_det(r)

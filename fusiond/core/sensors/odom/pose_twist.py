@@ -21,7 +21,7 @@ import msgspec
 
 from ....estimator import mat3
 from ....estimator import rotation as rot
-from ..checks import finite
+from ..checks import finite, near_unit
 from .sample import OdomSample
 
 __all__ = ["PoseDifferences"]
@@ -32,14 +32,9 @@ UNMEASURED = tuple(math.inf if i % 7 == 0 else 0.0 for i in range(36))
 FLOORED = (0.0,) * 36  # each variance at its floor (twist_min_sigma), unless twist_noise states it
 
 
-def _unit(q: tuple[float, float, float, float]) -> tuple[float, float, float, float] | None:
-    """``q`` normalised, None when it is not a rotation (zero, non-finite, or not near unit length)."""
-    if len(q) != 4 or not finite(q):
-        return None
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if abs(n - 1.0) > 1e-3:
-        return None
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+def _not_measured(s: OdomSample) -> OdomSample:
+    """``s`` saying nothing of the twist: zero, each component "not measured"."""
+    return msgspec.structs.replace(s, linear=_ZERO3, angular=_ZERO3, twist_covariance=UNMEASURED)
 
 
 class PoseDifferences:
@@ -52,14 +47,14 @@ class PoseDifferences:
         self._prev: tuple[float, tuple, tuple] | None = None  # (stamp, position, unit orientation)
 
     def __call__(self, s: OdomSample) -> OdomSample:
-        stamp, q = s.stamp, _unit(s.orientation)
+        stamp, q = s.stamp, near_unit(s.orientation) if len(s.orientation) == 4 else None
         usable = 0.0 < stamp < math.inf and q is not None and len(s.position) == 3 and finite(s.position)
         prev = self._prev
         if not usable or (prev is not None and not stamp > prev[0]):
-            return msgspec.structs.replace(s, linear=_ZERO3, angular=_ZERO3, twist_covariance=UNMEASURED)
+            return _not_measured(s)
         self._prev = (stamp, s.position, q)
         if prev is None or stamp - prev[0] > self.timeout_s:
-            return msgspec.structs.replace(s, linear=_ZERO3, angular=_ZERO3, twist_covariance=UNMEASURED)
+            return _not_measured(s)
         dt = stamp - prev[0]
         q0, p0 = prev[2], prev[1]
         phi = rot.log(rot.mul(rot.conj(q0), q))
