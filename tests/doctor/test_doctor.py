@@ -724,3 +724,16 @@ def test_an_imu_upside_down_beside_a_gps_is_named_with_the_pitch_the_gps_climb_m
     assert 2.0 * math.acos(min(1.0, abs(sum(a * b for a, b in zip(named, truth))))) < MOUNT_TOLERANCE_RAD, v.suggestion
     fixed = run_samples(samples, robot_config(gps="datum = [48.137, 11.575, 520.0]", imu=v.suggestion))
     assert abs(fixed.final[4]) < 0.1 and abs(fixed.final[5]) < 0.1, fixed.final  # qx, qy: upright
+
+
+def test_wheel_yaw_rate_noisier_than_stated_gets_its_value():
+    """Wheels whose yaw rate is 0.03 rad/s noisy, stated at 0.005 in twist_noise, beside a gyro of 0.002: the
+    residuals' rms^2 is the wheels' 0.03^2 plus the rest of S (the gyro's noise, the bias's spread: a few
+    thousandths), so the value the doctor gives for the wheels is within 10 % of 0.03, and the line keeps the
+    five other stated sigmas."""
+    noise = "twist_noise = [0.02, 0.02, 0.02, 0.02, 0.02, 0.005]"
+    samples = simulate(SimConfig(duration=60.0, standstill=2.0, wheel_sigma=0.03))
+    v = one(verdicts_of(make_config(extra_odom=noise), samples), "wheel", "yaw_rate")
+    assert v.key == "sensors.wheel.twist_noise" and "NIS high" in v.message, v
+    assert v.evidence["wheel_sigma_rad_s"] == pytest.approx(0.03, rel=0.1), v
+    assert v.suggestion.startswith("twist_noise = [0.02, 0.02, 0.02, 0.02, 0.02, 0.0"), v

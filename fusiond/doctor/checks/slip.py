@@ -101,10 +101,38 @@ class YawRateSlip(PerChannel):
                                       "stated_sigma_rad_s": floored[1], "wheel_sigma_rad_s": wheel})]
         if verdict != "ok":
             more = "smaller" if verdict == "nis_high" else "larger"
+            evidence = {"nis_per_dof": ch.nis_per_dof, "rms_rad_s": rms}
+            shown, line = _stated_wheel(odom, rms, predicted, verdict)
+            if shown is not None:
+                evidence["wheel_sigma_rad_s"] = shown
+            value = "" if shown is None else f": they show ~{shown:.4f} rad/s for the wheels"
             return [Verdict(odom.name, "yaw_rate", "warn",
                             f"wheel yaw rate against the gyro: NIS {verdict.removeprefix('nis_')} "
                             f"({ch.nis_per_dof:.2f} per "
                             f"dof over {ch.n}, rms {rms:.3f} rad/s) without slip: the stated wheel yaw-rate noise is "
-                            f"{more} than the residuals show", sensor_key(odom.name, "twist_noise"),
-                            evidence={"nis_per_dof": ch.nis_per_dof, "rms_rad_s": rms})]
+                            f"{more} than the residuals show{value}", sensor_key(odom.name, "twist_noise"), line,
+                            evidence=evidence)]
         return [Verdict(odom.name, "yaw_rate", "ok", f"wheels agree with the gyro (rms {rms:.3f} rad/s over {ch.n})")]
+
+
+def _stated_wheel(odom: OdomSensor, rms: float, predicted: float, verdict: str) -> tuple[float | None, str]:
+    """(the wheels' own yaw-rate sigma the residuals show, a twist_noise line stating it) for a yaw-rate NIS high or
+    low over samples whose noise the floor did not replace. The residuals' rms^2 is the wheels' variance plus the
+    rest of S (the gyro's rate noise, the bias estimate's spread): S less the wheels' variance as the filter took
+    it. Known where the config states twist_noise (the filter took max(its yaw sigma, the floor)); the line keeps
+    its five other sigmas. (None, "") where the wheels' share cannot be told from S (the messages state it, each
+    its own), or the value is one the floor would replace (a NIS low below twist_min_sigma: no twist_noise moves
+    it). Where the gyro drives heading the filter takes the wheels' yaw rate only while the gyro is silent: the
+    replay of a run without such silences cannot judge the line (the proof says so), the gaps of another can."""
+    floor = odom.twist_min_sigma[1]
+    stated = odom.twist_noise
+    if stated is None:
+        return None, ""
+    took = max(float(stated[5]), floor)
+    rest = max(predicted * predicted - took * took, 0.0)
+    wheel = math.sqrt(max(rms * rms - rest, 0.0))
+    if not math.isfinite(wheel) or wheel <= floor:  # the floor stands: no twist_noise below it changes the filter
+        return None, ""
+    if (verdict == "nis_high") != (wheel > took):  # the value would move the noise against the verdict
+        return None, ""
+    return wheel, "twist_noise = [" + ", ".join(f"{float(v):g}" for v in stated[:5]) + f", {wheel:.4f}]"
