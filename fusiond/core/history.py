@@ -130,7 +130,8 @@ def snapshots_read(keys: list[Key | None]) -> list[bool]:
     """For samples to be placed in this order (their keys; None: one the core drops whatever comes),
     whether a later one can be placed right after each (so its snapshot can be read: ``History``).
 
-    A snapshot is read when a late sample lands right after its entry: a sample with a greater key,
+    A snapshot is read when a late sample lands right after its entry: a sample with a greater key (or
+    the same one: a driver repeating a stamp with new values is placed after the entry it repeats),
     placed later, that is late then (older than the newest applied). Late in the core means older than
     the newest key applied, which is at most the newest key in the list before it: so a sample is
     taken as late when its key is below every earlier key's maximum, and an entry's snapshot as read
@@ -155,7 +156,7 @@ def snapshots_read(keys: list[Key | None]) -> list[bool]:
     for i in range(len(keys) - 1, -1, -1):
         k = keys[i]
         if k is not None:
-            read[i] = latest_late is not None and k < latest_late
+            read[i] = latest_late is not None and k <= latest_late  # an equal key lands after it (bisect_right)
         lk = late_key[i]
         if lk is not None and (latest_late is None or lk > latest_late):
             latest_late = lk

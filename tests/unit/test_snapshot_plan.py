@@ -23,14 +23,14 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _read_by_definition(keys: list) -> list[bool]:
     """Entry i's snapshot can be read when a later sample, late then (below the greatest key before
-    it), has a greater key."""
+    it), has a greater key or the same (placed after the entry it repeats)."""
     out = []
     for i, k in enumerate(keys):
         if k is None:
             out.append(True)
             continue
         out.append(any(
-            kj is not None and kj > k and kj < max((kk for kk in keys[:j] if kk is not None), default=kj)
+            kj is not None and kj >= k and kj < max((kk for kk in keys[:j] if kk is not None), default=kj)
             for j, kj in enumerate(keys) if j > i))
     return out
 
@@ -62,6 +62,9 @@ def _stream(draw_late, draw_jump) -> list:
                        gyro=(0.0, 0.0, 0.2 * math.sin(0.05 * k))))
         if k % 37 == 5:
             out.append(out[-2])  # a duplicate of the odometry sample
+        if k % 41 == 9 and late:  # a late IMU stamp repeated with new values (a driver's clock that stalls)
+            again = out[-1]
+            out.append(imu(again.stamp, rpy=(0.01, -0.02, 0.1 * k * 0.01), gyro=(0.0, 0.0, 0.3)))
         if k % 53 == 7:
             out.append(odom(math.nan, v=0.5))
         jump = draw_jump[(k // 60) % len(draw_jump)]
@@ -102,6 +105,20 @@ def test_a_planned_replay_is_the_replay_that_keeps_every_snapshot(late, jump, hi
     assert core_b.resets == core_a.resets
     assert np.array_equal(core_b.state.ekf.x, core_a.state.ekf.x)
     assert np.array_equal(core_b.state.ekf.P, core_a.state.ekf.P)
+
+
+def test_a_late_stamp_repeated_with_new_values_reads_the_snapshot_of_the_entry_it_repeats():
+    """An IMU whose clock stalls a second behind the others: each message repeats the stamp of the first, with
+    new values, and is placed right after it (found by the replay of a recording whose IMU stamps froze)."""
+    assert snapshots_read([(1.0, 1), (2.0, 0), (1.0, 1), (2.1, 0), (1.0, 1)]) == [True, False, True, False, False]
+    cfg = make_config()
+    samples = []
+    for k in range(30):
+        samples.append(odom(2.0 + 0.01 * k, v=0.3))
+        samples.append(imu(1.5, gyro=(0.0, 0.0, 0.01 * k)))
+    _, steps_a, stats_a = _run(cfg, samples, plan=False)
+    _, steps_b, stats_b = _run(cfg, samples, plan=True)
+    assert steps_b == steps_a and stats_b == stats_a
 
 
 def test_samples_in_order_keep_no_snapshot():
