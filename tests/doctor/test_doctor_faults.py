@@ -438,6 +438,18 @@ def test_a_gps_clock_ahead_is_named_beside_an_imu_stamped_behind():
     assert float(clock[0].suggestion.split("=")[1]) == pytest.approx(-0.25, abs=0.03), clock[0]
 
 
+@pytest.mark.parametrize("shift", [0.3, 1.7e9])
+def test_the_odometry_on_a_clock_ahead_of_the_imu_and_the_gps_is_named(shift):
+    """The wheels' stamps 0.3 s ahead of the IMU's and the GPS's (which share a clock), or on a boot clock 1.7e9 s
+    ahead: the other two each read the wheels' lead as their own offset, alike. Two sensors agreeing is no
+    mirrored pair: the odometry is named, with the line that brings it back (it was named nowhere, and the
+    boot clock had the doctor shift the IMU and then the GPS onto it)."""
+    samples = shift_stamps(sim_gps.simulate(sim_gps.World(duration=60.0, speed=10.0, gps_rate=10.0)), "wheel", shift)
+    clock = [v for v in run_samples(samples, robot_config(gps="")).verdicts() if v.channel == "time"]
+    assert [v.sensor for v in clock] == ["wheel"], clock
+    assert float(clock[0].suggestion.split("=")[1]) == pytest.approx(-shift, abs=0.03), clock[0]
+
+
 def test_an_imu_a_few_milliseconds_ahead_is_in_step_not_a_clock():
     """The IMU's stamps 12 ms ahead of the wheels' (a skew between two drivers, under the 20 ms odometry period):
     every wheel sample arrives behind the newest IMU stamp, but by less than a message period: in step, no
@@ -466,6 +478,11 @@ def test_the_culprit_is_the_largest_offset_and_of_a_mirrored_pair_not_the_odomet
     assert _culprit({"wheel": 18.0, "imu": -0.05, "gps": -0.04}, "wheel") == "wheel"
     assert _culprit({"wheel": -0.01, "imu": -0.31, "gps": 0.25}, "wheel", ahead_only=True) == "gps"
     assert _culprit({"wheel": 0.3, "imu": -0.3}, "wheel", ahead_only=True) is None  # a late IMU mirrored
+    # three sensors: the odometry 0.3 s (or a boot clock) ahead, the IMU and the GPS on one clock, both reading it
+    assert _culprit({"wheel": 0.305, "imu": -0.294, "gps": -0.294}, "wheel", ahead_only=True) == "wheel"
+    assert _culprit({"wheel": 1.7e9, "imu": -1.7e9, "gps": -1.7e9}, "wheel") == "wheel"
+    assert _culprit({"wheel": -0.295, "imu": 0.306, "gps": -0.295}, "wheel", ahead_only=True) == "imu"
+    assert _culprit({"wheel": -0.31, "imu": 0.3, "gps": -0.29}, "wheel", ahead_only=True) == "imu"
 
 
 def test_gps_on_the_same_clock_gets_no_clock_verdict():

@@ -9,7 +9,9 @@ That is not always the sensor dropped. The filter's time follows the first stamp
 and they are the ones dropped, while their own offsets against the others' newest stamp are a fraction of a
 second (the GPS's against the wheels'). The odd one out is the sensor whose offset is largest (``_culprit``):
 the IMU at -1000 s. With two sensors the two offsets mirror each other (+5 s and -5 s): the odometry, whose
-stamps the published poses carry, is then the reference, and the other sensor's clock is named.
+stamps the published poses carry, is then the reference, and the other sensor's clock is named. With three or
+more, a clock ahead stands apart (``_lone_ahead``): it reads +X and every other sensor -X, the others agreeing
+with each other; that sensor is named, the odometry too (its samples stamped on a boot clock, or 0.3 s ahead).
 
 An offset within the history (an IMU on another computer's clock, 0.5 s ahead) drops nothing: every sample
 of the sensor behind is applied late, re-applying the others after it, and the estimate pairs each wheel
@@ -104,18 +106,38 @@ def _far(st: dict) -> int:
 
 
 def _culprit(offsets: dict[str, float], odom: str | None, ahead_only: bool = False) -> str | None:
-    """The sensor whose clock is off: the largest offset; of two that mirror each other (within MIRROR), not
-    the odometry (module doc). ``ahead_only`` (samples applied late): only a clock ahead makes the others late.
-    When the largest offset is one behind (a receiver's delivery lag, which the history absorbs; or a sensor
-    measuring another's lead as part of its own: an IMU 0.06 s behind beside a GPS 0.25 s ahead reads
-    -0.31 s), the culprit is the sensor furthest ahead but the odometry, the reference where two mirror each
-    other; None when there is none."""
+    """The sensor whose clock is off: the one ahead that every other sensor sees alike (``_lone_ahead``), else the
+    largest offset; of two sensors alone that mirror each other (within MIRROR), not the odometry (module doc).
+    ``ahead_only`` (samples applied late): only a clock ahead makes the others late. When the largest offset is
+    one behind (a receiver's delivery lag, which the history absorbs; or a sensor measuring another's lead as part
+    of its own: an IMU 0.06 s behind beside a GPS 0.25 s ahead reads -0.31 s), the culprit is the sensor furthest
+    ahead but the odometry, the reference where two mirror each other; None when there is none."""
     ranked = sorted(offsets, key=lambda n: -abs(offsets[n]))
     if not ranked:
         return None
+    lone = _lone_ahead(offsets)
+    if lone is not None:
+        return lone
     top = ranked[0]
-    if len(ranked) > 1 and top == odom and abs(offsets[ranked[1]]) * MIRROR >= abs(offsets[top]):
+    if len(ranked) == 2 and top == odom and abs(offsets[ranked[1]]) * MIRROR >= abs(offsets[top]):
         top = ranked[1]
     if not ahead_only or offsets[top] > 0.0:
         return top
     return max((n for n in offsets if offsets[n] > 0.0 and n != odom), key=offsets.__getitem__, default=None)
+
+
+def _lone_ahead(offsets: dict[str, float]) -> str | None:
+    """Of three sensors or more, the one whose stamps are ahead of all the others', which agree with each other:
+    each sample's offset is taken against the newest stamp of the other sensors, so a clock X ahead reads +X
+    while every other sensor, its newest "other" being that clock, reads about -X (within MIRROR). Two sensors
+    on one clock and a third ahead is not the mirror of two (module doc): the odometry can be that third. None
+    when no one sensor stands so apart (a clock behind reads -X beside others near 0: the largest offset)."""
+    if len(offsets) < 3:
+        return None
+    ahead = [n for n, o in offsets.items() if o > 0.0]
+    if len(ahead) != 1:
+        return None
+    lead = offsets[ahead[0]]
+    if all(o < 0.0 and -o * MIRROR >= lead and lead * MIRROR >= -o for n, o in offsets.items() if n != ahead[0]):
+        return ahead[0]
+    return None

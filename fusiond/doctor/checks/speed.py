@@ -178,7 +178,8 @@ class Speed(BaseCheck):
             # travel with the GPS's over another stretch of the drive, which agrees only where speed is steady
             return [Verdict(odom.name, "speed", "ok",
                             f"the wheel speed cannot be checked against the GPS: {far} of its fixes were dropped as "
-                            "far from the filter's time (its clock: see gps/time); ask again once it is mended")]
+                            "far from the filter's time (a clock off: see the time verdict); ask again once it is "
+                            "mended")]
         fit = wheel_scale_fit(series, cfg)
         if fit is None:
             return []
