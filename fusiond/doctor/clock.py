@@ -31,6 +31,9 @@ class ClockOffsets:
         self._ids: dict[str, int] = {}
         self._newest: list[float] = []  # per sensor id: its newest stamp so far
         self._offsets: dict[str, array] = {}
+        # per (sensor, other sensor): [its stamp, the other's newest] at its first arrival after the other spoke,
+        # and at its latest arrival, for ``pace``
+        self._pairs: dict[tuple[str, str], list[float]] = {}
 
     def add(self, sensor: str, stamp: float) -> None:
         self.extend([sensor], [stamp])
@@ -54,6 +57,9 @@ class ClockOffsets:
             others = np.maximum.accumulate(np.concatenate(([before], np.where(mine, -math.inf, t))))[1:]
             seen = mine & (others > -math.inf)  # another sensor has spoken: an offset
             if seen.any():
+                for other, j in ids.items():
+                    if j != i:
+                        self._pace_pair(name, other, t, mine, np.where(idx == j, t, -math.inf), self._newest[j])
                 kept = self._offsets.setdefault(name, array("d"))
                 if len(kept) < MAX_KEPT:
                     kept.extend((t[seen] - others[seen])[: MAX_KEPT - len(kept)].tolist())
@@ -69,6 +75,33 @@ class ClockOffsets:
         if not kept:
             return None
         return max(0.0, -float(np.quantile(np.frombuffer(kept, dtype=float), 1.0 - share)))
+
+    def _pace_pair(self, name: str, other: str, t: np.ndarray, mine: np.ndarray, theirs: np.ndarray,
+                   before: float) -> None:
+        """``pace``'s ends for ``name`` against ``other``, over a chunk: ``theirs``, the chunk's stamps of the
+        other's samples (-inf elsewhere), ``before`` the other's newest stamp before the chunk."""
+        newest = np.maximum.accumulate(np.concatenate(([before], theirs)))[1:]
+        at = np.flatnonzero(mine & (newest > -math.inf))
+        if not len(at):
+            return
+        first, last = int(at[0]), int(at[-1])
+        ends = self._pairs.get((name, other))
+        if ends is None:
+            ends = self._pairs[(name, other)] = [float(t[first]), float(newest[first]), 0.0, 0.0]
+        ends[2], ends[3] = float(t[last]), float(newest[last])
+
+    def pace(self, sensor: str) -> dict[str, tuple[float, float]]:
+        """Per other sensor: (how far this sensor's stamps advanced, how far the other's newest stamp did) between
+        this sensor's first arrival after the other spoke and its latest, s. A clock that runs advances as each
+        other running clock does, whatever its offset; a driver that stamps a constant (or 0) does not advance;
+        an other that stopped early has advanced less (so a pace is judged against every other sensor)."""
+        return {other: (ends[2] - ends[0], ends[3] - ends[1])
+                for (name, other), ends in self._pairs.items() if name == sensor}
+
+    def newest(self, sensor: str) -> float | None:
+        """The sensor's newest stamp so far (None before any)."""
+        i = self._ids.get(sensor)
+        return None if i is None or self._newest[i] == -math.inf else self._newest[i]
 
     def offset(self, sensor: str) -> float | None:
         """Median offset of the sensor's stamps from the others' (s), None without another sensor."""

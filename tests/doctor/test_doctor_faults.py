@@ -450,6 +450,28 @@ def test_the_odometry_on_a_clock_ahead_of_the_imu_and_the_gps_is_named(shift):
     assert float(clock[0].suggestion.split("=")[1]) == pytest.approx(-shift, abs=0.03), clock[0]
 
 
+@pytest.mark.parametrize("stamp", [0.0, "first"])
+def test_an_imu_whose_stamps_do_not_advance_is_a_stuck_clock_not_an_offset(stamp):
+    """The IMU's driver stamps every message 0, or the first message's stamp over and over: no clock offset (it
+    read as one 30 s behind, the run's median, with a stamp_offset_s that mends nothing), a problem with the
+    driver's stamping and no paste line. A clock 200 ppm fast keeps time: no such verdict."""
+    import msgspec
+
+    from tests.support.sim import SimConfig, simulate as simulate_drive
+
+    samples = simulate_drive(SimConfig(duration=30.0, standstill=2.0))
+    first = next(s.stamp for s in samples if s.sensor == "imu")
+    value = first if stamp == "first" else 0.0
+    frozen = [msgspec.structs.replace(s, stamp=value) if s.sensor == "imu" else s for s in samples]
+    clock = [v for v in verdicts_of(robot_config(), frozen) if v.channel == "time"]
+    assert [(v.sensor, v.level, v.suggestion) for v in clock] == [("imu", "problem", "")], clock
+    assert ("stamped 0" if stamp == 0.0 else "does not run") in clock[0].message, clock[0]
+    t0 = samples[0].stamp
+    fast = [msgspec.structs.replace(s, stamp=t0 + (s.stamp - t0) * 1.0002) if s.sensor == "imu" else s
+            for s in samples]
+    assert not [v for v in verdicts_of(robot_config(), fast) if v.channel == "time" and v.level == "problem"]
+
+
 def test_an_imu_a_few_milliseconds_ahead_is_in_step_not_a_clock():
     """The IMU's stamps 12 ms ahead of the wheels' (a skew between two drivers, under the 20 ms odometry period):
     every wheel sample arrives behind the newest IMU stamp, but by less than a message period: in step, no

@@ -1,4 +1,5 @@
-"""A sensor whose clock is offset from the others: its samples dropped as far from filter time.
+"""A sensor whose clock is offset from the others: its samples dropped as far from filter time; or whose clock
+does not keep time at all.
 
 ``clock.ClockOffsets`` measures each sensor's stamps against the others' newest at arrival; where a sensor's
 samples were mostly dropped as ``future_stamp``/``stale_stamp``, the sensor whose clock is off gets one plain
@@ -23,6 +24,10 @@ clock out, when its stamps are AHEAD of the others'. Stamps behind them are also
 receiver's fixes 0.2 s after their epoch), which the history is there to absorb: nothing in the stamps tells
 that from a clock behind, so nothing is said of it. No delivery puts a stamp in the future, so a sensor behind
 is never the culprit of late samples: the one ahead is, however large the offset behind.
+
+A clock that does not run is no offset: a driver stamping every message 0, or one constant, reads as a clock
+ever further behind (its median, half the run). Its stamps do not advance with the others' (``_stuck``): the
+verdict names the driver's stamping, with no stamp_offset_s line, and no offset is said of it.
 """
 
 from __future__ import annotations
@@ -35,6 +40,12 @@ from ..verdict import Verdict, sensor_key
 __all__ = ["Clocks", "dropped_by_clock"]
 
 CLOCK_REASONS = (reasons.FUTURE_STAMP, reasons.STALE_STAMP)
+# A sensor's stamps advance at the others' pace within this share, or its clock does not run: quartz clocks
+# drift by tens of ppm, a thousandth of it; a driver stamping a constant (or 0) advances not at all
+PACE_TOLERANCE = 0.1
+# ... judged over at least this much of the others' time: stamps jitter by tens of milliseconds, which this
+# span makes a pace good to a few per cent
+PACE_SPAN_S = 2.0
 CLOCK_DROP_SHARE = 0.5  # this share of a sensor's samples dropped as far from filter time: its clock, not a glitch
 CLOCK_LATE_SHARE = 0.5  # ... or applied late (behind the others' newest stamp): a standing offset, not jitter
 MIRROR = 2.0  # two offsets within this factor of each other are one offset seen from either side (module doc)
@@ -58,6 +69,10 @@ class Clocks(BaseCheck):
         odom = ev.odom.name if ev.known and ev.odom is not None else None
         period = max((float(v.get("period", 0.0)) for v in stats.values()), default=0.0)  # the slowest sensor's
         out: dict[str, Verdict] = {}
+        for name in stats:
+            stuck = _stuck(name, clocks.pace(name), clocks.newest(name), stats[name])
+            if stuck is not None:
+                out[name] = stuck
         for name, st in stats.items():
             received = st.get("received", 0)
             far = _far(st)
@@ -66,7 +81,7 @@ class Clocks(BaseCheck):
             if received <= 0 or (far < CLOCK_DROP_SHARE * received and not behind) or name not in offsets:
                 continue
             culprit = _culprit(offsets, odom, ahead_only=behind)
-            if culprit is None or culprit in out or (behind and not offsets[culprit] > max(period, 0.0)):
+            if name in out or culprit is None or culprit in out or (behind and not offsets[culprit] > max(period, 0.0)):
                 continue
             offset = offsets[culprit]
             side = "ahead of" if offset > 0 else "behind"
@@ -90,6 +105,32 @@ class Clocks(BaseCheck):
                                              "applied_late": float(late), "received": float(received),
                                              "dropped_sensor_offset_s": offsets[name]})
         return list(out.values())
+
+
+def _stuck(name: str, pace: dict[str, tuple[float, float]], newest: float | None, st: dict) -> Verdict | None:
+    """A sensor whose stamps do not advance at the pace of every other sensor's (``ClockOffsets.pace``, over at
+    least PACE_SPAN_S of each, beyond PACE_TOLERANCE, on the same side): a driver stamping a constant, or never
+    filling the stamp (0). No stamp_offset_s mends it (the offset grows with the run: it read as a clock 30 s
+    behind, the run's median), so the verdict names the driver's stamping."""
+    rates = [own / others for own, others in pace.values() if others >= PACE_SPAN_S]
+    if not rates or not (all(r < 1.0 - PACE_TOLERANCE for r in rates) or all(r > 1.0 + PACE_TOLERANCE for r in rates)):
+        return None
+    own, others = max(pace.values(), key=lambda p: p[1])
+    zero = newest == 0.0
+    said = ("every sample is stamped 0: the driver never fills the header's stamp" if zero else
+            f"its stamps advance {own:.3g} s while the other sensors' advance {others:.3g} s: the driver stamps a "
+            "clock that does not run (a constant, a stalled time source)" if own < others else
+            f"its stamps advance {own:.3g} s while the other sensors' advance {others:.3g} s: its clock runs "
+            f"{own / others:.2g} times as fast as theirs (a wrong unit or tick rate)")
+    fused, received = st.get("applied", 0), st.get("received", 0)
+    taken = (f"none of its {received} samples was fused" if not fused else
+             f"{fused} of its {received} samples were fused, each at a time it was not taken")
+    return Verdict(name, "time", "problem",
+                   f"{said}. The filter orders and pairs every sample by its stamp: {taken}, and no stamp_offset_s "
+                   "mends a clock that does not keep time. Stamp each message with the time of its reading in the "
+                   "driver (the same clock as the other sensors)",
+                   evidence={"stamp_span_s": own, "others_span_s": others, "received": float(st.get("received", 0)),
+                             "applied": float(fused)})
 
 
 def dropped_by_clock(st: dict) -> int:
