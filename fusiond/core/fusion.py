@@ -77,6 +77,8 @@ class Step(msgspec.Struct, gc=False):
     # Samples held for a time jump and applied at once: (stamp, [x y z qx qy qz qw]) of the estimate
     # after each odometry sample among them, in order (a replay writes one pose per odometry message).
     poses: list[tuple[float, np.ndarray]] | None = None
+    # ... and, for each of those, whether the heading was known then (``heading_known``): a reset learns it anew
+    poses_heading_known: list[bool] | None = None
 
 
 @dataclass(slots=True)
@@ -324,14 +326,16 @@ class FusionCore:
             # timeouts, covariance inflated); the history before the jump stays, so a sensor
             # lagging the jump is still applied at its stamp.
             log.warning("time_jump_forward", stamp=cluster.first, filter_time=t, held=len(cluster.samples))
-        steps, poses = [], []
+        steps, poses, known = [], [], []
         for stamp, i, inp in cluster.in_order():
             steps.append(self._place(i, inp, stamp))
             if steps[-1].publish:
                 poses.append((self.state.t, self._shown_pose()))
+                known.append(self.heading_known)
         last = steps[-1]
         return Step(last.sensor, last.accepted, last.reason, late=any(s.late for s in steps),
-                    publish=bool(poses), records=[r for s in steps for r in s.records], poses=poses)
+                    publish=bool(poses), records=[r for s in steps for r in s.records], poses=poses,
+                    poses_heading_known=known)
 
     def _abandon_jump(self) -> None:
         self._drop_held(self._held.abandon())

@@ -340,11 +340,11 @@ class Runner:
         if doctor is not None:
             doctor.add_sample(sample)
         if step.poses:  # samples held for a time jump, applied at once: one pose per odometry message
-            known = core.heading_known
-            for t_held, x_held in step.poses:
+            known = step.poses_heading_known or [core.heading_known] * len(step.poses)
+            for (t_held, x_held), k in zip(step.poses, known):
                 self.trajectory.append(t_held)
                 self.trajectory.extend(x_held.tolist())
-                self.heading_known.append(known)
+                self.heading_known.append(k)
         if step.publish:
             t, x = core.pose()
             p = x.tolist()  # one conversion for the trajectory, the doctor and the trace

@@ -43,3 +43,23 @@ def test_a_cluster_holding_the_anchors_samples_is_left_only_by_the_anchor():
     unanchored = HeldTimeline(jump_s=5.0, confirm=3, persist_s=1.0, capacity=100, anchor=0)
     unanchored.hold(-40000.0, 1, "imu")
     assert unanchored.left_by(0) and unanchored.left_by(1)  # any sensor's old timeline leaves it
+
+
+def test_poses_of_a_held_timeline_say_the_heading_known_as_it_was_at_each():
+    """The IMU on a clock 1e6 s ahead and first in the recording: the filter's time follows it, the wheels and the
+    fixes are held as a jump back for jump_persist_s (4 s here), then reset onto and applied at once, the GPS
+    heading searched for afresh among them. Each pose of that cluster says whether the heading was known at it,
+    as the same drive without the IMU says (every one of them read "known", the state's after the cluster)."""
+    from tests.support import sim_gps
+    from tests.support.configs import robot_config
+    from tests.support.sim_faults import shift_stamps
+    from fusiond.replay.run import run_samples
+
+    samples = sim_gps.simulate(sim_gps.World(duration=30.0, speed=10.0, gps_rate=10.0))
+    start = samples[0].stamp + 0.5  # the IMU's alone
+    cfg = robot_config(gps="", filt="jump_persist_s = 4.0")
+    shifted = run_samples(shift_stamps([s for s in samples if s.sensor == "imu" or s.stamp >= start], "imu", 1e6), cfg)
+    alone = run_samples([s for s in samples if s.sensor != "imu" and s.stamp >= start], cfg)
+    assert shifted.core.resets == 1
+    unknown = list(alone.heading_known).count(False)
+    assert unknown > 10 and list(shifted.heading_known).count(False) == unknown
