@@ -6,7 +6,9 @@ only says "a clock glitch", N times. The doctor sees every sample as it arrives,
 it measures the offset: each sample's stamp against the newest stamp of the OTHER
 sensors when it arrives (what the filter's time follows). The median over the run is
 that sensor's clock offset (plus its transport lag, milliseconds), and a sensor whose
-samples are mostly dropped that way gets one plain verdict with it (``checks/clocks.py``).
+samples are mostly dropped that way gets one plain verdict with it (``checks/clocks.py``). Against each
+other sensor it also measures the pace (``ClockOffsets.pace``): how far its stamps advance while the other's
+do, which tells a clock that does not run (a driver stamping 0 or a constant) from one that is offset.
 """
 
 from __future__ import annotations
