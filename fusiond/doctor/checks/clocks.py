@@ -123,7 +123,7 @@ def _stuck(name: str, pace: dict[str, tuple[float, float]], newest: float | None
             f"its stamps advance {own:.3g} s while the other sensors' advance {others:.3g} s: its clock runs "
             f"{own / others:.2g} times as fast as theirs (a wrong unit or tick rate)")
     fused, received = st.get("applied", 0), st.get("received", 0)
-    taken = (f"none of its {received} samples was fused" if not fused else
+    taken = (f"not one of its {received} samples was fused" if not fused else
              f"{fused} of its {received} samples were fused, each at a time it was not taken")
     return Verdict(name, "time", "problem",
                    f"{said}. The filter orders and pairs every sample by its stamp: {taken}, and no stamp_offset_s "
