@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 
 from .common import EXIT_UNHEALTHY, EXIT_USAGE, add_daemon_client_arguments
-from .tool_session import how_long, in_namespace, tool_session
+from .tool_session import in_namespace, tool_session
 
 __all__ = ["add_arguments", "run"]
 
@@ -57,7 +56,6 @@ def run(args: argparse.Namespace) -> int:
                              orientation=from_rpy(args.roll, args.pitch, args.yaw), covariance=tuple(cov))
     cfg, session = tool_session(args, unreachable_exit=EXIT_UNHEALTHY)
     key = args.key or cfg.output.set_pose_key
-    started = time.monotonic()
     try:
         answers, errors = request_set_pose(session, key, msgspec.json.encode(message), args.timeout)
     finally:
@@ -67,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     for text in errors:
         print(f"fusiond: {text}", file=sys.stderr)
     if not answers and not errors:
-        waited = how_long(started, args.timeout)
+        waited = f"within {args.timeout:g} s"  # an unserved query is asked again until then
         print(f"fusiond: no daemon answered on {key!r}{in_namespace(cfg)} {waited} (not running, or not allowed)",
               file=sys.stderr)
     return 0 if answers and not errors else EXIT_UNHEALTHY

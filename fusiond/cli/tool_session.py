@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 from .common import EXIT_USAGE, load_config
 
-__all__ = ["how_long", "in_namespace", "reached", "tool_session", "zenoh_errors"]
+__all__ = ["in_namespace", "reached", "tool_session", "zenoh_errors"]
 
 
 def zenoh_errors():
@@ -55,14 +54,6 @@ def tool_session(args: argparse.Namespace, listen: list[str] | None = None, unre
     except SessionError as err:
         print(f"fusiond: {err}", file=sys.stderr)
         raise SystemExit(unreachable_exit) from None
-
-
-def how_long(started: float, timeout: float) -> str:
-    """How a query that got no answer ended, for its "no answer" line: at ``timeout``, or at once (``started``:
-    ``time.monotonic()`` before it), as Zenoh ends one when nothing on the link serves its key."""
-    if time.monotonic() - started >= 0.9 * timeout:
-        return f"within {timeout:g} s"
-    return "(nothing on the link serves it)"
 
 
 def reached(args: argparse.Namespace, cfg) -> str:

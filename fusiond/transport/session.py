@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -148,13 +149,27 @@ def client_config(zc: ZenohConfig, *, base_dir: Path | None = None, connect: Seq
                         listen=list(listen) if listen else None)
 
 
+# A query that no queryable serves ends at once; a session opened a moment ago may not yet know the route to
+# the daemon (a peer learns the router's routes after it connects: a health check right after opening went
+# unanswered about half the time). So an unserved query is asked again, this often, until its timeout.
+UNSERVED_RETRY_S = 0.05
+
+
+def _served(session: zenoh.Session, key: str, timeout: float, payload: bytes | None = None) -> list:
+    """The replies to a query on `key` within `timeout`, asked again while it ends unserved (no reply, before its
+    timeout: UNSERVED_RETRY_S). A query that reached a queryable is never repeated (a set_pose applies once)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        replies = list(session.get(key, payload=payload, timeout=max(left, 0.001)))
+        if replies or deadline - time.monotonic() <= UNSERVED_RETRY_S:
+            return replies
+        time.sleep(UNSERVED_RETRY_S)
+
+
 def query_health(session: zenoh.Session, key: str, timeout: float) -> list[bytes]:
     """The health answers of every daemon whose queryable matches `key` (possibly none) within `timeout`."""
-    answers: list[bytes] = []
-    for reply in session.get(key, timeout=timeout):
-        if reply.ok is not None:
-            answers.append(reply.ok.payload.to_bytes())
-    return answers
+    return [reply.ok.payload.to_bytes() for reply in _served(session, key, timeout) if reply.ok is not None]
 
 
 def request_set_pose(session: zenoh.Session, key: str, payload: bytes, timeout: float
@@ -166,7 +181,7 @@ def request_set_pose(session: zenoh.Session, key: str, payload: bytes, timeout: 
     """
     ok: list[bytes] = []
     errors: list[str] = []
-    for reply in session.get(key, payload=payload, timeout=timeout):
+    for reply in _served(session, key, timeout, payload):
         if reply.ok is not None:
             ok.append(reply.ok.payload.to_bytes())
         elif reply.err is not None:

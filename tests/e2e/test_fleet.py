@@ -220,3 +220,29 @@ def test_the_router_unit_runs_fusiond_router_as_its_command_line_reads_it(tmp_pa
             wait_until(lambda: _health(session, "robot1/fusiond/health", 0.5), 30, "an answer across the router")
         router.send_signal(signal.SIGTERM)
         assert router.wait(15) == 0
+
+
+def test_a_peer_tool_asks_a_daemon_behind_a_router_right_after_opening_and_is_answered(tmp_path):
+    """The README's rmw_zenoh setup: the daemon and the tools are peers that dial a router. A tool's session
+    learns the router's routes a moment after it opens; its health query, asked at once, found nothing serving
+    it about half the time and `fusiond health` failed. Each of ten fresh peer sessions is answered."""
+    from fusiond.config import ZenohConfig
+    from fusiond.transport.session import client_config, open_session, query_health
+
+    port = free_port()
+    with processes() as started:
+        started.append(start_router(port, tmp_path / "router.log"))
+        config = tmp_path / "peer.toml"
+        config.write_text(f'[zenoh]\nconnect = ["tcp/127.0.0.1:{port}"]\nmulticast_scouting = false\n\n'
+                          + (ROOT / "examples" / "jackal.toml").read_text())
+        started.append(start_daemon(config, tmp_path / "daemon.log"))
+        probe = client(port)
+        started.append(probe)
+        wait_until(lambda: _health(probe, "fusiond/health", 0.5), 30, "the daemon's first health answer")
+        tool = ZenohConfig(connect=[f"tcp/127.0.0.1:{port}"], multicast_scouting=False)
+        for _ in range(10):
+            session = open_session(client_config(tool))
+            try:
+                assert query_health(session, "fusiond/health", 2.0), "a fresh peer session was not answered"
+            finally:
+                session.close()
