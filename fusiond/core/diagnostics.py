@@ -110,6 +110,8 @@ class NisWindow:
         # each window of a coloured error, the whole run's says whether it persists (``run_verdict``)
         self._run_sum = 0.0
         self._run_n = 0
+        self._run_updates = 0  # ... and every update, rejected ones too (the run's share rejected)
+        self._run_rejected = 0
 
     def bounds(self, dof: int) -> tuple[float, float]:
         """Two-sided bounds on the window's mean NIS: chi-square's, widened to the practical band."""
@@ -127,12 +129,15 @@ class NisWindow:
             self.dof = dof
             self._sum, self._infinite, self._since_exact = 0.0, 0, 0
             self._run_sum, self._run_n = 0.0, 0
+            self._run_updates = self._run_rejected = 0
             self.recent_rejected = 0
+        self._run_updates += 1
         if len(flags) == self.window and flags[0]:
             self.recent_rejected -= 1
         flags.append(rejected)
         if rejected:
             self.rejected += 1
+            self._run_rejected += 1
             self.recent_rejected += 1
             return self.verdict()
         if nis == nis:  # NaN from a singular S is not evidence either way
@@ -179,7 +184,11 @@ class NisWindow:
 
     def run_verdict(self) -> str:
         """The verdict of every finite NIS applied since the dof last changed, against the chi-square bounds of
-        that many (widened to the practical band, as the window's): "warming_up" before a window's worth."""
+        that many (widened to the practical band, as the window's): "warming_up" before a window's worth. As the
+        window's, "nis_high" by the share the gate kept out over the run, beyond REJECTED_SHARE, whatever the
+        applied ones' mean (a channel gated three times in four read "ok" here while the replay's read nis_high)."""
+        if self._run_updates >= self.window and self._run_rejected > REJECTED_SHARE * self._run_updates:
+            return "nis_high"
         n = self._run_n
         if n < self.window or not self.dof:
             return "warming_up"

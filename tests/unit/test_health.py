@@ -276,6 +276,22 @@ def test_the_ros_status_of_the_wheels_yaw_rate_check_says_slip_not_a_noise():
     assert level == 1 and "R too small" in message, message
 
 
+def test_the_whole_run_reads_nis_high_when_the_gate_kept_out_more_than_its_share():
+    """A channel whose updates the gate rejected three times in four over the run, the applied ones consistent:
+    the whole run's verdict is nis_high by that share, as the window's and the replay's are (it read "ok", so
+    the ROS status, which warns only where the two agree, never warned)."""
+    from fusiond.core.diagnostics import REJECTED_SHARE, NisWindow
+
+    w = NisWindow(50, 0.95)
+    for k in range(400):
+        w.add(1.0, 1, k % 4 != 0)
+    assert w.summary()["run_verdict"] == "nis_high"
+    few = NisWindow(50, 0.95)
+    for k in range(400):  # a share within REJECTED_SHARE: the applied ones' mean decides
+        few.add(1.0, 1, k % 20 == 0 and REJECTED_SHARE > 0.05)
+    assert few.summary()["run_verdict"] == "ok"
+
+
 def test_a_window_out_of_its_bounds_warns_on_ros_only_while_the_whole_run_is_too():
     """One window of an AHRS's coloured error reads NIS low and the next ok: the ROS status followed each window
     and flapped between OK and WARN twenty times a minute while the doctor read the channel consistent. The
