@@ -36,7 +36,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate-imu": ("calibrate_imu", "measure a static IMU's noise and print it as config"),
     "bench": ("bench", "estimator, core and replay benchmarks on a bag"),
     "run": ("run", "the fusion daemon: subscribe to the sensors on Zenoh, publish the fused pose"),
-    "play": ("play", "publish a bag's sensor topics onto Zenoh as zenoh-bridge-ros2dds would"),
+    "play": ("play", "publish a bag's sensor topics onto Zenoh as zenoh-bridge-ros2dds would (as an rmw_zenoh node "
+                     "with [ros] interop = \"rmw_zenoh\")"),
     "health": ("health", "query a running daemon's health; exit 0 when it is good enough"),
     "set-pose": ("set_pose", "re-initialise a running daemon's filter at a pose (robot_localization's set_pose); "
                              "prints the new health, whose pose is the one set"),

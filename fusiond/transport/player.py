@@ -13,6 +13,9 @@ playing, its health asked again at the end): messages put after that went nowher
 
 Publishers use reliable, blocking congestion control: a replay tool should not
 lose messages to its own speed (the daemon's queue still counts its own drops).
+With `[ros] interop = "rmw_zenoh"` the daemon is an rmw_zenoh node, and so is `play`
+(node ``PLAY_NODE``): the topics on rmw_zenoh's keys, each sample with its attachment
+(``rmw_zenoh.RmwNode``), as a ROS 2 node on rmw_zenoh would publish the bag.
 
 The bag is opened by the caller (`fusiond.replay.bag.open_bag_samples`) and
 handed in as a `RawSource`: transport/ does not import replay/ (nor the reverse);
@@ -32,16 +35,19 @@ import zenoh
 
 from ..config import Config
 from ..core.sensors import encode_sample, make_decoder
+from ..core.sensors.registry import kind_of
 from ..errors import PlaybackError
 from ..health import decode_report
 from ..presence import withdrawn
 from ..logs import get_logger
 from .daemon import alive_key, sensor_kind
+from .rmw_zenoh import RmwNode, topic_name
 from .session import query_health
 
 log = get_logger("fusiond.play")
 
 LINGER_S = 0.3  # after the last put, before closing: let the transmit queue drain
+PLAY_NODE = "fusiond_play"  # the ROS node `play` is on rmw_zenoh (`[ros] interop = "rmw_zenoh"`)
 HEALTH_QUERY_S = 1.0  # how long the daemon's drop count is waited for after playing
 SETTLE_S = 10.0  # after playing, how long the daemon gets to account for every sample sent (fused or dropped)
 SETTLE_POLL_S = 0.1
@@ -119,9 +125,15 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
     result = PlayResult(per_sensor={s.name: 0 for s in cfg.sensors})
     if bag.missing:
         log.warning("play_missing_topics", sensors=bag.missing)
-    pubs = {s.name: session.declare_publisher(s.key, encoding=_encoding(s.encoding),
-                                              congestion_control=zenoh.CongestionControl.BLOCK)
-            for s in cfg.sensors if s.name not in bag.missing}
+    node = None
+    if cfg.ros.interop == "rmw_zenoh":  # the daemon subscribes as an rmw_zenoh node: publish as one (keys, attachments)
+        node = RmwNode(session, cfg.ros.domain_id, PLAY_NODE)
+        pubs: dict[str, Any] = {s.name: node.publisher(topic_name(s.key), kind_of(s).ros_type(s))
+                                for s in cfg.sensors if s.name not in bag.missing}
+    else:
+        pubs = {s.name: session.declare_publisher(s.key, encoding=_encoding(s.encoding),
+                                                  congestion_control=zenoh.CongestionControl.BLOCK)
+                for s in cfg.sensors if s.name not in bag.missing}
     transcode = {s.name: _transcoder(s) for s in cfg.sensors}
     watch = None
     try:
@@ -180,6 +192,8 @@ def play(bag: RawSource, cfg: Config, session: zenoh.Session, *, rate: float = 1
             watch.undeclare()
         for p in pubs.values():
             p.undeclare()
+        if node is not None:
+            node.undeclare()
     log.info("play_finished", messages=result.messages, per_sensor=result.per_sensor,
              seconds=round(result.seconds, 3), interrupted=result.interrupted, daemon_dropped=result.daemon_dropped)
     return result

@@ -234,6 +234,28 @@ def test_daemon_fuses_the_jackal_bag_over_zenoh_like_replay(jackal_bag, tmp_path
 
 
 @pytest.mark.e2e
+def test_play_speaks_rmw_zenoh_to_a_daemon_that_does(jackal_bag, tmp_path):
+    """With `[ros] interop = "rmw_zenoh"` the daemon subscribes on rmw_zenoh's keys and drops a sample without its
+    attachment: `play` of the same config publishes as an rmw_zenoh node (it published on the bridge's keys, and
+    not one sample was fused). Every sample it sends is received."""
+    port = free_port()
+    config = write_config(tmp_path / "rmw.toml", port)
+    config.write_text(config.read_text() + '\n[ros]\ninterop = "rmw_zenoh"\n')
+    log = tmp_path / "daemon.log"
+    with daemon_process(config, log) as proc, client_session(port) as session:
+        wait_daemon_ready(session, proc, log)
+        play = subprocess.run(fusiond_cmd("play", str(jackal_bag), "--config", str(config), "--rate", "4",
+                                          "--duration", "4"), cwd=ROOT, capture_output=True, text=True, timeout=60)
+        assert play.returncode == 0, play.stderr
+        m = re.search(r"played (\d+) messages \(wheel=(\d+) imu=(\d+)\)", play.stdout)
+        assert m and int(m.group(2)) > 0, play.stdout
+        sent = {"wheel": int(m.group(2)), "imu": int(m.group(3))}
+        h = wait_until(lambda: (lambda h: h if h and all(h["sensors"][n]["received"] >= k for n, k in sent.items())
+                                else None)(health(session)), 30, "every played sample received")
+        assert {n: h["sensors"][n]["received"] for n in sent} == sent
+
+
+@pytest.mark.e2e
 def test_play_feeds_run_like_the_bridge_would(jackal_bag, tmp_path):
     """`fusiond play` and `fusiond run` as two processes: the first 10 s of the bag at 4x."""
     port = free_port()
