@@ -261,6 +261,9 @@ class Health:
                     if age is None:
                         problems.append(f"{s.name}: no sample yet" if not s.received
                                         else f"{s.name}: no usable sample yet ({s.received} received)")
+                    elif core is not None and core.held[i]:  # arriving, stamped far from the filter's time
+                        problems.append(f"{s.name}: {core.held[i]} samples held for a clock jump, not applied for "
+                                        f"{age:.2f} s (the jump is taken once they persist: filter.jump_persist_s)")
                     else:
                         problems.append(f"{s.name}: silent for {age:.2f} s (timeout {timeout:.2f} s)")
             filt = core.filter if core is not None else FilterHealth()

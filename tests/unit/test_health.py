@@ -319,3 +319,19 @@ def test_a_window_out_of_its_bounds_warns_on_ros_only_while_the_whole_run_is_too
         return int(s.level)
 
     assert level("nis_low", "ok") == 0 and level("nis_low", "nis_low") == 1 and level("nis_low", "warming_up") == 1
+
+
+def test_a_sensor_whose_samples_are_held_for_a_clock_jump_is_said_held_not_silent():
+    """The wheels' samples arrive, stamped far from the filter's time, and are held until the jump persists: the
+    problem says so (it read "silent" while their messages flowed)."""
+    from fusiond.health import CoreCounters, FilterHealth
+
+    clock = Clock()
+    h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock, queue_capacity=8)
+    feed(h, clock, 100.0, {0: 0.02, 1: 0.01})
+    clock.t += 0.5
+    h.set_core(CoreCounters(applied=[1, 1], late=[0, 0], held=[25, 0], rejected=[0, 0], dropped=[{}, {}],
+                            filter=FilterHealth(), consistency={}))
+    problems = h.report().problems
+    assert any(p.startswith("wheel: 25 samples held for a clock jump") for p in problems), problems
+    assert any(p.startswith("imu: silent for") for p in problems), problems
