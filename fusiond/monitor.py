@@ -297,10 +297,6 @@ class Monitor:
                     view.presence.token_up(time.monotonic(), time.time())
         return sorted(found)
 
-    def query_health(self, timeout: float = 1.0) -> None:
-        """Ask every watched daemon for its health, once; the answers arrive on a Zenoh thread."""
-        self.session.get(self._scope(self.health_key), self._on_health, timeout=timeout)
-
     def _on_health(self, reply) -> None:
         if reply.ok is None:
             return
@@ -476,8 +472,11 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
         live = Live(render([]), console=Console(file=out), refresh_per_second=4, transient=False)
         live.start()
     try:
-        mon.refresh_health(timeout=min(interval, 1.0))  # the first view with answers in, not "waiting"
         while not stop.is_set() and (end is None or time.monotonic() < end):
+            asked = time.monotonic()
+            # asked, and the answers waited for, just before they are shown: each view shows the daemons' health
+            # of that moment (shown an interval after it was asked, it read an interval old)
+            mon.refresh_health(timeout=max(min(interval, stale), 0.1))
             snaps = mon.snapshot(stale, mon.link_up())
             wall = time.time()
             if fleet:
@@ -500,8 +499,7 @@ def run(session, *, timeout: float, duration: float | None, as_json: bool, inter
                 out.flush()
             else:
                 live.update(render(snaps))
-            mon.query_health(timeout=max(min(interval, stale), 0.1))
-            if stop.wait(interval):
+            if stop.wait(max(asked + interval - time.monotonic(), 0.0)):
                 break
     except KeyboardInterrupt:
         pass

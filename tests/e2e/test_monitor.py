@@ -81,7 +81,7 @@ def test_monitor_sees_a_running_daemon(jackal_bag, tmp_path):
                 cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
             mon = subprocess.run(
                 fusiond_cmd("monitor", "--connect", f"tcp/127.0.0.1:{port}", "--no-multicast", "--json",
-                            "--duration", "4", "--interval", "0.5", "--timeout", "10"),
+                            "--duration", "4", "--interval", "1.5", "--timeout", "10"),
                 cwd=ROOT, capture_output=True, text=True, timeout=60)
             try:
                 streamed = []
@@ -102,6 +102,9 @@ def test_monitor_sees_a_running_daemon(jackal_bag, tmp_path):
     lines = [json.loads(line) for line in mon.stdout.splitlines() if line.startswith("{")]
     assert lines, mon.stdout
     last = lines[-1]
+    # each view shows the health of its moment: asked just before it is shown, not an interval (1.5 s) earlier
+    assert all(rec["health_age_s"] is not None and rec["health_age_s"] < 0.75 for rec in lines), \
+        [rec["health_age_s"] for rec in lines]
     assert last["daemon"] == "(no namespace)"
     assert last["health"]["status"] in ("ok", "degraded")
     assert set(last["health"]["sensors"]) == {"wheel", "imu"}
