@@ -181,10 +181,10 @@ def test_imu_policy_resolves_each_new_covariance_and_never_reuses_a_stale_one():
     b = (1e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e6)
     changed = policy.convert(_imu_sample(1.2, b, (2e-6,) + g[1:]))
     assert changed.rows == (0, 1) and changed.gyro_cov[4] == pytest.approx(2e-6)
-    # a bad covariance after good ones is refused whatever was seen before
-    with pytest.raises(Rejected) as r:
-        policy.convert(_imu_sample(1.3, (math.nan,) + a[1:], g))
-    assert r.value.reason == "non_finite"
+    # a bad covariance after good ones is refused whatever was seen before: the orientation's rows (counted), the
+    # gyro of the same message kept
+    kept = policy.convert(_imu_sample(1.3, (math.nan,) + a[1:], g))
+    assert kept.rows == () and kept.gyro is not None and policy.orientation_dropped == {"non_finite": 1}
     with pytest.raises(Rejected) as r:
         policy.convert(_imu_sample(1.4, a, (-1e-6,) + g[1:]))
     assert r.value.reason == "negative_covariance"

@@ -349,10 +349,10 @@ def test_an_imu_dropout_while_the_drive_reads_zero_takes_the_imu_turn():
     assert abs(missed) > 0.9 - 0.3 * 0.2 - 0.1
 
 
-def test_in_two_d_mode_a_bad_orientation_costs_the_gap_turn_not_the_gyro():
-    """Read only for the gap turn there, an orientation that is no rotation (all zeros, its covariance not
-    marked absent) leaves the sample's gyro fused; in three dimensions, where it would be fused, the sample is
-    refused (its reason counted)."""
+def test_a_bad_orientation_costs_its_own_rows_and_the_gap_turn_not_the_gyro():
+    """Read only for the gap turn in two-D mode, an orientation that is no rotation (all zeros, its covariance not
+    marked absent) leaves the sample's gyro fused; in three dimensions, where its rows would be fused, they are
+    refused (their reason counted) and the gyro of the sample is fused all the same."""
     from tests.support.core_samples import odom
 
     def zeroed(t: float) -> ImuSample:
@@ -365,4 +365,23 @@ def test_in_two_d_mode_a_bad_orientation_costs_the_gap_turn_not_the_gyro():
         core.ingest(odom(T0, v=0.5))
     assert planar.ingest(zeroed(T0 + 0.01)).accepted and planar.state.gyro == (0.0, 0.0, 0.1)
     step = spatial.ingest(zeroed(T0 + 0.01))
-    assert not step.accepted and step.reason == "zero_quaternion", step
+    assert step.accepted and spatial.state.gyro == (0.0, 0.0, 0.1), step
+    assert imu_model(spatial).policy.orientation_dropped == {"zero_quaternion": 1}
+
+
+def test_an_imu_dropout_beside_wheels_that_measure_no_yaw_rate_takes_the_imu_turn():
+    """The IMU silent from 2 s to 5 s beside wheels whose yaw rate is marked not measured (a race car's drive):
+    nothing turned the heading through the silence, so the filter's standing heading is no measurement of the
+    turn, and the IMU's is taken whole (it was refused as disagreeing with the wheels' 0, and the heading stayed
+    0.9 rad behind for good). The heading's change over 1-6 s is the truth's to within 0.03 rad, as beside a
+    logging gap."""
+    from tests.support.sim_faults import mark_yaw_rate_unmeasured
+
+    drop = (2.0, 5.0)
+    samples = mark_yaw_rate_unmeasured([s for s in simulate(SimConfig(duration=10.0))
+                                        if not (isinstance(s, ImuSample) and T0 + drop[0] <= s.stamp < T0 + drop[1])])
+    turned = truth_turn(1.0, 6.0)
+    assert abs(truth_turn(*drop)) > 0.5
+    core, poses = run(samples)
+    assert imu_model(core).gap_turns == 1
+    assert abs(rot.wrap(rot.wrap(yaw_at(poses, T0 + 6.0) - yaw_at(poses, T0 + 1.0)) - turned)) < 0.03

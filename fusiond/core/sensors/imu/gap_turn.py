@@ -146,10 +146,11 @@ def _turn_across_gap(imu: "GapTurnImu", s: "FilterState", yaw: float, var: float
     # what is not known of the IMU's turn: its drift over the gap (the estimate's error and how much
     # the drift may change) and the yaw's noise at both ends; of the filter's: what its variance grew
     turn_var = (rate_var + DRIFT_CHANGE**2) * silent**2 + 2.0 * var
-    if (s.turn_unseen is not None and s.turn_unseen > t0) or s.still_since is not None:
+    if (s.turn_unseen is not None and s.turn_unseen > t0) or s.still_since is not None or not s.wheel_yaw_measured:
         # a logging gap: the filter's inputs ended with it, so its own change says nothing of the turn; or
         # the wheels read zero while the gyro or the yaw says the vehicle turned (not parked, above): a
-        # drive at rest can lie (coasting, turned by hand), its zero is no measurement of the turn
+        # drive at rest can lie (coasting, turned by hand), its zero is no measurement of the turn; or the
+        # wheels do not measure yaw rate at all (twist_measured): nothing turned the heading through the silence
         gain, wheels_turn, yaw_var = 1.0, filter_turn, var0 + turn_var
     else:
         # the wheels' yaw rate drove the heading through the IMU's silence: their turn, rescaled by how

@@ -81,6 +81,7 @@ class ImuPolicy:
         self._gyro_seen: tuple | None = None
         self._gyro_resolved: tuple[float, ...] = ()
         self._gyro_unknown_said = False  # the gyro_covariance_unknown warning was logged
+        self.orientation_dropped: dict[str, int] = {}  # per reason: orientations refused beside a gyro fused
 
     @property
     def gives_tilt(self) -> bool:
@@ -148,21 +149,23 @@ class ImuPolicy:
         q_base = rpy_cov = None
         rows: tuple[int, ...] = ()
         yaw_measured = False
+        refused: Rejected | None = None  # a bad orientation: it costs the sample only when nothing else is fused
         if (self._rows or self._reads_yaw) and len(s.orientation_covariance) == 9 and s.orientation_covariance[0] != -1.0:
             try:
                 q_base, rows, rpy_cov, yaw_measured = self._orientation(s)
-            except Rejected:
-                if self._rows:
-                    raise
-                # read for the gap turn alone (two-D mode): a bad orientation costs that, not the sample's gyro
+            except Rejected as err:
+                # read for the gap turn alone (two-D mode), or beside a gyro: a bad orientation costs its own
+                # rows, not the sample's gyro (an AHRS's NaN quaternion for 10 s turned the heading 87 deg off)
                 q_base, rows, rpy_cov, yaw_measured = None, (), None, False
+                refused = err if self._rows else None
         elif len(s.orientation_covariance) != 9:
             raise Rejected(reasons.BAD_COVARIANCE, "orientation covariance must have 9 entries")
 
         if q_base is None and s.angular_velocity == _ZERO3 and s.linear_acceleration == _ZERO3:
             # rates and specific force all exactly zero (at rest an accelerometer reads gravity): a
-            # driver's placeholder for a lost sample, not a measurement of zero rate
-            raise Rejected(reasons.NOTHING_TO_FUSE, "rates and acceleration all exactly zero: a lost sample")
+            # driver's placeholder for a lost sample, not a measurement of zero rate (its bad orientation, if
+            # it had one, says more)
+            raise refused or Rejected(reasons.NOTHING_TO_FUSE, "rates and acceleration all exactly zero: a lost sample")
         gyro = gyro_cov = None
         if self.cfg.angular_velocity and len(s.angular_velocity_covariance) == 9:
             gc = s.angular_velocity_covariance
@@ -193,6 +196,13 @@ class ImuPolicy:
             # [0] == -1: no accelerometer (sensor_msgs/Imu); an all-zero vector: not filled in
             if len(ac) == 9 and ac[0] != -1.0 and finite(a) and a != (0.0, 0.0, 0.0):
                 accel = a if self._identity else mat3.apply(self.R_ext, a)
+        if refused is not None:
+            if gyro is None:
+                raise refused
+            n = self.orientation_dropped[refused.reason] = self.orientation_dropped.get(refused.reason, 0) + 1
+            if n == 1 or n % 1000 == 0:
+                log.warning("orientation_dropped", sensor=self.cfg.name, reason=refused.reason, count=n,
+                            kept="the gyro rate of the same message")
         if q_base is None and gyro is None and accel is None:
             raise Rejected(reasons.NOTHING_TO_FUSE, "no orientation, angular velocity or acceleration in the message")
         return ImuInput(q_base, rpy_cov, rows, gyro, gyro_cov, accel, yaw_measured)
