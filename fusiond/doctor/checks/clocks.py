@@ -108,20 +108,19 @@ class Clocks(BaseCheck):
 
 
 def _stuck(name: str, pace: dict[str, tuple[float, float]], newest: float | None, st: dict) -> Verdict | None:
-    """A sensor whose stamps do not advance at the pace of every other sensor's (``ClockOffsets.pace``, over at
-    least PACE_SPAN_S of each, beyond PACE_TOLERANCE, on the same side): a driver stamping a constant, or never
-    filling the stamp (0). No stamp_offset_s mends it (the offset grows with the run: it read as a clock 30 s
-    behind, the run's median), so the verdict names the driver's stamping."""
+    """A sensor whose stamps advance slower than every other sensor's (``ClockOffsets.pace``, over at least
+    PACE_SPAN_S of each, by more than PACE_TOLERANCE): a driver stamping a constant, or never filling the stamp
+    (0). No stamp_offset_s mends it (the offset grows with the run: it read as a clock 30 s behind, the run's
+    median), so the verdict names the driver's stamping. Only slower: a sensor reads faster than one that went
+    silent while it went on (an IMU dead after 60 s of 160 made the wheels' clock read 2.7 times fast), which is
+    that sensor's silence, not this one's clock."""
     rates = [own / others for own, others in pace.values() if others >= PACE_SPAN_S]
-    if not rates or not (all(r < 1.0 - PACE_TOLERANCE for r in rates) or all(r > 1.0 + PACE_TOLERANCE for r in rates)):
+    if not rates or not all(r < 1.0 - PACE_TOLERANCE for r in rates):
         return None
     own, others = max(pace.values(), key=lambda p: p[1])
-    zero = newest == 0.0
-    said = ("every sample is stamped 0: the driver never fills the header's stamp" if zero else
+    said = ("every sample is stamped 0: the driver never fills the header's stamp" if newest == 0.0 else
             f"its stamps advance {own:.3g} s while the other sensors' advance {others:.3g} s: the driver stamps a "
-            "clock that does not run (a constant, a stalled time source)" if own < others else
-            f"its stamps advance {own:.3g} s while the other sensors' advance {others:.3g} s: its clock runs "
-            f"{own / others:.2g} times as fast as theirs (a wrong unit or tick rate)")
+            "clock that does not run (a constant, a stalled time source)")
     fused, received = st.get("applied", 0), st.get("received", 0)
     taken = (f"not one of its {received} samples was fused" if not fused else
              f"{fused} of its {received} samples were fused, each at a time it was not taken")
