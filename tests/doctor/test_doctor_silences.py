@@ -37,6 +37,17 @@ def test_an_imu_lost_for_good_while_the_wheels_report_is_named():
     assert v.evidence["longest_s"] == pytest.approx(25.0, abs=0.3), v
 
 
+def test_an_imu_lost_for_good_across_a_later_logging_gap_is_named_for_the_stretches_the_wheels_reported():
+    """The IMU stops 10 s in; every sensor is silent from 20 s to 28 s (a logging gap); the wheels report the rest:
+    the IMU's silence spans the gap, and it was said of no stretch (the odometry's own gap was inside it). It is
+    silent twice, the longest the 12 s after the gap."""
+    samples = [s for s in simulate(SimConfig(duration=40.0, standstill=2.0))
+               if not (type(s) is ImuSample and s.stamp >= T0 + 10.0) and not T0 + 20.0 <= s.stamp < T0 + 28.0]
+    (v,) = _inputs(verdicts_of(robot_config(), samples), "imu")
+    assert "silent 2 time(s)" in v.message, v
+    assert v.evidence["longest_s"] == pytest.approx(12.0, abs=0.3), v
+
+
 def test_a_logging_gap_of_every_sensor_is_no_silence_of_one():
     samples = [s for s in simulate(SimConfig(duration=40.0, standstill=2.0))
                if not T0 + 20.0 <= s.stamp < T0 + 25.0]

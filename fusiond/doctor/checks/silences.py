@@ -29,8 +29,8 @@ GPS_SILENT_PERIODS = 5.0
 def silences(t: list[float] | np.ndarray, longer_than: float, odom_t: list[float] | np.ndarray
              ) -> list[tuple[float, float]]:
     """(start, length s) of each interval between consecutive stamps ``t`` longer than ``longer_than`` across
-    which the odometry kept reporting (no interval of its own that long inside it): the sensor's own silences,
-    not a logging gap of every sensor. The odometry's first and last stamps bound ``t`` too: a sensor that
+    which the odometry kept reporting (split at the odometry's own intervals that long: a logging gap of every
+    sensor is no silence of this one). The odometry's first and last stamps bound ``t`` too: a sensor that
     starts late or stops for good (an IMU lost 20 s into a 60 s drive) is silent there as well."""
     ts, to = np.asarray(t, dtype=float), np.asarray(odom_t, dtype=float)
     if ts.size < 2 or to.size == 0:
@@ -41,8 +41,18 @@ def silences(t: list[float] | np.ndarray, longer_than: float, odom_t: list[float
     for i in np.nonzero(d > longer_than)[0].tolist():
         a, b = bounded[i], bounded[i + 1]
         inside = to[np.searchsorted(to, a, side="right"):np.searchsorted(to, b, side="left")]
-        if inside.size and np.max(np.diff(np.concatenate(([a], inside, [b])))) <= longer_than:
-            out.append((float(a), float(b - a)))
+        if not inside.size:
+            continue
+        # split at the odometry's own gaps (a logging gap silences every sensor): each stretch the odometry
+        # reported through, longer than ``longer_than``, is this sensor's silence (an IMU dead from 60 s of a run
+        # with a 26 s logging gap at 117 s is silent 60-117 s and 143-160 s, not in the gap)
+        edges = np.concatenate(([a], inside, [b]))
+        cuts = np.nonzero(np.diff(edges) > longer_than)[0]
+        starts = np.concatenate(([0], cuts + 1))
+        ends = np.concatenate((cuts, [len(edges) - 1]))
+        for lo, hi in zip(starts.tolist(), ends.tolist()):
+            if edges[hi] - edges[lo] > longer_than:
+                out.append((float(edges[lo]), float(edges[hi] - edges[lo])))
     return out
 
 
