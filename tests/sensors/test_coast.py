@@ -82,6 +82,18 @@ def test_a_drop_no_vehicle_could_make_is_a_coast():
     assert _path(tracks[1.0], end - coast_s, end) == pytest.approx(V * coast_s - coast_s**2 / 2, rel=0.05)
 
 
+def test_a_drive_that_measures_no_yaw_rate_coasts_too():
+    """The same 2 s coast, the drive's yaw rate marked not measured (a race car's: the gyro turns the heading):
+    the drop to zero is a coast all the same, covering V T - T^2 / 2 within 5 % (it stopped dead)."""
+    from tests.support.sim_faults import mark_yaw_rate_unmeasured
+
+    coast_s = 2.0
+    samples = mark_yaw_rate_unmeasured(simulate(_coasting_world(coast_s)))
+    end = T0 + 4.0 + coast_s
+    _, track = _fuse(samples)
+    assert _path(track, end - coast_s, end) == pytest.approx(V * coast_s - coast_s**2 / 2, rel=0.05)
+
+
 def test_the_coast_ends_when_the_speed_has_run_down():
     """A coast of 4 s: slowing at 1 m/s^2 from 2 m/s, the estimate stops after |v| / coast_decel = 2 s,
     having covered v^2 / (2 coast_decel) = 2 m (within 5 %), and stands for the rest of it."""

@@ -341,9 +341,10 @@ class OdomModel(SensorModel):
         """The coast (since, the twist and its covariance before the drop) this message is part of, or None
         (module doc): it lasts while the slowing speed is above zero.
 
-        Only a twist of exactly zero in every measured component, yaw rate included, can be one."""
+        Only a twist of exactly zero in every measured component can be one: a drive that measures no yaw rate
+        (a race car's) coasts as one that does (it stopped dead where the F1/10's drive read zero at 1.5 m/s)."""
         decel = self._coast_decel
-        if decel <= 0.0 or not (inp.stationary and inp.yaw_rate_measured):
+        if decel <= 0.0 or not inp.stationary:
             return None
         coast = own.coast
         if coast is not None:
