@@ -341,10 +341,11 @@ class OdomModel(SensorModel):
         """The coast (since, the twist and its covariance before the drop) this message is part of, or None
         (module doc): it lasts while the slowing speed is above zero.
 
-        Only a twist of exactly zero in every measured component can be one: a drive that measures no yaw rate
-        (a race car's) coasts as one that does (it stopped dead where the F1/10's drive read zero at 1.5 m/s)."""
+        Only a twist of exactly zero in every measured component, the forward speed among them, can be one: a
+        drive that measures no yaw rate (a race car's) coasts as one that does (it stopped dead where the F1/10's
+        drive read zero at 1.5 m/s); a message that measures no speed says nothing of one."""
         decel = self._coast_decel
-        if decel <= 0.0 or not inp.stationary:
+        if decel <= 0.0 or not (inp.stationary and inp.measured[0]):
             return None
         coast = own.coast
         if coast is not None:
