@@ -115,6 +115,7 @@ FROZEN_JITTER = 0.01  # m: a fix this close to the one a repeat began with is th
 FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since it came: a frozen receiver too
 NOISE_UPPER_Z = 2.0  # the measured unstated noise is used at its ~98 % upper bound (one-sided, z = 2 sigmas)
 ENU_NAMES = ("east", "north", "up")
+WHEEL_SCALE = "wheel_scale"  # the state block of the odometry's speed scale (estimator/scale.py)
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
@@ -249,6 +250,8 @@ class GpsModel(SensorModel):
             self.wander = max(cfg.error_sigma[0], cfg.error_sigma[1]) ** 2
         # An IMU's absolute yaw trusted as the heading in ENU (no offset estimated): no heading search.
         self.yaw_given = ctx.absolute_yaw and not layout.has("yaw_offset")
+        # the wheels' scale in the state: a locked-out run may be the track stretched (``_locked_out``)
+        self._scaled = layout.has(WHEEL_SCALE)
 
     def on_start(self, s: "FilterState") -> None:
         """A fresh state: the ENU frame at the configured datum (or none yet), heading unknown."""
@@ -493,7 +496,9 @@ class GpsModel(SensorModel):
         if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < self._reacquire_after(own, run[0]):
             return False
         me, mn = sum(r[1] for r in run) / len(run), sum(r[2] for r in run) / len(run)
-        spread = _rigid_residual([(r[4], r[5]) for r in run], [(r[6], r[7]) for r in run])
+        # with the wheels' scale in the state, the track may be stretched too (a tyre changed, a speed 20 %
+        # high from one moment: every fix gated out for good, 97 m off, where the fit's rotation alone left 10 m)
+        spread, _ = _fitted_residual([(r[4], r[5]) for r in run], [(r[6], r[7]) for r in run], self._scaled)
         noise = REACQUIRE_SIGMAS * math.sqrt(max(r[3] for r in run))
         allowed = max(REACQUIRE_AGREE * math.hypot(me, mn), noise)
         first, last = run[0], run[-1]
@@ -585,11 +590,32 @@ class GpsModel(SensorModel):
             log.warning("gps_reacquired", sensor=self.name, stamp=stamp, rejected=len(own.rejected),
                         seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
         set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, tuple(r for r in rows if r < 2))
+        if self._scaled:
+            self._rescale_wheels(s, own.rejected, emit, stamp)
         if not self.yaw_given:
             s.ekf.reset_covariance([YAW_ROW], np.array([[HEADING_UNKNOWN_SIGMA**2]]))
             s.heading_ready = False
         new_frame(s)
         self._start_track(s, z, inp.lla, stamp)
+
+    def _rescale_wheels(self, s: "FilterState", run: tuple, emit: bool, stamp: float) -> None:
+        """The wheels' scale as the re-acquiring run of fixes measures it: the fixes are the dead-reckoned track
+        stretched by k (``_fitted_residual``), so the scale the track was driven with was short by that factor.
+        The state's scale is multiplied by k and its variance opened by the change ((k - 1) scale)^2, so that the
+        fixes that follow refine it: a scale stepping 20 % put every later fix out of the gate again."""
+        _, k = _fitted_residual([(r[4], r[5]) for r in run], [(r[6], r[7]) for r in run], True)
+        if not (math.isfinite(k) and k > 0.0) or k == 1.0:
+            return
+        ekf = s.ekf
+        block = ekf.layout.nominal[WHEEL_SCALE]
+        scale = float(ekf.x[block.start])
+        change = scale * (k - 1.0)
+        e = ekf.layout.error[WHEEL_SCALE].start
+        var = float(ekf.P[e, e])
+        ekf.shift(WHEEL_SCALE, [change])
+        ekf.reset_variance(e, var + change * change)
+        if emit:
+            log.warning("gps_rescaled_wheels", sensor=self.name, stamp=stamp, wheel_scale=scale + change, factor=k)
 
     def _start_track(self, s: "FilterState", z, lla: tuple[float, float, float], stamp: float) -> None:
         """A new track (and heading search) from this fix; the receiver's measured noise goes on (its
@@ -735,6 +761,35 @@ class GpsModel(SensorModel):
         for i in rows:
             J[i, eb + i] = -1.0
         s.ekf.map_errors(J)
+
+
+def _fitted_residual(fixes: list[tuple[float, float]], track: list[tuple[float, float]],
+                     scaled: bool) -> tuple[float, float]:
+    """(RMS distance (m) of the fixes from the dead-reckoned track at their stamps once the track is turned,
+    stretched by k and shifted onto them (the least-squares similarity in the plane), k): what no error of the
+    filter's heading, position and wheel scale explains. ``scaled`` False: k = 1, the rigid fit
+    (``_rigid_residual``), for a filter without the wheels' scale in its state."""
+    if not scaled:
+        return _rigid_residual(fixes, track), 1.0
+    n = len(fixes)
+    fx, fy = sum(p[0] for p in fixes) / n, sum(p[1] for p in fixes) / n
+    tx, ty = sum(p[0] for p in track) / n, sum(p[1] for p in track) / n
+    dot = cross = norm = 0.0
+    for (a, b), (c, d) in zip(fixes, track):
+        a, b, c, d = a - fx, b - fy, c - tx, d - ty
+        dot += a * c + b * d
+        cross += b * c - a * d
+        norm += c * c + d * d
+    if norm <= 0.0:
+        return _rigid_residual(fixes, track), 1.0
+    k = math.hypot(dot, cross) / norm
+    turn = math.atan2(cross, dot)
+    kc, ks = k * math.cos(turn), k * math.sin(turn)
+    sq = 0.0
+    for (a, b), (c, d) in zip(fixes, track):
+        c, d = c - tx, d - ty
+        sq += (a - fx - (kc * c - ks * d)) ** 2 + (b - fy - (ks * c + kc * d)) ** 2
+    return math.sqrt(sq / n), k
 
 
 def _rigid_residual(fixes: list[tuple[float, float]], track: list[tuple[float, float]]) -> float:
