@@ -604,3 +604,20 @@ def test_every_message_sent_twice_is_said_to_be_repeated_not_stamped_in_groups()
     v = one(verdicts_of(robot_config(), twice), "wheel", "input")
     assert "duplicate_stamp=" in v.message and "same message again" in v.message and "nothing of the data" in v.message
     assert "groups" not in v.message and "FIFO" not in v.message, v
+
+
+def test_a_gyro_whose_range_ends_below_the_turns_is_named_and_a_working_one_is_not():
+    """The gyro's rates clipped at +-0.2 rad/s (a low full-scale range) on a robot turning at up to 0.3 rad/s: its
+    bins at the rail hold one float in every sample, which no noisy working gyro does. The IMU is named, with the
+    rail; the same drive unclipped gets no such verdict."""
+    import msgspec
+
+    from fusiond.core.sensors import ImuSample
+    from tests.support.sim import SimConfig, simulate as simulate_drive
+
+    samples = simulate_drive(SimConfig(duration=30.0, standstill=2.0))
+    clipped = [msgspec.structs.replace(s, angular_velocity=tuple(max(-0.2, min(0.2, w)) for w in s.angular_velocity))
+               if type(s) is ImuSample else s for s in samples]
+    v = one(verdicts_of(robot_config(), clipped), "imu", "range")
+    assert v.level == "problem" and v.evidence["rail_rad_s"] == pytest.approx(0.2), v
+    assert not [x for x in verdicts_of(robot_config(), samples) if x.channel == "range"]
