@@ -49,3 +49,17 @@ def test_a_nan_orientation_keeps_the_gyro_of_its_message():
     imu = core.sensors.index(next(s for s in core.sensors if s.name == "imu"))
     assert not core.stats[imu].dropped  # no sample lost: its rate was fused
     assert core.models[imu].policy.orientation_dropped == {"non_finite": 100}  # ... and its orientation counted
+
+
+def test_a_nan_acceleration_is_counted_and_the_rest_of_its_message_fused():
+    """An accelerometer reading NaN for a stretch: its gravity tilt is left out of those messages, counted (it
+    went unseen: 77 gravity updates of the highway car vanished with no count), their gyro fused."""
+    from fusiond.core.sensors.imu import ImuPolicy
+    from fusiond.config import ImuSensor
+
+    policy = ImuPolicy(ImuSensor(name="imu", key="imu", orientation="off", angular_velocity=True))
+    acc_cov = (0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.01)
+    msg = ImuSample("imu", 1.0, (0.0, 0.0, 0.0, 1.0), (-1.0,) + (0.0,) * 8, (0.0, 0.0, RATE),
+                    (1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6), (math.nan, 0.0, 9.81), acc_cov)
+    got = policy.convert(msg)
+    assert got.accel is None and got.gyro is not None and policy.acceleration_dropped == 1

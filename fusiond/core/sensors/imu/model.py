@@ -82,6 +82,7 @@ class ImuPolicy:
         self._gyro_resolved: tuple[float, ...] = ()
         self._gyro_unknown_said = False  # the gyro_covariance_unknown warning was logged
         self.orientation_dropped: dict[str, int] = {}  # per reason: orientations refused beside a gyro fused
+        self.acceleration_dropped = 0  # accelerations not finite, left out of the gravity tilt (the rest fused)
 
     @property
     def gives_tilt(self) -> bool:
@@ -196,6 +197,11 @@ class ImuPolicy:
             # [0] == -1: no accelerometer (sensor_msgs/Imu); an all-zero vector: not filled in
             if len(ac) == 9 and ac[0] != -1.0 and finite(a) and a != (0.0, 0.0, 0.0):
                 accel = a if self._identity else mat3.apply(self.R_ext, a)
+            elif len(ac) == 9 and ac[0] != -1.0 and not finite(a):  # NaN from the chip: said, not lost unseen
+                n = self.acceleration_dropped = self.acceleration_dropped + 1
+                if n == 1 or n % 1000 == 0:
+                    log.warning("acceleration_dropped", sensor=self.cfg.name, reason=reasons.NON_FINITE, count=n,
+                                kept="the rest of the message")
         if refused is not None:
             if gyro is None:
                 raise refused
