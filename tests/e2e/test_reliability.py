@@ -202,23 +202,32 @@ def bad_cases() -> list[Case]:
                                         orientation=(nan, 0.0, 0.0, 0.0))],
                      applied=1))
         else:
-            add(Case(name, "NaN in orientation", "dropped",
-                     lambda st: [st.enc("imu", orientation=(nan, 0.0, 0.0, 1.0))], drops={"non_finite": 1}))
+            # a bad orientation costs its own rows (counted by the model, logged), not the gyro of the same message
+            add(Case(name, "NaN in orientation", "accepted: the gyro of the message (its orientation refused)",
+                     lambda st: [st.enc("imu", stamp=st.newest + 0.001, orientation=(nan, 0.0, 0.0, 1.0))],
+                     applied=1))
+            add(Case(name, "NaN in orientation, no angular velocity (covariance -1)", "dropped",
+                     lambda st: [st.enc("imu", orientation=(nan, 0.0, 0.0, 1.0),
+                                        angular_velocity_covariance=(-1.0,) + (0.0,) * 8)],
+                     drops={"non_finite": 1}))
             add(Case(name, "+Inf in angular_velocity", "dropped",
                      lambda st: [st.enc("imu", angular_velocity=(0.0, inf, 0.0))], drops={"non_finite": 1}))
-            add(Case(name, "NaN in orientation covariance", "dropped",
-                     lambda st: [st.enc("imu", orientation_covariance=_cov_diag(3, [nan, 1e-4, 1e-4]))],
-                     drops={"non_finite": 1}))
-            add(Case(name, "zero quaternion", "dropped",
-                     lambda st: [st.enc("imu", orientation=(0.0, 0.0, 0.0, 0.0))], drops={"zero_quaternion": 1}))
-            add(Case(name, "non-unit quaternion (norm 2)", "dropped",
-                     lambda st: [st.enc("imu", orientation=(0.0, 0.0, 0.0, 2.0))], drops={"non_unit_quaternion": 1}))
+            add(Case(name, "NaN in orientation covariance", "accepted: the gyro of the message (its orientation refused)",
+                     lambda st: [st.enc("imu", stamp=st.newest + 0.001,
+                                        orientation_covariance=_cov_diag(3, [nan, 1e-4, 1e-4]))],
+                     applied=1))
+            add(Case(name, "zero quaternion", "accepted: the gyro of the message (its orientation refused)",
+                     lambda st: [st.enc("imu", stamp=st.newest + 0.001, orientation=(0.0, 0.0, 0.0, 0.0))],
+                     applied=1))
+            add(Case(name, "non-unit quaternion (norm 2)", "accepted: the gyro of the message (its orientation refused)",
+                     lambda st: [st.enc("imu", stamp=st.newest + 0.001, orientation=(0.0, 0.0, 0.0, 2.0))],
+                     applied=1))
             add(Case(name, "gyro 1e3 rad/s", "dropped: implausible",
                      lambda st: [st.enc("imu", angular_velocity=(0.0, 0.0, 1e3))], drops={"implausible_value": 1}))
-            add(Case(name, "negative orientation covariance", "dropped",
+            add(Case(name, "negative orientation covariance", "accepted: the gyro of the message (its orientation refused)",
                      lambda st: [st.enc("imu", stamp=st.newest + 0.001,
                                         orientation_covariance=_cov_diag(3, [1e-4, -1e-4, 1e-4]))],
-                     drops={"negative_covariance": 1}))
+                     applied=1))
             add(Case(name, "all-zero covariances", "accepted with floors (robot_pose_ekf 'zero covariance')",
                      lambda st: [st.enc("imu", stamp=st.newest + 0.001, orientation_covariance=(0.0,) * 9,
                                         angular_velocity_covariance=(0.0,) * 9)],
