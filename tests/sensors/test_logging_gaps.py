@@ -243,7 +243,10 @@ def test_the_longest_recent_interval_keeps_a_recurring_pause_and_forgets_a_singl
 
 
 def test_the_rigid_residual_is_what_no_turn_and_shift_of_the_track_explains():
-    from fusiond.core.sensors.gps.model import _rigid_residual
+    from fusiond.core.sensors.gps.model import _fitted_residual
+
+    def _rigid_residual(fixes, track):  # the fit without the wheels' scale: a turn and a shift
+        return _fitted_residual(fixes, track, False)[0]
 
     track = [(3.0 * k, 0.5 * k * k) for k in range(10)]  # a curved dead-reckoned track
     turn, (ox, oy) = 0.7, (40.0, -12.0)

@@ -478,8 +478,8 @@ class GpsModel(SensorModel):
         is an "outlier" and the gate never lets the truth back in. Fixes rejected for
         REACQUIRE_S in a row (at least REACQUIRE_FIXES) that agree with each other and moved with
         the wheels say so. "Agree": the fixes are the dead-reckoned track turned and shifted (one
-        rotation and one offset fitted, ``_rigid_residual``), to within the fixes' noise or a tenth of
-        the offset: a filter off by a constant offset, or driving along a wrong heading, whose error
+        rotation and one offset fitted, and a stretch where the wheels' scale is in the state:
+        ``_fitted_residual``), to within the fixes' noise or a tenth of the offset: a filter off by a constant offset, or driving along a wrong heading, whose error
         grows with the distance, not a multipath burst whose error jumps around the track. A
         receiver that lost its fix and repeats it with a little noise (its covariance then as
         unknown, wide enough for the growing innovations to "agree") stays where it was while the
@@ -767,10 +767,8 @@ def _fitted_residual(fixes: list[tuple[float, float]], track: list[tuple[float, 
                      scaled: bool) -> tuple[float, float]:
     """(RMS distance (m) of the fixes from the dead-reckoned track at their stamps once the track is turned,
     stretched by k and shifted onto them (the least-squares similarity in the plane), k): what no error of the
-    filter's heading, position and wheel scale explains. ``scaled`` False: k = 1, the rigid fit
-    (``_rigid_residual``), for a filter without the wheels' scale in its state."""
-    if not scaled:
-        return _rigid_residual(fixes, track), 1.0
+    filter's heading, position and wheel scale explains. ``scaled`` False, or a track that did not move: k = 1,
+    the rigid fit (rotation and offset), for a filter without the wheels' scale in its state."""
     n = len(fixes)
     fx, fy = sum(p[0] for p in fixes) / n, sum(p[1] for p in fixes) / n
     tx, ty = sum(p[0] for p in track) / n, sum(p[1] for p in track) / n
@@ -780,9 +778,7 @@ def _fitted_residual(fixes: list[tuple[float, float]], track: list[tuple[float, 
         dot += a * c + b * d
         cross += b * c - a * d
         norm += c * c + d * d
-    if norm <= 0.0:
-        return _rigid_residual(fixes, track), 1.0
-    k = math.hypot(dot, cross) / norm
+    k = math.hypot(dot, cross) / norm if scaled and norm > 0.0 else 1.0
     turn = math.atan2(cross, dot)
     kc, ks = k * math.cos(turn), k * math.sin(turn)
     sq = 0.0
@@ -790,27 +786,6 @@ def _fitted_residual(fixes: list[tuple[float, float]], track: list[tuple[float, 
         c, d = c - tx, d - ty
         sq += (a - fx - (kc * c - ks * d)) ** 2 + (b - fy - (ks * c + kc * d)) ** 2
     return math.sqrt(sq / n), k
-
-
-def _rigid_residual(fixes: list[tuple[float, float]], track: list[tuple[float, float]]) -> float:
-    """RMS distance (m) of the fixes from the dead-reckoned track at their stamps once the track is turned
-    and shifted onto them (the least-squares rotation and offset in the plane): what no error of the
-    filter's heading and position explains."""
-    n = len(fixes)
-    fx, fy = sum(p[0] for p in fixes) / n, sum(p[1] for p in fixes) / n
-    tx, ty = sum(p[0] for p in track) / n, sum(p[1] for p in track) / n
-    dot = cross = 0.0
-    for (a, b), (c, d) in zip(fixes, track):
-        a, b, c, d = a - fx, b - fy, c - tx, d - ty
-        dot += a * c + b * d
-        cross += b * c - a * d
-    turn = math.atan2(cross, dot)
-    cos_t, sin_t = math.cos(turn), math.sin(turn)
-    sq = 0.0
-    for (a, b), (c, d) in zip(fixes, track):
-        c, d = c - tx, d - ty
-        sq += (a - fx - (cos_t * c - sin_t * d)) ** 2 + (b - fy - (sin_t * c + cos_t * d)) ** 2
-    return math.sqrt(sq / n)
 
 
 def _jumped(own: GpsOwn, first: tuple) -> bool:
