@@ -165,42 +165,34 @@ def tolerances(terms: Iterable[TermKey]) -> dict[Channel, float]:
     return out
 
 
-def _slid(terms: dict[TermKey, tuple[float, float, int]], unfound: list[TermKey],
-          spare: list[DiagnosticsRecord], tolerance: dict[Channel, float]) -> list[tuple[TermKey, DiagnosticsRecord]]:
-    """The unfound terms paired with the spare records (module doc): per channel and dof, in time order, each term
-    with the nearest spare record not yet taken within the channel's tolerance."""
+def _paired(terms: dict[TermKey, tuple[float, float, int]], unfound: Iterable[TermKey],
+            spare: list[DiagnosticsRecord], tolerance: dict[Channel, float]) -> list[tuple[TermKey, DiagnosticsRecord]]:
+    """The unfound terms paired with the spare records (``spare``: in time order), per channel and dof (module
+    doc). First each term, in time order, with the nearest spare record not yet taken within the channel's
+    tolerance: the same update, its window slid. Then the terms still unfound, in time order, with the records
+    left, in time order: an update made elsewhere stands in for one not made here, up to the channel's count."""
     by: dict[tuple[str, str, int], list[DiagnosticsRecord]] = {}
     for r in spare:
         by.setdefault((r.sensor, r.channel, r.dof), []).append(r)
-    pairs = []
+    behind: dict[tuple[str, str, int], list[DiagnosticsRecord]] = {}  # records passed over, before any window
+    pairs, still = [], []
     for k in sorted(unfound, key=lambda k: k[2]):
-        rs = by.get((k[0], k[1], terms[k][2]))
+        group = (k[0], k[1], terms[k][2])
+        rs = by.get(group)
         tol = tolerance.get((k[0], k[1]), 0.0)
         if not rs or tol <= 0.0:
+            still.append(k)
             continue
-        # rs is in time order and consumed from the front: records before the term's window are left behind
+        # rs is in time order and consumed from the front: records before the term's window are passed over
         while rs and rs[0].stamp < k[2] - tol:
-            rs.pop(0)
+            behind.setdefault(group, []).append(rs.pop(0))
         best = min(range(min(len(rs), 2)), key=lambda i: abs(rs[i].stamp - k[2]), default=None)
         if best is not None and abs(rs[best].stamp - k[2]) <= tol:
             pairs.append((k, rs.pop(best)))
-    return pairs
-
-
-def _elsewhere(terms: dict[TermKey, tuple[float, float, int]], unfound: Iterable[TermKey],
-               spare: list[DiagnosticsRecord], slid: list[tuple[TermKey, DiagnosticsRecord]]
-               ) -> list[tuple[TermKey, DiagnosticsRecord]]:
-    """The terms still unfound after ``_slid``, paired in time order with the spare records it left of the same
-    channel and dof (module doc): an update made elsewhere stands in for one not made here, up to the channel's
-    count in the reference."""
-    taken = {id(r) for _, r in slid}
-    paired = {k for k, _ in slid}
-    left: dict[tuple[str, str, int], list[DiagnosticsRecord]] = {}
-    for r in sorted(spare, key=lambda r: r.stamp):
-        if id(r) not in taken:
-            left.setdefault((r.sensor, r.channel, r.dof), []).append(r)
-    pairs = []
-    for k in sorted((k for k in unfound if k not in paired), key=lambda k: k[2]):
+        else:
+            still.append(k)
+    left = {g: behind.get(g, []) + rs for g, rs in by.items()}  # each group's records not taken, in time order
+    for k in sorted(still, key=lambda k: k[2]):
         rs = left.get((k[0], k[1], terms[k][2]))
         if rs:
             pairs.append((k, rs.pop(0)))
@@ -234,10 +226,8 @@ def score(records: Iterable[DiagnosticsRecord], ref: Reference) -> Score:
         if key not in terms and r.channel not in CHECK_CHANNELS and not r.learning:
             spare.append(r)
     unfound = terms.keys() - {k for k, _ in keyed}
-    slid = _slid(terms, list(unfound), sorted(spare, key=lambda r: r.stamp), ref.tolerance) if unfound and spare else []
-    if len(slid) < len(unfound) and len(slid) < len(spare):
-        slid += _elsewhere(terms, unfound, spare, slid)
-    for key, r in [*keyed, *slid]:  # the keys are distinct: a slid pair's is a term no record found
+    slid = _paired(terms, unfound, sorted(spare, key=lambda r: r.stamp), ref.tolerance) if unfound and spare else []
+    for key, r in [*keyed, *slid]:  # the keys are distinct: a paired term is one no record found
         t = terms.get(key)
         if t is None:
             continue
