@@ -51,17 +51,21 @@ class ClockOffsets:
         t = np.array(stamps, dtype=float)
         finite = np.isfinite(t)
         idx, t = idx[finite], t[finite]
+        # each sensor's newest stamp at every arrival of the chunk, once: the others' newest (offsets) and each
+        # other's (paces) are read from them
+        running = {j: np.maximum.accumulate(np.concatenate(([self._newest[j]], np.where(idx == j, t, -math.inf))))[1:]
+                   for j in ids.values()}
         for name, i in ids.items():
             mine = idx == i
-            if not mine.any():
+            rest = [running[j] for j in ids.values() if j != i]
+            if not rest or not mine.any():
                 continue
-            before = max((newest for j, newest in enumerate(self._newest) if j != i), default=-math.inf)
-            others = np.maximum.accumulate(np.concatenate(([before], np.where(mine, -math.inf, t))))[1:]
+            others = np.maximum.reduce(rest)  # at this sensor's arrivals: the newest stamp of any other
             seen = mine & (others > -math.inf)  # another sensor has spoken: an offset
             if seen.any():
                 for other, j in ids.items():
                     if j != i:
-                        self._pace_pair(name, other, t, mine, np.where(idx == j, t, -math.inf), self._newest[j])
+                        self._pace_pair(name, other, t, mine, running[j])
                 kept = self._offsets.setdefault(name, array("d"))
                 if len(kept) < MAX_KEPT:
                     kept.extend((t[seen] - others[seen])[: MAX_KEPT - len(kept)].tolist())
@@ -78,11 +82,9 @@ class ClockOffsets:
             return None
         return max(0.0, -float(np.quantile(np.frombuffer(kept, dtype=float), 1.0 - share)))
 
-    def _pace_pair(self, name: str, other: str, t: np.ndarray, mine: np.ndarray, theirs: np.ndarray,
-                   before: float) -> None:
-        """``pace``'s ends for ``name`` against ``other``, over a chunk: ``theirs``, the chunk's stamps of the
-        other's samples (-inf elsewhere), ``before`` the other's newest stamp before the chunk."""
-        newest = np.maximum.accumulate(np.concatenate(([before], theirs)))[1:]
+    def _pace_pair(self, name: str, other: str, t: np.ndarray, mine: np.ndarray, newest: np.ndarray) -> None:
+        """``pace``'s ends for ``name`` against ``other``, over a chunk: ``newest``, the other's newest stamp at each
+        arrival of it."""
         at = np.flatnonzero(mine & (newest > -math.inf))
         if not len(at):
             return
