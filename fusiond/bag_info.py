@@ -20,13 +20,12 @@ from typing import Any
 
 import msgspec
 
+from .core.sensors.odom.pose_twist import POSE_PATH_M
 from .replay.bag import open_reader, same_definition
 
 __all__ = ["BagInfo", "StaticTransform", "TopicInfo", "format_info", "inspect_bags", "is_reference", "print_info",
            "topic_use"]
 
-POSE_ONLY_PATH_M = 1.0  # the sampled poses' path with every twist zero: a driver that fills the pose only (a standing
-# robot's integrated pose does not move a metre)
 SAMPLE = 400  # messages of each topic deserialized to read frames, covariances and motion
 ODOMETRY = "nav_msgs/msg/Odometry"
 IMU = "sensor_msgs/msg/Imu"
@@ -144,7 +143,7 @@ def _read_odometry(t: TopicInfo, msgs: list[Any]) -> None:
     path = sum(math.dist((a.pose.pose.position.x, a.pose.pose.position.y, a.pose.pose.position.z),
                          (b.pose.pose.position.x, b.pose.pose.position.y, b.pose.pose.position.z))
                for a, b in zip(msgs, msgs[1:]))
-    t.pose_only = still and path >= POSE_ONLY_PATH_M
+    t.pose_only = still and path >= POSE_PATH_M  # the sampled poses travel while every twist reads 0
 
 
 def _read_imu(t: TopicInfo, msgs: list[Any]) -> None:

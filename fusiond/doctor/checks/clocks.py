@@ -128,7 +128,7 @@ def _stuck(name: str, pace: dict[str, tuple[float, float]], newest: float | None
                    f"{said}. The filter orders and pairs every sample by its stamp: {taken}, and no stamp_offset_s "
                    "mends a clock that does not keep time. Stamp each message with the time of its reading in the "
                    "driver (the same clock as the other sensors)",
-                   evidence={"stamp_span_s": own, "others_span_s": others, "received": float(st.get("received", 0)),
+                   evidence={"stamp_span_s": own, "others_span_s": others, "received": float(received),
                              "applied": float(fused)})
 
 

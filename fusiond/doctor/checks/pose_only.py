@@ -9,15 +9,13 @@ nothing. ``twist_from_pose`` takes the twist from consecutive poses (``core/sens
 
 from __future__ import annotations
 
+from ...core.sensors.odom.pose_twist import POSE_PATH_M
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
 
 __all__ = ["PoseOnly"]
 
-# A metre of path: far beyond what an integrated pose moves while its robot stands (it does not jitter; a
-# standing drive's pose creeps by an encoder tick at most).
-POSE_TRAVEL_M = 1.0
 # The twists' path below this share of the positions': no wheel scale error explains it (a twist that reads 10 %
 # of the speed is a unit mistake the speed checks name; one that reads nothing is not filled).
 TWIST_SHARE = 0.1
@@ -34,7 +32,7 @@ class PoseOnly(BaseCheck):
             return []
         t = ev.twist
         pose, twist = t.pose_travel, t.twist_travel
-        if pose < POSE_TRAVEL_M or twist >= TWIST_SHARE * pose:
+        if pose < POSE_PATH_M or twist >= TWIST_SHARE * pose:
             return []
         return [Verdict(odom.name, "twist", "problem",
                         f"the odometry's own pose travelled {pose:.1f} m while its twist says the robot went "

@@ -8,7 +8,7 @@ the mean over the interval the message closes, so it follows the true twist by h
 the drive's, not the pose's (an integrated pose does not jitter), so its noise is the table's twist_noise, else
 the floors twist_min_sigma.
 
-A message with nothing before it to difference (the first, one after more than timeout_s, one stamped no later
+A message with nothing before it to difference (the first, one after more than gap_s, one stamped no later
 than the one before it, one without a usable orientation) says nothing of the twist: its twist is "not
 measured" (input zero, the default noise), and the next one differences from it, if it moved on in time.
 """
@@ -24,7 +24,12 @@ from ....estimator import rotation as rot
 from ..checks import finite, near_unit
 from .sample import OdomSample
 
-__all__ = ["PoseDifferences"]
+__all__ = ["POSE_PATH_M", "PoseDifferences"]
+
+# A metre of path: far beyond what an integrated pose moves while its robot stands (it does not jitter; a standing
+# drive's pose creeps by an encoder tick at most). A pose that travels that far while the twist says the robot
+# went nowhere is a driver that fills the pose only (``fusiond info``/``init``, the doctor's ``pose_only``).
+POSE_PATH_M = 1.0
 
 _ZERO3 = (0.0, 0.0, 0.0)
 # a variance beyond every twist_max_sigma: each component "not measured" (OdomPolicy._twist_noise)
@@ -42,8 +47,8 @@ class PoseDifferences:
     they are given. One per consumer: the core's odometry policy and the doctor each keep their own, fed the
     same messages in the same order."""
 
-    def __init__(self, timeout_s: float) -> None:
-        self.timeout_s = timeout_s
+    def __init__(self, gap_s: float) -> None:
+        self.gap_s = gap_s  # the filter's gap_s: a longer interval is a logging gap, not one motion
         self._prev: tuple[float, tuple, tuple] | None = None  # (stamp, position, unit orientation)
 
     def __call__(self, s: OdomSample) -> OdomSample:
@@ -53,7 +58,7 @@ class PoseDifferences:
         if not usable or (prev is not None and not stamp > prev[0]):
             return _not_measured(s)
         self._prev = (stamp, s.position, q)
-        if prev is None or stamp - prev[0] > self.timeout_s:
+        if prev is None or stamp - prev[0] > self.gap_s:
             return _not_measured(s)
         dt = stamp - prev[0]
         q0, p0 = prev[2], prev[1]
