@@ -42,7 +42,7 @@ from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
 from .history import History, snapshots_read
 from .inputs import HeldInputs, next_expiry, note_period
-from .layout import absolute_sensor, state_layout, update_masks
+from .layout import absolute_sensor, idle_keys, state_layout, update_masks
 from .resume import RESUME_VERSION, HeldMotion, ResumeState, state_fingerprint
 from .time_jumps import HeldTimeline
 from .sensors import Rejected, SensorContext, build_models, kind_of
@@ -115,6 +115,10 @@ class FusionCore:
         kinds = [kind_of(s) for s in self.sensors]  # what each sensor's kind means here (core/sensors/kind.py)
         self.odom_index = next((i for i, k in enumerate(kinds) if k.drives_prediction), -1)
         self.layout = state_layout(cfg)
+        # keys the configuration leaves without effect (an estimate nothing observes): said once, here
+        self.idle_keys = idle_keys(cfg)
+        for sensor, key, why in self.idle_keys:
+            log.warning("key_without_effect", sensor=sensor, key=key, reason=why)
         self._predict_ws = PredictWorkspace(self.layout)  # F and Q, rewritten in place by every prediction
         self.has_bias = self.layout.has("gyro_bias")
         # The sensor that defines the world frame (GPS: ENU at the datum; an absolute pose
@@ -381,11 +385,13 @@ class FusionCore:
 
     @property
     def scales(self) -> dict[str, float]:
-        """Estimated scale factors (wheel_scale, gyro_scale) that are in the state."""
+        """Estimated scale factors (wheel_scale, gyro_scale) that are in the state and observed (a gyro scale
+        with nothing telling the heading stays at its prior: ``idle_keys``)."""
         if not self.initialised:
             return {}
+        idle = {key for _, key, _ in self.idle_keys}
         return {n: float(self.state.ekf.x[self.layout.nominal[n]][0])
-                for n in ("wheel_scale", "gyro_scale") if self.layout.has(n)}
+                for n in ("wheel_scale", "gyro_scale") if self.layout.has(n) and f"{n}_estimation" not in idle}
 
     @property
     def still_since(self) -> float | None:

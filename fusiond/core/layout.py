@@ -39,12 +39,25 @@ def absolute_height(cfg: Config) -> bool:
     return any(fuses_height(cfg, s) for s in cfg.sensors)
 
 
+def layout_view(cfg: Config) -> LayoutView:
+    """What each kind may know of the whole configuration (``LayoutView``)."""
+    return LayoutView(cfg.filter, any(absolute_sensor(s) for s in cfg.sensors), absolute_height(cfg),
+                      any(kind_of(s).heading_reference(s) for s in cfg.sensors))
+
+
+def idle_keys(cfg: Config) -> list[tuple[str, str, str]]:
+    """(sensor, key, why) for each key the rest of the configuration leaves without effect
+    (``SensorKind.idle_keys``)."""
+    view = layout_view(cfg)
+    return [(s.name, key, why) for s in cfg.sensors for key, why in kind_of(s).idle_keys(s, view)]
+
+
 def state_blocks(cfg: Config) -> list[StateBlock]:
     """The error-state blocks this configuration's sensors ask for (``SensorKind.state_blocks``): one per
     name, the first sensor's in configuration order (at most one GPS, one absolute IMU yaw counts),
     sorted into ``BLOCK_ORDER``."""
     fc = cfg.filter
-    view = LayoutView(fc, any(absolute_sensor(s) for s in cfg.sensors), absolute_height(cfg))
+    view = layout_view(cfg)
     chosen: dict[str, StateBlock] = {}
     for s in cfg.sensors:
         for block in kind_of(s).state_blocks(s, view):
@@ -112,5 +125,5 @@ def update_masks(layout: StateLayout, has_frame_sensor: bool, heading_observed: 
     return UpdateMasks(tilt, position, delta, rest)
 
 
-__all__ = ["BLOCK_ORDER", "UpdateMasks", "absolute_height", "absolute_sensor", "fuses_height", "state_blocks",
-           "state_layout", "update_masks"]
+__all__ = ["BLOCK_ORDER", "UpdateMasks", "absolute_height", "absolute_sensor", "fuses_height", "idle_keys",
+           "layout_view", "state_blocks", "state_layout", "update_masks"]

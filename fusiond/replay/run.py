@@ -452,6 +452,8 @@ def summary(result: ReplayResult) -> str:
         learned["twist_pitch"] = core.twist_pitch
     if learned:
         out.append("estimated   " + "  ".join(f"{k}={v:.4f}" for k, v in learned.items()))
+    for sensor, key, why in core.idle_keys:
+        out.append(f"no effect   {sensor}.{key}: {why}")
     for name, c in result.doctor.channel_summaries().items():
         mean = "n/a" if c["nis_mean"] is None else f"{c['nis_mean']:.3f}"
         if c.get("nis_per_dof") is not None and c["nis_mean"] is not None:  # the figure the verdicts quote

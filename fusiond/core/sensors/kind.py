@@ -31,14 +31,17 @@ if TYPE_CHECKING:
 class LayoutView:
     """What a kind may know of the whole configuration when it says which state blocks it needs:
     the filter table, and whether some sensor defines the world frame / fuses an absolute height
-    (a wheel scale and a twist pitch are observable only then)."""
+    (a wheel scale and a twist pitch are observable only then) / tells the heading (a gyro's scale
+    is observable only then)."""
 
-    __slots__ = ("filter", "absolute", "absolute_height")
+    __slots__ = ("filter", "absolute", "absolute_height", "heading")
 
-    def __init__(self, filter_cfg: "FilterConfig", absolute: bool, absolute_height: bool) -> None:
+    def __init__(self, filter_cfg: "FilterConfig", absolute: bool, absolute_height: bool,
+                 heading: bool = True) -> None:
         self.filter = filter_cfg
         self.absolute = absolute
         self.absolute_height = absolute_height
+        self.heading = heading
 
 
 class SensorKind:
@@ -106,6 +109,12 @@ class SensorKind:
         """The error-state blocks this sensor needs; the layout keeps one block per name (the first
         sensor asking wins) in its fixed order (``layout.BLOCK_ORDER``), unknown names after."""
         return ()
+
+    def idle_keys(self, cfg: Any, view: LayoutView) -> list[tuple[str, str]]:
+        """(key, why) for each key set in this sensor's table that the rest of the configuration leaves
+        without effect (an estimate asked for with nothing to observe it): the core says so at start
+        rather than let the key look as if it worked. None by default."""
+        return []
 
     def datum(self, cfg: Any) -> tuple[float, float, float] | None:
         """A configured geodetic origin (lat deg, lon deg, alt m) of the world frame, if any."""

@@ -61,6 +61,12 @@ class ImuKind(SensorKind):
             blocks.append(YawOffsetBlock(cfg.yaw_offset_sigma, cfg.yaw_offset_walk))
         return blocks
 
+    def idle_keys(self, cfg: ImuSensor, view: LayoutView) -> list[tuple[str, str]]:
+        if cfg.gyro_scale_estimation and not view.heading:
+            return [("gyro_scale_estimation", "nothing tells the heading (no GPS, pose or IMU yaw fused): the "
+                                              "gyro's scale is in the state but nothing observes it, it stays at 1")]
+        return []
+
     def tunables(self, cfg: ImuSensor, samples: Sequence[object]) -> list[Param]:
         return imu_tunables(cfg, samples)
 

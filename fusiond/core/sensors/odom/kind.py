@@ -43,6 +43,17 @@ class OdomKind(SensorKind):
             blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
         return blocks
 
+    def idle_keys(self, cfg: OdomSensor, view: LayoutView) -> list[tuple[str, str]]:
+        if not cfg.pitch_estimation or (view.absolute_height and cfg.twist_frame == "body"):
+            return []
+        if view.filter.two_d_mode:
+            why = "two_d_mode holds the pitch at 0"
+        elif cfg.twist_frame != "body":
+            why = "the twist is in the driver's world frame (twist_frame = \"world\"), turned by its own pose"
+        else:
+            why = "no sensor fuses an absolute height (a GPS altitude, an absolute pose's z) to observe it"
+        return [("pitch_estimation", why + ": the twist's pitch is not estimated")]
+
     def tunables(self, cfg: OdomSensor, samples: Sequence[object]) -> list[Param]:
         return odom_tunables(cfg, samples)
 
