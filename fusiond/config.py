@@ -257,12 +257,28 @@ def _hint(msg: str, path: str, raw: object) -> str:
 
     unknown = re.match(r"Object contains unknown field `([^`]+)`", msg)
     if unknown:
+        name = unknown.group(1)
+        foreign = _foreign(name)
+        if foreign:
+            return foreign
         cls = _resolve(raw, path)
         if cls is not None:
-            close = difflib.get_close_matches(unknown.group(1), cls.__struct_fields__, n=1, cutoff=0.6)
+            close = difflib.get_close_matches(name, cls.__struct_fields__, n=1, cutoff=0.6)
             if close:
                 return f"; did you mean `{close[0]}`?"
+        elsewhere = [table for table, t in _TABLES.items() if name in t.__struct_fields__]
+        elsewhere += [f'a [[sensors]] table with kind = "{t.__struct_config__.tag}"' for t in _sensor_tables()
+                      if name in t.__struct_fields__ and t is not cls]
+        if elsewhere:
+            return f"; it is a key of {' or '.join(f'[{t}]' if t in _TABLES else t for t in elsewhere)}"
         return ""
+    if msg.startswith("Expected `array") and msg.endswith(("got `float`", "got `int`", "got `str`")):
+        table, _, field = path.rpartition(".")
+        cls = _resolve(raw, table) if table else Config
+        hint = typing.get_type_hints(cls).get(field) if cls is not None else None
+        n = next((len(typing.get_args(t)) for t in [hint, *typing.get_args(hint)]
+                  if typing.get_origin(t) is tuple and ... not in typing.get_args(t)), 0)
+        return f"; write a list of {n} numbers in [ ]" if n else "; write a list in [ ]"
     if msg.startswith(("Invalid enum value", "Invalid value")):
         table, _, field = path.rpartition(".")
         cls = _resolve(raw, table) if table else Config
@@ -277,6 +293,45 @@ def _hint(msg: str, path: str, raw: object) -> str:
         if valid:
             return "; valid values: " + ", ".join(f"{v!r}" if isinstance(v, str) else str(v) for v in valid)
     return ""
+
+
+# The top-level tables, by the name a document gives them: a key put in the wrong one is named with its own.
+_TABLES: Final = {"filter": FilterConfig, "output": OutputConfig, "zenoh": ZenohConfig, "ros": RosConfig,
+                  "state": StateConfig, "metrics": MetricsConfig}
+
+# robot_localization's and robot_pose_ekf's parameters a migrating user may write into a fusiond table, with
+# the key that says the same here (docs/MIGRATION.md maps every one): named in the error instead of a
+# look-alike key that means something else (`relative` is not `adaptive`).
+_FOREIGN: Final = {
+    "frequency": "not needed, a pose is published per odometry message",
+    "freq": "not needed, a pose is published per odometry message",
+    "sensor_timeout": "`timeout_s`, per sensor",
+    "world_frame": "`[output] frame_id` (odometry frame) or `map_frame` (with a GPS or absolute pose)",
+    "odom_frame": "`[output] frame_id`",
+    "output_frame": "`[output] frame_id`",
+    "base_link_frame": "`[output] child_frame_id`",
+    "base_footprint_frame": "`[output] child_frame_id`",
+    "process_noise_covariance": "`[filter] process_noise` (do not carry robot_localization's values over)",
+    "initial_estimate_covariance": "`[filter] initial_sigma` (standard deviations)",
+    "relative": '`orientation = "relative"` (an IMU) or `differential` (a pose)',
+    "zero_altitude": "`[filter] two_d_mode`, or `vertical_error_sigma` (a GPS)",
+    "use_odometry_yaw": 'an IMU with `orientation = "roll_pitch"` (the heading from the gyro and wheels)',
+    "odom_used": 'a [[sensors]] table with kind = "odom"',
+    "imu_used": 'a [[sensors]] table with kind = "imu"',
+    "vo_used": 'a [[sensors]] table with kind = "pose" and differential = true',
+    "gps_used": 'a [[sensors]] table with kind = "gps"',
+}
+# robot_localization's per-sensor parameters (odom0_config, imu1_differential, ...)
+_FOREIGN_SENSOR: Final = re.compile(r"(odom|imu|pose|twist)\d+(_[a-z_]+)?")
+
+
+def _foreign(name: str) -> str:
+    """The hint for a robot_localization / robot_pose_ekf parameter written as a fusiond key ("" if not one)."""
+    said = _FOREIGN.get(name)
+    if said is None and _FOREIGN_SENSOR.fullmatch(name):
+        said = ('a [[sensors]] table per sensor; its config booleans are `twist_measured` (odometry) or '
+                '`orientation` and `angular_velocity` (an IMU)')
+    return f"; a robot_localization / robot_pose_ekf parameter (fusiond: {said}; docs/MIGRATION.md)" if said else ""
 
 
 def _one_line(err: msgspec.ValidationError, raw: object = None) -> str:
@@ -325,14 +380,17 @@ def convert(raw: object) -> Config:
 
 
 def loads(text: str, source: str = "<config>") -> Config:
+    # `[sensors]` for `[[sensors]]`: TOML reads one table (then a second one overwrites it), not a list of them
+    single = re.search(r"^\s*\[\s*sensors\s*\]\s*(#.*)?$", text, re.MULTILINE) is not None
+    tables = "; each sensor is a [[sensors]] table (double brackets), not [sensors]" if single else ""
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{source}: invalid TOML: {err}") from None
+        raise ConfigError(f"{source}: invalid TOML: {err}{tables}") from None
     try:
         cfg = convert(raw)
     except msgspec.ValidationError as err:
-        raise ConfigError(f"{source}: {_one_line(err, raw)}") from None
+        raise ConfigError(f"{source}: {_one_line(err, raw)}{tables}") from None
     try:
         return validate(cfg)
     except ConfigError as err:

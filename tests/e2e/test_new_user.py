@@ -108,6 +108,34 @@ def test_config_errors_name_the_sensor(tmp_path, capsys, extra, needle):
         assert needle in line, line
 
 
+@pytest.mark.parametrize("text, needle", [
+    # a key of another table names that table, not a look-alike here
+    (ODOM_IMU + "two_d_mode = true\n", 'sensor "imu": Object contains unknown field `two_d_mode`; it is a key of '
+                                       "[filter]"),
+    # a migrating user's robot_localization / robot_pose_ekf parameter names fusiond's and the migration guide
+    (ODOM_IMU + "relative = true\n", '`relative`; a robot_localization / robot_pose_ekf parameter (fusiond: '
+                                     '`orientation = "relative"` (an IMU)'),
+    ("[filter]\nsensor_timeout = 1.0\n" + ODOM_IMU, "`sensor_timeout`; a robot_localization / robot_pose_ekf "
+                                                    "parameter (fusiond: `timeout_s`, per sensor; docs/MIGRATION.md)"),
+    ("[filter]\nodom0_config = [true]\n" + ODOM_IMU, "`odom0_config`; a robot_localization / robot_pose_ekf "
+                                                     "parameter (fusiond: a [[sensors]] table per sensor; its config "
+                                                     "booleans are `twist_measured`"),
+    # a vector given as one number says how many
+    (ODOM_IMU.replace('key = "odom"\n', 'key = "odom"\ntwist_noise = 0.1\n'),
+     'sensor "wheel": twist_noise: Expected `array | null`, got `float`; write a list of 6 numbers in [ ]'),
+    # [sensors] for [[sensors]]: one table (a document msgspec refuses), or a table then a list (TOML refuses)
+    ('[sensors]\nname = "wheel"\nkind = "odom"\nkey = "odom"\n',
+     "sensors: Expected `array`, got `object`; each sensor is a [[sensors]] table (double brackets), not [sensors]"),
+    (ODOM_IMU.replace("[[sensors]]", "[sensors]", 1),
+     "invalid TOML: Cannot overwrite a value (at line 5, column 10); each sensor is a [[sensors]] table"),
+])
+def test_config_errors_say_where_a_key_belongs(tmp_path, capsys, text, needle):
+    cfg = write_config(tmp_path, text)
+    code, _, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(cfg), "--quiet")
+    line = one_line(err)
+    assert code == 2 and needle in line, line
+
+
 def test_config_errors_keep_the_index_where_a_name_cannot_tell_the_tables_apart(tmp_path, capsys):
     cfg = write_config(tmp_path, ODOM_IMU.replace('name = "imu"', 'name = "wheel"'))
     code, _, err = run_cli(capsys, "replay", str(JACKAL), "--config", str(cfg), "--quiet")
