@@ -492,6 +492,13 @@ class FusionCore:
             return {}
         return {f"{m.cfg.name}.{k}": v for m in self.models for k, v in m.estimated_keys(self.state).items()}
 
+    def lost_components(self) -> list[tuple[str, ...]]:
+        """Per sensor: the components the filter found at run time not to be measurements
+        (``SensorModel.lost_components``); none before the filter starts."""
+        if self.state is None:
+            return [()] * len(self.models)
+        return [m.lost_components(self.state) for m in self.models]
+
     @property
     def twist_pitch(self) -> float | None:
         """The estimated pitch of the wheels' twist in the body (rad), when it is in the state."""

@@ -74,7 +74,8 @@ class ReplayResult:
         core = self.core
         periods = core.state.period if core.state is not None else [0.0] * len(core.sensors)
         stats = {s.name: {"received": st.received, "applied": st.applied, "late": st.late, "dropped": st.dropped,
-                          "period": period} for s, st, period in zip(core.sensors, core.stats, periods)}
+                          "period": period, "lost": lost}
+                 for s, st, period, lost in zip(core.sensors, core.stats, periods, core.lost_components())}
         at_cap = False
         if core.initialised:
             pos_var, att_var = _variances(core)

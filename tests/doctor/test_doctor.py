@@ -118,6 +118,17 @@ def test_lost_yaw_rate_is_not_measured_rather_than_slip():
     assert all(v.level == "ok" for v in result.verdicts()), result.verdicts()
 
 
+def test_the_lost_yaw_rates_line_declares_every_component_the_run_found_filled_in():
+    """The run's log names each filled-in rate (twist_component_lost) and `fusiond init` declares them: the doctor's
+    line declares the same ones, not the yaw rate alone."""
+    samples = simulate(SimConfig(duration=30.0, standstill=2.0, wheel_yaw_lost=True))
+    result = run_samples(samples, make_config())
+    assert result.core.lost_components()[0] == ("wz",)  # the sim rolls and pitches nowhere: wx, wy unrefuted
+    stats = {"wheel": {"lost": ("wx", "wz")}}
+    v = one(result.doctor.verdicts(stats), "wheel", "yaw_rate")
+    assert v.suggestion == "twist_measured = [true, true, true, false, true, false]", v
+
+
 def test_a_lost_yaw_rate_on_gentle_curves_is_not_measured_either():
     """A car on long gentle curves (0.03 rad/s, under TURNING_RAD_S: a highway) whose driver sends the
     yaw rate as exactly 0 with variance 0: no turn is sharp enough for the in-turns test, but every moving

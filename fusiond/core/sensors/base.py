@@ -103,6 +103,11 @@ class SensorModel:
         motion model leaves out of it, or None."""
         return None
 
+    def lost_components(self, s: "FilterState") -> tuple[str, ...]:
+        """The components of its measurement the filter found at run time not to be measurements (a rate a
+        driver fills in: the odometry's ``lost_channel``), as ``twist_measured`` names them; none by default."""
+        return ()
+
     def estimated_keys(self, s: "FilterState") -> dict[str, float]:
         """This sensor's config keys whose value the filter estimated, each as the key would state it
         (its own sign and convention: pasted, it says what the filter learned); empty by default."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.sensors.odom.lost_channel import TWIST
 from ..check import BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
@@ -54,8 +55,10 @@ class UnmeasuredYawRate(BaseCheck):
                 return []
             where = f"while moving, over a run the gyro turned through {turned:.1f} rad"
         frac = zeros / n
-        measured = ["true"] * 6
-        measured[5] = "false"
+        # with every other component the filter found filled in (log twist_component_lost): one line, as the
+        # run's log and `fusiond init` declare them
+        lost = set((ev.stats or {}).get(odom.name, {}).get("lost", ())) | {"wz"}
+        measured = ["false" if not on or c in lost else "true" for c, on in zip(TWIST, odom.twist_measured)]
         return [Verdict(odom.name, "yaw_rate", "problem",
                         f"the wheel yaw rate reads exactly 0 with variance 0 in {100 * frac:.0f}% of the {int(n)} "
                         f"samples {where}: the driver does not measure it (not slip). A fused gyro makes the filter "

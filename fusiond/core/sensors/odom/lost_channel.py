@@ -21,7 +21,8 @@ integral drifts): a lost speed is the user's to declare.
 from __future__ import annotations
 
 LOST_AFTER = 5  # consecutive odometry messages of a constant component while the gyro turns on its axis
-ANGULAR = ("wx", "wy", "wz")
+TWIST = ("vx", "vy", "vz", "wx", "wy", "wz")  # twist_measured's order
+ANGULAR = TWIST[3:]
 
 
 def watch(watched: tuple | None, angular: tuple, measured: tuple, gyro: tuple | None,
@@ -55,4 +56,4 @@ def lost(watched: tuple | None) -> tuple[bool, bool, bool]:
     return (runs[0] == -2, runs[1] == -2, runs[2] == -2)
 
 
-__all__ = ["ANGULAR", "LOST_AFTER", "lost", "watch"]
+__all__ = ["ANGULAR", "LOST_AFTER", "TWIST", "lost", "watch"]

@@ -227,6 +227,10 @@ class OdomModel(SensorModel):
         if cfg.twist_from_pose:  # an interval longer than the filter's gap_s is a logging gap, no twist
             self.policy.differences = PoseDifferences(ctx.filter.gap_s)
 
+    def lost_components(self, s: "FilterState") -> tuple[str, ...]:
+        own = s.own[self.index] or _NO_OWN
+        return tuple(name for name, lost in zip(lost_channel.ANGULAR, lost_channel.lost(own.watched)) if lost)
+
     def apply(self, s: "FilterState", inp: OdomInput, stamp: float, emit: bool, late: bool) -> list[DiagnosticsRecord]:
         own = s.own[self.index] or _NO_OWN
         watched = own.watched
