@@ -748,3 +748,29 @@ def test_wheel_yaw_rate_noisier_than_stated_gets_its_value():
     assert v.key == "sensors.wheel.twist_noise" and "NIS high" in v.message, v
     assert v.evidence["wheel_sigma_rad_s"] == pytest.approx(0.03, rel=0.1), v
     assert v.suggestion.startswith("twist_noise = [0.02, 0.02, 0.02, 0.02, 0.02, 0.0"), v
+
+
+# -- process noise ------------------------------------------------------------------------------------
+def _process_verdict(verdicts: list[Verdict], sensor: str, channel: str) -> tuple[Verdict, list[float]]:
+    v = one(verdicts, sensor, channel)
+    assert v.key == "filter.process_noise", v
+    return v, [float(x) for x in re.findall(r"[-\d.e]+", v.suggestion.split("=", 1)[1])]
+
+
+def test_a_process_noise_carried_over_from_robot_localization_is_named_with_the_most_the_innovations_allow():
+    """robot_localization's default process noise, carried over as sqrt(q) (0.22 m/sqrt(s), 0.24 rad/sqrt(s)):
+    the prediction's spread at each update is at least q^2 dt whatever the sensor's noise, and the innovations
+    are far below it. The doctor names filter.process_noise (not the sensor's noise, which no value can mend),
+    with a value below the stated one; at fusiond's default nothing is said of it."""
+    rl = "process_noise = [0.2236, 0.2449]"
+    w = sim_gps.World(duration=120.0, gps_rate=5.0, gps_sigma=0.02)  # an RTK receiver: centimetres fix to fix
+    samples = sim_gps.simulate(w)
+    v, (pos, att) = _process_verdict(verdicts_of(robot_config(gps="", filt=rl), samples), "gps", "position")
+    assert v.level == "warn" and 0.0 < pos < 0.2236 and att == 0.2449, v
+    assert v.evidence["innovation_rms_m"] < v.evidence["process_noise_alone_rms_m"]
+    v, (pos, att) = _process_verdict(verdicts_of(make_config(orientation="absolute", extra_filter=rl),
+                                                 simulate(SimConfig(duration=30.0, standstill=2.0))), "imu", "orientation")
+    assert v.level == "warn" and pos == 0.2236 and 0.0 < att < 0.2449, v
+    for verdicts in (verdicts_of(robot_config(gps=""), samples),
+                     verdicts_of(make_config(orientation="absolute"), simulate(SimConfig(duration=30.0, standstill=2.0)))):
+        assert all(v.key != "filter.process_noise" for v in verdicts), verdicts

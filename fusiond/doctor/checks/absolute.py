@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 
-from ..channels import GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, nis_head
+from ..channels import (GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, nis_head,
+                        process_overstated)
 from ...core.sensors.registry import kind_of
 from ..evidence import Evidence
 from ..heading import gps_sigma_up
@@ -51,7 +52,7 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                      up: ChannelStats | None = None, unstated: bool = False,
                      slow_vertical: tuple[float, float, float] | None = None,
                      up_sigma: float | None = None, stated_noise: list[float] | None = None,
-                     prediction_key: str = "") -> Verdict:
+                     prediction_key: str = "", process_noise: tuple[float, float] | None = None) -> Verdict:
     """GPS and pose channels: NIS against the stated noise. ``unstated``: a receiver whose fixes state no
     accuracy: the filter took its altitude's noise from the config's ``unknown_position_sigma`` (a verdict on
     it without a paste line names that key: ``position_noise`` would also replace the horizontal noise the
@@ -61,7 +62,9 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
     model's, not a noise to change (``_slow_altitude``). ``up_sigma``: the altitude's noise as the filter took it,
     the third value of a horizontal channel's line (``_measured_noise``). ``stated_noise``: the config's
     position_noise (east north up), with which a NIS low that no smaller noise can raise is told apart
-    (``_prediction_overstated``); ``prediction_key``: the key that verdict names (the odometry's twist_noise)."""
+    (``_prediction_overstated``); ``prediction_key``: the key that verdict names (the odometry's twist_noise).
+    ``process_noise``: the config's filter.process_noise, whose position part alone bounds the prediction's spread
+    from below (``channels.process_overstated``)."""
     frac = ch.rejected / ch.n if ch.n else 0.0
     key = sensor_key(name, "position_noise")
     detail = ", ".join(f"{c} rms {ch.component(i)[1]:.3f}" for i, c in enumerate(ch.components))
@@ -124,6 +127,18 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
                        f"if it is the noise, the innovations (an upper bound) suggest {rms}", key, line, evidence=ev)
     if verdict == "nis_low" and channel == "altitude" and slow_vertical is not None:
         return _slow_altitude(name, ch, t0, slow_vertical, ev)
+    over_q = (process_overstated(ch, process_noise[0], ("east", "north"))
+              if verdict == "nis_low" and process_noise is not None else None)
+    if over_q is not None:
+        c, got, floor, dt, q = over_q
+        ev["innovation_rms_m"], ev["process_noise_alone_rms_m"] = got, floor
+        return Verdict(name, channel, "warn",
+                       f"NIS low ({figures(ch, t0)}; {detail}): the innovations ({c} rms {got:.3f} m) are smaller than "
+                       f"what the process noise alone adds to the prediction between fixes ({floor:.3f} m: "
+                       f"filter.process_noise {process_noise[0]:g} m/sqrt(s) over {dt:.2g} s), whatever the sensor's "
+                       "noise: the model's position noise is stated too large, and no position_noise brings the NIS up. "
+                       "The value below is the most the innovations allow it (`fusiond tune` fits it on this recording)",
+                       "filter.process_noise", f"process_noise = [{q:.2g}, {process_noise[1]:g}]", evidence=ev)
     if verdict == "nis_low" and stated_noise is not None and channel != "altitude" and _settled(ch, stated_noise):
         over = _prediction_overstated(ch, stated_noise)
         if over is not None:
@@ -170,9 +185,10 @@ class AbsoluteNis(PerChannel):
         stated = getattr(sc, "position_noise", None)
         # what drives the prediction between fixes: the odometry's twist noise, named where the fixes say it is wide
         wheels = sensor_key(ev.odom.name, "twist_noise") if ev.config is not None and ev.odom is not None else ""
+        process = tuple(ev.config.filter.process_noise) if ev.config is not None else None
         return [absolute_verdict(key[0], key[1], ch, ev.t0, gps_up(ev, key), _unstated(ev, key[0]),
                                  _slow_vertical(ev, key[0], ch), up_sigma,
-                                 None if stated is None else [float(v) for v in stated], wheels)]
+                                 None if stated is None else [float(v) for v in stated], wheels, process)]
 
 
 def _settled(ch: ChannelStats, noise: list[float]) -> bool:

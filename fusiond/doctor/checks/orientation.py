@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from ...core.sensors.imu.axes import weights
 from ..attitude import AXES, noise_suggestion
-from ..channels import PerChannel, figures
+from ..channels import PerChannel, figures, process_overstated
 from ..evidence import Evidence
 from ..nis import ChannelStats
 from ..verdict import Verdict, sensor_key
@@ -70,6 +70,17 @@ class OrientationNis(PerChannel):
                                    f"NIS high ({figures(ch, t0)}; {detail}): the stated noise is too small or the IMU "
                                    f"lies{agrees}; the measured innovations, {note}, suggest the value below",
                                    key, line))
+        elif verdict == "nis_low" and (over_q := _attitude_overstated(ev, imu.name, ch)) is not None:
+            c, got, floor, dt, q, attitude = over_q
+            out.append(Verdict(imu.name, "orientation", "warn",
+                               f"NIS low ({figures(ch, t0)}; {detail}): the {c} innovations (rms {got:.4f} rad) are "
+                               f"smaller than what the process noise alone adds to the prediction between updates "
+                               f"({floor:.4f} rad: filter.process_noise's attitude {attitude:g} rad/sqrt(s) over "
+                               f"{dt:.2g} s), whatever the IMU's noise: the model's attitude noise is stated too large, "
+                               "and no orientation_noise brings the NIS up. The value below is the most the innovations "
+                               "allow it (`fusiond tune` fits it on this recording)", "filter.process_noise",
+                               f"process_noise = [{ev.config.filter.process_noise[0]:g}, {q:.2g}]",
+                               {"innovation_rms": got, "process_noise_alone_rms": floor}))
         elif verdict == "nis_low":
             line, note, values = noise_suggestion(ch, imu)
             # only where the line would lower no stated component (it is the noise the innovations show, or its
@@ -101,6 +112,18 @@ class OrientationNis(PerChannel):
         for v in out:
             v.evidence = {**v.evidence, "nis_per_dof": ch.nis_per_dof}
         return out
+
+
+def _attitude_overstated(ev: Evidence, sensor: str, ch: ChannelStats) -> tuple[str, float, float, float, float,
+                                                                              float] | None:
+    """``channels.process_overstated`` on the orientation's angles with filter.process_noise's attitude part, and
+    that part; None without a config (the live monitor) or where the innovations do not show it."""
+    if ev.config is None:
+        return None
+    attitude = float(ev.config.filter.process_noise[1])
+    period = float((ev.stats or {}).get(sensor, {}).get("period") or 0.0)
+    over = process_overstated(ch, attitude, ("roll", "pitch", "yaw"), period)
+    return None if over is None else (*over, attitude)
 
 
 def _settled(suggested: list[float], imu: ImuSensor) -> bool:
