@@ -338,8 +338,10 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
                 theta = [0.0] * n
                 f_best = f_start
         floored = [informed[i] and theta[i] <= active[i].lowest() + 1e-9 for i in range(n)]
+        # at the search's own limit, x1000 or /1000 of the start (not a floor): the recording asks for more
+        limited = [informed[i] and not floored[i] and abs(theta[i]) >= BOUND - 1e-9 for i in range(n)]
         result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts, original,
-                           pred_before, held_back, backend)
+                           pred_before, held_back, backend, limited)
     finally:
         bar.close()
     rows, config, before, after, comments, replays, predicted = result
@@ -363,7 +365,7 @@ def _predicted(c: Config, held_back: tuple[list, list], backend: Backend | None)
 def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
               informed: list[bool], split: float, bar: _Progress, floored: list[bool], verdicts: Sequence[object],
               original: list, pred_before: Prediction | None, held_back: tuple[list, list],
-              backend: Backend | None = None):
+              backend: Backend | None = None, limited: list[bool] | None = None):
     """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays).
     ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6; ``original``:
     the records of that replay, and ``pred_before`` its prediction of ``held_back``'s fixes (None: none held)."""
@@ -496,6 +498,14 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
                 note = (f"held at the noise the recording shows at rest, {p.measured_note}: the fit would go lower"
                         if p.held_by_measured() else
                         f"held at its floor {p.floor:g} (the sensor's *_min_sigma): the fit would go lower")
+        if limited is not None and limited[i] and status[i] == "tuned" and value(config, p) == value(
+                apply(cfg, active, theta), p):  # the fit's own value is the one kept (not the doctor's)
+            edge = ("at the fit's limit, 1/1000 of where it started: the recording asks for less still (a start "
+                    "far above it, such as another filter's process noise; tune the tuned config again to go on)"
+                    if theta[i] < 0.0 else
+                    "at the fit's limit, 1000 x where it started: the recording asks for more still (tune the tuned "
+                    "config again to go on)")
+            note = f"{note}; {edge}" if note else edge
         if below:
             note = f"{note}; {below}" if note else below
         rows.append(Row(p, value(cfg, p), value(config, p), status[i], note, before.nis_per_dof.get(s),

@@ -323,3 +323,20 @@ def test_a_doctor_line_stating_the_floor_the_messages_are_held_at_is_no_change(j
     assert rows["imu.gyro_noise"].status == "tuned" and rows["imu.gyro_noise"].after < 0.01
     orientation = rows["imu.orientation_noise"]
     assert orientation.status != "tuned" and result.config.sensor("imu").orientation_noise is None, orientation
+
+
+def test_a_fit_that_stops_at_its_own_limit_says_so():
+    """An attitude process noise started far above what the recording supports (another filter's, carried over):
+    the fit stops at 1/1000 of the start, its search's limit, not at a floor or an optimum, and the row says the
+    recording asks for less still, so that the user tunes again rather than takes it as fitted. (No orientation
+    update here: the doctor has no value of its own for it.)"""
+    samples = simulate_gps(World(duration=60.0, gps_rate=5.0, gps_sigma=0.02))
+    keys = ["filter.process_noise.attitude"]
+    result = tune(samples, robot_config(gps="", filt="process_noise = [0.002, 200.0]", orientation="off"), keys=keys,
+                  budget_s=300.0)
+    r = row(result, keys[0])
+    assert r.status == "tuned" and r.after == pytest.approx([0.2], rel=1e-6), r
+    assert "at the fit's limit, 1/1000 of where it started" in r.note, r.note
+    # from the default, inside its limits (the likelihood tells nothing below it apart): nothing of the kind is said
+    ok = row(tune(samples, robot_config(gps="", orientation="off"), keys=keys, budget_s=300.0), keys[0])
+    assert ok.status == "unchanged" and "fit's limit" not in ok.note, ok
