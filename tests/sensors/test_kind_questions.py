@@ -152,38 +152,12 @@ def test_an_entry_point_cannot_replace_a_built_in_kind_nor_name_another_tag():
         unregister("altimeter")
 
 
-IDLE = """
-[filter]
-two_d_mode = {two_d}
-
-[[sensors]]
-name = "wheel"
-kind = "odom"
-key = "odom"
-twist_frame = "{frame}"
-pitch_estimation = true
-
-[[sensors]]
-name = "imu"
-kind = "imu"
-key = "imu"
-orientation = "roll_pitch"
-angular_velocity = true
-gyro_scale_estimation = true
-{gps}"""
-GPS = """
-[[sensors]]
-name = "fix"
-kind = "gps"
-key = "fix"
-"""
-
 
 @pytest.mark.parametrize("two_d, frame, gps, idle", [
-    ("false", "body", GPS, set()),  # the GPS altitude observes the pitch, its track the heading
-    ("false", "body", "", {("wheel", "pitch_estimation"), ("imu", "gyro_scale_estimation")}),
-    ("false", "world", GPS, {("wheel", "pitch_estimation")}),
-    ("true", "body", GPS, {("wheel", "pitch_estimation")}),
+    ("false", "body", "", set()),  # the GPS altitude observes the pitch, its track the heading
+    ("false", "body", None, {("wheel", "pitch_estimation"), ("imu", "gyro_scale_estimation")}),
+    ("false", "world", "", {("wheel", "pitch_estimation")}),
+    ("true", "body", "", {("wheel", "pitch_estimation")}),
 ])
 def test_an_estimate_nothing_observes_is_said_at_start_not_printed_as_estimated(two_d, frame, gps, idle):
     """pitch_estimation without an absolute height (or in 2-D, or with a world-frame twist) adds no state, and a
@@ -191,11 +165,12 @@ def test_an_estimate_nothing_observes_is_said_at_start_not_printed_as_estimated(
     replay's summary, and the summary does not print the prior as an estimate."""
     from structlog.testing import capture_logs
 
-    from fusiond.config import loads
     from fusiond.core import FusionCore
+    from tests.support.configs import robot_config
     from tests.support.core_samples import imu, odom
 
-    cfg = loads(IDLE.format(two_d=two_d, frame=frame, gps=gps))
+    cfg = robot_config(gps=gps, odom=f'twist_frame = "{frame}"\npitch_estimation = true',
+                       imu="gyro_scale_estimation = true", filt=f"two_d_mode = {two_d}")
     with capture_logs() as logs:
         core = FusionCore(cfg)
     said = {(e["sensor"], e["key"]) for e in logs if e["event"] == "key_without_effect"}
