@@ -3,8 +3,8 @@
 In a fleet every answer must name its robot: `fusiond health --key '*/fusiond/health'`
 prints one line per daemon, and a line that does not say which robot it is tells an operator
 nothing. So the answer is the report (``health.HealthReport``, every field as before) followed
-by the daemon's Zenoh ``namespace`` and ``zid``, its ``link`` (`connected` or `disconnected`)
-and the link's figures (``link_stats``: sessions open, losses, reconnections; ``link.py``). Built here, by
+by the daemon's Zenoh ``namespace`` and ``zid``, its ``link`` (`connected`, `disconnected`, or `listening`: a peer
+that dials nothing) and the link's figures (``link_stats``: sessions open, losses, reconnections; ``link.py``). Built here, by
 the transport, because the report is pure logic with no session; the metrics endpoint
 (``metrics.py``) reads the same answer, so a scrape and a query agree.
 """
@@ -24,7 +24,7 @@ class HealthAnswer(HealthReport, kw_only=True):
 
     namespace: str = ""  # the daemon's Zenoh namespace ("" when it has none)
     zid: str = ""  # its Zenoh session id (a restarted daemon has a new one)
-    link: str = ""  # "connected" (a router or peer session open) or "disconnected"
+    link: str = ""  # "connected" (a router or peer session open), "disconnected", or "listening" (dials nothing)
     link_stats: LinkHealth | None = None  # that link's sessions, losses and reconnections
 
 

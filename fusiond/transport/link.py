@@ -10,7 +10,10 @@ reconnections). Connected means at least one router or peer session is open.
 
 Only a link the config asks for is announced and counted (``watched``: client mode, or `connect`
 endpoints): a peer daemon that merely listens sees tools dial it and leave (`fusiond health`
-every 30 s from a Docker HEALTHCHECK), which is no loss of anything; its state is still reported.
+every 30 s from a Docker HEALTHCHECK), which is no loss of anything. With no router or peer session open
+its state is ``listening``, not ``disconnected``: a tool in client mode that dials it is not among the
+session's routers and peers (``session.info`` lists those two only), so "disconnected" would be said to the
+very tool whose query it answers.
 
 Polled rather than driven by Zenoh's transport events: the poll costs two short calls per
 period and holds on every zenoh-python 1.x; its period bounds how late a change is seen.
@@ -33,7 +36,7 @@ log = get_logger("fusiond.link")
 
 POLL_S = 0.2  # how often the session's routers and peers are looked at
 
-LinkState = Literal["connected", "disconnected"]
+LinkState = Literal["connected", "disconnected", "listening"]
 
 
 class LinkHealth(msgspec.Struct, kw_only=True):
@@ -124,6 +127,7 @@ class LinkWatch:
 
     def health(self) -> LinkHealth:
         with self._lock:
-            return LinkHealth(state="connected" if self._connected else "disconnected", routers=self._routers,
+            state = "connected" if self._connected else "disconnected" if self._watched else "listening"
+            return LinkHealth(state=state, routers=self._routers,
                               peers=self._peers, losses=self.losses, reconnections=self.reconnections,
                               since_s=max(self._clock() - self._since, 0.0))

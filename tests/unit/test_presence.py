@@ -158,7 +158,11 @@ def test_a_listening_peer_reports_its_sessions_but_counts_no_tool_leaving_as_a_l
         counts.value = value
         w.poll()
     h = w.health()
-    assert (h.state, h.losses, h.reconnections) == ("disconnected", 0, 0)
+    # listening, not disconnected: a tool dialling it in client mode is no router or peer of its session
+    assert (h.state, h.losses, h.reconnections) == ("listening", 0, 0)
+    counts.value = (0, 1)
+    w.poll()
+    assert w.health().state == "connected"
 
 
 def test_the_fleet_lines_and_table_say_lost_with_since_and_the_rest_with_their_figures():
