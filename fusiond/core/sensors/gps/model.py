@@ -369,7 +369,14 @@ class GpsModel(SensorModel):
         # a consumer receiver's altitude wanders by metres that say nothing about its east and north,
         # and one 3-dof test would throw good horizontal fixes away with a bad altitude.
         if horizontal:
-            y, H, R = self._block(ekf, z, inp.cov, horizontal)
+            if mask is None:
+                y, H, R = self._block(ekf, z, inp.cov, horizontal)
+            else:  # the antenna about the base along a heading not known yet (``_unaligned_lever``)
+                lever_mean, spread = self._unaligned_lever(ekf.yaw_variance())
+                y, H, R = self._block(ekf, z, inp.cov, horizontal, lever_mean)
+                if spread > 0.0:
+                    H[:, YAW_ROW] = 0.0
+                    R[np.diag_indices_from(R)] += spread
             res = ekf.update(y, H, R, threshold, mask)
             own = s.own[self.index]
             if own.unaligned and not res.rejected:  # the fix bounds the displacement again
@@ -435,9 +442,12 @@ class GpsModel(SensorModel):
             return inp
         return GpsInput(inp.lla, (min(c[0], var), 0.0, 0.0, 0.0, min(c[4], var), 0.0, 0.0, 0.0, c[8]), False)
 
-    def _block(self, ekf, z, cov, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The fix's rows ``rows`` (east north up indices) as a measurement of the state now."""
-        y, H, R = obs.position(self.ctx.layout, ekf.x, z, cov, self.cfg.extrinsic_xyz, self.error)
+    def _block(self, ekf, z, cov, rows: tuple[int, ...],
+               lever_xyz: tuple[float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fix's rows ``rows`` (east north up indices) as a measurement of the state now (the antenna at
+        ``lever_xyz`` in base_link; default: extrinsic_xyz)."""
+        lever_xyz = self.cfg.extrinsic_xyz if lever_xyz is None else lever_xyz
+        y, H, R = obs.position(self.ctx.layout, ekf.x, z, cov, lever_xyz, self.error)
         if len(rows) == 3:
             return y, H, R
         lo, hi = rows[0], rows[-1] + 1
@@ -453,7 +463,10 @@ class GpsModel(SensorModel):
         """The first fix defines the world frame: the base goes where it says, heading unknown
         (unless an absolute IMU yaw is trusted as ENU heading)."""
         ekf = s.ekf
-        set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, rows)
+        if self.yaw_given:
+            set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, rows)
+        else:
+            self._set_unaligned(s, z, inp.cov, rows, HEADING_UNKNOWN_SIGMA**2)
         split = POSITION_ROWS
         if self.cfg.datum is None and 2 in rows:
             # The datum's altitude is this fix's: the frame's zero height is where the antenna is
@@ -589,7 +602,11 @@ class GpsModel(SensorModel):
         if emit:  # once: not again for each re-application after a late sample
             log.warning("gps_reacquired", sensor=self.name, stamp=stamp, rejected=len(own.rejected),
                         seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
-        set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, tuple(r for r in rows if r < 2))
+        horizontal = tuple(r for r in rows if r < 2)
+        if self.yaw_given:
+            set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, horizontal)
+        else:
+            self._set_unaligned(s, z, inp.cov, horizontal, HEADING_UNKNOWN_SIGMA**2)
         if self._scaled:
             self._rescale_wheels(s, own.rejected, emit, stamp)
         if not self.yaw_given:
@@ -710,9 +727,18 @@ class GpsModel(SensorModel):
         the heading, and P turns with both (``ErrorStateEKF.rotate_yaw``). The heading's row of P is
         then re-set to the fit's variance: its old correlations described the wrong heading."""
         ekf = s.ekf
-        a = lever(ekf.x, self.cfg.extrinsic_xyz)
+        lever_mean, spread = self._unaligned_lever(ekf.yaw_variance())
+        a = lever(ekf.x, lever_mean)
         p = ekf.position()
-        ekf.rotate_yaw(fit.theta, (p[0] + a[0], p[1] + a[1]))
+        antenna = (p[0] + a[0], p[1] + a[1])
+        ekf.rotate_yaw(fit.theta, antenna)
+        if spread > 0.0 and track.points:
+            # The fixes pinned the antenna only to within the lever's circle while the heading was unknown: the
+            # fit places it (the newest point's dead-reckoned antenna, turned and shifted onto the fixes), and
+            # the base goes the whole lever back from there along the heading found.
+            gx, gy = fit.apply(*track.points[-1][2:4])
+            full = lever(ekf.x, self.cfg.extrinsic_xyz)
+            ekf.set_position([gx - full[0], gy - full[1]], (0, 1))
         if self.ctx.layout.has("yaw_offset"):  # an absolute IMU yaw reads the same: its offset turns the other way
             ekf.shift("yaw_offset", [-fit.theta])
         # While the heading was unknown, the position's correlations with the gyro bias and the scales
@@ -750,6 +776,32 @@ class GpsModel(SensorModel):
         elif not ready and emit and not track.applied:
             log.info("gps_heading_provisional", sensor=self.name, yaw_correction=fit.theta, sigma=sigma,
                      fixes=len(points))
+
+    def _unaligned_lever(self, s2: float) -> tuple[tuple[float, float, float], float]:
+        """The antenna's lever arm as a fix sees it while the heading is searched for, its error psi ~ N(0, s2)
+        about the state's placeholder: (the lever's mean, the variance of the antenna's place about it per
+        horizontal axis). The antenna is at p + R(psi) t, and a turn about z moves only t's horizontal part:
+        its mean is E[R(psi)] t_xy = exp(-s2/2) t_xy (as ``shown_position``'s displacement), its spread
+        (|t_xy|^2 / 2)(1 - exp(-s2)) per axis, a circle of radius |t_xy| once nothing is known of psi. The
+        linearised lever (dh/dpsi = -[R t]x, times s2 ~ (pi / sqrt 3)^2) claimed ~1.8 |t| on each axis where the
+        antenna is |t| away at most: an RTK fix's centimetres, weighed against that, left the base metres behind
+        the antenna, the fit turned the state about an antenna the fix had not placed, and the first fixes after
+        it were gated and then taken for the wheels' scale (20 m off for 20 s with the antenna half a metre back).
+        Level roll and pitch are assumed, as by the heading search itself."""
+        t = self.cfg.extrinsic_xyz
+        h2 = t[0] * t[0] + t[1] * t[1]
+        if h2 == 0.0:
+            return t, 0.0
+        k = math.exp(-0.5 * s2)
+        return (k * t[0], k * t[1], t[2]), -0.5 * h2 * math.expm1(-s2)
+
+    def _set_unaligned(self, s: "FilterState", z, cov, rows: tuple[int, ...], s2: float) -> None:
+        """``set_position`` from a fix while the heading is unknown (its variance ``s2``): the base the mean lever
+        back from the antenna, the antenna's spread about it added to the fix's horizontal variance."""
+        lever_mean, spread = self._unaligned_lever(s2)
+        if spread > 0.0:
+            cov = tuple(c + spread if i in (0, 4) else c for i, c in enumerate(cov))
+        set_position(s, z, cov, lever_mean, rows)
 
     def _split_first_fix(self, s: "FilterState", rows: tuple[int, ...]) -> None:
         """The first fix put the base at z - R t, but z also carries the GPS error b: the base
