@@ -180,3 +180,19 @@ def test_an_altitude_low_as_its_slow_error_expects_stays_so_beside_gated_outlier
     v = absolute_verdict("gps", "altitude", ch, 1000.0, slow_vertical=(5.0, 300.0, 60.0))
     assert v.level == "ok" and "as the altitude's error model expects" in v.message, v
     assert "only because of the 49 update(s) the gate rejected" in v.message, v
+
+
+def test_an_rtk_altitude_that_does_not_wander_names_the_wander_model_with_the_most_it_allows():
+    """An RTK receiver's altitude (1.5 cm, no wander) beside the default wander model (5 m over 300 s): between two
+    fixes 0.1 s apart the model alone moves the altitude by 0.13 m, and the innovations are a tenth of that. No
+    noise of the fixes explains it: the doctor names vertical_error_sigma with the most the innovations allow
+    (not "as the model expects"). A receiver whose altitude does wander by that much is left as the model's."""
+    w = sim_gps.World(duration=60.0, gps_rate=10.0, gps_sigma=0.015)
+    v = one(verdicts_of(robot_config(gps=""), sim_gps.simulate(w)), "gps", "altitude")
+    assert v.level == "warn" and v.key == "sensors.gps.vertical_error_sigma", v
+    most = float(v.suggestion.split("=")[1])
+    assert 0.0 < most < 5.0 and v.evidence["innovation_rms_m"] < v.evidence["wander_alone_rms_m"], v
+    wandering = sim_gps.World(duration=60.0, gps_rate=10.0, gps_sigma=0.015, gps_alt_error_sigma=5.0,
+                              gps_alt_error_tau=300.0)
+    v = one(verdicts_of(robot_config(gps=""), sim_gps.simulate(wandering)), "gps", "altitude")
+    assert v.key != "sensors.gps.vertical_error_sigma", v

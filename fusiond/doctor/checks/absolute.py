@@ -167,11 +167,44 @@ def _slow_altitude(name: str, ch: ChannelStats, t0: float | None, slow: tuple[fl
     is most of the spread), and a smaller wander is for a recording that spans it to tell (tune fits it there).
     ``head``: what opens the message (default: the NIS low and its figures)."""
     sigma, tau, span = slow
+    over = _wander_overstated(ch, sigma, tau)
+    if over is not None:
+        got, alone, dt, most = over
+        ev["innovation_rms_m"], ev["wander_alone_rms_m"] = got, alone
+        return Verdict(name, "altitude", "warn",
+                       f"{head or f'NIS low ({figures(ch, t0)})'}: the altitude's innovations (rms {got:.3f} m) are "
+                       f"smaller than what its modelled wander alone moves it between two fixes ({alone:.3f} m: "
+                       f"vertical_error_sigma {sigma:g} m over vertical_error_tau_s {tau:g} s, the fixes {dt:.2g} s "
+                       "apart), whatever their noise: this receiver's altitude does not wander so far (an RTK "
+                       "receiver's holds to centimetres), and the model lets the estimate's height drift from it. The "
+                       "value below is the most the innovations allow", sensor_key(name, "vertical_error_sigma"),
+                       f"vertical_error_sigma = {most:.2g}", evidence=ev)
     return Verdict(name, "altitude", "ok",
                    f"{head or f'NIS low ({figures(ch, t0)})'}, as the altitude's error model expects over {span:.0f} s: it takes "
                    f"the receiver's altitude to wander by {sigma:g} m over {tau:g} s (vertical_error_sigma, "
                    "vertical_error_tau_s), a slice of which this run spans; nothing to change from it (a recording "
                    "spanning several of those time constants tells whether the wander is smaller)", evidence=ev)
+
+
+def _wander_overstated(ch: ChannelStats, sigma: float, tau: float) -> tuple[float, float, float, float] | None:
+    """(innovation rms, the rms the modelled wander alone adds between two fixes, their interval, the largest
+    vertical_error_sigma the innovations allow) where the altitude's innovations are smaller than the wander's
+    own increment: the Gauss-Markov state b (sigma, tau) moves by sigma^2 (1 - exp(-2 dt / tau)) in variance over
+    the interval dt between fixes, which the prediction of every fix carries whatever the fix's noise, so
+    innovations below it cannot be explained by any noise of the fixes. Judged as ``channels.process_overstated``
+    judges a process noise (a 3-sigma margin for the sample variance, the median interval). None otherwise."""
+    if not (sigma > 0.0 and tau > 0.0) or not ch.n_comp:
+        return None
+    ts = sorted(ch.stamps)
+    gaps = sorted(b - a for a, b in zip(ts, ts[1:]) if b > a)
+    if not gaps:
+        return None
+    dt = gaps[len(gaps) // 2]
+    share = -math.expm1(-2.0 * dt / tau)  # of sigma^2, the increment's variance
+    rms = ch.component(0)[1]
+    if not (math.isfinite(rms) and rms * rms < sigma * sigma * share * (1.0 - 3.0 * math.sqrt(2.0 / ch.n_comp))):
+        return None
+    return rms, sigma * math.sqrt(share), dt, rms / math.sqrt(share)
 
 
 class AbsoluteNis(PerChannel):
