@@ -297,8 +297,10 @@ def test_a_kind_registers_under_its_tables_tag_and_an_unknown_tag_names_the_know
 
     with pytest.raises(ValueError, match="its config table Tagged is tagged 'tagged'"):
         register(Misnamed())
-    with pytest.raises(ValueError, match=r"unknown sensor kind 'tagged', expected one of \['gps', 'imu', 'odom', 'pose'"):
+    with pytest.raises(ValueError, match=r"unknown sensor kind 'tagged', expected one of \[") as err:
         kind_named("tagged")
+    # the built-in kinds among them (a package installed here may add its own: discovery looked)
+    assert all(f"'{k}'" in str(err.value) for k in ("gps", "imu", "odom", "pose")), err.value
 
 
 def test_no_merge_conflict_markers_in_the_tree():
