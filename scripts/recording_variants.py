@@ -62,6 +62,7 @@ class Variant:
     keep_datum: bool = False  # name the original's first fix as the datum (a variant that starts later)
     fuse_every: int = 1  # as `replay --fuse-every N`: every Nth fix fused, scored at the others
     odom_keys: tuple[tuple[str, object], ...] = ()  # keys set in the config's odometry table (what `init` writes)
+    gps_keys: tuple[tuple[str, object], ...] = ()  # keys set in the config's GPS table (a receiver's antenna)
 
 
 def _keep(topic: str, rel: float, msg: object) -> object:
@@ -208,6 +209,64 @@ class _NoisyRest:
         return msg
 
 
+class _RtkFixes:
+    """Every fix rebuilt as an RTK receiver's (fixed solution) would give it: the reference's position at the fix's
+    stamp (interpolated), the antenna at ``lever`` in base_link turned by the reference's direction of travel
+    (over +-0.25 s), plus a seeded white noise of 1.2 cm horizontal and 2.5 cm vertical, stating 1.5 cm and 3 cm
+    (DIAGONAL_KNOWN) and a GBAS fix. In the reference's frame: ENU at the original first fix, which the variant's
+    config names as its datum (``keep_datum``)."""
+
+    def __init__(self, lever: tuple[float, float, float], seed: int = 1) -> None:
+        self.lever, self.seed = lever, seed
+
+    def prepare(self, src: Path) -> None:
+        import numpy as np
+        from rosbags.highlevel import AnyReader
+
+        from fusiond.estimator.geodesy import EnuFrame
+
+        rows, first = [], None
+        with AnyReader([src]) as reader:
+            conns = [c for c in reader.connections if c.topic in ("/ground_truth", "/fix")]
+            for c, _, raw in reader.messages(connections=conns):
+                m = reader.deserialize(raw, c.msgtype)
+                if c.topic == "/fix":
+                    if first is None and m.status.status >= 0:
+                        first = (m.latitude, m.longitude, m.altitude)
+                    continue
+                pose = m.pose.pose if hasattr(m.pose, "pose") else m.pose
+                p = pose.position
+                rows.append((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, p.x, p.y, p.z))
+        self.ref = np.array(sorted(rows))
+        self.frame = EnuFrame(*first)
+        self.rng = np.random.default_rng(self.seed)
+
+    def __call__(self, topic: str, rel: float, msg) -> object | None:
+        import numpy as np
+
+        from fusiond.estimator.geodesy import enu_to_geodetic
+
+        if topic != "/fix":
+            return msg
+        rt = self.ref[:, 0]
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if not rt[0] + 0.25 <= t <= rt[-1] - 0.25:
+            return None
+        e, n, u = (float(np.interp(t, rt, self.ref[:, k])) for k in (1, 2, 3))
+        (e0, n0), (e1, n1) = ([float(np.interp(s, rt, self.ref[:, k])) for k in (1, 2)] for s in (t - 0.25, t + 0.25))
+        yaw = math.atan2(n1 - n0, e1 - e0)
+        c, s = math.cos(yaw), math.sin(yaw)
+        lx, ly, lz = self.lever
+        e += c * lx - s * ly + float(self.rng.normal(0.0, 0.012))
+        n += s * lx + c * ly + float(self.rng.normal(0.0, 0.012))
+        u += lz + float(self.rng.normal(0.0, 0.025))
+        msg.latitude, msg.longitude, msg.altitude = enu_to_geodetic(self.frame, e, n, u)
+        msg.status.status = 2  # GBAS_FIX: an RTK solution
+        msg.position_covariance = np.array([0.015**2, 0.0, 0.0, 0.0, 0.015**2, 0.0, 0.0, 0.0, 0.03**2])
+        msg.position_covariance_type = 2  # DIAGONAL_KNOWN
+        return msg
+
+
 COMMA, F110 = "comma2k19_ex1", "f110_ds2"
 F110_BASELINES = ("gyro + wheel speed", "wheel odometry")
 VARIANTS = (
@@ -247,6 +306,11 @@ VARIANTS = (
     Variant("comma_wz_offset", COMMA, "comma2k19.toml",
             "highway car, the wheels' yaw rate read 0.05 rad/s high (a driver's offset; the gyro fused)",
             _wheel_yaw_offset(0.05), edits=("/odom",)),
+    Variant("comma_rtk", COMMA, "comma2k19.toml", "highway car, an RTK receiver's fixes (1.2 cm) at the base",
+            _RtkFixes((0.0, 0.0, 0.0)), ("/fix",), keep_datum=True),
+    Variant("comma_rtk_lever", COMMA, "comma2k19.toml",
+            "highway car, an RTK receiver's fixes (1.2 cm), its antenna 0.5 m behind the base, stated",
+            _RtkFixes((-0.5, 0.0, 0.0)), ("/fix",), keep_datum=True, gps_keys=(("extrinsic_xyz", (-0.5, 0.0, 0.0)),)),
     Variant("f110_copy", F110, "f110.toml", "F1/10 car, orientation off, as recorded (the control)", _keep,
             metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
     Variant("f110_noisy_rest", F110, "f110.toml",
@@ -333,6 +397,9 @@ def score(data: Path, v: Variant, work: Path, tuned: dict | None = None
     if v.odom_keys:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, **dict(v.odom_keys))
                                                     if kind_of(s).drives_prediction else s for s in cfg.sensors])
+    if v.gps_keys:
+        cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, **dict(v.gps_keys))
+                                                    if kind_of(s).geodetic else s for s in cfg.sensors])
     if v.keep_datum and first_fix is not None:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, datum=first_fix)
                                                     if kind_of(s).geodetic else s for s in cfg.sensors])
