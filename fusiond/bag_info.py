@@ -21,6 +21,7 @@ from typing import Any
 import msgspec
 
 from .core.sensors.odom.pose_twist import POSE_PATH_M
+from .core.sensors.registry import kind_reading
 from .replay.bag import open_reader, same_definition
 
 __all__ = ["BagInfo", "StaticTransform", "TopicInfo", "format_info", "inspect_bags", "is_reference", "print_info",
@@ -102,6 +103,9 @@ def topic_use(t: TopicInfo) -> str:
         return "pose sensor (absolute or differential), if it measures this robot"
     if t.msgtype == TF and t.topic.endswith("tf_static"):
         return "mounts: extrinsic_rpy / extrinsic_xyz of the sensors"
+    kind = kind_reading(t.msgtype)  # a kind an installed package adds (docs/SENSOR_KINDS.md)
+    if kind is not None:
+        return f'{kind.name} sensor: kind = "{kind.name}", from an installed package'
     return "not used"
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from .bag_info import IMU, NAVSATFIX, ODOMETRY, POSES, BagInfo, StaticTransform, TopicInfo, inspect_bags, is_reference
 from .config import ImuSensor, loads
+from .core.sensors.registry import kind_reading
 from .estimator import rotation as rot
 
 __all__ = ["generate_config", "mount", "pick", "write_init"]
@@ -214,6 +215,10 @@ def generate_config(info: BagInfo, bags: Sequence[str]) -> str:
         elif t.msgtype.endswith("TFMessage"):
             skipped.append(f"# {t.topic}: read for the sensors' mounts above" if t.topic.endswith("tf_static")
                            else f"# {t.topic}: not read (fusiond publishes its own TF)")
+        elif (kind := kind_reading(t.msgtype)) is not None:  # a kind an installed package adds: its keys are its own
+            skipped.append(f"# {t.topic} ({t.msgtype}): the installed kind \"{kind.name}\" reads it: add a [[sensors]] "
+                           f"table with kind = \"{kind.name}\" and key = \"{_key(t.topic)}\" (its keys: that "
+                           "package's documentation)")
         else:
             skipped.append(f"# {t.topic} ({t.msgtype}): not a sensor kind fusiond fuses")
     if skipped:

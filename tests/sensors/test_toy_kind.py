@@ -126,7 +126,8 @@ def test_the_kind_registers_its_own_codecs_and_the_codecs_name_no_kind(altimeter
         make_decoder("altimeter", encoding, "sonar")(encode_sample(_drive(0.1)[0], encoding))
 
 
-def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(altimeter, tmp_path: Path):
+def _toy_bag(tmp_path: Path) -> Path:
+    """A ROS 2 bag of 20 s of driving with the altimeter's readings (sensor_msgs/Range on /range)."""
     bag = tmp_path / "toy"
     ts = typestore()
     samples = sorted(_drive() + _readings(200), key=lambda s: s.stamp)
@@ -138,8 +139,27 @@ def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(alti
                 writer.write(conns["/range"], int(s.stamp * 1e9), _range_cdr(s))
             else:
                 writer.write(conns["/odom"], int(s.stamp * 1e9), encode_sample(s, "ros2-cdr"))
+    return bag
+
+
+def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(altimeter, tmp_path: Path):
+    bag = _toy_bag(tmp_path)
     result = replay([bag], loads(TOML), progress=False, keep_trace=False)
     assert result.core.stats[result.core.index["sonar"]].applied == 200
     final = result.trajectory[-8:]  # t x y z qx qy qz qw of the last published pose
     assert final[3] == pytest.approx(HEIGHT, abs=3.0 * NOISE / math.sqrt(20))
     assert final[1] == pytest.approx(0.5 * 19.98, abs=0.05)
+
+
+def test_info_and_init_name_the_kind_that_reads_a_topic_no_built_in_kind_reads(altimeter, tmp_path: Path):
+    """A topic whose type only a kind from another package reads: `fusiond info` says which kind, and `fusiond init`
+    says which table to add for it (its keys being that package's), where both said it is not used."""
+    from fusiond.bag_info import inspect_bags, topic_use
+    from fusiond.init_config import generate_config
+
+    bag = _toy_bag(tmp_path)
+    info = inspect_bags([bag])
+    (t,) = [t for t in info.topics if t.topic == "/range"]
+    assert topic_use(t) == 'altimeter sensor: kind = "altimeter", from an installed package'
+    assert ('# /range (sensor_msgs/msg/Range): the installed kind "altimeter" reads it: add a [[sensors]] table '
+            'with kind = "altimeter" and key = "range"') in generate_config(info, [str(bag)])

@@ -23,8 +23,8 @@ from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSample, ImuSensor, q
 from .kind import LayoutView, SensorKind
 from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSample, OdomSensor
 from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSample, PoseSensor
-from .registry import (ENTRY_POINT_GROUP, KINDS, config_types, discover, kind_named, kind_of, register, require,
-                       unregister)
+from .registry import (ENTRY_POINT_GROUP, KINDS, config_types, discover, kind_named, kind_of, kind_reading, register,
+                       require, unregister)
 
 
 def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
@@ -37,6 +37,6 @@ __all__ = [
     "ImuModel", "ImuPolicy", "ImuSample", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
     "OdomSample", "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSample", "PoseSensor", "Rejected", "SensorContext",
     "SensorKind", "SensorModel", "build_models", "codec_named", "codec_of", "config_types", "discover",
-    "encode_sample", "kind_named", "kind_of", "make_decoder", "quiet_bound",
+    "encode_sample", "kind_named", "kind_of", "kind_reading", "make_decoder", "quiet_bound",
     "register", "require", "unregister",
 ]

@@ -90,6 +90,15 @@ def discover(entry_points: Iterable[Any] | None = None) -> list[SensorKind]:
     return added
 
 
+def kind_reading(msgtype: str) -> SensorKind | None:
+    """The registered kind whose messages are ``msgtype`` (its ``ros_types``), the installed packages' kinds
+    discovered first (once): what `fusiond info` and `init` name for a topic of a type none of the built-in
+    kinds reads. None when no kind reads it."""
+    if not _discovered:
+        discover()
+    return next((k for k in KINDS.values() if msgtype in k.ros_types), None)
+
+
 def config_types() -> tuple[type, ...]:
     """The [[sensors]] tables, in registration order: the tagged union a config's sensors decode as."""
     return tuple(k.config_type for k in KINDS.values())
@@ -98,5 +107,5 @@ def config_types() -> tuple[type, ...]:
 for _kind in (OdomKind(), ImuKind(), GpsKind(), PoseKind()):
     register(_kind)
 
-__all__ = ["ENTRY_POINT_GROUP", "KINDS", "config_types", "discover", "kind_named", "kind_of", "register", "require",
-           "unregister"]
+__all__ = ["ENTRY_POINT_GROUP", "KINDS", "config_types", "discover", "kind_named", "kind_of", "kind_reading", "register",
+           "require", "unregister"]
