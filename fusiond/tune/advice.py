@@ -23,7 +23,8 @@ read consistent) while the filter, following it less, predicts the run's end wor
 printed as tried, with what it did. A line that changes none of the updates cannot be judged by the likelihood (a heading
 turned where nothing measures the heading; a key only the doctor's own check reads): it is printed as the
 doctor's, with how far it moved the final pose, if at all, and why the replay cannot tell. A problem
-whose line makes -log L worse by more than its keys is shown as a warning: the replay contradicts it.
+whose line the replay judged and did not advise is shown as a warning: the replay does not bear it out (it
+contradicts it when -log L is worse by more than the line's keys).
 """
 
 from __future__ import annotations
@@ -361,11 +362,15 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
 
 
 def _with_proof(v: Verdict, proof: Proof) -> Verdict:
-    """``v`` with its line's proof; a problem whose line the replay refutes is a warning that says so: two
-    independent tests of the same claim disagree, and the doctor does not call it a problem on one of them."""
-    if v.level == "problem" and proof.refuted:
+    """``v`` with its line's proof; a problem whose line the replay judged and did not advise is a warning that
+    says so: the problem's claim is its line's fix, the replay is the test of a fix, and the doctor does not call
+    a problem what that test does not bear out (one the replay refutes, worse by more than its keys, says that;
+    one it cannot judge stands on its check's evidence)."""
+    if v.level == "problem" and proof.tried and proof.judged and not proof.advised:
+        said = ("makes the filter's predictions worse" if proof.refuted else
+                "does not make the filter's predictions better by more than it adds")
         return msgspec.structs.replace(
             v, level="warn", proof=proof,
-            message=v.message + ". Replayed, its line makes the filter's predictions worse (below): the replay "
-                                "does not bear this check out on this recording, so it is a warning, not a problem")
+            message=v.message + f". Replayed, its line {said} (below): the replay does not bear this check out on "
+                                "this recording, so it is a warning, not a problem")
     return msgspec.structs.replace(v, proof=proof)

@@ -15,7 +15,7 @@ import pytest
 
 from fusiond.cli import main
 from fusiond.config import ConfigError
-from fusiond.doctor import Verdict, format_verdicts
+from fusiond.doctor import Proof, Verdict, format_verdicts
 from fusiond.replay.run import run_samples
 from fusiond.tune.advice import prove_advice, with_suggestion
 
@@ -293,3 +293,21 @@ def test_a_change_that_applies_the_updates_a_lost_run_gated_or_learned_from_is_n
     assert _updates_back(fixes(0, 59, 517), fixes(566, 0, 10), scored=1100) == "566 more gps/position updates"
     assert _updates_back(fixes(560, 6, 10), fixes(566, 0, 10), scored=1100) == ""
     assert _updates_back(fixes(2, 2, 10), fixes(6, 0, 10), scored=1500) == ""  # doubled, four of 1,500 terms
+
+
+@pytest.mark.parametrize("proof, level, said", [
+    (Proof(True, "likelihood +40"), "problem", ""),
+    # judged, within its keys either way: not borne out
+    (Proof(False, "likelihood -0"), "warn", "does not make the filter's predictions better by more than it adds"),
+    (Proof(False, "likelihood -90", refuted=True), "warn", "makes the filter's predictions worse"),
+    # the replay cannot judge it, or did not try: the check's evidence stands
+    (Proof(False, "it changes none of the filter's updates", judged=False), "problem", ""),
+    (Proof(True, "the 60 s budget ran out", tried=False), "problem", ""),
+])
+def test_a_problem_whose_line_the_replay_judged_and_did_not_advise_is_a_warning(proof, level, said):
+    from fusiond.tune.advice import _with_proof
+
+    v = _with_proof(Verdict("imu", "orientation", "problem", "the IMU's yaw drifts", "sensors.imu.orientation",
+                            'orientation = "roll_pitch"'), proof)
+    assert v.level == level and v.proof == proof and said in v.message, v
+    assert ("so it is a warning, not a problem" in v.message) == (level == "warn")
