@@ -163,3 +163,18 @@ def test_info_and_init_name_the_kind_that_reads_a_topic_no_built_in_kind_reads(a
     assert topic_use(t) == 'altimeter sensor: kind = "altimeter", from an installed package'
     assert ('# /range (sensor_msgs/msg/Range): the installed kind "altimeter" reads it: add a [[sensors]] table '
             'with kind = "altimeter" and key = "range"') in generate_config(info, [str(bag)])
+
+
+def test_the_doctor_names_the_noise_key_the_kind_names_for_its_channel(altimeter):
+    """The kind has no check of its own in the doctor: its channel's NIS verdict names the key its kind says
+    states that channel's noise (``noise_key``), here a range_sigma stated ten times below the readings' noise."""
+    from fusiond.replay.run import run_samples
+
+    cfg = loads(TOML.replace(f"range_sigma = {NOISE}", f"range_sigma = {NOISE / 10}"))
+    result = run_samples(sorted(_drive() + _readings(200), key=lambda s: s.stamp), cfg)
+    (v,) = [v for v in result.verdicts() if (v.sensor, v.channel) == ("sonar", "height")]
+    assert v.level == "warn" and v.key == "sensors.sonar.range_sigma" and "nis_high" in v.message, v
+    # stated as the readings' noise: consistent, and nothing named
+    (ok,) = [v for v in run_samples(sorted(_drive() + _readings(200), key=lambda s: s.stamp), loads(TOML)).verdicts()
+             if (v.sensor, v.channel) == ("sonar", "height")]
+    assert ok.level == "ok" and not ok.key, ok

@@ -107,6 +107,9 @@ class AltimeterKind(SensorKind):
     def fuses_height(self, cfg: AltimeterSensor, filter_cfg: FilterConfig) -> bool:
         return True
 
+    def noise_key(self, cfg: AltimeterSensor, channel: str) -> str | None:
+        return "range_sigma" if channel == "height" else None
+
     def codec(self) -> Any:
         """Its wire formats: ROS 2 CDR of a Range, JSON and msgpack of ``AltimeterMessage``. The codecs
         are imported here, when a decoder is first asked for, never when the kind loads."""

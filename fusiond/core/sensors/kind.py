@@ -110,6 +110,12 @@ class SensorKind:
         sensor asking wins) in its fixed order (``layout.BLOCK_ORDER``), unknown names after."""
         return ()
 
+    def noise_key(self, cfg: Any, channel: str) -> str | None:
+        """The key of its table that states the noise of its updates on ``channel`` (the key a NIS high or low
+        there is about), for the doctor's verdict on a channel no check of its own judges; None by default (the
+        built-in kinds' channels have checks of their own)."""
+        return None
+
     def idle_keys(self, cfg: Any, view: LayoutView) -> list[tuple[str, str]]:
         """(key, why) for each key set in this sensor's table that the rest of the configuration leaves
         without effect (an estimate asked for with nothing to observe it): the core says so at start
