@@ -341,8 +341,11 @@ def test_an_rtk_antenna_off_the_base_finds_the_heading_and_stays_at_the_fixes(le
                               "position_noise = [0.015, 0.015, 0.03]"))
     from structlog.testing import capture_logs
 
+    from fusiond.logs import configure
+
     errors = []
     t0 = None
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop warnings
     with capture_logs() as logs:
         for s in samples:
             step = core.ingest(s)

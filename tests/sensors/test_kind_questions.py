@@ -166,12 +166,15 @@ def test_an_estimate_nothing_observes_is_said_at_start_not_printed_as_estimated(
     replay's summary, and the summary does not print the prior as an estimate."""
     from structlog.testing import capture_logs
 
+    from fusiond.logs import configure
+
     from fusiond.core import FusionCore
     from tests.support.configs import robot_config
     from tests.support.core_samples import imu, odom
 
     cfg = robot_config(gps=gps, odom=f'twist_frame = "{frame}"\npitch_estimation = true',
                        imu="gyro_scale_estimation = true", filt=f"two_d_mode = {two_d}")
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop warnings
     with capture_logs() as logs:
         core = FusionCore(cfg)
     said = {(e["sensor"], e["key"]) for e in logs if e["event"] == "key_without_effect"}
