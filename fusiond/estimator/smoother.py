@@ -42,7 +42,8 @@ A heading found late. While a GPS searches for the heading, the caller publishes
 heading; each fit then turns the state about the antenna (``ErrorStateEKF.rotate_yaw``, recorded as
 ``heading_turn``) and ends the segment. After the fact the turns that came later are known: such an
 anchor's position is its origin plus its dead-reckoned displacement turned by the sum of those turns
-(the displacement along the heading found), or the shown position when no turn came after it.
+(the displacement along the heading found), and its attitude turned by as much (its placeholder heading was
+off by that), or the shown position, its attitude as the filter had it, when no turn came after it.
 
 Cost (n: error dimension, 9-16 here; m: nominal dimension). Per message while recording: one n x n
 product for its transition (the run's F product); per run of transitions, one n x n solve and product
@@ -64,6 +65,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import rotation as rot
 from .backend import DEFAULT, Backend
 from .state import StateLayout
 
@@ -306,20 +308,24 @@ def smooth(layout: StateLayout, anchors: list[Anchor], covariance: bool = False,
         if a.shown is None:
             continue
         later = befores > i
-        xs[i, 0:3] = _shown_turned(a, float(angles[later].sum()) if later.any() else None)
+        _shown_turned(xs[i], a, float(angles[later].sum()) if later.any() else None)
     return Smoothed(t, xs, Ps, filtered)
 
 
-def _shown_turned(a: Anchor, turn: float | None) -> tuple[float, float, float]:
-    """The position of an anchor whose published one was ``shown`` (module doc: a heading found late):
-    its origin plus its dead-reckoned displacement turned by ``turn`` (the later heading turns' sum), or
-    the shown one when no turn came after it (``turn`` None) or it has no origin."""
+def _shown_turned(x: np.ndarray, a: Anchor, turn: float | None) -> None:
+    """``x`` (the anchor's nominal state, in place) where its published position was ``shown`` (module doc: a
+    heading found late): its position the origin plus its dead-reckoned displacement turned by ``turn`` (the
+    later heading turns' sum), and its attitude turned about the world's z by as much (the placeholder heading it
+    dead-reckoned along was off by that); or the shown position, the attitude as it is, when no turn came after
+    it (``turn`` None) or it has no origin."""
     if a.origin is None or turn is None:
-        return a.shown
+        x[0:3] = a.shown
+        return
     c, s = np.cos(turn), np.sin(turn)
     ox, oy = a.origin
     dx, dy = float(a.x[0]) - ox, float(a.x[1]) - oy
-    return (ox + c * dx - s * dy, oy + s * dx + c * dy, a.shown[2])
+    x[0:3] = (ox + c * dx - s * dy, oy + s * dx + c * dy, a.shown[2])
+    x[3:7] = rot.turn(0.0, 0.0, turn, tuple(float(v) for v in x[3:7]))
 
 
 
@@ -347,5 +353,5 @@ def smoothed_at(layout: StateLayout, anchors: list[Anchor], k: int,
         layout.boxplus(x, d)
     if a.shown is not None:
         later = [angle for before, angle in turns or () if before > k]
-        x[0:3] = _shown_turned(a, float(np.array(later).sum()) if later else None)
+        _shown_turned(x, a, float(np.array(later).sum()) if later else None)
     return x

@@ -393,6 +393,24 @@ def _aligned_rms(est: np.ndarray, ref: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((aligned - ref) ** 2, axis=1))))
 
 
+def _timelines(t: np.ndarray) -> list[slice]:
+    """The runs of ``t`` between its jumps back (a clock reset starts a timeline of its own), in order."""
+    cuts = [0, *(np.flatnonzero(np.diff(t) < 0) + 1).tolist(), len(t)]
+    return [slice(a, b) for a, b in zip(cuts, cuts[1:])]
+
+
+def _known_by_then(published: np.ndarray, known: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """Per stamp of another track of the same publish moments (the smoothed one), whether the heading of the
+    last pose published by then was known: looked up within the same timeline (its k-th run between jumps back
+    against the published poses' k-th), so that a clock reset does not send a stamp to the other run's poses."""
+    out = np.zeros(len(stamps), dtype=bool)
+    mine, theirs = _timelines(published), _timelines(stamps)
+    for pub, run in zip(mine, theirs):
+        i = np.searchsorted(published[pub], stamps[run], side="right") - 1
+        out[run] = (i >= 0) & known[pub][np.clip(i, 0, None)]
+    return out
+
+
 def _score(segment: str, track, ts, ref_xyz, ref_h, world: bool, max_gap: float, rpe_s: float) -> Score | None:
     xyz, h, valid = track.at(ts, max_gap)
     valid = valid & np.all(np.isfinite(xyz), axis=1)
@@ -487,8 +505,7 @@ def evaluate(paths: Sequence[Path], cfg: Config, reference: str, trajectory, rec
         sm = np.asarray(smoothed, dtype=float).reshape(-1, 8)
         sm_known = None
         if known is not None:  # a smoothed pose's heading is scored where the last pose published by then was
-            i = np.searchsorted(tr[:, 0], sm[:, 0], side="right") - 1
-            sm_known = (i >= 0) & known[np.clip(i, 0, None)]
+            sm_known = _known_by_then(tr[:, 0], known, sm[:, 0])
         tracks.append(Track.build("fusiond smoothed", sm[:, 0], sm[:, 1:4],
                                   np.array([yaw(tuple(q)) for q in sm[:, 4:8]]) if sm.size else None, world=world,
                                   heading_known=sm_known))

@@ -236,3 +236,18 @@ def test_a_mistyped_reference_is_refused_before_the_recording_is_fused(drive, tm
     err = capsys.readouterr().err
     assert "--reference /ground_trut: no such topic" in err and "did you mean /ground_truth?" in err, err
     assert not tum.exists()
+
+
+def test_a_smoothed_poses_heading_is_looked_up_in_its_own_timeline_after_a_clock_reset():
+    """The smoothed track has the published one's moments, a clock reset included: each smoothed pose's heading
+    counts as known where the published pose of the same run between jumps back was (the run after a jump back
+    lies earlier in time: looked up across both, a stamp found the other run's poses, still searching for their
+    heading, and the smoothed heading's score read 14 deg where the filter's read 0.1)."""
+    from fusiond.replay.evaluate import _known_by_then
+
+    published = np.array([100.0, 101.0, 102.0, 103.0, 10.0, 11.0, 12.0, 13.0])
+    known = np.array([False, True, True, True, False, False, True, True])
+    assert _known_by_then(published, known, published).tolist() == known.tolist()
+    # a smoothed track with a pose more in the second run (a late sample's moment): still its own run's
+    smoothed = np.array([100.0, 101.5, 103.0, 10.0, 10.5, 12.5])
+    assert _known_by_then(published, known, smoothed).tolist() == [False, True, True, False, False, True]
