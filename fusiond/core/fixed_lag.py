@@ -64,29 +64,39 @@ class FixedLag:
         rec.forget(len(rec.anchors))
 
     def pose(self, segment: OpenSegment | None) -> LaggedPose | None:
-        """The pose at the newest anchor's stamp - ``lag_s`` (the anchor at or just before it), smoothed
-        over the anchors since; None while no anchor is that old, or when that anchor's pose was
-        returned already. ``segment``: the newest filter's view of the record (what an abandoned
-        timeline recorded goes)."""
+        """The newest of ``poses``: the pose at the newest anchor's stamp - ``lag_s`` (the anchor at or just
+        before it), None when there is none not returned yet (the ones before it are returned no more)."""
+        poses = self.poses(segment)
+        return poses[-1] if poses else None
+
+    def poses(self, segment: OpenSegment | None) -> list[LaggedPose]:
+        """Every anchor's pose not returned yet up to the newest anchor's stamp - ``lag_s`` (the anchor at or
+        just before it), in order, each smoothed over the anchors since: one a publish moment as the lag reaches
+        it, several where the newest stamp leapt (a logging gap: the moments before it, all of them, not the
+        last alone). Empty while no anchor is that old. ``segment``: the newest filter's view of the record
+        (what an abandoned timeline recorded goes)."""
         rec = self.recorder
         if segment is None:
-            return None
+            return []
         rec.keep(segment.count, segment.turns)
         anchors = rec.anchors
         if not anchors:
-            return None
+            return []
         target = anchors[-1].stamp - self.lag_s
         k = _last_at_or_before(anchors, target)
-        if k < 0:
-            return None
-        # what no window can reach any more, even after a rewind within the history, goes
-        drop = min(k, max(_last_at_or_before(anchors, anchors[-1].stamp - self.keep_s), 0))
+        first = max(self._last + 1 - rec.base, 0)  # the first anchor not returned yet
+        if k < first:
+            return []
+        # what no window can reach any more, even after a rewind within the history, goes (not one to return)
+        drop = min(first, max(_last_at_or_before(anchors, anchors[-1].stamp - self.keep_s), 0))
         rec.forget(drop)
-        k -= drop
-        a = rec.anchors[k]
-        if rec.base + k <= self._last:
-            return None
+        k, first = k - drop, first - drop
         self._last = rec.base + k
+        return [self._smoothed(j) for j in range(first, k + 1)]
+
+    def _smoothed(self, k: int) -> LaggedPose:
+        rec = self.recorder
+        a = rec.anchors[k]
         window = self.window
         d = window.correction(rec.anchors, rec.base, k)
         x = smoothed_at(self.layout, rec.anchors, k, rec.relative_turns(), d)

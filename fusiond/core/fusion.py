@@ -216,6 +216,14 @@ class FusionCore:
             return None
         return self._lag.pose(self.state.ekf.recording)
 
+    def lagged_poses(self) -> list[LaggedPose]:
+        """Every publish moment's pose the lag has reached and not returned yet, in order, each smoothed over
+        the window since (``FixedLag.poses``: several where the newest stamp leapt, a logging gap); empty
+        without ``smooth_with_lag``."""
+        if self._lag is None or self.state is None:
+            return []
+        return self._lag.poses(self.state.ekf.recording)
+
     def smoothed(self) -> Smoothed:
         """The smoothed estimates at the publish moments so far (RTS over each segment: a time jump, a
         gap longer than ``gap_s``, a covariance reset or a re-set state ends one)."""

@@ -111,14 +111,12 @@ class Outputs:
             self._publish_smoothed(core, frame)
 
     def _publish_smoothed(self, core: Any, frame: str) -> None:
-        """The fixed-lag smoothed pose, when the lag reaches a publish moment not yet put (the core
-        returns each once)."""
-        lagged = core.lagged_pose()
-        if lagged is None:
-            return
-        self.smoothed.put(encode_pose_cdr(lagged.stamp, frame, lagged.position, lagged.orientation,
-                                          lagged.pose_covariance))
-        self.smoothed_published += 1
+        """The fixed-lag smoothed poses of the publish moments the lag has reached and not put yet, each once, in
+        order (several after a logging gap: the core returns them all)."""
+        for lagged in core.lagged_poses():
+            self.smoothed.put(encode_pose_cdr(lagged.stamp, frame, lagged.position, lagged.orientation,
+                                              lagged.pose_covariance))
+            self.smoothed_published += 1
 
     @property
     def pending(self) -> bool:

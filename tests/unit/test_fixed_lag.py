@@ -153,3 +153,25 @@ def test_a_time_jump_back_starts_the_window_again():
     assert all(newest - LAG - 0.1 <= t <= newest - LAG for t, newest in second)
     stamps = [a.stamp for a in core._smoothing.anchors]
     assert stamps == sorted(stamps)
+
+
+def test_every_publish_moment_the_lag_reaches_is_returned_once_across_a_logging_gap():
+    """A consumer of the lagged stream gets each publish moment once, in order: where the newest stamp leaps (a
+    logging gap of 5 s), the moments the lag passed over in one step come all at once, not the last alone (a
+    second's hole before every gap), and at 20 Hz odometry with 50 Hz IMU messages none is skipped between."""
+    samples = [s for s in sim_gps.simulate(sim_gps.World(**WORLD)) if not 1008.0 <= s.stamp < 1013.0]
+    core = FusionCore(robot_config(gps=""))
+    core.smooth_with_lag(LAG)
+    published, lagged = [], []
+    for s in samples:
+        step = core.ingest(s)
+        if step.poses:  # the gap is held as a jump forward: its samples' poses come at once
+            published += [t for t, _ in step.poses]
+        elif step.publish:
+            published.append(core.pose()[0])
+        if step.publish:
+            lagged += [p.stamp for p in core.lagged_poses()]
+    assert lagged == sorted(set(lagged)), "each moment once, in order"
+    reached = [t for t in published if t <= published[-1] - LAG]
+    assert lagged == reached[:len(lagged)] and len(reached) - len(lagged) <= 1, (len(reached), len(lagged))
+    assert any(b - a > 4.0 for a, b in zip(lagged, lagged[1:]))  # the gap is in it
