@@ -241,8 +241,8 @@ def test_a_mistyped_reference_is_refused_before_the_recording_is_fused(drive, tm
 def test_a_smoothed_poses_heading_is_looked_up_in_its_own_timeline_after_a_clock_reset():
     """The smoothed track has the published one's moments, a clock reset included: each smoothed pose's heading
     counts as known where the published pose of the same run between jumps back was (the run after a jump back
-    lies earlier in time: looked up across both, a stamp found the other run's poses, still searching for their
-    heading, and the smoothed heading's score read 14 deg where the filter's read 0.1)."""
+    lies earlier in time: looked up across both, a stamp finds the other run's poses, still searching for their
+    heading, and the smoothed heading's score reads 14 deg where the filter's reads 0.1)."""
     from fusiond.replay.evaluate import _known_by_then
 
     published = np.array([100.0, 101.0, 102.0, 103.0, 10.0, 11.0, 12.0, 13.0])

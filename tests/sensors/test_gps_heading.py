@@ -330,9 +330,9 @@ def test_wheels_reading_20_percent_high_from_halfway_are_rescaled_when_the_fixes
 def test_an_rtk_antenna_off_the_base_finds_the_heading_and_stays_at_the_fixes(lever):
     """An RTK receiver (1.5 cm) at 10 Hz on a car at 25 m/s, its antenna stated where it is, off base_link. While the
     heading is searched for, the antenna can be anywhere on a circle of the lever's radius about where the
-    placeholder heading puts it; weighed as the linearised lever claims (~1.8 times the radius on each axis), the
-    fixes' centimetres left the base metres behind the antenna, the heading fit turned the state about the wrong
-    point, and the next fixes were gated and then taken for the wheels' scale: 20 m off for 20 s. Here: no step,
+    placeholder heading puts it; weighed as a linearised lever would claim (~1.8 times the radius on each axis),
+    the fixes' centimetres would leave the base metres behind the antenna, the heading fit would turn the state
+    about the wrong point, and the next fixes would be gated and then taken for the wheels' scale. Here: no step,
     no re-acquisition, no rescale, and within 10 cm of the truth from the second second on."""
     w = _car(gps_rate=10.0, gps_sigma=0.015, gps_lever=lever, duration=40.0)
     samples = simulate(w)

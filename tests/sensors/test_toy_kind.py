@@ -153,7 +153,7 @@ def test_a_bag_with_the_kinds_topic_replays_and_ends_at_the_measured_height(alti
 
 def test_info_and_init_name_the_kind_that_reads_a_topic_no_built_in_kind_reads(altimeter, tmp_path: Path):
     """A topic whose type only a kind from another package reads: `fusiond info` says which kind, and `fusiond init`
-    says which table to add for it (its keys being that package's), where both said it is not used."""
+    says which table to add for it (its keys being that package's), rather than "not used"."""
     from fusiond.bag_info import inspect_bags, topic_use
     from fusiond.init_config import generate_config
 

@@ -782,12 +782,12 @@ class GpsModel(SensorModel):
         about the state's placeholder: (the lever's mean, the variance of the antenna's place about it per
         horizontal axis). The antenna is at p + R(psi) t, and a turn about z moves only t's horizontal part:
         its mean is E[R(psi)] t_xy = exp(-s2/2) t_xy (as ``shown_position``'s displacement), its spread
-        (|t_xy|^2 / 2)(1 - exp(-s2)) per axis, a circle of radius |t_xy| once nothing is known of psi. The
-        linearised lever (dh/dpsi = -[R t]x, times s2 ~ (pi / sqrt 3)^2) claimed ~1.8 |t| on each axis where the
-        antenna is |t| away at most: an RTK fix's centimetres, weighed against that, left the base metres behind
-        the antenna, the fit turned the state about an antenna the fix had not placed, and the first fixes after
-        it were gated and then taken for the wheels' scale (20 m off for 20 s with the antenna half a metre back).
-        Level roll and pitch are assumed, as by the heading search itself."""
+        (|t_xy|^2 / 2)(1 - exp(-s2)) per axis, a circle of radius |t_xy| once nothing is known of psi. A
+        linearised lever (dh/dpsi = -[R t]x, times s2 ~ (pi / sqrt 3)^2) would claim ~1.8 |t| on each axis where
+        the antenna is |t| away at most: weighed against that, an RTK fix's centimetres leave the base metres
+        behind the antenna, the fit turns the state about an antenna no fix placed, and the first fixes after it
+        are gated and then taken for the wheels' scale (20 m off for 20 s on the highway car's RTK variant with
+        the antenna half a metre back). Level roll and pitch are assumed, as by the heading search itself."""
         t = self.cfg.extrinsic_xyz
         h2 = t[0] * t[0] + t[1] * t[1]
         if h2 == 0.0:
