@@ -11,9 +11,9 @@ reconnections). Connected means at least one router or peer session is open.
 Only a link the config asks for is announced and counted (``watched``: client mode, or `connect`
 endpoints): a peer daemon that merely listens sees tools dial it and leave (`fusiond health`
 every 30 s from a Docker HEALTHCHECK), which is no loss of anything. With no router or peer session open
-its state is ``listening``, not ``disconnected``: a tool in client mode that dials it is not among the
-session's routers and peers (``session.info`` lists those two only), so "disconnected" would be said to the
-very tool whose query it answers.
+its state is ``listening``, not ``disconnected``: a tool that dials it is not among the session's routers and
+peers until the next poll sees it, and never in client mode (``session.info`` lists those two only), so
+"disconnected" would be said to the very tool whose query it answers.
 
 Polled rather than driven by Zenoh's transport events: the poll costs two short calls per
 period and holds on every zenoh-python 1.x; its period bounds how late a change is seen.

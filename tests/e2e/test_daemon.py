@@ -340,8 +340,9 @@ def test_health_without_a_daemon_exits_1(tmp_path):
 
 
 def test_a_listening_daemon_tells_the_tool_that_dials_it_listening_not_disconnected(tmp_path):
-    """A peer daemon that only listens, queried by `fusiond health` alone: the tool's client session is no router or
-    peer of the daemon's session, so "disconnected" would be said to the very tool it answers."""
+    """A peer daemon that only listens, queried by `fusiond health` alone: it dials nothing, so with no session seen
+    it reads "listening" ("disconnected" would be said to the very tool it answers); the tool's own session may
+    already be among its peers (polled every 0.2 s), "connected" then. Never a loss."""
     port = free_port()
     config = write_config(tmp_path / "fusiond.toml", port)
     with daemon_process(config, tmp_path / "daemon.log"):
@@ -350,4 +351,4 @@ def test_a_listening_daemon_tells_the_tool_that_dials_it_listening_not_disconnec
                                            "--timeout", "2"), cwd=ROOT, capture_output=True, text=True, timeout=60)
             return json.loads(p.stdout) if p.returncode == 0 and p.stdout.strip() else None
         answer = wait_until(probe, 60.0, "the daemon's health answer")
-    assert answer["link"] == "listening" and answer["link_stats"]["losses"] == 0, answer
+    assert answer["link"] in ("listening", "connected") and answer["link_stats"]["losses"] == 0, answer
