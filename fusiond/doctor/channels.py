@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
+from collections.abc import Callable
 
 from ..core.sensors.registry import kind_of
 from .check import BaseCheck
@@ -19,7 +20,7 @@ from .nis import ChannelStats
 from .verdict import Verdict
 
 __all__ = ["ABSOLUTE_CHANNELS", "GATED_FRACTION", "PerChannel", "applied_verdict", "channel_kind", "figures",
-           "gated_out", "geodetic", "gps_up", "nis_head", "process_overstated"]
+           "gated_out", "geodetic", "gps_up", "innovations_below", "nis_head", "process_overstated"]
 
 # gated beyond this: the sensor jumps, or its noise is understated (checks/absolute.py MOST_GATED tells which)
 GATED_FRACTION = 0.1
@@ -117,31 +118,45 @@ class PerChannel(BaseCheck):
         """The findings on channel ``key`` (its statistics ``ch``)."""
 
 
-def process_overstated(ch: ChannelStats, q: float, axes: tuple[str, ...],
-                       period: float = 0.0) -> tuple[str, float, float, float, float] | None:
-    """(component, its innovation rms, the process noise's own rms over an update interval, that interval, the
-    largest process noise the innovations allow) where one of ``axes``' innovations is smaller than the process
-    noise ``q`` (per sqrt(s): filter.process_noise's position part for positions, attitude part for angles) alone
-    adds to the prediction between two updates: the prediction's variance at an update is at least q^2 dt on
-    each axis (Q's block, isotropic, over the interval dt since the last update, before any sensor's noise or
-    the state's own), so innovations below it cannot be explained by any R. Judged with the sample variance's own
-    spread: below q^2 dt (1 - 3 sqrt(2 / n)) over n updates, a 3-sigma margin for a chi-square's mean. The
-    interval is the median between the channel's updates where it keeps their stamps, else ``period``, the
-    sensor's typical one (an update per sample at most: no longer than the updates' own interval, so the bound
-    stays a bound); the component, of those below, the smallest rms. None otherwise."""
-    if not (q > 0.0) or not ch.n_comp:
+def innovations_below(ch: ChannelStats, added: Callable[[float], float], axes: tuple[str, ...],
+                      period: float = 0.0) -> tuple[str, float, float] | None:
+    """(component, its innovation rms, the interval dt) where one of ``axes``' innovations is smaller than what one
+    term of the model alone adds to the prediction's variance between two updates, ``added(dt)``: the prediction's
+    variance at an update is at least that, before any sensor's noise or the state's own, so innovations below it
+    cannot be explained by any R. Judged with the sample variance's own spread: below added(dt) (1 - 3 sqrt(2 / n))
+    over n updates, a 3-sigma margin for a chi-square's mean. The interval is the median between the channel's
+    updates where it keeps their stamps, else ``period``, the sensor's typical one (an update per sample at most:
+    no longer than the updates' own interval, so the bound stays a bound); the component, of those below, the
+    smallest rms. None otherwise."""
+    if not ch.n_comp:
         return None
     ts = sorted(ch.stamps)
     gaps = sorted(b - a for a, b in zip(ts, ts[1:]) if b > a)
     dt = gaps[len(gaps) // 2] if gaps else period
     if not (0.0 < dt < math.inf):
         return None
-    floor = q * q * dt * (1.0 - 3.0 * math.sqrt(2.0 / ch.n_comp))
+    floor = added(dt) * (1.0 - 3.0 * math.sqrt(2.0 / ch.n_comp))
     below = [(c, ch.component(i)[1]) for i, c in enumerate(ch.components) if c in axes]
     below = [(c, r) for c, r in below if math.isfinite(r) and r * r < floor]
     if not below:
         return None
     c, rms = min(below, key=lambda cr: cr[1])
+    return c, rms, dt
+
+
+def process_overstated(ch: ChannelStats, q: float, axes: tuple[str, ...],
+                       period: float = 0.0) -> tuple[str, float, float, float, float] | None:
+    """(component, its innovation rms, the process noise's own rms over an update interval, that interval, the
+    largest process noise the innovations allow) where one of ``axes``' innovations is smaller than the process
+    noise ``q`` (per sqrt(s): filter.process_noise's position part for positions, attitude part for angles) alone
+    adds to the prediction between two updates, q^2 dt on each axis (Q's block, isotropic, over the interval dt
+    since the last update: ``innovations_below``). None otherwise."""
+    if not (q > 0.0):
+        return None
+    found = innovations_below(ch, lambda dt: q * q * dt, axes, period)
+    if found is None:
+        return None
+    c, rms, dt = found
     return c, rms, q * math.sqrt(dt), dt, rms / math.sqrt(dt)
 
 

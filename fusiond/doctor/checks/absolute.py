@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from ..channels import (GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, nis_head,
+from ..channels import (GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, innovations_below, nis_head,
                         process_overstated)
 from ...core.sensors.registry import kind_of
 from ..evidence import Evidence
@@ -190,20 +190,15 @@ def _wander_overstated(ch: ChannelStats, sigma: float, tau: float) -> tuple[floa
     """(innovation rms, the rms the modelled wander alone adds between two fixes, their interval, the largest
     vertical_error_sigma the innovations allow) where the altitude's innovations are smaller than the wander's
     own increment: the Gauss-Markov state b (sigma, tau) moves by sigma^2 (1 - exp(-2 dt / tau)) in variance over
-    the interval dt between fixes, which the prediction of every fix carries whatever the fix's noise, so
-    innovations below it cannot be explained by any noise of the fixes. Judged as ``channels.process_overstated``
-    judges a process noise (a 3-sigma margin for the sample variance, the median interval). None otherwise."""
-    if not (sigma > 0.0 and tau > 0.0) or not ch.n_comp:
+    the interval dt between fixes, which the prediction of every fix carries whatever the fix's noise
+    (``channels.innovations_below``, as a process noise is judged). None otherwise."""
+    if not (sigma > 0.0 and tau > 0.0):
         return None
-    ts = sorted(ch.stamps)
-    gaps = sorted(b - a for a, b in zip(ts, ts[1:]) if b > a)
-    if not gaps:
+    found = innovations_below(ch, lambda dt: sigma * sigma * -math.expm1(-2.0 * dt / tau), ("up",))
+    if found is None:
         return None
-    dt = gaps[len(gaps) // 2]
+    _, rms, dt = found
     share = -math.expm1(-2.0 * dt / tau)  # of sigma^2, the increment's variance
-    rms = ch.component(0)[1]
-    if not (math.isfinite(rms) and rms * rms < sigma * sigma * share * (1.0 - 3.0 * math.sqrt(2.0 / ch.n_comp))):
-        return None
     return rms, sigma * math.sqrt(share), dt, rms / math.sqrt(share)
 
 
