@@ -463,10 +463,7 @@ class GpsModel(SensorModel):
         """The first fix defines the world frame: the base goes where it says, heading unknown
         (unless an absolute IMU yaw is trusted as ENU heading)."""
         ekf = s.ekf
-        if self.yaw_given:
-            set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, rows)
-        else:
-            self._set_unaligned(s, z, inp.cov, rows, HEADING_UNKNOWN_SIGMA**2)
+        self._set_from_fix(s, z, inp.cov, rows)
         split = POSITION_ROWS
         if self.cfg.datum is None and 2 in rows:
             # The datum's altitude is this fix's: the frame's zero height is where the antenna is
@@ -602,11 +599,7 @@ class GpsModel(SensorModel):
         if emit:  # once: not again for each re-application after a late sample
             log.warning("gps_reacquired", sensor=self.name, stamp=stamp, rejected=len(own.rejected),
                         seconds=stamp - own.rejected[0][0], offset=math.hypot(last[1], last[2]))
-        horizontal = tuple(r for r in rows if r < 2)
-        if self.yaw_given:
-            set_position(s, z, inp.cov, self.cfg.extrinsic_xyz, horizontal)
-        else:
-            self._set_unaligned(s, z, inp.cov, horizontal, HEADING_UNKNOWN_SIGMA**2)
+        self._set_from_fix(s, z, inp.cov, tuple(r for r in rows if r < 2))
         if self._scaled:
             self._rescale_wheels(s, own.rejected, emit, stamp)
         if not self.yaw_given:
@@ -795,10 +788,15 @@ class GpsModel(SensorModel):
         k = math.exp(-0.5 * s2)
         return (k * t[0], k * t[1], t[2]), -0.5 * h2 * math.expm1(-s2)
 
-    def _set_unaligned(self, s: "FilterState", z, cov, rows: tuple[int, ...], s2: float) -> None:
-        """``set_position`` from a fix while the heading is unknown (its variance ``s2``): the base the mean lever
-        back from the antenna, the antenna's spread about it added to the fix's horizontal variance."""
-        lever_mean, spread = self._unaligned_lever(s2)
+    def _set_from_fix(self, s: "FilterState", z, cov, rows: tuple[int, ...]) -> None:
+        """``set_position`` from a fix (the first, or a re-acquiring one) as the heading is then: given (an absolute
+        IMU yaw trusted as heading), the base the lever back from the antenna; unknown (``HEADING_UNKNOWN_SIGMA``),
+        the mean lever back (``_unaligned_lever``), the antenna's spread about it added to the fix's horizontal
+        variance."""
+        if self.yaw_given:
+            set_position(s, z, cov, self.cfg.extrinsic_xyz, rows)
+            return
+        lever_mean, spread = self._unaligned_lever(HEADING_UNKNOWN_SIGMA**2)
         if spread > 0.0:
             cov = tuple(c + spread if i in (0, 4) else c for i, c in enumerate(cov))
         set_position(s, z, cov, lever_mean, rows)
