@@ -54,13 +54,20 @@ class FixedLag:
         self.recorder = SmoothingRecorder(layout, covariance=True)
         self.window = SlidingCorrection(layout.error_dim, covariance=True)
         self._last = -1  # the timeline's index of the last anchor returned: each is returned once
+        self._tail: list[LaggedPose] = []  # an ended timeline's last moments, returned by the next ``poses``
 
     def restart(self, segment: OpenSegment | None) -> None:
         """The filter starts over (a time jump back, set_pose, a resumed state): what came before is
-        another timeline, whose stamps may be later than the new one's; the window starts empty."""
+        another timeline, whose stamps may be later than the new one's; the window starts empty. The old
+        timeline's moments not returned yet (its last ``lag_s``) are smoothed over the anchors to its end, as
+        the offline smoother ends a segment, and ``poses`` returns them first: a consumer of every moment
+        loses none at a reset."""
         rec = self.recorder
         if segment is not None:
             rec.keep(segment.count, segment.turns)
+            first = max(self._last + 1 - rec.base, 0)
+            self._tail += [self._smoothed(j) for j in range(first, len(rec.anchors))]
+            self._last = rec.base + len(rec.anchors) - 1
         rec.forget(len(rec.anchors))
 
     def pose(self, segment: OpenSegment | None) -> LaggedPose | None:
@@ -74,7 +81,13 @@ class FixedLag:
         just before it), in order, each smoothed over the anchors since: one a publish moment as the lag reaches
         it, several where the newest stamp leapt (a logging gap: the moments before it, all of them, not the
         last alone). Empty while no anchor is that old. ``segment``: the newest filter's view of the record
-        (what an abandoned timeline recorded goes)."""
+        (what an abandoned timeline recorded goes). After a ``restart``, the ended timeline's last moments
+        come first."""
+        tail, self._tail = self._tail, []
+        return tail + self._reached(segment) if tail else self._reached(segment)
+
+    def _reached(self, segment: OpenSegment | None) -> list[LaggedPose]:
+        """``poses`` of the newest timeline."""
         rec = self.recorder
         if segment is None:
             return []

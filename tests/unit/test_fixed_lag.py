@@ -175,3 +175,26 @@ def test_every_publish_moment_the_lag_reaches_is_returned_once_across_a_logging_
     reached = [t for t in published if t <= published[-1] - LAG]
     assert lagged == reached[:len(lagged)] and len(reached) - len(lagged) <= 1, (len(reached), len(lagged))
     assert any(b - a > 4.0 for a, b in zip(lagged, lagged[1:]))  # the gap is in it
+
+
+def test_a_reset_returns_the_ended_timelines_last_lag_of_moments():
+    """A recording played twice: at the jump back the core starts over, and the last lag_s of the first
+    pass's publish moments, which no later anchor of that timeline would reach, come out of lagged_poses
+    before the second pass's (smoothed over the anchors to the timeline's end, the last of them the filtered
+    pose itself): every publish moment of the first pass is in the lagged stream once, in order."""
+    samples = sim_gps.simulate(sim_gps.World(**{**WORLD, "duration": 8.0}))
+    core = FusionCore(robot_config(gps=""))
+    core.smooth_with_lag(LAG)
+    published, lagged = [], []
+    for s in samples + samples:
+        step = core.ingest(s)
+        if step.publish:
+            if core.resets == 0:
+                published.append(core.pose())
+            lagged += core.lagged_poses()
+    assert core.resets == 1
+    back = next(i for i in range(1, len(lagged)) if lagged[i].stamp < lagged[i - 1].stamp)
+    assert [p.stamp for p in lagged[:back]] == [t for t, _ in published]
+    t_end, x_end = published[-1]
+    assert np.allclose(lagged[back - 1].position, x_end[:3], atol=1e-9)
+    assert all(np.diff([p.stamp for p in lagged[back:]]) > 0)
