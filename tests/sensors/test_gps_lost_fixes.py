@@ -120,3 +120,24 @@ def test_a_multipath_burst_is_gated_out_by_default():
     assert rejected == 5
     assert default < 3 * w.gps_sigma
     assert ungated > 1.0
+
+
+def test_a_slow_receivers_multipath_burst_is_a_jump_not_the_filter_lost():
+    """A 1 Hz receiver whose epochs come 1.05 s apart (1 m noise): five fixes, 5 s, 35 m off right after good
+    ones. The burst's first fix is the next fix after an accepted one, so the run began with a jump, and a jump is
+    believed only after REACQUIRE_JUMP_S or the step test (6 fixes): the burst stays gated out and the pose where
+    the wheels and the good fixes put it. Read as a filter lost (its first fix 1.05 s after the accepted one, over
+    JUMP_AFTER_S), the fifth fix was taken as the position (REACQUIRE_S), the wheels rescaled to it, and the pose
+    pulled 35 m off."""
+    from structlog.testing import capture_logs
+
+    from fusiond.logs import configure
+
+    w = _gps_world(gps_rate=1.0 / 1.05, gps_sigma=1.0)
+    samples = _with_burst(simulate(w), 1060.0, 5, 35.0)
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop warnings
+    with capture_logs() as logs:
+        worst, rejected = _max_error(samples, w, 1059.0, 1070.0, _gps_config())
+    assert rejected == 5
+    assert not [e for e in logs if e["event"] in ("gps_reacquired", "gps_rescaled_wheels")], logs
+    assert worst < 3 * w.gps_sigma, worst

@@ -30,8 +30,8 @@ fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitud
 Steps. A receiver's error can step and stay (a re-acquisition, a multipath lock that ends): the fixes
 jump by d from one epoch to the next and keep the new level. The gate rejects them as it rejects an
 outlier, and waiting REACQUIRE_JUMP_S before believing them costs |d| for that long. Once the heading is
-known, a run of gated-out fixes that began with a jump (its first fix within JUMP_AFTER_S of one the gate
-let in) is judged by a sequential probability-ratio test of two hypotheses about fix k of the run, given
+known, a run of gated-out fixes that began with a jump (its first fix the next fix after one the gate let in:
+within JUMP_AFTER_S, or one and a half of the receiver's periods at a rate under 1/JUMP_AFTER_S) is judged by a sequential probability-ratio test of two hypotheses about fix k of the run, given
 fixes 1..k-1 (``_step_llr``):
 - H1, "the error stepped by one offset d": y_k ~ N(d_k, R_k + C_k + G_k), with d_k the R-weighted mean
   of the run's earlier innovations, C_k its covariance (sum R_j^-1)^-1, and G_k what the dead-reckoning
@@ -108,6 +108,7 @@ REACQUIRE_AGREE = 0.1  # "agreeing": spread of their innovations within this fra
 REACQUIRE_SIGMAS = 3.0  # ... or within this many fix sigmas
 REACQUIRE_JUMP_S = 10.0  # s instead of REACQUIRE_S when the run began with a jump of the fixes (``_locked_out``)
 JUMP_AFTER_S = 1.0  # ... "a jump": its first fix within this of an accepted one, and most of its offset new
+JUMP_AFTER_PERIODS = 1.5  # ... or within this many fix periods (a slow receiver's next fix; a missed one makes 2)
 BURST_REPEAT = 0.2  # the outlier model's statement: a burst repeats its previous fix's offset with this probability
 # per fix. It caps what one agreeing fix can say for a step at log(1 / BURST_REPEAT) (module doc, "Steps")
 FROZEN_MIN_TRAVEL = 0.05  # m of dead-reckoned travel after which a bit-identical repeated fix is a frozen receiver
@@ -503,7 +504,7 @@ class GpsModel(SensorModel):
         dr = (own.track.base[0] + t[0], own.track.base[1] + t[1])
         run = own.rejected + ((stamp, float(y[0]), float(y[1]), float(max(R[0, 0], R[1, 1])), z[0], z[1], *dr),)
         s.own[self.index] = msgspec.structs.replace(own, rejected=run)
-        if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < self._reacquire_after(own, run[0]):
+        if len(run) < REACQUIRE_FIXES or stamp - run[0][0] < self._reacquire_after(own, run[0], self._jump_after(s)):
             return False
         me, mn = sum(r[1] for r in run) / len(run), sum(r[2] for r in run) / len(run)
         # with the wheels' scale in the state, the track may be stretched too (a tyre changed, a speed 20 %
@@ -537,7 +538,7 @@ class GpsModel(SensorModel):
             left = None  # long enough at the new level: a return is a step like any other
         h = -math.log(alpha)
         if st is None:
-            if len(own.rejected) != 1 or not _jumped(own, own.rejected[0]):
+            if len(own.rejected) != 1 or not _jumped(own, own.rejected[0], self._jump_after(s)):
                 return None  # not the first fix of a run, or no jump: the REACQUIRE_S rule alone
             st = _step_start(y, R, hp)
         else:
@@ -580,15 +581,21 @@ class GpsModel(SensorModel):
         left = None if back else (stamp, float(d[0]), float(d[1]))
         s.own[self.index] = msgspec.structs.replace(own, rejected=(), step=None, accepted=accepted, left=left)
 
+    def _jump_after(self, s: "FilterState") -> float:
+        """How soon after an accepted fix a gated-out one is the next fix, not the first after missing ones:
+        JUMP_AFTER_S, or JUMP_AFTER_PERIODS of the receiver's typical period where that is longer (a 1 Hz
+        receiver's next fix comes 1.0 s later, give or take its jitter)."""
+        return max(JUMP_AFTER_S, JUMP_AFTER_PERIODS * s.period[self.index])
+
     @staticmethod
-    def _reacquire_after(own: GpsOwn, first: tuple) -> float:
+    def _reacquire_after(own: GpsOwn, first: tuple, jump_after: float) -> float:
         """How long a run of gated-out fixes must last to say the filter is lost: REACQUIRE_S, or
-        REACQUIRE_JUMP_S when the fixes jumped (the run's first fix came within JUMP_AFTER_S of one the
+        REACQUIRE_JUMP_S when the fixes jumped (the run's first fix came within ``jump_after`` of one the
         gate let in, and most of its offset is new). A filter drifts off continuously (dead-reckoning
         through a gap or a tunnel, a wrong heading); a receiver jumps: multipath (a 4 s burst 18 m
         off would be taken in after 3 s and left again 1 s later), a reset. Its new fixes may be right, but
         they have to keep saying so for longer."""
-        return REACQUIRE_JUMP_S if _jumped(own, first) else REACQUIRE_S
+        return REACQUIRE_JUMP_S if _jumped(own, first, jump_after) else REACQUIRE_S
 
     def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
                    emit: bool) -> None:
@@ -838,11 +845,12 @@ def _fitted_residual(fixes: list[tuple[float, float]], track: list[tuple[float, 
     return math.sqrt(sq / n), k
 
 
-def _jumped(own: GpsOwn, first: tuple) -> bool:
+def _jumped(own: GpsOwn, first: tuple, jump_after: float) -> bool:
     """Did the run of gated-out fixes that begins with ``first`` begin with a jump of the fixes: its first
-    fix within JUMP_AFTER_S of one the gate let in, and most of its offset new (``_reacquire_after``)?"""
+    fix within ``jump_after`` of one the gate let in (``GpsModel._jump_after``), and most of its offset new
+    (``_reacquire_after``)?"""
     last = own.accepted
-    if last is None or first[0] - last[0] > JUMP_AFTER_S:
+    if last is None or first[0] - last[0] > jump_after:
         return False
     return math.hypot(first[1] - last[1], first[2] - last[2]) > 0.5 * math.hypot(first[1], first[2])
 
