@@ -26,7 +26,7 @@ from fusiond.core.sensors.gps.codec import encode_gps_sample
 from fusiond.core.sensors.pose.codec import encode_pose_sample
 from fusiond.codecs import NAVSATFIX, ODOMETRY, POSE_STAMPED, TYPESTORE, DecodeError
 
-from tests.support.sim_gps import World, simulate, truth_at
+from tests.support.sim_gps import T0, World, simulate, truth_at
 from tests.support.configs import sensor_tables
 from tests.support.gps_pose import DATUM, _gps_config, _gps_world, config
 
@@ -693,3 +693,31 @@ def test_gps_with_a_trusted_absolute_imu_yaw_takes_heading_from_the_imu():
     assert core.heading_known
     assert steps.records and steps.records[0].channel == "position"
     assert rot.to_rpy(tuple(core.pose()[1][3:7].tolist()))[2] == pytest.approx(1.0, abs=0.01)
+
+
+@pytest.mark.parametrize("restarts", [True, False], ids=["restarted_at_the_origin", "went_on"])
+def test_a_visual_odometry_silent_beyond_its_timeout_may_restart_its_chain(restarts):
+    """Visual odometry (no gate configured, the default) silent for 3 s, beyond its 1 s timeout: a VO that lost
+    tracking and starts again from a new origin (its pose 1.5 m and 0.4 rad away) is no motion: the delta across
+    the silence, far beyond anything the wheels and gyro allow (chi-square, RESTART_FALSE_ALARM), starts a new
+    chain and is said; one that went on through the silence is fused. Fused as motion, the restart's jump put
+    the pose metres and 0.4 rad off."""
+    from structlog.testing import capture_logs
+
+    from fusiond.logs import configure
+
+    jump = (33.0, 1.5, -1.0, 0.4) if restarts else None
+    w = _pose_world(start=(0.0, 0.0, 0.0), pose_lever=(0.0, 0.0, 0.0), pose_origin_jump=jump,
+                    pose_increment_noise=True, pose_sigma=(0.005, 0.002), hand_turn=(20.0, 24.0, 0.8))
+    samples = [s for s in simulate(w) if not (isinstance(s, PoseSample) and T0 + 30.0 <= s.stamp < T0 + 33.0)]
+    vo = FusionCore(config(pose="differential = true", odom="scale_estimation = true\ntwist_correlation_s = 0.0",
+                           imu="gyro_scale_estimation = true"))
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop warnings
+    with capture_logs() as logs:
+        across = [r for s in samples for r in vo.ingest(s).records
+                  if r.channel == "pose_delta" and T0 + 30.0 <= r.stamp < T0 + 33.05]
+    restarted = [e for e in logs if e["event"] == "pose_chain_restarted"]
+    assert len(restarted) == (1 if restarts else 0), restarted
+    assert len(across) == (0 if restarts else 1)  # the delta across the silence: fused, or none (a new chain)
+    pos_err, yaw_err = errors(vo, w)
+    assert pos_err < 0.7 and abs(yaw_err) < 0.03, (pos_err, yaw_err)

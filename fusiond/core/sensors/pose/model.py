@@ -8,6 +8,7 @@ predicted motion over the same interval, kept in its slice of the state.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -18,7 +19,8 @@ from .... import reasons
 from ....estimator import YAW_ROW, attitude_of, mat3, position_of
 from ....estimator import observations as obs
 from ....estimator import rotation as rot
-from ...diagnostics import DiagnosticsRecord
+from ....logs import get_logger
+from ...diagnostics import DiagnosticsRecord, chi2_ppf
 from ..base import SensorContext, SensorModel
 from ..checks import Rejected, finite, plausible, unit_quaternion
 from ..frame import new_frame, set_position
@@ -28,18 +30,29 @@ from .table import PoseSensor
 if TYPE_CHECKING:
     from ..state import FilterState
 
+log = get_logger(__name__)
+
+# A differential sensor's delta across a silence beyond its timeout, with no gate configured, is taken for a
+# restart of its chain when a chain that went on would give one as far out this rarely (``_apply_delta``)
+RESTART_FALSE_ALARM = 1e-6
+
 NO_MOTION = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
 
 class PoseAnchor(msgspec.Struct, frozen=True, gc=False):
     """A differential sensor's slice of the state: its previous message (position, quaternion), the
-    filter's predicted motion since then (in the body frame at that message), and the world frame
-    it was taken in (``FilterState.frame_epoch``: a frame defined or turned since restarts it)."""
+    filter's predicted motion since then (in the body frame at that message), the world frame
+    it was taken in (``FilterState.frame_epoch``: a frame defined or turned since restarts it), when
+    the sensor is silent from (that message's stamp plus its timeout), that message's stamp and the sensor's
+    typical period then."""
 
     position: tuple[float, float, float]
     q: tuple[float, float, float, float]
     moved: tuple[tuple[float, float, float], tuple[float, float, float, float]]
     epoch: int
+    until: float = math.inf
+    stamp: float = math.nan
+    period: float = 0.0
 
 
 @dataclass(slots=True)
@@ -166,10 +179,19 @@ class PoseModel(SensorModel):
         then (accumulated by the predictions, kept with the anchor in the snapshot): the
         sensor's drifting origin never enters. The stated noise (message covariance or override) is
         that of one delta, as robot_pose_ekf reads visual odometry's covariance: VO's error
-        lives in its increments."""
+        lives in its increments.
+
+        A message after the sensor was silent beyond its timeout (``FusionCore.timeout``) may start a new chain
+        instead: a visual odometry that lost tracking starts again from a new origin (its pose jumps back to
+        identity), and that jump is no motion. Its delta is then gated (the configured mahalanobis_threshold, else
+        the chi-square quantile of RESTART_FALSE_ALARM: a chain that went on through the silence is taken for a
+        restart that rarely), its stated covariance taken once for each message period it spans (the increments
+        of the messages not sent): within the gate it is the motion across the silence (a logging gap the sensor's
+        own chain spans), beyond it the chain starts again from this message and the log says so."""
         ekf = s.ekf
         anchor: PoseAnchor | None = s.own[self.index]
-        s.own[self.index] = PoseAnchor(inp.position, inp.q, NO_MOTION, s.frame_epoch)
+        s.own[self.index] = PoseAnchor(inp.position, inp.q, NO_MOTION, s.frame_epoch,
+                                       stamp + self.ctx.timeout(self.index, s), stamp, s.period[self.index])
         if anchor is None or anchor.epoch != s.frame_epoch:
             return []
         dp, dqf = anchor.moved
@@ -183,7 +205,23 @@ class PoseModel(SensorModel):
         x_prev = (p[0] - a[0], p[1] - a[1], p[2] - a[2], *qa)
         dpos, dq = obs.relative_pose(anchor.position, anchor.q, inp.position, inp.q)
         y, H, R = obs.delta_pose(self.ctx.layout, ekf.x, x_prev, dpos, dq, inp.cov, inp.rows, self.cfg.extrinsic_xyz)
-        res = ekf.update(y, H, R, self.cfg.mahalanobis_threshold, self.ctx.delta_mask)
+        gate = self.cfg.mahalanobis_threshold
+        silent = stamp > anchor.until
+        if silent:
+            # the delta spans the increments of every message the sensor did not send, each as uncertain as one
+            if anchor.period > 0.0:
+                R = R * max(1.0, (stamp - anchor.stamp) / anchor.period)
+            if not math.isfinite(gate):
+                gate = math.sqrt(chi2_ppf(1.0 - RESTART_FALSE_ALARM, len(inp.rows)))
+        res = ekf.update(y, H, R, gate, self.ctx.delta_mask)
+        if silent and res.rejected:
+            if emit:  # once: not again for each re-application after a late sample
+                log.warning("pose_chain_restarted", sensor=self.name, stamp=stamp,
+                            beyond_timeout_s=stamp - anchor.until, nis=res.nis,
+                            reason="silent beyond its timeout, then a delta the filter's motion rules out: its "
+                                   "deltas start again from this message (a visual odometry that lost tracking "
+                                   "starts from a new origin)")
+            return []
         if not emit:
             return []
         return [self.record(stamp, [obs.DELTA_NAMES[i] for i in inp.rows], y.tolist(), res.innovation_var, res.nis,
@@ -203,7 +241,8 @@ class PoseModel(SensorModel):
         dp, dq = anchor.moved
         a = mat3.apply(rot.matrix9(dq), step_p)
         moved = ((dp[0] + a[0], dp[1] + a[1], dp[2] + a[2]), rot.normalize(rot.mul(dq, step_q)))
-        s.own[self.index] = PoseAnchor(anchor.position, anchor.q, moved, anchor.epoch)
+        s.own[self.index] = PoseAnchor(anchor.position, anchor.q, moved, anchor.epoch, anchor.until, anchor.stamp,
+                                       anchor.period)
         return None
 
 
