@@ -67,6 +67,7 @@ class World:
     pose_rate: float = 0.0  # 0: no pose sensor
     pose_sigma: tuple[float, float] = (0.01, 0.005)  # position m, orientation rad
     pose_lever: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pose_mount_yaw: float = 0.0  # the sensor's axes turned by this about base_link's z (a camera looking sideways)
     pose_origin_drift: float = 0.0  # the pose sensor's origin creeps along x, m/s
     pose_origin_jump: tuple[float, float, float, float] | None = None  # (t, dx, dy, dyaw): a relocalisation
     pose_increment_noise: bool = False  # visual odometry: pose_sigma is per message increment, and accumulates
@@ -193,7 +194,7 @@ def simulate(w: World) -> list:
                 err = vo_err
             else:
                 err = [rng.normal(0, ps), rng.normal(0, ps), rng.normal(0, ps), rng.normal(0, os_)]
-            q = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), yaw - oyaw + err[3])
+            q = rot.from_rpy(rng.normal(0, 0.002), rng.normal(0, 0.002), yaw + w.pose_mount_yaw - oyaw + err[3])
             cov = tuple((ps**2 if i < 3 else os_**2) if j == i else 0.0 for i in range(6) for j in range(6))
             out.append(PoseSample("pose", t, (px + err[0], py + err[1], lz + err[2]), q, cov))
         x += v * math.cos(yaw) * dt

@@ -58,13 +58,15 @@ class PoseAnchor(msgspec.Struct, frozen=True, gc=False):
 @dataclass(slots=True)
 class PoseInput:
     """Sensor pose (position, unit quaternion, its rpy) with a 6x6 covariance (x y z roll pitch yaw,
-    row-major 36-tuple, diagonal) and the usable rows."""
+    row-major 36-tuple; diagonal but where a mount rotation turned it) and the usable rows; ``dof``: the
+    components the sensor measures (None: the rows)."""
 
     position: tuple[float, float, float]
     q: tuple[float, float, float, float]
     rpy: tuple[float, float, float]
     cov: tuple[float, ...]
     rows: tuple[int, ...]
+    dof: int | None = None
 
 
 class PosePolicy:
@@ -81,6 +83,9 @@ class PosePolicy:
         self._pos_override = None if cfg.position_noise is None else [v * v for v in cfg.position_noise]
         self._ori_override = None if cfg.orientation_noise is None else [v * v for v in cfg.orientation_noise]
         self._held: tuple[int, ...] = ()
+        # the sensor's orientation in base_link (extrinsic_rpy): None for none, the common case, read as before
+        self.mount_q = rot.from_rpy(*cfg.extrinsic_rpy) if any(cfg.extrinsic_rpy) else None
+        self._mount = None if self.mount_q is None else np.array(rot.matrix9(self.mount_q)).reshape(3, 3)
 
     def planar(self) -> None:
         """Two-D mode: z, roll and pitch are held at 0 and never fused."""
@@ -114,10 +119,46 @@ class PosePolicy:
             rows.append(i)
         if not rows:
             raise Rejected(reasons.NOTHING_TO_FUSE, "every pose component is marked not measured")
+        if self._mount is not None:
+            return self._mounted(s.position, q, var, rows)
         cov = [0.0] * 36
         for i in range(6):
             cov[7 * i] = var[i] if var[i] > 0.0 else 1.0
         return PoseInput(s.position, q, rot.to_rpy(q), tuple(cov), tuple(rows))
+
+    def _mounted(self, position: tuple[float, float, float], q: tuple[float, float, float, float], var: list[float],
+                 rows: list[int]) -> PoseInput:
+        """The pose of a frame at the sensor's origin with base_link's axes (extrinsic_rpy undone: q R_bs^T), and
+        the covariance of what the sensor measures in its own axes turned into that frame (R_bs C R_bs^T): the
+        orientation's, and for a differential sensor the position's too (its deltas are in the sensor's axes; an
+        absolute position is the world's). A block the sensor measures in part keeps its unmeasured axes at
+        max_sigma: turned, they stay what the sensor does not measure. A delta is turned by ``turn_delta``."""
+        M = self._mount
+        C = np.zeros((6, 6))
+        out_rows: list[int] = []
+        turned = (0, 3) if self.cfg.differential else (3,)
+        for b in (0, 3):
+            measured = [i for i in range(b, b + 3) if i in rows]
+            if not measured:
+                continue
+            d = [var[i] if i in measured else self._max[i] for i in range(b, b + 3)]
+            C[b:b + 3, b:b + 3] = M @ np.diag(d) @ M.T if b in turned else np.diag(d)
+            out_rows += [i for i in range(b, b + 3) if i not in self._held and (b in turned or i in measured)]
+        for i in range(6):
+            if C[i, i] <= 0.0:
+                C[i, i] = 1.0
+        q = q if self.cfg.differential else rot.normalize(rot.mul(q, rot.conj(self.mount_q)))
+        return PoseInput(position, q, rot.to_rpy(q), tuple(C.ravel().tolist()), tuple(out_rows), len(rows))
+
+    def turn_delta(self, dpos: tuple[float, float, float], dq: tuple[float, float, float, float]
+                   ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """A differential sensor's delta (position, quaternion in the sensor's axes at the earlier message) as the
+        same motion in base_link's axes at the sensor's origin: conjugated by the mount, R_bs D R_bs^T."""
+        if self._mount is None:
+            return dpos, dq
+        p = self._mount @ np.array(dpos)
+        return (float(p[0]), float(p[1]), float(p[2])), rot.normalize(rot.mul(rot.mul(self.mount_q, dq),
+                                                                              rot.conj(self.mount_q)))
 
 
 class PoseModel(SensorModel):
@@ -150,7 +191,7 @@ class PoseModel(SensorModel):
         if not emit:
             return []
         return [self.record(stamp, [obs.POSE_NAMES[i] for i in inp.rows], y.tolist(), res.innovation_var, res.nis,
-                            len(inp.rows), res.rejected, "pose", late)]
+                            inp.dof or len(inp.rows), res.rejected, "pose", late)]
 
     def _define_frame(self, s: "FilterState", inp: PoseInput) -> None:
         """The first absolute pose defines the world frame: position and heading (and roll/pitch
@@ -203,7 +244,7 @@ class PoseModel(SensorModel):
         a = mat3.apply(rot.matrix9(qa), dp)
         p = ekf.position()
         x_prev = (p[0] - a[0], p[1] - a[1], p[2] - a[2], *qa)
-        dpos, dq = obs.relative_pose(anchor.position, anchor.q, inp.position, inp.q)
+        dpos, dq = self.policy.turn_delta(*obs.relative_pose(anchor.position, anchor.q, inp.position, inp.q))
         y, H, R = obs.delta_pose(self.ctx.layout, ekf.x, x_prev, dpos, dq, inp.cov, inp.rows, self.cfg.extrinsic_xyz)
         gate = self.cfg.mahalanobis_threshold
         silent = stamp > anchor.until
@@ -212,7 +253,7 @@ class PoseModel(SensorModel):
             if anchor.period > 0.0:
                 R = R * max(1.0, (stamp - anchor.stamp) / anchor.period)
             if not math.isfinite(gate):
-                gate = math.sqrt(chi2_ppf(1.0 - RESTART_FALSE_ALARM, len(inp.rows)))
+                gate = math.sqrt(chi2_ppf(1.0 - RESTART_FALSE_ALARM, inp.dof or len(inp.rows)))
         res = ekf.update(y, H, R, gate, self.ctx.delta_mask)
         if silent and res.rejected:
             if emit:  # once: not again for each re-application after a late sample
@@ -225,7 +266,7 @@ class PoseModel(SensorModel):
         if not emit:
             return []
         return [self.record(stamp, [obs.DELTA_NAMES[i] for i in inp.rows], y.tolist(), res.innovation_var, res.nis,
-                            len(inp.rows), res.rejected, "pose_delta", late)]
+                            inp.dof or len(inp.rows), res.rejected, "pose_delta", late)]
 
     def on_predict(self, s: "FilterState", x0: np.ndarray, x1: np.ndarray) -> None:
         """Compose one prediction step's relative motion (x0^-1 x1) onto the anchor's.

@@ -32,6 +32,8 @@ class PoseSensor(SensorTable, tag="pose"):
     max_sigma: Vec2 = (100.0, 3.0)  # larger means "not measured": m, rad
     unknown_sigma: Vec2 = (0.1, 0.05)  # for a message without covariance (PoseStamped): m, rad
     extrinsic_xyz: Vec3 = (0.0, 0.0, 0.0)  # sensor (marker, camera) origin in base_link, m
+    # sensor (marker, camera) orientation in base_link: fixed-axis roll, pitch, yaw, rad, as URDF
+    extrinsic_rpy: Vec3 = (0.0, 0.0, 0.0)
 
 
 __all__ = ["POSE_MSGTYPES", "PoseSensor"]
