@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..channels import (GATED_FRACTION, PerChannel, applied_verdict, figures, gps_up, innovations_below, nis_head,
                         process_overstated)
 from ...core.sensors.registry import kind_of
@@ -21,6 +23,11 @@ __all__ = ["AbsoluteNis", "absolute_verdict"]
 
 # gated beyond this (and so beyond GATED_FRACTION): its noise is understated, as jumps are the exception, not the rule
 MOST_GATED = 0.5
+# the noise of a channel's kept innovations (``_spread``): 1 / Phi^-1(3/4), the median magnitude of a standard
+# normal's draws, so that the median magnitude times it is sigma; from MIN_ROBUST updates on (the median's standard
+# error is then within a fifth of sigma's)
+ROBUST_SCALE = 1.4826
+MIN_ROBUST = 20
 
 
 _ANGLES = frozenset({"roll", "pitch", "yaw", "drx", "dry", "drz"})  # a pose's rotation components (and deltas)
@@ -31,18 +38,30 @@ def _unit(component: str) -> str:
     return "rad" if component in _ANGLES else "m"
 
 
+def _spread(ch: ChannelStats, i: int) -> float:
+    """Component i's noise as the innovations show it: where the channel keeps every update's innovation (a
+    GPS's), ROBUST_SCALE times their median magnitude, gated ones included, which a minority of bursts (multipath
+    20-40 m off for 5 s of a minute) leaves where the ordinary fixes put it and which is the rms for Gaussian
+    innovations; else their rms. Either is the sensor's noise plus the filter's own uncertainty."""
+    width = len(ch.components)
+    column = [y[i] for y in ch.innovations if len(y) == width] if ch.keep else []
+    if len(column) >= MIN_ROBUST:
+        return ROBUST_SCALE * float(np.median(np.abs(column)))
+    return ch.component(i)[1]
+
+
 def _measured_noise(ch: ChannelStats, up: ChannelStats | None = None, up_sigma: float | None = None) -> str:
-    """``position_noise = [...]`` from the innovations' rms per axis (east north up), when the channel
-    has the three, or the horizontal two and a third: ``up_sigma``, the altitude's noise as the filter took
-    it, which the horizontal's line keeps (the altitude is judged by its own channel, whose error another
+    """``position_noise = [...]`` from the innovations' spread per axis (east north up, ``_spread``), when the
+    channel has the three, or the horizontal two and a third: ``up_sigma``, the altitude's noise as the filter
+    took it, which the horizontal's line keeps (the altitude is judged by its own channel, whose error another
     check may explain: a mount's pitch climbing the height 40 m off read as a 31 m noise that hid it), else
-    the rms of ``up`` (the fix's altitude channel) where that is not known (no config: the live monitor). The
-    rms is the sensor's noise plus the filter's own uncertainty, so an upper bound."""
-    rms = [ch.component(i)[1] for i in range(len(ch.components))]
+    the spread of ``up`` (the fix's altitude channel) where that is not known (no config: the live monitor). It
+    is the sensor's noise plus the filter's own uncertainty, so an upper bound."""
+    rms = [_spread(ch, i) for i in range(len(ch.components))]
     if len(rms) == 2 and up_sigma is not None:
         rms.append(up_sigma)
     elif len(rms) == 2 and up is not None and up.n and up.components == ["up"]:
-        rms.append(up.component(0)[1])
+        rms.append(_spread(up, 0))
     if len(rms) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rms):
         return ""
     return "position_noise = [" + ", ".join(f"{r:.2g}" for r in rms) + "]"
@@ -82,8 +101,8 @@ def absolute_verdict(name: str, channel: str, ch: ChannelStats, t0: float | None
         stated = ("the noise taken for its fixes, which state none (measured from the wheels, at the upper end of "
                   "its uncertainty; position_noise states it instead),")
     # the innovations' rms as a pasteable line when it covers every axis of the key, else said in the text
-    rms = "the value below" if line else "their rms per axis (" + ", ".join(
-        f"{c} {ch.component(i)[1]:.2g} {_unit(c)}" for i, c in enumerate(ch.components)) + ")"
+    rms = "the value below" if line else "their spread per axis (" + ", ".join(
+        f"{c} {_spread(ch, i):.2g} {_unit(c)}" for i, c in enumerate(ch.components)) + ")"
     if frac > MOST_GATED:
         # Jumps (multipath, relocalisation) come in bursts among good fixes; a gate that rejects most
         # of them is cutting into the ordinary noise, which is then larger than stated.
