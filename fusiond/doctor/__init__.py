@@ -39,6 +39,7 @@ from .clock import ClockOffsets
 from .evidence import Evidence
 from .lost import LostSamples
 from .nis import ChannelStats, judge_nis, nis_bounds
+from .pose_motion import PoseMotion
 from .check import run_check
 from .registry import CHECKS
 from .series import Series, SeriesCollector
@@ -88,6 +89,9 @@ class Doctor:
         # differences of the same messages in the same order
         self._from_pose = {s.name: PoseDifferences(self.cfg.filter.gap_s) for s in self.cfg.sensors
                            if kind_of(s).drives_prediction and s.twist_from_pose}
+        # a differential pose sensor's deltas against the direction the wheels move in (its mount: ``pose_motion``)
+        motion = PoseMotion(self.cfg.sensors)
+        self.pose_motion: PoseMotion | None = motion if motion.sensors else None
 
     # -- feeding ---------------------------------------------------------------
     def add(self, record) -> None:
@@ -130,6 +134,8 @@ class Doctor:
                 sample = msgspec.structs.replace(sample, linear=body[0], angular=body[1])
         for s in self.lost.admit(sample):
             self._note_sample(s)
+        if self.pose_motion is not None:
+            self.pose_motion.add(sample)
 
     def _note_sample(self, sample) -> None:
         samples = self._samples
@@ -204,7 +210,8 @@ class Doctor:
         """``stats``: per sensor {"received", "applied", "late", "dropped": {reason: n}}."""
         return diagnose(Evidence(self.cfg if self.known else None, self.series(), self.channels, self.twist,
                                  self.tilt, stats=stats, at_cap=at_cap, covariance_resets=covariance_resets,
-                                 scales=scales, t0=self.t0, clocks=self.clocks, repeats=self.repeats))
+                                 scales=scales, t0=self.t0, clocks=self.clocks, repeats=self.repeats,
+                                 pose_motion=self.pose_motion))
 
 
 def _merge(candidates: list[Verdict]) -> Verdict:

@@ -22,6 +22,7 @@ from .gyro import bias_check
 from .heading import wheel_yaw_fit
 from .mounting import MountYaw, mount_yaw_fit
 from .nis import ChannelStats
+from .pose_motion import PoseMotion
 from .series import Series
 from .twist import TwistStats
 from .verdict import Verdict
@@ -74,6 +75,7 @@ class Evidence:
     t0: float | None = None  # the run's first stamp: times in messages are counted from it
     clocks: ClockOffsets | None = None  # the sensors' stamp offsets measured at arrival
     repeats: dict[str, int] | None = None  # per sensor, messages that came twice, stamp and content alike
+    pose_motion: PoseMotion | None = None  # the differential pose sensors' deltas in base_link's axes
     findings: Findings = field(default_factory=Findings)
     _bias_verdicts: dict[tuple[str, str], Verdict | None] = field(default_factory=dict, init=False, repr=False)
 
