@@ -63,6 +63,8 @@ class Variant:
     fuse_every: int = 1  # as `replay --fuse-every N`: every Nth fix fused, scored at the others
     odom_keys: tuple[tuple[str, object], ...] = ()  # keys set in the config's odometry table (what `init` writes)
     gps_keys: tuple[tuple[str, object], ...] = ()  # keys set in the config's GPS table (a receiver's antenna)
+    # a [[sensors]] table added to the config (key = value lines): the sensor of a topic the edit adds (``added``)
+    sensor: str = ""
 
 
 def _keep(topic: str, rel: float, msg: object) -> object:
@@ -267,6 +269,74 @@ class _RtkFixes:
         return msg
 
 
+class _VisualOdometry:
+    """A camera's visual odometry made from the reference (``added``: the topic /vo/odom, nav_msgs/Odometry at the
+    reference's rate): the camera's pose (``lever`` ahead of base_link, its axes turned by ``mount`` yaw) in a frame
+    at its first pose, plus a seeded white noise of 1.5 cm and 0.2 deg, stating 2 cm and 0.01 rad. ``reset``: (t,
+    seconds) after the first message: silent for that long, then it starts again from its own origin (a tracking
+    loss). The reference's own orientation is the camera's as recorded (the highway car's INS sits 0.9 deg from its
+    direction of travel: the doctor's vo/mount)."""
+
+    def __init__(self, lever: float = 0.0, mount: float = 0.0, reset: tuple[float, float] | None = None,
+                 seed: int = 1) -> None:
+        self.lever, self.mount, self.reset, self.seed = lever, mount, reset, seed
+
+    def prepare(self, src: Path) -> None:
+        self.src = src
+
+    def __call__(self, topic: str, rel: float, msg) -> object | None:
+        return msg
+
+    def added(self, store, t_first: int) -> tuple[str, str, list[tuple[int, bytes]]]:
+        import numpy as np
+        from rosbags.highlevel import AnyReader
+
+        from fusiond.estimator import rotation as rot
+
+        rng = np.random.default_rng(self.seed)
+        rows = []
+        with AnyReader([self.src]) as reader:
+            for c, t, raw in reader.messages(connections=[c for c in reader.connections if c.topic == "/ground_truth"]):
+                m = reader.deserialize(raw, c.msgtype)
+                pose = m.pose.pose if hasattr(m.pose, "pose") else m.pose
+                p, o = pose.position, pose.orientation
+                rows.append((t, m.header, (p.x, p.y, p.z), (o.x, o.y, o.z, o.w)))
+        mount_q = rot.from_rpy(0.0, 0.0, self.mount)
+        msgtype = "nav_msgs/msg/Odometry"
+        Odometry = store.types[msgtype]
+        cov = np.diag([0.02**2] * 3 + [0.01**2] * 3).ravel()
+        out, origin = [], None
+        for t, header, p, q in rows:
+            rel = (t - t_first) / 1e9
+            if self.reset is not None and self.reset[0] <= rel < self.reset[0] + self.reset[1]:
+                continue
+            lever = rot.matrix9(q)
+            cam = (p[0] + lever[0] * self.lever, p[1] + lever[3] * self.lever, p[2] + lever[6] * self.lever)
+            cq = rot.mul(q, mount_q)
+            restart = self.reset is not None and rel >= self.reset[0] + self.reset[1] and origin[2] == 0
+            if origin is None or restart:
+                origin = (cam, cq, 1 if origin is not None else 0)
+            r0 = rot.matrix9(origin[1])
+            d = (cam[0] - origin[0][0], cam[1] - origin[0][1], cam[2] - origin[0][2])
+            local = tuple(r0[k] * d[0] + r0[k + 3] * d[1] + r0[k + 6] * d[2] + float(rng.normal(0.0, 0.015))
+                          for k in range(3))
+            turn = rot.from_rpy(*(float(v) for v in rng.normal(0.0, math.radians(0.2), 3)))
+            lq = rot.normalize(rot.mul(turn, rot.mul(rot.conj(origin[1]), cq)))
+            msg = Odometry(header=header, child_frame_id="camera", pose=store.types[
+                "geometry_msgs/msg/PoseWithCovariance"](pose=store.types["geometry_msgs/msg/Pose"](
+                    position=store.types["geometry_msgs/msg/Point"](x=local[0], y=local[1], z=local[2]),
+                    orientation=store.types["geometry_msgs/msg/Quaternion"](x=lq[0], y=lq[1], z=lq[2], w=lq[3])),
+                    covariance=cov), twist=store.types["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=store.types["geometry_msgs/msg/Twist"](
+                        linear=store.types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                        angular=store.types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
+                    covariance=np.zeros(36)))
+            msg.header.frame_id = "vo"
+            out.append((t, store.serialize_cdr(msg, msgtype)))
+        return "/vo/odom", msgtype, out
+
+
+VO = 'name = "vo"\nkind = "pose"\nkey = "vo/odom"\nmsgtype = "nav_msgs/msg/Odometry"\ndifferential = true'
 COMMA, F110 = "comma2k19_ex1", "f110_ds2"
 F110_BASELINES = ("gyro + wheel speed", "wheel odometry")
 VARIANTS = (
@@ -311,6 +381,27 @@ VARIANTS = (
     Variant("comma_rtk_lever", COMMA, "comma2k19.toml",
             "highway car, an RTK receiver's fixes (1.2 cm), its antenna 0.5 m behind the base, stated",
             _RtkFixes((-0.5, 0.0, 0.0)), ("/fix",), keep_datum=True, gps_keys=(("extrinsic_xyz", (-0.5, 0.0, 0.0)),)),
+    Variant("comma_vo", COMMA, "comma2k19_odom_imu.toml",
+            "highway car, wheels + gyro + a camera's visual odometry (the reference's, as mounted), no GPS",
+            _VisualOdometry(), metrics=("aligned_h", "heading_deg"), baselines=("gyro + wheel speed", "wheel odometry"),
+            sensor=VO),
+    Variant("comma_vo_stated", COMMA, "comma2k19_odom_imu.toml",
+            "the same, the doctor's vo/mount line pasted (its yaw, 0.82 deg, in extrinsic_rpy)",
+            _VisualOdometry(), metrics=("aligned_h", "heading_deg"), baselines=("gyro + wheel speed", "wheel odometry"),
+            sensor=VO + "\nextrinsic_rpy = [0.0, 0.0, 0.0143]"),
+    Variant("comma_vo_mount", COMMA, "comma2k19_odom_imu.toml",
+            "the camera 0.3 m ahead, turned 90 deg left, stated (extrinsic_xyz, and extrinsic_rpy as the doctor's "
+            "vo/mount line on it: 90.82 deg)", _VisualOdometry(lever=0.3, mount=math.pi / 2),
+            metrics=("aligned_h", "heading_deg"), baselines=("gyro + wheel speed", "wheel odometry"),
+            sensor=VO + "\nextrinsic_xyz = [0.3, 0.0, 0.0]\nextrinsic_rpy = [0.0, 0.0, 1.5851]"),
+    Variant("comma_vo_reset", COMMA, "comma2k19_odom_imu.toml",
+            "the stated camera, silent 3 s from 18 s, then starting again from its own origin",
+            _VisualOdometry(reset=(18.0, 3.0)), metrics=("aligned_h", "heading_deg"),
+            baselines=("gyro + wheel speed", "wheel odometry"), sensor=VO + "\nextrinsic_rpy = [0.0, 0.0, 0.0143]"),
+    Variant("f110_vo_reset", F110, "f110.toml",
+            "F1/10 car, a camera's visual odometry silent 3 s from 50 s, then from its own origin",
+            _VisualOdometry(reset=(50.0, 3.0)), metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES,
+            segments=("a", "c", "d"), sensor=VO),
     Variant("f110_copy", F110, "f110.toml", "F1/10 car, orientation off, as recorded (the control)", _keep,
             metrics=("aligned_h", "heading_deg"), baselines=F110_BASELINES, segments=("a", "c", "d")),
     Variant("f110_noisy_rest", F110, "f110.toml",
@@ -360,6 +451,11 @@ def write_variant(src: Path, out: Path, v: Variant) -> tuple[float, float, float
             if kept is None:
                 continue
             writer.write(conns[c.id], t, store.serialize_cdr(kept, c.msgtype) if c.topic in v.edits else raw)
+        if hasattr(v.edit, "added"):
+            topic, msgtype, rows = v.edit.added(store, t0)
+            conn = writer.add_connection(topic, msgtype, typestore=store)
+            for t, raw in rows:
+                writer.write(conn, t, raw)
     return first_fix
 
 
@@ -394,6 +490,10 @@ def score(data: Path, v: Variant, work: Path, tuned: dict | None = None
     bag = work / v.name
     first_fix = write_variant(data / v.recording, bag, v)
     cfg = load(ROOT / "examples" / v.config)
+    if v.sensor:  # the example's own text with the table added: checked as a user's config is
+        from fusiond.config import loads
+
+        cfg = loads((ROOT / "examples" / v.config).read_text() + "\n[[sensors]]\n" + v.sensor)
     if v.odom_keys:
         cfg = msgspec.structs.replace(cfg, sensors=[msgspec.structs.replace(s, **dict(v.odom_keys))
                                                     if kind_of(s).drives_prediction else s for s in cfg.sensors])
