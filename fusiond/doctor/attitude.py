@@ -22,7 +22,7 @@ from itertools import chain
 
 import numpy as np
 
-from ..config import ImuSensor
+from ..config import ImuSensor, PoseSensor
 from ..core.sensors.imu.axes import seen_axes, weights
 from ..estimator import rotation as rot
 from .nis import ChannelStats
@@ -111,8 +111,9 @@ def noise_suggestion(ch: ChannelStats, imu: ImuSensor) -> tuple[str, str, list[f
     return "orientation_noise = [" + ", ".join(f"{v:.4f}" for v in filled) + "]", note, filled
 
 
-def full_mount(imu: ImuSensor, lean: tuple[float, float] = (0.0, 0.0), yaw: float = 0.0) -> tuple[float, ...]:
-    """The IMU's true mounting as roll, pitch, yaw: Rz(yaw) * tilt(lean) * configured.
+def full_mount(imu: ImuSensor | PoseSensor, lean: tuple[float, float] = (0.0, 0.0),
+               yaw: float = 0.0) -> tuple[float, ...]:
+    """The IMU's (or a camera's) true mounting as roll, pitch, yaw: Rz(yaw) * tilt(lean) * configured.
 
     A lean: estimated base = q_imu * q_cfg^-1 = yaw * q_true * q_cfg^-1, so on level ground
     q_true = tilt * q_cfg. A yaw error from the accelerometer is a turn about base z before that

@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 from ..core.sensors.registry import kind_of
+from ..estimator import mat3
 from ..estimator import observations as obs
 from ..estimator import rotation as rot
 
@@ -78,15 +79,10 @@ class PoseMotion:
         if prev is None or self._speed == 0.0:
             return
         mount, lever = self._mounts[name]
-        dpos, dq = obs.relative_pose(prev[0], prev[1], sums.prev[0], sums.prev[1])
-        # in base_link's axes at the sensor's origin (R_bs D R_bs^T), less what a turn moves the lever by
-        d = rot.matrix9(mount)
-        p = (d[0] * dpos[0] + d[1] * dpos[1] + d[2] * dpos[2], d[3] * dpos[0] + d[4] * dpos[1] + d[5] * dpos[2],
-             d[6] * dpos[0] + d[7] * dpos[1] + d[8] * dpos[2])
-        turn = rot.matrix9(rot.mul(rot.mul(mount, dq), rot.conj(mount)))
-        lx, ly, lz = lever
-        moved = (turn[0] * lx + turn[1] * ly + turn[2] * lz - lx, turn[3] * lx + turn[4] * ly + turn[5] * lz - ly,
-                 turn[6] * lx + turn[7] * ly + turn[8] * lz - lz)
+        # in base_link's axes at the sensor's origin, as the filter reads the delta, less what a turn moves the lever by
+        p, turn = obs.turned_delta(mount, *obs.relative_pose(prev[0], prev[1], sums.prev[0], sums.prev[1]))
+        r = mat3.apply(rot.matrix9(turn), lever)
+        moved = (r[0] - lever[0], r[1] - lever[1], r[2] - lever[2])
         sign = 1.0 if self._speed > 0.0 else -1.0
         fwd, lat, up = (sign * (p[0] - moved[0]), sign * (p[1] - moved[1]), sign * (p[2] - moved[2]))
         sums.n += 1

@@ -178,6 +178,17 @@ def relative_pose(pos0: tuple[float, float, float], q0: rot.Quat, pos1: tuple[fl
              R[2] * d[0] + R[5] * d[1] + R[8] * d[2]), rot.mul(rot.conj(q0), q1))
 
 
+def turned_delta(mount: rot.Quat, dpos: tuple[float, float, float], dq: rot.Quat
+                 ) -> tuple[tuple[float, float, float], rot.Quat]:
+    """A delta (``relative_pose``: in the sensor's axes at the earlier pose) of a sensor turned by ``mount`` in
+    base_link, as the same motion in base_link's axes at the sensor's origin: conjugated by the mount,
+    (R_bs dp, q_bs dq q_bs^-1)."""
+    R = rot.matrix9(mount)
+    return ((R[0] * dpos[0] + R[1] * dpos[1] + R[2] * dpos[2], R[3] * dpos[0] + R[4] * dpos[1] + R[5] * dpos[2],
+             R[6] * dpos[0] + R[7] * dpos[1] + R[8] * dpos[2]), rot.normalize(rot.mul(rot.mul(mount, dq),
+                                                                                       rot.conj(mount))))
+
+
 def delta_pose(
     layout: StateLayout, x: np.ndarray, x_prev: np.ndarray, z_dpos: tuple[float, float, float], z_dq: rot.Quat,
     cov: tuple[float, ...], rows: tuple[int, ...], lever: tuple[float, float, float] = (0.0, 0.0, 0.0),

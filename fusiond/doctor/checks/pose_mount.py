@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from ...estimator import rotation as rot
+from ..attitude import full_mount, paste_mount
 from ..check import MIN_UPDATES, BaseCheck
 from ..evidence import Evidence
 from ..verdict import Verdict, sensor_key
@@ -40,9 +40,7 @@ class PoseMount(BaseCheck):
                 continue
             if not abs(fit.yaw) > MOUNT_SIGMAS * fit.yaw_se:
                 continue
-            sensor = ev.sensors[name]
-            r, p, y = rot.to_rpy(rot.normalize(rot.mul(rot.from_rpy(0.0, 0.0, fit.yaw),
-                                                       rot.from_rpy(*sensor.extrinsic_rpy))))
+            line = paste_mount(full_mount(ev.sensors[name], yaw=fit.yaw))
             out.append(Verdict(
                 name, "mount", "warn",
                 f"its deltas, read in base_link's axes through extrinsic_rpy, lean sideways against the direction the "
@@ -53,7 +51,7 @@ class PoseMount(BaseCheck):
                 "x; an omnidirectional one does not, and this is then its sideways motion). Their pitch against the "
                 f"motion reads {math.degrees(fit.pitch):+.2f} deg (+- {math.degrees(fit.pitch_se):.2f}): the filter's "
                 "tilt is the IMU's, so state it once the IMU's own mount is (imu/attitude)",
-                sensor_key(name, "extrinsic_rpy"), f"extrinsic_rpy = [{r:.4f}, {p:.4f}, {y:.4f}]",
+                sensor_key(name, "extrinsic_rpy"), line,
                 evidence={"mount_yaw_error_rad": fit.yaw, "mount_yaw_se": fit.yaw_se,
                           "mount_pitch_error_rad": fit.pitch, "mount_pitch_se": fit.pitch_se,
                           "deltas": float(fit.n), "forward_m": fit.forward_m}))

@@ -152,13 +152,11 @@ class PosePolicy:
 
     def turn_delta(self, dpos: tuple[float, float, float], dq: tuple[float, float, float, float]
                    ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
-        """A differential sensor's delta (position, quaternion in the sensor's axes at the earlier message) as the
-        same motion in base_link's axes at the sensor's origin: conjugated by the mount, R_bs D R_bs^T."""
-        if self._mount is None:
+        """A differential sensor's delta in base_link's axes (``observations.turned_delta``; as it is without a
+        mount)."""
+        if self.mount_q is None:
             return dpos, dq
-        p = self._mount @ np.array(dpos)
-        return (float(p[0]), float(p[1]), float(p[2])), rot.normalize(rot.mul(rot.mul(self.mount_q, dq),
-                                                                              rot.conj(self.mount_q)))
+        return obs.turned_delta(self.mount_q, dpos, dq)
 
 
 class PoseModel(SensorModel):
