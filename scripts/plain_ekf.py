@@ -10,10 +10,16 @@ logic (every message is processed once, in header-stamp order), no rest detectio
   otherwise the odometry's angular twist. The input's own covariance (the odometry's twist covariance,
   the IMU's gyro covariance) enters as input noise, plus a fixed process noise per second (PROCESS_NOISE).
 - Updates: the IMU's orientation as the configuration's mode says (``absolute``; ``relative``: absolute
-  less the yaw difference at the first sample; ``roll_pitch``: roll and pitch only; ``off``), and GPS
-  positions in ENU at the first fix (or the configured datum), each with the message's own covariance.
+  less the yaw difference at the first sample; ``roll_pitch``: roll and pitch only; ``off``), GPS
+  positions in ENU at the first fix (or the configured datum), and a pose sensor's poses (a marker
+  system, a map localiser) with the sensor at its extrinsic in base_link, each with the message's own
+  covariance. A ``differential`` pose sensor (visual odometry, whose origin drifts) is fused as
+  robot_localization's differential mode first did it: the change since its previous message, put on
+  the filter's own pose at that message, as a pose measurement with this message's covariance (a
+  tracking reset is then a jump like any other: nothing here looks at silences or outliers).
 - The configuration (fusiond.config.load) is read only for topic names, sensor kinds, the orientation
-  mode, the gyro switch, the IMU's extrinsic rotation, the twist frame and a GPS datum.
+  mode, the gyro switch, the IMU's and the pose sensors' extrinsics, the twist frame, a GPS datum and a
+  pose sensor's ``differential``.
 
 Covariance floors, the only departures from the messages (in variances):
 - a diagonal element <= 0 (a message that states 0, or -1 for "absent" on a channel that is used) is
@@ -21,7 +27,9 @@ Covariance floors, the only departures from the messages (in variances):
 - a twist element >= 1e6 (the "not measured" convention) is taken as UNMEASURED_VARIANCE (1.0: 1 m/s,
   1 rad/s) so that one such input does not swamp the state;
 - a GPS fix with covariance type UNKNOWN is taken to be UNKNOWN_GPS_SIGMA = 1 m on each axis: the plain
-  user's choice for a receiver that states nothing.
+  user's choice for a receiver that states nothing;
+- a pose's axis stated at >= 1e6 (the "not measured" convention) is not fused; a pose message without a
+  covariance (PoseStamped) is taken at UNKNOWN_POSE_SIGMA (0.1 m, 0.05 rad).
 
     .venv/bin/python scripts/plain_ekf.py BAG [BAG ...] --config examples/jackal_rl.toml [--tum OUT.tum]
                                           [--fuse-every N]
@@ -45,6 +53,7 @@ PROCESS_NOISE = np.array([0.05, 0.05, 0.06, 0.03, 0.03, 0.06, 1e-8, 1e-8, 1e-8])
 MIN_VARIANCE = 1e-6
 UNMEASURED_VARIANCE = 1.0
 UNKNOWN_GPS_SIGMA = 1.0  # m
+UNKNOWN_POSE_SIGMA = (0.1, 0.05)  # m, rad
 # Initial standard deviations: a position unknown to 100 m with a GPS (its first fix sets it), else
 # exactly the origin (1 mm); heading unknown (pi) with a GPS and no absolute orientation, else 0.01 rad;
 # roll and pitch 0.01 rad; gyro bias 0.01 rad/s.
@@ -181,10 +190,12 @@ def _diag_floor(var: np.ndarray, unmeasured: bool = False) -> np.ndarray:
 
 
 class PlainEkf:
-    def __init__(self, gps: bool, absolute_yaw: bool, gyro: bool, world_twist: bool) -> None:
+    def __init__(self, placed_by: bool, absolute_yaw: bool, gyro: bool, world_twist: bool) -> None:
+        """``placed_by``: a sensor (a GPS, an absolute pose) places the robot in its world frame: the position
+        starts unknown, and the heading too unless the IMU's yaw is absolute."""
         self.x = State(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3))
-        pos = INITIAL_POSITION_SIGMA_GPS if gps else INITIAL_POSITION_SIGMA
-        yaw = INITIAL_YAW_SIGMA_UNKNOWN if gps and not absolute_yaw else INITIAL_ANGLE_SIGMA
+        pos = INITIAL_POSITION_SIGMA_GPS if placed_by else INITIAL_POSITION_SIGMA
+        yaw = INITIAL_YAW_SIGMA_UNKNOWN if placed_by and not absolute_yaw else INITIAL_ANGLE_SIGMA
         self.P = np.diag(np.array([pos, pos, pos, INITIAL_ANGLE_SIGMA, INITIAL_ANGLE_SIGMA, yaw,
                                    INITIAL_BIAS_SIGMA, INITIAL_BIAS_SIGMA, INITIAL_BIAS_SIGMA]) ** 2)
         self.gyro, self.world_twist = gyro, world_twist
@@ -231,6 +242,24 @@ class PlainEkf:
         h[:, 3:6] = np.eye(3)
         self.update(quat_log(quat_mul(quat_conj(self.x.q), q_meas)), h, rot.T @ r_world @ rot)
 
+    def update_pose(self, p_meas: np.ndarray, q_meas: np.ndarray, cov: np.ndarray, lever: np.ndarray) -> None:
+        """A sensor at ``lever`` (base_link) whose pose reads: the sensor's origin ``p_meas`` (h = p + R(q) t) and
+        base_link's orientation ``q_meas``; ``cov`` 6x6 about the world's axes (ROS's convention), its rows of
+        variance >= 1e6 not fused."""
+        rot = quat_matrix(self.x.q)
+        h = np.zeros((6, 9))
+        h[0:3, 0:3] = np.eye(3)
+        h[0:3, 3:6] = -rot @ skew(lever)  # q_true = q Exp(dtheta): R_true t = R t + R (dtheta x t)
+        h[3:6, 3:6] = np.eye(3)
+        y = np.concatenate((p_meas - self.x.p - rot @ lever, quat_log(quat_mul(quat_conj(self.x.q), q_meas))))
+        r = cov.copy()
+        r[3:6, 3:6] = rot.T @ r[3:6, 3:6] @ rot  # the attitude error is about the body's axes
+        r[0:3, 3:6] = r[0:3, 3:6] @ rot
+        r[3:6, 0:3] = rot.T @ r[3:6, 0:3]
+        rows = [i for i in range(6) if cov[i, i] < 1e6]
+        if rows:
+            self.update(y[rows], h[rows], r[np.ix_(rows, rows)])
+
     def update_roll_pitch(self, q_meas: np.ndarray, r_rp: np.ndarray) -> None:
         roll, pitch, _ = quat_rpy(self.x.q)
         mr, mp, _ = quat_rpy(q_meas)
@@ -268,6 +297,48 @@ def _stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
+def _pose_of(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A pose message's (position, orientation, 6x6 covariance, diagonal floored) whatever its type."""
+    pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose  # Odometry, PoseWithCovarianceStamped
+    if hasattr(msg.pose, "covariance"):
+        cov = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
+        cov = cov + np.diag(_diag_floor(cov.diagonal()) - cov.diagonal())
+    else:  # PoseStamped
+        cov = np.diag([UNKNOWN_POSE_SIGMA[0] ** 2] * 3 + [UNKNOWN_POSE_SIGMA[1] ** 2] * 3)
+    p, o = pose.position, pose.orientation
+    return np.array([p.x, p.y, p.z]), np.array([o.x, o.y, o.z, o.w]), cov
+
+
+def _fuse_pose(f: PlainEkf, msg, sensor: dict) -> None:
+    """One pose message: the sensor's pose as base_link's (absolute), or the change since the sensor's previous
+    message put on the filter's pose at it (differential)."""
+    p_s, q_s, cov = _pose_of(msg)
+    q_ext, t_ext = sensor["q_ext"], sensor["t_ext"]
+    q_base = quat_mul(q_s, quat_conj(q_ext))  # the sensor's frame is base_link turned by q_ext
+    if not sensor["differential"]:  # its covariance is about the world's axes already (ROS's convention)
+        f.update_pose(p_s, q_base, cov, t_ext)
+        return
+    last = sensor["last"]
+    if last is None:
+        sensor["last"] = (p_s, q_base, f.x.p.copy(), f.x.q.copy())
+        return
+    p0, q0, fp, fq = last
+    # base_link's motion between the two messages, in base_link's axes at the first: the sensor's origin moved
+    # by R0^T (p1 - p0); base_link's origin is t_ext behind it in either pose
+    dq = quat_mul(quat_conj(q0), q_base)
+    dp = quat_matrix(q0).T @ (p_s - p0) + t_ext - quat_matrix(dq) @ t_ext
+    q_meas = quat_mul(fq, dq)
+    p_meas = fp + quat_matrix(fq) @ dp + quat_matrix(q_meas) @ t_ext  # the sensor's origin, as update_pose reads
+    # the message's covariance as the change's noise, about the sensor's axes: turned into the world's (a pose
+    # measured in part is fused about its own axes: turning would mix the unmeasured ones in)
+    if (cov.diagonal() < 1e6).all():
+        turn = np.zeros((6, 6))
+        turn[0:3, 0:3] = turn[3:6, 3:6] = quat_matrix(quat_mul(fq, q_ext))
+        cov = turn @ cov @ turn.T
+    f.update_pose(p_meas, q_meas, cov, t_ext)
+    sensor["last"] = (p_s, q_base, f.x.p.copy(), f.x.q.copy())  # the filter's pose at it: after its update
+
+
 def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] | None = None) -> np.ndarray:
     """The plain EKF over ``bags`` with fusiond's config ``cfg``: one pose per odometry message (with a GPS,
     from its first fix on), (n, 8) rows t x y z qx qy qz qw. ``fuse_fix(stamp, index)`` (index: the fix's position in bag order) says
@@ -283,6 +354,11 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
     mode = imu_cfg.orientation if imu_cfg is not None else "off"
     ext = quat_from_rpy(*imu_cfg.extrinsic_rpy) if imu_cfg is not None else np.array([0.0, 0.0, 0.0, 1.0])
     ext_rot = quat_matrix(ext)
+    # a pose sensor: its extrinsic (rotation, lever arm), and for a differential one the previous message's
+    # pose and the filter's at it
+    poses = {topic: {"q_ext": quat_from_rpy(*sc.extrinsic_rpy), "t_ext": np.array(sc.extrinsic_xyz, dtype=float),
+                     "differential": sc.differential, "last": None}
+             for topic, (kind, sc) in by_topic.items() if kind == "pose"}
 
     events = []  # (stamp, bag order, kind, message)
     fixes = 0
@@ -296,20 +372,22 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
                 fixes += 1
                 if not keep or msg.status.status < 0:  # STATUS_NO_FIX: no position
                     continue
-            events.append((_stamp(msg), order, kind, msg))
+            events.append((_stamp(msg), order, kind, msg, c.topic))
     events.sort(key=lambda e: (e[0], e[1]))  # header-stamp order
 
-    f = PlainEkf(gps=gps_cfg is not None, absolute_yaw=mode in ("absolute", "relative"), gyro=gyro,
+    placing = gps_cfg is not None or any(not ps["differential"] for ps in poses.values())
+    f = PlainEkf(placed_by=placing, absolute_yaw=mode in ("absolute", "relative"), gyro=gyro,
                  world_twist=odom_cfg.twist_frame == "world")
     enu = Enu(*gps_cfg.datum) if gps_cfg is not None and gps_cfg.datum is not None else None
     yaw_offset = None  # orientation = "relative": filter yaw less the IMU's yaw at the first sample
-    # with a GPS, a pose is published once its first fix has placed the robot (as fusiond does): before it,
-    # the filter's position is the datum's, which a recording that starts away from its datum puts far off
-    placed = gps_cfg is None
+    # with a GPS (an absolute pose), a pose is published once its first fix (pose) has placed the robot (as
+    # fusiond does): before it, the filter's position is the datum's (the origin), which a recording that
+    # starts away from it puts far off
+    placed = not placing
     out = []
     from_pose = getattr(odom_cfg, "twist_from_pose", False)
     last_pose = None  # twist_from_pose: the previous odometry message's (t, p, q)
-    for t, _, kind, msg in events:
+    for t, _, kind, msg, topic in events:
         f.predict(t)
         if kind == "odom":
             tw = msg.twist.twist
@@ -364,6 +442,9 @@ def run(bags: Sequence[Path | str], cfg, fuse_fix: Callable[[float, int], bool] 
                 r = r + np.diag(_diag_floor(r.diagonal()) - r.diagonal())
             f.update_position(z, r)
             placed = True
+        elif kind == "pose":
+            _fuse_pose(f, msg, poses[topic])
+            placed = placed or not poses[topic]["differential"]
     return np.array(out, dtype=float).reshape(-1, 8)
 
 

@@ -105,7 +105,7 @@ def test_roll_pitch_rows_against_central_differences():
 
 
 def test_an_update_moves_the_state_by_the_gain_and_keeps_the_covariance_symmetric():
-    f = pe.PlainEkf(gps=True, absolute_yaw=False, gyro=True, world_twist=False)
+    f = pe.PlainEkf(placed_by=True, absolute_yaw=False, gyro=True, world_twist=False)
     f.predict(0.0)
     f.v = np.array([1.0, 0.0, 0.0])
     f.predict(1.0)
@@ -114,3 +114,77 @@ def test_an_update_moves_the_state_by_the_gain_and_keeps_the_covariance_symmetri
     assert np.all(np.isfinite(f.P)) and np.allclose(f.P, f.P.T)
     assert np.all(np.diag(f.P)[:3] < before[:3])
     assert np.linalg.eigvalsh(f.P).min() > 0.0
+
+
+class _Spy(pe.PlainEkf):
+    """A plain EKF whose update hands back what it was given (residual, H, R) instead of applying it."""
+
+    def update(self, residual, h, r):
+        self.seen = (residual, h, r)
+
+
+def _pose_residual(f, s, p_meas, q_meas, lever):
+    f.x = s
+    f.update_pose(p_meas, q_meas, np.eye(6) * 1e-4, lever)
+    return f.seen
+
+
+def test_pose_jacobian_with_a_lever_arm_against_central_differences():
+    """h(x) = (p + R(q) t, q): the residual's slope in each error direction is -H (a sensor ahead of the base
+    sees the heading through its lever arm). The attitude rows are the identity of the first-order error
+    state: exact where the measured attitude is the state's (here within 1e-5 rad)."""
+    f = _Spy(placed_by=True, absolute_yaw=False, gyro=True, world_twist=False)
+    for _ in range(10):
+        s = _random_state(RNG)
+        lever = RNG.normal(size=3)
+        p_meas, q_meas = s.p + RNG.normal(size=3) * 0.1, pe.quat_mul(s.q, pe.quat_exp(RNG.normal(size=3) * 1e-5))
+        _, H, _ = _pose_residual(f, s, p_meas, q_meas, lever)
+        num = np.zeros((6, 9))
+        h = 1e-6
+        for i in range(9):
+            d = np.zeros(9)
+            d[i] = h
+            plus = _pose_residual(f, pe.boxplus(s, d), p_meas, q_meas, lever)[0]
+            minus = _pose_residual(f, pe.boxplus(s, -d), p_meas, q_meas, lever)[0]
+            num[:, i] = -(plus - minus) / (2 * h)
+        np.testing.assert_allclose(H[:3], num[:3], atol=1e-6)  # the lever arm's rows
+        np.testing.assert_allclose(H[3:], num[3:], atol=5e-5)  # off by about the residual's 1e-5 rad
+
+
+def _odometry(x: float, y: float, yaw: float, sigma: float = 0.01):
+    """A nav_msgs/Odometry-like message whose pose is (x, y, yaw) with ``sigma`` on each axis."""
+    from types import SimpleNamespace as N
+
+    q = pe.quat_exp(np.array([0.0, 0.0, yaw]))
+    pose = N(position=N(x=x, y=y, z=0.0), orientation=N(x=q[0], y=q[1], z=q[2], w=q[3]))
+    return N(pose=N(pose=pose, covariance=list((np.eye(6) * sigma**2).ravel())))
+
+
+@pytest.mark.parametrize("mount_yaw", [0.0, 0.5 * math.pi])
+def test_a_differential_pose_moves_the_filter_by_its_deltas_in_base_link(mount_yaw):
+    """Visual odometry whose origin is 10 m and 1 rad away from the filter's (a drifting origin) and whose camera
+    is turned by mount_yaw (stated): the filter, its wheels reading nothing, goes 1 m along its own x per message,
+    as the deltas say once turned into base_link, and not to the camera's origin."""
+    f = pe.PlainEkf(placed_by=False, absolute_yaw=False, gyro=False, world_twist=False)
+    sensor = {"q_ext": pe.quat_exp(np.array([0.0, 0.0, mount_yaw])), "t_ext": np.zeros(3), "differential": True,
+              "last": None}
+    origin_yaw = 1.0
+    camera_yaw = origin_yaw + mount_yaw  # the camera's frame: base_link's turned by the mount
+    for k in range(5):
+        f.predict(float(k))
+        along = np.array([math.cos(origin_yaw), math.sin(origin_yaw)]) * k
+        pe._fuse_pose(f, _odometry(10.0 + along[0], -3.0 + along[1], camera_yaw), sensor)
+    np.testing.assert_allclose(f.x.p, [4.0, 0.0, 0.0], atol=0.05)
+    assert abs(pe.quat_rpy(f.x.q)[2]) < 0.01
+
+
+def test_an_absolute_pose_places_the_base_behind_its_sensor():
+    """A marker system reading its marker 0.5 m ahead of the base (stated): the base is put 0.5 m behind it."""
+    f = pe.PlainEkf(placed_by=True, absolute_yaw=False, gyro=False, world_twist=False)
+    sensor = {"q_ext": np.array([0.0, 0.0, 0.0, 1.0]), "t_ext": np.array([0.5, 0.0, 0.0]), "differential": False,
+              "last": None}
+    f.predict(0.0)
+    for k in range(3):
+        f.predict(0.1 * (k + 1))
+        pe._fuse_pose(f, _odometry(3.0, 2.0, 0.0, sigma=0.001), sensor)
+    np.testing.assert_allclose(f.x.p, [2.5, 2.0, 0.0], atol=0.01)
