@@ -509,8 +509,12 @@ class FusionCore:
 
     @property
     def twist_pitch(self) -> float | None:
-        """The estimated pitch of the wheels' twist in the body (rad), when it is in the state."""
+        """The estimated pitch of the wheels' twist in the body (rad), when it is in the state and estimated (not
+        held at the mount as configured: ``pitch_estimation = "auto"`` until released)."""
         if not self.initialised or not self.layout.has("twist_pitch"):
+            return None
+        e = self.layout.error["twist_pitch"].start
+        if self.state.ekf.P[e, e] == 0.0:
             return None
         return float(self.state.ekf.x[self.layout.nominal["twist_pitch"].start])
 

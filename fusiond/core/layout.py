@@ -42,7 +42,8 @@ def absolute_height(cfg: Config) -> bool:
 def layout_view(cfg: Config) -> LayoutView:
     """What each kind may know of the whole configuration (``LayoutView``)."""
     return LayoutView(cfg.filter, any(absolute_sensor(s) for s in cfg.sensors), absolute_height(cfg),
-                      any(kind_of(s).heading_reference(s) for s in cfg.sensors))
+                      any(kind_of(s).heading_reference(s) for s in cfg.sensors),
+                      any(fuses_height(cfg, s) and kind_of(s).height_wander(s) for s in cfg.sensors))
 
 
 def idle_keys(cfg: Config) -> list[tuple[str, str, str]]:

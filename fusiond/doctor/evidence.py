@@ -71,7 +71,8 @@ class Evidence:
     stats: dict[str, dict] | None = None  # per sensor {"received", "applied", "late", "dropped": {reason: n}}
     at_cap: bool = False  # the covariance sat at its cap at the end
     covariance_resets: int = 0
-    scales: dict[str, float] | None = None  # the scales the core estimated (e.g. wheel_scale)
+    # what the core estimated of the robot (e.g. wheel_scale; twist_pitch once estimated, not held)
+    scales: dict[str, float] | None = None
     t0: float | None = None  # the run's first stamp: times in messages are counted from it
     clocks: ClockOffsets | None = None  # the sensors' stamp offsets measured at arrival
     repeats: dict[str, int] | None = None  # per sensor, messages that came twice, stamp and content alike

@@ -256,6 +256,30 @@ class ErrorStateEKF:
         self.P = P
         self._cut()
 
+    def reattribute(self, src: tuple[int, int], dst: tuple[int, int], src_var: float,
+                    release: tuple[list[int], np.ndarray] | None = None) -> None:
+        """What the additive component ``src`` (nominal index, error index) holds belongs to ``dst``: dst takes
+        it (x[dst] += x[src], with its variance and correlations: dst' = dst + src), src starts again at 0 with
+        ``src_var`` and no correlation, and the components ``release[0]``, held until now, are given the
+        covariance ``release[1]``. Any sum of dst and src (a measurement of both) is unchanged. P stays PSD;
+        for the smoother a change it does not see through."""
+        (sn, se), (dn, de) = src, dst
+        self.x[dn] += self.x[sn]
+        self.x[sn] = 0.0
+        P = self.P.copy()
+        P[de, :] += P[se, :]
+        P[:, de] += P[:, se]
+        P[se, :] = 0.0
+        P[:, se] = 0.0
+        P[se, se] = src_var
+        if release is not None:
+            idx, block = release
+            P[idx, :] = 0.0
+            P[:, idx] = 0.0
+            P[np.ix_(idx, idx)] = block
+        self.P = P
+        self._cut()
+
     def widen(self, idx: list[int], C: np.ndarray) -> None:
         """Add ``C`` (PSD) to the covariance of the error components ``idx``: an independent error they
         took on at once (a GPS receiver's step, whose mean the caller moved the state by). P stays PSD;

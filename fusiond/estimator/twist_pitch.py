@@ -23,10 +23,17 @@ from .state import ScalarInputBlock, Vec3
 
 
 class TwistPitchBlock(ScalarInputBlock):
+    """``release_sigma`` > 0: held (no variance) until an update finds the height's other explanation refuted,
+    then given that prior (``ErrorStateEKF.release``)."""
+
     name = "twist_pitch"
     corrects = "linear"
     kernel_code = 4  # _kernels.c BLOCK_TWIST_PITCH
     start = 0.0  # the mount as configured
+
+    def __init__(self, sigma: float, walk: float, release_sigma: float = 0.0) -> None:
+        super().__init__(sigma, walk)
+        self.release_sigma = release_sigma
 
     def correct(self, xb: list[float], u: Vec3) -> Vec3:
         c, s = math.cos(xb[0]), math.sin(xb[0])

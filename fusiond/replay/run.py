@@ -81,8 +81,11 @@ class ReplayResult:
             pos_var, att_var = _variances(core)
             cap = core.cfg.filter.covariance_cap
             at_cap = pos_var >= 0.999 * cap[0] or att_var >= 0.999 * cap[1]
+        learned = dict(core.scales)
+        if core.twist_pitch is not None:  # estimated (not held, pitch_estimation = "auto", at the mount)
+            learned["twist_pitch"] = core.twist_pitch
         return self.doctor.verdicts(stats, at_cap=at_cap, covariance_resets=core.covariance_resets,
-                                    scales=core.scales)
+                                    scales=learned)
 
     @property
     def applied(self) -> dict[str, int]:

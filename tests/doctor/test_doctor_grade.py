@@ -23,12 +23,15 @@ MOUNT = 0.05
 WORLD = dict(duration=150.0, speed=5.0, gps_rate=5.0, gps_sigma=0.5, arcs=((10.0, 150.0, 0.05),))
 
 
-def attitude_of(samples, imu: str = "", gps: str = ""):
-    verdicts = run_samples(samples, robot_config(gps=gps, imu=imu)).verdicts()
+HELD = "pitch_estimation = false"  # the twist's pitch never estimated: the climb stays the wander state's
+
+
+def attitude_of(samples, imu: str = "", gps: str = "", odom: str = HELD):
+    verdicts = run_samples(samples, robot_config(gps=gps, imu=imu, odom=odom)).verdicts()
     return next((v for v in verdicts if v.sensor == "imu" and v.channel == "attitude"), None)
 
 
-def up_rms(samples, imu: str = "", odom: str = "") -> float:
+def up_rms(samples, imu: str = "", odom: str = HELD) -> float:
     """RMS of the published z (the ground is level: the truth is 0) after the first 20 s."""
     core = FusionCore(robot_config(gps="", imu=imu, odom=odom))
     zs = [core.pose()[1][2] for s in samples if core.ingest(s).publish and s.stamp > sim_gps.T0 + 20.0]
@@ -42,6 +45,11 @@ def test_a_pitched_imu_is_found_from_the_gps_climb_and_pasting_it_keeps_z_on_the
     # no receiver wander, and the published height leaves the fixes by about that: a problem
     assert v is not None and v.level == "problem" and v.key == "sensors.imu.extrinsic_rpy", v
     assert "GPS altitude" in v.message and "pitch_estimation = true" in v.message
+    # by default ("auto") the wander state's refuted height releases the filter's own pitch, which learns the
+    # mount: a warning saying so, the same line to paste
+    auto = attitude_of(samples, odom="")
+    assert auto.level == "warn" and "twist_pitch state learns" in auto.message, auto
+    assert auto.key == v.key and auto.suggestion.split("[")[0] == v.suggestion.split("[")[0], auto
     climb = v.evidence["unmodelled_climb_m"]
     assert abs(climb - abs(v.evidence["mount_pitch_error_rad"]) * v.evidence["grade_distance_m"]) < 1e-6, v.evidence
     delta, se = v.evidence["mount_pitch_error_rad"], v.evidence["mount_pitch_error_se"]
@@ -124,7 +132,7 @@ def test_the_climb_verdict_quotes_what_the_altitude_channel_shows_and_explains_i
 
     # the check reads the run's own altitude channel: here ok (the state absorbed the climb), and said so
     samples = sim_gps.simulate(sim_gps.World(**WORLD, imu_mount_pitch=MOUNT))
-    verdicts = run_samples(samples, robot_config(gps="")).verdicts()
+    verdicts = run_samples(samples, robot_config(gps="", odom=HELD)).verdicts()
     up = next(v for v in verdicts if v.sensor == "gps" and v.channel == "altitude")
     attitude = next(v for v in verdicts if v.sensor == "imu" and v.channel == "attitude")
     assert up.level == "ok" and attitude.level == "problem" and "looks normal" in attitude.message, attitude

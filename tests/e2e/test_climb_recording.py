@@ -1,9 +1,11 @@
-"""The highway car with no fix for 20 s from 25 s in (``scripts/recording_variants.py``'s ``comma_outage20``), as
-`fusiond init` writes its config: the IMU pitched in its mount, unstated, and no pitch_estimation. The twist climbs
-7 m per 100 m; the GPS's vertical error state takes it, through the outage too, until the height is off by more
-than the altitude's gate allows, and the fixes' altitudes are then gated out. The doctor's problem on the mount
-says so (not "the altitude's NIS looks normal"), and the altitude's own verdict is explained by it and names
-extrinsic_rpy, not the gate. Skipped without the recording."""
+"""The highway car as `fusiond init` and the README write its config: the IMU pitched in its mount, unstated,
+pitch_estimation at its default ("auto"). With no fix for 20 s from 25 s in (``scripts/recording_variants.py``'s
+``comma_outage20``) the twist climbs 7 m per 100 m; the GPS's vertical error state takes it (23 m when the fixes
+stop, short of the 24.5 m, 4.9 sigmas, that would release the twist's pitch), the climb goes on through the
+outage, the height is then off by more than the altitude's gate allows, and the fixes' altitudes are gated
+out. The doctor's problem on the mount says so (not "the altitude's NIS looks normal"), and the altitude's own
+verdict is explained by it and names extrinsic_rpy, not the gate. As recorded, the wander state's height is
+refuted and the pitch learned. Skipped without the recording."""
 
 from __future__ import annotations
 
@@ -44,3 +46,33 @@ def test_the_altitude_nis_low_of_a_slow_vertical_error_over_a_short_run_is_the_m
     assert result.doctor.channels[("gps", "altitude")].verdict() == "nis_low"  # the trait
     assert up.level == "ok" and up.message.startswith("NIS low") and "expects" in up.message, up
     assert not up.key and not up.suggestion, up
+
+
+def test_the_config_a_user_writes_learns_the_unstated_mount_once_the_altitude_refutes_its_wander():
+    """The highway car as recorded with the README's config (pitch_estimation at its default, "auto"): the
+    wander state takes the climb until it holds beyond 4.9 of its 5 m (27 s in), then the height is the car's
+    and the twist's pitch is learned (the doctor's fit: 0.0747 +- 0.008 rad). At the end the published height
+    is within metres of the fixes' altitude, where held (false) it is tens of metres off."""
+    from structlog.testing import capture_logs
+
+    import fusiond.logs
+    from tests.support.recordings import DATA
+
+    fusiond.logs.configure("warning")
+    with capture_logs() as logs:
+        auto = replay([DATA / "comma2k19_ex1"], loads(CONFIG), progress=False, doctor=False)
+    held = replay([DATA / "comma2k19_ex1"], loads(CONFIG.replace('twist_frame = "body"', 'twist_frame = "body"\n'
+                                                                 'pitch_estimation = false')),
+                  progress=False, doctor=False)
+    released = [e for e in logs if e["event"] == "height_refuted"]
+    assert len(released) == 1 and abs(released[0]["wander_m"]) > 24.4, released
+    assert abs(auto.core.twist_pitch - 0.0747) < 3 * 0.008, auto.core.twist_pitch
+    assert held.core.twist_pitch is None
+
+    def wander(result) -> float:
+        """The altitude's wander state at the end: z + b is what the fixes measure, so b is how far the
+        published height has left them."""
+        layout = result.core.layout
+        return abs(float(result.core.state.ekf.x[layout.nominal["gps_error"].start + 2]))
+
+    assert wander(auto) < 5.0 and wander(held) > 20.0, (wander(auto), wander(held))

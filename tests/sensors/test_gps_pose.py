@@ -157,7 +157,9 @@ def test_issue_config_keys_parse():
     assert isinstance(cfg.sensors[0], OdomSensor) and cfg.sensors[0].scale_estimation
     core = FusionCore(cfg)
     # gps_error: the vertical wander state a GPS gets by default
-    assert [b.name for b in core.layout.blocks] == ["pose", "gyro_bias", "gyro_scale", "wheel_scale", "gps_error"]
+    # the twist's pitch is held (pitch_estimation = "auto") beside the altitude's wander state that can release it
+    assert [b.name for b in core.layout.blocks] == ["pose", "gyro_bias", "gyro_scale", "wheel_scale", "twist_pitch",
+                                                    "gps_error"]
 
 
 @pytest.mark.parametrize("gps, pose, imu, needle", [
@@ -622,7 +624,7 @@ def test_gps_error_state_is_vertical_only_by_default_and_a_block_when_configured
     off = FusionCore(_gps_config("error_tau_s = 0.0\nerror_sigma = [1.0, 1.0, 1.0]\nvertical_error_sigma = 0.0"))
     assert not off.layout.has("gps_error")
     core = FusionCore(_gps_config(GM))
-    assert [b.name for b in core.layout.blocks][-1] == "gps_error" and core.layout.error_dim == 14
+    assert [b.name for b in core.layout.blocks][-1] == "gps_error" and core.layout.error_dim == 15  # twist_pitch held
     # neither roll/pitch nor an unaligned fix may write the GPS error
     es = core.layout.error["gps_error"]
     assert not core.tilt_mask[es].any() and not core.position_mask[es].any()

@@ -32,16 +32,17 @@ class LayoutView:
     """What a kind may know of the whole configuration when it says which state blocks it needs:
     the filter table, and whether some sensor defines the world frame / fuses an absolute height
     (a wheel scale and a twist pitch are observable only then) / tells the heading (a gyro's scale
-    is observable only then)."""
+    is observable only then) / tests a height wander state it fuses (``SensorKind.height_wander``)."""
 
-    __slots__ = ("filter", "absolute", "absolute_height", "heading")
+    __slots__ = ("filter", "absolute", "absolute_height", "heading", "height_wander")
 
     def __init__(self, filter_cfg: "FilterConfig", absolute: bool, absolute_height: bool,
-                 heading: bool = True) -> None:
+                 heading: bool = True, height_wander: bool = False) -> None:
         self.filter = filter_cfg
         self.absolute = absolute
         self.absolute_height = absolute_height
         self.heading = heading
+        self.height_wander = height_wander
 
 
 class SensorKind:
@@ -82,6 +83,11 @@ class SensorKind:
 
     def fuses_height(self, cfg: Any, filter_cfg: "FilterConfig") -> bool:
         """Does its absolute height reach the filter (outside two_d_mode, which the caller checks)?"""
+        return False
+
+    def height_wander(self, cfg: Any) -> bool:
+        """Does its height carry a modelled wander state whose estimate it tests against that model (a GPS
+        altitude's: a refuted wander releases what ``pitch_estimation = "auto"`` holds)?"""
         return False
 
     def fuses_yaw(self, cfg: Any) -> bool:

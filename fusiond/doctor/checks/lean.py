@@ -170,6 +170,15 @@ def grade_fit(series: Series, cfg: Config, altitude: ChannelStats | None = None)
     return GradeFit(delta, se_model, se_emp, n, float(np.abs(d_).sum()), runs, sigma_m if state else 0.0)
 
 
+def _pitch_learned(ev: Evidence) -> bool:
+    """Did the filter estimate the twist's pitch? What the run's core says (``Evidence.scales``: not while
+    ``pitch_estimation = "auto"`` held it), else what the config asks (a pitch estimated from the start)."""
+    if ev.scales is not None:
+        return "twist_pitch" in ev.scales
+    block = next((b for b in state_layout(ev.config).blocks if b.name == "twist_pitch"), None)
+    return block is not None and block.sigma > 0.0
+
+
 def grade_verdict(fit: GradeFit | None, imu: ImuSensor | None, mount: MountYaw | None,
                   learned: bool = False, altitude: ChannelStats | None = None) -> Verdict | None:
     """The GPS climb's verdict on the IMU's mounting pitch; None when the drive could not tell. ``learned``:
@@ -263,5 +272,5 @@ class Lean(BaseCheck):
         fit = grade_fit(ev.series, ev.config, altitude)
         if ev.tilt.n >= MIN_UPDATES and inverted_lean(ev.tilt) is not None:  # as lean_of asks of a lean
             return found(lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount, fit))
-        graded = grade_verdict(fit, ev.run_imu, ev.mount, state_layout(ev.config).has("twist_pitch"), altitude)
+        graded = grade_verdict(fit, ev.run_imu, ev.mount, _pitch_learned(ev), altitude)
         return found(graded if graded is not None else lean_verdict(ev.tilt, ev.run_imu, MIN_UPDATES, ev.mount))

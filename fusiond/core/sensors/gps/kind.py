@@ -50,6 +50,11 @@ class GpsKind(SensorKind):
     def fuses_height(self, cfg: GpsSensor, filter_cfg: FilterConfig) -> bool:
         return cfg.position_noise is None or cfg.position_noise[2] <= cfg.max_sigma
 
+    def height_wander(self, cfg: GpsSensor) -> bool:
+        if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
+            return cfg.error_sigma[2] > 0.0
+        return cfg.vertical_error_sigma > 0.0
+
     def state_blocks(self, cfg: GpsSensor, view: LayoutView) -> list[StateBlock]:
         if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
             return [GpsErrorBlock(cfg.error_tau_s, cfg.error_sigma)]

@@ -22,7 +22,9 @@ wheel scale what a drive reading zero for seconds cost the dead-reckoning.
 
 Altitude. Consumer receivers' altitude wanders by metres over minutes while they state
 1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
-so the fixes pull z only as far as that wander and the odometry allow.
+so the fixes pull z only as far as that wander and the odometry allow. A wander estimate its model refutes
+(``_refuted_height``) is the vehicle's height instead: z takes it, and the twist's pitch held for this
+(``pitch_estimation = "auto"``) is released.
 
 Axes. A fix axis whose stated variance exceeds ``max_sigma``^2 is not measured and not
 fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitude).
@@ -81,7 +83,7 @@ from ....estimator import observations as obs
 from ....estimator.geodesy import EnuFrame
 from ....estimator.rigid_fit import RigidFit, fit_rigid
 from ....logs import get_logger
-from ...diagnostics import DiagnosticsRecord
+from ...diagnostics import DiagnosticsRecord, chi2_ppf
 from ..base import SensorContext, SensorModel
 from ..checks import Rejected, finite
 from ..frame import lever, new_frame, set_position
@@ -117,6 +119,10 @@ FROZEN_JITTER_TRAVEL = 0.5  # ... once the wheels have moved this far (m) since 
 NOISE_UPPER_Z = 2.0  # the measured unstated noise is used at its ~98 % upper bound (one-sided, z = 2 sigmas)
 ENU_NAMES = ("east", "north", "up")
 WHEEL_SCALE = "wheel_scale"  # the state block of the odometry's speed scale (estimator/scale.py)
+# The altitude's wander state refuted: its estimate b of a zero-mean Gauss-Markov error of stationary variance
+# sigma^2 has a variance below sigma^2, so b^2 / sigma^2 beyond the chi-square(1) quantile of 1 - this happens
+# under the model less often than this per fix (``_refuted_height``)
+HEIGHT_REFUTED_FALSE_ALARM = 1e-6
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
@@ -253,6 +259,16 @@ class GpsModel(SensorModel):
         self.yaw_given = ctx.absolute_yaw and not layout.has("yaw_offset")
         # the wheels' scale in the state: a locked-out run may be the track stretched (``_locked_out``)
         self._scaled = layout.has(WHEEL_SCALE)
+        # blocks held until the height the wander state takes is refuted (``_refuted_height``): (rows, prior)
+        held = [(list(range(layout.error[b.name].start, layout.error[b.name].stop)), b.release_sigma)
+                for b in layout.blocks if getattr(b, "release_sigma", 0.0) > 0.0]
+        self._held = None
+        if held and self.error is not None:
+            block = next(b for b in layout.blocks if b.name == "gps_error")
+            if block.sigma[2] > 0.0:  # (rows, their priors, the wander's variance, the bound on b^2)
+                var = block.sigma[2] ** 2
+                self._held = ([i for rows, _ in held for i in rows], [s for rows, s in held for _ in rows], var,
+                              var * chi2_ppf(1.0 - HEIGHT_REFUTED_FALSE_ALARM, 1.0))
 
     def on_start(self, s: "FilterState") -> None:
         """A fresh state: the ENU frame at the configured datum (or none yet), heading unknown."""
@@ -410,12 +426,43 @@ class GpsModel(SensorModel):
             y, H, R = self._block(ekf, z, inp.cov, vertical)
             # The altitude does not depend on the heading: gated as soon as a gate is configured.
             res = ekf.update(y, H, R, cfg.mahalanobis_threshold, mask)
+            if self._held is not None and not res.rejected:
+                self._refuted_height(s, stamp, emit)
             if emit:
                 records.append(self.record(stamp, ["up"], y.tolist(), res.innovation_var, res.nis, 1, res.rejected,
                                            "altitude", late))
         return records
 
+    def _refuted_height(self, s: "FilterState", stamp: float, emit: bool) -> None:
+        """The altitude's wander state holding a height its model refutes: the climb is the vehicle's.
+
+        The wander b is a zero-mean Gauss-Markov error of stationary std dev sigma (vertical_error_sigma): the
+        filter's estimate of it has a variance below sigma^2, so b^2 > sigma^2 chi2(1 - HEIGHT_REFUTED_FALSE_ALARM)
+        (4.9 sigma) happens under that model at fewer than one fix in a million. What puts it there is a height the
+        motion model makes and the fixes do not: a twist that climbs as the body is pitched against the wheels (an
+        IMU pitched in its mount, 7 m per 100 m at 4 deg, which b takes for receiver wander until the published
+        height leaves the fixes by tens of metres). Then the height b holds is the state's (z takes it: z + b, what
+        the fixes measure, is unchanged), b starts again from its prior, and the blocks held for this (the twist's
+        pitch, ``pitch_estimation = "auto"``) get their priors: the climb is learned from the next fixes on. Once:
+        a released block is no longer held (its variance is no longer 0)."""
+        ekf = s.ekf
+        rows, sigmas, var, bound = self._held
+        P = ekf.P
+        if any(P[i, i] != 0.0 for i in rows):
+            return  # released already
+        b_n, b_e = self.ctx.layout.nominal["gps_error"].start + 2, self._error_rows[2]
+        b = float(ekf.x[b_n])
+        if b * b <= bound:
+            return
+        ekf.reattribute((b_n, b_e), (2, 2), var, (rows, np.diag([sg * sg for sg in sigmas])))
+        if emit:
+            log.warning("height_refuted", sensor=self.cfg.name, stamp=stamp, wander_m=b, sigma_m=math.sqrt(var),
+                        reason="the altitude's wander state held beyond its model: the height is the vehicle's "
+                               "(a twist climbing with the body pitched in its mount); what was held for this "
+                               "(the twist's pitch, pitch_estimation = \"auto\") is estimated from here on")
+
     def _measured_noise(self, s: "FilterState", z, inp: GpsInput, stamp: float) -> GpsInput:
+
         """A receiver that states no accuracy: its horizontal white noise, measured. Between two consecutive
         fixes (within the sensor's timeout) the wheels know how far the antenna went far better than a fix
         knows where it is, and a distance needs no heading (this works while the heading is searched for):

@@ -37,14 +37,18 @@ class OdomKind(SensorKind):
         blocks: list[StateBlock] = []
         if cfg.scale_estimation or (cfg.scale_estimation is None and view.absolute):
             blocks.append(WheelScaleBlock(fc.wheel_scale_sigma, fc.wheel_scale_walk))
-        # Not on by default: over a short drive the twist's pitch is confounded with the altitude's
-        # wander, and an error model that calls a slow wander white lets it take the wander for a slope.
-        if view.absolute_height and cfg.twist_frame == "body" and cfg.pitch_estimation:
+        # Not free from the start by default: over a short drive the twist's pitch is confounded with the
+        # altitude's wander, and an error model that calls a slow wander white lets it take the wander for a
+        # slope. "auto" holds it at the mount as configured (no variance, no walk: a rigid mount) until the
+        # wander state holds a height its model refutes (``TwistPitchBlock.release_sigma``).
+        if view.absolute_height and cfg.twist_frame == "body" and cfg.pitch_estimation is True:
             blocks.append(TwistPitchBlock(fc.twist_pitch_sigma, fc.twist_pitch_walk))
+        elif view.height_wander and cfg.twist_frame == "body" and cfg.pitch_estimation == "auto":
+            blocks.append(TwistPitchBlock(0.0, 0.0, release_sigma=fc.twist_pitch_sigma))
         return blocks
 
     def idle_keys(self, cfg: OdomSensor, view: LayoutView) -> list[tuple[str, str]]:
-        if not cfg.pitch_estimation or (view.absolute_height and cfg.twist_frame == "body"):
+        if cfg.pitch_estimation is not True or (view.absolute_height and cfg.twist_frame == "body"):
             return []
         if view.filter.two_d_mode:
             why = "two_d_mode holds the pitch at 0"

@@ -20,8 +20,10 @@ class OdomSensor(SensorTable, tag="odom"):
     # makes it observable; false: an explicit opt-out
     scale_estimation: bool | None = None
     # estimate the pitch of the wheels' twist in the body (an IMU pitched in its mount beyond extrinsic_rpy);
-    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one
-    pitch_estimation: bool = False
+    # needs an absolute height (GPS altitude, an absolute pose's z) to be observable, and is ignored without one.
+    # "auto": in the state, held at the mount as configured until the GPS's vertical error state is found
+    # holding more than its model allows (the climb is then the twist's: core/sensors/gps/model.py)
+    pitch_estimation: bool | Literal["auto"] = "auto"
     twist_correlation_s: float = 0.5  # the linear twist covariance is a velocity error lasting this long, s
     # m/s^2: a drive that drops to exactly zero faster than a vehicle can stop: the vehicle is taken
     # to coast on, slowing at coast_decel (+- coast_decel * t) until it stops (core/sensors/odom/model.py); 0: off
