@@ -1,11 +1,13 @@
-"""The highway car as `fusiond init` and the README write its config: the IMU pitched in its mount, unstated,
-pitch_estimation at its default ("auto"). With no fix for 20 s from 25 s in (``scripts/recording_variants.py``'s
-``comma_outage20``) the twist climbs 7 m per 100 m; the GPS's vertical error state takes it (23 m when the fixes
-stop, short of the 24.5 m, 4.9 sigmas, that would release the twist's pitch), the climb goes on through the
-outage, the height is then off by more than the altitude's gate allows, and the fixes' altitudes are gated
-out. The doctor's problem on the mount says so (not "the altitude's NIS looks normal"), and the altitude's own
-verdict is explained by it and names extrinsic_rpy, not the gate. As recorded, the wander state's height is
-refuted and the pitch learned. Skipped without the recording."""
+"""The highway car as `fusiond init` and the README write its config: the IMU pitched in its mount, unstated.
+With no fix for 20 s from 25 s in (``scripts/recording_variants.py``'s ``comma_outage20``) the twist climbs 7 m per
+100 m; the GPS's vertical error state takes it (23 m when the fixes stop, short of the 24.5 m, 4.9 sigmas, that
+would refute it), the climb goes on through the outage, and the height is then off by more than the altitude's
+gate allows: the fixes' altitudes are gated out until they have agreed for 3 s, and the height is taken from them
+again (``gps_altitude_reacquired``). With pitch_estimation held (false) the climb starts over, and the doctor's
+problem on the mount says the altitude was gated (not "the altitude's NIS looks normal"); the altitude's own
+verdict is explained by it and names extrinsic_rpy, not the gate. At the default ("auto") the lock-out refutes the
+wander and the twist's pitch is learned from then on. As recorded, the wander state's height is refuted and the
+pitch learned. Skipped without the recording."""
 
 from __future__ import annotations
 
@@ -19,15 +21,24 @@ pytestmark = needs("comma2k19_ex1", "the highway car")
 CONFIG = HIGHWAY_CONFIG
 
 
+HELD = CONFIG.replace('twist_frame = "body"', 'twist_frame = "body"\npitch_estimation = false')
+
+
 def test_the_altitude_gated_by_an_unstated_mount_is_put_down_to_the_mount(tmp_path):
     bag = write_variant("comma_outage20", tmp_path / "comma_outage20")
-    result = replay([bag], loads(CONFIG), progress=False)
+    result = replay([bag], loads(HELD), progress=False)
     verdicts = result.verdicts()
     attitude = next(v for v in verdicts if v.sensor == "imu" and v.channel == "attitude")
     up = next(v for v in verdicts if v.sensor == "gps" and v.channel == "altitude")
     assert result.doctor.channels[("gps", "altitude")].rejected > 0  # the recording has the trait
     assert attitude.level == "problem" and "gated" in attitude.message and "looks normal" not in attitude.message
     assert up.key == "sensors.imu.extrinsic_rpy" and "explained by imu/attitude" in up.message, up
+    # at the default the lock-out itself refutes the wander: the height is taken from the fixes and the pitch learned
+    auto = replay([bag], loads(CONFIG), progress=False)
+    gated = auto.doctor.channels[("gps", "altitude")].rejected  # the lock-out ends at the same fix either way
+    assert gated == result.doctor.channels[("gps", "altitude")].rejected, gated
+    assert result.core.twist_pitch is None
+    assert auto.core.twist_pitch is not None and abs(auto.core.twist_pitch - 0.0747) < 3 * 0.008, auto.core.twist_pitch
 
 
 STATED_MOUNT = CONFIG.replace('angular_velocity = true', 'angular_velocity = true\nextrinsic_rpy = [0.0, 0.0741, 0.0]')
@@ -61,9 +72,7 @@ def test_the_config_a_user_writes_learns_the_unstated_mount_once_the_altitude_re
     fusiond.logs.configure("warning")
     with capture_logs() as logs:
         auto = replay([DATA / "comma2k19_ex1"], loads(CONFIG), progress=False, doctor=False)
-    held = replay([DATA / "comma2k19_ex1"], loads(CONFIG.replace('twist_frame = "body"', 'twist_frame = "body"\n'
-                                                                 'pitch_estimation = false')),
-                  progress=False, doctor=False)
+    held = replay([DATA / "comma2k19_ex1"], loads(HELD), progress=False, doctor=False)
     released = [e for e in logs if e["event"] == "height_refuted"]
     assert len(released) == 1 and abs(released[0]["wander_m"]) > 24.4, released
     assert abs(auto.core.twist_pitch - 0.0747) < 3 * 0.008, auto.core.twist_pitch

@@ -67,3 +67,38 @@ def test_vertical_error_keys_are_validated(gps, needle):
 
     with pytest.raises(ConfigError, match=needle):
         robot_config(gps=gps)
+
+
+def _heights(w: World, gps: str = "") -> tuple[list[tuple[float, float]], list]:
+    """(seconds into the run, published z) and the warnings logged, over a run of ``w``."""
+    from structlog.testing import capture_logs
+
+    import fusiond.logs
+    from tests.support.sim_gps import T0
+
+    fusiond.logs.configure("warning")
+    core = FusionCore(robot_config(gps=gps))
+    with capture_logs() as logs:
+        zs = [(s.stamp - T0, float(core.pose()[1][2])) for s in simulate(w) if core.ingest(s).publish]
+    return zs, logs
+
+
+@pytest.mark.parametrize("until, taken", [(65.0, False), (1e9, True)])
+def test_an_altitude_gated_out_for_long_and_agreeing_is_taken_back(until, taken):
+    """The receiver's altitude 30 m up from 60 s (its height reference switched): a jump, so its fixes must agree
+    for REACQUIRE_JUMP_S (10 s) before the height is taken from them (``GpsModel._altitude_lost``), as a
+    horizontal step would be; back after 5 s, it never is, and z stays on the ground throughout. Before, a
+    height beyond the altitude's gate was locked out for good (a car that climbed 40 m through a tunnel with
+    its IMU pitched in its mount kept its wrong height to the end)."""
+    w = World(duration=100.0, speed=5.0, gps_rate=5.0, gps_sigma=0.5, arcs=((10.0, 100.0, 0.05),),
+              gps_alt_jump=(60.0, until, 30.0))
+    zs, logs = _heights(w)
+    reacquired = [e for e in logs if e["event"] == "gps_altitude_reacquired"]
+    late = [z for t, z in zs if t > 80.0]
+    early = [z for t, z in zs if 62.0 < t < 69.0]  # jumped, not yet agreed for 10 s
+    assert max(abs(z) for z in early) < 1.0
+    if taken:
+        assert len(reacquired) == 1 and 69.0 < reacquired[0]["stamp"] - 1000.0 < 72.0, reacquired
+        assert all(abs(z - 30.0) < 2.0 for z in late), late[:5]
+    else:
+        assert not reacquired and all(abs(z) < 1.0 for z in late)

@@ -24,7 +24,8 @@ Altitude. Consumer receivers' altitude wanders by metres over minutes while they
 1-2 m; by default (``vertical_error_sigma``) the vertical carries a Gauss-Markov error state,
 so the fixes pull z only as far as that wander and the odometry allow. A wander estimate its model refutes
 (``_refuted_height``) is the vehicle's height instead: z takes it, and the twist's pitch held for this
-(``pitch_estimation = "auto"``) is released.
+(``pitch_estimation = "auto"``) is released. Altitudes gated out for seconds that agree with each other take
+the height back, as a horizontal lock-out does (``_altitude_lost``): the height is then what is wrong.
 
 Axes. A fix axis whose stated variance exceeds ``max_sigma``^2 is not measured and not
 fused (a 2D receiver, or ``position_noise = [.., .., 1e6]`` to leave out altitude).
@@ -232,6 +233,10 @@ class GpsOwn(msgspec.Struct, frozen=True, gc=False):
     last: tuple[float, ...] | None = None
     # the state's horizontal position after the newest fix applied (``shown_position``)
     anchor: tuple[float, float] | None = None
+    # the altitude's (``_altitude_lost``): the newest the gate let in (t, innovation), and the run gated out
+    # since: (first t, fixes, sum of innovations, of their squares, largest variance, began with a jump)
+    up_accepted: tuple[float, float] | None = None
+    up_rejected: tuple[float, int, float, float, float, bool] | None = None
 
 
 class GpsModel(SensorModel):
@@ -428,12 +433,13 @@ class GpsModel(SensorModel):
             res = ekf.update(y, H, R, cfg.mahalanobis_threshold, mask)
             if self._held is not None and not res.rejected:
                 self._refuted_height(s, stamp, emit)
+            self._altitude_lost(s, res.rejected, float(y[0]), float(R[0, 0]), stamp, emit)
             if emit:
                 records.append(self.record(stamp, ["up"], y.tolist(), res.innovation_var, res.nis, 1, res.rejected,
                                            "altitude", late))
         return records
 
-    def _refuted_height(self, s: "FilterState", stamp: float, emit: bool) -> None:
+    def _refuted_height(self, s: "FilterState", stamp: float, emit: bool, force: bool = False) -> None:
         """The altitude's wander state holding a height its model refutes: the climb is the vehicle's.
 
         The wander b is a zero-mean Gauss-Markov error of stationary std dev sigma (vertical_error_sigma): the
@@ -444,7 +450,8 @@ class GpsModel(SensorModel):
         height leaves the fixes by tens of metres). Then the height b holds is the state's (z takes it: z + b, what
         the fixes measure, is unchanged), b starts again from its prior, and the blocks held for this (the twist's
         pitch, ``pitch_estimation = "auto"``) get their priors: the climb is learned from the next fixes on. Once:
-        a released block is no longer held (its variance is no longer 0)."""
+        a released block is no longer held (its variance is no longer 0). ``force``: refuted by the altitude's
+        lock-out (``_altitude_lost``) whatever b holds."""
         ekf = s.ekf
         rows, sigmas, var, bound = self._held
         P = ekf.P
@@ -452,14 +459,57 @@ class GpsModel(SensorModel):
             return  # released already
         b_n, b_e = self.ctx.layout.nominal["gps_error"].start + 2, self._error_rows[2]
         b = float(ekf.x[b_n])
-        if b * b <= bound:
+        if b * b <= bound and not force:
             return
         ekf.reattribute((b_n, b_e), (2, 2), var, (rows, np.diag([sg * sg for sg in sigmas])))
         if emit:
+            why = ("the fixes' altitude gated out for seconds, agreeing" if force else
+                   "the altitude's wander state held beyond its model")
             log.warning("height_refuted", sensor=self.cfg.name, stamp=stamp, wander_m=b, sigma_m=math.sqrt(var),
-                        reason="the altitude's wander state held beyond its model: the height is the vehicle's "
-                               "(a twist climbing with the body pitched in its mount); what was held for this "
-                               "(the twist's pitch, pitch_estimation = \"auto\") is estimated from here on")
+                        reason=why + ": the height is the vehicle's (a twist climbing with the body pitched in its "
+                                     "mount); what was held for this (the twist's pitch, pitch_estimation = "
+                                     "\"auto\") is estimated from here on")
+
+    def _altitude_lost(self, s: "FilterState", rejected: bool, y: float, r: float, stamp: float, emit: bool) -> None:
+        """Is the filter locked out of the altitude? As for the horizontal (``_locked_out``): altitudes gated out
+        for REACQUIRE_S in a row (REACQUIRE_JUMP_S when the run began with a jump of the fixes: a receiver's
+        height reference switching), at least REACQUIRE_FIXES of them, whose innovations agree (their spread
+        within REACQUIRE_AGREE of their mean or REACQUIRE_SIGMAS of the fixes' sigma) say the filter's height is
+        what is wrong: a height the motion model made while no fix came (a tunnel, with the twist climbing as a
+        pitched IMU tilts it) that no later fix can pull back once it is beyond the gate. The height is then
+        taken from the fixes: a wander the state held beyond its model is z's (``_refuted_height``), and z's
+        variance opens by the run's mean innovation squared, so that the next altitude is let in. A run that
+        does not agree starts again at its newest fix."""
+        own: GpsOwn = s.own[self.index]
+        if not rejected:
+            if own.up_rejected is not None or own.up_accepted is None or stamp > own.up_accepted[0]:
+                s.own[self.index] = msgspec.structs.replace(own, up_accepted=(stamp, y), up_rejected=None)
+            return
+        run = own.up_rejected
+        if run is None:
+            last = own.up_accepted
+            jumped = (last is not None and stamp - last[0] <= self._jump_after(s)
+                      and abs(y - last[1]) > 0.5 * abs(y))
+            run = (stamp, 0, 0.0, 0.0, 0.0, jumped)
+        t0, n, sy, syy, rmax, jumped = run
+        n, sy, syy, rmax = n + 1, sy + y, syy + y * y, max(rmax, r)
+        wait = REACQUIRE_JUMP_S if jumped else REACQUIRE_S
+        if n < REACQUIRE_FIXES or stamp - t0 < wait:
+            s.own[self.index] = msgspec.structs.replace(own, up_rejected=(t0, n, sy, syy, rmax, jumped))
+            return
+        mean = sy / n
+        spread = math.sqrt(max(syy / n - mean * mean, 0.0))
+        if spread > max(REACQUIRE_AGREE * abs(mean), REACQUIRE_SIGMAS * math.sqrt(rmax)):
+            s.own[self.index] = msgspec.structs.replace(own, up_rejected=(stamp, 1, y, y * y, r, False))
+            return
+        s.own[self.index] = msgspec.structs.replace(own, up_rejected=None)
+        ekf = s.ekf
+        if self._held is not None:
+            self._refuted_height(s, stamp, emit, force=True)
+        ekf.widen([POSITION_ROWS[2]], np.array([[mean * mean]]))
+        if emit:
+            log.warning("gps_altitude_reacquired", sensor=self.name, stamp=stamp, rejected=n, seconds=stamp - t0,
+                        offset_m=mean)
 
     def _measured_noise(self, s: "FilterState", z, inp: GpsInput, stamp: float) -> GpsInput:
 
