@@ -24,7 +24,7 @@ from .state import ScalarInputBlock, Vec3
 
 class TwistPitchBlock(ScalarInputBlock):
     """``release_sigma`` > 0: held (no variance) until an update finds the height's other explanation refuted,
-    then given that prior (``ErrorStateEKF.release``)."""
+    then given that prior (``ErrorStateEKF.reattribute``'s ``release``)."""
 
     name = "twist_pitch"
     corrects = "linear"

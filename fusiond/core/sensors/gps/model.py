@@ -482,8 +482,7 @@ class GpsModel(SensorModel):
         does not agree starts again at its newest fix."""
         own: GpsOwn = s.own[self.index]
         if not rejected:
-            if own.up_rejected is not None or own.up_accepted is None or stamp > own.up_accepted[0]:
-                s.own[self.index] = msgspec.structs.replace(own, up_accepted=(stamp, y), up_rejected=None)
+            s.own[self.index] = msgspec.structs.replace(own, up_accepted=(stamp, y), up_rejected=None)
             return
         run = own.up_rejected
         if run is None:
