@@ -147,6 +147,20 @@ class GpsTrack:
     guess: tuple[float, float] | None = None  # before a fit is applied: the newest fit's (theta, var_theta)
 
 
+@dataclass(frozen=True, slots=True)
+class HeldForHeight:
+    """What ``GpsModel._refuted_height`` needs: the error rows held (no variance) until the altitude's wander is
+    refuted and the priors they get then, the wander's vertical component (nominal, error index) and its
+    stationary variance, and the bound on its estimate squared."""
+
+    rows: list[int]
+    priors: list[float]
+    b_nominal: int
+    b_error: int
+    var: float
+    bound: float
+
+
 @dataclass(slots=True)
 class GpsInput:
     """A valid fix: WGS84 position and its ENU covariance (row-major 9-tuple, m^2). ``stated``: False
@@ -267,13 +281,14 @@ class GpsModel(SensorModel):
         # blocks held until the height the wander state takes is refuted (``_refuted_height``): (rows, prior)
         held = [(list(range(layout.error[b.name].start, layout.error[b.name].stop)), b.release_sigma)
                 for b in layout.blocks if getattr(b, "release_sigma", 0.0) > 0.0]
-        self._held = None
+        self._held: HeldForHeight | None = None
         if held and self.error is not None:
             block = next(b for b in layout.blocks if b.name == "gps_error")
-            if block.sigma[2] > 0.0:  # (rows, their priors, the wander's variance, the bound on b^2)
+            if block.sigma[2] > 0.0:
                 var = block.sigma[2] ** 2
-                self._held = ([i for rows, _ in held for i in rows], [s for rows, s in held for _ in rows], var,
-                              var * chi2_ppf(1.0 - HEIGHT_REFUTED_FALSE_ALARM, 1.0))
+                self._held = HeldForHeight([i for rows, _ in held for i in rows], [p for rows, p in held for _ in rows],
+                                           layout.nominal["gps_error"].start + 2, self._error_rows[2], var,
+                                           var * chi2_ppf(1.0 - HEIGHT_REFUTED_FALSE_ALARM, 1.0))
 
     def on_start(self, s: "FilterState") -> None:
         """A fresh state: the ENU frame at the configured datum (or none yet), heading unknown."""
@@ -452,20 +467,19 @@ class GpsModel(SensorModel):
         pitch, ``pitch_estimation = "auto"``) get their priors: the climb is learned from the next fixes on. Once:
         a released block is no longer held (its variance is no longer 0). ``force``: refuted by the altitude's
         lock-out (``_altitude_lost``) whatever b holds."""
-        ekf = s.ekf
-        rows, sigmas, var, bound = self._held
+        ekf, held = s.ekf, self._held
         P = ekf.P
-        if any(P[i, i] != 0.0 for i in rows):
+        if any(P[i, i] != 0.0 for i in held.rows):
             return  # released already
-        b_n, b_e = self.ctx.layout.nominal["gps_error"].start + 2, self._error_rows[2]
-        b = float(ekf.x[b_n])
-        if b * b <= bound and not force:
+        b = float(ekf.x[held.b_nominal])
+        if b * b <= held.bound and not force:
             return
-        ekf.reattribute((b_n, b_e), (2, 2), var, (rows, np.diag([sg * sg for sg in sigmas])))
+        ekf.reattribute((held.b_nominal, held.b_error), (2, 2), held.var,
+                        (held.rows, np.diag([p * p for p in held.priors])))
         if emit:
             why = ("the fixes' altitude gated out for seconds, agreeing" if force else
                    "the altitude's wander state held beyond its model")
-            log.warning("height_refuted", sensor=self.cfg.name, stamp=stamp, wander_m=b, sigma_m=math.sqrt(var),
+            log.warning("height_refuted", sensor=self.cfg.name, stamp=stamp, wander_m=b, sigma_m=math.sqrt(held.var),
                         reason=why + ": the height is the vehicle's (a twist climbing with the body pitched in its "
                                      "mount); what was held for this (the twist's pitch, pitch_estimation = "
                                      "\"auto\") is estimated from here on")
@@ -486,10 +500,7 @@ class GpsModel(SensorModel):
             return
         run = own.up_rejected
         if run is None:
-            last = own.up_accepted
-            jumped = (last is not None and stamp - last[0] <= self._jump_after(s)
-                      and abs(y - last[1]) > 0.5 * abs(y))
-            run = (stamp, 0, 0.0, 0.0, 0.0, jumped)
+            run = (stamp, 0, 0.0, 0.0, 0.0, _jumped(own.up_accepted, (stamp, y), self._jump_after(s)))
         t0, n, sy, syy, rmax, jumped = run
         n, sy, syy, rmax = n + 1, sy + y, syy + y * y, max(rmax, r)
         wait = REACQUIRE_JUMP_S if jumped else REACQUIRE_S
@@ -511,7 +522,6 @@ class GpsModel(SensorModel):
                         offset_m=mean)
 
     def _measured_noise(self, s: "FilterState", z, inp: GpsInput, stamp: float) -> GpsInput:
-
         """A receiver that states no accuracy: its horizontal white noise, measured. Between two consecutive
         fixes (within the sensor's timeout) the wheels know how far the antenna went far better than a fix
         knows where it is, and a distance needs no heading (this works while the heading is searched for):
@@ -634,7 +644,7 @@ class GpsModel(SensorModel):
             left = None  # long enough at the new level: a return is a step like any other
         h = -math.log(alpha)
         if st is None:
-            if len(own.rejected) != 1 or not _jumped(own, own.rejected[0], self._jump_after(s)):
+            if len(own.rejected) != 1 or not _jumped(own.accepted, own.rejected[0][:3], self._jump_after(s)):
                 return None  # not the first fix of a run, or no jump: the REACQUIRE_S rule alone
             st = _step_start(y, R, hp)
         else:
@@ -691,7 +701,7 @@ class GpsModel(SensorModel):
         through a gap or a tunnel, a wrong heading); a receiver jumps: multipath (a 4 s burst 18 m
         off would be taken in after 3 s and left again 1 s later), a reset. Its new fixes may be right, but
         they have to keep saying so for longer."""
-        return REACQUIRE_JUMP_S if _jumped(own, first, jump_after) else REACQUIRE_S
+        return REACQUIRE_JUMP_S if _jumped(own.accepted, first[:3], jump_after) else REACQUIRE_S
 
     def _reacquire(self, s: "FilterState", z, inp: GpsInput, rows: tuple[int, ...], stamp: float,
                    emit: bool) -> None:
@@ -941,14 +951,13 @@ def _fitted_residual(fixes: list[tuple[float, float]], track: list[tuple[float, 
     return math.sqrt(sq / n), k
 
 
-def _jumped(own: GpsOwn, first: tuple, jump_after: float) -> bool:
-    """Did the run of gated-out fixes that begins with ``first`` begin with a jump of the fixes: its first
-    fix within ``jump_after`` of one the gate let in (``GpsModel._jump_after``), and most of its offset new
-    (``_reacquire_after``)?"""
-    last = own.accepted
+def _jumped(last: tuple | None, first: tuple, jump_after: float) -> bool:
+    """Did a run of gated-out fixes begin with a jump of the fixes: its first, ``first`` (t, innovation
+    components...), within ``jump_after`` of ``last``, the newest one the gate let in (the same components;
+    ``GpsModel._jump_after``), and most of its offset new (``_reacquire_after``, ``_altitude_lost``)?"""
     if last is None or first[0] - last[0] > jump_after:
         return False
-    return math.hypot(first[1] - last[1], first[2] - last[2]) > 0.5 * math.hypot(first[1], first[2])
+    return math.hypot(*(f - a for f, a in zip(first[1:], last[1:]))) > 0.5 * math.hypot(*first[1:])
 
 
 def _step_start(y: np.ndarray, R: np.ndarray, hp: np.ndarray) -> StepRun:
