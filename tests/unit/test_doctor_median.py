@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -36,3 +37,23 @@ def test_it_does_not_import_numpy_ma():
                           "median([1.0, 2.0]); print('numpy.ma' in sys.modules)"],
                          capture_output=True, text=True, check=True, timeout=60)
     assert out.stdout.split() == ["False"]
+
+
+def test_a_gps_runs_verdicts_do_not_import_numpy_ma():
+    """The noise line of a GPS stating far too much noise takes the median of its innovations (the absolute
+    check's robust spread): through the doctor's median, so a replay's verdicts never pay numpy.ma's import."""
+    script = (
+        "import sys\n"
+        "import fusiond.logs\n"
+        "fusiond.logs.configure('warning')\n"
+        "from tests.support import sim_gps\n"
+        "from tests.support.configs import robot_config\n"
+        "from tests.support.verdicts import one, verdicts_of\n"
+        "world = sim_gps.World(duration=120.0, gps_rate=10.0, gps_sigma=0.6, speed=25.0)\n"
+        "v = one(verdicts_of(robot_config(gps='position_noise = [10.0, 10.0, 20.0]'), sim_gps.simulate(world)),\n"
+        "        'gps', 'position')\n"
+        "print(v.suggestion.startswith('position_noise = ['), 'numpy.ma' in sys.modules)\n")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=120,
+                         cwd=root)
+    assert out.stdout.split() == ["True", "False"], out.stdout + out.stderr

@@ -16,6 +16,7 @@ from ..channels import (GATED_FRACTION, PerChannel, applied_verdict, figures, gp
 from ...core.sensors.registry import kind_of
 from ..evidence import Evidence
 from ..heading import gps_sigma_up
+from ..median import median
 from ..nis import ChannelStats
 from ..verdict import Verdict, sensor_key
 
@@ -46,7 +47,7 @@ def _spread(ch: ChannelStats, i: int) -> float:
     width = len(ch.components)
     column = [y[i] for y in ch.innovations if len(y) == width] if ch.keep else []
     if len(column) >= MIN_ROBUST:
-        return ROBUST_SCALE * float(np.median(np.abs(column)))
+        return ROBUST_SCALE * median(np.abs(column))
     return ch.component(i)[1]
 
 
