@@ -45,7 +45,7 @@ from ..config import Config, ConfigError, convert, validate
 from ..doctor import ChannelStats, Proof, Verdict
 from ..logs import muted
 from .forked import run_side_by_side
-from .likelihood import Reference, Score, TermKey, reference, replay_records, score, term_keys
+from .likelihood import Keyed, Reference, Score, TermKey, reference, replay_records, score
 from .recording import split_stamp
 
 __all__ = ["prove_advice", "split_key", "with_suggestion"]
@@ -89,12 +89,12 @@ def with_suggestion(cfg: Config, verdict: Verdict) -> tuple[Config, int]:
         raise ConfigError(f"{verdict.suggestion!r} in {verdict.key}: {err}") from None
 
 
-def _comparable(ref: Reference, records: Sequence[object]) -> tuple[Reference, int]:
+def _comparable(ref: Reference, records: Keyed) -> tuple[Reference, int]:
     """``ref`` without the terms that ``records`` measure otherwise (module doc): with another dof, or
     of a channel ``records`` no longer have at all; and how many those are."""
     dof: dict[TermKey, int] = {}
     channels: set[tuple[str, str]] = set()
-    for k, r in term_keys(records):
+    for k, r, _ in records.items:
         dof[k] = r.dof
         channels.add((k[0], k[1]))
     keep = {k: t for k, t in ref.terms.items() if (k[0], k[1]) in channels and dof.get(k, t[2]) == t[2]}
@@ -275,8 +275,9 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
     if base_records is None:
         with muted():
             base_records = replay_records(cfg, samples, backend)
-    full = reference(base_records, cfg)
-    held = reference(base_records, cfg, after=split_stamp(samples))  # the run's last 30 %, as tune holds it back
+    base = Keyed(base_records)  # each term's key and log det, for every reference and score below
+    full = reference(base, cfg)
+    held = reference(base, cfg, after=split_stamp(samples))  # the run's last 30 %, as tune holds it back
     proofs: dict[tuple[str, str], Proof] = {}
     to_replay: list[tuple[tuple[str, str], Verdict, Config, int]] = []
     # problems first: if the budget runs out, the lines left unproven are the least urgent ones
@@ -315,12 +316,13 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             return Proof(False, f"it applies {back} the run as configured gated or only learned from: the likelihood "
                                 "over the run's own updates cannot judge a run it no longer loses; the evidence above "
                                 "is the case for it", judged=False)
-        ref, dropped = _comparable(full, records)
+        keyed = Keyed(records)
+        ref, dropped = _comparable(full, keyed)
         if dropped and not ref.terms:  # every update it leaves is measured otherwise (a yaw no longer fused)
             return Proof(False, f"it changes how each of the run's {dropped} updates is measured, so none is left "
                                 "to compare: the likelihood over the run's own updates cannot judge it; the "
                                 "evidence above is the case for it", judged=False)
-        before, after = score(base_records, ref), score(records, ref)
+        before, after = score(base, ref), score(keyed, ref)
         gain = before.neg_loglik - after.neg_loglik
         if gain == 0.0 and not dropped and after.rejected == before.rejected:
             start = base_final
@@ -340,8 +342,8 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
                                 "doctor's own check: the replay cannot judge it", judged=False)
         effect = _effect(before, after, v, dropped, base_records, records)
         if gain > n_keys:
-            held_ref, _ = _comparable(held, records)
-            held_gain = score(base_records, held_ref).neg_loglik - score(records, held_ref).neg_loglik
+            held_ref, _ = _comparable(held, keyed)
+            held_gain = score(base, held_ref).neg_loglik - score(keyed, held_ref).neg_loglik
             if held_gain < 0.0:  # better over the run, worse over its end: fitted to the run, not predicting it
                 return Proof(False, effect + f"; but over the run's last 30 % (held back, as tune validates) "
                                              f"likelihood {held_gain:+.0f}: it does not predict the run's end better")

@@ -102,6 +102,25 @@ def term_keys(records: Iterable[DiagnosticsRecord]) -> Iterable[tuple[TermKey, D
         yield (r.sensor, r.channel, r.stamp, n), r
 
 
+class Keyed:
+    """A replay's records, each with its term key (``term_keys``) and its log det S (``_log_det``; None: not
+    usable), taken once for the several references one replay is scored on (the advice's proof scores each of its
+    two replays on the whole run's terms and on the held-back end's). ``score``, ``reference`` and the proof take
+    it wherever they take records."""
+
+    __slots__ = ("records", "items", "keys")
+
+    def __init__(self, records: Iterable[DiagnosticsRecord]) -> None:
+        self.records = records if isinstance(records, Sequence) else list(records)
+        self.items: list[tuple[TermKey, DiagnosticsRecord, float | None]] = [
+            (k, r, _log_det(r)) for k, r in term_keys(self.records)]
+        self.keys: set[TermKey] = {k for k, _, _ in self.items}
+
+
+def _keyed(records: Iterable[DiagnosticsRecord] | Keyed) -> Keyed:
+    return records if isinstance(records, Keyed) else Keyed(records)
+
+
 def _log_det(r: DiagnosticsRecord) -> float | None:
     """log det of S's diagonal approximation (module doc); None when S is not usable."""
     total = 0.0
@@ -138,17 +157,19 @@ class Reference:
         return len(self.terms)
 
 
-def reference(records: Iterable[DiagnosticsRecord], cfg: Config, after: float = -math.inf,
+def reference(records: Iterable[DiagnosticsRecord] | Keyed, cfg: Config, after: float = -math.inf,
               until: float = math.inf) -> Reference:
     """The terms of this replay (module doc) with stamp in (after, until]."""
     terms: dict[TermKey, tuple[float, float, int]] = {}
-    for key, r in term_keys(records):
-        if r.channel in CHECK_CHANNELS or r.learning or not (after < r.stamp <= until):
+    caps: dict[tuple[str, str, int], float] = {}  # nis_cap of each (sensor, channel, dof): a config lookup each
+    for key, r, ld in _keyed(records).items:
+        if ld is None or r.channel in CHECK_CHANNELS or r.learning or not (after < r.stamp <= until):
             continue
-        ld = _log_det(r)
-        if ld is None:
-            continue
-        terms[key] = (ld, nis_cap(cfg, r.sensor, r.channel, r.dof), r.dof)
+        group = (r.sensor, r.channel, r.dof)
+        cap = caps.get(group)
+        if cap is None:
+            cap = caps[group] = nis_cap(cfg, r.sensor, r.channel, r.dof)
+        terms[key] = (ld, cap, r.dof)
     return Reference(terms, tolerances(terms))
 
 
@@ -212,7 +233,7 @@ class Score:
     nis_per_dof: dict[str, float] = field(default_factory=dict)
 
 
-def score(records: Iterable[DiagnosticsRecord], ref: Reference) -> Score:
+def score(records: Iterable[DiagnosticsRecord] | Keyed, ref: Reference) -> Score:
     """-log L of a replay's records on ``ref``'s terms (module doc)."""
     terms = ref.terms
     total = 0.0
@@ -220,19 +241,17 @@ def score(records: Iterable[DiagnosticsRecord], ref: Reference) -> Score:
     found: set[TermKey] = set()
     nis_sum: dict[str, float] = {}
     nis_n: dict[str, int] = {}
-    spare: list[DiagnosticsRecord] = []
-    keyed = list(term_keys(records))
-    for key, r in keyed:
-        if key not in terms and r.channel not in CHECK_CHANNELS and not r.learning:
-            spare.append(r)
-    unfound = terms.keys() - {k for k, _ in keyed}
+    keyed = _keyed(records)
+    spare = [r for key, r, _ in keyed.items
+             if key not in terms and r.channel not in CHECK_CHANNELS and not r.learning]
+    unfound = terms.keys() - keyed.keys
     slid = _paired(terms, unfound, sorted(spare, key=lambda r: r.stamp), ref.tolerance) if unfound and spare else []
-    for key, r in [*keyed, *slid]:  # the keys are distinct: a paired term is one no record found
+    # the keys are distinct: a paired term is one no record found
+    for key, r, ld in [*keyed.items, *((k, r, _log_det(r)) for k, r in slid)]:
         t = terms.get(key)
         if t is None:
             continue
         found.add(key)
-        ld = _log_det(r)
         cap = t[1]
         if ld is None:
             total += t[0] + cap
@@ -263,5 +282,5 @@ def residuals(ref: Reference, sensors: Sequence[str] | None = None, channel: str
     return sum(t[2] for k, t in ref.terms.items() if (sensors is None or k[0] in sensors) and (channel is None or k[1] == channel))
 
 
-__all__ = ["CHECK_CHANNELS", "Reference", "Score", "TermKey", "nis_cap", "reference", "replay_records", "residuals",
+__all__ = ["CHECK_CHANNELS", "Keyed", "Reference", "Score", "TermKey", "nis_cap", "reference", "replay_records", "residuals",
            "score", "term_keys", "tolerances"]
