@@ -100,7 +100,9 @@ def run(args: argparse.Namespace) -> int:
     from ..replay.read_ahead import reading_ahead
 
     bags = [Path(p) for p in args.bags]
-    reading = reading_ahead(bags, cfg.sensors)
+    # ... and, where every sample it reads reaches the doctor (no evaluation holding fixes back), the doctor's
+    # sample part made there too, beside the filter (read_ahead's module doc)
+    reading = reading_ahead(bags, cfg.sensors, cfg if fused is not None and recorder is None else None)
     try:
         from ..replay.run import replay, summary
     except BaseException:

@@ -25,11 +25,13 @@ them all; the live monitor only the diagnostics stream) and returns
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from operator import attrgetter
 
 import msgspec
 
 from ..config import Config
+from ..errors import DoctorError
 from ..core.sensors.registry import kind_of
 from ..core.sensors import OdomSample
 from ..core.sensors.odom import PoseDifferences, body_twist
@@ -46,7 +48,7 @@ from .series import Series, SeriesCollector
 from .twist import TwistStats
 from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
 
-__all__ = ["Doctor", "Evidence", "Proof", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose",
+__all__ = ["Doctor", "Evidence", "Proof", "SampleSide", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose",
            "format_verdicts", "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, the GPS
@@ -56,6 +58,21 @@ KEPT_CHANNELS = ("gyro_bias", "position", "altitude", "position_step")
 GATE_CHANNELS = ("yaw_jump",)  # every record is a reading its gate kept out: no NIS test (ChannelStats.judged)
 _SENSOR, _STAMP = attrgetter("sensor"), attrgetter("stamp")
 CHUNK = 4096  # records or samples noted before they are folded into the statistics (bounded memory)
+
+
+@dataclass
+class SampleSide:
+    """What a doctor fed only a run's samples (``Doctor.add_sample``, every one in arrival order) made of them,
+    settled at their end: the part of a doctor that reads no filter output. Another doctor, fed the same run's
+    records and estimates but none of its samples, ``adopt``s it, and is then the doctor fed both: a replay's
+    reading child, which has the samples first, does this part beside the filter (``replay.read_ahead``)."""
+
+    t0: float | None  # the earliest sample stamp (the records' earliest is the other doctor's)
+    repeats: dict[str, int]
+    lost: LostSamples
+    clocks: ClockOffsets
+    collector: SeriesCollector | None  # its series' sample streams (the estimates are the other doctor's)
+    pose_motion: PoseMotion | None
 
 
 class Doctor:
@@ -144,6 +161,29 @@ class Doctor:
             self.t0 = sample.stamp
         if len(samples) >= CHUNK:
             self._settle_samples()
+
+    def sample_side(self) -> SampleSide:
+        """This doctor's sample part (``SampleSide``), settled as the run's end settles it (the last waiting
+        frame judged lost, every sample folded into the series): ask once every sample has been added."""
+        self.lost.flush()
+        self._settle_samples()
+        if self.collector is not None:
+            self.collector.finish()
+        return SampleSide(self.t0, self.repeats, self.lost, self._clocks, self.collector, self.pose_motion)
+
+    def adopt(self, side: SampleSide) -> None:
+        """Take ``side`` (``sample_side`` of a doctor with this config, fed every sample of this run) as this
+        doctor's sample part: this one is fed the run's records, twists and estimates, and none of its samples.
+        The verdicts are then those of one doctor fed all of it (the two parts share no state but the earliest
+        stamp, a minimum; the series' sample streams and its estimates are separate fields)."""
+        if self._samples or self._newest:
+            raise DoctorError("a doctor fed samples cannot adopt another's: the run's samples would count twice")
+        self.repeats, self.lost, self._clocks, self.pose_motion = side.repeats, side.lost, side.clocks, side.pose_motion
+        if side.t0 is not None and (self.t0 is None or side.t0 < self.t0):
+            self.t0 = side.t0
+        if self.collector is not None and side.collector is not None:
+            side.collector.take_estimates(self.collector)
+            self.collector = side.collector
 
     def add_rest(self, sample, since: float) -> None:
         """An odometry sample the filter took at rest, since ``since`` (filter time). The standstills the gyro

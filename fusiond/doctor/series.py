@@ -182,6 +182,15 @@ class SeriesCollector:
         s.est_pos_var.append(pos_var)
         s.est_att_var.append(att_var)
 
+    def take_estimates(self, other: SeriesCollector) -> None:
+        """``other``'s estimates and standstills (``add_estimate``, ``add_rest``) as this collector's, which was fed
+        none: the samples were collected here and the filter's output there (``Doctor.adopt``)."""
+        s, o = self.series, other.series
+        s.rest_spans = o.rest_spans
+        s.est_t, s.est_yaw, s.est_roll, s.est_pitch = o.est_t, o.est_yaw, o.est_roll, o.est_pitch
+        s.est_bias_z, s.est_pos_var, s.est_att_var = o.est_bias_z, o.est_pos_var, o.est_att_var
+        self._est_next = other._est_next
+
     def wants_estimate(self, t: float) -> bool:
         return t >= self._est_next
 

@@ -9,6 +9,12 @@ imports and builds the filter and the doctor, then takes the samples as it fuses
 three to four times faster than the filter fuses, so it is done early (``complete``), and the rest of
 the recording is in memory from then on.
 
+A replay whose doctor reads every sample as read (no evaluation holding fixes back) may ask the child for the
+doctor's sample part too (``doctor``): the child has every sample long before the filter has fused them, so
+once it has sent them it feeds a doctor of its own the same samples in the same order and sends what it made
+of them (``Doctor.sample_side``) after the last frame; the replay's doctor adopts it (``doctor_side``). Where it
+does not arrive (the child died, or failed at it), the replay feeds its own doctor the samples it kept.
+
 Nothing differs from reading in this process: the same BagError when the bags cannot be opened, the
 same header, the same samples in the same order, the same count of messages that did not decode
 (``decode_errors``, known once every sample has been taken), and a bag damaged halfway raises its
@@ -39,7 +45,8 @@ from ..logs import get_logger
 from ..processes import fork_writer, stop_child, workers_available, write_all
 
 if TYPE_CHECKING:
-    from ..config import SensorConfig
+    from ..config import Config, SensorConfig
+    from ..doctor import SampleSide
     from ..samples import Sample
     from .bag import BagSamples
 
@@ -54,17 +61,20 @@ PIPE_BYTES = 1 << 20  # the pipe's buffer, asked of Linux (its unprivileged maxi
 BACKLOG = 1024
 _LENGTH = struct.Struct("<Q")  # a frame: its length, then a pickled (tag, value)
 # the child's frames, in order: ("opened", (missing, bag topics, total)), ("batch", samples)...,
-# then ("end", decode errors); ("error", exception) in place of any of them ends the stream
+# then ("end", decode errors); ("error", exception) in place of any of them ends the stream. Asked for the
+# doctor's sample part, the child sends ("doctor", SampleSide) after "end" (nothing when it could not)
 
 
-def reading_ahead(paths: Sequence[Path | str], sensors: Sequence[SensorConfig]) -> ReadAhead | None:
+def reading_ahead(paths: Sequence[Path | str], sensors: Sequence[SensorConfig],
+                  doctor: Config | None = None) -> ReadAhead | None:
     """The bags read ahead in a forked child (``ReadAhead``), or None where that would not help (one CPU,
     or no fork here: ``processes.workers_available``) or cannot be had (no process or pipe left: the log
-    says so): the caller reads them itself then."""
+    says so): the caller reads them itself then. ``doctor``: the config whose doctor's sample part the child
+    makes too (module doc)."""
     if workers_available() < 2:
         return None
     try:
-        return ReadAhead(paths, sensors)
+        return ReadAhead(paths, sensors, doctor)
     except OSError as err:
         log.warning("read_ahead_unavailable", reason=str(err))
         return None
@@ -75,8 +85,12 @@ class ReadAhead:
     open (raising what opening them raised) and returns this reader; iterate once; then ``decode_errors``.
     Use it as a context manager, or ``close()`` it."""
 
-    def __init__(self, paths: Sequence[Path | str], sensors: Sequence[SensorConfig]) -> None:
+    def __init__(self, paths: Sequence[Path | str], sensors: Sequence[SensorConfig],
+                 doctor: Config | None = None) -> None:
         self._paths, self._sensors = [Path(p) for p in paths], list(sensors)
+        self._doctor_cfg = doctor
+        self.feeds_doctor = doctor is not None  # the caller's doctor is to take its sample part from here
+        self._side: SampleSide | None = None
         self.missing: list[str] = []
         self.bag_topics: dict[str, str] = {}
         self.total = 0
@@ -131,7 +145,23 @@ class ReadAhead:
                 else:
                     self._pump(block=True)
         finally:
-            self.close()
+            if not self._doctor_pending():  # else the child is reaped once its doctor's part is taken
+                self.close()
+
+    def doctor_side(self) -> SampleSide | None:
+        """The doctor's sample part the child made (``feeds_doctor``), asked once every sample has been taken
+        (it waits for the child to send it, which it has nearly always done by then: it decodes several times
+        faster than the filter fuses); None when it sent none (it died, or failed at it): the caller's doctor
+        is then fed the samples itself. The child is reaped."""
+        while self._doctor_pending():
+            self._pump(block=True)
+        self.close()
+        return self._side
+
+    def _doctor_pending(self) -> bool:
+        """Every sample sent, and the doctor's part still to come from a child that is alive."""
+        return (self.feeds_doctor and self._side is None and self._ended is not None and self._ended[0] == "end"
+                and not self._eof and self._read_end >= 0)
 
     def close(self) -> None:
         """Stop the child if it still runs and reap it; close bags opened here (idempotent)."""
@@ -140,8 +170,9 @@ class ReadAhead:
             self._local = None
         if self._read_end < 0:
             return
+        running = self._ended is None or self._doctor_pending()  # (a doctor's part no one waits for any more)
         fd, self._read_end = self._read_end, -1
-        if self._ended is None:  # still running, or died: a kill is harmless either way
+        if running:  # still running, or died: a kill is harmless either way
             stop_child(fd, self.pid)
         else:
             os.close(fd)
@@ -166,6 +197,7 @@ class ReadAhead:
         from .bag import open_bag_samples
 
         batch: list[Sample] = []
+        kept: list[Sample] | None = [] if self._doctor_cfg is not None else None  # for the doctor, once all are sent
         try:
             with open_bag_samples(self._paths, self._sensors) as bag:
                 _write(fd, ("opened", (bag.missing, bag.bag_topics, bag.total)))
@@ -173,16 +205,36 @@ class ReadAhead:
                     batch.append(sample)
                     if len(batch) == BATCH:
                         _write(fd, ("batch", batch))
+                        if kept is not None:
+                            kept += batch
                         batch = []
                 last: tuple[str, object] = ("end", bag.decode_errors)
         except Exception as err:  # noqa: BLE001 - carried to the parent, which raises it in its place
             last = ("error", err)
         if batch:  # the samples before the end, or before what was raised
             _write(fd, ("batch", batch))
+            if kept is not None:
+                kept += batch
         try:
             _write(fd, last)
         except (pickle.PicklingError, TypeError, AttributeError):  # an exception that does not pickle: its text
             _write(fd, ("error", ReplayError(f"{type(last[1]).__name__}: {last[1]}")))
+        if kept is not None and last[0] == "end":
+            self._send_doctor(fd, kept)
+
+    def _send_doctor(self, fd: int, samples: list[Sample]) -> None:
+        """In the child, after the last frame: the doctor's sample part of ``samples`` (module doc); nothing
+        when making it fails (the parent's doctor is then fed the samples there, and says what fails)."""
+        try:
+            from ..doctor import Doctor
+
+            doctor = Doctor(self._doctor_cfg)
+            for sample in samples:
+                doctor.add_sample(sample)
+            payload = pickle.dumps(("doctor", doctor.sample_side()), protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # noqa: BLE001 - the parent redoes it, where the error shows
+            return
+        write_all(fd, _LENGTH.pack(len(payload)) + payload)
 
     def _pump(self, block: bool) -> None:
         """Read what the pipe holds (``block``: wait until a frame is whole, or the pipe closes) and unpickle
@@ -224,6 +276,8 @@ class ReadAhead:
                 self._batches.append(value)
             elif tag == "opened":
                 self._take_header(value)
+            elif tag == "doctor":
+                self._side = value
             else:
                 self._ended = (tag, value)
                 self.complete = True

@@ -269,7 +269,11 @@ def replay(
                 samples = list(samples)
                 _feed(runner, zip(samples, runner.core.snapshot_plan(samples)), bar)
             elif lookahead:
-                _feed_until_read(runner, iter(samples), reading, bar)
+                # the child makes the doctor's sample part (the caller asked it: every sample it reads is fed)
+                runner.samples_to_doctor = runner.doctor is None or not reading.feeds_doctor
+                fed = _feed_until_read(runner, iter(samples), reading, bar)
+                if not runner.samples_to_doctor:
+                    _doctor_samples(runner.doctor, reading, fed)
             else:
                 _feed(runner, ((sample, True) for sample in samples), bar)
             bar.update(runner.messages)
@@ -296,10 +300,11 @@ def _feed(runner: Runner, planned: Iterable[tuple[Sample, bool]], bar: _Progress
             bar.update(runner.messages)
 
 
-def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead, bar: _Progress) -> None:
+def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead, bar: _Progress) -> list[Sample]:
     """``samples`` as they come from ``ahead``, each keeping its snapshot (a plan needs every later sample),
     until the child has read the whole recording; then the rest as ``snapshot_plan`` says, planned over the
-    whole recording as fed (so what the rest keeps is what a plan made before the first sample would say)."""
+    whole recording as fed (so what the rest keeps is what a plan made before the first sample would say).
+    Returns every sample fed, in order."""
     fed: list[Sample] = []
     for sample in samples:
         fed.append(sample)
@@ -308,9 +313,22 @@ def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead
             bar.update(runner.messages)
         if ahead.complete:
             rest = list(samples)
-            plan = runner.core.snapshot_plan(fed + rest)
-            _feed(runner, zip(rest, plan[len(fed):]), bar)
-            return
+            fed += rest
+            plan = runner.core.snapshot_plan(fed)
+            _feed(runner, zip(rest, plan[len(fed) - len(rest):]), bar)
+            return fed
+    return fed
+
+
+def _doctor_samples(doctor, ahead: ReadAhead, fed: list[Sample]) -> None:
+    """The doctor's sample part of a replay whose reading child was asked for it (``read_ahead``): adopted from
+    the child, else (it sent none) made here from the samples ``fed``, in their order."""
+    side = ahead.doctor_side()
+    if side is not None:
+        doctor.adopt(side)
+        return
+    for sample in fed:
+        doctor.add_sample(sample)
 
 
 class Runner:
@@ -335,13 +353,15 @@ class Runner:
         self.heading_known = array("b")  # per published pose (ReplayResult.heading_known)
         self.messages = 0
         self.on_record: Callable | None = None
+        # False: the doctor's sample part is made elsewhere from the same samples and adopted (``replay``)
+        self.samples_to_doctor = True
 
     def feed(self, sample, keep: bool = True) -> None:
         """``keep``: the core's (``FusionCore.ingest``, ``snapshot_plan``)."""
         core, doctor, trace, keep_trace = self.core, self.doctor, self.trace, self.keep_trace
         self.messages += 1
         step = core.ingest(sample, keep)
-        if doctor is not None:
+        if doctor is not None and self.samples_to_doctor:
             doctor.add_sample(sample)
         if step.poses:  # samples held for a time jump, applied at once: one pose per odometry message
             known = step.poses_heading_known or [core.heading_known] * len(step.poses)

@@ -251,7 +251,7 @@ def _imported_modules(path: Path) -> set[str]:
 
 # The doctor is a floor above the fusion core: it reads the core's diagnostics and the samples, and
 # only the commands that show its verdicts read it.
-_DOCTOR_READERS = {"monitor.py", "replay/run.py", "tune/advice.py", "tune/doctor_values.py"}
+_DOCTOR_READERS = {"monitor.py", "replay/read_ahead.py", "replay/run.py", "tune/advice.py", "tune/doctor_values.py"}
 
 
 def test_the_core_never_imports_the_doctor_and_only_its_readers_do():

@@ -201,3 +201,51 @@ def test_late_samples_land_on_their_snapshots_when_read_ahead(jackal_bag: Path, 
     in_turn = replay([tmp_path / "late"], cfg, progress=False, doctor=False, lookahead=True, read_ahead=False)
     assert tum_text(ahead.trajectory) == tum_text(in_turn.trajectory)
     assert ahead.core.stats[1].late > 400 and ahead.poses > 3000
+
+
+def _verdict_texts(result) -> list[str]:
+    return [f"{v.sensor}/{v.channel} {v.level} {v.message} {v.suggestion}" for v in result.verdicts()]
+
+
+def test_the_doctors_sample_part_made_in_the_child_is_the_one_made_here(jackal_bag: Path) -> None:
+    """Asked for the doctor's sample part, the child sends it after the samples: the same series, repeats and
+    earliest stamp as a doctor fed the same samples here; the child is reaped once it is taken."""
+    from fusiond.doctor import Doctor
+
+    cfg = loads(JACKAL)
+    here = Doctor(cfg)
+    for s in _in_turn([jackal_bag])[0]:
+        here.add_sample(s)
+    mine = here.sample_side()
+    with ReadAhead([jackal_bag], cfg.sensors, cfg).opened() as ahead:
+        assert ahead.feeds_doctor and len(list(ahead)) == 6121
+        side = ahead.doctor_side()
+    assert side is not None and _child_gone(ahead.pid)
+    assert side.collector.series == mine.collector.series and len(side.collector.series.odom_t) > 100
+    assert (side.t0, side.repeats, side.lost.odom, side.lost.imu) == (mine.t0, mine.repeats, mine.lost.odom,
+                                                                     mine.lost.imu)
+
+
+@pytest.mark.parametrize("child_fails", [False, True])
+def test_a_replay_whose_child_makes_the_doctors_sample_part_says_what_one_in_turn_says(
+        jackal_bag: Path, monkeypatch: pytest.MonkeyPatch, child_fails: bool) -> None:
+    """The replay's doctor adopts the child's sample part (and, when the child sends none, is fed the samples it
+    kept): the verdicts, the series and the trajectory are those of the doctor fed everything in one process."""
+    from fusiond.doctor import Doctor
+
+    cfg = loads(JACKAL)
+    if child_fails:  # the child, forked after this, fails at its doctor's part and sends nothing
+        def fails(self):
+            raise RuntimeError("no sample part")
+        monkeypatch.setattr(Doctor, "sample_side", fails)
+    adopted = []
+    real_adopt = Doctor.adopt
+    monkeypatch.setattr(Doctor, "adopt", lambda self, side: (adopted.append(side), real_adopt(self, side)))
+    reading = reading_ahead([jackal_bag], cfg.sensors, cfg)
+    ahead = replay([jackal_bag], cfg, progress=False, lookahead=True, reading=reading)
+    assert reading.feeds_doctor and _child_gone(reading.pid)
+    assert len(adopted) == (0 if child_fails else 1)
+    in_turn = replay([jackal_bag], cfg, progress=False, lookahead=True, read_ahead=False)
+    assert _verdict_texts(ahead) == _verdict_texts(in_turn) and len(_verdict_texts(in_turn)) >= 2
+    assert ahead.doctor.series() == in_turn.doctor.series()
+    assert tum_text(ahead.trajectory) == tum_text(in_turn.trajectory)
