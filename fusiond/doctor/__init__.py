@@ -48,8 +48,8 @@ from .series import Series, SeriesCollector
 from .twist import TwistStats
 from .verdict import LEVELS, Proof, Verdict, filter_key, format_verdicts, sensor_key
 
-__all__ = ["Doctor", "Evidence", "Proof", "SampleSide", "Verdict", "Series", "SeriesCollector", "ChannelStats", "diagnose",
-           "format_verdicts", "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
+__all__ = ["Doctor", "Evidence", "Proof", "SampleSide", "Verdict", "Series", "SeriesCollector", "ChannelStats",
+           "diagnose", "format_verdicts", "judge_nis", "nis_bounds", "sensor_key", "filter_key"]
 
 # channels whose every update is kept (stamp, rejected, innovation): the standstill episodes, the GPS
 # innovations whose autocorrelation tells a wandering receiver error from white noise, and the receiver's

@@ -13,7 +13,9 @@ A replay whose doctor reads every sample as read (no evaluation holding fixes ba
 doctor's sample part too (``doctor``): the child has every sample long before the filter has fused them, so
 once it has sent them it feeds a doctor of its own the same samples in the same order and sends what it made
 of them (``Doctor.sample_side``) after the last frame; the replay's doctor adopts it (``doctor_side``). Where it
-does not arrive (the child died, or failed at it), the replay feeds its own doctor the samples it kept.
+does not arrive (the child died, or failed at it), the replay feeds its own doctor the samples it kept. The
+child keeps the samples for it only up to what the pipe's backlog may hold (BACKLOG batches): a longer
+recording's doctor is fed in the replay, as without the child, and the child's memory stays bounded.
 
 Nothing differs from reading in this process: the same BagError when the bags cannot be opened, the
 same header, the same samples in the same order, the same count of messages that did not decode
@@ -197,10 +199,12 @@ class ReadAhead:
         from .bag import open_bag_samples
 
         batch: list[Sample] = []
-        kept: list[Sample] | None = [] if self._doctor_cfg is not None else None  # for the doctor, once all are sent
+        kept: list[Sample] | None = None  # for the doctor, once all are sent
         try:
             with open_bag_samples(self._paths, self._sensors) as bag:
                 _write(fd, ("opened", (bag.missing, bag.bag_topics, bag.total)))
+                if self._doctor_cfg is not None and _keeps_for_doctor(bag.total):
+                    kept = []
                 for sample in bag:
                     batch.append(sample)
                     if len(batch) == BATCH:
@@ -290,6 +294,7 @@ class ReadAhead:
     def _take_header(self, header: tuple[list[str], dict[str, str], int]) -> None:
         self.missing, self.bag_topics, self.total = list(header[0]), dict(header[1]), int(header[2])
         self._header = True
+        self.feeds_doctor = self.feeds_doctor and _keeps_for_doctor(self.total)  # as the child decides it
 
     def _died(self) -> None:
         log.warning("read_ahead_rerun", samples_taken=self._taken,
@@ -307,6 +312,11 @@ class ReadAhead:
             yield sample
         self.decode_errors = bag.decode_errors
         self._ended = ("end", self.decode_errors)
+
+
+def _keeps_for_doctor(total: int) -> bool:
+    """Does the child keep a recording of ``total`` messages for the doctor's sample part (module doc)?"""
+    return total <= BACKLOG * BATCH
 
 
 def _write(fd: int, frame: tuple[str, object]) -> None:

@@ -282,5 +282,5 @@ def residuals(ref: Reference, sensors: Sequence[str] | None = None, channel: str
     return sum(t[2] for k, t in ref.terms.items() if (sensors is None or k[0] in sensors) and (channel is None or k[1] == channel))
 
 
-__all__ = ["CHECK_CHANNELS", "Keyed", "Reference", "Score", "TermKey", "nis_cap", "reference", "replay_records", "residuals",
-           "score", "term_keys", "tolerances"]
+__all__ = ["CHECK_CHANNELS", "Keyed", "Reference", "Score", "TermKey", "nis_cap", "reference", "replay_records",
+           "residuals", "score", "term_keys", "tolerances"]

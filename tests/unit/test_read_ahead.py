@@ -226,25 +226,28 @@ def test_the_doctors_sample_part_made_in_the_child_is_the_one_made_here(jackal_b
                                                                      mine.lost.imu)
 
 
-@pytest.mark.parametrize("child_fails", [False, True])
+@pytest.mark.parametrize("case", ["adopted", "child_fails", "too_long"])
 def test_a_replay_whose_child_makes_the_doctors_sample_part_says_what_one_in_turn_says(
-        jackal_bag: Path, monkeypatch: pytest.MonkeyPatch, child_fails: bool) -> None:
-    """The replay's doctor adopts the child's sample part (and, when the child sends none, is fed the samples it
-    kept): the verdicts, the series and the trajectory are those of the doctor fed everything in one process."""
+        jackal_bag: Path, monkeypatch: pytest.MonkeyPatch, case: str) -> None:
+    """The replay's doctor adopts the child's sample part; when the child sends none (it failed at it), or keeps
+    none (a recording longer than the pipe's backlog), it is fed the samples in the replay: the verdicts, the
+    series and the trajectory are those of the doctor fed everything in one process."""
     from fusiond.doctor import Doctor
 
     cfg = loads(JACKAL)
-    if child_fails:  # the child, forked after this, fails at its doctor's part and sends nothing
+    if case == "child_fails":  # the child, forked after this, fails at its doctor's part and sends nothing
         def fails(self):
             raise RuntimeError("no sample part")
         monkeypatch.setattr(Doctor, "sample_side", fails)
+    if case == "too_long":  # a backlog of two batches: the Jackal's 6,121 messages are more
+        monkeypatch.setattr(read_ahead, "BACKLOG", 2)
     adopted = []
     real_adopt = Doctor.adopt
     monkeypatch.setattr(Doctor, "adopt", lambda self, side: (adopted.append(side), real_adopt(self, side)))
     reading = reading_ahead([jackal_bag], cfg.sensors, cfg)
     ahead = replay([jackal_bag], cfg, progress=False, lookahead=True, reading=reading)
-    assert reading.feeds_doctor and _child_gone(reading.pid)
-    assert len(adopted) == (0 if child_fails else 1)
+    assert reading.feeds_doctor == (case != "too_long") and _child_gone(reading.pid)
+    assert len(adopted) == (1 if case == "adopted" else 0)
     in_turn = replay([jackal_bag], cfg, progress=False, lookahead=True, read_ahead=False)
     assert _verdict_texts(ahead) == _verdict_texts(in_turn) and len(_verdict_texts(in_turn)) >= 2
     assert ahead.doctor.series() == in_turn.doctor.series()
