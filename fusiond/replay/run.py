@@ -81,11 +81,8 @@ class ReplayResult:
             pos_var, att_var = _variances(core)
             cap = core.cfg.filter.covariance_cap
             at_cap = pos_var >= 0.999 * cap[0] or att_var >= 0.999 * cap[1]
-        learned = dict(core.scales)
-        if core.twist_pitch is not None:  # estimated (not held, pitch_estimation = "auto", at the mount)
-            learned["twist_pitch"] = core.twist_pitch
         return self.doctor.verdicts(stats, at_cap=at_cap, covariance_resets=core.covariance_resets,
-                                    scales=learned)
+                                    scales=_learned(core))
 
     @property
     def applied(self) -> dict[str, int]:
@@ -98,6 +95,18 @@ class ReplayResult:
             return None
         t, x = self.core.pose()
         return (t, *x.tolist())
+
+
+def _learned(core: FusionCore, keys: bool = False) -> dict[str, float]:
+    """What the core estimated of its own configuration: its scales, (``keys``) the keys it estimates as the
+    config states them (an IMU's yaw_offset: pasted, it holds), and the twist's pitch once it is estimated (not
+    while ``pitch_estimation = "auto"`` holds it at the mount)."""
+    learned = dict(core.scales)
+    if keys:
+        learned.update(core.estimated_keys())
+    if core.twist_pitch is not None:
+        learned["twist_pitch"] = core.twist_pitch
+    return learned
 
 
 def _variances(core: FusionCore) -> tuple[float, float]:
@@ -470,10 +479,7 @@ def summary(result: ReplayResult) -> str:
     bias = core.gyro_bias
     if bias is not None:
         out.append("gyro bias   [" + ", ".join(f"{b:+.5f}" for b in bias) + "] rad/s")
-    learned = dict(core.scales)
-    learned.update(core.estimated_keys())  # as the keys state them (an IMU's yaw_offset: pasted, it holds)
-    if core.twist_pitch is not None:
-        learned["twist_pitch"] = core.twist_pitch
+    learned = _learned(core, keys=True)
     if learned:
         out.append("estimated   " + "  ".join(f"{k}={v:.4f}" for k, v in learned.items()))
     for sensor, key, why in core.idle_keys:
