@@ -83,6 +83,8 @@ class Series(msgspec.Struct):
     acc_x: list[float] = []  # accelerometer specific force minus gravity, base_link x through the configured
     acc_y: list[float] = []  # extrinsic_rpy (so a mounting missing from it shows), m/s^2
     acc_level: list[float] = []  # fraction of the bin's samples whose gravity was removed with the IMU's attitude
+    acc_samples: int = 0  # the accelerometer samples binned ...
+    acc_in_g: int = 0  # ... and of them, those whose magnitude reads as g units (G_UNITS_BAND: a driver in g)
     gps_t: list[float] = []
     gps_e: list[float] = []
     gps_n: list[float] = []

@@ -320,6 +320,8 @@ class ImuStream:
         fx, fy, fz = a.T
         norm = np.sqrt(fx * fx + fy * fy + fz * fz)
         in_g = (G_UNITS_BAND[0] <= norm) & (norm <= G_UNITS_BAND[1])  # a driver reporting in g
+        series.acc_samples += len(norm)
+        series.acc_in_g += int(np.count_nonzero(in_g))
         fx, fy, fz = (np.where(in_g, f * GRAVITY, f) for f in (fx, fy, fz))
         x, y, z, w = qn.T
         fx = np.where(level, fx - GRAVITY * 2.0 * (x * z - w * y), fx)
