@@ -101,6 +101,11 @@ class Series(msgspec.Struct):
     est_att_var: list[float] = []  # largest attitude variance, rad^2
 
 
+# The series' fields the filter's output fills (``SeriesCollector.add_rest``, ``add_estimate``: the standstills and
+# the ``est_`` fields); every other field is the samples'.
+FILTER_FIELDS = ("rest_spans", *(f for f in Series.__struct_fields__ if f.startswith("est_")))
+
+
 def release_order(stamps: np.ndarray, newest: float, final: bool) -> tuple[np.ndarray, np.ndarray, float]:
     """The order in which a reorder buffer releases samples, computed in bulk.
 
@@ -187,10 +192,8 @@ class SeriesCollector:
     def take_estimates(self, other: SeriesCollector) -> None:
         """``other``'s estimates and standstills (``add_estimate``, ``add_rest``) as this collector's, which was fed
         none: the samples were collected here and the filter's output there (``Doctor.adopt``)."""
-        s, o = self.series, other.series
-        s.rest_spans = o.rest_spans
-        s.est_t, s.est_yaw, s.est_roll, s.est_pitch = o.est_t, o.est_yaw, o.est_roll, o.est_pitch
-        s.est_bias_z, s.est_pos_var, s.est_att_var = o.est_bias_z, o.est_pos_var, o.est_att_var
+        for name in FILTER_FIELDS:
+            setattr(self.series, name, getattr(other.series, name))
         self._est_next = other._est_next
 
     def wants_estimate(self, t: float) -> bool:

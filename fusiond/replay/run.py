@@ -321,10 +321,10 @@ def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead
         if runner.messages % 256 == 0:
             bar.update(runner.messages)
         if ahead.complete:
+            first = len(fed)
             rest = list(samples)
             fed += rest
-            plan = runner.core.snapshot_plan(fed)
-            _feed(runner, zip(rest, plan[len(fed) - len(rest):]), bar)
+            _feed(runner, zip(rest, runner.core.snapshot_plan(fed)[first:]), bar)
             return fed
     return fed
 

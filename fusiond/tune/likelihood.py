@@ -108,12 +108,11 @@ class Keyed:
     two replays on the whole run's terms and on the held-back end's). ``score``, ``reference`` and the proof take
     it wherever they take records."""
 
-    __slots__ = ("records", "items", "keys")
+    __slots__ = ("items", "keys")
 
     def __init__(self, records: Iterable[DiagnosticsRecord]) -> None:
-        self.records = records if isinstance(records, Sequence) else list(records)
         self.items: list[tuple[TermKey, DiagnosticsRecord, float | None]] = [
-            (k, r, _log_det(r)) for k, r in term_keys(self.records)]
+            (k, r, _log_det(r)) for k, r in term_keys(records)]
         self.keys: set[TermKey] = {k for k, _, _ in self.items}
 
 
