@@ -291,7 +291,7 @@ class FusionCore:
         if late:
             if h.too_old(stamp):
                 return self._drop(idx, reasons.TOO_OLD, stamp)
-            self.state = h.state_before(pos)
+            self.state = h.state_before(pos, self._reapply)
         records = self._apply(self.state, idx, inp, stamp, emit=True, late=late)
         h.insert(pos, key, (idx, inp, stamp), self.state, keep)
         if late:

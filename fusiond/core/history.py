@@ -16,11 +16,25 @@ A snapshot is read only when a late sample is placed right after its entry (or i
 base then). A caller that knows every sample to come (a replay of a recording in memory) can say
 which entries no later sample lands right after (``snapshots_read``); those keep no snapshot
 (``None`` in ``after``), and what the filter computes is the same to the bit, as nothing reads them.
+
+A caller that cannot know (the daemon: a live stream) takes a snapshot at every ``stride``-th entry in
+order only; the others are ``DERIVED``: the state after one is the nearest snapshot before it with the
+events in between applied again, which is the state itself to the bit (applying an event is a function of
+the state and the event alone: the re-application after a late sample already rests on that). The stride
+trades the copies saved against the re-applications a late sample then pays: with a share p of the entries
+placed late, a snapshot costing c_s and an event's re-application c_r, an entry costs c_s / k + p c_r (k - 1)
+/ 2 on average at stride k (a late sample lands after an entry (k - 1) / 2 past the nearest snapshot), least
+at k = sqrt(2 c_s / (p c_r)) (``stride_for``): every 8th entry for a stream in order (a late sample then
+re-applies at most 7 events more), every 2nd with one sample in ten late, every entry beyond one in three.
+``trim`` keeps the entries a derivation still starts from (up to ``stride`` - 1 before the horizon, ``kept``
+to ``start``) but judges "too old" by the horizon itself, so what is placed and what is dropped does not
+change.
 """
 
 from __future__ import annotations
 
 import bisect
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -30,22 +44,55 @@ from .state import FilterState
 Key = tuple[float, int]  # (stamp, sensor index): ties broken by sensor, never by arrival
 SCAN = 8  # ``trim`` steps over this many keys before it bisects
 COMPACT = 256  # dropped entries deleted from the lists' front at once
+STRIDE_MAX = 8  # the longest stride (module doc): beyond, the copies saved are a few per cent of one
+# an event's re-application against a snapshot's copy: ~70,000 against ~11,000 instructions on the daemon's
+# traffic (1 kHz IMU, 100 Hz odometry; scripts/core_instructions.py with and without the stride)
+REAPPLY_OVER_SNAPSHOT = 6.0
+LATE_MEMORY = 256.0  # entries: the late share's exponential memory
+DEFAULT_STRIDE: int | None = None  # None: the stride follows the late share (``stride_for``); an int: fixed
+
+
+def stride_for(late_share: float) -> int:
+    """The stride that costs least with ``late_share`` of the entries placed late (module doc)."""
+    if late_share * REAPPLY_OVER_SNAPSHOT * STRIDE_MAX * STRIDE_MAX <= 2.0:
+        return STRIDE_MAX
+    return max(1, round(math.sqrt(2.0 / (REAPPLY_OVER_SNAPSHOT * late_share))))
+
+
+class _Derived:
+    """The ``after`` of an entry whose state is derived from the nearest snapshot before it (module doc)."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "DERIVED"
+
+
+DERIVED = _Derived()
 
 
 class History:
     """``keys[start:]``, ``events[start:]`` and ``after[start:]`` are the history, oldest first: ``trim``
     drops from the front by moving ``start`` (deleting one entry at the front of a list moves all the
     others: at 1 kHz, a second of history moved once a message), and the dropped entries are deleted
-    in one block once COMPACT of them have gathered."""
+    in one block once COMPACT of them have gathered. ``kept`` <= ``start``: the dropped entries a derived
+    state after the horizon still starts from (module doc); ``base`` is the state before ``kept``.
+    ``stride``: every how many entries in order keep a snapshot (1: each; None: ``stride_for`` the late share)."""
 
-    def __init__(self, base: FilterState | None) -> None:
+    def __init__(self, base: FilterState | None, stride: int | None = None) -> None:
+        stride = DEFAULT_STRIDE if stride is None else stride
         self.keys: list[Key] = []
         self.events: list[tuple[int, Any, float]] = []
-        self.after: list[FilterState] = []
+        self.after: list[FilterState | None | _Derived] = []
         self.start = 0  # entries before it are dropped (the snapshots among them are in _free or the base)
+        self.kept = 0  # entries from here to start are dropped but still start a derivation
         self.base = base.copy() if base is not None else None
-        # the filter time of a base entry inserted without a snapshot (``too_old``)
-        self.base_t: float | None = None
+        # the filter time of the newest entry dropped: a sample older than it is too old to place
+        self.horizon: float | None = base.t if base is not None else None
+        self.adaptive = stride is None
+        self.stride = STRIDE_MAX if stride is None else stride
+        self._run = -1  # entries DERIVED at the end since its newest snapshot (-1: none there to derive from)
+        self.late_share = 0.0  # of the entries inserted, over the last ~LATE_MEMORY
         self._free: list[FilterState] = []  # snapshots no longer referenced, to be overwritten
 
     def slot(self, key: Key) -> tuple[int, bool]:
@@ -57,28 +104,64 @@ class History:
         return pos, pos > self.start and keys[pos - 1] == key
 
     def too_old(self, stamp: float) -> bool:
-        base_t = self.base.t if self.base is not None else self.base_t
-        return base_t is not None and stamp < base_t
+        return self.horizon is not None and stamp < self.horizon
 
-    def state_before(self, pos: int) -> FilterState:
-        """A copy the caller owns (it becomes the live state)."""
-        s = self.after[pos - 1] if pos > self.start else self.base
+    def state_before(self, pos: int, reapply: Callable[[FilterState, int, Any, float], None]) -> FilterState:
+        """A copy the caller owns (it becomes the live state): the snapshot before ``pos``, or, where that
+        entry's state is DERIVED, the nearest snapshot before it with the events between applied again
+        (``reapply``, as ``reapply_after`` applies them)."""
+        after = self.after
+        j = pos - 1
+        kept = self.kept
+        while j >= kept and after[j] is DERIVED:
+            j -= 1
+        s = after[j] if j >= kept else self.base
         if s is None:  # the caller said no later sample lands here (``insert(keep=False)``)
             raise CoreError("a late sample landed after an entry inserted without its snapshot: the "
                             "samples were not the ones their snapshot plan was made for")
-        return s.copy()
+        c = s.copy()
+        events = self.events
+        for i in range(j + 1, pos):
+            idx, inp, stamp = events[i]
+            reapply(c, idx, inp, stamp)
+        return c
 
     def insert(self, pos: int, key: Key, event: tuple[int, Any, float], state: FilterState,
                keep: bool = True) -> None:
         """``keep``: False when no later sample is placed right after this entry (``snapshots_read``):
-        its snapshot, never read, is not taken."""
+        its snapshot, never read, is not taken (unless entries after it derive their state through it).
+        Otherwise an entry placed at the end is DERIVED where fewer than ``stride`` - 1 entries before it
+        are, and a late one keeps its snapshot."""
+        after = self.after
+        at_end = pos == len(after)
         self.keys.insert(pos, key)
         self.events.insert(pos, event)
-        if keep:
-            free = self._free
-            self.after.insert(pos, state.copy(into=free.pop() if free else None))
+        share = self.late_share
+        if at_end:
+            self.late_share = share - share / LATE_MEMORY
+            if not keep:
+                after.append(None)
+                self._run = -1  # nothing after it can derive through it
+                return
+            run = self._run
+            if 0 <= run < self.stride - 1:
+                after.append(DERIVED)
+                self._run = run + 1
+                return
+            self._run = 0
+            if self.adaptive:
+                self.stride = stride_for(share)
         else:
-            self.after.insert(pos, None)
+            self.late_share = share + (1.0 - share) / LATE_MEMORY
+            if not keep and after[pos] is not DERIVED:
+                after.insert(pos, None)
+                return
+        free = self._free
+        snapshot = state.copy(into=free.pop() if free else None)
+        if at_end:
+            after.append(snapshot)
+        else:
+            after.insert(pos, snapshot)
 
     def reapply_after(self, pos: int, state: FilterState, apply: Callable[[FilterState, int, Any, float], None]) -> None:
         """Re-apply every event after ``pos`` on ``state`` (in place), refreshing their snapshots in place."""
@@ -86,8 +169,9 @@ class History:
         for j in range(pos + 1, len(self.events)):
             idx, inp, stamp = self.events[j]
             apply(state, idx, inp, stamp)
-            if after[j] is not None:  # an entry without a snapshot stays without one: nothing reads it
-                state.copy(into=after[j])
+            a = after[j]
+            if a is not None and a is not DERIVED:  # an entry without a snapshot stays without one
+                state.copy(into=a)
 
     def trim(self, history_s: float, history_max: int) -> None:
         """Drop the samples older than ``history_s`` before the newest, and beyond ``history_max``."""
@@ -108,22 +192,41 @@ class History:
         if size - history_max > n:
             n = size - history_max
         if n:
-            after = self.after
-            free = self._free
-            if self.base is not None:
-                free.append(self.base)
             end = start + n
-            base = self.base = after[end - 1]
-            if base is None:  # an entry's filter time is its stamp (keys in stamp order, each applied at its own)
-                self.base_t = keys[end - 1][0]
-            if n > 1:  # a loop, not a comprehension: its frame cost more than the one or two entries it reads
-                for s in after[start : end - 1]:
-                    if s is not None:
-                        free.append(s)
-            if end >= COMPACT:
-                del keys[:end], self.events[:end], self.after[:end]
-                end = 0
+            last = self.after[end - 1]
+            if last is DERIVED:
+                # what stays derives its state from this entry's chain: kept from the chain's snapshot on
+                head = end - 2
+                after, kept = self.after, self.kept
+                while head >= kept and after[head] is DERIVED:
+                    head -= 1
+                if head >= kept:  # a chain starts at a snapshot
+                    self._drop_through(head)
+                self.horizon = keys[end - 1][0]  # an entry's filter time is its stamp
+            else:
+                self._drop_through(end - 1)
+                # (no snapshot: an entry's filter time is its stamp, keys in stamp order, each applied at its own)
+                self.horizon = last.t if last is not None else keys[end - 1][0]
             self.start = end
+            kept = self.kept
+            if kept >= COMPACT:
+                del keys[:kept], self.events[:kept], self.after[:kept]
+                self.start = end - kept
+                self.kept = 0
+
+    def _drop_through(self, j: int) -> None:
+        """Entries ``kept`` to ``j`` leave the history: their snapshots (and the old base) to the free list,
+        the state after ``j`` the new base."""
+        after = self.after
+        free = self._free
+        if self.base is not None:
+            free.append(self.base)
+        if j > self.kept:  # a loop, not a comprehension: its frame cost more than the one or two entries it reads
+            for s in after[self.kept : j]:
+                if s is not None and s is not DERIVED:
+                    free.append(s)
+        self.base = after[j]
+        self.kept = j + 1
 
 
 def snapshots_read(keys: list[Key | None]) -> list[bool]:

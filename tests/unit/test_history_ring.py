@@ -6,22 +6,29 @@ from __future__ import annotations
 import bisect
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import fusiond.core.history as history
 from fusiond.core.fusion import FusionCore
+from fusiond.core.history import DERIVED
 
 from tests.support.core_samples import imu, make_config, odom
 
 
 def _snapshots(core: FusionCore) -> list:
+    """Every state the history holds: the base, the snapshots from ``kept`` on, the free list."""
     h = core.history
-    return [h.base, *h.after[h.start:], *h._free]
+    return [s for s in (h.base, *h.after[h.kept:], *h._free) if s is not None and s is not DERIVED]
 
 
-def test_steady_stream_reuses_the_same_snapshots():
-    # history_s = 0.2 s at 100 + 100 Hz: about 40 snapshots in use; the 2 s of stream after the
-    # first second only ever overwrites the objects the first second created.
+@pytest.mark.parametrize("stride", [1, history.STRIDE_MAX])
+def test_steady_stream_reuses_the_same_snapshots(stride, monkeypatch):
+    # history_s = 0.2 s at 100 + 100 Hz: about 40 entries; the 2 s of stream after the first second only
+    # ever overwrites the snapshots the first second created (at a steady stride: one that follows the
+    # late share takes more of them as it learns it)
+    monkeypatch.setattr(history, "DEFAULT_STRIDE", stride)
     core = FusionCore(make_config(extra_filter="history_s = 0.2"))
 
     def second(k0: int) -> None:  # one second of stream, with a late IMU sample every 0.1 s
@@ -71,6 +78,7 @@ def test_trim_keeps_exactly_the_samples_within_the_window_and_the_count(stamps, 
     states = []
     for pos, key in enumerate(keys):
         s = FilterState.__new__(FilterState)
+        s.t = key[0]  # an entry's filter time is its stamp
         states.append(s)
         h.keys.insert(pos, key)
         h.events.insert(pos, (key[1], None, key[0]))
