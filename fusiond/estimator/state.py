@@ -301,10 +301,25 @@ class StateLayout:
         # Everything after the pose is additive (the usual case): boxplus adds it in one loop,
         # nominal component i taking error component i - 1 (the quaternion's extra slot).
         self._additive_tail = all(b.additive for b in blocks[1:])
+        self._position_rows: dict[str | None, np.ndarray] = {}
         # Blocks with their own dynamics; empty for odometry/IMU-only layouts (predict skips them).
         self.dynamic_blocks = [(b, n0, e0) for b, n0, e0 in self._offsets if b.dynamic]
         walk = np.concatenate([np.asarray(b.random_walk(), float) for b in blocks])
         self.random_walk_var = walk**2
+
+    def position_rows(self, error: str | None = None) -> np.ndarray:
+        """The Jacobian of a position observation (``observations.position``) before its lever's columns: the
+        identity on the position's error (and on the additive 3-block ``error``). Made once per block; the
+        caller copies it (every GPS fix's two blocks built it from zeros)."""
+        rows = self._position_rows.get(error)
+        if rows is None:
+            rows = np.zeros((3, self.error_dim))
+            rows[0, 0] = rows[1, 1] = rows[2, 2] = 1.0
+            if error is not None:
+                rows[0:3, self.error[error]] = np.eye(3)
+            rows.flags.writeable = False
+            self._position_rows[error] = rows
+        return rows
 
     def noise_density(self, pose_noise_var: np.ndarray) -> np.ndarray:
         """Per-second variance of every error component: pose model error + random walks."""

@@ -127,12 +127,12 @@ HEIGHT_REFUTED_FALSE_ALARM = 1e-6
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
-@dataclass(frozen=True, slots=True)
-class GpsTrack:
+class GpsTrack(msgspec.Struct, frozen=True, gc=False):
     """What the GPS keeps between fixes (immutable: shared by history snapshots): while the heading
     is unknown, the fixes paired with the dead-reckoned antenna position at their stamps; always,
     the newest coordinates, to recognise a frozen receiver. ``base`` + the state's ``travel`` is
-    the dead-reckoned base position."""
+    the dead-reckoned base position. A Struct, as ``GpsOwn``: each fix replaces it, and a dataclass's
+    ``replace`` cost a fix more than its position update."""
 
     points: tuple[tuple[float, float, float, float, float], ...]  # (gx, gy, dx, dy, weight)
     base: tuple[float, float, float]
@@ -766,7 +766,7 @@ class GpsModel(SensorModel):
         if last is not None and math.hypot(z[0] - last[0], z[1] - last[1]) <= FROZEN_JITTER:
             return moved > FROZEN_JITTER_TRAVEL
         s.own[self.index] = msgspec.structs.replace(
-            own, track=replace(track, last_lla=lla, last_dr=dr, last_enu=(z[0], z[1])))
+            own, track=msgspec.structs.replace(track, last_lla=lla, last_dr=dr, last_enu=(z[0], z[1])))
         return False
 
     def _heading(self, s: "FilterState", z: tuple[float, float, float], cov, stamp: float, emit: bool) -> None:
@@ -787,7 +787,7 @@ class GpsModel(SensorModel):
             # for the standstill: the fix nearest the drive, in time and in the receiver's error.
             points = track.points[:-1] + (point,)
             if len(points) == 1:  # the track has only stood: it starts here
-                track = replace(track, first=(z[0], z[1]), extent=0.0, t0=stamp)
+                track = msgspec.structs.replace(track, first=(z[0], z[1]), extent=0.0, t0=stamp)
         else:
             points = track.points + (point,)
         if len(points) > HEADING_MAX_FIXES:
@@ -798,7 +798,7 @@ class GpsModel(SensorModel):
         fit = self._fit(points, extent, stamp - track.t0) if made else None
         # the shown position's heading until a fit is applied (``shown_position``): what the track says already
         guess = (fit.theta, fit.var_theta) if fit is not None and not track.applied else None
-        track = replace(track, points=points, extent=extent, rest=still, guess=guess)
+        track = msgspec.structs.replace(track, points=points, extent=extent, rest=still, guess=guess)
         s.own[self.index] = msgspec.structs.replace(own, track=track)
         if extent < max(cfg.heading_init_m, 4.0 * math.sqrt(var)):
             return
@@ -868,7 +868,7 @@ class GpsModel(SensorModel):
         # and the previous fix's dead-reckoned point turns with the track. Dropped at each refinement, the
         # fixes of the whole search went in at the unknown default (2.5 m) where they measured 0.1 m.
         last = own.last if own.last is None else (*own.last[0:3], *fit.apply(own.last[3], own.last[4]))
-        s.own[self.index] = GpsOwn(replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
+        s.own[self.index] = GpsOwn(msgspec.structs.replace(track, points=() if ready else points, base=(bx, by, track.base[2] + t[2]),
                                            applied=True, last_dr=fit.apply(*track.last_dr), guess=None),
                                    accepted=own.accepted,  # the jump check's reference stays
                                    increments=own.increments, last=last)
