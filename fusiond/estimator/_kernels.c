@@ -35,6 +35,8 @@
  *               dx *= keep and W^T W *= J elementwise (the Joseph form's closed form); then
  *               x [+]= dx: p += dp, q = normalize(Exp(dtheta) q), x_i += dx_(i-1) after the
  *               quaternion, and with hold_heading the yaw put back (state.hold_heading_of).
+ *   difference_noise, zero_mean_window: zero_motion.py's, the odometry's standstill test at every
+ *               odometry message (its running noise and its window's test, ~2 us of tuples in Python).
  *   rts_fold:   the smoother's fold of a run of transitions (smoother.py; the reference: rts.py): A P0 F^T P1^-1 on
  *               the components P1 gives any variance, by a Cholesky solve; paid per correction and per
  *               output moment while a smoother records, ~30 us of numpy and LAPACK calls otherwise.
@@ -1305,6 +1307,227 @@ static PyObject *line_fit(PyObject *self, PyObject *const *args, Py_ssize_t narg
     return Py_BuildValue("(dd)", slope, sqrt(srr / (double)(n - 2)));
 }
 
+
+/* -- zero motion (zero_motion.py) ----------------------------------------------------------------- */
+
+PyDoc_STRVAR(difference_noise_doc,
+"difference_noise(track, values, stamp, period, gap_factor, memory) -> tuple or None\n\n"
+"zero_motion.difference_noise to the bit; None where it would not be plain floats in tuples, or a square\n"
+"overflows (the reference decides those).");
+
+/* Six floats of a tuple; 0 when it is not a 6-tuple of exact floats. */
+static int six_floats(PyObject *obj, double *out) {
+    if (!PyTuple_CheckExact(obj) || PyTuple_GET_SIZE(obj) != 6) {
+        return 0;
+    }
+    for (Py_ssize_t i = 0; i < 6; i++) {
+        PyObject *item = PyTuple_GET_ITEM(obj, i);
+        if (!PyFloat_CheckExact(item)) {
+            return 0;
+        }
+        out[i] = PyFloat_AS_DOUBLE(item);
+    }
+    return 1;
+}
+
+/* A tuple of the given items, each a new reference stolen (NULL: an error is set and the rest released). */
+static PyObject *tuple_of(Py_ssize_t n, PyObject **items) {
+    PyObject *t = PyTuple_New(n);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (t == NULL || items[i] == NULL) {
+            for (Py_ssize_t j = i; j < n; j++) {
+                Py_XDECREF(items[j]);
+            }
+            Py_XDECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, items[i]);
+    }
+    return t;
+}
+
+static PyObject *float_tuple(const double *v, Py_ssize_t n) {
+    PyObject *items[6];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        items[i] = PyFloat_FromDouble(v[i]);
+    }
+    return tuple_of(n, items);
+}
+
+static PyObject *difference_noise(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "difference_noise(track, values, stamp, period, gap_factor, memory) takes 6 "
+                                         "arguments");
+        return NULL;
+    }
+    PyObject *track = args[0], *values = args[1], *stamp = args[2];
+    double a[6], b[6], var[6];
+    if (!six_floats(values, a) || !PyFloat_CheckExact(stamp) || !PyFloat_CheckExact(args[3]) ||
+        !PyFloat_CheckExact(args[4]) || !PyFloat_CheckExact(args[5])) {
+        Py_RETURN_NONE;
+    }
+    if (track == Py_None) {
+        Py_INCREF(values), Py_INCREF(Py_None), Py_INCREF(stamp);
+        PyObject *items[4] = {values, Py_None, PyFloat_FromDouble(0.0), stamp};
+        return tuple_of(4, items);
+    }
+    if (!PyTuple_CheckExact(track) || PyTuple_GET_SIZE(track) != 4) {
+        Py_RETURN_NONE;
+    }
+    PyObject *var_obj = PyTuple_GET_ITEM(track, 1), *weight_obj = PyTuple_GET_ITEM(track, 2);
+    PyObject *last = PyTuple_GET_ITEM(track, 3);
+    int has_var = var_obj != Py_None;
+    if (!six_floats(PyTuple_GET_ITEM(track, 0), b) || (has_var && !six_floats(var_obj, var)) ||
+        !PyFloat_CheckExact(weight_obj) || !PyFloat_CheckExact(last)) {
+        Py_RETURN_NONE;
+    }
+    double t = PyFloat_AS_DOUBLE(stamp), period = PyFloat_AS_DOUBLE(args[3]);
+    double gap_factor = PyFloat_AS_DOUBLE(args[4]), memory = PyFloat_AS_DOUBLE(args[5]);
+    if (period > 0.0 && t - PyFloat_AS_DOUBLE(last) > gap_factor * period) {
+        Py_INCREF(values), Py_INCREF(var_obj), Py_INCREF(weight_obj), Py_INCREF(stamp);
+        PyObject *items[4] = {values, var_obj, weight_obj, stamp};
+        return tuple_of(4, items);
+    }
+    double weight = PyFloat_AS_DOUBLE(weight_obj);
+    weight = weight < memory ? weight + 1.0 : memory;
+    double d[6];
+    for (int i = 0; i < 6; i++) {
+        double sq = libm_pow(fabs(a[i] - b[i]), 2.0);
+        if (!isfinite(sq) && isfinite(a[i] - b[i])) {
+            Py_RETURN_NONE; /* Python's ** raises OverflowError there */
+        }
+        d[i] = 0.5 * sq;
+    }
+    if (has_var) {
+        double g = 1.0 / weight;
+        for (int i = 0; i < 6; i++) {
+            d[i] = var[i] + g * (d[i] - var[i]);
+        }
+    }
+    Py_INCREF(values), Py_INCREF(stamp);
+    PyObject *items[4] = {values, float_tuple(d, 6), PyFloat_FromDouble(weight), stamp};
+    return tuple_of(4, items);
+}
+
+PyDoc_STRVAR(zero_mean_window_doc,
+"zero_mean_window(window, values, measured, running, stamp, span, z, min_window, floor, bound) -> (window, bool)\n"
+"or None\n\n"
+"zero_motion.zero_mean_window to the bit; None where its items are not the plain floats, bools and tuples\n"
+"it takes, or a square overflows (the reference decides those). bound(n) is called as the reference does.");
+
+static PyObject *zero_mean_window(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError, "zero_mean_window(window, values, measured, running, stamp, span, z, "
+                                         "min_window, floor, bound) takes 10 arguments");
+        return NULL;
+    }
+    PyObject *window = args[0], *values = args[1], *measured = args[2], *running = args[3], *stamp = args[4];
+    double v[6], var[6];
+    int used[6];
+    if (!PyTuple_CheckExact(window) || !six_floats(values, v) || !PyTuple_CheckExact(measured) ||
+        PyTuple_GET_SIZE(measured) != 6 || !PyFloat_CheckExact(stamp) || !PyFloat_CheckExact(args[5]) ||
+        !PyFloat_CheckExact(args[6]) || !PyLong_CheckExact(args[7]) || !PyFloat_CheckExact(args[8]) ||
+        (running != Py_None && !six_floats(running, var))) {
+        Py_RETURN_NONE;
+    }
+    for (int i = 0; i < 6; i++) {
+        PyObject *m = PyTuple_GET_ITEM(measured, i);
+        if (m != Py_True && m != Py_False) {
+            Py_RETURN_NONE;
+        }
+        used[i] = m == Py_True;
+    }
+    double t = PyFloat_AS_DOUBLE(stamp), span = PyFloat_AS_DOUBLE(args[5]), z = PyFloat_AS_DOUBLE(args[6]);
+    double floor_var = PyFloat_AS_DOUBLE(args[8]);
+    Py_ssize_t min_window = PyLong_AsSsize_t(args[7]);
+    if (min_window < 1) {
+        Py_RETURN_NONE;
+    }
+    double zz = z * z;
+    if (running != Py_None) {
+        for (int i = 0; i < 6; i++) {
+            if (used[i] && v[i] * v[i] > zz * (var[i] > floor_var ? var[i] : floor_var)) {
+                return Py_BuildValue("(()O)", Py_False); /* moving */
+            }
+        }
+    }
+    Py_ssize_t len = PyTuple_GET_SIZE(window), n = len + 1, drop = 0;
+    /* every entry a (float stamp, six floats) pair, checked before any is read */
+    for (Py_ssize_t e = 0; e < len; e++) {
+        PyObject *entry = PyTuple_GET_ITEM(window, e);
+        double unused[6];
+        if (!PyTuple_CheckExact(entry) || PyTuple_GET_SIZE(entry) != 2 ||
+            !PyFloat_CheckExact(PyTuple_GET_ITEM(entry, 0)) || !six_floats(PyTuple_GET_ITEM(entry, 1), unused)) {
+            Py_RETURN_NONE;
+        }
+    }
+    while (n - drop > min_window && t - PyFloat_AS_DOUBLE(PyTuple_GET_ITEM(PyTuple_GET_ITEM(window, drop), 0)) >= span) {
+        drop++;
+    }
+    n = len - drop + 1;
+    PyObject *kept = PyTuple_New(n);
+    if (kept == NULL) {
+        return NULL;
+    }
+    for (Py_ssize_t e = drop; e < len; e++) {
+        PyObject *entry = PyTuple_GET_ITEM(window, e);
+        Py_INCREF(entry);
+        PyTuple_SET_ITEM(kept, e - drop, entry);
+    }
+    Py_INCREF(stamp), Py_INCREF(values);
+    PyObject *pair_items[2] = {stamp, values};
+    PyObject *pair = tuple_of(2, pair_items);
+    if (pair == NULL) {
+        Py_DECREF(kept);
+        return NULL;
+    }
+    PyTuple_SET_ITEM(kept, n - 1, pair);
+    if (n < min_window) {
+        return Py_BuildValue("(NO)", kept, Py_False);
+    }
+    if (n < 2) { /* no difference to measure a noise from: the reference raises ZeroDivisionError */
+        Py_DECREF(kept);
+        Py_RETURN_NONE;
+    }
+    PyObject *n_obj = PyLong_FromSsize_t(n);
+    PyObject *b_obj = n_obj == NULL ? NULL : PyObject_CallOneArg(args[9], n_obj);
+    Py_XDECREF(n_obj);
+    if (b_obj == NULL) {
+        Py_DECREF(kept);
+        return NULL;
+    }
+    double b = PyFloat_AsDouble(b_obj);
+    Py_DECREF(b_obj);
+    if (b == -1.0 && PyErr_Occurred()) {
+        Py_DECREF(kept);
+        return NULL;
+    }
+    for (int i = 0; i < 6; i++) {
+        if (!used[i]) {
+            continue;
+        }
+        double total = 0.0, diff2 = 0.0, previous = 0.0;
+        for (Py_ssize_t e = 0; e < n; e++) {
+            double x = PyFloat_AS_DOUBLE(PyTuple_GET_ITEM(PyTuple_GET_ITEM(PyTuple_GET_ITEM(kept, e), 1), i));
+            total += x;
+            if (e > 0) {
+                double sq = libm_pow(fabs(x - previous), 2.0);
+                if (!isfinite(sq) && isfinite(x - previous)) {
+                    Py_DECREF(kept);
+                    Py_RETURN_NONE; /* Python's ** raises OverflowError there */
+                }
+                diff2 += sq;
+            }
+            previous = x;
+        }
+        double s2 = diff2 / (2.0 * (double)(n - 1));
+        if (total * total / (double)n > b * (s2 > floor_var ? s2 : floor_var)) {
+            return Py_BuildValue("(NO)", kept, Py_False);
+        }
+    }
+    return Py_BuildValue("(NO)", kept, Py_True);
+}
+
 static PyMethodDef methods[] = {
     {"propagate", (PyCFunction)(void (*)(void))propagate, METH_FASTCALL, propagate_doc},
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL, update_doc},
@@ -1315,6 +1538,8 @@ static PyMethodDef methods[] = {
     {"hold_planar", (PyCFunction)(void (*)(void))hold_planar, METH_FASTCALL, hold_planar_doc},
     {"rts_fold", (PyCFunction)(void (*)(void))rts_fold, METH_FASTCALL, rts_fold_doc},
     {"line_fit", (PyCFunction)(void (*)(void))line_fit, METH_FASTCALL, line_fit_doc},
+    {"difference_noise", (PyCFunction)(void (*)(void))difference_noise, METH_FASTCALL, difference_noise_doc},
+    {"zero_mean_window", (PyCFunction)(void (*)(void))zero_mean_window, METH_FASTCALL, zero_mean_window_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -21,14 +21,14 @@ reads no environment and keeps no process-wide switch.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import EstimatorError
-from . import motion
+from . import motion, zero_motion
 from .orientation_residual import rpy_residual
 from .cholesky import gain_rows
 from .rts import rts_gain
@@ -94,6 +94,17 @@ class Backend:
 
     def line_fit(self, pairs: tuple[tuple[float, float], ...]) -> tuple[float, float]:
         """(slope, rms misfit) of the least-squares line through (t, v) pairs (``line_fit.line_fit``)."""
+        raise NotImplementedError
+
+    def difference_noise(self, track: tuple | None, values: tuple, stamp: float, period: float, gap_factor: float,
+                         memory: float) -> tuple:
+        """A twist stream's running noise after ``values`` (``zero_motion.difference_noise``)."""
+        raise NotImplementedError
+
+    def zero_mean_window(self, window: tuple, values: tuple, measured: tuple, running: tuple | None, stamp: float,
+                         span: float, z: float, min_window: int, floor: float,
+                         bound: Callable[[int], float]) -> tuple[tuple, bool]:
+        """A twist window's test of a zero mean after ``values`` (``zero_motion.zero_mean_window``)."""
         raise NotImplementedError
 
     def rts_fold(self, A: np.ndarray, P0: np.ndarray, F: np.ndarray, P1: np.ndarray) -> np.ndarray:
@@ -202,6 +213,13 @@ class PythonBackend(Backend):
     def line_fit(self, pairs):
         return line_fit(pairs)
 
+    def difference_noise(self, track, values, stamp, period, gap_factor, memory):
+        return zero_motion.difference_noise(track, values, stamp, period, gap_factor, memory)
+
+    def zero_mean_window(self, window, values, measured, running, stamp, span, z, min_window, floor, bound):
+        return zero_motion.zero_mean_window(window, values, measured, running, stamp, span, z, min_window, floor,
+                                            bound)
+
     def rts_fold(self, A, P0, F, P1):
         return A.dot(rts_gain(P0, F, P1))
 
@@ -277,6 +295,19 @@ class CompiledBackend(PythonBackend):
     def line_fit(self, pairs):
         fit = self._k.line_fit(pairs)
         return line_fit(pairs) if fit is None else fit  # None: not floats in tuples, or a degenerate fit
+
+    def difference_noise(self, track, values, stamp, period, gap_factor, memory):
+        noise = self._k.difference_noise(track, values, stamp, period, gap_factor, memory)
+        if noise is None:  # not plain floats in tuples, or a square overflows: the reference decides
+            return zero_motion.difference_noise(track, values, stamp, period, gap_factor, memory)
+        return noise
+
+    def zero_mean_window(self, window, values, measured, running, stamp, span, z, min_window, floor, bound):
+        tested = self._k.zero_mean_window(window, values, measured, running, stamp, span, z, min_window, floor, bound)
+        if tested is None:  # not plain floats, bools and tuples, or a square overflows: the reference decides
+            return zero_motion.zero_mean_window(window, values, measured, running, stamp, span, z, min_window, floor,
+                                                bound)
+        return tested
 
     def rts_fold(self, A, P0, F, P1):
         out = np.empty_like(A)

@@ -623,3 +623,67 @@ def test_a_fix_measuring_two_axes_reaches_the_compiled_update():
     assert len(fixes) > 200 and fell_back == []
     y, H, R = observations._select_rows(np.zeros(6), np.ones((6, 15)), tuple(np.eye(6).ravel()), (0, 1, 5))
     assert all(a.flags["C_CONTIGUOUS"] for a in (y, H, R))
+
+
+def _twist(draw_floats: list[float], k0: int) -> tuple[float, ...]:
+    return tuple(draw_floats[(k0 + i) % len(draw_floats)] for i in range(6))
+
+
+@settings(max_examples=200, deadline=None)
+@given(readings=st.lists(st.floats(-3.0, 3.0), min_size=6, max_size=40), scale=st.sampled_from([0.0, 1e-3, 0.02, 1.0]),
+       steps=st.integers(1, 60), period=st.sampled_from([0.0, 0.02, 0.1]), gaps=st.integers(0, 9),
+       measured=st.tuples(*[st.booleans()] * 6), span=st.sampled_from([0.05, 0.3, 1.0]),
+       z=st.floats(0.5, 5.0), min_window=st.integers(2, 8))
+def test_the_compiled_zero_motion_tests_give_the_references_bits(readings, scale, steps, period, gaps, measured,
+                                                                 span, z, min_window):
+    """The odometry's standstill test: the running noise and the window's test, message after message, the
+    same tuples of the same doubles through either backend (a stream at rest, creeping, with gaps)."""
+    from fusiond.estimator import zero_motion
+
+    bounds = []
+
+    def bound(n: int) -> float:
+        bounds.append(n)
+        return 1.0 + 4.0 / n
+
+    tracks = {b: None for b in (COMPILED, PYTHON, "reference")}
+    windows = {b: () for b in tracks}
+    stamp = 100.0
+    for step in range(steps):
+        stamp += 0.02 * (10 if gaps and step % (gaps + 1) == gaps else 1)
+        values = tuple(scale * v for v in _twist(readings, step))
+        out = []
+        for b in tracks:
+            noise = (zero_motion.difference_noise if b == "reference" else b.difference_noise)(
+                tracks[b], values, stamp, period, 3.0, 64.0)
+            window, at_rest = (zero_motion.zero_mean_window if b == "reference" else b.zero_mean_window)(
+                windows[b], values, measured, noise[1], stamp, span, z, min_window, 1e-6, bound)
+            tracks[b], windows[b] = noise, window
+            out.append(repr((noise, window, at_rest)))
+        assert out[0] == out[1] == out[2]
+    assert len(bounds) % 3 == 0  # asked alike by each
+
+
+def test_zero_motion_the_kernel_cannot_read_is_the_references():
+    """Ints among the readings, lists for tuples, a bound that raises: the reference answers (or raises)."""
+    from fusiond.estimator import zero_motion
+
+    ints = (1, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert k.difference_noise(None, ints, 1.0, 0.02, 3.0, 64.0) is None
+    assert COMPILED.difference_noise(None, ints, 1.0, 0.02, 3.0, 64.0) == (ints, None, 0.0, 1.0)
+    assert k.zero_mean_window((), [0.0] * 6, (True,) * 6, None, 1.0, 0.3, 2.0, 5, 1e-6, float) is None
+    track = zero_motion.difference_noise(None, (0.1,) * 6, 1.0, 0.02, 3.0, 64.0)
+    assert k.difference_noise(track, (1e300,) * 6, 1.02, 0.02, 3.0, 64.0) is None  # Python's ** overflows
+    with pytest.raises(OverflowError):
+        COMPILED.difference_noise(track, (1e300,) * 6, 1.02, 0.02, 3.0, 64.0)
+    window = tuple((1.0 + 0.02 * i, (0.0,) * 6) for i in range(5))
+
+    def refused(n: int) -> float:
+        raise ValueError(f"no bound for {n}")
+
+    with pytest.raises(ValueError, match="no bound for 6"):
+        COMPILED.zero_mean_window(window, (0.0,) * 6, (True,) * 6, None, 1.1, 1.0, 2.0, 5, 1e-6, refused)
+    moving = COMPILED.zero_mean_window(window, (1.0,) * 6, (True,) * 6, (1e-4,) * 6, 1.1, 1.0, 2.0, 5, 1e-6, refused)
+    assert moving == ((), False)  # the early exit asks no bound
+    with pytest.raises(ZeroDivisionError):  # a window of one reading has no difference to take a noise from
+        COMPILED.zero_mean_window((), (0.0,) * 6, (True,) * 6, None, 1.0, 1.0, 2.0, 1, 1e-6, float)

@@ -326,10 +326,11 @@ class OdomModel(SensorModel):
         """The standstill test after this message (``rest.py``): its window, the running noise, and whether
         the wheels are at rest, judged on the noise the stream shows, not the stated one."""
         values = (*inp.linear, *inp.angular)
-        noise = running_noise(own.noise, values, stamp, s.period[self.index])
+        backend = s.ekf.backend
+        noise = running_noise(own.noise, values, stamp, s.period[self.index], backend)
         fc = self.ctx.filter
         window, at_rest = rest_window(own.rest, values, inp.measured, noise[1], stamp, fc.standstill_s,
-                                      fc.standstill_alpha)
+                                      fc.standstill_alpha, backend)
         return window, noise, at_rest
 
     @staticmethod

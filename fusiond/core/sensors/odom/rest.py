@@ -34,10 +34,16 @@ raises) is not rest noise, and no window holding it could pass.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from collections.abc import Callable
+from functools import lru_cache, partial
 from statistics import NormalDist
+from typing import TYPE_CHECKING
 
+from ....estimator import zero_motion
 from ...diagnostics import t_quantile
+
+if TYPE_CHECKING:
+    from ....estimator.backend import Backend
 
 MIN_WINDOW = 5  # messages a rest decision needs at least (a 10 Hz drive's 0.3 s holds only 3)
 RESOLUTION = 1e-3  # m/s, rad/s: the smallest noise a rest window is judged with (module doc)
@@ -57,70 +63,38 @@ def t2_bound(alpha: float, k: int, n: int) -> float:
     return t_quantile(normal_bound(alpha, k), 2.0 * (n - 1) / 3.0) ** 2
 
 
-def running_noise(track: tuple | None, values: tuple, stamp: float, period: float) -> tuple:
+def running_noise(track: tuple | None, values: tuple, stamp: float, period: float,
+                  backend: Backend | None = None) -> tuple:
     """The twist's running noise per component after ``values``: (values, the variance per component or None,
     weight, stamp). An exponentially weighted mean of the squared first differences over ~NOISE_MEMORY
     messages, halved (a difference of two white readings has twice the variance); motion only raises it, so
-    it bounds the rest noise from above. A message after a gap starts the differences again (a gap's jump is
-    not noise). Immutable tuples: the state is snapshotted."""
-    if track is None:
-        return (values, None, 0.0, stamp)
-    prev, var, weight = track[0], track[1], track[2]
-    if period > 0.0 and stamp - track[3] > GAP_FACTOR * period:
-        return (values, var, weight, stamp)
-    weight = weight + 1.0 if weight < NOISE_MEMORY else NOISE_MEMORY
-    a0, a1, a2, a3, a4, a5 = values
-    b0, b1, b2, b3, b4, b5 = prev
-    d = (0.5 * (a0 - b0) ** 2, 0.5 * (a1 - b1) ** 2, 0.5 * (a2 - b2) ** 2,
-         0.5 * (a3 - b3) ** 2, 0.5 * (a4 - b4) ** 2, 0.5 * (a5 - b5) ** 2)
-    if var is None:
-        return (values, d, weight, stamp)
-    g = 1.0 / weight
-    v0, v1, v2, v3, v4, v5 = var
-    return (values, (v0 + g * (d[0] - v0), v1 + g * (d[1] - v1), v2 + g * (d[2] - v2),
-                     v3 + g * (d[3] - v3), v4 + g * (d[4] - v4), v5 + g * (d[5] - v5)), weight, stamp)
+    it bounds the rest noise from above. A message after a gap (GAP_FACTOR periods) starts the differences
+    again (a gap's jump is not noise). ``zero_motion.difference_noise``, run by ``backend`` (default: the
+    reference)."""
+    noise = zero_motion.difference_noise if backend is None else backend.difference_noise
+    return noise(track, values, stamp, period, GAP_FACTOR, NOISE_MEMORY)
 
 
 def rest_window(window: tuple, values: tuple, measured: tuple, running: tuple | None, stamp: float, span: float,
-                alpha: float) -> tuple[tuple, bool]:
+                alpha: float, backend: Backend | None = None) -> tuple[tuple, bool]:
     """The rest window after one message, and whether the wheels are at rest now (module doc).
 
     ``window`` holds the six twist components (unmeasured ones 0) and stamps of the last ``span``
-    seconds, at least MIN_WINDOW messages; ``running`` is ``running_noise``'s variance per component."""
+    seconds, at least MIN_WINDOW messages; ``running`` is ``running_noise``'s variance per component.
+    ``zero_motion.zero_mean_window`` with this test's bounds, run by ``backend`` (default: the reference)."""
     k = sum(measured)
     if k == 0:
         return (), False
-    z = normal_bound(0.5 * alpha / MIN_WINDOW, k)
-    if running is not None:
-        for v, var, used in zip(values, running, measured):
-            if used and v * v > z * z * (var if var > RESOLUTION * RESOLUTION else RESOLUTION * RESOLUTION):
-                return (), False  # beyond any rest noise the stream has shown: moving
-    drop = 0
-    n = len(window) + 1
-    while n - drop > MIN_WINDOW and stamp - window[drop][0] >= span:
-        drop += 1
-    window = window[drop:] + ((stamp, values),)
-    n = len(window)
-    if n < MIN_WINDOW:
-        return window, False
-    bound = t2_bound(0.5 * alpha, k, n)
-    floor = RESOLUTION * RESOLUTION
-    for i in range(6):
-        if not measured[i]:
-            continue
-        total = 0.0
-        diff2 = 0.0
-        previous = None
-        for entry in window:
-            v = entry[1][i]
-            total += v
-            if previous is not None:
-                diff2 += (v - previous) ** 2
-            previous = v
-        var = diff2 / (2.0 * (n - 1))
-        if total * total / n > bound * (var if var > floor else floor):
-            return window, False
-    return window, True
+    z, bound = _bounds(alpha, k)
+    test = zero_motion.zero_mean_window if backend is None else backend.zero_mean_window
+    return test(window, values, measured, running, stamp, span, z, MIN_WINDOW, RESOLUTION * RESOLUTION, bound)
+
+
+@lru_cache(maxsize=64)
+def _bounds(alpha: float, k: int) -> tuple[float, Callable[[int], float]]:
+    """The early exit's normal bound over a window's first MIN_WINDOW messages and the Student bound by the
+    window's length, for k measured components (module doc)."""
+    return normal_bound(0.5 * alpha / MIN_WINDOW, k), partial(t2_bound, 0.5 * alpha, k)
 
 
 __all__ = ["MIN_WINDOW", "RESOLUTION", "normal_bound", "rest_window", "running_noise", "t2_bound"]
