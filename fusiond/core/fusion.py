@@ -40,7 +40,7 @@ from .fixed_lag import FixedLag, LaggedPose
 from ..logs import get_logger
 from ..samples import Sample
 from .diagnostics import DiagnosticsRecord, NisWindow
-from .history import History, snapshots_read
+from .history import History, snapshots_read, unrecorded_from
 from .inputs import HeldInputs, next_expiry, note_period
 from .layout import absolute_sensor, idle_keys, state_layout, update_masks
 from .resume import RESUME_VERSION, HeldMotion, ResumeState, state_fingerprint
@@ -236,22 +236,27 @@ class FusionCore:
         return rec.smooth()
 
     # -- public API ---------------------------------------------------------
-    def snapshot_plan(self, samples: Sequence[Sample]) -> list[bool]:
+    def snapshot_plan(self, samples: Sequence[Sample]) -> list[bool | None]:
         """For samples to be ingested in this order, the ``keep`` each is ingested with: False where no
         later one of them can land right after it (``history.snapshots_read``), so its history snapshot,
-        never read, is not taken. The estimates are the same as with every snapshot kept; a replay of a
-        recording held in memory saves a snapshot a message where its samples come in order."""
+        never read, is not taken; None from where every sample comes after all before it
+        (``history.unrecorded_from``), so none needs a history entry at all. The estimates are the same as
+        with every snapshot kept; a replay of a recording held in memory saves a snapshot a message where its
+        samples come in order, and the history's upkeep where none comes late any more."""
         index, offsets = self.index, self._stamp_offset
         keys: list[tuple[float, int] | None] = []
         for sample in samples:
             idx = index.get(sample.sensor)
             stamp = sample.stamp + offsets[idx] if idx is not None else math.nan
             keys.append((stamp, idx) if 0.0 < stamp < math.inf else None)
-        return snapshots_read(keys)
+        read = snapshots_read(keys)
+        start = unrecorded_from(keys)
+        return [*read[:start], *([None] * (len(read) - start))]
 
-    def ingest(self, sample: Sample, keep: bool = True) -> Step:
+    def ingest(self, sample: Sample, keep: bool | None = True) -> Step:
         """Fuse one sample. ``keep``: ``snapshot_plan``'s word for it (False: no later sample lands right
-        after it; an entry of a timeline held for a time jump keeps its snapshot whatever it says)."""
+        after it; None: none is placed before it, so it takes no history entry; an entry of a timeline held
+        for a time jump keeps its snapshot whatever it says)."""
         idx = self.index.get(sample.sensor)
         if idx is None:
             return Step(sample.sensor, False, reasons.UNKNOWN_SENSOR)
@@ -278,25 +283,30 @@ class FusionCore:
             self._abandon_jump()  # the stream moved on along the old timeline: the far stamps were a glitch
         return self._place(idx, inp, stamp, keep)
 
-    def _place(self, idx: int, inp, stamp: float, keep: bool = True) -> Step:
+    def _place(self, idx: int, inp, stamp: float, keep: bool | None = True) -> Step:
         """Apply a sample at its own stamp (re-applying later ones when it is late) and count it."""
         st = self.stats[idx]
         resets = self.state.ekf.resets  # the newest timeline's covariance resets before this sample
         key = (stamp, idx)
         h = self.history
-        pos, duplicate = h.slot(key)
-        if duplicate:
-            return self._drop(idx, reasons.DUPLICATE_STAMP, stamp)
-        late = pos < len(h.keys)  # placed before the newest applied sample
-        if late:
-            if h.too_old(stamp):
-                return self._drop(idx, reasons.TOO_OLD, stamp)
-            self.state = h.state_before(pos, self._reapply)
-        records = self._apply(self.state, idx, inp, stamp, emit=True, late=late)
-        h.insert(pos, key, (idx, inp, stamp), self.state, keep)
-        if late:
-            h.reapply_after(pos, self.state, self._reapply)
-        h.trim(self._history_s, self._history_max)
+        if keep is None:  # nothing is placed before it later (``snapshot_plan``): no history entry
+            h.pass_by(key)
+            late = False
+            records = self._apply(self.state, idx, inp, stamp, emit=True, late=False)
+        else:
+            pos, duplicate = h.slot(key)
+            if duplicate:
+                return self._drop(idx, reasons.DUPLICATE_STAMP, stamp)
+            late = pos < len(h.keys)  # placed before the newest applied sample
+            if late:
+                if h.too_old(stamp):
+                    return self._drop(idx, reasons.TOO_OLD, stamp)
+                self.state = h.state_before(pos, self._reapply)
+            records = self._apply(self.state, idx, inp, stamp, emit=True, late=late)
+            h.insert(pos, key, (idx, inp, stamp), self.state, keep)
+            if late:
+                h.reapply_after(pos, self.state, self._reapply)
+            h.trim(self._history_s, self._history_max)
         if self.state.ekf.resets > resets:
             self._covariance_reset(self.state.ekf.resets - resets)
         st.applied += 1

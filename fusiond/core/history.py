@@ -17,6 +17,10 @@ base then). A caller that knows every sample to come (a replay of a recording in
 which entries no later sample lands right after (``snapshots_read``); those keep no snapshot
 (``None`` in ``after``), and what the filter computes is the same to the bit, as nothing reads them.
 
+Where every sample from some point on comes after all before it (a recording without late samples from
+there: ``unrecorded_from``), nothing is placed before any of them later, so they take no entry at all
+(``pass_by``): only the newest key is kept, to know the next one is newer still.
+
 A caller that cannot know (the daemon: a live stream) takes a snapshot at every ``stride``-th entry in
 order only; the others are ``DERIVED``: the state after one is the nearest snapshot before it with the
 events in between applied again, which is the state itself to the bit (applying an event is a function of
@@ -59,6 +63,10 @@ def stride_for(late_share: float) -> int:
     return max(1, round(math.sqrt(2.0 / (REAPPLY_OVER_SNAPSHOT * late_share))))
 
 
+_UNFORESEEN = ("a late sample landed after an entry inserted without its snapshot: the samples were not the ones "
+               "their snapshot plan was made for")
+
+
 class _Derived:
     """The ``after`` of an entry whose state is derived from the nearest snapshot before it (module doc)."""
 
@@ -94,14 +102,26 @@ class History:
         self._run = -1  # entries DERIVED at the end since its newest snapshot (-1: none there to derive from)
         self.late_share = 0.0  # of the entries inserted, over the last ~LATE_MEMORY
         self._free: list[FilterState] = []  # snapshots no longer referenced, to be overwritten
+        self.newest: Key | None = None  # the greatest key placed (an entry's, or one ``pass_by`` took)
 
     def slot(self, key: Key) -> tuple[int, bool]:
         """(insert position, is a duplicate of an applied sample)."""
         keys = self.keys
-        if keys and key > keys[-1]:  # the newest sample (nearly every one): after all, equal to none
+        newest = self.newest
+        if newest is None or key > newest:  # the newest sample (nearly every one): after all, equal to none
             return len(keys), False
+        if not keys or keys[-1] != newest:  # samples placed without an entry (``pass_by``) would be skipped
+            raise CoreError(_UNFORESEEN)
         pos = bisect.bisect_right(keys, key, self.start)
         return pos, pos > self.start and keys[pos - 1] == key
+
+    def pass_by(self, key: Key) -> None:
+        """Place a sample after all others without an entry: the caller knows no later one is placed before or
+        on it (``unrecorded_from``). A key not after the newest is a CoreError."""
+        newest = self.newest
+        if newest is not None and key <= newest:
+            raise CoreError(_UNFORESEEN)
+        self.newest = key
 
     def too_old(self, stamp: float) -> bool:
         return self.horizon is not None and stamp < self.horizon
@@ -117,8 +137,7 @@ class History:
             j -= 1
         s = after[j] if j >= kept else self.base
         if s is None:  # the caller said no later sample lands here (``insert(keep=False)``)
-            raise CoreError("a late sample landed after an entry inserted without its snapshot: the "
-                            "samples were not the ones their snapshot plan was made for")
+            raise CoreError(_UNFORESEEN)
         c = s.copy()
         events = self.events
         for i in range(j + 1, pos):
@@ -138,6 +157,7 @@ class History:
         self.events.insert(pos, event)
         share = self.late_share
         if at_end:
+            self.newest = key
             self.late_share = share - share / LATE_MEMORY
             if not keep:
                 after.append(None)
@@ -264,3 +284,21 @@ def snapshots_read(keys: list[Key | None]) -> list[bool]:
         if lk is not None and (latest_late is None or lk > latest_late):
             latest_late = lk
     return read
+
+
+def unrecorded_from(keys: list[Key | None]) -> int:
+    """For samples to be placed in this order (their keys, as ``snapshots_read`` takes them), the first from
+    which each comes after every one before it: the one after the last that comes late or repeats a key
+    (at or below the greatest key before it). From there no sample is placed before or on another, so none
+    needs an entry (``History.pass_by``). A sample the core drops (a far stamp held for a time jump, a
+    reading it refuses) only moves that point later: the answer errs on the side of an entry."""
+    newest: Key | None = None
+    last = -1
+    for i, k in enumerate(keys):
+        if k is None:
+            continue
+        if newest is not None and k <= newest:
+            last = i
+        else:
+            newest = k
+    return last + 1

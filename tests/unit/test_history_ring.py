@@ -120,6 +120,8 @@ def test_a_long_stream_keeps_what_plain_lists_would_keep(steps, history_s, histo
         h.keys.insert(got_pos, key)
         h.events.insert(got_pos, (sensor, k, key[0]))
         h.after.insert(got_pos, s)
+        if h.newest is None or key > h.newest:  # as ``History.insert`` keeps it
+            h.newest = key
         keys.insert(pos, key)
         after.insert(pos, s)
         h.trim(history_s, history_max)

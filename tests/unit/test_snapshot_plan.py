@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusiond.core.fusion import FusionCore
-from fusiond.core.history import snapshots_read
+from fusiond.core.history import snapshots_read, unrecorded_from
 from fusiond.errors import CoreError
 
 from tests.support.core_samples import imu, make_config, odom
@@ -121,14 +121,41 @@ def test_a_late_stamp_repeated_with_new_values_reads_the_snapshot_of_the_entry_i
     assert steps_b == steps_a and stats_b == stats_a
 
 
-def test_samples_in_order_keep_no_snapshot():
+def test_samples_in_order_take_no_history_entry():
     cfg = make_config()
     samples = [s for k in range(50) for s in (odom(1.0 + 0.01 * k, v=0.3), imu(1.0 + 0.01 * k + 0.005))]
     core = FusionCore(cfg)
-    for s, keep in zip(samples, core.snapshot_plan(samples)):
+    plan = core.snapshot_plan(samples)
+    assert plan == [None] * len(samples)
+    for s, keep in zip(samples, plan):
         core.ingest(s, keep)
     h = core.history
-    assert h.after[h.start:] and all(a is None for a in h.after[h.start:])
+    assert not h.keys and h.newest == (1.0 + 0.01 * 49 + 0.005, 1)
+
+
+def test_after_the_last_late_sample_the_plan_records_nothing():
+    """Snapshots where a late sample lands, entries up to the last one that comes late or repeats a key, none
+    after it."""
+    keys = [(1.0, 0), (3.0, 0), (2.0, 0), (4.0, 0), (4.0, 0), (5.0, 1), (6.0, 0)]
+    assert unrecorded_from(keys) == 5  # after the repeated (4.0, 0)
+    assert unrecorded_from([None, (1.0, 0), None, (2.0, 0)]) == 0
+    assert unrecorded_from([]) == 0
+    cfg = make_config()
+    samples = [odom(1.0, v=0.3), odom(1.03, v=0.3), odom(1.02, v=0.3), odom(1.04, v=0.3), odom(1.05, v=0.3)]
+    core = FusionCore(cfg)
+    assert core.snapshot_plan(samples) == [True, False, False, None, None]
+
+
+def test_a_sample_placed_before_one_that_took_no_entry_is_an_error_not_a_wrong_estimate():
+    core = FusionCore(make_config())
+    for k in range(10):
+        core.ingest(odom(1.0 + 0.01 * k, v=0.3), keep=k < 5 or None)
+    with pytest.raises(CoreError, match="snapshot plan"):
+        core.ingest(imu(1.075))  # among the samples placed without an entry
+    with pytest.raises(CoreError, match="snapshot plan"):
+        core.ingest(imu(1.035))  # among the entries, with samples placed without one after them
+    with pytest.raises(CoreError, match="snapshot plan"):
+        core.ingest(odom(1.09, v=0.3), keep=None)  # a repeat of the newest, said to need no entry
 
 
 def test_a_late_sample_the_plan_did_not_foresee_is_an_error_not_a_wrong_estimate():
