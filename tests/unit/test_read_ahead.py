@@ -14,6 +14,7 @@ from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_typestore
 
 from fusiond.config import ImuSensor, OdomSensor, loads
+from fusiond.logs import configure
 from fusiond.replay import bag1_records, read_ahead
 from fusiond.replay.bag import BagError, iter_raw_cdr, open_bag_samples
 from fusiond.replay.read_ahead import BATCH, ReadAhead, reading_ahead
@@ -117,6 +118,7 @@ def _dies_at(monkeypatch: pytest.MonkeyPatch, tag: str, nth: int) -> None:
 def test_a_child_that_dies_halfway_loses_nothing(jackal_bag: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from structlog.testing import capture_logs  # here: imported at collection, structlog would cache every logger
 
+    configure("warning")  # capture_logs keeps the level's filter: an earlier test's --quiet would drop the warning
     samples, *_ = _in_turn([jackal_bag])
     _dies_at(monkeypatch, "batch", 3)
     with capture_logs() as logs, ReadAhead([jackal_bag], SENSORS).opened() as ahead:
@@ -132,6 +134,7 @@ def test_a_child_that_dies_before_the_bags_are_open_loses_nothing(jackal_bag: Pa
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     from structlog.testing import capture_logs
 
+    configure("warning")
     samples, missing, *_ = _in_turn([jackal_bag])
     _dies_at(monkeypatch, "opened", 1)
     with capture_logs() as logs, ReadAhead([jackal_bag], SENSORS).opened() as ahead:
