@@ -30,8 +30,8 @@ placed late, a snapshot costing c_s and an event's re-application c_r, an entry 
 / 2 on average at stride k (a late sample lands after an entry (k - 1) / 2 past the nearest snapshot), least
 at k = sqrt(2 c_s / (p c_r)) (``stride_for``): every 8th entry for a stream in order (a late sample then
 re-applies at most 7 events more), every 2nd with one sample in ten late, every entry beyond one in three.
-``trim`` keeps the entries a derivation still starts from (up to ``stride`` - 1 before the horizon, ``kept``
-to ``start``) but judges "too old" by the horizon itself, so what is placed and what is dropped does not
+``trim`` keeps the entries a derivation still starts from (``kept`` to ``start``: a few strides before the
+horizon at most) but judges "too old" by the horizon itself, so what is placed and what is dropped does not
 change.
 """
 
@@ -215,13 +215,16 @@ class History:
             end = start + n
             last = self.after[end - 1]
             if last is DERIVED:
-                # what stays derives its state from this entry's chain: kept from the chain's snapshot on
-                head = end - 2
+                # what stays derives its state from this entry's chain: kept from the chain's snapshot on. Looked
+                # for only once the entries kept so have grown past two strides (a stream in order drops them
+                # through its next snapshot a few trims later, without looking)
                 after, kept = self.after, self.kept
-                while head >= kept and after[head] is DERIVED:
-                    head -= 1
-                if head >= kept:  # a chain starts at a snapshot
-                    self._drop_through(head)
+                if end - kept > 2 * STRIDE_MAX:
+                    head = end - 2
+                    while head >= kept and after[head] is DERIVED:
+                        head -= 1
+                    if head >= kept:  # a chain starts at a snapshot
+                        self._drop_through(head)
                 self.horizon = keys[end - 1][0]  # an entry's filter time is its stamp
             else:
                 self._drop_through(end - 1)

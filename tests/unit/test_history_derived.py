@@ -127,3 +127,21 @@ def test_a_live_stream_strides_by_how_many_of_its_samples_come_late():
         if k == 1999:
             assert core.history.stride == history.stride_for(core.history.late_share) == 2
     assert core.history.stride == history.STRIDE_MAX
+
+
+@pytest.mark.parametrize("pattern", ["alone", "pairs", "triples"])
+def test_the_entries_kept_for_derivations_stay_within_a_few_strides(pattern):
+    """``trim`` drops the entries before the horizon through the newest snapshot among them only now and then:
+    however a stream's trims fall against its snapshots (one entry a trim, or two and three at once), what it
+    keeps before the horizon stays within two strides and a trim's worth."""
+    per = {"alone": 1, "pairs": 2, "triples": 3}[pattern]
+    core = FusionCore(make_config(extra_filter="history_s = 0.05"))
+    h_max = 0
+    for k in range(3000):
+        t = 1.0 + 0.01 * k
+        for j in range(per):  # samples at one instant trim together at the next
+            core.ingest(imu(t + 1e-5 * j, gyro=(0.0, 0.0, 0.1)) if j != 1 else odom(t + 1e-5, v=0.5, w=0.1))
+        h = core.history
+        h_max = max(h_max, h.start - h.kept)
+    assert h_max <= 2 * history.STRIDE_MAX + per
+    assert len(core.history.keys) < 2 * history.COMPACT + 20  # compacted as it goes
