@@ -224,6 +224,7 @@ class OdomModel(SensorModel):
         self._unmeasured_var = cfg.twist_unmeasured_sigma[1] ** 2
         self._last_fit: tuple = ((), math.nan, 0.0)  # (window, linear variance, its forward_accel)
         self._lost_kept: tuple | None = None  # the last ``_lost_noise``: (its three arguments, its answer)
+        self._bounds_kept: tuple = (None, None)  # the last gyro covariance ``_watch`` read, and its quiet bounds
         if cfg.twist_from_pose:  # an interval longer than the filter's gap_s is a logging gap, no twist
             self.policy.differences = PoseDifferences(ctx.filter.gap_s)
 
@@ -285,9 +286,20 @@ class OdomModel(SensorModel):
         logging a component the moment it is found lost."""
         gyro = bounds = None
         if s.gyro is not None and stamp - s.gyro_last[1] <= self.ctx.timeout(s.gyro_last[0], s):
-            x, cov, bias_sigma = s.ekf.x, s.gyro_cov, self.ctx.filter.gyro_bias_sigma
-            gyro = tuple(s.gyro[i] - (float(x[b]) if b >= 0 else 0.0) for i, b in enumerate(self._bias))
-            bounds = tuple(quiet_bound(math.sqrt(cov[4 * i]), bias_sigma) for i in range(3))
+            g, cov = s.gyro, s.gyro_cov
+            b0 = self._bias[0]
+            if b0 >= 0:  # the bias block's three rates: one slice, the same floats as float(x[i]) each
+                c0, c1, c2 = s.ekf.x[b0 : b0 + 3].tolist()
+                gyro = (g[0] - c0, g[1] - c1, g[2] - c2)
+            else:
+                gyro = (g[0] - 0.0, g[1] - 0.0, g[2] - 0.0)
+            kept = self._bounds_kept  # the IMU's covariance is one tuple while it repeats: its bounds once
+            if kept[0] is cov:
+                bounds = kept[1]
+            else:
+                bias_sigma = self.ctx.filter.gyro_bias_sigma
+                bounds = tuple(quiet_bound(math.sqrt(cov[4 * i]), bias_sigma) for i in range(3))
+                self._bounds_kept = (cov, bounds)  # holds the covariance: its identity stays its own
         before = lost_channel.lost(watched)
         watched = lost_channel.watch(watched, inp.angular, inp.measured, gyro, bounds)
         if emit:
