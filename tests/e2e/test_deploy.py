@@ -134,7 +134,7 @@ def test_dockerfile_install_steps_without_docker(tmp_path):
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())
         entry_points = next(z.read(n).decode() for n in names if n.endswith("entry_points.txt"))
-    assert "fusiond = fusiond.cli:main" in entry_points
+    assert "fusiond = fusiond.cli:run" in entry_points
     for module in ("cli/__init__.py", "cli/run.py", "health.py", "transport/daemon.py", "transport/player.py",
                    "transport/session.py", "core/fusion.py", "estimator/ekf.py"):
         assert f"fusiond/{module}" in names
