@@ -365,9 +365,9 @@ class Runner:
         # False: the doctor's sample part is made elsewhere from the same samples and adopted (``replay``)
         self.samples_to_doctor = True
 
-    def feed(self, sample, keep: bool = True) -> None:
+    def feed(self, sample, keep: bool | None = True) -> None:
         """``keep``: the core's (``FusionCore.ingest``, ``snapshot_plan``)."""
-        core, doctor, trace, keep_trace = self.core, self.doctor, self.trace, self.keep_trace
+        core, doctor, keep_trace = self.core, self.doctor, self.keep_trace
         self.messages += 1
         step = core.ingest(sample, keep)
         if doctor is not None and self.samples_to_doctor:
@@ -393,27 +393,31 @@ class Runner:
                     bias = core.gyro_bias
                     doctor.add_estimate(t, q, pos_var, att_var, float(bias[2]) if bias is not None else 0.0)
             if keep_trace:
-                trace.fused.append((t, p[0], p[1], p[2]))
-        if doctor is not None and type(sample) is OdomSample:
-            since = core.still_since
-            if since is not None:
-                doctor.add_rest(sample, since)
-        if isinstance(sample, OdomSample) and step.accepted:
+                self.trace.fused.append((t, p[0], p[1], p[2]))
+        if type(sample) is OdomSample:
             if doctor is not None:
-                doctor.add_twist(sample.linear, sample.angular, sample.orientation, sample.position, sample.stamp)
-            if keep_trace:
-                trace.raw_odom.append((sample.stamp, *sample.position))
-        for r in step.records:
-            if doctor is not None:
-                doctor.add(r)
-            if self.on_record is not None:
-                self.on_record(r)
-            if keep_trace:
-                name = f"{r.sensor}/{r.channel}"
-                trace.nis.setdefault(name, []).append((r.stamp, r.nis, r.dof, r.rejected))
-                comps, rows = trace.innovations.setdefault(name, (list(r.components), []))
-                if r.components == comps:
-                    rows.append((r.stamp, r.innovation, r.innovation_var))
+                since = core.still_since
+                if since is not None:
+                    doctor.add_rest(sample, since)
+                if step.accepted:
+                    doctor.add_twist(sample.linear, sample.angular, sample.orientation, sample.position,
+                                     sample.stamp)
+            if keep_trace and step.accepted:
+                self.trace.raw_odom.append((sample.stamp, *sample.position))
+        records = step.records
+        if records:
+            on_record, trace = self.on_record, self.trace
+            for r in records:
+                if doctor is not None:
+                    doctor.add(r)
+                if on_record is not None:
+                    on_record(r)
+                if keep_trace:
+                    name = f"{r.sensor}/{r.channel}"
+                    trace.nis.setdefault(name, []).append((r.stamp, r.nis, r.dof, r.rejected))
+                    comps, rows = trace.innovations.setdefault(name, (list(r.components), []))
+                    if r.components == comps:
+                        rows.append((r.stamp, r.innovation, r.innovation_var))
 
     def result(self, seconds: float = 0.0, missing: list[str] | None = None, decode_errors: int = 0) -> ReplayResult:
         return ReplayResult(self.core, self.doctor, self.trace, self.messages, len(self.trajectory) // 8, seconds,
