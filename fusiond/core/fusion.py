@@ -306,7 +306,7 @@ class FusionCore:
             h.insert(pos, key, (idx, inp, stamp), self.state, keep)
             if late:
                 h.reapply_after(pos, self.state, self._reapply)
-            h.trim(self._history_s, self._history_max)
+            h.trimmed()
         if self.state.ekf.resets > resets:
             self._covariance_reset(self.state.ekf.resets - resets)
         st.applied += 1
@@ -724,7 +724,8 @@ class FusionCore:
         self._reset_history()
 
     def _reset_history(self) -> None:
-        self.history = History(self.state)
+        fc = self.cfg.filter
+        self.history = History(self.state, history_s=fc.history_s, history_max=fc.history_max)
 
     def _reapply(self, s: FilterState, idx: int, inp, stamp: float) -> None:
         self._apply(s, idx, inp, stamp, emit=False, late=False)

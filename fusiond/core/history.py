@@ -48,6 +48,10 @@ from .state import FilterState
 Key = tuple[float, int]  # (stamp, sensor index): ties broken by sensor, never by arrival
 SCAN = 8  # ``trim`` steps over this many keys before it bisects
 COMPACT = 256  # dropped entries deleted from the lists' front at once
+# entries placed in order between two trims (``trimmed``): the history holds at most that many past its horizon
+# until the next, and a trim costs about what an entry's insert does, so a sixteenth of one an entry. A sample
+# placed late trims first (``slot``): what it finds is what a trim after every entry would have left.
+TRIM_EVERY = 16
 STRIDE_MAX = 8  # the longest stride (module doc): beyond, the copies saved are a few per cent of one
 # an event's re-application against a snapshot's copy: ~70,000 against ~11,000 instructions on the daemon's
 # traffic (1 kHz IMU, 100 Hz odometry; scripts/core_instructions.py with and without the stride)
@@ -87,7 +91,8 @@ class History:
     state after the horizon still starts from (module doc); ``base`` is the state before ``kept``.
     ``stride``: every how many entries in order keep a snapshot (1: each; None: ``stride_for`` the late share)."""
 
-    def __init__(self, base: FilterState | None, stride: int | None = None) -> None:
+    def __init__(self, base: FilterState | None, stride: int | None = None, history_s: float = math.inf,
+                 history_max: int = 1 << 62) -> None:
         stride = DEFAULT_STRIDE if stride is None else stride
         self.keys: list[Key] = []
         self.events: list[tuple[int, Any, float]] = []
@@ -103,6 +108,8 @@ class History:
         self.late_share = 0.0  # of the entries inserted, over the last ~LATE_MEMORY
         self._free: list[FilterState] = []  # snapshots no longer referenced, to be overwritten
         self.newest: Key | None = None  # the greatest key placed (an entry's, or one ``pass_by`` took)
+        self.history_s, self.history_max = history_s, history_max  # what ``trimmed`` keeps
+        self._untrimmed = 0  # entries placed since the last trim
 
     def slot(self, key: Key) -> tuple[int, bool]:
         """(insert position, is a duplicate of an applied sample)."""
@@ -112,6 +119,9 @@ class History:
             return len(keys), False
         if not keys or keys[-1] != newest:  # samples placed without an entry (``pass_by``) would be skipped
             raise CoreError(_UNFORESEEN)
+        if self._untrimmed:  # placed before the newest: against the history a trim after every entry leaves
+            self._untrimmed = 0
+            self.trim(self.history_s, self.history_max)
         pos = bisect.bisect_right(keys, key, self.start)
         return pos, pos > self.start and keys[pos - 1] == key
 
@@ -192,6 +202,17 @@ class History:
             a = after[j]
             if a is not None and a is not DERIVED:  # an entry without a snapshot stays without one
                 state.copy(into=a)
+
+    def trimmed(self) -> None:
+        """After an entry is placed: ``trim`` to ``history_s`` and ``history_max`` every TRIM_EVERY entries
+        (and before the next late one, ``slot``). Trims are the same whenever they run between two late
+        samples: each drops what is older than the newest less ``history_s``, and beyond the count."""
+        n = self._untrimmed + 1
+        if n < TRIM_EVERY:
+            self._untrimmed = n
+            return
+        self._untrimmed = 0
+        self.trim(self.history_s, self.history_max)
 
     def trim(self, history_s: float, history_max: int) -> None:
         """Drop the samples older than ``history_s`` before the newest, and beyond ``history_max``."""

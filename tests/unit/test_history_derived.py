@@ -32,11 +32,13 @@ def _stream(steps: list[tuple[int, float, float]]) -> list:
     return out
 
 
-def _fused(samples: list, stride: int | None, plan: bool) -> tuple[list, FusionCore]:
-    """What a core makes of ``samples`` with its histories striding by ``stride``: each step's outcome, its
-    records' NIS and innovations, the pose after it, and the core (its final state)."""
+def _fused(samples: list, stride: int | None, plan: bool, trim_every: int = history.TRIM_EVERY) -> tuple[list, FusionCore]:
+    """What a core makes of ``samples`` with its histories striding by ``stride`` and trimmed every ``trim_every``
+    entries: each step's outcome, its records' NIS and innovations, the pose after it, and the core (its final
+    state)."""
     with pytest.MonkeyPatch.context() as m:
         m.setattr(history, "DEFAULT_STRIDE", stride)
+        m.setattr(history, "TRIM_EVERY", trim_every)
         core = FusionCore(make_config(extra_filter="history_s = 0.08"))
         keeps = core.snapshot_plan(samples) if plan else [True] * len(samples)
         seen = []
@@ -55,8 +57,9 @@ def _fused(samples: list, stride: int | None, plan: bool) -> tuple[list, FusionC
                                 st.floats(-0.3, 0.3)), min_size=20, max_size=160),
        plan=st.booleans(), stride=st.sampled_from([None, 2, history.STRIDE_MAX]))
 def test_a_history_of_derived_states_fuses_what_one_of_snapshots_fuses(steps, plan, stride):
+    """... and trimmed now and then, what one trimmed after every entry fuses."""
     samples = _stream(steps)
-    every, core_every = _fused(samples, 1, plan)
+    every, core_every = _fused(samples, 1, plan, trim_every=1)
     strided, core_strided = _fused(samples, stride, plan)
     assert strided == every
     a, b = core_every.state, core_strided.state

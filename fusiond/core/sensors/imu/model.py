@@ -307,8 +307,16 @@ class ImuModel(SensorModel):
             return True
         own: ImuOwn = s.own[self.index]
         bucket = own.orientation_credit
-        credit = ORIENTATION_BURST if bucket is None else min(
-            ORIENTATION_BURST, bucket[0] + max(stamp - bucket[1], 0.0) * self.cfg.orientation_rate_hz)
+        if bucket is None:
+            credit = ORIENTATION_BURST
+        else:
+            # min(BURST, credit + max(elapsed, 0) f) as comparisons: the same float (NaN included), no builtin calls
+            elapsed = stamp - bucket[1]
+            if elapsed < 0.0:
+                elapsed = 0.0
+            credit = bucket[0] + elapsed * self.cfg.orientation_rate_hz
+            if not credit < ORIENTATION_BURST:
+                credit = ORIENTATION_BURST
         due = credit >= 1.0
         s.own[self.index] = msgspec.structs.replace(own, orientation_credit=(credit - 1.0 if due else credit, stamp))
         if not due and emit:
