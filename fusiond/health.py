@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from itertools import chain
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, Literal
 
@@ -110,9 +111,10 @@ class CoreCounters(msgspec.Struct, kw_only=True):
 def core_counters(core: Any, published: int = 0) -> CoreCounters:
     """Snapshot of a FusionCore's counters and sanity; call it from the thread that feeds the core."""
     finite = True
+    est = None
     if core.initialised:
-        est = core.estimate()
-        finite = all(math.isfinite(v) for v in (*est.position, *est.orientation, *est.pose_covariance))
+        est = core.estimate()  # built once: the pose below is read from it too
+        finite = all(map(math.isfinite, chain(est.position, est.orientation, est.pose_covariance)))
     return CoreCounters(
         applied=[s.applied for s in core.stats],
         late=[s.late for s in core.stats],
@@ -125,7 +127,7 @@ def core_counters(core: Any, published: int = 0) -> CoreCounters:
                             heading_known=core.heading_known, scales=core.scales),
         consistency=core.consistency(),
         published=published,
-        pose=pose_health(core) if finite else None,
+        pose=pose_health(core, est) if finite else None,
     )
 
 

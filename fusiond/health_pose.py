@@ -16,12 +16,15 @@ estimate the daemon publishes, so it is the published pose of that moment, in th
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 
 from .core.tf_tree import tf_tree_active
 from .estimator import rotation as rot
+
+if TYPE_CHECKING:
+    from .core.fusion import Estimate
 
 __all__ = ["PoseHealth", "pose_health", "sigma_worst_xy"]
 
@@ -47,14 +50,16 @@ def sigma_worst_xy(cov: list[float]) -> float:
     return math.sqrt(max(half + math.hypot(0.5 * (a - d), b), 0.0))
 
 
-def pose_health(core: Any) -> PoseHealth | None:
+def pose_health(core: Any, est: Estimate | None = None) -> PoseHealth | None:
     """The core's newest estimate as the health answer's ``pose`` (module doc), or None before there is one
-    to publish; in the frame the daemon publishes it in (``map_frame`` in a map -> odom tree, else frame_id)."""
+    to publish; in the frame the daemon publishes it in (``map_frame`` in a map -> odom tree, else frame_id).
+    ``est``: that estimate when the caller has built it already (``core_counters``, for its finiteness)."""
     if not core.ready or not core.initialised:
         return None
     out = core.cfg.output
     frame_id = out.map_frame if tf_tree_active(core.cfg) else out.frame_id
-    est = core.estimate()
+    if est is None:
+        est = core.estimate()
     cov = est.pose_covariance
     roll, pitch, yaw = rot.to_rpy(tuple(est.orientation))
     return PoseHealth(stamp=est.stamp, frame_id=frame_id, position=tuple(est.position), yaw=yaw,
