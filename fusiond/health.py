@@ -10,7 +10,10 @@ stale stamps or a frozen receiver's repeats (``Step.measured``) is not counted a
 
 Threads: subscriber callbacks count arrivals and queue drops, the worker reports
 accepted samples and core counters, the queryable reads a report. One lock
-guards it all; every call is a few dict/list updates.
+guards it all; every call is a few dict/list updates. The worker notes each accepted
+sample without the lock (`noted`, a deque's append: the daemon's per-message
+path takes no lock and makes no call for health); they are counted, in the order noted,
+by the next report or core counters, so a report counts every sample accepted before it.
 
 Status: `starting` while the daemon waits for its first samples (nothing accepted of
 the sensors whose samples prompt a publish, the odometry, and nothing dropped yet: not
@@ -28,8 +31,9 @@ from __future__ import annotations
 import math
 import threading
 import time
-from itertools import chain
+from collections import deque
 from collections.abc import Callable, Iterable, Sequence
+from itertools import chain
 from typing import Any, Literal
 
 import msgspec
@@ -180,6 +184,9 @@ class Health:
         self._queue_depth = queue_depth or (lambda: 0)
         self._worker_alive = True
         self._started = clock()
+        # (sensor index, arrival, floored) of the samples the filter used, not counted yet: the worker appends
+        # (module doc), `count_noted` counts them
+        self.noted: deque[tuple[int, float, bool]] = deque()
 
     @property
     def names(self) -> list[str]:
@@ -201,18 +208,20 @@ class Health:
     def on_floored(self, idx: int) -> None:
         """An accepted sample had a zero variance that the sensor's floor replaced (robot_pose_ekf's zero covariance)."""
         with self._lock:
+            self._count_noted()
             self._sensors[idx].floored += 1
 
     def on_accepted(self, idx: int, arrival: float) -> None:
         """A sample the filter used, received at wall time `arrival` (the subscriber's clock)."""
         with self._lock:
+            self._count_noted()
             _accept(self._sensors[idx], arrival)
 
     def on_accepted_many(self, accepted: Iterable[tuple[int, float, bool]]) -> None:
         """(sensor index, arrival, floored) of the samples the filter used, in the order it used them:
-        `on_accepted` of each (and `on_floored` of those flagged) under one lock. The daemon's worker
-        hands over what one pass fused at once instead of taking the lock per message."""
+        `on_accepted` of each (and `on_floored` of those flagged) under one lock."""
         with self._lock:
+            self._count_noted()
             sensors = self._sensors
             for idx, arrival, floored in accepted:
                 s = sensors[idx]
@@ -220,8 +229,30 @@ class Health:
                     s.floored += 1
                 _accept(s, arrival)
 
-    def set_core(self, counters: CoreCounters) -> None:
+    def count_noted(self) -> None:
+        """Count the samples noted since the last count (the worker, in a long pass, so they stay few)."""
         with self._lock:
+            self._count_noted()
+
+    def _count_noted(self) -> None:
+        """Count the samples appended to `noted` since the last count, in the order noted (lock held).
+        Only what was noted when it starts: the worker may note more meanwhile, for the next count."""
+        noted = self.noted
+        if not noted:
+            return
+        take, sensors = noted.popleft, self._sensors
+        for _ in range(len(noted)):
+            idx, arrival, floored = take()
+            s = sensors[idx]
+            if floored:
+                s.floored += 1
+            _accept(s, arrival)
+
+    def set_core(self, counters: CoreCounters) -> None:
+        """The core's counters (worker): the noted samples are counted too, so that they wait no longer than
+        the worker's refresh period when nobody asks for a report."""
+        with self._lock:
+            self._count_noted()
             self._core = counters
 
     def set_worker_alive(self, alive: bool) -> None:
@@ -231,6 +262,7 @@ class Health:
     # -- reader -------------------------------------------------------------------------
     def report(self, now: float | None = None) -> HealthReport:
         with self._lock:
+            self._count_noted()
             now = self._clock() if now is None else now
             core = self._core
             sensors: dict[str, SensorHealth] = {}

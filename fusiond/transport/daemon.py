@@ -29,8 +29,10 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   An idle worker sleeps long and the first arrival of any sensor wakes it.
 - ONE worker drains the inbox: decode (`DecodeError` counted per reason),
   `core.ingest`, then publish. The core's history absorbs the arrival order.
-  Bookkeeping that can wait for the end of a pass does (health learns a pass's
-  accepted samples under one lock), so the per-message path is decode, fuse, publish.
+  Bookkeeping that can wait does (health is handed each accepted sample by a
+  deque's append and counts them when a report or the core's counters are taken:
+  no lock and no call of health per message), so the per-message path is decode,
+  fuse, publish.
 - What goes out, in which encoding and on which key, is `outputs.py`'s: the pose,
   odometry, NavSatFix and TF of every estimate the core says to publish (and, with
   `smoothed_key`, the fixed-lag smoothed pose beside it), and the JSON
@@ -103,7 +105,7 @@ CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this
 DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
 MIN_WAIT_S = 0.001  # shortest wait of the worker (a diagnostics batch due now is flushed on the next pass)
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
-HEALTH_CHUNK = 64  # accepted samples handed to health at once in a long pass (~10 ms of fusing here)
+HEALTH_CHUNK = 256  # the most noted samples left for health to count (more: the worker has them counted)
 
 _STOP = object()  # wake token: drain the inbox, then end
 SET_POSE_TOPIC = "/set_pose"  # robot_localization's topic (rmw_zenoh mode)
@@ -464,10 +466,10 @@ class Daemon:
     def _fuse_inbox(self, schedule: DrainSchedule) -> None:
         """Fuse everything in the inbox in arrival order: decode, `core.ingest`, publish, collect records.
 
-        The per-message path of the daemon, so written for it: what can wait for the end of the
-        pass does (health learns the accepted samples under one lock per pass, or per
-        `HEALTH_CHUNK` samples in a long backlog, not one per message), and what it calls is
-        looked up once per pass. A failure on one sample is counted and logged; the rest go on.
+        The per-message path of the daemon, so written for it: health is only noted each accepted
+        sample (a deque's append; it counts them when a report or the core's counters are taken, so a
+        set_pose's reply counts what was fused before it), and what it calls is looked up once per
+        pass. A failure on one sample is counted and logged; the rest go on.
         """
         inbox = self.inbox
         take = inbox.popleft
@@ -476,14 +478,12 @@ class Daemon:
         prompt = self._prompt
         zero_cov = self._zero_cov
         collect = self.outputs.collect
-        accepted: list[tuple[int, float, bool]] = []  # (sensor, arrival, floored) for health, per pass
+        noted = self.health.noted
+        note = noted.append  # (sensor, arrival, floored)
         while inbox and not self._abort:
             item = take()
             try:
                 if type(item) is _SetPoseItem:
-                    if accepted:  # its health reply must count what was fused before it
-                        self.health.on_accepted_many(accepted)
-                        accepted = []
                     self._set_pose(item)
                     continue
                 idx, payload, arrival = item
@@ -499,7 +499,9 @@ class Daemon:
                     continue  # counted (and logged) by the core
                 if step.measured:  # a frozen receiver's repeat is applied but is no sign of its life (health)
                     check = zero_cov[idx]
-                    accepted.append((idx, arrival, check is not None and check(sample)))
+                    note((idx, arrival, check is not None and check(sample)))
+                    if len(noted) >= HEALTH_CHUNK:  # a long pass that nobody asks about: they stay few
+                        self.health.count_noted()
                 if step.publish:
                     self._publish_estimate()
                 records = step.records
@@ -509,11 +511,6 @@ class Daemon:
                 self.errors += 1
                 if self.errors == 1 or self.errors % LOG_EVERY == 0:
                     log.exception("worker_error", count=self.errors)
-            if len(accepted) >= HEALTH_CHUNK:  # a long backlog: liveness must not wait for its end
-                self.health.on_accepted_many(accepted)
-                accepted = []
-        if accepted:
-            self.health.on_accepted_many(accepted)
 
     def _decode_dropped(self, idx: int, err: DecodeError) -> None:
         n = self.health.on_dropped(idx, err.reason)

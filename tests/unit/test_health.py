@@ -210,6 +210,32 @@ def test_a_pass_handed_over_at_once_reads_as_the_same_samples_one_by_one():
     assert rep.sensors["wheel"].rate_hz == pytest.approx(1 / 0.02)  # 20 ms apart, twice (100.0, 100.02, 100.04)
 
 
+def test_samples_noted_without_the_lock_are_counted_in_order_by_the_next_report_or_core_counters():
+    """The worker notes each accepted sample with a deque's append (`Health.noted`), no lock and no call:
+    the next report counts them, in the order noted, as the same arrivals one call at a time; the core's
+    counters count them too, so they do not pile up while nobody asks for a report."""
+    arrivals = [(0, 100.0, False), (1, 100.001, True), (1, 100.011, False), (0, 100.02, True),
+                (1, 100.005, True), (0, 100.04, False), (1, 100.021, False)]  # (sensor, arrival, floored)
+    reports = []
+    for noted in (False, True):
+        clock = Clock(100.0)
+        h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)
+        for idx, arrival, floored in arrivals:
+            if noted:
+                h.noted.append((idx, arrival, floored))
+            else:
+                h.on_accepted(idx, arrival)
+                if floored:
+                    h.on_floored(idx)
+        clock.t = 100.05
+        reports.append(encode_report(h.report()))
+    assert reports[0] == reports[1]
+    h.noted.append((0, 100.06, True))
+    h.set_core(core_counters(FusionCore(loads(sensor_tables()))))
+    assert not h.noted
+    assert h.report().sensors["wheel"].zero_covariance_floored == 2
+
+
 def test_health_says_when_the_world_frame_is_not_defined_yet():
     """A GPS-referenced core publishes nothing before its first fix: health names the reason."""
     from fusiond.config import loads
