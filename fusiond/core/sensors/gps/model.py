@@ -804,7 +804,7 @@ class GpsModel(SensorModel):
             return
         if not made:
             # GPS wander or a pushed robot: the wheels did not make this track. Start over here.
-            s.own[self.index] = msgspec.structs.replace(own, track=replace(
+            s.own[self.index] = msgspec.structs.replace(own, track=msgspec.structs.replace(
                 track, points=((z[0], z[1], dx, dy, 1.0 / var),), first=(z[0], z[1]), extent=0.0, t0=stamp,
                 guess=None))
             return
