@@ -108,7 +108,7 @@ def run() -> None:
 
     A command that leaves only this thread and no Zenoh session behind (a replay, the doctor, tune, a report)
     ends without the interpreter freeing its heap object by object: the recording, the records and the verdicts
-    a replay holds took ~25 ms of a 0.7 s replay of the highway car to tear down, which the process's end does
+    a replay holds take ~25 ms of a 0.7 s replay of the highway car to tear down, which the process's end does
     at once. The output streams are flushed and the exit handlers run first, as a normal exit runs them; a
     command that leaves threads or a Zenoh session exits as usual (their joins and closes run)."""
     code = main()

@@ -132,7 +132,7 @@ class GpsTrack(msgspec.Struct, frozen=True, gc=False):
     is unknown, the fixes paired with the dead-reckoned antenna position at their stamps; always,
     the newest coordinates, to recognise a frozen receiver. ``base`` + the state's ``travel`` is
     the dead-reckoned base position. A Struct, as ``GpsOwn``: each fix replaces it, and a dataclass's
-    ``replace`` cost a fix more than its position update."""
+    ``replace`` costs a fix more than its position update."""
 
     points: tuple[tuple[float, float, float, float, float], ...]  # (gx, gy, dx, dy, weight)
     base: tuple[float, float, float]
