@@ -219,15 +219,11 @@ class Health:
 
     def on_accepted_many(self, accepted: Iterable[tuple[int, float, bool]]) -> None:
         """(sensor index, arrival, floored) of the samples the filter used, in the order it used them:
-        `on_accepted` of each (and `on_floored` of those flagged) under one lock."""
+        `on_accepted` of each (and `on_floored` of those flagged) under one lock: noted after what was noted
+        before, and counted with it."""
         with self._lock:
+            self.noted.extend(accepted)
             self._count_noted()
-            sensors = self._sensors
-            for idx, arrival, floored in accepted:
-                s = sensors[idx]
-                if floored:
-                    s.floored += 1
-                _accept(s, arrival)
 
     def count_noted(self) -> None:
         """Count the samples noted since the last count (the worker, in a long pass, so they stay few)."""

@@ -184,20 +184,23 @@ def test_out_of_order_arrival_times_are_ignored():
     assert rep.sensors["imu"].age_s == pytest.approx(0.09) and rep.sensors["imu"].rate_hz == pytest.approx(100.0)
 
 
+# (sensor, arrival, floored) of one pass's accepted samples, one arriving out of order
+ARRIVALS = [(0, 100.0, False), (1, 100.001, True), (1, 100.011, False), (0, 100.02, True),
+            (1, 100.005, True), (0, 100.04, False), (1, 100.021, False)]
+
+
 def test_a_pass_handed_over_at_once_reads_as_the_same_samples_one_by_one():
     """The worker hands health the samples of one pass at once (`on_accepted_many`): the report is
     the one the same arrivals, floored flags and an out-of-order arrival give one call at a time."""
-    arrivals = [(0, 100.0, False), (1, 100.001, True), (1, 100.011, False), (0, 100.02, True),
-                (1, 100.005, True), (0, 100.04, False), (1, 100.021, False)]  # (sensor, arrival, floored)
     healths = []
     for at_once in (False, True):
         clock = Clock(100.0)
         h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)
         if at_once:
-            h.on_accepted_many(arrivals[:3])
-            h.on_accepted_many(arrivals[3:])
+            h.on_accepted_many(ARRIVALS[:3])
+            h.on_accepted_many(ARRIVALS[3:])
         else:
-            for idx, arrival, floored in arrivals:
+            for idx, arrival, floored in ARRIVALS:
                 h.on_accepted(idx, arrival)
                 if floored:
                     h.on_floored(idx)
@@ -214,13 +217,11 @@ def test_samples_noted_without_the_lock_are_counted_in_order_by_the_next_report_
     """The worker notes each accepted sample with a deque's append (`Health.noted`), no lock and no call:
     the next report counts them, in the order noted, as the same arrivals one call at a time; the core's
     counters count them too, so they do not pile up while nobody asks for a report."""
-    arrivals = [(0, 100.0, False), (1, 100.001, True), (1, 100.011, False), (0, 100.02, True),
-                (1, 100.005, True), (0, 100.04, False), (1, 100.021, False)]  # (sensor, arrival, floored)
     reports = []
     for noted in (False, True):
         clock = Clock(100.0)
         h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)
-        for idx, arrival, floored in arrivals:
+        for idx, arrival, floored in ARRIVALS:
             if noted:
                 h.noted.append((idx, arrival, floored))
             else:

@@ -291,8 +291,8 @@ class OdomModel(SensorModel):
             if b0 >= 0:  # the bias block's three rates: one slice, the same floats as float(x[i]) each
                 c0, c1, c2 = s.ekf.x[b0 : b0 + 3].tolist()
                 gyro = (g[0] - c0, g[1] - c1, g[2] - c2)
-            else:
-                gyro = (g[0] - 0.0, g[1] - 0.0, g[2] - 0.0)
+            else:  # no bias state: the rates as read
+                gyro = g
             kept = self._bounds_kept  # the IMU's covariance is one tuple while it repeats: its bounds once
             if kept[0] is cov:
                 bounds = kept[1]
