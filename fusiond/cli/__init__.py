@@ -95,6 +95,10 @@ def main(argv: list[str] | None = None) -> int:
         except EstimatorError as e:
             print(f"fusiond: {e}", file=sys.stderr)
             return 2
+    if getattr(args, "holds_recording", False):
+        from ..collector import for_a_recording
+
+        for_a_recording()
     try:
         return args.func(args)
     except BrokenPipeError:  # `fusiond doctor ... | head`: the reader left; no traceback for that

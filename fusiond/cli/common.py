@@ -14,12 +14,18 @@ import sys
 from pathlib import Path
 
 __all__ = ["ADVICE_BUDGET", "ALLOW_MISSING", "BENCH_NO_MULTICAST", "EXIT_UNHEALTHY", "EXIT_USAGE", "LOG_LEVELS",
-           "VersionAction", "add_daemon_client_arguments", "chosen_backend", "load_config", "non_negative",
-           "output_error", "positive"]
+           "VersionAction", "add_daemon_client_arguments", "chosen_backend", "holds_recording", "load_config",
+           "non_negative", "output_error", "positive"]
 
 EXIT_USAGE = 2
 EXIT_UNHEALTHY = 1
 LOG_LEVELS = ["debug", "info", "warning", "error"]
+
+
+def holds_recording(parser: argparse.ArgumentParser) -> None:
+    """Mark a command as one that replays a recording held in memory: ``main`` spaces the cyclic collector's
+    young collections out for it from the start, its imports included (``collector.for_a_recording``)."""
+    parser.set_defaults(holds_recording=True)
 
 
 def chosen_backend():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import ADVICE_BUDGET, ALLOW_MISSING
+from .common import ADVICE_BUDGET, ALLOW_MISSING, holds_recording
 from .replay import as_replay
 from .replay import run as run_replay
 
@@ -12,6 +12,7 @@ __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    holds_recording(p)
     p.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     p.add_argument("--config", required=True, help="TOML config (see config.toml)")
     p.add_argument("--advice-budget-s", **ADVICE_BUDGET)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 
+from .common import holds_recording
 from .replay import as_replay
 from .replay import run as run_replay
 
@@ -12,6 +13,7 @@ __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    holds_recording(p)
     p.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     p.add_argument("--out", required=True, metavar="FILE", help="the config to write")
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")

@@ -10,12 +10,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import ADVICE_BUDGET, ALLOW_MISSING, EXIT_USAGE, chosen_backend, load_config, output_error
+from .common import (ADVICE_BUDGET, ALLOW_MISSING, EXIT_USAGE, chosen_backend,
+                     holds_recording, load_config, output_error)
 
 __all__ = ["add_arguments", "as_replay", "run"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    holds_recording(p)
     p.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     p.add_argument("--config", required=True, help="TOML config (see config.toml)")
     p.add_argument("--tum", help="write the trajectory as TUM lines (stamp x y z qx qy qz qw)")

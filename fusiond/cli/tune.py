@@ -7,12 +7,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import ALLOW_MISSING, EXIT_USAGE, chosen_backend, load_config, output_error
+from .common import (ALLOW_MISSING, EXIT_USAGE, chosen_backend, holds_recording,
+                     load_config, output_error)
 
 __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    holds_recording(p)
     p.add_argument("bags", nargs="+", help="bag file(s) (ROS 1 .bag or ROS 2 directory/.mcap)")
     p.add_argument("--config", required=True, help="TOML config (see config.toml): the sensors and the start")
     p.add_argument("--out", required=True, metavar="TUNED.toml", help="write the complete tuned config here")

@@ -11,6 +11,7 @@ import argparse
 import importlib
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -77,3 +78,30 @@ def test_the_commands_that_reach_a_daemon_take_its_options_alike():
         assert config.required == (name == "play"), name
     assert "--key" not in options["play"] and all("--key" in options[name] for name in ("health", "set-pose",
                                                                                         "calibrate-imu"))
+
+
+_REPLAYS_A_RECORDING = {"replay", "doctor", "report", "tune", "init"}
+
+
+def test_the_commands_that_replay_a_recording_raise_the_collectors_threshold_and_no_other(jackal_bag, tmp_path):
+    """A command holding a recording in memory spaces the cyclic collector's young collections out from its
+    start (``collector.for_a_recording``); the others (the daemon first) keep the interpreter's threshold."""
+    import gc
+
+    from fusiond.cli import main
+    from fusiond.collector import YOUNG
+
+    commands = _subparsers(build_parser())
+    marked = {name for name, parser in commands.items() if parser.get_default("holds_recording")}
+    assert marked == _REPLAYS_A_RECORDING
+    before = gc.get_threshold()
+    config = tmp_path / "jackal.toml"
+    config.write_text((Path(__file__).parents[2] / "examples" / "jackal.toml").read_text())
+    try:
+        gc.set_threshold(700, *before[1:])
+        assert main(["info", str(jackal_bag)]) == 0
+        assert gc.get_threshold()[0] == 700
+        assert main(["replay", str(jackal_bag), "--config", str(config), "--quiet"]) == 0
+        assert gc.get_threshold() == (YOUNG, *before[1:])
+    finally:
+        gc.set_threshold(*before)
