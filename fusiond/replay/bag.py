@@ -9,7 +9,6 @@ reading ahead (``read_ahead``) opens its bags in a child, and the fusing process
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -219,6 +218,8 @@ def unreadable(names: str, err: BaseException) -> str:
 def did_you_mean(wanted: str, topics: Iterable[str]) -> str:
     """' (did you mean /x?)' for the bag topic closest to ``wanted`` (a topic, with or without its
     leading slash), or '' when none is close: for the errors and warnings about an absent topic."""
+    import difflib  # here: the reading child imports this module on a replay's critical path (its heapq and more)
+
     want = "/" + wanted.lstrip("/")
     names = {"/" + t.lstrip("/"): t for t in topics}
     close = difflib.get_close_matches(want, list(names), n=1, cutoff=0.6)
