@@ -92,19 +92,18 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_USAGE
     doctor = not args.quiet or bool(args.plot or args.report)  # --quiet: no summary to judge for
-    # the samples as fused, kept to replay the doctor's advice on (what --fuse-every left, in bag order)
-    fused: list | None = [] if doctor and args.advice_budget_s > 0.0 else None
-    records: list | None = [] if fused is not None else None  # ... and what it made of them
+    # the samples as fused are kept to replay the doctor's advice on (what --fuse-every left, in bag order:
+    # ``ReplayResult.samples``), and what the replay made of them
+    proves = doctor and args.advice_budget_s > 0.0
+    records: list | None = [] if proves else None
     through = recorder.filter if recorder is not None else None
-    if fused is not None:
-        through = _kept(fused, through)
     # the bags opened and read in a child from here on, while the filter and the doctor are imported and built
     from ..replay.read_ahead import reading_ahead
 
     bags = [Path(p) for p in args.bags]
     # ... and, where every sample it reads reaches the doctor (no evaluation holding fixes back), the doctor's
     # sample part made there too, beside the filter (read_ahead's module doc)
-    reading = reading_ahead(bags, cfg.sensors, cfg if fused is not None and recorder is None else None)
+    reading = reading_ahead(bags, cfg.sensors, cfg if proves and recorder is None else None)
     try:
         from ..replay.run import replay, summary
     except BaseException:
@@ -127,16 +126,21 @@ def run(args: argparse.Namespace) -> int:
             allow_missing=args.allow_missing,
             smooth=args.smooth,
             backend=backend,
-            lookahead=fused is not None,  # the recording is kept in memory for the advice's proof anyway
+            lookahead=proves,  # the recording is kept in memory for the advice's proof anyway
             reading=reading,
         )
         evaluation = None
+        fused = result.samples if proves else None
 
         def prove():
             from ..tune.advice import prove_advice
+            from ..tune.likelihood import Plans
 
+            plans = Plans(fused)
+            if result.plan is not None:  # the recording's own replay planned it: its lines' replays need not
+                plans.add(cfg, result.plan)
             return prove_advice(cfg, fused, result.verdicts(), args.advice_budget_s, records, backend,
-                                base_final=result.final, base_applied=result.applied)
+                                base_final=result.final, base_applied=result.applied, plans=plans)
 
         def score():
             from ..replay.evaluate import evaluate
@@ -185,14 +189,6 @@ def run(args: argparse.Namespace) -> int:
         return 1  # nothing fused, or nothing published (the summary says why)
     return 0
 
-
-def _kept(into: list, through=None):
-    """A replay ``through`` hook that appends every sample reaching the core to ``into`` (after ``through``)."""
-    def keep(samples):
-        for s in samples if through is None else through(samples):
-            into.append(s)
-            yield s
-    return keep
 
 
 def as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespace:

@@ -65,6 +65,11 @@ class ReplayResult:
     # with smoothing (replay(..., smooth=True)): t x y z qx qy qz qw of the smoothed pose at every publish
     # moment of the final timeline (``smoothed_trajectory``)
     smoothed: array | None = None
+    # with lookahead (replay(..., lookahead=True)): the samples as fused, in order (the recording held in memory),
+    # and the snapshot plan made of them (``FusionCore.snapshot_plan``; None where the reading child was done only
+    # once every sample had been fused), which a replay of them with the same sensors' keys can take again
+    samples: list[Sample] | None = None
+    plan: list[bool | None] | None = None
 
     def verdicts(self) -> list[Verdict]:
         if self.proven is not None:
@@ -274,13 +279,16 @@ def replay(
                 runner.on_record = records.append
             bar = _Progress(bag.total if progress else 0)
             samples = bag if through is None else through(iter(bag))
+            fed: list[Sample] | None = None
+            plan: list[bool | None] | None = None
             if lookahead and reading is None:
-                samples = list(samples)
-                _feed(runner, zip(samples, runner.core.snapshot_plan(samples)), bar)
+                fed = list(samples)
+                plan = runner.core.snapshot_plan(fed)
+                _feed(runner, zip(fed, plan), bar)
             elif lookahead:
                 # the child makes the doctor's sample part (the caller asked it: every sample it reads is fed)
                 runner.samples_to_doctor = runner.doctor is None or not reading.feeds_doctor
-                fed = _feed_until_read(runner, iter(samples), reading, bar)
+                fed, plan = _feed_until_read(runner, iter(samples), reading, bar)
                 if not runner.samples_to_doctor:
                     _doctor_samples(runner.doctor, reading, fed)
             else:
@@ -295,6 +303,7 @@ def replay(
             diag_out.close()
     seconds = time.perf_counter() - t0
     result = runner.result(seconds, missing, decode_errors)
+    result.samples, result.plan = fed, plan
     if tum is not None:
         tum.parent.mkdir(parents=True, exist_ok=True)
         tum.write_text(tum_text(result.smoothed if smooth else runner.trajectory))
@@ -309,11 +318,12 @@ def _feed(runner: Runner, planned: Iterable[tuple[Sample, bool]], bar: _Progress
             bar.update(runner.messages)
 
 
-def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead, bar: _Progress) -> list[Sample]:
+def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead, bar: _Progress
+                     ) -> tuple[list[Sample], list[bool | None] | None]:
     """``samples`` as they come from ``ahead``, each keeping its snapshot (a plan needs every later sample),
     until the child has read the whole recording; then the rest as ``snapshot_plan`` says, planned over the
     whole recording as fed (so what the rest keeps is what a plan made before the first sample would say).
-    Returns every sample fed, in order."""
+    Returns every sample fed, in order, and that plan (None when the child was done only after the last)."""
     fed: list[Sample] = []
     for sample in samples:
         fed.append(sample)
@@ -324,9 +334,10 @@ def _feed_until_read(runner: Runner, samples: Iterator[Sample], ahead: ReadAhead
             first = len(fed)
             rest = list(samples)
             fed += rest
-            _feed(runner, zip(rest, runner.core.snapshot_plan(fed)[first:]), bar)
-            return fed
-    return fed
+            plan = runner.core.snapshot_plan(fed)
+            _feed(runner, zip(rest, plan[first:]), bar)
+            return fed, plan
+    return fed, None
 
 
 def _doctor_samples(doctor, ahead: ReadAhead, fed: list[Sample]) -> None:

@@ -45,7 +45,7 @@ from ..config import Config, ConfigError, convert, validate
 from ..doctor import ChannelStats, Proof, Verdict
 from ..logs import muted
 from .forked import run_side_by_side
-from .likelihood import Keyed, Reference, Score, TermKey, reference, replay_records, score
+from .likelihood import Keyed, Plans, Reference, Score, TermKey, reference, replay_records, score
 from .recording import split_stamp
 
 __all__ = ["prove_advice", "split_key", "with_suggestion"]
@@ -239,7 +239,7 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
                  budget_s: float = 60.0, base_records: Sequence[object] | None = None,
                  backend: Backend | None = None, workers: int | None = None,
                  base_final: Sequence[float] | None = None,
-                 base_applied: dict[str, int] | None = None) -> list[Verdict]:
+                 base_applied: dict[str, int] | None = None, plans: Plans | None = None) -> list[Verdict]:
     """``verdicts`` with a ``proof`` on each that has a paste line (module doc). ``samples``: the
     recording as the replay fused it, in its order; ``base_records``: that replay's diagnostics records,
     when the caller kept them (else the recording is replayed once more for them), and ``base_final`` its
@@ -249,13 +249,17 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
     distinct paste line, while ``budget_s`` lasts (the lines not replayed in time say so). The
     recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
     ``backend``: the estimator's in these replays (``FusionCore``). ``workers``: how many lines are replayed
-    at once, each in a forked process (``forked.run_side_by_side``; default: all at once, up to two per CPU)."""
+    at once, each in a forked process (``forked.run_side_by_side``; default: all at once, up to two per CPU).
+    ``plans``: the snapshot plans of ``samples`` (``likelihood.Plans``), with the one the recording's own replay
+    made when it made one."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
+    if plans is None or plans.samples is not samples:
+        plans = Plans(samples)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
         return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,
-                       backend, workers, base_final, base_applied)
+                       backend, workers, base_final, base_applied, plans)
 
 
 def _moved(before: Sequence[float] | None, after: Sequence[float] | None) -> str:
@@ -270,11 +274,11 @@ def _moved(before: Sequence[float] | None, after: Sequence[float] | None) -> str
 def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict], pending: list[Verdict],
             deadline: float, budget_s: float, base_records: Sequence[object] | None,
             backend: Backend | None, workers: int | None, base_final: Sequence[float] | None,
-            base_applied: dict[str, int] | None = None) -> list[Verdict]:
+            base_applied: dict[str, int] | None, plans: Plans) -> list[Verdict]:
     """``prove_advice`` once its pending lines are known."""
     if base_records is None:
         with muted():
-            base_records = replay_records(cfg, samples, backend)
+            base_records = replay_records(cfg, samples, backend, plans=plans)
     base = Keyed(base_records)  # each term's key and log det, for every reference and score below
     full = reference(base, cfg)
     held = reference(base, cfg, after=split_stamp(samples))  # the run's last 30 %, as tune holds it back
@@ -302,7 +306,7 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         ends: list = []
         applied: dict[str, int] = {}
         with muted():
-            records = replay_records(changed, samples, backend, ends, applied)
+            records = replay_records(changed, samples, backend, ends, applied, plans)
         shifts = _shifts(cfg, changed)
         if shifts:  # a clock shifted: its records paired with the configured replay's by their samples' stamps
             records = _restamped(records, shifts, base_records)
@@ -329,7 +333,7 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
             if start is None:
                 start_ends: list = []
                 with muted():
-                    replay_records(cfg, samples, backend, start_ends)
+                    replay_records(cfg, samples, backend, start_ends, plans=plans)
                 start = start_ends[0] if start_ends else None
             moved = _moved(start, ends[0] if ends else None)
             if moved:  # the estimate moved where no update looks (a heading with nothing measuring it)
@@ -357,6 +361,8 @@ def _proven(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verdict],
         still = _still(v, base_records, records) if advised else ""  # what the next round would say of an advised one
         return Proof(advised, effect + still, refuted=gain < -n_keys)
 
+    if len(to_replay) > 1:  # the configured keys' plan made once here, before the lines' replays are forked
+        plans.of(cfg)
     # each line's replay is independent of the others': side by side on the machine's cores (``forked``)
     for job, proof in zip(to_replay, run_side_by_side(prove, to_replay, workers, out_of_time)):
         proofs[job[0]] = proof

@@ -59,7 +59,7 @@ from .advice import with_suggestion
 from .doctor_values import diagnose, doctor_lines, untuned_problems
 from .floors import measured_floors, with_floors
 from .forked import beside, run_side_by_side
-from .likelihood import Reference, Score, reference, replay_records, residuals, score
+from .likelihood import Plans, Reference, Score, reference, replay_records, residuals, score
 from .params import Param, apply, select, sensor_of, tunable_params, value
 from .prediction import HOLD_EVERY, Prediction, predict
 from .prediction import split as split_fixes
@@ -152,6 +152,9 @@ class _Objective:
     def __init__(self, cfg: Config, params: Sequence[Param], samples: Sequence[object], deadline: float,
                  maxfev: int, bar: _Progress, backend: Backend | None = None) -> None:
         self.cfg, self.params, self.samples, self.backend = cfg, list(params), samples, backend
+        # made here, before any replay is forked: the probes' configs key the samples alike (unless a clock is fitted)
+        self.plans = Plans(samples)
+        self.plans.of(cfg)
         self.deadline, self.maxfev, self.bar = deadline, maxfev, bar
         self.cache: dict[tuple[float, ...], float] = {}
         self.replays = 0
@@ -204,7 +207,7 @@ class _Objective:
     def _replay(self, key: tuple[float, ...]) -> list:
         """The records of one replay of the fit part at ``key``."""
         with muted():  # the recording's warnings are said once, by the held-back check's first replay
-            return replay_records(self.config(key), self.samples, self.backend)
+            return replay_records(self.config(key), self.samples, self.backend, plans=self.plans)
 
     def _spent(self, started: int) -> bool:
         """Is the budget spent, with ``started`` replays under way besides those made? (``stopped`` says how)"""
@@ -370,13 +373,15 @@ def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta
     ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6; ``original``:
     the records of that replay, and ``pred_before`` its prediction of ``held_back``'s fixes (None: none held)."""
     replays = 0
+    plans = Plans(samples)  # the whole recording's, made before the checks fork their predictions
+    plans.of(cfg)
 
     def run(c: Config) -> list:
         nonlocal replays
         replays += 1
         bar.step("held-back check")
         with muted():
-            return replay_records(c, samples, backend)
+            return replay_records(c, samples, backend, plans=plans)
 
     def and_predicted(here: Callable[[], T], c: Config) -> tuple[T, Prediction | None]:
         """``here()`` and, where fixes are held back, ``c``'s prediction of them beside it (a replay of its

@@ -179,3 +179,56 @@ def test_the_jackal_bag_with_its_late_imu_samples_replays_the_same_planned():
     _, steps_b, stats_b = _run(cfg, samples, plan=True)
     assert any(s[3] for s in steps_a)  # late samples were placed
     assert steps_b == steps_a and stats_b == stats_a
+
+
+def _records(records) -> list:
+    return [(r.sensor, r.channel, r.stamp, list(r.innovation), r.nis, r.rejected) for r in records]
+
+
+def test_the_plans_of_a_recording_are_made_once_per_sensor_keys_and_replay_it_alike(monkeypatch):
+    """``likelihood.Plans``: replays of one recording whose configs key its samples alike (sensor names, order,
+    stamp offsets) share one plan, and replay exactly as each making its own; a shifted clock makes its own."""
+    from fusiond.errors import TuneError
+    from fusiond.tune.advice import with_suggestion
+    from fusiond.doctor import Verdict
+    from fusiond.tune.likelihood import Plans, replay_records
+
+    cfg = make_config()
+    samples = _stream([0.0, 0.035, 0.0], [0.0])
+    noisier, _ = with_suggestion(cfg, Verdict("wheel", "twist", "problem", "", key="sensors.wheel.twist_noise",
+                                              suggestion="twist_noise = [0.3, 0.1, 0.1, 0.1, 0.1, 0.05]"))
+    shifted, _ = with_suggestion(cfg, Verdict("imu", "clock", "problem", "", key="sensors.imu.stamp_offset_s",
+                                              suggestion="stamp_offset_s = 0.02"))
+    alone = [_records(replay_records(c, samples)) for c in (cfg, noisier, shifted)]
+    made = []
+    plan_of = FusionCore.snapshot_plan
+
+    def counted(core, s):
+        made.append(len(s))
+        return plan_of(core, s)
+
+    monkeypatch.setattr(FusionCore, "snapshot_plan", counted)
+    plans = Plans(samples)
+    shared = [_records(replay_records(c, samples, plans=plans)) for c in (cfg, noisier, shifted, cfg)]
+    assert shared == [*alone, alone[0]]
+    assert len(made) == 2  # one for the configured clocks (cfg and the noisier one), one for the shifted IMU
+    assert Plans.keys(noisier) == Plans.keys(cfg) != Plans.keys(shifted)
+    with pytest.raises(TuneError):
+        replay_records(cfg, list(samples), plans=plans)  # the plans of another list of samples
+    with pytest.raises(TuneError):
+        Plans(samples).add(cfg, [None])
+
+
+def test_a_replay_holding_its_recording_hands_out_its_samples_and_their_plan():
+    """``ReplayResult.samples`` and ``.plan`` (what the advice's replays take again), read ahead or not."""
+    from fusiond.config import load
+    from fusiond.replay.run import replay
+
+    cfg = load(ROOT / "examples" / "jackal.toml")
+    for read_ahead in (True, False):
+        result = replay([ROOT / "data" / "jackal_test2.bag"], cfg, progress=False, doctor=False,
+                        lookahead=True, read_ahead=read_ahead)
+        assert result.samples is not None and len(result.samples) == result.messages
+        assert result.plan is None or result.plan == FusionCore(cfg).snapshot_plan(result.samples)
+        assert read_ahead or result.plan is not None
+    assert replay([ROOT / "data" / "jackal_test2.bag"], cfg, progress=False, doctor=False).samples is None
