@@ -190,7 +190,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def as_replay(bags: list[str], config: str, *options: str) -> argparse.Namespace:
     """The replay command's own arguments for these bags and options, parsed by its own parser (every
     default as `fusiond replay` has it), so that `doctor` and `report` are that command, not a copy."""

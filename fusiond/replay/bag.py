@@ -218,7 +218,7 @@ def unreadable(names: str, err: BaseException) -> str:
 def did_you_mean(wanted: str, topics: Iterable[str]) -> str:
     """' (did you mean /x?)' for the bag topic closest to ``wanted`` (a topic, with or without its
     leading slash), or '' when none is close: for the errors and warnings about an absent topic."""
-    import difflib  # here: the reading child imports this module on a replay's critical path (its heapq and more)
+    import difflib  # here, not with the module: the reading child imports that on a replay's critical path
 
     want = "/" + wanted.lstrip("/")
     names = {"/" + t.lstrip("/"): t for t in topics}

@@ -250,12 +250,12 @@ def prove_advice(cfg: Config, samples: Sequence[object], verdicts: Sequence[Verd
     recording's warnings were logged by the replay the verdicts come from: these replays log nothing.
     ``backend``: the estimator's in these replays (``FusionCore``). ``workers``: how many lines are replayed
     at once, each in a forked process (``forked.run_side_by_side``; default: all at once, up to two per CPU).
-    ``plans``: the snapshot plans of ``samples`` (``likelihood.Plans``), with the one the recording's own replay
-    made when it made one."""
+    ``plans``: the snapshot plans of these very ``samples`` (``likelihood.Plans``), with the one the recording's own
+    replay made when it made one (else made here, once for all the lines)."""
     pending = [v for v in verdicts if v.suggestion]
     if not pending:
         return list(verdicts)
-    if plans is None or plans.samples is not samples:
+    if plans is None:
         plans = Plans(samples)
     with skips_the_caller():  # the recording's own replay is alive (its records, the doctor): frozen
         return _proven(cfg, samples, verdicts, pending, time.perf_counter() + budget_s, budget_s, base_records,

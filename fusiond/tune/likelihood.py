@@ -76,7 +76,7 @@ class Plans:
     (``keys``), nothing else: tune's noise and most of the doctor's lines leave those alone, so the replays of
     one recording share a plan (making one takes ~0.6 us a sample: 7 ms of the highway car's recording, a
     thirtieth of a replay of its core). A plan made by the recording's own replay is handed in with ``add``.
-    Made before replays are forked, a plan is shared by them; one a forked replay makes stays in it."""
+    A plan made before replays are forked is shared by them; one made in a forked replay stays in its process."""
 
     def __init__(self, samples: Sequence[object]) -> None:
         self.samples = samples
