@@ -464,6 +464,20 @@ static Py_ssize_t read_decays(PyObject *spec, DecayBlock *decays, Py_ssize_t nx,
     return count;
 }
 
+/* Does a kernel get the arguments it takes (`low` to `high`)? Else a TypeError naming its call and the count
+ * given, as Python's own for a function, and 0: the kernel returns NULL. */
+static int takes(Py_ssize_t nargs, Py_ssize_t low, Py_ssize_t high, const char *call) {
+    if (low <= nargs && nargs <= high) {
+        return 1;
+    }
+    if (low == high) {
+        PyErr_Format(PyExc_TypeError, "%s takes %zd argument%s (%zd given)", call, low, low == 1 ? "" : "s", nargs);
+    } else {
+        PyErr_Format(PyExc_TypeError, "%s takes %zd or %zd arguments (%zd given)", call, low, high, nargs);
+    }
+    return 0;
+}
+
 PyDoc_STRVAR(predict_doc,
 "predict(x, x_out, F, Q, density, dt, extra, linear, angular, linear_cov, angular_cov, linear_period,\n"
 "        angular_period, twist_correlation, flags, blocks[, decays]) -> None\n\n"
@@ -477,8 +491,7 @@ PyDoc_STRVAR(predict_doc,
 "without it the dynamic blocks' decay is left to the caller (their noise comes in extra, or None).");
 
 static PyObject *predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 16 && nargs != 17) {
-        PyErr_SetString(PyExc_TypeError, "predict takes 16 or 17 arguments");
+    if (!takes(nargs, 16, 17, "predict")) {
         return NULL;
     }
     double dt = PyFloat_AsDouble(args[5]);
@@ -670,8 +683,7 @@ PyDoc_STRVAR(orientation_doc,
 "zero elsewhere. x the nominal state (q at 3-6), y (m) and H (m x n) written whole.");
 
 static PyObject *orientation(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 5) {
-        PyErr_SetString(PyExc_TypeError, "orientation takes 5 arguments");
+    if (!takes(nargs, 5, 5, "orientation")) {
         return NULL;
     }
     double z[3];
@@ -742,8 +754,7 @@ PyDoc_STRVAR(add_motion_noise_doc,
 "Q[yaw_row, yaw_row] += yaw (Q: an n x n float64 array; the same additions, so the same doubles).");
 
 static PyObject *add_motion_noise(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 6) {
-        PyErr_SetString(PyExc_TypeError, "add_motion_noise(Q, xx, xy, yy, yaw_row, yaw) takes 6 arguments");
+    if (!takes(nargs, 6, 6, "add_motion_noise(Q, xx, xy, yy, yaw_row, yaw)")) {
         return NULL;
     }
     double xx = PyFloat_AsDouble(args[1]), xy = PyFloat_AsDouble(args[2]), yy = PyFloat_AsDouble(args[3]);
@@ -799,8 +810,7 @@ PyDoc_STRVAR(hold_planar_doc,
 "and P's rows and columns of error_zero zeroed (both tuples of ints, checked before anything is written).");
 
 static PyObject *hold_planar(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "hold_planar(x, P, nominal_zero, error_zero) takes 4 arguments");
+    if (!takes(nargs, 4, 4, "hold_planar(x, P, nominal_zero, error_zero)")) {
         return NULL;
     }
     Py_ssize_t nominal[MAX_N], error[MAX_N];
@@ -855,8 +865,7 @@ PyDoc_STRVAR(copy_into_doc,
 "otherwise: the caller allocates a new snapshot).");
 
 static PyObject *copy_into(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "copy_into(x, P, x_to, P_to) takes 4 arguments");
+    if (!takes(nargs, 4, 4, "copy_into(x, P, x_to, P_to)")) {
         return NULL;
     }
     Held held = {.count = 0};
@@ -904,8 +913,7 @@ PyDoc_STRVAR(propagate_doc,
 "out = F P F^T + Q for n x n float64 arrays (out must not be P); True iff its diagonal is finite.");
 
 static PyObject *propagate(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "propagate(F, P, Q, out) takes 4 arguments");
+    if (!takes(nargs, 4, 4, "propagate(F, P, Q, out)")) {
         return NULL;
     }
     Held held = {.count = 0};
@@ -966,8 +974,7 @@ PyDoc_STRVAR(update_doc,
 "but the diagonal needs ekf.py's checks. innovation_var is the diagonal of S as a list.");
 
 static PyObject *update(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 10) {
-        PyErr_SetString(PyExc_TypeError, "update takes 10 arguments");
+    if (!takes(nargs, 10, 10, "update")) {
         return NULL;
     }
     double threshold2 = PyFloat_AsDouble(args[4]);
@@ -1220,8 +1227,7 @@ static int fold_into(Py_ssize_t n, const double *A, const double *P0, const doub
 }
 
 static PyObject *rts_fold(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 5) {
-        PyErr_SetString(PyExc_TypeError, "rts_fold(A, P0, F, P1, out) takes 5 arguments");
+    if (!takes(nargs, 5, 5, "rts_fold(A, P0, F, P1, out)")) {
         return NULL;
     }
     Held held = {.count = 0};
@@ -1269,8 +1275,7 @@ static int pair_of(PyObject *item, double *t, double *v) {
 }
 
 static PyObject *line_fit(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 1) {
-        PyErr_SetString(PyExc_TypeError, "line_fit(pairs) takes 1 argument");
+    if (!takes(nargs, 1, 1, "line_fit(pairs)")) {
         return NULL;
     }
     PyObject *pairs = args[0];
@@ -1355,9 +1360,7 @@ static PyObject *float_tuple(const double *v, Py_ssize_t n) {
 }
 
 static PyObject *difference_noise(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 6) {
-        PyErr_SetString(PyExc_TypeError, "difference_noise(track, values, stamp, period, gap_factor, memory) takes 6 "
-                                         "arguments");
+    if (!takes(nargs, 6, 6, "difference_noise(track, values, stamp, period, gap_factor, memory)")) {
         return NULL;
     }
     PyObject *track = args[0], *values = args[1], *stamp = args[2];
@@ -1416,9 +1419,8 @@ PyDoc_STRVAR(zero_mean_window_doc,
 "it takes, or a square overflows (the reference decides those). bound(n) is called as the reference does.");
 
 static PyObject *zero_mean_window(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 10) {
-        PyErr_SetString(PyExc_TypeError, "zero_mean_window(window, values, measured, running, stamp, span, z, "
-                                         "min_window, floor, bound) takes 10 arguments");
+    if (!takes(nargs, 10, 10, "zero_mean_window(window, values, measured, running, stamp, span, z, min_window, "
+                              "floor, bound)")) {
         return NULL;
     }
     PyObject *window = args[0], *values = args[1], *measured = args[2], *running = args[3], *stamp = args[4];

@@ -687,3 +687,15 @@ def test_zero_motion_the_kernel_cannot_read_is_the_references():
     assert moving == ((), False)  # the early exit asks no bound
     with pytest.raises(ZeroDivisionError):  # a window of one reading has no difference to take a noise from
         COMPILED.zero_mean_window((), (0.0,) * 6, (True,) * 6, None, 1.0, 1.0, 2.0, 1, 1e-6, float)
+
+
+@pytest.mark.parametrize("name, low, high", [
+    ("predict", 16, 17), ("orientation", 5, 5), ("add_motion_noise", 6, 6), ("hold_planar", 4, 4), ("copy_into", 4, 4),
+    ("propagate", 4, 4), ("update", 10, 10), ("rts_fold", 5, 5), ("line_fit", 1, 1), ("difference_noise", 6, 6),
+    ("zero_mean_window", 10, 10)])
+def test_a_kernel_called_with_another_count_of_arguments_says_which_it_takes(name, low, high):
+    """A wrong count is refused before any argument is read, as Python refuses it for a function."""
+    taken = f"{low} or {high} arguments" if high > low else f"{low} argument{'s' if low > 1 else ''}"
+    for given in (0, high + 1):
+        with pytest.raises(TypeError, match=rf"^{name}\b.* takes {taken} \({given} given\)$"):
+            getattr(k, name)(*([None] * given))
