@@ -142,16 +142,18 @@ def term_keys(records: Iterable[DiagnosticsRecord]) -> Iterable[tuple[TermKey, D
 
 
 class Keyed:
-    """A replay's records, each with its term key (``term_keys``) and its log det S (``_log_det``; None: not
-    usable), taken once for the several references one replay is scored on (the advice's proof scores each of its
-    two replays on the whole run's terms and on the held-back end's). ``score``, ``reference`` and the proof take
-    it wherever they take records."""
+    """A replay's records that can be terms, each with its term key (``term_keys``) and its log det S
+    (``_log_det``; None: not usable), taken once for the several references one replay is scored on (the advice's
+    proof scores each of its two replays on the whole run's terms and on the held-back end's). ``score``,
+    ``reference`` and the proof take it wherever they take records. The checks' records (CHECK_CHANNELS) are
+    left out: no reference has them as terms, nor does a score pair them, and their channels are their own, so
+    the others' keys are the same without them (on the highway car, 4,974 wheel yaw-rate checks of 6,619 records)."""
 
     __slots__ = ("items", "keys")
 
     def __init__(self, records: Iterable[DiagnosticsRecord]) -> None:
         self.items: list[tuple[TermKey, DiagnosticsRecord, float | None]] = [
-            (k, r, _log_det(r)) for k, r in term_keys(records)]
+            (k, r, _log_det(r)) for k, r in term_keys(r for r in records if r.channel not in CHECK_CHANNELS)]
         self.keys: set[TermKey] = {k for k, _, _ in self.items}
 
 

@@ -152,6 +152,23 @@ def test_records_keyed_once_score_and_reference_as_the_records_themselves():
         assert score(recs, ref).neg_loglik == pytest.approx(_score_by_definition(recs, ref), rel=1e-12)
 
 
+def test_the_checks_records_are_not_keyed_and_score_nothing():
+    """A check moves no state (``CHECK_CHANNELS``: the wheels' yaw rate against the gyro): ``Keyed`` leaves its
+    records out, and a replay's terms and score are the same with them as without them."""
+    from fusiond.tune.likelihood import CHECK_CHANNELS
+
+    samples = simulate_imu(SimConfig(duration=5.0))
+    cfg = robot_config()
+    records = replay_records(cfg, samples)
+    updates = [r for r in records if r.channel not in CHECK_CHANNELS]
+    assert len(updates) < len(records)  # the wheels' yaw-rate checks are among them
+    keyed = Keyed(records)
+    assert [r for _, r, _ in keyed.items] == updates
+    ref = reference(records, cfg)
+    assert reference(updates, cfg).terms == ref.terms
+    assert score(keyed, ref) == score(updates, ref) == score(Keyed(updates), ref)
+
+
 def _score_by_definition(records, ref) -> float:
     """-log L without pairing: each term found by its key, rejected or missing ones at their cap (the module doc);
     equal to ``score`` wherever no record slid."""
