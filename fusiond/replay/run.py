@@ -449,14 +449,20 @@ def smoothed_trajectory(core: FusionCore) -> array:
 
 
 def run_samples(samples, cfg: Config, keep_trace: bool = False, smooth: bool = False,
-                backend: Backend | None = None, records: list | None = None) -> ReplayResult:
+                backend: Backend | None = None, records: list | None = None,
+                plan: Sequence[bool | None] | None = None) -> ReplayResult:
     """Replay samples already in memory (a simulation) exactly as a bag would be replayed (``backend``: the
-    estimator's, ``FusionCore``; ``records``: every diagnostics record is appended to it, as ``replay``'s)."""
+    estimator's, ``FusionCore``; ``records``: every diagnostics record is appended to it, as ``replay``'s;
+    ``plan``: ``FusionCore.snapshot_plan`` of these samples with ``cfg``'s sensors, when the caller made it)."""
     runner = Runner(cfg, keep_trace, smooth=smooth, backend=backend)
     if records is not None:
         runner.on_record = records.append
     samples = samples if isinstance(samples, Sequence) else list(samples)
-    for s, keep in zip(samples, runner.core.snapshot_plan(samples)):  # all here: FusionCore.snapshot_plan
+    if plan is None:
+        plan = runner.core.snapshot_plan(samples)  # all here: FusionCore.snapshot_plan
+    elif len(plan) != len(samples):
+        raise ReplayError(f"a plan of {len(plan)} samples for {len(samples)} samples")
+    for s, keep in zip(samples, plan):
         runner.feed(s, keep)
     return runner.result()
 

@@ -48,16 +48,18 @@ def _group(key: str) -> tuple[str, str] | None:
 
 
 def diagnose(cfg: Config, samples: Sequence[object], backend: Backend | None = None, records: list | None = None,
-             quiet: bool = True) -> tuple[list[Verdict], list[tuple[float, float]]]:
+             quiet: bool = True, plan: Sequence[bool | None] | None = None
+             ) -> tuple[list[Verdict], list[tuple[float, float]]]:
     """One replay of the recording with the doctor: its verdicts, and the standstills it reads a noise at rest
     over (``doctor.gyro.rest_windows``: the filter's, confirmed, in filter time), which ``floors`` measures over.
     ``backend``: the estimator's (``FusionCore``). ``records``: every diagnostics record of the replay is appended to it
     (tune scores the original config's held-back part on them: the same replay). ``quiet``: the replay's
-    warnings are not logged (False: they are, as the recording's, said once)."""
+    warnings are not logged (False: they are, as the recording's, said once). ``plan``: the samples' snapshot plan
+    with ``cfg`` (``likelihood.Plans``), when the caller has it."""
     from ..replay.run import run_samples
 
     with muted() if quiet else nullcontext():
-        result = run_samples(samples, cfg, backend=backend, records=records)
+        result = run_samples(samples, cfg, backend=backend, records=records, plan=plan)
         verdicts = result.verdicts()
     if result.doctor is None:
         return verdicts, []

@@ -304,9 +304,10 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
     # warnings are the recording's, said once); beside it, the original's prediction of the held-back fixes.
     held_back = split_fixes(samples, cfg)
     original: list = []
+    plans = Plans(samples)  # the whole recording's: this replay's plan, and the held-back checks' (``_validate``)
 
     def diagnosed() -> tuple[list, list]:
-        return diagnose(cfg, samples, backend, records=original, quiet=False)
+        return diagnose(cfg, samples, backend, records=original, quiet=False, plan=plans.of(cfg))
 
     if held_back[1]:
         (verdicts, spans), pred_before = beside(diagnosed, lambda: _predicted(cfg, held_back, backend))
@@ -344,7 +345,7 @@ def tune(samples: Sequence[object], cfg: Config, keys: Sequence[str] | None = No
         # at the search's own limit, x1000 or /1000 of the start (not a floor): the recording asks for more
         limited = [informed[i] and not floored[i] and abs(theta[i]) >= BOUND - 1e-9 for i in range(n)]
         result = _validate(cfg, samples, active, theta, informed, split, bar, floored, verdicts, original,
-                           pred_before, held_back, backend, limited)
+                           pred_before, held_back, backend, limited, plans)
     finally:
         bar.close()
     rows, config, before, after, comments, replays, predicted = result
@@ -368,13 +369,15 @@ def _predicted(c: Config, held_back: tuple[list, list], backend: Backend | None)
 def _validate(cfg: Config, samples: Sequence[object], active: list[Param], theta: list[float],
               informed: list[bool], split: float, bar: _Progress, floored: list[bool], verdicts: Sequence[object],
               original: list, pred_before: Prediction | None, held_back: tuple[list, list],
-              backend: Backend | None = None, limited: list[bool] | None = None):
+              backend: Backend | None = None, limited: list[bool] | None = None, plans: Plans | None = None):
     """Step 4 of the module doc: (rows, tuned config, held-back scores before/after, comments, replays).
     ``verdicts``: the doctor's on the original config (``doctor_values.diagnose``), for step 6; ``original``:
-    the records of that replay, and ``pred_before`` its prediction of ``held_back``'s fixes (None: none held)."""
+    the records of that replay, and ``pred_before`` its prediction of ``held_back``'s fixes (None: none held);
+    ``plans``: the whole recording's snapshot plans (``likelihood.Plans`` of ``samples``)."""
     replays = 0
-    plans = Plans(samples)  # the whole recording's, made before the checks fork their predictions
-    plans.of(cfg)
+    if plans is None:
+        plans = Plans(samples)
+    plans.of(cfg)  # the whole recording's plan made before the checks fork their predictions
 
     def run(c: Config) -> list:
         nonlocal replays

@@ -399,3 +399,23 @@ def test_a_fit_that_stops_at_its_own_limit_says_so():
     # from the default, inside its limits (the likelihood tells nothing below it apart): nothing of the kind is said
     ok = row(tune(samples, robot_config(gps="", orientation="off"), keys=keys, budget_s=300.0), keys[0])
     assert ok.status == "unchanged" and "fit's limit" not in ok.note, ok
+
+
+def test_tune_plans_the_whole_recording_once(monkeypatch):
+    """The doctor's replay of the whole recording and the held-back checks' replays share one snapshot plan
+    (``likelihood.Plans``): the same samples with the same sensors' keys make the same plan."""
+    from fusiond.core.fusion import FusionCore
+
+    samples = simulate_imu(SimConfig(duration=10.0, orientation_sigma=0.002))
+    cfg = robot_config(imu="orientation_noise = [0.008, 0.008, 0.008]")
+    made = []
+    plan_of = FusionCore.snapshot_plan
+
+    def counted(core, s):
+        made.append(len(s))
+        return plan_of(core, s)
+
+    monkeypatch.setattr(FusionCore, "snapshot_plan", counted)
+    result = tune(samples, cfg, keys=["imu.orientation_noise"], budget_s=300.0)
+    assert row(result, "imu.orientation_noise").status == "tuned"
+    assert made.count(len(samples)) == 1  # in this process; the forked replays plan in theirs
