@@ -106,6 +106,9 @@ def run(args: argparse.Namespace) -> int:
     reading = reading_ahead(bags, cfg.sensors, cfg if proves and recorder is None else None)
     try:
         from ..replay.run import replay, summary
+
+        if proves and reading is not None:  # the proof's modules too, while the child opens the bags (it takes longer)
+            from ..tune import advice, likelihood  # noqa: F401
     except BaseException:
         if reading is not None:
             reading.close()

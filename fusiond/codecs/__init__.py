@@ -20,59 +20,63 @@ definition of the formats. No Zenoh import here: pure functions over bytes.
 - `ros_messages`: TF, diagnostics, set_pose, rmw_zenoh type names and hashes.
 """
 
-from .bag_readers import bag_fast_path, flat_layout
-from .decoders import decode_odometry_cdr, decode_pose_cdr, decoder_for, ros_msgtype
-from .kind_codec import KindCodec
-from .output_encoders import encode_navsat_cdr, encode_odometry_cdr, encode_pose_cdr
-from .ros_messages import (
-    DIAGNOSTIC_ARRAY,
-    ERROR,
-    OK,
-    TF_MESSAGE,
-    WARN,
-    DiagnosticStatus,
-    SetPose,
-    SetPoseMessage,
-    check_set_pose,
-    dds_type_name,
-    decode_set_pose,
-    encode_diagnostic_array_cdr,
-    encode_tf_cdr,
-    encode_tf_tree_cdr,
-    type_hash,
-)
-from .rosbags_cdr import typestore
-from .sample_encoders import encode_with
-from .wire import (
-    IMU,
-    MAX_PAYLOAD,
-    NAVSATFIX,
-    ODOMETRY,
-    POSE_COV_STAMPED,
-    POSE_STAMPED,
-    REASONS,
-    DecodeError,
-    Decoder,
-    Encoding,
-    Payload,
-    stamp_to_ros,
-)
+from __future__ import annotations
 
-__all__ = [
-    "IMU", "MAX_PAYLOAD", "NAVSATFIX", "ODOMETRY", "POSE_COV_STAMPED", "POSE_STAMPED", "REASONS",
-    "TYPESTORE", "DecodeError", "Decoder", "Encoding", "KindCodec",
-    "Payload", "bag_fast_path", "decode_odometry_cdr", "decode_pose_cdr", "decoder_for",
-    "encode_navsat_cdr", "encode_odometry_cdr",
-    "encode_pose_cdr", "encode_with", "flat_layout",
-    "ros_msgtype", "stamp_to_ros", "typestore",
-    "DIAGNOSTIC_ARRAY", "ERROR", "OK", "TF_MESSAGE", "WARN", "DiagnosticStatus", "SetPose", "SetPoseMessage",
-    "check_set_pose", "dds_type_name", "decode_set_pose", "encode_diagnostic_array_cdr", "encode_tf_cdr", "encode_tf_tree_cdr",
-    "type_hash",
-]
+from ..lazy_exports import lazy_exports
+
+# public name -> the module of this package that defines it, imported on first use: a bag's decoding needs
+# neither numpy nor the encoders (a replay's reading child opens its bags without them)
+_EXPORTS = {
+    "bag_fast_path": "bag_readers",
+    "flat_layout": "bag_readers",
+    "decode_odometry_cdr": "decoders",
+    "decode_pose_cdr": "decoders",
+    "decoder_for": "decoders",
+    "ros_msgtype": "decoders",
+    "KindCodec": "kind_codec",
+    "encode_navsat_cdr": "output_encoders",
+    "encode_odometry_cdr": "output_encoders",
+    "encode_pose_cdr": "output_encoders",
+    "DIAGNOSTIC_ARRAY": "ros_messages",
+    "ERROR": "ros_messages",
+    "OK": "ros_messages",
+    "TF_MESSAGE": "ros_messages",
+    "WARN": "ros_messages",
+    "DiagnosticStatus": "ros_messages",
+    "SetPose": "ros_messages",
+    "SetPoseMessage": "ros_messages",
+    "check_set_pose": "ros_messages",
+    "dds_type_name": "ros_messages",
+    "decode_set_pose": "ros_messages",
+    "encode_diagnostic_array_cdr": "ros_messages",
+    "encode_tf_cdr": "ros_messages",
+    "encode_tf_tree_cdr": "ros_messages",
+    "type_hash": "ros_messages",
+    "typestore": "rosbags_cdr",
+    "encode_with": "sample_encoders",
+    "IMU": "wire",
+    "MAX_PAYLOAD": "wire",
+    "NAVSATFIX": "wire",
+    "ODOMETRY": "wire",
+    "POSE_COV_STAMPED": "wire",
+    "POSE_STAMPED": "wire",
+    "REASONS": "wire",
+    "DecodeError": "wire",
+    "Decoder": "wire",
+    "Encoding": "wire",
+    "Payload": "wire",
+    "stamp_to_ros": "wire",
+}
+
+__all__, _exported, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
+__all__ = sorted([*__all__, "TYPESTORE"])
 
 
 def __getattr__(name: str) -> object:
-    """`TYPESTORE`: the Humble type store, built when first asked for (see `typestore`)."""
+    """A public name, imported from its module when first read; `TYPESTORE`: the Humble type store, built
+    when first asked for (see `typestore`)."""
     if name == "TYPESTORE":
+        from .rosbags_cdr import typestore
+
         return typestore()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return _exported(name)

@@ -1,6 +1,6 @@
 """Struct readers of a bag's raw messages (ROS 1 and ROS 2) of a kind whose codec has a struct fast path
-(``KindCodec.repeated``: the odometry's and the IMU's), and the check that a bag defines the kind's type
-with the layout that fast path reads before it is used (`bag_fast_path`).
+(``KindCodec.repeated``: the odometry's and the IMU's; ``KindCodec.tail``: the GPS's), and the check that a
+bag defines the kind's type with the layout that fast path reads before it is used (`bag_fast_path`).
 
 A bag replay reads those messages thousands of times a second. ROS 2 bags hold the CDR of
 `cdr_fast_path`; ROS 1 bags hold ROS 1 serialisation: the same fields with a `seq` in the header, strings
@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Final
 
 from fusiond.samples import Sample
 
-from .cdr_fast_path import U32, Fields, RepeatedLayout
-from .kind_codec import KindCodec
+from .cdr_fast_path import _CDR_LE, _STAMP, U32, Fields, RepeatedLayout, _skip_string
+from .kind_codec import KindCodec, TailFields
 from .wire import Payload
 
 if TYPE_CHECKING:
@@ -81,6 +81,60 @@ class _Ros1Stream:
 
 
 _HEADER_LAYOUT: Final = ("int32", "uint32", "string")  # stamp.sec, stamp.nanosec, frame_id
+# a base type's struct code (little-endian; its size is its CDR alignment)
+_CODES: Final = {"int8": "b", "uint8": "B", "int16": "h", "uint16": "H", "int32": "i", "uint32": "I",
+                 "int64": "q", "uint64": "Q", "float32": "f", "float64": "d"}
+
+
+class _TailReader:
+    """A message that is a Header then fixed-size base fields (``KindCodec.tail``), read with one struct
+    call after the frame id: the fields' values, as rosbags gives them (Python ints and floats), go to
+    the kind's ``make``. CDR aligns each field to its size from the body's start, so the padding depends on
+    where the frame id ends (modulo 8): one struct per such end, made when first met. It returns None for a
+    message it does not read exactly as rosbags would (big-endian CDR, a bad string, a size rosbags rejects:
+    any other in ROS 1, more than 3 padding bytes at the end in CDR), which rosbags then decides."""
+
+    __slots__ = ("types", "make", "ros1", "_structs")
+
+    def __init__(self, fields: TailFields, ros1: bool) -> None:
+        self.types, self.make = fields
+        self.ros1 = ros1
+        self._structs: dict[int, struct.Struct] = {}
+
+    def _struct(self, start: int) -> struct.Struct:
+        """The fields' struct from body offset ``start`` (ROS 1: no alignment)."""
+        key = 0 if self.ros1 else start % 8
+        found = self._structs.get(key)
+        if found is None:
+            codes, pos = ["<"], key
+            for name in self.types:
+                size = struct.calcsize(_CODES[name])
+                pad = 0 if self.ros1 else -pos % size
+                codes.append("x" * pad + _CODES[name])
+                pos += pad + size
+            found = self._structs[key] = struct.Struct("".join(codes))
+        return found
+
+    def __call__(self, buf: Payload, sensor: str) -> Sample | None:
+        try:
+            if self.ros1:
+                at = _ros1_string_end(buf, 12) if len(buf) >= 16 else -1
+                fields = self._struct(0)
+                if at < 0 or at + fields.size != len(buf):
+                    return None
+                _, sec, nanosec = _ROS1_HEAD(buf, 0)
+            else:
+                end = _skip_string(buf, 8) if len(buf) >= 16 and buf[:2] == _CDR_LE else -1
+                if end < 0:
+                    return None
+                fields, at = self._struct(end), 4 + end
+                if not 0 <= len(buf) - at - fields.size <= 3:
+                    return None
+                sec, nanosec = _STAMP(buf, 4)
+        except (struct.error, UnicodeDecodeError):
+            return None
+        values = fields.unpack_from(buf, at)
+        return self.make(values, sec + nanosec * 1e-9, sensor)  # type: ignore[no-any-return]
 
 
 def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
@@ -117,17 +171,24 @@ def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
 def bag_fast_path(store: Typestore, codec: KindCodec, msgtype: str,
                   ros1: bool) -> Callable[[Payload, str], Sample | None] | None:
     """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR) for a sensor of the kind
-    whose codec is ``codec``, when the codec has a struct fast path for that type (``repeated``, of its first
-    ROS type) and the bag's definition of it (in ``store``, the bag reader's type store) has the layout that
-    fast path reads.
+    whose codec is ``codec``, when the codec has a struct fast path for that type (``repeated`` or ``tail``, of
+    its first ROS type) and the bag's definition of it (in ``store``, the bag reader's type store) has the
+    layout that fast path reads.
 
     A reader remembers its stream's layout and covariances (`_Ros1Stream`, `RepeatedLayout`): one per
     topic. It returns the sample, or None for a message it does not read exactly as rosbags would
     (big-endian CDR, bad strings, wrong size): deserialise those with rosbags, the authority on errors.
     None when the codec has no fast path for ``msgtype`` or the bag defines it differently.
     """
-    if codec.repeated is None or msgtype != codec.ros_types[0]:
+    if msgtype != codec.ros_types[0]:
         return None
+    if codec.repeated is None:
+        if codec.tail is None:
+            return None
+        want = (*_HEADER_LAYOUT, *codec.tail[0])
+        if flat_layout(store, msgtype) != (("uint32", *want) if ros1 else want):
+            return None
+        return _TailReader(codec.tail, ros1)
     has_child_frame, fields = codec.repeated
     want = (*_HEADER_LAYOUT, *(("string",) if has_child_frame else ()), *("float64",) * (fields.size // 8))
     if ros1:

@@ -21,7 +21,11 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .cdr_fast_path import Fields
 
-__all__ = ["KindCodec"]
+__all__ = ["KindCodec", "TailFields"]
+
+# the base types of a message's fields after its Header, in wire order (``bag_readers.flat_layout``'s names),
+# and (their values, the stamp, the sensor's name) -> the sample
+TailFields = tuple[tuple[str, ...], Callable[[tuple[Any, ...], float, str], Any]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,6 +42,9 @@ class KindCodec:
       the struct fast path of its first ROS type (a Header, that child_frame_id, one run of float64s), for
       a kind read at the daemon's highest rates; None: rosbags reads it.
     - ``zero``: a sample whose CDR ``encode`` makes, to generate rosbags' deserialisers at start-up.
+    - ``tail``: (``TailFields``) for a first ROS type that is a Header then fixed-size base fields, which a
+      bag replay then reads by struct (``bag_readers``), not through rosbags: its arrays need numpy, which a
+      replay's reading child does not import (``replay.read_ahead``); None: rosbags reads it.
     """
 
     name: str
@@ -49,3 +56,4 @@ class KindCodec:
     from_message: Callable[[Any, str], Any] | None = None
     repeated: tuple[bool, type[Fields]] | None = None
     zero: Any = None
+    tail: TailFields | None = None

@@ -13,12 +13,13 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Sequence
 from functools import lru_cache
-from typing import Final
-
-import numpy as np
+from typing import TYPE_CHECKING, Final
 
 from .rosbags_cdr import float_array, ros_header, ros_types, serialize
 from .wire import NAVSATFIX, stamp_to_ros
+
+if TYPE_CHECKING:
+    import numpy as np
 
 _CDR_HEADER: Final = b"\x00\x01\x00\x00"
 _STAMP_PACK: Final = struct.Struct("<iI").pack

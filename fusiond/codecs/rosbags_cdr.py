@@ -12,11 +12,10 @@ from collections.abc import Sequence
 from functools import cache
 from typing import TYPE_CHECKING, Any, Final
 
-import numpy as np
-
 from .wire import IMU, ODOMETRY, POSE_COV_STAMPED, DecodeError, Payload, stamp_to_ros
 
 if TYPE_CHECKING:
+    import numpy as np
     from rosbags.typesys.store import Typestore
 
 
@@ -81,6 +80,8 @@ def ros_header(stamp: float, frame_id: str) -> Any:
 def float_array(values: Sequence[float] | np.ndarray, n: int) -> np.ndarray:
     """``values`` as the flat float64 array of ``n`` elements a rosbags array field holds
     (a covariance); ValueError for any other length."""
+    import numpy as np  # rosbags' arrays: a bag is read (and a replay's reading child forked) without numpy
+
     arr = np.asarray(values, dtype=np.float64).reshape(-1)
     if arr.size != n:
         raise ValueError(f"covariance must have {n} elements, got {arr.size}")

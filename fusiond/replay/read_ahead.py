@@ -2,10 +2,12 @@
 
 Opening a bag (rosbags' import, its reader, the index), reading it and decoding its samples is a
 third of a replay's time and needs nothing the fusion computes; fusing needs each sample in turn. On
-a machine with two cores the two run side by side: a child forked before the filter is imported opens
-the bags, sends what they hold (the header: the topics, which configured ones are missing, the message
-count), then their samples in bag order, pickled in batches, through a pipe. This process meanwhile
-imports and builds the filter and the doctor, then takes the samples as it fuses. The child decodes
+a machine with two cores the two run side by side: a child forked once the config is loaded, before
+numpy and the filter are imported (a config loads without them, and the child reads the bags without
+them: ``kind.ModelIn``, the struct fast paths of ``codecs.bag_readers``), opens the bags, sends what
+they hold (the header: the topics, which configured ones are missing, the message count), then their
+samples in bag order, pickled in batches, through a pipe. This process meanwhile imports numpy and
+builds the filter and the doctor, then takes the samples as it fuses. The child decodes
 three to four times faster than the filter fuses, so it is done early (``complete``), and the rest of
 the recording is in memory from then on.
 

@@ -205,9 +205,11 @@ def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
     converter, JSON / msgpack Struct, encoder, struct fast path) live in its own package
     (``core/sensors/<kind>/sample.py``, ``codec.py``), found through its descriptor, by its name or its
     sample's type (``core/sensors/formats.py``)."""
-    code = "import sys, fusiond.codecs; print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}))"
+    code = ("import sys, fusiond.codecs as c\n"
+            "[getattr(c, name) for name in c.__all__ if name != 'TYPESTORE']\n"  # every module of the package
+            "print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('fusiond.')}))")
     out = _printed(code)
-    assert out.strip() == "['codecs', 'errors', 'samples']"
+    assert out.strip() == "['codecs', 'errors', 'lazy_exports', 'samples']"
     from fusiond.core.sensors import codec_named, codec_of, kind_named
 
     for name in ("odom", "imu", "gps", "pose"):  # the built-in kinds
@@ -221,6 +223,8 @@ def test_the_codecs_load_without_the_core_and_each_kind_answers_for_its_codec():
         assert codec.from_ros.__module__ == f"fusiond.core.sensors.{name}.codec"
         if codec.repeated is not None:  # its struct fast path is its own too
             assert codec.repeated[1].__module__ == f"fusiond.core.sensors.{name}.codec"
+        if codec.tail is not None:
+            assert codec.tail[1].__module__ == f"fusiond.core.sensors.{name}.codec"
 
 
 def test_the_config_stands_above_the_kinds_it_assembles():

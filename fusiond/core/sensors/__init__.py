@@ -15,28 +15,37 @@ a single module) and one ``register`` call (docs/SENSOR_KINDS.md, "Adding a sens
 
 from __future__ import annotations
 
+from ...lazy_exports import lazy_exports
 from .base import SensorContext, SensorModel
 from .checks import Rejected
 from .formats import codec_named, codec_of, encode_sample, make_decoder
-from .gps import GpsInput, GpsKind, GpsModel, GpsPolicy, GpsSample, GpsSensor
-from .imu import ImuInput, ImuKind, ImuModel, ImuPolicy, ImuSample, ImuSensor, quiet_bound
-from .kind import LayoutView, SensorKind
-from .odom import OdomInput, OdomKind, OdomModel, OdomPolicy, OdomSample, OdomSensor
-from .pose import POSE_MSGTYPES, PoseInput, PoseKind, PoseModel, PosePolicy, PoseSample, PoseSensor
+from .gps import GpsKind, GpsSample, GpsSensor
+from .imu import ImuKind, ImuSample, ImuSensor
+from .kind import LayoutView, ModelIn, SensorKind
+from .odom import OdomKind, OdomSample, OdomSensor
+from .pose import POSE_MSGTYPES, PoseKind, PoseSample, PoseSensor
 from .registry import (ENTRY_POINT_GROUP, KINDS, config_types, discover, kind_named, kind_of, kind_reading, register,
                        require, unregister)
 
+# the kinds' models and what they define need numpy and the estimator: imported when first read, so that
+# a config loads without them (``kind.ModelIn``)
+_EXPORTS = {
+    "GpsInput": "gps", "GpsModel": "gps", "GpsPolicy": "gps",
+    "ImuInput": "imu", "ImuModel": "imu", "ImuPolicy": "imu", "quiet_bound": "imu",
+    "OdomInput": "odom", "OdomModel": "odom", "OdomPolicy": "odom",
+    "PoseInput": "pose", "PoseModel": "pose", "PosePolicy": "pose",
+}
+_, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
 
 def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
     """One model per configured sensor, in configuration order (their index in the state)."""
     return [kind_of(cfg).model_type(cfg, i, ctx) for i, cfg in enumerate(sensors)]
 
 
-__all__ = [
-    "ENTRY_POINT_GROUP", "KINDS", "POSE_MSGTYPES", "GpsInput", "GpsKind", "GpsModel", "GpsPolicy", "GpsSample", "GpsSensor", "ImuInput", "ImuKind",
-    "ImuModel", "ImuPolicy", "ImuSample", "ImuSensor", "LayoutView", "OdomInput", "OdomKind", "OdomModel", "OdomPolicy",
-    "OdomSample", "OdomSensor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSample", "PoseSensor", "Rejected", "SensorContext",
-    "SensorKind", "SensorModel", "build_models", "codec_named", "codec_of", "config_types", "discover",
-    "encode_sample", "kind_named", "kind_of", "kind_reading", "make_decoder", "quiet_bound",
-    "register", "require", "unregister",
-]
+__all__ = sorted([
+    "ENTRY_POINT_GROUP", "KINDS", "POSE_MSGTYPES", "GpsKind", "GpsSample", "GpsSensor", "ImuKind", "ImuSample",
+    "ImuSensor", "LayoutView", "ModelIn", "OdomKind", "OdomSample", "OdomSensor", "PoseKind", "PoseSample",
+    "PoseSensor", "Rejected", "SensorContext", "SensorKind", "SensorModel", "build_models", "codec_named",
+    "codec_of", "config_types", "discover", "encode_sample", "kind_named", "kind_of", "kind_reading",
+    "make_decoder", "register", "require", "unregister", *_EXPORTS,
+])

@@ -16,12 +16,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import numpy as np
-
 from ...config_tables import FilterConfig
 from ..diagnostics import DiagnosticsRecord
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ...estimator import MotionInput, StateLayout
     from ..state import FilterState
 

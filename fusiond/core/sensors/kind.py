@@ -16,6 +16,7 @@ rosbags in), never at import, so the filter core stays importable without them.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from importlib import import_module
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from ...errors import ConfigError
@@ -26,6 +27,21 @@ if TYPE_CHECKING:
     from ...estimator import StateBlock
     from .base import SensorModel
     from .tunable import Param
+
+
+class ModelIn:
+    """A kind's ``model_type`` named by the module that defines it, imported when first read (when a
+    filter is built). A model needs numpy and the estimator; a config is loaded without them, so that a
+    replay's reading child is forked before that import and opens the bags beside it (``replay.read_ahead``).
+    A kind may as well set ``model_type`` to the class itself."""
+
+    __slots__ = ("module", "name")
+
+    def __init__(self, module: str, name: str) -> None:
+        self.module, self.name = module, name
+
+    def __get__(self, kind: object, owner: type | None = None) -> type["SensorModel"]:
+        return getattr(import_module(self.module), self.name)  # type: ignore[no-any-return]
 
 
 class LayoutView:
@@ -193,4 +209,4 @@ class SensorKind:
         return f"<sensor kind {self.name!r}>"
 
 
-__all__ = ["LayoutView", "SensorKind"]
+__all__ = ["LayoutView", "ModelIn", "SensorKind"]

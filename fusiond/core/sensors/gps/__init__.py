@@ -4,19 +4,38 @@ formats (``codec``, imported only when a decoder is asked for) and its descripto
 
 from __future__ import annotations
 
+from ....lazy_exports import lazy_exports
 from .kind import GpsKind
-from .model import (
-    ENU_NAMES, FROZEN_JITTER, FROZEN_JITTER_TRAVEL, FROZEN_MIN_TRAVEL, HEADING_MAX_FIXES, HEADING_MIN_TRAVEL,
-    HEADING_PROVISIONAL_SIGMA, HEADING_READY_SIGMA, BURST_REPEAT, HEADING_UNKNOWN_SIGMA, HEADING_WANDER_READY_SIGMA, JUMP_AFTER_PERIODS, JUMP_AFTER_S,
-    REACQUIRE_AGREE, REACQUIRE_FIXES, REACQUIRE_JUMP_S, REACQUIRE_S, REACQUIRE_SIGMAS, GpsInput, GpsModel, GpsOwn,
-    GpsPolicy, GpsTrack,
-)
 from .sample import GpsSample
 from .table import GpsSensor
 
-__all__ = [
-    "BURST_REPEAT", "ENU_NAMES", "FROZEN_JITTER", "FROZEN_JITTER_TRAVEL", "FROZEN_MIN_TRAVEL", "HEADING_MAX_FIXES",
-    "HEADING_MIN_TRAVEL", "HEADING_PROVISIONAL_SIGMA", "HEADING_READY_SIGMA", "HEADING_UNKNOWN_SIGMA", "HEADING_WANDER_READY_SIGMA",
-    "JUMP_AFTER_PERIODS", "JUMP_AFTER_S", "REACQUIRE_AGREE", "REACQUIRE_FIXES", "REACQUIRE_JUMP_S", "REACQUIRE_S", "REACQUIRE_SIGMAS",
-    "GpsInput", "GpsKind", "GpsModel", "GpsSample", "GpsOwn", "GpsPolicy", "GpsSensor", "GpsTrack",
-]
+# the model's modules need numpy and the estimator: imported when first read, so that a config loads
+# without them (``kind.ModelIn``)
+_EXPORTS = {
+    "BURST_REPEAT": "model",
+    "ENU_NAMES": "model",
+    "FROZEN_JITTER": "model",
+    "FROZEN_JITTER_TRAVEL": "model",
+    "FROZEN_MIN_TRAVEL": "model",
+    "HEADING_MAX_FIXES": "model",
+    "HEADING_MIN_TRAVEL": "model",
+    "HEADING_PROVISIONAL_SIGMA": "model",
+    "HEADING_READY_SIGMA": "model",
+    "HEADING_UNKNOWN_SIGMA": "model",
+    "HEADING_WANDER_READY_SIGMA": "model",
+    "JUMP_AFTER_PERIODS": "model",
+    "JUMP_AFTER_S": "model",
+    "REACQUIRE_AGREE": "model",
+    "REACQUIRE_FIXES": "model",
+    "REACQUIRE_JUMP_S": "model",
+    "REACQUIRE_S": "model",
+    "REACQUIRE_SIGMAS": "model",
+    "GpsInput": "model",
+    "GpsModel": "model",
+    "GpsOwn": "model",
+    "GpsPolicy": "model",
+    "GpsTrack": "model",
+}
+
+_, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
+__all__ = sorted(["GpsKind", "GpsSample", "GpsSensor", *_EXPORTS])

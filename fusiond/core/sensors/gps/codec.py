@@ -3,13 +3,14 @@ from a bag or from ROS 2 CDR through rosbags, its JSON / msgpack Struct (``GpsMe
 (``encode_gps_sample``).
 
 Imported only when a decoder or encoder of a GPS is first asked for (``GpsKind.codec``), so that the
-fusion core loads without the codecs and rosbags; rosbags' generic path reads a fix (a GPS runs at
-1-100 Hz).
+fusion core loads without the codecs and rosbags. rosbags' generic path reads a fix on the wire (a GPS runs
+at 1-100 Hz); a bag's fixes are read by struct (``KindCodec.tail``), since rosbags makes the covariance a
+numpy array and a replay's reading child opens and reads its bags without numpy (``replay.read_ahead``).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Final
 
 import msgspec
 
@@ -47,6 +48,17 @@ def gps_from_ros(msg: Any, sensor: str) -> GpsSample:
     )
 
 
+# NavSatFix after its Header: status.status, status.service, latitude, longitude, altitude, the covariance,
+# its type
+NAVSATFIX_TAIL: Final = ("int8", "uint16", *("float64",) * 12, "uint8")
+
+
+def gps_from_tail(values: tuple[Any, ...], stamp: float, sensor: str) -> GpsSample:
+    """A NavSatFix's fields after its Header (``NAVSATFIX_TAIL``), read by struct from a bag, as the
+    GpsSample ``gps_from_ros`` makes of the same message."""
+    return GpsSample(sensor, stamp, values[2], values[3], values[4], values[0], values[5:14], values[14])
+
+
 def gps_from_message(m: GpsMessage, sensor: str) -> GpsSample:
     """A decoded ``GpsMessage`` as a GpsSample."""
     return GpsSample(sensor, m.stamp, m.latitude, m.longitude, m.altitude, m.status, m.position_covariance,
@@ -74,6 +86,7 @@ def encode_gps_sample(sample: GpsSample, encoding: str, msgtype: str = NAVSATFIX
 
 
 CODEC = KindCodec("gps", GpsSample, (NAVSATFIX,), gps_from_ros, encode_gps_sample, GpsMessage, gps_from_message,
-                  None, GpsSample("", 0.0, 0.0, 0.0, 0.0))
+                  None, GpsSample("", 0.0, 0.0, 0.0, 0.0), (NAVSATFIX_TAIL, gps_from_tail))
 
-__all__ = ["CODEC", "GpsMessage", "encode_gps_sample", "gps_from_message", "gps_from_ros"]
+__all__ = ["CODEC", "NAVSATFIX_TAIL", "GpsMessage", "encode_gps_sample", "gps_from_message", "gps_from_ros",
+           "gps_from_tail"]

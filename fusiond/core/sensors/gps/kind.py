@@ -7,16 +7,15 @@ from typing import TYPE_CHECKING
 
 from ....config_tables import FilterConfig
 from ....errors import ConfigError
-from ....estimator import GpsErrorBlock, StateBlock
-from ..kind import LayoutView, SensorKind
+from ..kind import LayoutView, ModelIn, SensorKind
 from ..tunable import Param
-from .model import GpsModel
 from .sample import GpsSample
 from .table import GpsSensor
 from .tunables import difference_variance, gps_tunables, slow_errors
 
 if TYPE_CHECKING:
     from ....codecs.kind_codec import KindCodec
+    from ....estimator import StateBlock
 
 
 class GpsKind(SensorKind):
@@ -26,7 +25,7 @@ class GpsKind(SensorKind):
     name = "gps"
     config_type = GpsSensor
     sample_type = GpsSample
-    model_type = GpsModel
+    model_type = ModelIn(f"{__package__}.model", "GpsModel")
     ros_types = ("sensor_msgs/msg/NavSatFix",)
     geodetic = True
     frame_message = "GPS fix"
@@ -56,6 +55,9 @@ class GpsKind(SensorKind):
         return cfg.vertical_error_sigma > 0.0
 
     def state_blocks(self, cfg: GpsSensor, view: LayoutView) -> list[StateBlock]:
+        # numeric code: imported when a filter is built, not when a config is loaded (ModelIn)
+        from ....estimator import GpsErrorBlock
+
         if cfg.error_tau_s > 0.0 and cfg.error_sigma is not None:
             return [GpsErrorBlock(cfg.error_tau_s, cfg.error_sigma)]
         if cfg.vertical_error_sigma > 0.0:  # the altitude's wander alone

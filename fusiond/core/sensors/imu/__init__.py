@@ -6,13 +6,25 @@ formats and struct fast path (``codec``, imported only when a decoder is asked f
 
 from __future__ import annotations
 
-from .gyro_bias import BiasLearning, quiet_bound
-from .inputs import ImuInput
+from ....lazy_exports import lazy_exports
 from .kind import ImuKind
-from .model import G_UNITS_BAND, GRAVITY, ORIENTATION_BURST, YAW_JUMP_GATE, ImuModel, ImuPolicy
-from .own import ImuOwn
 from .sample import ImuSample
 from .table import ImuSensor
 
-__all__ = ["G_UNITS_BAND", "GRAVITY", "ORIENTATION_BURST", "YAW_JUMP_GATE", "BiasLearning", "ImuInput", "ImuKind",
-           "ImuModel", "ImuOwn", "ImuPolicy", "ImuSample", "ImuSensor", "quiet_bound"]
+# the model's modules need numpy and the estimator: imported when first read, so that a config loads
+# without them (``kind.ModelIn``)
+_EXPORTS = {
+    "BiasLearning": "gyro_bias",
+    "quiet_bound": "gyro_bias",
+    "ImuInput": "inputs",
+    "G_UNITS_BAND": "model",
+    "GRAVITY": "model",
+    "ORIENTATION_BURST": "model",
+    "YAW_JUMP_GATE": "model",
+    "ImuModel": "model",
+    "ImuPolicy": "model",
+    "ImuOwn": "own",
+}
+
+_, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
+__all__ = sorted(["ImuKind", "ImuSample", "ImuSensor", *_EXPORTS])

@@ -9,16 +9,15 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ....errors import ConfigError
-from ....estimator import GyroBiasBlock, GyroScaleBlock, StateBlock, YawOffsetBlock
-from ..kind import LayoutView, SensorKind
+from ..kind import LayoutView, ModelIn, SensorKind
 from ..tunable import Param
-from .model import ImuModel
 from .sample import ImuSample
 from .table import ImuSensor
 from .tunables import imu_tunables
 
 if TYPE_CHECKING:
     from ....codecs.kind_codec import KindCodec
+    from ....estimator import StateBlock
 
 
 class ImuKind(SensorKind):
@@ -27,7 +26,7 @@ class ImuKind(SensorKind):
     name = "imu"
     config_type = ImuSensor
     sample_type = ImuSample
-    model_type = ImuModel
+    model_type = ModelIn(f"{__package__}.model", "ImuModel")
     ros_types = ("sensor_msgs/msg/Imu",)
     inertial = True
 
@@ -50,6 +49,9 @@ class ImuKind(SensorKind):
         return cfg.tilt_from_gravity
 
     def state_blocks(self, cfg: ImuSensor, view: LayoutView) -> list[StateBlock]:
+        # numeric code: imported when a filter is built, not when a config is loaded (ModelIn)
+        from ....estimator import GyroBiasBlock, GyroScaleBlock, YawOffsetBlock
+
         fc = view.filter
         blocks: list[StateBlock] = []
         if cfg.angular_velocity:

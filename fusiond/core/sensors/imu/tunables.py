@@ -8,7 +8,6 @@ import math
 from collections.abc import Sequence
 
 from ..tunable import Param, median, own_samples
-from .axes import seen_axes
 from .sample import ImuSample
 from .table import ImuSensor
 
@@ -35,6 +34,8 @@ def imu_tunables(s: ImuSensor, samples: Sequence[object]) -> list[Param]:
                 out.append(Param(name, s.name, "gyro_noise", None, max(math.sqrt(var), s.gyro_min_sigma),
                                  "messages (median)", "rad/s", floor=s.gyro_min_sigma))
     if s.fuses_orientation:
+        from .axes import seen_axes  # rotation maths (numpy): tune's, not a config load's
+
         name = f"{s.name}.orientation_noise"
         # the IMU axes (the key's own, before extrinsic_rpy) that land on the base rows the mode fuses
         rows = seen_axes(s.extrinsic_rpy, s.orientation_rows)

@@ -6,11 +6,23 @@ decoder is asked for) and its descriptor (``kind``)."""
 
 from __future__ import annotations
 
+from ....lazy_exports import lazy_exports
 from .kind import OdomKind
-from .model import STOP_DECEL_LIMIT, OdomInput, OdomModel, OdomOwn, OdomPolicy, body_twist, impossible_stop
-from .pose_twist import PoseDifferences
 from .sample import OdomSample
 from .table import OdomSensor
 
-__all__ = ["STOP_DECEL_LIMIT", "OdomInput", "OdomKind", "OdomModel", "OdomOwn", "OdomPolicy", "OdomSample", "OdomSensor",
-           "PoseDifferences", "body_twist", "impossible_stop"]
+# the model's modules need numpy and the estimator: imported when first read, so that a config loads
+# without them (``kind.ModelIn``)
+_EXPORTS = {
+    "STOP_DECEL_LIMIT": "model",
+    "OdomInput": "model",
+    "OdomModel": "model",
+    "OdomOwn": "model",
+    "OdomPolicy": "model",
+    "body_twist": "model",
+    "impossible_stop": "model",
+    "PoseDifferences": "pose_twist",
+}
+
+_, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
+__all__ = sorted(["OdomKind", "OdomSample", "OdomSensor", *_EXPORTS])

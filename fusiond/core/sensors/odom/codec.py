@@ -14,7 +14,6 @@ import struct
 from typing import Any, Final
 
 import msgspec
-import numpy as np
 
 from ....codecs.cdr_fast_path import Covariances
 from ....codecs.json_msgpack import Cov36, Quat, Vec3, encode_structured
@@ -74,7 +73,7 @@ def encode_odom_sample(sample: OdomSample, encoding: str, msgtype: str = ODOMETR
     packed with struct, the same bytes rosbags would make)."""
     if encoding == "ros2-cdr":
         return encode_odometry_cdr(
-            sample.stamp, "odom", "base_link", sample.position, sample.orientation, np.zeros(36),
+            sample.stamp, "odom", "base_link", sample.position, sample.orientation, (0.0,) * 36,
             sample.linear, sample.angular, sample.twist_covariance,
         )
     return encode_structured(

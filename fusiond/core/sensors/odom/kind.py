@@ -6,16 +6,15 @@ import operator
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from ....estimator import StateBlock, TwistPitchBlock, WheelScaleBlock
-from ..kind import LayoutView, SensorKind
+from ..kind import LayoutView, ModelIn, SensorKind
 from ..tunable import Param
-from .model import OdomModel
 from .sample import OdomSample
 from .table import OdomSensor
 from .tunables import odom_tunables
 
 if TYPE_CHECKING:
     from ....codecs.kind_codec import KindCodec
+    from ....estimator import StateBlock
 
 
 class OdomKind(SensorKind):
@@ -27,12 +26,15 @@ class OdomKind(SensorKind):
     name = "odom"
     config_type = OdomSensor
     sample_type = OdomSample
-    model_type = OdomModel
+    model_type = ModelIn(f"{__package__}.model", "OdomModel")
     ros_types = ("nav_msgs/msg/Odometry",)
     drives_prediction = True
     prompts_publish = True
 
     def state_blocks(self, cfg: OdomSensor, view: LayoutView) -> list[StateBlock]:
+        # numeric code: imported when a filter is built, not when a config is loaded (ModelIn)
+        from ....estimator import TwistPitchBlock, WheelScaleBlock
+
         fc = view.filter
         blocks: list[StateBlock] = []
         if cfg.scale_estimation or (cfg.scale_estimation is None and view.absolute):

@@ -4,9 +4,19 @@ wire formats (``codec``, imported only when a decoder is asked for) and its desc
 
 from __future__ import annotations
 
+from ....lazy_exports import lazy_exports
 from .kind import PoseKind
-from .model import PoseAnchor, PoseInput, PoseModel, PosePolicy
 from .sample import PoseSample
 from .table import POSE_MSGTYPES, PoseSensor
 
-__all__ = ["POSE_MSGTYPES", "PoseAnchor", "PoseInput", "PoseKind", "PoseModel", "PosePolicy", "PoseSample", "PoseSensor"]
+# the model's modules need numpy and the estimator: imported when first read, so that a config loads
+# without them (``kind.ModelIn``)
+_EXPORTS = {
+    "PoseAnchor": "model",
+    "PoseInput": "model",
+    "PoseModel": "model",
+    "PosePolicy": "model",
+}
+
+_, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
+__all__ = sorted(["POSE_MSGTYPES", "PoseKind", "PoseSample", "PoseSensor", *_EXPORTS])

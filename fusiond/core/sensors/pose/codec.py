@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import msgspec
-import numpy as np
 
 from ....codecs.json_msgpack import Cov36, Quat, Vec3, encode_structured
 from ....codecs.kind_codec import KindCodec
@@ -74,7 +73,7 @@ def encode_pose_sample(sample: PoseSample, encoding: str, msgtype: str = POSE_CO
             return serialize(msg, POSE_COV_STAMPED)
         if msgtype == ODOMETRY:
             return encode_odometry_cdr(sample.stamp, "map", "base_link", sample.position, sample.orientation, cov,
-                                       (0.0,) * 3, (0.0,) * 3, np.zeros(36))
+                                       (0.0,) * 3, (0.0,) * 3, (0.0,) * 36)
         raise ValueError(f"msgtype {msgtype!r} is not a pose type, expected one of {POSE_MSGTYPES}")
     return encode_structured(
         PoseMessage(stamp=sample.stamp, position=sample.position, orientation=sample.orientation,

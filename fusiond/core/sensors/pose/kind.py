@@ -6,9 +6,8 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from ....config_tables import FilterConfig
-from ..kind import SensorKind
+from ..kind import ModelIn, SensorKind
 from ..tunable import Param
-from .model import PoseModel
 from .sample import PoseSample
 from .table import POSE_MSGTYPES, PoseSensor
 from .tunables import pose_tunables
@@ -24,7 +23,7 @@ class PoseKind(SensorKind):
     name = "pose"
     config_type = PoseSensor
     sample_type = PoseSample
-    model_type = PoseModel
+    model_type = ModelIn(f"{__package__}.model", "PoseModel")
     ros_types = POSE_MSGTYPES
     frame_message = "pose"
     measures_position = True
