@@ -43,8 +43,9 @@ class KindCodec:
       a kind read at the daemon's highest rates; None: rosbags reads it.
     - ``zero``: a sample whose CDR ``encode`` makes, to generate rosbags' deserialisers at start-up.
     - ``tail``: (``TailFields``) for a first ROS type that is a Header then fixed-size base fields, which a
-      bag replay then reads by struct (``bag_readers``), not through rosbags: its arrays need numpy, which a
-      replay's reading child does not import (``replay.read_ahead``); None: rosbags reads it.
+      bag replay then reads by struct (``bag_readers``), not through rosbags: faster, and without rosbags'
+      numpy arrays (a replay's reading child imports numpy only for its doctor: ``replay.read_ahead``);
+      None: rosbags reads it.
     """
 
     name: str

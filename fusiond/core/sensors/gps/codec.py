@@ -4,8 +4,9 @@ from a bag or from ROS 2 CDR through rosbags, its JSON / msgpack Struct (``GpsMe
 
 Imported only when a decoder or encoder of a GPS is first asked for (``GpsKind.codec``), so that the
 fusion core loads without the codecs and rosbags. rosbags' generic path reads a fix on the wire (a GPS runs
-at 1-100 Hz); a bag's fixes are read by struct (``KindCodec.tail``), since rosbags makes the covariance a
-numpy array and a replay's reading child opens and reads its bags without numpy (``replay.read_ahead``).
+at 1-100 Hz); a bag's fixes are read by struct (``KindCodec.tail``): a third of rosbags' time, and no
+numpy (rosbags makes the covariance a numpy array), which a replay's reading child imports only for its
+doctor (``replay.read_ahead``).
 """
 
 from __future__ import annotations
