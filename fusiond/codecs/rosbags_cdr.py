@@ -80,7 +80,7 @@ def ros_header(stamp: float, frame_id: str) -> Any:
 def float_array(values: Sequence[float] | np.ndarray, n: int) -> np.ndarray:
     """``values`` as the flat float64 array of ``n`` elements a rosbags array field holds
     (a covariance); ValueError for any other length."""
-    import numpy as np  # rosbags' arrays: a bag is read (and a replay's reading child forked) without numpy
+    import numpy as np  # here: only an encoder makes rosbags' arrays, and a bag is read without numpy
 
     arr = np.asarray(values, dtype=np.float64).reshape(-1)
     if arr.size != n:

@@ -37,6 +37,7 @@ _EXPORTS = {
 }
 _, __getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
 
+
 def build_models(sensors: list, ctx: SensorContext) -> list[SensorModel]:
     """One model per configured sensor, in configuration order (their index in the state)."""
     return [kind_of(cfg).model_type(cfg, i, ctx) for i, cfg in enumerate(sensors)]

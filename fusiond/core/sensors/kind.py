@@ -31,9 +31,10 @@ if TYPE_CHECKING:
 
 class ModelIn:
     """A kind's ``model_type`` named by the module that defines it, imported when first read (when a
-    filter is built). A model needs numpy and the estimator; a config is loaded without them, so that a
-    replay's reading child is forked before that import and opens the bags beside it (``replay.read_ahead``).
-    A kind may as well set ``model_type`` to the class itself."""
+    filter is built). A model needs numpy and the estimator; a config is loaded without them, so that the
+    process imports them after a replay's reading child is forked and while it opens the bags (such a child
+    imports numpy only for a doctor of its own: ``replay.read_ahead``). A kind may as well set ``model_type``
+    to the class itself."""
 
     __slots__ = ("module", "name")
 
