@@ -110,8 +110,8 @@ class ReadAhead:
         self._local: BagSamples | None = None  # the bags opened here, once the child died
         if doctor is not None:
             # the child's doctor needs numpy. Imported here, it is imported once for both processes; imported in
-            # the child after its samples (~80 ms), the doctor's part came after this process's pass had ended
-            # (by 45 ms on the Jackal bag, whose replay was 8 % slower for it)
+            # the child after its samples (~80 ms), the doctor's part comes after this process's pass has ended
+            # (by 45 ms on the Jackal bag, making its replay 8 % slower)
             import numpy  # noqa: F401
         self._read_end, self.pid = self._fork()
 
