@@ -34,10 +34,10 @@ from benchmarks import bench_latency  # noqa: E402
 def _samples(seconds: float) -> tuple[Any, list[Any]]:
     """The benchmark's config and its traffic of ``seconds``, decoded as the daemon decodes it."""
     from fusiond.config import loads
-    from fusiond.core.sensors import kind_of, make_decoder
+    from fusiond.core.sensors import kind_of
 
     cfg = loads(bench_latency._config_text(bench_latency.free_port()))
-    decoders = {kind_of(s).name: make_decoder(kind_of(s).name, "ros2-cdr", s.name) for s in cfg.sensors}
+    decoders = {kind_of(s).name: kind_of(s).decoder(s) for s in cfg.sensors}  # the daemon's own
     return cfg, [decoders[kind](payload) for _, kind, payload, _ in bench_latency._schedule(seconds, 1000.0, 100.0)]
 
 

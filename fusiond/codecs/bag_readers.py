@@ -168,6 +168,13 @@ def flat_layout(store: Typestore, msgtype: str) -> tuple[str, ...] | None:
     return tuple(out) if walk(msgtype) else None
 
 
+def _defines(store: Typestore, msgtype: str, body: tuple[str, ...], ros1: bool) -> bool:
+    """Does the bag's store define ``msgtype`` as a Header (ROS 1's with its seq) followed by ``body``'s base
+    types (``flat_layout``'s names), the layout a struct reader reads?"""
+    head = ("uint32", *_HEADER_LAYOUT) if ros1 else _HEADER_LAYOUT  # ROS 1: header.seq first
+    return flat_layout(store, msgtype) == (*head, *body)
+
+
 def bag_fast_path(store: Typestore, codec: KindCodec, msgtype: str,
                   ros1: bool) -> Callable[[Payload, str], Sample | None] | None:
     """The struct reader of a bag's raw messages of ``msgtype`` (ROS 1 or ROS 2 CDR) for a sensor of the kind
@@ -183,17 +190,12 @@ def bag_fast_path(store: Typestore, codec: KindCodec, msgtype: str,
     if msgtype != codec.ros_types[0]:
         return None
     if codec.repeated is None:
-        if codec.tail is None:
-            return None
-        want = (*_HEADER_LAYOUT, *codec.tail[0])
-        if flat_layout(store, msgtype) != (("uint32", *want) if ros1 else want):
+        if codec.tail is None or not _defines(store, msgtype, codec.tail[0], ros1):
             return None
         return _TailReader(codec.tail, ros1)
     has_child_frame, fields = codec.repeated
-    want = (*_HEADER_LAYOUT, *(("string",) if has_child_frame else ()), *("float64",) * (fields.size // 8))
-    if ros1:
-        want = ("uint32", *want)  # header.seq
-    if flat_layout(store, msgtype) != want:
+    body = (*(("string",) if has_child_frame else ()), *("float64",) * (fields.size // 8))
+    if not _defines(store, msgtype, body, ros1):
         return None
     if ros1:
         return _Ros1Stream(has_child_frame, fields())

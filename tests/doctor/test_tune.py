@@ -25,6 +25,7 @@ from fusiond.tune.fit import XATOL
 from fusiond.tune.likelihood import Keyed, reference, replay_records, score
 
 from tests.support.configs import robot_config
+from tests.support.core_samples import plans_made
 from tests.support.sim import SimConfig
 from tests.support.sim import simulate as simulate_imu
 from tests.support.sim_gps import World
@@ -404,18 +405,9 @@ def test_a_fit_that_stops_at_its_own_limit_says_so():
 def test_tune_plans_the_whole_recording_once(monkeypatch):
     """The doctor's replay of the whole recording and the held-back checks' replays share one snapshot plan
     (``likelihood.Plans``): the same samples with the same sensors' keys make the same plan."""
-    from fusiond.core.fusion import FusionCore
-
     samples = simulate_imu(SimConfig(duration=10.0, orientation_sigma=0.002))
     cfg = robot_config(imu="orientation_noise = [0.008, 0.008, 0.008]")
-    made = []
-    plan_of = FusionCore.snapshot_plan
-
-    def counted(core, s):
-        made.append(len(s))
-        return plan_of(core, s)
-
-    monkeypatch.setattr(FusionCore, "snapshot_plan", counted)
+    made = plans_made(monkeypatch)
     result = tune(samples, cfg, keys=["imu.orientation_noise"], budget_s=300.0)
     assert row(result, "imu.orientation_noise").status == "tuned"
     assert made.count(len(samples)) == 1  # in this process; the forked replays plan in theirs

@@ -25,3 +25,19 @@ def odom(t, v=0.0, w=0.0, var=1e-4, sensor="wheel"):
 def imu(t, rpy=(0.0, 0.0, 0.0), gyro=(0.0, 0.0, 0.0), ovar=1e-4, gvar=1e-6):
     return ImuSample("imu", t, rot.from_rpy(*rpy), (ovar, 0, 0, 0, ovar, 0, 0, 0, ovar), gyro,
                      (gvar, 0, 0, 0, gvar, 0, 0, 0, gvar))
+
+
+def plans_made(monkeypatch) -> list[int]:
+    """The sample counts of every ``FusionCore.snapshot_plan`` made in this process from here on (``monkeypatch``:
+    the test's fixture, which restores the method after it): how many plans a replay or tune made."""
+    from fusiond.core.fusion import FusionCore
+
+    made: list[int] = []
+    plan_of = FusionCore.snapshot_plan
+
+    def counted(core, samples):
+        made.append(len(samples))
+        return plan_of(core, samples)
+
+    monkeypatch.setattr(FusionCore, "snapshot_plan", counted)
+    return made

@@ -16,7 +16,7 @@ from fusiond.core.fusion import FusionCore
 from fusiond.core.history import snapshots_read, unrecorded_from
 from fusiond.errors import CoreError
 
-from tests.support.core_samples import imu, make_config, odom
+from tests.support.core_samples import imu, make_config, odom, plans_made
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -200,14 +200,7 @@ def test_the_plans_of_a_recording_are_made_once_per_sensor_keys_and_replay_it_al
     shifted, _ = with_suggestion(cfg, Verdict("imu", "clock", "problem", "", key="sensors.imu.stamp_offset_s",
                                               suggestion="stamp_offset_s = 0.02"))
     alone = [_records(replay_records(c, samples)) for c in (cfg, noisier, shifted)]
-    made = []
-    plan_of = FusionCore.snapshot_plan
-
-    def counted(core, s):
-        made.append(len(s))
-        return plan_of(core, s)
-
-    monkeypatch.setattr(FusionCore, "snapshot_plan", counted)
+    made = plans_made(monkeypatch)
     plans = Plans(samples)
     shared = [_records(replay_records(c, samples, plans=plans)) for c in (cfg, noisier, shifted, cfg)]
     assert shared == [*alone, alone[0]]
