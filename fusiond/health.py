@@ -32,7 +32,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from itertools import chain
 from typing import Any, Literal
 
@@ -216,14 +216,6 @@ class Health:
         with self._lock:
             self._count_noted()
             _accept(self._sensors[idx], arrival)
-
-    def on_accepted_many(self, accepted: Iterable[tuple[int, float, bool]]) -> None:
-        """(sensor index, arrival, floored) of the samples the filter used, in the order it used them:
-        `on_accepted` of each (and `on_floored` of those flagged) under one lock: noted after what was noted
-        before, and counted with it."""
-        with self._lock:
-            self.noted.extend(accepted)
-            self._count_noted()
 
     def count_noted(self) -> None:
         """Count the samples noted since the last count (the worker, in a long pass, so they stay few)."""

@@ -189,16 +189,18 @@ ARRIVALS = [(0, 100.0, False), (1, 100.001, True), (1, 100.011, False), (0, 100.
             (1, 100.005, True), (0, 100.04, False), (1, 100.021, False)]
 
 
-def test_a_pass_handed_over_at_once_reads_as_the_same_samples_one_by_one():
-    """The worker hands health the samples of one pass at once (`on_accepted_many`): the report is
-    the one the same arrivals, floored flags and an out-of-order arrival give one call at a time."""
+def test_samples_noted_by_the_worker_read_as_the_same_samples_one_by_one():
+    """The worker notes the samples it fused in `Health.noted` (a deque's append, no lock) and health counts
+    them on `count_noted` or when a report is taken: the report is the one the same arrivals, floored flags
+    and an out-of-order arrival give through `on_accepted` and `on_floored` one call at a time."""
     healths = []
-    for at_once in (False, True):
+    for noted in (False, True):
         clock = Clock(100.0)
         h = Health([("wheel", 0.2), ("imu", 0.2)], clock=clock)
-        if at_once:
-            h.on_accepted_many(ARRIVALS[:3])
-            h.on_accepted_many(ARRIVALS[3:])
+        if noted:
+            h.noted.extend(ARRIVALS[:3])
+            h.count_noted()
+            h.noted.extend(ARRIVALS[3:])  # counted by the report
         else:
             for idx, arrival, floored in ARRIVALS:
                 h.on_accepted(idx, arrival)
@@ -206,8 +208,8 @@ def test_a_pass_handed_over_at_once_reads_as_the_same_samples_one_by_one():
                     h.on_floored(idx)
         clock.t = 100.05
         healths.append(h)
-    one_by_one, at_once = (encode_report(h.report()) for h in healths)
-    assert one_by_one == at_once
+    one_by_one, noted = (encode_report(h.report()) for h in healths)
+    assert one_by_one == noted
     rep = healths[1].report()
     assert rep.sensors["imu"].zero_covariance_floored == 2 and rep.sensors["wheel"].zero_covariance_floored == 1
     assert rep.sensors["wheel"].rate_hz == pytest.approx(1 / 0.02)  # 20 ms apart, twice (100.0, 100.02, 100.04)
