@@ -39,6 +39,7 @@ import struct
 import threading
 import time
 from collections.abc import Callable
+from statistics import median
 from typing import Any
 
 import msgspec
@@ -448,6 +449,21 @@ def _zenoh_version() -> str:
         return version("eclipse-zenoh")
     except Exception:
         return "unknown"
+
+
+def format_runs(results: list[BenchResult]) -> str:
+    """One line a run and the CPU ratio's median over them: the bare subscriber's own share moves with where
+    the system places its threads (each run starts its processes afresh), so one run's ratio is one draw."""
+    out = [f"{'run':>4}{'ratio':>8}{'daemon %':>10}{'bare %':>8}{'worker %':>10}{'pose p50 us':>13}{'p99 us':>9}"]
+    for i, r in enumerate(results, 1):
+        out.append(f"{i:>4}{r.cpu_ratio:>8.2f}{r.cpu_daemon_pct:>10.1f}{r.cpu_bare_pct:>8.1f}{r.cpu_worker_pct:>10.1f}"
+                   f"{r.pose.p50_us:>13.0f}{r.pose.p99_us:>9.0f}")
+    ratios = [r.cpu_ratio for r in results]
+    out.append(f"CPU ratio daemon / bare subscriber over {len(results)} runs: median {median(ratios):.2f} "
+               f"({min(ratios):.2f}-{max(ratios):.2f}); the daemon's process median "
+               f"{median([r.cpu_daemon_pct for r in results]):.1f} %, the bare subscriber's "
+               f"{median([r.cpu_bare_pct for r in results]):.1f} %")
+    return "\n".join(out)
 
 
 def format_table(r: BenchResult) -> str:

@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 __all__ = ["ADVICE_BUDGET", "ALLOW_MISSING", "BENCH_NO_MULTICAST", "EXIT_UNHEALTHY", "EXIT_USAGE", "LOG_LEVELS",
-           "VersionAction", "add_daemon_client_arguments", "chosen_backend", "holds_recording", "load_config",
-           "non_negative", "output_error", "positive"]
+           "VersionAction", "add_daemon_client_arguments", "chosen_backend", "count", "holds_recording",
+           "load_config", "non_negative", "output_error", "positive"]
 
 EXIT_USAGE = 2
 EXIT_UNHEALTHY = 1
@@ -114,6 +114,17 @@ def positive(text: str) -> float:
 
 def non_negative(text: str) -> float:
     return _number(text, zero=True)
+
+
+def count(text: str) -> int:
+    """An option's whole number of times, 1 or more (argparse's own error otherwise)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text}: must be 1 or more")
+    return value
 
 
 # replay, doctor and report: how long the doctor's paste lines may be replayed before they are printed

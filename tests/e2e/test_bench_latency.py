@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import math
 
-from benchmarks.bench_latency import format_table, run_bench
+import msgspec
+
+from benchmarks.bench_latency import format_runs, format_table, run_bench
 
 
 def test_the_bench_feeds_the_daemon_and_the_bare_subscriber_the_same_traffic():
@@ -24,3 +26,11 @@ def test_the_bench_feeds_the_daemon_and_the_bare_subscriber_the_same_traffic():
     # straddling its start), at least one
     assert r.messages_in_window == 220 and 1 <= r.worker_batches <= r.messages_in_window + 1
     assert "bare subscriber" in format_table(r)
+
+    # `--runs`: a line a run, and the ratio's median and range over them (three runs: the middle one's ratio)
+    runs = [msgspec.structs.replace(r, cpu_ratio=ratio, cpu_daemon_pct=daemon, cpu_bare_pct=10.0)
+            for ratio, daemon in ((2.3, 23.0), (1.9, 19.0), (2.05, 20.5))]
+    table = format_runs(runs).splitlines()
+    assert len(table) == 1 + 3 + 1 and table[2].split()[:4] == ["2", "1.90", "19.0", "10.0"]
+    assert table[-1].startswith("CPU ratio daemon / bare subscriber over 3 runs: median 2.05 (1.90-2.30); "
+                                "the daemon's process median 20.5 %, the bare subscriber's 10.0 %"), table[-1]
