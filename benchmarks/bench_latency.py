@@ -24,8 +24,8 @@ queue, the filter and the encoding in between).
 
 CPU: process time per wall second over the measured window (each child reads its
 own `process_time()` at the window's start and end, asked over a pipe), for the
-daemon, the bare subscriber, and the daemon's worker thread and the generator thread
-on their own. The daemon's process also carries the echo (100 Hz, a few us each):
+daemon, the bare subscriber, and the daemon's worker thread (its timers: samples are
+fused on the threads that receive them) and the generator thread on their own. The daemon's process also carries the echo (100 Hz, a few us each):
 counted against it, not the yardstick.
 """
 
@@ -87,10 +87,10 @@ class BenchResult(msgspec.Struct):
     cpu_daemon_pct: float  # the daemon's process, of one core
     cpu_bare_pct: float  # the bare subscriber's process on the same traffic, same window
     cpu_ratio: float  # daemon / bare
-    cpu_worker_pct: float  # the daemon's worker thread alone
+    cpu_worker_pct: float  # the daemon's worker thread alone (its timers: samples are fused where they arrive)
     cpu_generator_pct: float
-    worker_batches: int  # passes of the daemon's worker that fused samples, in the measured window
-    messages_in_window: int  # sensor messages sent in the measured window (batches / messages: wake-ups per message)
+    passes: int  # the daemon's passes that fused samples, in the measured window (each one sample or more)
+    messages_in_window: int  # sensor messages sent in the measured window
     bare_received: int  # sensor messages the bare subscriber got (whole run: = sent_total)
     daemon_received: int  # the same at the daemon (health's `received`)
     queue_drops: int
@@ -270,7 +270,7 @@ def _daemon_child(conn: Any, config_text: str, express: bool) -> None:
         conn.send("ready")
         while (cmd := conn.recv()) != "stop":
             if cmd == "mark":
-                conn.send((time.process_time(), _thread_cpu(worker), daemon.wakeups))
+                conn.send((time.process_time(), _thread_cpu(worker), daemon.passes))
             elif cmd == "hops":
                 conn.send(_take(hop))
             elif cmd == "drained":
@@ -397,9 +397,9 @@ def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 10
                     put_time[stamp] = t
         _wait(lambda: all(k in pose_arrival for k in put_time) and _ask(d_conn, "drained"), 2.0)
         wall = perf() - marks["wall"]
-        (d_cpu1, w_cpu1, batches1), (b_cpu1, bare_received) = _ask(d_conn, "mark"), _ask(b_conn, "mark")
+        (d_cpu1, w_cpu1, passes1), (b_cpu1, bare_received) = _ask(d_conn, "mark"), _ask(b_conn, "mark")
         main_cpu = _thread_cpu(main_ident) - marks["main"]
-        (d_cpu0, w_cpu0, batches0), (b_cpu0, _) = marks["daemon"], marks["bare"]
+        (d_cpu0, w_cpu0, passes0), (b_cpu0, _) = marks["daemon"], marks["bare"]
         hop = _ask(d_conn, "hops")
         _wait(lambda: _ask(b_conn, "mark")[1] >= len(schedule), 1.0)  # the last puts may be in flight
         bare_received = _ask(b_conn, "mark")[1]
@@ -419,7 +419,7 @@ def run_bench(seconds: float = 10.0, imu_hz: float = 1000.0, odom_hz: float = 10
             cpu_ratio=daemon_pct / bare_pct if bare_pct > 0 else math.nan,
             cpu_worker_pct=100.0 * (w_cpu1 - w_cpu0) / wall,
             cpu_generator_pct=100.0 * main_cpu / wall,
-            worker_batches=batches1 - batches0,
+            passes=passes1 - passes0,
             messages_in_window=sum(1 for o, *_ in schedule if o >= warmup_s),
             bare_received=bare_received, daemon_received=sum(s.received for s in rep.sensors.values()),
             queue_drops=rep.queue.dropped,
@@ -481,10 +481,10 @@ def format_table(r: BenchResult) -> str:
     out.append(f"poses matched {r.poses_matched}/{r.odom_sent} (unmatched {r.poses_unmatched}); "
                f"queue drops {r.queue_drops}, core drops {r.core_drops}")
     out.append(f"CPU (% of one core): daemon process {r.cpu_daemon_pct:.1f}, bare subscriber process "
-               f"{r.cpu_bare_pct:.1f} -> ratio {r.cpu_ratio:.2f}x; daemon worker thread {r.cpu_worker_pct:.1f}, "
+               f"{r.cpu_bare_pct:.1f} -> ratio {r.cpu_ratio:.2f}x; daemon worker thread (timers) {r.cpu_worker_pct:.1f}, "
                f"load generator thread {r.cpu_generator_pct:.1f}")
-    out.append(f"worker batches {r.worker_batches} for {r.messages_in_window} messages "
-               f"({r.worker_batches / max(r.messages_in_window, 1):.2f} wake-ups a message)")
+    out.append(f"passes that fused {r.passes} for {r.messages_in_window} messages "
+               f"({r.passes / max(r.messages_in_window, 1):.2f} a message)")
     batch = "default" if r.diagnostics_batch_s is None else f"{r.diagnostics_batch_s:g} s"
     out.append(f"received (whole run, {r.sent_total} sent): daemon {r.daemon_received}, bare subscriber "
                f"{r.bare_received}; diagnostics batch {batch}")

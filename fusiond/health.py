@@ -8,9 +8,9 @@ under gap_s)` ago (core/inputs.py's rule), so a 5 Hz sensor with jitter, or a dr
 whose logger pauses 0.4 s every 2 s, does not flap, and a sensor sending only garbage,
 stale stamps or a frozen receiver's repeats (``Step.measured``) is not counted as alive.
 
-Threads: subscriber callbacks count arrivals and queue drops, the worker reports
-accepted samples and core counters, the queryable reads a report. One lock
-guards it all; every call is a few dict/list updates. The worker notes each accepted
+Threads: subscriber callbacks count arrivals and queue drops, the thread holding the
+daemon's core reports accepted samples and core counters, the queryable reads a report.
+One lock guards it all; every call is a few dict/list updates. That thread notes each accepted
 sample without the lock (`noted`, a deque's append: the daemon's per-message
 path takes no lock and makes no call for health); they are counted, in the order noted,
 by the next report or core counters, so a report counts every sample accepted before it.
@@ -99,7 +99,7 @@ class HealthReport(msgspec.Struct, kw_only=True):
 
 
 class CoreCounters(msgspec.Struct, kw_only=True):
-    """What the worker copies out of the fusion core (it alone touches the core)."""
+    """What the daemon copies out of the fusion core (with the core held: health never touches it)."""
 
     applied: list[int]
     late: list[int]
@@ -184,7 +184,7 @@ class Health:
         self._queue_depth = queue_depth or (lambda: 0)
         self._worker_alive = True
         self._started = clock()
-        # (sensor index, arrival, floored) of the samples the filter used, not counted yet: the worker appends
+        # (sensor index, arrival, floored) of the samples the filter used, not counted yet: the daemon appends
         # (module doc), `count_noted` counts them
         self.noted: deque[tuple[int, float, bool]] = deque()
 
@@ -218,13 +218,13 @@ class Health:
             _accept(self._sensors[idx], arrival)
 
     def count_noted(self) -> None:
-        """Count the samples noted since the last count (the worker, in a long pass, so they stay few)."""
+        """Count the samples noted since the last count (the daemon, in a long pass, so they stay few)."""
         with self._lock:
             self._count_noted()
 
     def _count_noted(self) -> None:
         """Count the samples appended to `noted` since the last count, in the order noted (lock held).
-        Only what was noted when it starts: the worker may note more meanwhile, for the next count."""
+        Only what was noted when it starts: the daemon may note more meanwhile, for the next count."""
         noted = self.noted
         if not noted:
             return
@@ -237,8 +237,8 @@ class Health:
             _accept(s, arrival)
 
     def set_core(self, counters: CoreCounters) -> None:
-        """The core's counters (worker): the noted samples are counted too, so that they wait no longer than
-        the worker's refresh period when nobody asks for a report."""
+        """The core's counters (the daemon's worker): the noted samples are counted too, so that they wait no
+        longer than its refresh period when nobody asks for a report."""
         with self._lock:
             self._count_noted()
             self._core = counters

@@ -4,9 +4,8 @@ Runs `fusiond bench-latency`'s benchmark (daemon, bare zenoh-python subscriber a
 generator in their own processes, 1 kHz IMU + 100 Hz odometry, live stamps) twice per round,
 alternating: once with the real daemon, once with its core stubbed out (each sample is decoded and
 accepted, and each odometry sample answered with a pose at its own stamp, without the real
-`core.ingest`). The stubbed run is the daemon's transport floor: subscribers, inbox, worker
-wake-ups (batched: see `fusiond/transport/drain_schedule.py`), decoding, health, a pose put per
-odometry message, the Zenoh session. Its ratio to the bare subscriber is the best the daemon's
+`core.ingest`). The stubbed run is the daemon's transport floor: subscribers, inbox, the core's
+lock, decoding, health, a pose put per odometry message, the worker's timers, the Zenoh session. Its ratio to the bare subscriber is the best the daemon's
 ratio could be with a free core; the difference to the real run is the core's share.
 
     .venv/bin/python scripts/daemon_transport_floor.py [--rounds 3] [--seconds 8]
@@ -73,8 +72,8 @@ def main() -> None:
             if drops or r.daemon_received != r.sent_total:
                 raise SystemExit(f"{label}: {drops} drops, {r.daemon_received}/{r.sent_total} received")
             rows[label].append((r.cpu_daemon_pct, r.cpu_bare_pct, r.cpu_ratio, r.cpu_worker_pct,
-                                r.worker_batches / max(r.messages_in_window, 1)))
-    print(f"{'run':<16}{'daemon %':>10}{'bare %':>9}{'ratio':>8}{'worker %':>10}{'wake/msg':>10}"
+                                r.passes / max(r.messages_in_window, 1)))
+    print(f"{'run':<16}{'daemon %':>10}{'bare %':>9}{'ratio':>8}{'worker %':>10}{'pass/msg':>10}"
           f"   (medians of {args.rounds} rounds)")
     for label, values in rows.items():
         cols = [statistics.median(v[i] for v in values) for i in range(5)]

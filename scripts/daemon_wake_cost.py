@@ -1,16 +1,17 @@
-"""What a wake-up costs the daemon's worker on this machine: the fusion core on the daemon benchmark's traffic,
-run back to back and run as the worker runs it (a few samples a wake-up, the thread asleep between).
+"""What a wake-up costs a thread that fuses on this machine: the fusion core on the daemon benchmark's traffic,
+run back to back and run by a thread woken for a few samples at a time (asleep between).
 
-`fusiond bench-latency` holds the daemon's CPU to a bare zenoh-python subscriber's. The worker thread is
-most of the difference, and its core takes several times the CPU a message it takes in a loop over the
-same samples: between two wake-ups the thread sleeps, and it wakes with cold caches and pays the sleep's
-own system calls. This measures both on the machine at hand, with no Zenoh in the way:
+`fusiond bench-latency` holds the daemon's CPU to a bare zenoh-python subscriber's. A thread woken to fuse
+takes several times the CPU a message the same core takes in a loop over the same samples: between two
+wake-ups it sleeps, and it wakes with cold caches and pays the sleep's own system calls. That is why the
+daemon fuses each sample on the thread that receives it (``transport/daemon.py``), which is awake for it
+anyway, rather than handing it to a thread of its own. This measures both on the machine at hand, with no
+Zenoh in the way:
 
 - ``back to back``: ``FusionCore.ingest`` over the benchmark's samples (1 kHz IMU + 100 Hz odometry,
   decoded beforehand), in a thread that never sleeps;
-- ``woken``: the same, the thread sleeping ``--sleep-ms`` every ``--per-wake`` samples (the worker fuses
-  3-4 samples a wake-up at that traffic: ``transport/drain_schedule.py``); the sleeps' own CPU is
-  reported apart, and left out of the core's;
+- ``woken``: the same, the thread sleeping ``--sleep-ms`` every ``--per-wake`` samples; the sleeps' own
+  CPU is reported apart, and left out of the core's;
 - ``sleep alone``: the thread CPU one such sleep costs.
 
 The thread CPU (``time.thread_time``) is the figure, as the benchmark's: the best of ``--rounds``.
@@ -42,7 +43,7 @@ def _samples(seconds: float) -> tuple[Any, list[Any]]:
 
 
 def _in_thread(fn: Any) -> Any:
-    """``fn()`` run in a thread of its own (as the daemon's worker is), its result returned."""
+    """``fn()`` run in a thread of its own, its result returned."""
     out: list[Any] = []
     worker = threading.Thread(target=lambda: out.append(fn()))
     worker.start()

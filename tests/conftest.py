@@ -3,7 +3,7 @@
 The tests are in tiers, one directory each, by subject:
 
 - ``tests/unit``: the maths, the estimator and its kernels, codecs and bags, config, logs, layout, and
-  small core units (history, health, diagnostics, TF tree, state file, drain schedule);
+  small core units (history, health, diagnostics, TF tree, state file);
 - ``tests/sensors``: the sensor models and the fusion core's behaviour on simulated robots (GPS, IMU,
   odometry, pose, time jumps, gaps, two_d_mode, ...);
 - ``tests/doctor``: the doctor's verdicts, the advice it pastes, ``fusiond tune`` and ``calibrate-imu``;
@@ -33,7 +33,7 @@ pytest.register_assert_rewrite("tests.support")
 FAST_MODULES = frozenset({
     "test_estimator_math", "test_estimator_fast_paths", "test_kernels", "test_layout", "test_history_ring",
     "test_written_out", "test_replay_collector", "test_snapshot_plan",
-    "test_codecs", "test_config_truth", "test_logs", "test_thread_state", "test_drain_schedule",
+    "test_codecs", "test_config_truth", "test_logs", "test_thread_state",
     "test_time_jumps", "test_fusion_core", "test_sensor_models", "test_evaluate", "test_health",
     "test_diagnostics", "test_gps_blocks", "test_continuous_odom", "test_odom_rate", "test_world_twist",
     "test_two_d_mode", "test_bag", "test_trajectory_pin", "test_standstill_bias", "test_tf_tree", "test_state_file",

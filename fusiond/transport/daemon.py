@@ -1,65 +1,68 @@
-"""The Zenoh side of `fusiond run`: subscribers -> one inbox -> one worker -> publishers.
+"""The Zenoh side of `fusiond run`: subscribers -> one inbox -> the core, one thread at a time -> publishers.
 
 Kept thin on purpose: the maths is the fusion core's, the wire formats are the
 codecs', liveness is health.py's. What lives here is threading and life cycle:
 
-- Callbacks never touch the filter: they copy the payload and append (sensor
-  index, bytes, wall arrival time) to ONE bounded inbox (a `collections.deque`:
-  an append is one C call under the GIL, no lock, no wake-up). A full inbox drops
-  the new sample and counts it per sensor as `queue_full` (explicit, visible in
-  health as the queue's depth and drops).
-- Because callbacks only do that (microseconds, never blocking), they run on
-  Zenoh's receive thread (`Callback(indirect=False)`) instead of zenoh-python's
-  default thread per subscriber: that keeps the arrival order across the keys
-  of one link (a bag played at full speed reaches the core in bag order, not
-  hundreds of messages apart) and saves a thread hop of latency. Without that
-  option (older zenoh-python) callbacks fall back to the default.
-- The worker is woken per batch, not per message (`drain_schedule.py`). A sample
-  that makes the daemon publish (odometry: the pose answers it at once) wakes it
-  through a `SimpleQueue` of wake tokens; other samples (a 1 kHz IMU) wait in the
-  inbox and are fused in one batch, either when the window before the next
-  expected odometry sample opens (so that sample finds the inbox empty and its
-  pose is not delayed by a backlog) or after at most `hold_s` (`HOLD_S`, at most a
-  quarter of the shortest sensor timeout). The
-  batches keep the arrival order, so the core sees the same sequence, and
-  publishes the same poses and records, as with a wake-up per message. At 1 kHz
-  IMU + 100 Hz odometry this is ~0.3 wake-ups a message instead of 1: fewer
-  futex/GIL hand-offs with Zenoh's receive thread, and the core runs several
-  samples with warm caches. `hold_s = 0` restores a wake-up per message.
-  An idle worker sleeps long and the first arrival of any sensor wakes it.
-- ONE worker drains the inbox: decode (`DecodeError` counted per reason),
-  `core.ingest`, then publish. The core's history absorbs the arrival order.
-  Bookkeeping that can wait does (health is handed each accepted sample by a
-  deque's append and counts them when a report or the core's counters are taken:
-  no lock and no call of health per message), so the per-message path is decode,
-  fuse, publish.
+- A callback copies the payload and appends (sensor index, bytes, wall arrival
+  time) to ONE bounded inbox (a `collections.deque`), then fuses what the inbox
+  holds on its own thread, unless another thread holds the core (`_drain`). A
+  full inbox drops the new sample and counts it per sensor as `queue_full`
+  (explicit, visible in health as the queue's depth and drops).
+- One thread at a time holds the core (`_core`, a lock a callback only tries: it
+  never waits for it). The thread that holds it fuses everything in the inbox in
+  arrival order, and looks at the inbox again after it lets go, so a sample
+  appended while another thread held the core is fused by that thread or by its
+  own, never left behind (and the worker looks at least every `CORE_REFRESH_S`).
+  The core's history absorbs the arrival order.
+- Fusing where the sample arrives saves a hand-off per message: no wake-up of
+  another thread, whose caches have gone cold while it slept (on a shared host
+  that costs more than the fusion itself), and a pose that leaves as soon as its
+  odometry sample is fused. Callbacks run on Zenoh's receive thread
+  (`Callback(indirect=False)`) instead of zenoh-python's default thread per
+  subscriber: that keeps the arrival order across the keys of one link (a bag
+  played at full speed reaches the core in bag order, not hundreds of messages
+  apart). Without that option (older zenoh-python) callbacks fall back to the
+  default, and the lock keeps one fuser at a time. While a sample is fused the
+  link's next messages wait in its buffers; under the GIL a callback waited for
+  any Python work of the daemon's anyway. So a sender faster than the fusion (a
+  bag at `play --rate 0`) is slowed by its link: a blocking publisher waits, as
+  `play`'s do; one that drops on congestion drops at its end. The inbox fills
+  only while another thread holds the core.
+- A pass decodes (`DecodeError` counted per reason), calls `core.ingest`, then
+  publishes. Bookkeeping that can wait does (health is handed each accepted
+  sample by a deque's append and counts them when a report or the core's
+  counters are taken: no lock and no call of health per message), so the
+  per-message path is decode, fuse, publish.
+- The worker thread keeps time: it puts the diagnostics batch, copies the core's
+  counters into health and hands the state to the saver when they are due, and
+  fuses what is left at stop. It holds the core for that as any thread does.
 - What goes out, in which encoding and on which key, is `outputs.py`'s: the pose,
   odometry, NavSatFix and TF of every estimate the core says to publish (and, with
   `smoothed_key`, the fixed-lag smoothed pose beside it), and the JSON
-  diagnostics records. Here: when. Diagnostics are put on a timer of the worker's own
-  loop (never a Zenoh thread), one JSON array a put: at 1 kHz IMU 20 puts a second
-  instead of 1,100 encodes and puts (6-9 us of worker time a message here); the batch
-  is flushed when the worker ends, so a clean stop loses no record. Health as
+  diagnostics records. Here: when. Diagnostics are put on the worker's timer, one
+  JSON array a put: at 1 kHz IMU 20 puts a second instead of 1,100 encodes and puts
+  (6-9 us a message here); the batch is flushed when the worker ends, so a clean stop
+  loses no record. Health as
   `diagnostic_msgs/msg/DiagnosticArray` once a period, from the health thread (it
   reads health, never the core). A health queryable, and a liveliness token
   `<health_key>/alive` so remote tools see the daemon come and go (with a namespace
   both are prefixed).
 - set_pose: a queryable (and in rmw_zenoh mode the topic /set_pose) whose
-  request is decoded on the Zenoh thread, then queued like a sample (and wakes
-  the worker): the worker alone re-initialises the core, publishes the new pose
-  and replies with the new health (a Zenoh query can be answered from any
-  thread). A bad request is answered with an error naming the problem and
-  changes nothing.
+  request is decoded on the Zenoh thread, then queued and fused like a sample:
+  the thread that holds the core re-initialises it, publishes the new pose and
+  replies with the new health (a Zenoh query can be answered from any thread).
+  A bad request is answered with an error naming the problem and changes nothing.
 - Interop (`[ros] interop`): "bridge" uses zenoh-bridge-ros2dds's plain keys;
   "rmw_zenoh" uses rmw_zenoh's keys, attachments and liveliness tokens for every
   ROS topic in and out (`rmw_zenoh.py`); the JSON health/diagnostics keys stay plain.
 - Persisted state (`[state] path`, `state_file.py`): resumed before the first input
   when it fits the config and is fresh; the worker exports the core's state every
-  `save_interval_s` while it fuses and a thread of its own writes it (an fsync must
-  not delay a pose); the last state is written when the worker has ended.
-- Stop: subscribers first (no new input), then the worker drains what is queued
-  (bounded time; each sample is published completely or not at all), the state is
-  written, then the outputs are undeclared; the caller closes the session.
+  `save_interval_s` while samples are fused and a thread of its own writes it (an
+  fsync must not delay a pose); the last state is written when the worker has ended.
+- Stop: subscribers first (no new input), then the worker fuses what is queued
+  (bounded time; each sample is published completely or not at all), the core is
+  closed to any callback still under way, the state is written, then the outputs
+  are undeclared; the caller closes the session.
 """
 
 from __future__ import annotations
@@ -86,7 +89,6 @@ from ..health import Health, HealthReport, core_counters, ros_statuses
 from ..errors import SessionError
 from ..logs import bind_process, get_logger
 from .answer import HealthAnswer, answer, encode_answer
-from .drain_schedule import DrainSchedule
 from .link import LinkWatch
 from .outputs import Outputs
 from .rmw_zenoh import RmwNode, topic_name
@@ -97,22 +99,19 @@ from .intake import direct, sensor_kind, zero_covariance_check  # noqa: F401  (t
 log = get_logger("fusiond.daemon")
 
 QUEUE_SIZE = 1024  # ~1 s of 1 kHz IMU + 100 Hz odometry: as long as the core's default history
-HOLD_S = 0.01  # longest a sample that publishes nothing waits in the inbox for the worker's next batch
-HOLD_OF_TIMEOUT = 0.25  # ... and at most this fraction of the shortest sensor timeout
 HEALTH_LOG_S = 5.0  # period of the `health` log event
 HEALTH_POLL_S = 0.1  # how often status changes are looked for (`health_changed`)
-CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while busy
+CORE_REFRESH_S = 0.1  # the worker copies core counters into health at most this often while samples are fused
 DRAIN_S = 2.0  # at stop, time the worker gets to finish what is queued
-MIN_WAIT_S = 0.001  # shortest wait of the worker (a diagnostics batch due now is flushed on the next pass)
 LOG_EVERY = 1000  # a repeated drop reason is logged on its 1st and every 1000th occurrence
-HEALTH_CHUNK = 256  # the most noted samples left for health to count (more: the worker has them counted)
+HEALTH_CHUNK = 256  # the most noted samples left for health to count (more: the pass has them counted)
 
-_STOP = object()  # wake token: drain the inbox, then end
+_STOP = object()  # the worker's token: fuse what is queued, then end
 SET_POSE_TOPIC = "/set_pose"  # robot_localization's topic (rmw_zenoh mode)
 
 
 class _SetPoseItem:
-    """A decoded set_pose request in the worker's queue; `query` is None for the /set_pose topic."""
+    """A decoded set_pose request in the inbox; `query` is None for the /set_pose topic."""
 
     __slots__ = ("request", "query", "source")
 
@@ -132,29 +131,22 @@ class Daemon:
 
     def __init__(self, cfg: Config, session: zenoh.Session, *, queue_size: int = QUEUE_SIZE,
                  health_log_s: float = HEALTH_LOG_S, express: bool = False, direct_callbacks: bool = True,
-                 monitor: bool = True, clock: Callable[[], float] = time.monotonic, hold_s: float = HOLD_S,
+                 monitor: bool = True, clock: Callable[[], float] = time.monotonic,
                  base_dir: Path | None = None, backend: Backend | None = None) -> None:
-        if not hold_s >= 0.0:
-            raise ValueError(f"hold_s must be >= 0 s, got {hold_s}")
         self.cfg = cfg
         self.session = session
         self.core = FusionCore(cfg, backend)
         if cfg.output.smoothed_key:  # the fixed-lag window is recorded only when its pose is published
             self.core.smooth_with_lag(cfg.output.smooth_lag_s)
-        # Samples and set_pose requests in arrival order (callbacks append, the worker pops), and the
-        # wake tokens that end the worker's wait: one per sample that publishes, per set_pose, on stop,
-        # and on the first arrival while the worker sleeps idle (see the module docstring).
+        # Samples and set_pose requests in arrival order (callbacks append, the thread holding the core
+        # pops), the lock that thread holds (module doc), and the worker's stop token.
         self.inbox: deque[Any] = deque()
+        self._core = threading.Lock()
         self._wake: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._sleeping = False  # the worker waits without a hold deadline: any arrival must wake it
-        # A sample never waits in the inbox for more than a quarter of the shortest sensor timeout, so
-        # batching cannot make a live sensor look silent to health (which ages it from its arrival).
-        self.hold_s = min(hold_s, min((s.timeout_s for s in cfg.sensors), default=math.inf) * HOLD_OF_TIMEOUT)
-        self._prompt = [kind_of(s).prompts_publish for s in cfg.sensors]  # samples that publish: fused at once
         self.capacity = queue_size
         self.health = Health([(s.name, s.timeout_s) for s in cfg.sensors], clock=clock,
-                             queue_capacity=queue_size, queue_depth=self.inbox.__len__, publishing=self._prompt,
-                             gap_s=cfg.filter.gap_s)
+                             queue_capacity=queue_size, queue_depth=self.inbox.__len__,
+                             publishing=[kind_of(s).prompts_publish for s in cfg.sensors], gap_s=cfg.filter.gap_s)
         self._clock = clock
         self._express = express
         self._direct = direct_callbacks
@@ -173,8 +165,10 @@ class Daemon:
         self._abort = False
         self.errors = 0
         self._batch_s = cfg.output.diagnostics_batch_s
-        self.worker_cpu_s = 0.0  # CPU time of the worker thread, set when it ends
-        self.wakeups = 0  # passes of the worker that found samples to fuse (each a batch of one or more)
+        self.worker_cpu_s = 0.0  # CPU time of the worker thread (its timers, not the fusion), set when it ends
+        self.passes = 0  # passes that fused what the inbox held (each one sample or more)
+        self._dirty = False  # fused since the core's counters were last copied into health
+        self._unsaved = False  # fused since the state was last handed to the saver
         # `[state] path`: resumed at start, written by a thread of its own every save_interval_s (state_file.py)
         self.state_path: Path | None = None
         if cfg.state.path:
@@ -250,7 +244,7 @@ class Daemon:
                       self.link.health() if self.link is not None else None)
 
     def _save_state(self) -> None:
-        """Worker (or after it ended): hand the core's state to the saver thread."""
+        """The core held: hand its state to the saver thread."""
         if self._saver is not None and self.core.initialised:
             self._saver.offer(self.core.export_state(), self._fused_wall)
 
@@ -270,11 +264,18 @@ class Daemon:
             if worker.is_alive():  # still busy: stop between samples, never inside one
                 self._abort = True
                 worker.join(1.0)
-        left = len(self.inbox)
-        if left:
-            log.warning("samples_discarded_at_stop", count=left)
-        if self._saver is not None:  # the worker has ended (or was abandoned between samples): the last state
-            self._saver.flush(self.core.export_state() if self.core.initialised else None, self._fused_wall)
+        # A callback still under way (an undeclared subscriber's last one) finishes its sample; none fuses after.
+        got = self._core.acquire(timeout=1.0)
+        self._abort = True
+        try:
+            left = len(self.inbox)
+            if left:
+                log.warning("samples_discarded_at_stop", count=left)
+            if self._saver is not None:  # the worker has ended (or was abandoned between samples): the last state
+                self._saver.flush(self.core.export_state() if self.core.initialised else None, self._fused_wall)
+        finally:
+            if got:
+                self._core.release()
         if self._monitor is not None:
             self._monitor.join(1.0)
         for obj in reversed(self._declared):  # the node's token last: rmw_zenoh undeclares entities first
@@ -315,24 +316,18 @@ class Daemon:
     def _callback(self, idx: int) -> Callable[[zenoh.Sample], None]:
         inbox = self.inbox
         append = inbox.append
-        wake = self._wake.put
+        drain = self._drain  # taken when subscribing: tools may wrap it before (scripts/profile_daemon_cpu.py)
         capacity = self.capacity
         clock = self._clock
         health = self.health
-        sensor = self.cfg.sensors[idx]
-        name = sensor.name
-        # Only odometry makes the daemon publish (the pose answers it at once): it wakes the worker.
-        # Any other sample waits for the next batch unless the worker sleeps idle.
-        prompt = self._prompt[idx]
+        name = self.cfg.sensors[idx].name
 
         def on_sample(sample: zenoh.Sample) -> None:
             arrival = clock()
             health.on_received(idx)
             if len(inbox) < capacity:
                 append((idx, sample.payload.to_bytes(), arrival))
-                if prompt or self._sleeping:
-                    self._sleeping = False
-                    wake(None)
+                drain()
                 return
             n = health.on_dropped(idx, reasons.QUEUE_FULL)
             if n == 1 or n % LOG_EVERY == 0:
@@ -343,7 +338,7 @@ class Daemon:
     def _enqueue_set_pose(self, item: _SetPoseItem) -> None:
         """A set_pose request joins the samples in arrival order and is applied at once."""
         self.inbox.append(item)
-        self._wake.put(None)
+        self._drain()
 
     def _on_query(self, query: zenoh.Query) -> None:
         query.reply(self.cfg.output.health_key, encode_answer(self.answer()), encoding=zenoh.Encoding.APPLICATION_JSON)
@@ -370,84 +365,66 @@ class Daemon:
             return
         self._enqueue_set_pose(_SetPoseItem(request, None, "topic"))
 
-    # -- worker ------------------------------------------------------------------------
-    def _work(self) -> None:
-        """Wait for a wake token or the batch deadline (`DrainSchedule`), fuse everything in the
-        inbox in arrival order, then do what is due on the timers (diagnostics batch, health counters)."""
+    # -- fusing (any thread that holds the core) and the worker's timers ----------------
+    def _drain(self) -> None:
+        """Fuse what waits in the inbox on the calling thread, unless another thread holds the core: that one
+        fuses it before it lets go, or looks again after (module doc). Called after every append."""
         inbox = self.inbox
+        core = self._core
+        while inbox and not self._abort and core.acquire(False):
+            try:
+                self._fuse_inbox()
+            finally:
+                core.release()
+
+    def _work(self) -> None:
+        """The daemon's clock: the diagnostics batch, the core's counters for health and the saved state when
+        they are due, each with the core held (then what arrived meanwhile is fused); at stop, what is queued."""
         wait_for = self._wake.get
-        fuse = self._fuse_inbox
         monotonic = time.monotonic
-        clock = self._clock  # the arrivals' clock
-        schedule = DrainSchedule(self.hold_s)
+        core = self._core
         outputs = self.outputs
         batch_s = self._batch_s
-        next_refresh = 0.0
-        next_flush = monotonic() + batch_s
-        dirty = False
         save_every = self.cfg.state.save_interval_s
-        next_save = monotonic() + save_every
-        unsaved = False  # fused since the state was last handed to the saver
-        idle = True  # nothing arrived during the last wait: wait long, and let any arrival wake us
+        now = monotonic()
+        next_flush, next_refresh, next_save = now + batch_s, now, now + save_every
         stopping = False
         try:
-            while not self._abort:
-                backlog = False  # this pass fuses what waited for the window to open (its duration is planned for)
-                if not inbox:
-                    if idle:
-                        wait, any_arrival = CORE_REFRESH_S, True
-                    else:
-                        wait, any_arrival = schedule.next_wait(clock())
-                        wait = min(wait, CORE_REFRESH_S)
-                    if outputs.pending:
-                        wait = min(wait, max(next_flush - monotonic(), MIN_WAIT_S))
-                    self._sleeping = any_arrival
-                    token = None
-                    if not inbox:  # re-checked after `_sleeping` is set: an append before it is seen here
-                        try:
-                            token = wait_for(timeout=max(wait, 0.0))
-                        except queue.Empty:
-                            pass
-                    self._sleeping = False
-                    if token is _STOP:
-                        stopping = True
-                    if token is not None or inbox:
-                        idle = False
-                        backlog = token is None and not any_arrival
-                    elif not any_arrival:  # a whole batching wait without an arrival: the input stopped
-                        idle = True
-                if inbox:
-                    self.wakeups += 1
-                    dirty = unsaved = True
-                    self._fused_wall = time.time()  # the state's age runs from here (transport/state_file.py)
-                    started = clock()
-                    fuse(schedule)
-                    if backlog:
-                        schedule.on_backlog(clock() - started)
-                now = monotonic()
-                if now >= next_flush:
-                    if outputs.pending:
-                        self._flush_diagnostics()
-                    next_flush = now + batch_s
-                if dirty and now >= next_refresh:
+            while not stopping:
+                wait = min(next_refresh, next_flush if batch_s > 0.0 else math.inf) - monotonic()
+                try:
+                    stopping = wait_for(timeout=max(wait, 0.0)) is _STOP
+                except queue.Empty:
+                    pass
+                with core:
+                    if stopping:
+                        self._fuse_inbox()  # what a callback appended while this thread held the core
+                    now = monotonic()
+                    if now >= next_flush:
+                        if outputs.pending:
+                            self._flush_diagnostics()
+                        next_flush = now + batch_s
+                    if now >= next_refresh:
+                        if self._dirty:
+                            self._dirty = False
+                            self._refresh()
+                        next_refresh = now + CORE_REFRESH_S
+                    if self._unsaved and now >= next_save:
+                        self._unsaved = False
+                        self._save_state()
+                        next_save = now + save_every
+                self._drain()
+            with core:
+                if self._dirty:
                     self._refresh()
-                    dirty = False
-                    next_refresh = now + CORE_REFRESH_S
-                if unsaved and now >= next_save:
-                    self._save_state()
-                    unsaved = False
-                    next_save = now + save_every
-                if stopping:
-                    break
-            if dirty:
-                self._refresh()
         except BaseException:
             log.exception("worker_crashed")
             self.health.set_worker_alive(False)
             raise
         finally:
-            if outputs.pending:  # at stop (or a crash): the records of samples already fused go out
-                self._flush_diagnostics()
+            with core:
+                if outputs.pending:  # at stop (or a crash): the records of samples already fused go out
+                    self._flush_diagnostics()
             self.worker_cpu_s = time.thread_time()
         if not self._stopping.is_set():
             self.health.set_worker_alive(False)
@@ -463,8 +440,9 @@ class Daemon:
     def _refresh(self) -> None:
         self.health.set_core(core_counters(self.core, self.published))
 
-    def _fuse_inbox(self, schedule: DrainSchedule) -> None:
-        """Fuse everything in the inbox in arrival order: decode, `core.ingest`, publish, collect records.
+    def _fuse_inbox(self) -> None:
+        """The core held: fuse everything in the inbox in arrival order: decode, `core.ingest`, publish, collect
+        records.
 
         The per-message path of the daemon, so written for it: health is only noted each accepted
         sample (a deque's append; it counts them when a report or the core's counters are taken, so a
@@ -472,10 +450,14 @@ class Daemon:
         pass. A failure on one sample is counted and logged; the rest go on.
         """
         inbox = self.inbox
+        if not inbox or self._abort:
+            return
+        self.passes += 1
+        self._dirty = self._unsaved = True
+        self._fused_wall = time.time()  # the state's age runs from here (transport/state_file.py)
         take = inbox.popleft
-        decoders = self._decoders  # looked up per pass: tools may wrap them (scripts/profile_daemon_worker.py)
+        decoders = self._decoders  # looked up per pass: tools may wrap them (scripts/profile_daemon_cpu.py)
         ingest = self.core.ingest
-        prompt = self._prompt
         zero_cov = self._zero_cov
         collect = self.outputs.collect
         noted = self.health.noted
@@ -487,8 +469,6 @@ class Daemon:
                     self._set_pose(item)
                     continue
                 idx, payload, arrival = item
-                if prompt[idx]:
-                    schedule.on_prompt(arrival)
                 try:
                     sample = decoders[idx](payload)
                 except DecodeError as err:
@@ -519,7 +499,7 @@ class Daemon:
                         detail=err.detail, count=n)
 
     def _set_pose(self, item: _SetPoseItem) -> None:
-        """Worker only: re-initialise the core at the requested pose, publish it, answer with the new health."""
+        """The core held: re-initialise it at the requested pose, publish that pose, answer with the new health."""
         req = item.request
         stamp = req.stamp if req.stamp > 0.0 else self.core.time
         try:

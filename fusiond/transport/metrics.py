@@ -122,7 +122,7 @@ def families(a: HealthAnswer) -> list[Any]:
             [ns], p.sigma_yaw)
 
     q = a.queue
-    gauge("queue_depth", "samples waiting for the worker").add_metric([ns], q.depth)
+    gauge("queue_depth", "samples waiting to be fused").add_metric([ns], q.depth)
     gauge("queue_capacity", "input queue capacity").add_metric([ns], q.capacity)
 
     if a.link_stats is not None:

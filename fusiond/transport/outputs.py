@@ -2,8 +2,8 @@
 (batched) and the ROS diagnostics, on publishers declared once.
 
 Apart from the daemon's threading (``daemon.py``) so that what goes out, in which encoding and on which
-key, reads in one place. The worker thread calls ``publish_estimate``, ``collect`` and
-``flush_diagnostics``; the health thread calls ``put_ros_diagnostics``. Nothing here reads a sensor or
+key, reads in one place. The thread holding the daemon's core calls ``publish_estimate``, ``collect``
+and ``flush_diagnostics`` (one at a time); the health thread calls ``put_ros_diagnostics``. Nothing here reads a sensor or
 writes the filter: it is handed the core and asks it for the estimate.
 
 - Pose (PoseWithCovarianceStamped CDR) and odometry (nav_msgs/Odometry CDR) on every estimate the core
@@ -68,7 +68,7 @@ class Outputs:
         self.ros_diagnostics = (self._ros_publisher(out.ros_diagnostics_key, DIAGNOSTIC_ARRAY)
                                 if out.ros_diagnostics_key else None)
         self._batch_s = out.diagnostics_batch_s
-        self._batch: list[Any] = []  # records not yet published (worker only)
+        self._batch: list[Any] = []  # records not yet published (the core held)
         self.published = 0  # estimates published
         self.diagnostics_puts = 0  # puts on the diagnostics key (one per batch, or per record with batch 0)
 
@@ -88,7 +88,7 @@ class Outputs:
     def tf_published(self) -> int:
         return self.tf.published
 
-    # -- worker ---------------------------------------------------------------------------------
+    # -- the core held -------------------------------------------------------------------------
     def publish_estimate(self, core: Any) -> None:
         """The core's newest estimate as pose, odometry, (with a datum) NavSatFix and (when its stamp
         advanced) TF."""

@@ -98,8 +98,8 @@ def attachment(sequence_number: int, source_timestamp_ns: int, gid: bytes) -> by
 class RmwPublisher:
     """A Zenoh publisher on a topic's rmw_zenoh key that attaches seq/timestamp/GID to each sample.
 
-    `put` is called from one thread (the daemon's worker, or its health thread for
-    /diagnostics), so the sequence counter needs no lock.
+    `put` is called by one thread at a time (the one holding the daemon's core, or its health
+    thread for /diagnostics), so the sequence counter needs no lock.
     """
 
     def __init__(self, node: RmwNode, topic: str, msgtype: str, depth: int, express: bool) -> None:

@@ -15,9 +15,9 @@ is the I/O around it, and the only place the file is read or written.
   down, or idle before it). The age runs from the newest sample fused, not from the write: a
   daemon stopped cleanly after minutes without input writes its state at the stop, and that
   state is as old as its data. The caller logs one event either way.
-- ``StateSaver``: writes off the worker's thread (an fsync can take milliseconds; the worker
-  publishes poses). The worker hands it the newest export; a write in progress is never
-  queued behind, the newest state wins.
+- ``StateSaver``: writes on a thread of its own (an fsync can take milliseconds; the daemon's
+  threads publish poses). The daemon's worker hands it the newest export; a write in progress
+  is never queued behind, the newest state wins.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ __all__ = ["TfBroadcast"]
 
 
 class TfBroadcast:
-    """The TF messages of one daemon (worker thread only): ``message`` per published estimate."""
+    """The TF messages of one daemon (the core held): ``message`` per published estimate."""
 
     __slots__ = ("map_frame", "frame_id", "child_frame_id", "odom_frame", "pose_frame", "stamp", "published",
                  "timeline", "_odom_timeout")

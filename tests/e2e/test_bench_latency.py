@@ -22,9 +22,9 @@ def test_the_bench_feeds_the_daemon_and_the_bare_subscriber_the_same_traffic():
     assert r.cpu_daemon_pct > 0 and r.cpu_bare_pct > 0 and math.isfinite(r.cpu_worker_pct)
     assert math.isclose(r.cpu_ratio, r.cpu_daemon_pct / r.cpu_bare_pct)
     assert r.diagnostics_batch_s == 0.05
-    # each worker pass fuses one or more samples: at most one pass per message of the window (plus one
-    # straddling its start), at least one
-    assert r.messages_in_window == 220 and 1 <= r.worker_batches <= r.messages_in_window + 1
+    # each pass fuses one or more samples: at most one pass per message of the window (plus one straddling its
+    # start), at least one
+    assert r.messages_in_window == 220 and 1 <= r.passes <= r.messages_in_window + 1
     assert "bare subscriber" in format_table(r)
 
     # `--runs`: a line a run, and the ratio's median and range over them (three runs: the middle one's ratio)
