@@ -48,6 +48,59 @@ def test_imu_samples_without_any_odometry_are_all_fused(sessions):  # noqa: F811
         daemon.stop()
 
 
+def test_callbacks_on_a_thread_each_fuse_every_sample_one_thread_at_a_time(sessions):  # noqa: F811
+    """With zenoh-python's default callbacks (a thread per subscriber) two threads append and try the core at
+    once: one pass is under way at a time, and a burst on both keys is accounted for whole (every sample
+    applied, or dropped and counted, none left in the inbox)."""
+    dsession, client = sessions
+    cfg = loopback_daemon_config(imu='orientation = "roll_pitch"\nangular_velocity = true')
+    messages = stream()
+    poses: list[bytes] = []
+    sub = client.declare_subscriber("t/pose", lambda s: poses.append(s.payload.to_bytes()))
+    daemon = Daemon(cfg, dsession, monitor=False, direct_callbacks=False)
+    under_way: list[int] = []  # the threads of the passes under way
+    overlaps: list[list[int]] = []  # any moment two passes were under way at once
+    fused_on: set[int] = set()
+    fuse = daemon._fuse_inbox
+
+    def fuse_watched() -> None:
+        under_way.append(threading.get_ident())
+        fused_on.add(under_way[-1])
+        if len(under_way) > 1:
+            overlaps.append(list(under_way))
+        try:
+            fuse()
+        finally:
+            under_way.remove(threading.get_ident())
+
+    daemon._fuse_inbox = fuse_watched
+    daemon.start()
+    try:
+        block = zenoh.CongestionControl.BLOCK
+        pubs = {k: client.declare_publisher(k, congestion_control=block) for k in ("t/imu", "t/odom")}
+        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10, "the daemon")
+        for key, raw in messages:
+            pubs[key].put(raw)
+        sent = {"imu": sum(k == "t/imu" for k, _ in messages), "wheel": sum(k == "t/odom" for k, _ in messages)}
+
+        def settled():
+            rep = daemon.report()
+            done = all(rep.sensors[n].received == c and rep.sensors[n].applied + rep.sensors[n].dropped
+                       + rep.sensors[n].held == c for n, c in sent.items())
+            return done and daemon.queued() == 0 and rep
+
+        rep = wait_until(settled, 20, "every sample of the burst fused or counted")
+        assert not overlaps  # one thread at a time
+        assert fused_on - {daemon._worker.ident}  # the subscribers' threads fused
+        # while one thread fuses, the other appends: a burst may fill the inbox, and that is counted
+        for name in sent:
+            assert set(rep.sensors[name].dropped_by_reason) <= {"queue_full"}, rep.sensors[name]
+        assert daemon.errors == 0 and 0 < len(poses) <= rep.sensors["wheel"].applied
+    finally:
+        daemon.stop()
+        sub.undeclare()
+
+
 def test_paced_samples_fuse_in_arrival_order_and_answer_every_odometry_sample(sessions):  # noqa: F811
     """1 kHz IMU + 100 Hz odometry in real time: each odometry sample gets its pose, and the records
     (with their `late` flags) are exactly those of a core fed the samples in send order, so fusing where they
