@@ -25,8 +25,9 @@ queue, the filter and the encoding in between).
 CPU: process time per wall second over the measured window (each child reads its
 own `process_time()` at the window's start and end, asked over a pipe), for the
 daemon, the bare subscriber, and the daemon's worker thread (its timers: samples are
-fused on the threads that receive them) and the generator thread on their own. The daemon's process also carries the echo (100 Hz, a few us each):
-counted against it, not the yardstick.
+fused on the threads that receive them) and the generator thread on their own. The
+daemon's process also carries the echo (100 Hz, a few us each): counted against it,
+not the yardstick.
 """
 
 from __future__ import annotations
@@ -481,8 +482,8 @@ def format_table(r: BenchResult) -> str:
     out.append(f"poses matched {r.poses_matched}/{r.odom_sent} (unmatched {r.poses_unmatched}); "
                f"queue drops {r.queue_drops}, core drops {r.core_drops}")
     out.append(f"CPU (% of one core): daemon process {r.cpu_daemon_pct:.1f}, bare subscriber process "
-               f"{r.cpu_bare_pct:.1f} -> ratio {r.cpu_ratio:.2f}x; daemon worker thread (timers) {r.cpu_worker_pct:.1f}, "
-               f"load generator thread {r.cpu_generator_pct:.1f}")
+               f"{r.cpu_bare_pct:.1f} -> ratio {r.cpu_ratio:.2f}x; daemon worker thread (timers) "
+               f"{r.cpu_worker_pct:.1f}, load generator thread {r.cpu_generator_pct:.1f}")
     out.append(f"passes that fused {r.passes} for {r.messages_in_window} messages "
                f"({r.passes / max(r.messages_in_window, 1):.2f} a message)")
     batch = "default" if r.diagnostics_batch_s is None else f"{r.diagnostics_batch_s:g} s"

@@ -172,7 +172,8 @@ def test_play_reports_what_a_daemon_that_cannot_keep_up_dropped(sessions, jackal
     daemon.start()
 
     def release_once_all_arrived() -> None:
-        wait_until(lambda: sum(s.received for s in daemon.report().sensors.values()) >= 201, 20, "the 201 messages")
+        wait_until(lambda: sum(s.received for s in daemon.report().sensors.values()) >= 201, 20,
+                   "the 201 messages")
         daemon._core.release()
 
     assert daemon._core.acquire(timeout=10.0)
