@@ -23,11 +23,11 @@ codecs', liveness is health.py's. What lives here is threading and life cycle:
   played at full speed reaches the core in bag order, not hundreds of messages
   apart). Without that option (older zenoh-python) callbacks fall back to the
   default, and the lock keeps one fuser at a time. While a sample is fused the
-  link's next messages wait in its buffers; under the GIL a callback waited for
-  any Python work of the daemon's anyway. So a sender faster than the fusion (a
-  bag at `play --rate 0`) is slowed by its link: a blocking publisher waits, as
-  `play`'s do; one that drops on congestion drops at its end. The inbox fills
-  only while another thread holds the core.
+  link's next messages wait in its buffers, as they would under the GIL for any
+  Python work of the daemon's on another thread. So a sender faster than the
+  fusion (a bag at `play --rate 0`) is slowed by its link: a blocking publisher
+  waits, as `play`'s do; one that drops on congestion drops at its end. The
+  inbox fills only while another thread holds the core.
 - A pass decodes (`DecodeError` counted per reason), calls `core.ingest`, then
   publishes. Bookkeeping that can wait does (health is handed each accepted
   sample by a deque's append and counts them when a report or the core's
