@@ -18,7 +18,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_daemon_client_arguments(p, reads="sensors, keys", config_required=True)
     p.add_argument("--rate", type=non_negative, default=1.0,
                    help="pace relative to the recording (default 1: the recorded pace); 0 = as fast as possible, "
-                        "which a daemon may not keep up with (play reports what its queue dropped)")
+                        "which the daemon's fusion paces (play reports anything the daemon dropped)")
     p.add_argument("--duration", type=positive, help="play only the first S seconds of the bag")
     p.add_argument("--allow-missing", action="store_true",
                    help="play without a configured sensor whose topic is not in the bag (a warning); default: "
