@@ -13,7 +13,7 @@ from fusiond.core.sensors import GpsSample, ImuSample, OdomSample, encode_sample
 from fusiond.transport.daemon import Daemon
 
 from tests.support.configs import loopback_daemon_config
-from tests.support.loopback import sessions, wait_until  # noqa: F401  (fixture)
+from tests.support.loopback import sessions, wait_answering  # noqa: F401  (fixture)
 from tests.support.sim_gps import T0, World, simulate
 
 KEYS = {OdomSample: "t/odom", ImuSample: "t/imu", GpsSample: "t/gps"}
@@ -32,7 +32,7 @@ def test_a_frozen_receiver_is_not_alive_while_its_repeats_keep_coming(sessions):
     try:
         pubs = {k: client.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
                 for k, key in KEYS.items()}
-        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10, "the daemon")
+        wait_answering(client)
         t0, s0 = time.monotonic(), samples[0].stamp
         alive_frozen = []
         for s in samples:  # at the recorded pace: liveness is wall time

@@ -18,7 +18,7 @@ from fusiond.core.sensors import ImuSample, encode_sample
 from fusiond.transport.daemon import Daemon
 
 from tests.support.configs import loopback_daemon_config
-from tests.support.loopback import sessions, wait_until  # noqa: F401  (fixture)
+from tests.support.loopback import sessions, wait_answering, wait_until  # noqa: F401  (fixture)
 from tests.support.batches import expected_records, identity, stream
 
 COV3 = (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4)
@@ -36,7 +36,7 @@ def test_imu_samples_without_any_odometry_are_all_fused(sessions):  # noqa: F811
     daemon.start()
     try:
         pub = client.declare_publisher("t/imu", congestion_control=zenoh.CongestionControl.BLOCK)
-        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10, "the daemon")
+        wait_answering(client)
         for k in range(200):
             pub.put(imu(k))
         rep = wait_until(lambda: (r := daemon.report()).sensors["imu"].applied == 200 and r, 10,
@@ -78,7 +78,7 @@ def test_callbacks_on_a_thread_each_fuse_every_sample_one_thread_at_a_time(sessi
     try:
         block = zenoh.CongestionControl.BLOCK
         pubs = {k: client.declare_publisher(k, congestion_control=block) for k in ("t/imu", "t/odom")}
-        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10, "the daemon")
+        wait_answering(client)
         for key, raw in messages:
             pubs[key].put(raw)
         sent = {"imu": sum(k == "t/imu" for k, _ in messages), "wheel": sum(k == "t/odom" for k, _ in messages)}
@@ -119,7 +119,7 @@ def test_paced_samples_fuse_in_arrival_order_and_answer_every_odometry_sample(se
     try:
         block = zenoh.CongestionControl.BLOCK
         pubs = {k: client.declare_publisher(k, congestion_control=block) for k in ("t/imu", "t/odom")}
-        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10, "the daemon")
+        wait_answering(client)
         start = time.perf_counter()
         for i, (key, raw) in enumerate(messages):  # paced like the sensors: 1 ms between IMU samples
             delay = start + 0.001 * math.floor(i * 1000 / 1100) - time.perf_counter()
@@ -170,7 +170,7 @@ def test_samples_arriving_while_the_worker_holds_the_core_are_fused_when_it_lets
     daemon._refresh = held_refresh
     try:
         pub = client.declare_publisher("t/imu", congestion_control=zenoh.CongestionControl.BLOCK)
-        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10, "the daemon")
+        wait_answering(client)
         pub.put(imu(0))  # fused: the worker copies the counters next, and holds the core there
         assert inside.wait(10.0), "the worker never copied the core's counters"
         for k in range(1, 51):

@@ -19,7 +19,7 @@ from fusiond.monitor import Monitor, decode_diagnostics
 from fusiond.transport.daemon import Daemon
 
 from tests.support.configs import loopback_daemon_config
-from tests.support.loopback import sessions, wait_until  # noqa: F401  (fixture)
+from tests.support.loopback import sessions, wait_answering, wait_until  # noqa: F401  (fixture)
 from tests.support.batches import N_IMU, expected_records, identity, stream
 
 
@@ -41,8 +41,7 @@ def test_every_record_arrives_exactly_once_including_those_flushed_at_stop(sessi
     try:
         block = zenoh.CongestionControl.BLOCK
         pubs = {k: client.declare_publisher(k, congestion_control=block) for k in ("t/imu", "t/odom")}
-        wait_until(lambda: [r for r in client.get("t/health", timeout=1.0) if r.ok is not None], 10,
-                   "the daemon (its answer proves its subscribers are known here)")
+        wait_answering(client)
         for key, raw in messages:  # a burst: faster than the worker fuses, so samples are queued at stop
             pubs[key].put(raw)
         wait_until(lambda: sum(s.received for s in daemon.report().sensors.values()) == len(messages), 10,

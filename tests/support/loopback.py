@@ -28,6 +28,13 @@ def wait_until(cond, timeout: float, what: str):
     return value
 
 
+def wait_answering(client: zenoh.Session, health_key: str = "t/health", timeout: float = 10.0):
+    """Until a daemon answers on ``health_key``: its answer proves its subscribers are known to ``client`` (a
+    peer's declarations reach it in order on the link, before the reply: transport/daemon.py)."""
+    return wait_until(lambda: [r for r in client.get(health_key, timeout=1.0) if r.ok is not None], timeout,
+                      "the daemon (its answer proves its subscribers are known here)")
+
+
 @pytest.fixture
 def sessions() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
     port = free_port()
