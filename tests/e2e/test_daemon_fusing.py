@@ -92,9 +92,11 @@ def test_callbacks_on_a_thread_each_fuse_every_sample_one_thread_at_a_time(sessi
         rep = wait_until(settled, 20, "every sample of the burst fused or counted")
         assert not overlaps  # one thread at a time
         assert fused_on - {daemon._worker.ident}  # the subscribers' threads fused
-        # while one thread fuses, the other appends: a burst may fill the inbox, and that is counted
+        # while one thread fuses, the other appends: a burst may fill the inbox, and one key's samples may reach
+        # the core behind the other's by more than the history holds (no order across keys with a thread per
+        # subscriber); both are counted
         for name in sent:
-            assert set(rep.sensors[name].dropped_by_reason) <= {"queue_full"}, rep.sensors[name]
+            assert set(rep.sensors[name].dropped_by_reason) <= {"queue_full", "too_old"}, rep.sensors[name]
         assert daemon.errors == 0 and 0 < len(poses) <= rep.sensors["wheel"].applied
     finally:
         daemon.stop()
