@@ -397,8 +397,6 @@ class Daemon:
                 except queue.Empty:
                     pass
                 with core:
-                    if stopping:
-                        self._fuse_inbox()  # what a callback appended while this thread held the core
                     now = monotonic()
                     if now >= next_flush:
                         if outputs.pending:
@@ -413,7 +411,7 @@ class Daemon:
                         self._unsaved = False
                         self._save_state()
                         next_save = now + save_every
-                self._drain()
+                self._drain()  # what arrived while this thread held the core; at stop, what is queued
             with core:
                 if self._dirty:
                     self._refresh()
